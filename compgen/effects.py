@@ -1,0 +1,234 @@
+"""THE catalogue of physical effects: every error compgen can model is declared here, once.
+
+An effect is a named error with a basis in one coordinate. Names (ISO 230 symbols, with the
+letter O as in the seed report; ``X0C`` and ``E_X0C`` are accepted at input):
+
+=====================  ====================================================================
+``XOC``                constant: a location error (``<dir>O<axis>``), or a set-up offset
+``ECC:h2``             2nd harmonic of a component error of a full-turn rotary axis;
+                       parameters ``ECC:h2c`` (× cos 2C) and ``ECC:h2s`` (× sin 2C)
+``EAA:p1``             1st-order polynomial of a component error of a tilting axis, in the
+                       axis angle in rad; of a linear axis, in its position per 1000 mm
+                       (so ``EXX:p1`` in µm is a scale error in µm/m)
+``drift_Z:t1``         thermal drift of the tool relative to the table along machine Z,
+                       polynomial in the session time per hour (µm/h for ``t1``)
+``nest_X``             R-test nest (tool side) set-up offset along the spindle frame X
+=====================  ====================================================================
+
+Order 0 of a component error does not exist here on purpose: a constant error motion *is*
+a location error (or a set-up offset), and declaring it twice would make the model singular.
+
+Placement in the chain (``kinematics.py``):
+* rotary axis: ``Trans(offset)·Trans(loc)·Rot(loc)·Trans(comp)·Rot(comp)·R(angle + E_own)``
+  (contract §3, seed eq. 2);
+* linear axis: ``Trans(offset)·Trans(comp + q·Rot(loc)·e)·Rot(comp)`` (seed eq. 1): a
+  squareness tilts the direction of motion only, not the carried frame;
+* component errors displace the carried frame in its parent frame, whatever the axis sense.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import CompgenError
+from .machine import Axis, Machine
+
+TRANSLATIONS, ROTATIONS = "xyz", "abc"
+ROT_OF = dict(zip(TRANSLATIONS, ROTATIONS, strict=True))  # rotation about a direction
+POLY_SCALE_MM = 1000.0       # linear-axis polynomials run in q / 1 m
+TIME_SCALE_S = 3600.0        # drift polynomials run in t / 1 h
+MAX_ORDER = {"h": 4, "p": 3, "t": 2}  # the candidate list offered by catalogue()
+
+
+@dataclass(frozen=True)
+class Basis:
+    """Shape of an effect in its coordinate: constant, harmonic k, polynomial k, time k."""
+
+    kind: str            # "const", "h", "p" or "t"
+    order: int = 0
+
+    @property
+    def suffix(self) -> str:
+        return "" if self.kind == "const" else f":{self.kind}{self.order}"
+
+    @property
+    def terms(self) -> tuple[str, ...]:
+        if self.kind == "h":
+            return (f"{self.suffix}c", f"{self.suffix}s")
+        return (self.suffix,)
+
+    def values(self, x: np.ndarray) -> np.ndarray:
+        """(n, len(terms)) basis values at coordinate ``x`` (rad, scaled length or time)."""
+        x = np.asarray(x, dtype=float)
+        if self.kind == "const":
+            return np.ones(x.shape + (1,))
+        if self.kind == "h":
+            return np.stack([np.cos(self.order * x), np.sin(self.order * x)], axis=-1)
+        return (x**self.order)[..., None]
+
+
+CONSTANT = Basis("const")
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One physical effect.
+
+    ``carrier`` is the axis whose transform carries it, or ``"ball"``, ``"nest"``,
+    ``"time"``; ``slot`` is ``"loc"`` (before the motion, constant) or ``"comp"``
+    (component error, a function of the axis coordinate); ``direction`` is ``x y z`` for a
+    translation (mm) and ``a b c`` for a rotation (rad) about x, y, z.
+    """
+
+    symbol: str
+    carrier: str
+    slot: str
+    direction: str
+    basis: Basis
+    words: str
+    cause: str = ""
+
+    @property
+    def name(self) -> str:
+        return self.symbol + self.basis.suffix
+
+    @property
+    def params(self) -> tuple[str, ...]:
+        return tuple(self.symbol + t for t in self.basis.terms)
+
+    @property
+    def unit(self) -> str:
+        """Inside unit of each parameter: mm for a translation, rad for a rotation."""
+        return "mm" if self.direction in TRANSLATIONS else "rad"
+
+
+def _symbols(machine: Machine) -> dict[str, tuple[str, str, str, tuple[str, ...], str, str]]:
+    """symbol → (carrier, slot, direction, allowed basis kinds, words, cause), for a machine."""
+    out: dict = {}
+    for d in TRANSLATIONS:
+        D = d.upper()
+        out[f"{D}OW"] = ("ball", "loc", d, ("const",), f"ball centre offset in {D} (table frame)",
+                         "ball not where the machine file says: set-up, not a machine error")
+        out[f"nest_{D}"] = ("nest", "loc", d, ("const",), f"R-test nest offset in {D}",
+                            "nest centre off the spindle axis or wrong probe length")
+        out[f"drift_{D}"] = ("time", "loc", d, ("t",), f"thermal drift of tool to table in {D}",
+                             "warm-up of spindle, column or table during the test")
+    for axis in machine.axes:
+        out.update(_axis_symbols(axis))
+    return out
+
+
+def _axis_symbols(axis: Axis) -> dict:
+    L, d, out = axis.name, axis.direction, {}
+    kinds = ("h",) if axis.full_turn else ("p",)
+    for e in TRANSLATIONS + ROTATIONS:
+        E = e.upper()
+        own = e in (d, ROT_OF[d])
+        if axis.rotary:
+            if not own:
+                about = "tilt about" if e in ROTATIONS else "offset in"
+                ref = TRANSLATIONS[ROTATIONS.index(e)].upper() if e in ROTATIONS else E
+                out[f"{E}O{L}"] = (L, "loc", e, ("const",), f"{L} axis line {about} {ref}",
+                                   "assembly or kinematics table not matching the machine")
+            if e == ROT_OF[d]:
+                words, cause = f"angular positioning error of {L}", "encoder eccentricity (1/rev), worm or scale error (2/rev and up)"
+            elif e == d:
+                words, cause = f"axial error motion of {L}", "bearing or face runout"
+            elif e in TRANSLATIONS:
+                words, cause = f"radial error motion of {L} in {E}", "bearing runout, eccentric table"
+            else:
+                words, cause = f"tilt error motion of {L} about {TRANSLATIONS[ROTATIONS.index(e)].upper()}", "wobble of the bearing"
+        else:
+            if e == d:
+                words, cause = f"positioning error of {L} (scale)", "scale error, thermal growth of the scale"
+            elif e in TRANSLATIONS:
+                words, cause = f"straightness of {L} in {E}", "guideway straightness"
+            else:
+                names = {"a": "roll", "b": "pitch", "c": "yaw"} if d == "x" else \
+                        {"a": "pitch", "b": "roll", "c": "yaw"} if d == "y" else \
+                        {"a": "pitch", "b": "yaw", "c": "roll"}
+                words, cause = f"{names[e]} of {L}", "guideway twist or bending"
+        out[f"E{E}{L}"] = (L, "comp", e, kinds, words, cause)
+    if not axis.rotary:
+        # ISO 230-1 squareness with Y as the reference (the seed's COX, AOZ, BOZ):
+        # X is squared to Y about Z, Z to X and Y about X and Y.
+        about = {"x": "c", "z": "ab"}.get(d, "")
+        for r in about:
+            other = {"c": "Y", "a": "Y", "b": "X"}[r]
+            out[f"{r.upper()}O{L}"] = (L, "loc", r, ("const",), f"squareness of {L} to {other}",
+                                       "assembly or thermal bending of the frame")
+    return out
+
+
+ALIAS = re.compile(r"^(?:E_?)?([XYZABC])0([A-Z])$")
+
+
+def canonical(name: str) -> str:
+    """Map input spellings to the canonical one: ``X0C``, ``E_X0C``, ``EX0C`` → ``XOC``."""
+    name = name.strip()
+    m = ALIAS.match(name.split(":")[0])
+    if m:
+        return f"{m[1]}O{m[2]}" + name[len(name.split(":")[0]):]
+    return name
+
+
+NAME = re.compile(r"^([A-Za-z_]+):?([hpt]?)(\d*)$")
+
+
+def resolve(machine: Machine, name: str) -> Effect:
+    """The effect called ``name`` (canonical or alias) on this machine, or a clear error."""
+    text = canonical(name)
+    symbol, _, order_txt = text.partition(":")
+    table = _symbols(machine)
+    if symbol not in table:
+        raise CompgenError(f"unknown effect {name!r} on machine {machine.name!r}",
+                           hint="`compgen effects --machine M` lists them")
+    carrier, slot, direction, kinds, words, cause = table[symbol]
+    if not order_txt:
+        if "const" not in kinds:
+            raise CompgenError(f"{symbol} needs an order, e.g. {symbol}:{kinds[0]}1",
+                               where=name)
+        basis = CONSTANT
+    else:
+        m = re.fullmatch(r"([hpt])([1-9]\d?)", order_txt)
+        if not m or m[1] not in kinds:
+            raise CompgenError(f"{symbol} takes {' or '.join(k + 'N' for k in kinds)} "
+                               f"with N ≥ 1, not {order_txt!r}", where=name)
+        basis = Basis(m[1], int(m[2]))
+    return Effect(symbol, carrier, slot, direction, basis, words, cause)
+
+
+def effect_of_param(machine: Machine, param: str) -> Effect:
+    """The effect a parameter name belongs to (``ECC:h2c`` → effect ``ECC:h2``)."""
+    param = canonical(param)
+    name = param[:-1] if re.search(r":h\d+[cs]$", param) else param
+    effect = resolve(machine, name)
+    if param not in effect.params:
+        raise CompgenError(f"unknown parameter {param!r}",
+                           hint=f"effect {effect.name} has parameters {', '.join(effect.params)}")
+    return effect
+
+
+def catalogue(machine: Machine) -> tuple[Effect, ...]:
+    """Every effect this machine can carry, orders up to ``MAX_ORDER``: the candidate list."""
+    out = []
+    for symbol, (_, _, _, kinds, _, _) in _symbols(machine).items():
+        for kind in kinds:
+            names = [symbol] if kind == "const" else [f"{symbol}:{kind}{k}"
+                                                      for k in range(1, MAX_ORDER[kind] + 1)]
+            out.extend(resolve(machine, n) for n in names)
+    return tuple(out)
+
+
+def location_model(machine: Machine) -> tuple[str, ...]:
+    """The seed's model generalised: ball offset plus the four location errors of each
+    rotary axis (for the seed machine exactly XOW YOW ZOW, YOA ZOA BOA COA, XOC YOC AOC BOC).
+    """
+    names = ["XOW", "YOW", "ZOW"]
+    for axis in machine.rotary_axes:
+        names += [f"{e.upper()}O{axis.name}" for e in TRANSLATIONS if e != axis.direction]
+        names += [f"{e.upper()}O{axis.name}" for e in ROTATIONS if e != ROT_OF[axis.direction]]
+    return tuple(names)

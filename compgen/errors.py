@@ -1,0 +1,20 @@
+"""The one exception type compgen raises for bad input or an impossible request."""
+
+from __future__ import annotations
+
+
+class CompgenError(Exception):
+    """What is wrong and where, in one line a person can act on.
+
+    ``where`` is ``file:line:column`` (or a parameter name); ``hint`` says what to do next.
+    """
+
+    def __init__(self, message: str, where: str | None = None, hint: str | None = None):
+        self.message = message
+        self.where = where
+        self.hint = hint
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        text = f"{self.where}: {self.message}" if self.where else self.message
+        return f"{text}. {self.hint}" if self.hint else text

@@ -1,0 +1,29 @@
+"""Writing outputs: atomically, and never over a user's file without ``force``."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+from .errors import CompgenError
+
+
+def write_atomically(path: str | Path, text: str, force: bool = False, newline: str = "\n") -> None:
+    """Write ``text`` to ``path`` via a temporary file and ``os.replace``: nothing half-written."""
+    path = Path(path)
+    if path.exists() and not force:
+        raise CompgenError("output file exists", where=str(path), hint="use --force to overwrite it")
+    if path.is_dir():
+        raise CompgenError("output path is a directory", where=str(path))
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise CompgenError("output folder does not exist", where=str(folder))
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=folder)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline=newline) as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        raise CompgenError(f"cannot write: {exc.strerror}", where=str(path)) from None

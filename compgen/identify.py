@@ -1,0 +1,216 @@
+"""Identification: first-order least squares (the seed's method), then Gauss–Newton on the
+exact model, with uncertainties from the residual and the Jacobian, and an identifiability
+check that refuses what the data cannot separate.
+
+References: seed report §3 (eq. 26); ``shared/research/identification.md`` §1.9 and §3.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from importlib.metadata import PackageNotFoundError, version
+
+import numpy as np
+
+from .effects import canonical, effect_of_param, location_model
+from .errors import CompgenError
+from .kinematics import Model, Poses
+from .machine import Machine
+from .paths import generate
+from .results import DataRef, Estimate, FitResult
+from .rtest import RTestData
+from .units import parse_quantity, shown
+
+COND_LIMIT = 1000.0       # column-normalised; the seed's K4 is 27, K4+K1+K2 is 6
+MAX_ITER = 30
+STEP_TOL_SHOWN = 1e-7     # µm or arcsec: Gauss–Newton has converged below this step
+SECOND_BALL_DZ_MM = 100.0  # the second ball position offered when one ball cannot separate
+
+
+def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] | None = None,
+             fixed: Mapping[str, float] | None = None, method: str = "exact",
+             sign: str = "nest-minus-ball") -> FitResult:
+    """Identify the parameters of ``model`` from R-test data.
+
+    Parameters
+    ----------
+    model : parameter names; default the seed's 11 generalised (``location_model``)
+    fixed : name → value (mm, rad) held fixed; names not in ``model`` are added to it
+    method : ``"exact"`` (first-order start, then Gauss–Newton on the exact model) or
+        ``"linear"`` (first-order only, as the seed)
+    """
+    if method not in ("exact", "linear"):
+        raise CompgenError(f"method must be 'exact' or 'linear', not {method!r}")
+    if not data:
+        raise CompgenError("no data to fit")
+    fixed = dict(fixed or {})
+    names = list(model or location_model(machine))
+    names += [n for n in fixed if n not in names]
+    m = Model(machine, names)
+    free = [i for i, n in enumerate(names) if n not in fixed]
+    if not free:
+        raise CompgenError("every parameter is fixed: nothing to fit")
+    poses = Poses.concat([d.poses for d in data])
+    y = np.concatenate([d.deviation for d in data])
+    readings, p = y.size, len(free)
+    if readings <= p:
+        raise CompgenError(f"{len(poses)} poses give {readings} readings for {p} parameters",
+                           hint="measure more poses: a K4 path has 241")
+
+    x = np.array([fixed.get(n, 0.0) for n in names])
+
+    def residual(x):
+        return (y - m.deviation(poses, x)).ravel()
+
+    def jac(x):
+        return m.jacobian(poses, x)[:, :, free].reshape(readings, p)
+
+    J = jac(x)
+    check_identifiable(machine, m, free, J)
+    # first order about zero (seed eq. 26): y − dev(fixed) ≈ J a
+    x[free] += np.linalg.lstsq(J, residual(x), rcond=None)[0]
+    iterations = 0
+    if method == "exact":
+        x, J, iterations = _gauss_newton(residual, jac, x, free, m)
+    else:
+        J = jac(np.where(np.isin(np.arange(len(x)), free), 0.0, x))
+
+    r = residual(x)
+    dof = readings - p
+    sigma2 = float(r @ r) / dof
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    cov = (Vt.T / s**2) @ Vt * sigma2
+    std = np.sqrt(np.diag(cov))
+    corr = cov / np.outer(std, std) if np.all(std > 0) else np.eye(p)
+    norm = np.linalg.norm(J, axis=0)
+    sv = np.linalg.svd(J / norm, compute_uv=False)
+
+    params = {}
+    for i, n in enumerate(names):
+        e = m.effects[i]
+        k = free.index(i) if i in free else None
+        params[n] = Estimate(float(x[i]), 0.0 if k is None else float(std[k]), e.unit, k is None)
+    return FitResult(
+        machine={"name": machine.name, "file": machine.source, "sha256": machine.sha256},
+        data=tuple(DataRef(d.source, d.sha256, len(d), _counts(d.poses.path)) for d in data),
+        model=tuple(names), parameters=params, free=tuple(names[i] for i in free),
+        correlation=np.clip(corr, -1.0, 1.0), singular_values=sv,
+        residual=residual_stats(poses, r.reshape(-1, 3), dof),
+        method=method, iterations=iterations, sign=sign, version=_version(),
+        descriptions={n: e.words for n, e in zip(names, m.effects, strict=True)})
+
+
+def _gauss_newton(residual, jac, x, free, m):
+    """Gauss–Newton with step halving (a Levenberg–Marquardt safeguard never needed here,
+    since the problem is mildly non-linear and well started by the first-order solution)."""
+    cost = float(residual(x) @ residual(x))
+    for it in range(1, MAX_ITER + 1):
+        J = jac(x)
+        dx = np.linalg.lstsq(J, residual(x), rcond=None)[0]
+        for _ in range(30):
+            trial = x.copy()
+            trial[free] += dx
+            new = float(residual(trial) @ residual(trial))
+            if new <= cost * (1 + 1e-12):
+                break
+            dx /= 2
+        x, cost = trial, new
+        step = max(abs(shown(v, m.effects[i].unit)[0]) for i, v in zip(free, dx, strict=True))
+        if step < STEP_TOL_SHOWN:
+            return x, jac(x), it
+    raise CompgenError(f"the exact fit did not converge in {MAX_ITER} iterations",
+                       hint="the errors may be too large for this model; try --method linear "
+                            "to see the first-order estimate")
+
+
+def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarray) -> None:
+    """Refuse a rank-deficient or badly conditioned problem, naming what cannot be separated
+    and which of the machine's paths, or a second ball position, would separate it."""
+    norm = np.linalg.norm(J, axis=0)
+    names = [m.names[i] for i in free]
+    dead = [names[k] for k in np.flatnonzero(norm == 0)]
+    if dead:
+        raise CompgenError(f"{', '.join(dead)} do{'es' if len(dead) == 1 else ''} not change any "
+                           f"reading on these poses", hint="fix it with --fix NAME=0 or measure a "
+                                                           "path that moves its axis")
+    _, s, Vt = np.linalg.svd(J / norm, full_matrices=False)
+    weak = np.flatnonzero(s < s[0] / COND_LIMIT)
+    if not weak.size:
+        return
+    combos = []
+    for k in weak:
+        v = Vt[k] / norm                  # a physical direction the readings do not see
+        big = np.flatnonzero(np.abs(v * norm) >= 0.15 * np.abs(v * norm).max())
+        scale = 1.0 / abs(shown(v[big[0]], m.effects[free[big[0]]].unit)[0])
+        combos.append(" with ".join(
+            f"{names[j]} {shown(v[j] * scale, m.effects[free[j]].unit)[0]:+.2f} "
+            f"{shown(1, m.effects[free[j]].unit)[1]}" for j in big))
+    cond = s[0] / s[-1] if s[-1] > 0 else np.inf
+    raise CompgenError(
+        f"these data cannot separate the parameters (condition number {cond:.3g}): moving "
+        + "; or ".join(combos) + " changes the readings by less than 1/"
+        + f"{COND_LIMIT:g} of the best-seen combination",
+        hint=_separating_measurements(machine, m, free, J) +
+             "; or hold one parameter of each combination with --fix NAME=VALUE")
+
+
+def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.ndarray) -> str:
+    options = []
+    table = np.asarray(machine.ball)
+    for ball, where in ((table, ""), (table + [0, 0, SECOND_BALL_DZ_MM],
+                                      f" with the ball {SECOND_BALL_DZ_MM:g} mm higher")):
+        for name in machine.paths:
+            try:
+                extra = generate(machine, [name], ball=ball)
+            except CompgenError:          # that path leaves the travel: not an option
+                continue
+            Je = m.jacobian(extra)[:, :, free].reshape(-1, len(free))
+            both = np.vstack([J, Je])
+            s = np.linalg.svd(both / np.linalg.norm(both, axis=0), compute_uv=False)
+            if s[-1] > s[0] / COND_LIMIT:
+                options.append((s[0] / s[-1], f"{name}{where}"))
+    if not options:
+        return "no single path of the machine file separates them"
+    best = ", ".join(f"{o} (condition {c:.0f})" for c, o in sorted(options)[:3])
+    return f"adding one of these measurements would: {best}"
+
+
+def residual_stats(poses: Poses, r: np.ndarray, dof: int) -> dict:
+    """RMS and ISO 10791-6 style range per path and per direction, µm; r (n, 3) mm."""
+    r_um = r * 1e3
+    per_path = {}
+    for label in dict.fromkeys(poses.path):
+        rp = r_um[poses.path == label]
+        per_path[label or "(unlabelled)"] = {
+            "n": int(len(rp)), "rms_um": np.sqrt((rp**2).mean(axis=0)).tolist(),
+            "range_um": (rp.max(axis=0) - rp.min(axis=0)).tolist(),
+            "max_abs_um": np.abs(rp).max(axis=0).tolist()}
+    return {"rms_um": float(np.sqrt((r_um**2).mean())),
+            "sigma_um": float(np.sqrt((r_um**2).sum() / dof)),
+            "readings": int(r.size), "dof": int(dof),
+            "per_direction_rms_um": dict(zip(("dX", "dY", "dZ"),
+                                             np.sqrt((r_um**2).mean(axis=0)).tolist(), strict=True)),
+            "per_path": per_path}
+
+
+def _counts(labels: np.ndarray) -> dict[str, int]:
+    return {str(k) or "(unlabelled)": int((labels == k).sum()) for k in dict.fromkeys(labels)}
+
+
+def _version() -> str:
+    try:
+        return version("compgen")
+    except PackageNotFoundError:
+        return "0+unknown"
+
+
+def parse_fixed(machine: Machine, items: Sequence[str]) -> dict[str, float]:
+    """``["ZOW=0", "BOA=12.3arcsec"]`` → {name: value in mm or rad}."""
+    out = {}
+    for item in items:
+        name, eq, value = item.partition("=")
+        if not eq:
+            raise CompgenError(f"--fix takes NAME=VALUE, not {item!r}", hint="e.g. --fix ZOW=0")
+        effect = effect_of_param(machine, name.strip())
+        out[canonical(name)] = parse_quantity(value, effect.unit, where=f"--fix {item}")
+    return out

@@ -1,0 +1,193 @@
+"""Exact forward model of the R-test reading, its Jacobian, and the nominal inverse.
+
+The R-test reads the nest (tool) centre minus the ball (workpiece) centre along the machine
+X, Y, Z (contract §1). compgen predicts the *deviation from nominal*: that vector on the
+erroneous machine minus the same vector on the nominal machine at the same commanded pose.
+On a pose commanded by TCPM or by compgen's inverse kinematics the nominal vector is zero up
+to the resolution of the recorded X, Y, Z; subtracting it keeps that rounding (0.05 µm at
+four decimals) out of the model.
+
+References: seed report eqs. (1)–(8); ``shared/spec/rtest-format.md`` §2–3.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .effects import POLY_SCALE_MM, ROT_OF, ROTATIONS, TIME_SCALE_S, TRANSLATIONS, Effect, canonical, effect_of_param
+from .errors import CompgenError
+from .machine import Axis, Machine
+from .transforms import UNIT, apply, rot_axis, rot_exact, trans
+
+SLOT_INDEX = {d: i for i, d in enumerate(TRANSLATIONS + ROTATIONS)}
+FD_STEP = 1e-6   # mm or rad: central differences exact to ~1e-9 relative at these levers
+
+
+@dataclass(frozen=True, eq=False)
+class Poses:
+    """Commanded poses of one or more R-test sessions.
+
+    q : (n, k) commanded axis positions, mm and rad, columns in ``machine.axis_names`` order
+    ball : (n, 3) nominal ball centre in the table frame, mm
+    t : (n,) time since the start of the session, s (NaN where not recorded)
+    path : (n,) path label of each pose
+    """
+
+    q: np.ndarray
+    ball: np.ndarray
+    t: np.ndarray
+    path: np.ndarray
+
+    def __post_init__(self):
+        for field in ("q", "ball", "t", "path"):
+            a = np.array(getattr(self, field))   # a copy: freezing must not touch the caller's
+            a.setflags(write=False)
+            object.__setattr__(self, field, a)
+
+    def __len__(self) -> int:
+        return len(self.q)
+
+    def take(self, index) -> Poses:
+        return Poses(self.q[index], self.ball[index], self.t[index], self.path[index])
+
+    @staticmethod
+    def concat(items: Sequence[Poses]) -> Poses:
+        return Poses(*(np.concatenate([getattr(p, f) for p in items])
+                       for f in ("q", "ball", "t", "path")))
+
+
+class Model:
+    """A set of named parameters (an ordered model) on a machine, ready to evaluate.
+
+    >>> m = Model(machine, ["XOC", "ECC:h2c"])        # doctest: +SKIP
+    >>> m.deviation(poses, np.array([1e-3, 2e-6]))    # (n, 3) mm
+    """
+
+    def __init__(self, machine: Machine, names: Iterable[str]):
+        self.machine = machine
+        self.names = tuple(canonical(n) for n in names)
+        if len(set(self.names)) != len(self.names):
+            raise CompgenError(f"a parameter is named twice in the model {list(self.names)}")
+        self.effects: tuple[Effect, ...] = tuple(effect_of_param(machine, n) for n in self.names)
+
+    def _slots(self, poses: Poses, values: np.ndarray) -> dict[tuple[str, str], np.ndarray]:
+        n, slots = len(poses), {}
+        for name, effect, value in zip(self.names, self.effects, values, strict=True):
+            if value == 0.0:
+                continue
+            term = effect.params.index(name)
+            x = coordinate(self.machine, effect, poses)
+            key = (effect.carrier, effect.slot)
+            slots.setdefault(key, np.zeros((n, 6)))[:, SLOT_INDEX[effect.direction]] += (
+                value * effect.basis.values(x)[:, term])
+        return slots
+
+    def relative(self, poses: Poses, values: np.ndarray | None = None) -> np.ndarray:
+        """Nest centre minus ball centre, machine frame, (n, 3) mm."""
+        values = np.zeros(len(self.names)) if values is None else np.asarray(values, float)
+        slots = self._slots(poses, values)
+        m = self.machine
+        zero = np.zeros((len(poses), 6))
+        table = _chain(m, m.workpiece, poses, slots, zero)
+        spindle = _chain(m, m.tool, poses, slots, zero) @ trans([0.0, 0.0, m.probe_length])
+        ball = apply(table, poses.ball + slots.get(("ball", "loc"), zero)[:, :3])
+        nest = apply(spindle, np.array([0.0, 0.0, -m.probe_length])
+                     + slots.get(("nest", "loc"), zero)[:, :3])
+        return nest - ball + slots.get(("time", "loc"), zero)[:, :3]
+
+    def deviation(self, poses: Poses, values: np.ndarray) -> np.ndarray:
+        """Predicted R-test reading minus its nominal value, (n, 3) mm."""
+        return self.relative(poses, values) - self.relative(poses)
+
+    def jacobian(self, poses: Poses, values: np.ndarray | None = None) -> np.ndarray:
+        """∂ deviation / ∂ parameters at ``values``, (n, 3, p), mm per mm or per rad.
+
+        At ``values = 0`` these are the first-order error gains (seed Table 2).
+        """
+        values = np.zeros(len(self.names)) if values is None else np.asarray(values, float)
+        J = np.empty((len(poses), 3, len(self.names)))
+        for i in range(len(self.names)):
+            step = np.zeros_like(values)
+            step[i] = FD_STEP
+            J[:, :, i] = (self.relative(poses, values + step)
+                          - self.relative(poses, values - step)) / (2 * FD_STEP)
+        return J
+
+
+def coordinate(machine: Machine, effect: Effect, poses: Poses) -> np.ndarray:
+    """The coordinate an effect's basis runs in: rad, position per 1000 mm, or hours."""
+    if effect.carrier == "time":
+        if np.isnan(poses.t).any():
+            raise CompgenError(f"{effect.name} needs the time column t in every data row")
+        return poses.t / TIME_SCALE_S
+    if effect.basis.kind == "const":
+        return np.zeros(len(poses))
+    axis = machine.axis(effect.carrier)
+    q = poses.q[:, machine.index(axis.name)]
+    return q if axis.rotary else q / POLY_SCALE_MM
+
+
+def _link(axis: Axis, q: np.ndarray, loc: np.ndarray, comp: np.ndarray) -> np.ndarray:
+    """Transform of one axis frame in its parent, (n, 4, 4) (seed eqs. 1 and 2)."""
+    offset = np.asarray(axis.offset)
+    if axis.rotary:
+        own = SLOT_INDEX[ROT_OF[axis.direction]]
+        tilt = comp[:, 3:].copy()
+        tilt[:, own - 3] = 0.0
+        return (trans(offset + loc[:, :3]) @ rot_exact(loc[:, 3:]) @ trans(comp[:, :3])
+                @ rot_exact(tilt) @ rot_axis(axis.direction, axis.sense * q + comp[:, own]))
+    # squareness tilts the line of motion; the carriage itself turns only by its own
+    # angular error motions
+    line = apply(rot_exact(loc[:, 3:]), np.broadcast_to(UNIT[axis.direction], loc[:, :3].shape))
+    motion = (axis.sense * q)[:, None] * line
+    return trans(offset + loc[:, :3] + comp[:, :3] + motion) @ rot_exact(comp[:, 3:])
+
+
+def _chain(machine: Machine, axes: Sequence[Axis], poses: Poses, slots: Mapping,
+           zero: np.ndarray) -> np.ndarray:
+    T = np.broadcast_to(np.eye(4), (len(poses), 4, 4))
+    for axis in axes:
+        q = poses.q[:, machine.index(axis.name)]
+        T = T @ _link(axis, q, slots.get((axis.name, "loc"), zero),
+                      slots.get((axis.name, "comp"), zero))
+    return T
+
+
+def inverse(machine: Machine, rotary_rad: np.ndarray, ball: np.ndarray) -> np.ndarray:
+    """Nominal inverse kinematics, as a controller's TCPM/TRAORI would compute it.
+
+    Parameters
+    ----------
+    rotary_rad : (n, r) rotary axis positions in ``machine.rotary_axes`` order, rad
+    ball : (n, 3) or (3,) ball centre in the table frame, mm
+
+    Returns
+    -------
+    q : (n, k) full commanded poses (mm, rad) that put the nest centre on the ball centre.
+
+    For fixed rotary angles the nest-minus-ball vector is affine in the linear axes, so
+    three unit steps give its matrix exactly, whatever the chain.
+    """
+    rotary_rad = np.atleast_2d(np.asarray(rotary_rad, float))
+    n = len(rotary_rad)
+    ball = np.broadcast_to(np.asarray(ball, float), (n, 3))
+    q = np.zeros((n, len(machine.axes)))
+    linear = [i for i, a in enumerate(machine.axes) if not a.rotary]
+    q[:, [i for i, a in enumerate(machine.axes) if a.rotary]] = rotary_rad
+    nominal = Model(machine, ())
+    blank = (np.full(n, np.nan), np.full(n, "", dtype=object))
+
+    def rel(qq):
+        return nominal.relative(Poses(qq, ball.copy(), *blank))
+
+    r0 = rel(q)
+    M = np.empty((n, 3, 3))
+    for j, i in enumerate(linear):
+        qi = q.copy()
+        qi[:, i] += 1.0
+        M[:, :, j] = rel(qi) - r0
+    q[:, linear] = np.linalg.solve(M, -r0[..., None])[..., 0]
+    return q

@@ -1,0 +1,276 @@
+"""A machine: two kinematic chains of axes, the R-test set-up and the test paths, from TOML.
+
+The workpiece chain runs from the machine frame out to the table that carries the ball; the
+tool chain from the machine frame out to the spindle that carries the nest. Machine frame
+origin and orientation are the machine file's: on the seed machine, the nominal A/C
+intersection (``shared/spec/rtest-format.md`` §2).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import CompgenError
+
+LINEAR, ROTARY = "linear", "rotary"
+DIRECTIONS = ("x", "y", "z")
+CONTROLLERS = ("itnc530", "tnc640", "sinumerik840d", "linuxcnc")
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One numerically controlled axis.
+
+    ``sense`` is the sign between the commanded coordinate and the motion of the carried
+    frame: a table axis that moves the table in -x for a +X command (ISO 841) has -1.
+    ``offset`` (mm) places the axis frame in its parent at zero command: for a rotary axis,
+    the reference point of its location errors. ``travel`` and ``feed_max`` are in mm and
+    mm/min (linear) or deg and deg/min (rotary), as on the machine's data plate.
+    """
+
+    name: str
+    kind: str
+    direction: str
+    side: str
+    sense: int = 1
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    travel: tuple[float, float] = (-math.inf, math.inf)
+    feed_max: float = math.inf
+
+    @property
+    def rotary(self) -> bool:
+        return self.kind == ROTARY
+
+    @property
+    def full_turn(self) -> bool:
+        """A rotary axis that can turn a whole revolution: its errors repeat every 360°."""
+        return self.rotary and self.travel[1] - self.travel[0] >= 360.0
+
+
+@dataclass(frozen=True)
+class PathDef:
+    """A test path as data: ``n`` poses, each rotary axis a function of s ∈ [0, 1].
+
+    ``rotary[name]`` is ``("const", value)``, ``("ramp", start, end)`` or
+    ``("sine", offset, amplitude, cycles)`` meaning offset + amplitude·sin(2π·cycles·s), deg.
+    """
+
+    name: str
+    n: int
+    seconds_per_pose: float
+    rotary: dict[str, tuple]
+
+
+@dataclass(frozen=True)
+class Machine:
+    name: str
+    controller: str
+    workpiece: tuple[Axis, ...]
+    tool: tuple[Axis, ...]
+    ball: tuple[float, float, float]
+    probe_length: float
+    paths: dict[str, PathDef] = field(default_factory=dict)
+    source: str = ""
+    sha256: str = ""
+
+    @property
+    def axes(self) -> tuple[Axis, ...]:
+        """Linear axes in X, Y, Z order, then rotary axes from the base outwards.
+
+        This is the column order of every pose array: ``poses.q[:, machine.index('C')]``.
+        """
+        linear = sorted((a for a in self.workpiece + self.tool if not a.rotary),
+                        key=lambda a: a.direction)
+        rotary = [a for a in self.workpiece + self.tool if a.rotary]
+        return tuple(linear + rotary)
+
+    @property
+    def axis_names(self) -> tuple[str, ...]:
+        return tuple(a.name for a in self.axes)
+
+    @property
+    def rotary_axes(self) -> tuple[Axis, ...]:
+        return tuple(a for a in self.axes if a.rotary)
+
+    def axis(self, name: str) -> Axis:
+        for a in self.axes:
+            if a.name == name:
+                return a
+        raise CompgenError(f"machine {self.name!r} has no axis {name!r}",
+                           hint=f"its axes are {', '.join(self.axis_names)}")
+
+    def index(self, name: str) -> int:
+        return self.axis_names.index(self.axis(name).name)
+
+
+def load_machine(path: str | Path) -> Machine:
+    """Read and check a machine file; every problem names the file and the key."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise CompgenError(f"cannot read machine file: {exc.strerror}", where=str(path)) from None
+    try:
+        doc = tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise CompgenError("machine file is not UTF-8 text", where=str(path)) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise CompgenError(f"not valid TOML: {exc}", where=str(path)) from None
+    return _machine_from_dict(doc, str(path), hashlib.sha256(raw).hexdigest())
+
+
+def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
+    get = _Getter(doc, source)
+    controller = get.str("controller")
+    if controller not in CONTROLLERS:
+        raise CompgenError(f"unknown controller {controller!r}", where=f"{source}: controller",
+                           hint=f"use one of {', '.join(CONTROLLERS)}")
+    chains = {side: tuple(_axis(get.sub(side, i), side) for i in range(len(get.list(side))))
+              for side in ("workpiece", "tool")}
+    axes = chains["workpiece"] + chains["tool"]
+    names = [a.name for a in axes]
+    if len(set(names)) != len(names):
+        raise CompgenError("an axis name appears twice", where=f"{source}: axes {names}")
+    linear_dirs = sorted(a.direction for a in axes if not a.rotary)
+    if linear_dirs != ["x", "y", "z"]:
+        raise CompgenError(f"need exactly one linear axis along each of x, y, z, found "
+                           f"{linear_dirs}", where=source)
+    if not any(a.rotary for a in axes):
+        raise CompgenError("the machine has no rotary axis", where=source)
+    rtest = get.sub("rtest")
+    machine = Machine(
+        name=get.str("name"), controller=controller,
+        workpiece=chains["workpiece"], tool=chains["tool"],
+        ball=rtest.vec3("ball"), probe_length=rtest.number("probe_length"),
+        source=source, sha256=sha256,
+    )
+    paths = {}
+    for name in get.table("paths", optional=True):
+        paths[name] = _path(get.sub("paths").sub(name), name, machine)
+    return Machine(**{**machine.__dict__, "paths": paths})
+
+
+def _axis(get: _Getter, side: str) -> Axis:
+    name = get.str("axis")
+    kind = get.str("type")
+    if kind not in (LINEAR, ROTARY):
+        raise CompgenError(f"type must be {LINEAR!r} or {ROTARY!r}, not {kind!r}", where=get.at("type"))
+    direction = get.str("direction")
+    if direction not in DIRECTIONS:
+        raise CompgenError(f"direction must be one of x, y, z, not {direction!r}",
+                           where=get.at("direction"))
+    sense = int(get.number("sense", default=1))
+    if sense not in (1, -1):
+        raise CompgenError("sense must be +1 or -1", where=get.at("sense"))
+    travel = tuple(get.numbers("travel", 2))
+    if not travel[0] < travel[1]:
+        raise CompgenError(f"travel must be [min, max] with min < max, got {list(travel)}",
+                           where=get.at("travel"))
+    feed = get.number("feed_max")
+    if not feed > 0:
+        raise CompgenError("feed_max must be positive", where=get.at("feed_max"))
+    return Axis(name=name, kind=kind, direction=direction, side=side, sense=sense,
+                offset=get.vec3("offset", default=(0.0, 0.0, 0.0)), travel=travel, feed_max=feed)
+
+
+def _path(get: _Getter, name: str, machine: Machine) -> PathDef:
+    n = int(get.number("n"))
+    if n < 2:
+        raise CompgenError("a path needs n ≥ 2 poses", where=get.at("n"))
+    rotary = {}
+    for axis in machine.rotary_axes:
+        spec = get.doc.get(axis.name, 0.0)
+        where = get.at(axis.name)
+        if isinstance(spec, int | float) and not isinstance(spec, bool):
+            rotary[axis.name] = ("const", float(spec))
+        elif isinstance(spec, dict) and set(spec) == {"from", "to"}:
+            rotary[axis.name] = ("ramp", float(spec["from"]), float(spec["to"]))
+        elif isinstance(spec, dict) and {"amplitude", "cycles"} <= set(spec) <= {
+                "amplitude", "cycles", "offset"}:
+            rotary[axis.name] = ("sine", float(spec.get("offset", 0.0)),
+                                 float(spec["amplitude"]), float(spec["cycles"]))
+        else:
+            raise CompgenError(f"cannot read {spec!r}", where=where,
+                               hint="give a number (deg), {from=…, to=…} or "
+                                    "{amplitude=…, cycles=…, offset=…}")
+    unknown = set(get.doc) - {"n", "seconds_per_pose"} - set(rotary)
+    if unknown:
+        raise CompgenError(f"unknown keys {sorted(unknown)}", where=get.at(""),
+                           hint=f"a path names rotary axes {', '.join(rotary)}, n and seconds_per_pose")
+    return PathDef(name=name, n=n, seconds_per_pose=get.number("seconds_per_pose", default=1.0),
+                   rotary=rotary)
+
+
+class _Getter:
+    """Typed access to a TOML table that names file and key in every complaint."""
+
+    def __init__(self, doc: dict, where: str):
+        self.doc, self.where = doc, where
+
+    def at(self, key: str) -> str:
+        return f"{self.where}: {key}" if key else self.where
+
+    def _get(self, key: str, default=None):
+        if key not in self.doc:
+            if default is not None:
+                return default
+            raise CompgenError(f"missing key {key!r}", where=self.where)
+        return self.doc[key]
+
+    def str(self, key: str) -> str:
+        v = self._get(key)
+        if not isinstance(v, str) or not v:
+            raise CompgenError("must be a non-empty string", where=self.at(key))
+        return v
+
+    def number(self, key: str, default: float | None = None) -> float:
+        v = self._get(key, default)
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise CompgenError(f"must be a finite number, got {v!r}", where=self.at(key))
+        return float(v)
+
+    def numbers(self, key: str, count: int, default=None) -> list[float]:
+        v = self._get(key, default)
+        if (not isinstance(v, list | tuple) or len(v) != count
+                or not all(isinstance(x, int | float) and not isinstance(x, bool) for x in v)
+                or not all(math.isfinite(x) for x in v)):
+            raise CompgenError(f"must be a list of {count} finite numbers, got {v!r}",
+                               where=self.at(key))
+        return [float(x) for x in v]
+
+    def vec3(self, key: str, default=None) -> tuple[float, float, float]:
+        return tuple(self.numbers(key, 3, default))
+
+    def list(self, key: str) -> list:
+        v = self._get(key)
+        if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
+            raise CompgenError("must be an array of tables ([[…]])", where=self.at(key))
+        return v
+
+    def table(self, key: str, optional: bool = False) -> dict:
+        v = self.doc.get(key, {} if optional else None)
+        if not isinstance(v, dict):
+            raise CompgenError("must be a table", where=self.at(key))
+        return v
+
+    def sub(self, key: str, index: int | None = None) -> _Getter:
+        if index is None:
+            return _Getter(self.table(key), self.at(key))
+        return _Getter(self.list(key)[index], f"{self.at(key)}[{index}]")
+
+
+def sha256_of(path: str | Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def travel_violations(machine: Machine, q: np.ndarray) -> np.ndarray:
+    """Boolean (n, k): which pose coordinates (mm, rad) leave the machine's travel."""
+    lo = np.array([a.travel[0] if not a.rotary else math.radians(a.travel[0]) for a in machine.axes])
+    hi = np.array([a.travel[1] if not a.rotary else math.radians(a.travel[1]) for a in machine.axes])
+    return (q < lo - 1e-9) | (q > hi + 1e-9)

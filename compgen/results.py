@@ -1,0 +1,161 @@
+"""The fit result as a value: fit.json in and out, and the human report.
+
+fit.json (format ``compgen.fit/1``) stores values in inside units (mm, rad) with the unit
+beside them; µm and arcsec appear only in ``report()``. Python's json writes floats with
+repr, so values round-trip exactly.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import CompgenError
+from .units import shown
+
+FORMAT = "compgen.fit/1"
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A parameter's value and standard uncertainty, in ``unit`` (mm or rad)."""
+
+    value: float
+    std: float
+    unit: str
+    fixed: bool = False
+
+
+@dataclass(frozen=True)
+class DataRef:
+    file: str
+    sha256: str
+    rows: int
+    paths: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, eq=False)   # eq=False: ndarray fields make the default __eq__ raise
+class FitResult:
+    """What ``identify`` returns and fit.json holds.
+
+    ``correlation`` is over ``free`` (the fitted parameters, model order);
+    ``singular_values`` are those of the column-normalised Jacobian, largest first.
+    """
+
+    machine: dict
+    data: tuple[DataRef, ...]
+    model: tuple[str, ...]
+    parameters: dict[str, Estimate]
+    free: tuple[str, ...]
+    correlation: np.ndarray
+    singular_values: np.ndarray
+    residual: dict
+    method: str
+    iterations: int
+    sign: str
+    version: str
+    descriptions: dict[str, str] = field(default_factory=dict)
+
+    def __post_init__(self):
+        for a in (self.correlation, self.singular_values):
+            a.setflags(write=False)
+
+    @property
+    def condition_number(self) -> float:
+        s = self.singular_values
+        return float(s[0] / s[-1]) if len(s) and s[-1] > 0 else math.inf
+
+    def to_dict(self) -> dict:
+        return {
+            "format": FORMAT,
+            "compgen_version": self.version,
+            "machine": self.machine,
+            "data": [d.__dict__ for d in self.data],
+            "sign": self.sign,
+            "model": list(self.model),
+            "method": self.method,
+            "iterations": self.iterations,
+            "parameters": {
+                n: {"value": e.value, "unit": e.unit, "std": e.std,
+                    **({"fixed": True} if e.fixed else {}),
+                    **({"description": self.descriptions[n]} if n in self.descriptions else {})}
+                for n, e in self.parameters.items()},
+            "correlation": {"names": list(self.free), "matrix": self.correlation.tolist()},
+            "identifiability": {"singular_values": self.singular_values.tolist(),
+                                "condition_number": self.condition_number,
+                                "normalisation": "columns scaled to unit norm"},
+            "residual": self.residual,
+        }
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=2, allow_nan=False, ensure_ascii=False) + "\n"
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "fit.json") -> FitResult:
+        if d.get("format") != FORMAT:
+            raise CompgenError(f"not a compgen fit file (format {d.get('format')!r})", where=where,
+                               hint="make one with `compgen fit`")
+        try:
+            params = {n: Estimate(float(p["value"]), float(p["std"]), p["unit"], bool(p.get("fixed")))
+                      for n, p in d["parameters"].items()}
+            return cls(
+                machine=d["machine"], data=tuple(DataRef(**x) for x in d["data"]),
+                model=tuple(d["model"]), parameters=params,
+                free=tuple(d["correlation"]["names"]),
+                correlation=np.array(d["correlation"]["matrix"], float).reshape(
+                    len(d["correlation"]["names"]), -1),
+                singular_values=np.array(d["identifiability"]["singular_values"], float),
+                residual=d["residual"], method=d["method"], iterations=int(d["iterations"]),
+                sign=d["sign"], version=d["compgen_version"],
+                descriptions={n: p["description"] for n, p in d["parameters"].items()
+                              if "description" in p})
+        except (KeyError, TypeError, ValueError) as exc:
+            raise CompgenError(f"fit file is incomplete or damaged ({exc!r})", where=where) from None
+
+    def report(self) -> str:
+        """A table like the seed's Table 4, in µm and arcsec, with uncertainties."""
+        r = self.residual
+        lines = [f"compgen fit: {self.machine['name']}"]
+        for d in self.data:
+            counts = ", ".join(f"{k} {v}" for k, v in d.paths.items())
+            lines.append(f"  data  {d.file}: {d.rows} poses ({counts})")
+        lines.append(f"  model {len(self.model)} parameters ({len(self.free)} fitted), method "
+                     f"{self.method}, {self.iterations} iteration(s)")
+        lines += ["", f"  {'parameter':<12}{'value':>12}  {'std. unc.':>11}   meaning"]
+        for n, e in self.parameters.items():
+            v, unit = shown(e.value, e.unit)
+            s, _ = shown(e.std, e.unit)
+            unc = "fixed" if e.fixed else f"± {s:.3f}"
+            lines.append(f"  {n:<12}{v:>9.3f} {unit:<2} {unc:>11}   {self.descriptions.get(n, '')}")
+        lines += ["", f"  residual RMS {r['rms_um']:.3f} µm over {r['readings']} readings; "
+                      f"σ̂ = {r['sigma_um']:.3f} µm with {r['dof']} degrees of freedom",
+                  f"  {'path':<8}{'poses':>6}   RMS dX    dY    dZ    range dX    dY    dZ   (µm)"]
+        for name, p in r["per_path"].items():
+            rms, rng = p["rms_um"], p["range_um"]
+            lines.append(f"  {name:<8}{p['n']:>6}   {rms[0]:7.3f}{rms[1]:6.3f}{rms[2]:6.3f}"
+                         f"    {rng[0]:8.3f}{rng[1]:6.3f}{rng[2]:6.3f}")
+        lines += ["", f"  condition number {self.condition_number:.1f} (columns scaled to unit "
+                      f"norm; above 100 the estimates are fragile)"]
+        pairs = [(abs(self.correlation[i, j]), self.free[i], self.free[j], self.correlation[i, j])
+                 for i in range(len(self.free)) for j in range(i)]
+        strong = sorted(p for p in pairs if p[0] >= 0.9)[::-1][:5]
+        if strong:
+            lines.append("  strongly correlated: " + ", ".join(f"{a}–{b} {c:+.2f}" for _, a, b, c in strong))
+        return "\n".join(lines) + "\n"
+
+
+def load_fit(path: str | Path) -> FitResult:
+    path = Path(path)
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise CompgenError(f"cannot read fit file: {exc.strerror}", where=str(path)) from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CompgenError(f"not a JSON fit file ({exc})", where=str(path)) from None
+    if not isinstance(d, dict):
+        raise CompgenError("not a compgen fit file", where=str(path))
+    return FitResult.from_dict(d, str(path))

@@ -1,0 +1,151 @@
+"""R-test CSV v1 in and out (``shared/spec/rtest-format.md`` §1).
+
+Reading converts to inside units (mm, rad; deviations in mm) and checks every cell; a
+problem names file, line and column. Writing keeps enough digits to round-trip to 1 pm.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import CompgenError
+from .kinematics import Model, Poses
+from .machine import Machine
+
+DEVIATION = ("dX", "dY", "dZ")
+BALL = ("bx", "by", "bz")
+SIGNS = ("nest-minus-ball", "ball-minus-nest")
+NOMINAL_TOLERANCE_MM = 0.01   # commanded XYZ vs nominal ball: far above 4-decimal rounding
+
+
+@dataclass(frozen=True, eq=False)
+class RTestData:
+    """One R-test file: poses and readings. ``deviation`` (n, 3) mm, nest minus ball."""
+
+    poses: Poses
+    deviation: np.ndarray
+    source: str = ""
+    sha256: str = ""
+
+    def __len__(self) -> int:
+        return len(self.poses)
+
+
+def read_rtest(path: str | Path, machine: Machine, sign: str = "nest-minus-ball") -> RTestData:
+    """Read an R-test CSV v1 file for ``machine``.
+
+    ``sign`` says what the device reports; the contract's is nest minus ball. A device that
+    reports ball minus nest needs ``sign="ball-minus-nest"``: compgen never guesses it.
+    """
+    if sign not in SIGNS:
+        raise CompgenError(f"sign must be one of {', '.join(SIGNS)}, not {sign!r}")
+    path = Path(path)
+    where = str(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise CompgenError(f"cannot read data file: {exc.strerror}", where=where) from None
+    if b"\x00" in raw:
+        raise CompgenError("binary file, not CSV text", where=where)
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise CompgenError(f"not UTF-8 text (byte {exc.start})", where=where) from None
+
+    lines = [(i, line) for i, line in enumerate(text.splitlines(), start=1)
+             if line.strip() and not line.lstrip().startswith("#")]
+    if not lines:
+        raise CompgenError("empty file: no header and no data", where=where)
+    header_line, header_text = lines[0]
+    header = [h.strip() for h in next(csv.reader([header_text]))]
+    dup = sorted({h for h in header if header.count(h) > 1})
+    if dup:
+        raise CompgenError(f"column {dup[0]!r} appears twice in the header", where=f"{where}:{header_line}")
+    required = ["X", "Y", "Z", *(a.name for a in machine.rotary_axes), *DEVIATION]
+    missing = [c for c in required if c not in header]
+    if missing:
+        raise CompgenError(f"missing column{'s' if len(missing) > 1 else ''} {', '.join(missing)}",
+                           where=f"{where}:{header_line}",
+                           hint=f"machine {machine.name!r} needs {', '.join(required)}; found "
+                                f"{', '.join(header)}")
+    if len(lines) == 1:
+        raise CompgenError("header only: no data rows", where=where)
+    has_ball = [c in header for c in BALL]
+    if any(has_ball) and not all(has_ball):
+        raise CompgenError("give all of bx, by, bz or none", where=f"{where}:{header_line}")
+    numeric = required + [c for c in ("t", *BALL) if c in header]
+    col = {c: header.index(c) for c in header}
+
+    values = np.empty((len(lines) - 1, len(numeric)))
+    labels, line_no = [], []
+    for r, (i, line) in enumerate(lines[1:]):
+        cells = next(csv.reader([line]))
+        if len(cells) != len(header):
+            raise CompgenError(f"{len(cells)} fields where the header has {len(header)}",
+                               where=f"{where}:{i}")
+        for j, name in enumerate(numeric):
+            cell = cells[col[name]].strip()
+            try:
+                v = float(cell)
+            except ValueError:
+                v = math.nan if cell.lower() in ("nan", "") else None
+                if v is None:
+                    raise CompgenError(f"column {name}: {cell!r} is not a number",
+                                       where=f"{where}:{i}:{col[name] + 1}") from None
+            if not math.isfinite(v):
+                raise CompgenError(f"column {name}: {cell or 'empty cell'!r} is not a finite number",
+                                   where=f"{where}:{i}:{col[name] + 1}")
+            values[r, j] = v
+        labels.append(cells[col["path"]].strip() if "path" in col else "")
+        line_no.append(i)
+
+    get = {name: values[:, j] for j, name in enumerate(numeric)}
+    q = np.column_stack([get[a.name] if not a.rotary else np.radians(get[a.name])
+                         for a in machine.axes])
+    ball = (np.column_stack([get[c] for c in BALL]) if all(has_ball)
+            else np.broadcast_to(machine.ball, (len(q), 3)))
+    t = get.get("t", np.full(len(q), np.nan))
+    poses = Poses(q, ball, t, np.array(labels, dtype=object))
+    deviation = np.column_stack([get[c] for c in DEVIATION]) * 1e-3
+    if sign == "ball-minus-nest":
+        deviation = -deviation
+
+    off = np.linalg.norm(Model(machine, ()).relative(poses), axis=1)
+    bad = np.flatnonzero(off > NOMINAL_TOLERANCE_MM)
+    if bad.size:
+        k = bad[0]
+        raise CompgenError(
+            f"commanded X, Y, Z are {off[k]:.3f} mm from the nominal ball centre at these "
+            f"rotary positions ({bad.size} rows like this)", where=f"{where}:{line_no[k]}",
+            hint="the machine file's geometry or ball position does not match this data; "
+                 "give the ball per row in bx, by, bz if it moved")
+    return RTestData(poses, deviation, where, hashlib.sha256(raw).hexdigest())
+
+
+def format_rtest(machine: Machine, data: RTestData, comments: tuple[str, ...] = ()) -> str:
+    """CSV v1 text: path, t, linear axes, rotary axes (deg), dX dY dZ (µm), ball if not default."""
+    p = data.poses
+    ball_default = np.allclose(p.ball, machine.ball, rtol=0, atol=1e-12)
+    timed = not np.isnan(p.t).any()
+    header = ["path", *(["t"] if timed else []), *machine.axis_names, *DEVIATION] + (
+        [] if ball_default else list(BALL))
+    out = io.StringIO()
+    for c in comments:
+        out.write(f"# {c}\n")
+    w = csv.writer(out, lineterminator="\n")
+    w.writerow(header)
+    for i in range(len(p)):
+        axes = [f"{np.degrees(v) if a.rotary else v:.6f}" for a, v in zip(machine.axes, p.q[i], strict=True)]
+        row = [p.path[i], *([f"{p.t[i]:.3f}"] if timed else []), *axes,
+               *(f"{v * 1e3:.6f}" for v in data.deviation[i])]
+        if not ball_default:
+            row += [f"{v:.6f}" for v in p.ball[i]]
+        w.writerow(row)
+    return out.getvalue()

@@ -1,0 +1,58 @@
+"""Simulated R-test sessions: the project's own source of data with hidden effects."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from .effects import effect_of_param
+from .errors import CompgenError
+from .kinematics import Model, Poses
+from .machine import Machine
+from .rtest import RTestData
+from .units import to_inside
+
+
+def simulate(machine: Machine, truth: Mapping[str, float], poses: Poses, noise_um: float = 0.0,
+             rng: np.random.Generator | None = None) -> RTestData:
+    """Readings of the exact model with ``truth`` (name → mm or rad) plus white noise, µm σ."""
+    if not (math.isfinite(noise_um) and noise_um >= 0):
+        raise CompgenError(f"noise must be a finite σ ≥ 0 µm, not {noise_um}")
+    model = Model(machine, list(truth))
+    dev = model.deviation(poses, np.array(list(truth.values()), dtype=float))
+    if noise_um:
+        rng = rng or np.random.default_rng()
+        dev = dev + rng.normal(0.0, noise_um * 1e-3, dev.shape)
+    return RTestData(poses, dev)
+
+
+def read_truth(path: str | Path, machine: Machine) -> dict[str, float]:
+    """Parameters from a truth file or a fit.json: ``{"parameters": {NAME: {"value": v,
+    "unit": u}}}`` → {canonical name: value in mm or rad}."""
+    where = str(path)
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise CompgenError(f"cannot read truth file: {exc.strerror}", where=where) from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CompgenError(f"not a JSON file ({exc})", where=where) from None
+    params = doc.get("parameters") if isinstance(doc, dict) else None
+    if not isinstance(params, dict):
+        raise CompgenError('needs an object "parameters": {NAME: {"value": v, "unit": u}}',
+                           where=where)
+    out = {}
+    for name, p in params.items():
+        at = f"{where}: parameters.{name}"
+        effect = effect_of_param(machine, name)
+        if not isinstance(p, dict) or not isinstance(p.get("value"), int | float) \
+                or isinstance(p.get("value"), bool) or not isinstance(p.get("unit"), str):
+            raise CompgenError('must be {"value": number, "unit": text}', where=at)
+        canonical = Model(machine, [name]).names[0]
+        if canonical in out:
+            raise CompgenError("parameter given twice (under two spellings)", where=at)
+        out[canonical] = to_inside(float(p["value"]), p["unit"], effect.unit, at)
+    return out

@@ -1,0 +1,52 @@
+"""Units at the edge: SI-like inside (mm, rad), µm and arcsec for people.
+
+Every quantity inside compgen is in mm or rad; these tables convert at input and output.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+from .errors import CompgenError
+
+TO_INSIDE = {"mm": 1.0, "um": 1e-3, "µm": 1e-3, "rad": 1.0, "urad": 1e-6, "µrad": 1e-6,
+             "deg": math.pi / 180.0, "arcsec": math.pi / 648000.0}
+LENGTH = {"mm", "um", "µm"}
+DISPLAY = {"mm": ("um", 1e3), "rad": ("arcsec", 648000.0 / math.pi)}   # inside unit → shown
+
+
+def to_inside(value: float, unit: str, inside_unit: str, where: str = "") -> float:
+    """Convert ``value`` in ``unit`` to ``inside_unit`` (mm or rad), refusing a wrong dimension."""
+    if unit not in TO_INSIDE:
+        raise CompgenError(f"unknown unit {unit!r}", where=where,
+                           hint="use one of mm, um, rad, urad, deg, arcsec")
+    if (unit in LENGTH) != (inside_unit == "mm"):
+        raise CompgenError(f"unit {unit!r} is not a {'length' if inside_unit == 'mm' else 'angle'}",
+                           where=where)
+    if not math.isfinite(value):
+        raise CompgenError(f"value {value!r} is not a finite number", where=where)
+    return value * TO_INSIDE[unit]
+
+
+def shown(value: float, inside_unit: str) -> tuple[float, str]:
+    """``value`` in mm or rad as a person reads it: µm or arcsec."""
+    unit, factor = DISPLAY[inside_unit]
+    return value * factor, ("µm" if unit == "um" else "″")
+
+
+QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-zµ]*)\s*$")
+
+
+def parse_quantity(text: str, inside_unit: str, where: str) -> float:
+    """``"-5um"``, ``"12.3 arcsec"`` or ``"0"`` → mm or rad. A non-zero bare number is refused."""
+    m = QUANTITY.match(text)
+    if not m:
+        raise CompgenError(f"cannot read {text!r} as a number with a unit", where=where,
+                           hint="write e.g. 12.3arcsec or -5um")
+    value, unit = float(m[1]), m[2]
+    if not unit:
+        if value != 0.0:
+            raise CompgenError(f"{text!r} has no unit", where=where, hint="write e.g. 12.3arcsec or -5um")
+        return 0.0
+    return to_inside(value, unit, inside_unit, where)
