@@ -116,8 +116,8 @@ def _gauss_newton(residual, jac, x, free, m):
             dx /= 2
         x, cost = trial, new
         step = max(abs(shown(v, m.effects[i].unit)[0]) for i, v in zip(free, dx, strict=True))
-        if step < STEP_TOL_SHOWN:
-            return x, jac(x), it
+        if step < STEP_TOL_SHOWN:   # J at a point 1e-7 µm away is the Jacobian at the solution
+            return x, J, it
     raise CompgenError(f"the exact fit did not converge in {MAX_ITER} iterations",
                        hint="the errors may be too large for this model; try --method linear "
                             "to see the first-order estimate")

@@ -72,6 +72,7 @@ class Model:
         if len(set(self.names)) != len(self.names):
             raise CompgenError(f"a parameter is named twice in the model {list(self.names)}")
         self.effects: tuple[Effect, ...] = tuple(effect_of_param(machine, n) for n in self.names)
+        self._nominal: tuple[Poses | None, np.ndarray | None] = (None, None)
 
     def _slots(self, poses: Poses, values: np.ndarray) -> dict[tuple[str, str], np.ndarray]:
         n, slots = len(poses), {}
@@ -100,7 +101,9 @@ class Model:
 
     def deviation(self, poses: Poses, values: np.ndarray) -> np.ndarray:
         """Predicted R-test reading minus its nominal value, (n, 3) mm."""
-        return self.relative(poses, values) - self.relative(poses)
+        if self._nominal[0] is not poses:   # poses are frozen: the nominal vector is too
+            self._nominal = (poses, self.relative(poses))
+        return self.relative(poses, values) - self._nominal[1]
 
     def jacobian(self, poses: Poses, values: np.ndarray | None = None) -> np.ndarray:
         """∂ deviation / ∂ parameters at ``values``, (n, 3, p), mm per mm or per rad.
@@ -131,19 +134,28 @@ def coordinate(machine: Machine, effect: Effect, poses: Poses) -> np.ndarray:
 
 
 def _link(axis: Axis, q: np.ndarray, loc: np.ndarray, comp: np.ndarray) -> np.ndarray:
-    """Transform of one axis frame in its parent, (n, 4, 4) (seed eqs. 1 and 2)."""
+    """Transform of one axis frame in its parent, (n, 4, 4) (seed eqs. 1 and 2).
+
+    Factors that are exactly zero are skipped: the model is evaluated ~2p times per
+    Jacobian, and most parameters are zero in most slots.
+    """
     offset = np.asarray(axis.offset)
     if axis.rotary:
         own = SLOT_INDEX[ROT_OF[axis.direction]]
         tilt = comp[:, 3:].copy()
         tilt[:, own - 3] = 0.0
-        return (trans(offset + loc[:, :3]) @ rot_exact(loc[:, 3:]) @ trans(comp[:, :3])
-                @ rot_exact(tilt) @ rot_axis(axis.direction, axis.sense * q + comp[:, own]))
+        T = trans(offset + loc[:, :3])
+        for factor, build in ((loc[:, 3:], rot_exact), (comp[:, :3], trans), (tilt, rot_exact)):
+            if factor.any():
+                T = T @ build(factor)
+        return T @ rot_axis(axis.direction, axis.sense * q + comp[:, own])
     # squareness tilts the line of motion; the carriage itself turns only by its own
     # angular error motions
-    line = apply(rot_exact(loc[:, 3:]), np.broadcast_to(UNIT[axis.direction], loc[:, :3].shape))
-    motion = (axis.sense * q)[:, None] * line
-    return trans(offset + loc[:, :3] + comp[:, :3] + motion) @ rot_exact(comp[:, 3:])
+    line = np.broadcast_to(UNIT[axis.direction], loc[:, :3].shape)
+    if loc[:, 3:].any():
+        line = apply(rot_exact(loc[:, 3:]), line)
+    T = trans(offset + loc[:, :3] + comp[:, :3] + (axis.sense * q)[:, None] * line)
+    return T @ rot_exact(comp[:, 3:]) if comp[:, 3:].any() else T
 
 
 def _chain(machine: Machine, axes: Sequence[Axis], poses: Poses, slots: Mapping,

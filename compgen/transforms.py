@@ -32,11 +32,9 @@ def rot_exact(w: np.ndarray) -> np.ndarray:
     K[..., 0, 1], K[..., 0, 2] = -w[..., 2], w[..., 1]
     K[..., 1, 0], K[..., 1, 2] = w[..., 2], -w[..., 0]
     K[..., 2, 0], K[..., 2, 1] = -w[..., 1], w[..., 0]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        # sin(θ)/θ and (1-cos θ)/θ² with their limits at θ → 0
-        a = np.where(theta > 1e-8, np.sin(theta) / np.where(theta > 0, theta, 1), 1 - theta**2 / 6)
-        b = np.where(theta > 1e-6, (1 - np.cos(theta)) / np.where(theta > 0, theta, 1) ** 2,
-                     0.5 - theta**2 / 24)
+    # sin θ/θ and (1 − cos θ)/θ² = ½(sin(θ/2)/(θ/2))², without branches or cancellation
+    a = np.sinc(theta / np.pi)
+    b = 0.5 * np.sinc(theta / (2 * np.pi)) ** 2
     R = np.eye(3) + a * K + b * (K @ K)
     T = np.zeros(w.shape[:-1] + (4, 4))
     T[..., :3, :3] = R
@@ -47,7 +45,13 @@ def rot_exact(w: np.ndarray) -> np.ndarray:
 def rot_axis(direction: str, angle: np.ndarray) -> np.ndarray:
     """Right-handed rotation about the unit axis ``direction`` ('x', 'y' or 'z') by ``angle`` rad."""
     angle = np.asarray(angle, dtype=float)
-    return rot_exact(angle[..., None] * UNIT[direction])
+    c, s = np.cos(angle), np.sin(angle)
+    i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[direction]
+    T = np.zeros(angle.shape + (4, 4))
+    T[..., 0, 0] = T[..., 1, 1] = T[..., 2, 2] = T[..., 3, 3] = 1.0
+    T[..., i, i] = T[..., j, j] = c
+    T[..., j, i], T[..., i, j] = s, -s
+    return T
 
 
 def apply(T: np.ndarray, p: np.ndarray) -> np.ndarray:

@@ -1,0 +1,44 @@
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from compgen.machine import load_machine
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = Path(os.environ.get("COMPGEN_SHARED", ROOT.parent / "shared"))
+VECTORS = SHARED / "vectors"
+SEED_MACHINE = ROOT / "machines" / "ac-trunnion-itnc530.toml"
+BC_MACHINE = ROOT / "machines" / "bc-table-sinumerik840d.toml"
+UM, ARCSEC = 1e-3, np.pi / 648000
+
+# Seed report, Table 4 (the truth in shared/vectors/seed-table4-noiseless.csv), inside units
+TABLE4 = {"XOW": -3.2 * UM, "YOW": -21.6 * UM, "ZOW": -33.9 * UM, "YOA": 20.5 * UM,
+          "ZOA": 32.5 * UM, "BOA": 12.3 * ARCSEC, "COA": -7.2 * ARCSEC, "XOC": 1.4 * UM,
+          "YOC": -15.9 * UM, "AOC": -6.5 * ARCSEC, "BOC": -4.6 * ARCSEC}
+
+
+@pytest.fixture(scope="session")
+def seed_machine():
+    return load_machine(SEED_MACHINE)
+
+
+@pytest.fixture(scope="session")
+def bc_machine():
+    return load_machine(BC_MACHINE)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(20261124)
+
+
+def vector(name: str) -> Path:
+    """A shared test vector; CI sets COMPGEN_REQUIRE_SHARED so a missing one fails there."""
+    path = VECTORS / name
+    if not path.exists():
+        if os.environ.get("COMPGEN_REQUIRE_SHARED"):
+            pytest.fail(f"shared vector {path} is missing")
+        pytest.skip(f"shared vectors not found at {VECTORS}")
+    return path
