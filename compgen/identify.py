@@ -142,8 +142,8 @@ def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarra
         v = Vt[k] / norm                  # a physical direction the readings do not see
         big = np.flatnonzero(np.abs(v * norm) >= 0.15 * np.abs(v * norm).max())
         scale = 1.0 / abs(shown(v[big[0]], m.effects[free[big[0]]].unit)[0])
-        combos.append(" with ".join(
-            f"{names[j]} {shown(v[j] * scale, m.effects[free[j]].unit)[0]:+.2f} "
+        combos.append(" together with ".join(
+            f"{names[j]} by {shown(v[j] * scale, m.effects[free[j]].unit)[0]:+.2f} "
             f"{shown(1, m.effects[free[j]].unit)[1]}" for j in big))
     cond = s[0] / s[-1] if s[-1] > 0 else np.inf
     raise CompgenError(

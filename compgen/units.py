@@ -22,7 +22,7 @@ def to_inside(value: float, unit: str, inside_unit: str, where: str = "") -> flo
         raise CompgenError(f"unknown unit {unit!r}", where=where,
                            hint="use one of mm, um, rad, urad, deg, arcsec")
     if (unit in LENGTH) != (inside_unit == "mm"):
-        raise CompgenError(f"unit {unit!r} is not a {'length' if inside_unit == 'mm' else 'angle'}",
+        raise CompgenError(f"unit {unit!r} is not {'a length' if inside_unit == 'mm' else 'an angle'}",
                            where=where)
     if not math.isfinite(value):
         raise CompgenError(f"value {value!r} is not a finite number", where=where)

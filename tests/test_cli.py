@@ -1,0 +1,177 @@
+"""Bad input: one line on stderr naming what and where, exit code 2, no traceback, and no
+output file written. Good input: the commands do what the README says."""
+
+import json
+
+import pytest
+from click.testing import CliRunner
+from conftest import BC_MACHINE, SEED_MACHINE, TABLE4
+
+from compgen.cli import main
+
+GOOD_HEADER = "path,t,X,Y,Z,A,C,dX,dY,dZ"
+GOOD_ROW = "K4,0.000,-217.5040,-0.2790,241.3310,0.0000,0.0000,-7.8617,2.7427,-6.7288"
+
+
+def run(*args):
+    result = CliRunner().invoke(main, [str(a) for a in args])
+    return result.exit_code, result.stdout, result.stderr
+
+
+@pytest.fixture
+def truth(tmp_path):
+    path = tmp_path / "truth.json"
+    path.write_text(json.dumps({"parameters": {
+        n: {"value": v * (1e3 if n[0] in "XYZ" else 648000 / 3.141592653589793),
+            "unit": "um" if n[0] in "XYZ" else "arcsec"} for n, v in TABLE4.items()}}))
+    return path
+
+
+@pytest.fixture
+def good_csv(tmp_path, truth):
+    path = tmp_path / "good.csv"
+    code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "--noise-um",
+                       0.5, "--seed", 7, "-o", path)
+    assert code == 0, err
+    return path
+
+
+def test_simulate_then_fit_recovers_truth(tmp_path, good_csv):
+    out = tmp_path / "fit.json"
+    code, stdout, err = run("fit", "--machine", SEED_MACHINE, good_csv, "-o", out)
+    assert code == 0, err
+    fit = json.loads(out.read_text())
+    for name, value in TABLE4.items():
+        p = fit["parameters"][name]
+        assert abs(p["value"] - value) < 4 * p["std"], name
+    assert "YOC" in stdout and "µm" in stdout and "″" in stdout and "K4" in stdout
+    assert abs(fit["residual"]["rms_um"] - 0.5) < 0.05
+
+
+def test_aliases_and_fixing_on_the_command_line(tmp_path, good_csv):
+    out = tmp_path / "fit.json"
+    code, stdout, err = run("fit", "--machine", SEED_MACHINE, good_csv, "--fix", "X0C=1.4um",
+                            "--fix", "E_B0C=-4.6arcsec", "-o", out)
+    assert code == 0, err
+    params = json.loads(out.read_text())["parameters"]
+    assert params["XOC"]["fixed"] and params["BOC"]["fixed"] and "X0C" not in params
+
+
+def _bad_csv(tmp_path, text: str | bytes):
+    path = tmp_path / "bad.csv"
+    (path.write_bytes if isinstance(text, bytes) else path.write_text)(text)
+    return path
+
+
+BAD_DATA = {
+    "empty": ("", "empty file"),
+    "comments only": ("# nothing\n\n", "empty file"),
+    "header only": (GOOD_HEADER + "\n", "header only"),
+    "missing column": ("path,t,X,Y,Z,A,dX,dY,dZ\n" + "K4,0,1,2,3,4,5,6,7\n", "missing column C"),
+    "text in a number": (GOOD_HEADER + "\n" + GOOD_ROW.replace("-7.8617", "abc") + "\n",
+                         "bad.csv:2:8"),
+    "NaN": (GOOD_HEADER + "\n" + GOOD_ROW.replace("2.7427", "nan") + "\n", "bad.csv:2:9"),
+    "infinity": (GOOD_HEADER + "\n" + GOOD_ROW.replace("0.0000,0.0000", "inf,0.0000") + "\n",
+                 "bad.csv:2:6"),
+    "ragged": (GOOD_HEADER + "\n" + GOOD_ROW + "\n" + GOOD_ROW + ",1\n", "bad.csv:3"),
+    "binary": (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", "binary"),
+    "not utf-8": (b"path,X\n\xff\xfe\xfa\n", "not UTF-8"),
+    "duplicate column": ("path,X,X,Y,Z,A,C,dX,dY,dZ\n", "appears twice"),
+    "wrong machine": (GOOD_HEADER + "\n" + GOOD_ROW.replace("-217.5040", "-117.5040") + "\n",
+                      "from the nominal ball"),
+    "too few poses": (GOOD_HEADER + "\n" + GOOD_ROW + "\n" * 2, "readings for 11 parameters"),
+    "degenerate poses": (GOOD_HEADER + "\n" + (GOOD_ROW + "\n") * 50, "cannot separate"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_DATA)
+def test_bad_data_is_refused_cleanly(tmp_path, case):
+    text, expected = BAD_DATA[case]
+    out = tmp_path / "fit.json"
+    code, stdout, err = run("fit", "--machine", SEED_MACHINE, _bad_csv(tmp_path, text), "-o", out)
+    assert code == 2
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert expected in err, err
+    assert not out.exists()
+
+
+BAD_MACHINE = {
+    "not toml": ("name = [unclosed\n", "not valid TOML"),
+    "missing rtest": ('name = "m"\ncontroller = "itnc530"\n[[workpiece]]\naxis="C"\n', "missing key"),
+    "unknown controller": ('name = "m"\ncontroller = "fanuc"\n', "unknown controller"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_MACHINE)
+def test_bad_machine_file_is_refused_cleanly(tmp_path, good_csv, case):
+    text, expected = BAD_MACHINE[case]
+    machine = tmp_path / "m.toml"
+    machine.write_text(text)
+    out = tmp_path / "fit.json"
+    code, _, err = run("fit", "--machine", machine, good_csv, "-o", out)
+    assert code == 2 and err.count("\n") == 1 and expected in err, err
+    assert not out.exists()
+
+
+def test_machine_file_errors_name_the_key(tmp_path, good_csv):
+    text = SEED_MACHINE.read_text().replace("travel = [-120.0, 120.0]", "travel = [120.0, -120.0]")
+    machine = tmp_path / "m.toml"
+    machine.write_text(text)
+    code, _, err = run("fit", "--machine", machine, good_csv, "-o", tmp_path / "f.json")
+    assert code == 2 and "workpiece[1]: travel" in err, err
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["--model", "XOW,NOPE"], "unknown effect 'NOPE'"),
+    (["--fix", "BOA=12.3"], "has no unit"),
+    (["--fix", "BOA=12.3um"], "is not an angle"),
+    (["--fix", "BOA"], "NAME=VALUE"),
+])
+def test_bad_options_are_refused_cleanly(tmp_path, good_csv, args, expected):
+    out = tmp_path / "fit.json"
+    code, _, err = run("fit", "--machine", SEED_MACHINE, good_csv, *args, "-o", out)
+    assert code == 2 and expected in err and err.count("\n") == 1, err
+    assert not out.exists()
+
+
+def test_missing_files_are_refused_cleanly(tmp_path, good_csv):
+    for args in (["--machine", tmp_path / "nope.toml", good_csv],
+                 ["--machine", SEED_MACHINE, tmp_path / "nope.csv"]):
+        code, _, err = run("fit", *args, "-o", tmp_path / "f.json")
+        assert code == 2 and "nope" in err and "Traceback" not in err, err
+
+
+def test_existing_output_needs_force(tmp_path, good_csv, truth):
+    out = tmp_path / "fit.json"
+    out.write_text("mine")
+    code, _, err = run("fit", "--machine", SEED_MACHINE, good_csv, "-o", out)
+    assert code == 2 and "--force" in err and out.read_text() == "mine"
+    code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "-o", out)
+    assert code == 2 and out.read_text() == "mine"
+    code, _, err = run("fit", "--machine", SEED_MACHINE, good_csv, "-o", out, "--force")
+    assert code == 0 and json.loads(out.read_text())["format"] == "compgen.fit/1"
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["--paths", "K9"], "defines no path 'K9'"),
+    (["--noise-um", "-1"], "noise"),
+    (["--ball", "1,2"], "three numbers"),
+    (["--ball", "0,0,900"], "outside its travel"),
+])
+def test_simulate_refuses_bad_requests(tmp_path, truth, args, expected):
+    out = tmp_path / "s.csv"
+    code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", truth, *args, "-o", out)
+    assert code == 2 and expected in err and err.count("\n") == 1, err
+    assert not out.exists()
+
+
+def test_simulate_writes_what_fit_reads_on_the_bc_machine(tmp_path):
+    truth = tmp_path / "t.json"
+    truth.write_text('{"parameters": {"XOB": {"value": 12, "unit": "um"}}}')
+    data = tmp_path / "bc.csv"
+    assert run("simulate", "--machine", BC_MACHINE, "--truth", truth, "--paths", "BK4,K1,K2",
+               "-o", data)[0] == 0
+    code, stdout, err = run("fit", "--machine", BC_MACHINE, data, "-o", tmp_path / "f.json")
+    assert code == 0, err
+    fit = json.loads((tmp_path / "f.json").read_text())
+    assert abs(fit["parameters"]["XOB"]["value"] - 0.012) < 1e-8
