@@ -129,8 +129,8 @@ class FitResult:
         for n, e in self.parameters.items():
             v, unit = shown(e.value, e.unit)
             s, _ = shown(e.std, e.unit)
-            unc = "fixed" if e.fixed else f"± {s:.3f}"
-            lines.append(f"  {n:<12}{v:>9.3f} {unit:<2} {unc:>11}   {self.descriptions.get(n, '')}")
+            unc = "fixed" if e.fixed else f"± {s:.3f} {unit}"
+            lines.append(f"  {n:<12}{v:>9.3f} {unit:<2} {unc:>12}   {self.descriptions.get(n, '')}")
         lines += ["", f"  residual RMS {r['rms_um']:.3f} µm over {r['readings']} readings; "
                       f"σ̂ = {r['sigma_um']:.3f} µm with {r['dof']} degrees of freedom",
                   f"  {'path':<8}{'poses':>6}   RMS dX    dY    dZ    range dX    dY    dZ   (µm)"]

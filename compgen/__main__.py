@@ -1,0 +1,5 @@
+"""``python -m compgen``: the same CLI, immune to bash's ``compgen`` builtin."""
+
+from .cli import main
+
+main(prog_name="compgen")
