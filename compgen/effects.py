@@ -134,13 +134,15 @@ def _axis_symbols(axis: Axis) -> dict:
                 out[f"{E}O{L}"] = (L, "loc", e, ("const",), f"{L} axis line {about} {ref}",
                                    "assembly or kinematics table not matching the machine")
             if e == ROT_OF[d]:
-                words, cause = f"angular positioning error of {L}", "encoder eccentricity (1/rev), worm or scale error (2/rev and up)"
+                words = f"angular positioning error of {L}"
+                cause = "encoder eccentricity (1/rev), worm or scale error (2/rev and up)"
             elif e == d:
                 words, cause = f"axial error motion of {L}", "bearing or face runout"
             elif e in TRANSLATIONS:
                 words, cause = f"radial error motion of {L} in {E}", "bearing runout, eccentric table"
             else:
-                words, cause = f"tilt error motion of {L} about {TRANSLATIONS[ROTATIONS.index(e)].upper()}", "wobble of the bearing"
+                about = TRANSLATIONS[ROTATIONS.index(e)].upper()
+                words, cause = f"tilt error motion of {L} about {about}", "wobble of the bearing"
         else:
             if e == d:
                 words, cause = f"positioning error of {L} (scale)", "scale error, thermal growth of the scale"

@@ -17,7 +17,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .effects import POLY_SCALE_MM, ROT_OF, ROTATIONS, TIME_SCALE_S, TRANSLATIONS, Effect, canonical, effect_of_param
+from .effects import (
+    POLY_SCALE_MM,
+    ROT_OF,
+    ROTATIONS,
+    TIME_SCALE_S,
+    TRANSLATIONS,
+    Effect,
+    canonical,
+    effect_of_param,
+)
 from .errors import CompgenError
 from .machine import Axis, Machine
 from .transforms import UNIT, apply, rot_axis, rot_exact, trans

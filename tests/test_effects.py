@@ -1,0 +1,113 @@
+"""The effect catalogue: every entry well-formed and evaluable, rotary component errors
+against the seed report's Table 1, and the signs of the non-ISO effects."""
+
+import numpy as np
+import pytest
+from conftest import SEED_MACHINE
+
+from compgen.effects import canonical, catalogue, location_model, resolve
+from compgen.errors import CompgenError
+from compgen.kinematics import Model, Poses
+from compgen.machine import load_machine
+from compgen.paths import generate
+
+SEED = load_machine(SEED_MACHINE)
+ULPS_AT_100_MM = 1e-13   # mm: a few units in the last place of a 100 mm coordinate
+POSES = generate(SEED, ["K4", "K1", "K2"])
+
+
+@pytest.mark.parametrize("effect", catalogue(SEED), ids=lambda e: e.name)
+def test_every_effect_is_well_formed_and_moves_the_readings(effect):
+    assert resolve(SEED, effect.name) == effect
+    J = Model(SEED, effect.params).jacobian(POSES)
+    assert np.isfinite(J).all()
+    assert J.shape == (len(POSES), 3, len(effect.params))
+    assert effect.words and effect.unit in ("mm", "rad")
+
+
+def test_catalogue_names_are_unique_and_hold_the_default_model():
+    names = [e.name for e in catalogue(SEED)]
+    params = [p for e in catalogue(SEED) for p in e.params]
+    assert len(set(names)) == len(names) and len(set(params)) == len(params)
+    assert set(location_model(SEED)) <= set(names)
+    assert location_model(SEED) == ("XOW", "YOW", "ZOW", "YOA", "ZOA", "BOA", "COA",
+                                    "XOC", "YOC", "AOC", "BOC")
+
+
+def table1_rotary(A, C, Xw, Yw, Zw, Zc):
+    """Seed report Table 1, rows of the A and C component errors, columns dX dY dZ."""
+    Ca, Sa, Cc, Sc = np.cos(A), np.sin(A), np.cos(C), np.sin(C)
+    z, one = np.zeros_like(A), np.ones_like(A)
+    return {
+        "EXA": (-one, z, z), "EYA": (z, -one, z), "EZA": (z, z, -one),
+        "EAA": (z, Sa * Sc * Xw + Sa * Cc * Yw + Ca * (Zw + Zc),
+                -Ca * Cc * Yw + Sa * (Zw + Zc) - Ca * Sc * Xw),
+        "EBA": (-Ca * (Zw + Zc) - Sa * Sc * Xw - Sa * Cc * Yw, z, -Sc * Yw + Cc * Xw),
+        "ECA": (-Sa * (Zw + Zc) + Ca * Sc * Xw + Ca * Cc * Yw, -Cc * Xw + Sc * Yw, z),
+        "EXC": (-one, z, z), "EYC": (z, -Ca, -Sa), "EZC": (z, Sa, -Ca),
+        "EAC": (z, Sc * Sa * Xw + Cc * Sa * Yw + Ca * Zw, -Cc * Ca * Yw + Sa * Zw - Sc * Ca * Xw),
+        "EBC": (-Zw * one, -Cc * Sa * Xw + Sc * Sa * Yw, -Sc * Ca * Yw + Cc * Ca * Xw),
+        "ECC": (Sc * Xw + Cc * Yw, -Ca * Cc * Xw + Ca * Sc * Yw, Sa * Sc * Yw - Sa * Cc * Xw),
+    }
+
+
+@pytest.mark.parametrize("symbol", list(table1_rotary(*np.zeros(6))))
+def test_rotary_component_error_gains_equal_seed_table1(symbol):
+    A, C = POSES.q[:, 3], POSES.q[:, 4]
+    want = np.column_stack(np.broadcast_arrays(
+        *table1_rotary(A, C, *SEED.ball, SEED.axis("C").offset[2])[symbol], A))[:, :3]
+    if symbol.endswith("C"):   # full turn: a unit error at every angle is h1c·cos C + h1s·sin C
+        J = Model(SEED, [f"{symbol}:h1c", f"{symbol}:h1s"]).jacobian(POSES)
+        got = J[:, :, 0] * np.cos(C)[:, None] + J[:, :, 1] * np.sin(C)[:, None]
+    else:                      # tilting: p1 is the error per rad of A
+        J = Model(SEED, [f"{symbol}:p1"]).jacobian(POSES)[:, :, 0]
+        keep = np.abs(A) > 0.05
+        got, want, A = J[keep] / A[keep, None], want[keep], A[keep]
+    scale = 1.0 if symbol[1] in "XYZ" else 1e3   # angular gains are in mm per rad
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-6 * scale)
+
+
+def _one_pose(q, t=0.0):
+    return Poses(np.array([q]), np.array([SEED.ball]), np.array([t]), np.array(["x"], dtype=object))
+
+
+def test_drift_scale_and_nest_signs():
+    q = [100.0, 50.0, 200.0, 0.0, 0.0]
+    # tool drifts +1 µm/h in Z relative to the table: after an hour nest − ball = +1 µm
+    dev = Model(SEED, ["drift_Z:t1"]).deviation(_one_pose(q, 3600.0), np.array([1e-3]))
+    np.testing.assert_allclose(dev[0], [0, 0, 1e-3], atol=1e-12)
+    # X carries the table; a +10 µm/m scale error of X at X = 100 mm moves the table frame
+    # 1 µm further in +x, the ball with it: nest − ball = −1 µm
+    dev = Model(SEED, ["EXX:p1"]).deviation(_one_pose(q), np.array([10e-3]))
+    np.testing.assert_allclose(dev[0], [-1e-3, 0, 0], atol=1e-12)
+    # Y carries the spindle: a +10 µm/m scale error at Y = 50 mm moves the nest +0.5 µm
+    dev = Model(SEED, ["EYY:p1"]).deviation(_one_pose(q), np.array([10e-3]))
+    np.testing.assert_allclose(dev[0], [0, 0.5e-3, 0], atol=1e-12)
+    # nest offset +1 µm in X on a vertical spindle: nest − ball = +1 µm in X
+    dev = Model(SEED, ["nest_X"]).deviation(_one_pose(q), np.array([1e-3]))
+    np.testing.assert_allclose(dev[0], [1e-3, 0, 0], atol=1e-12)
+
+
+def test_squareness_of_x_tilts_its_line_only():
+    # COX turns X's line about Z by θ. X is a table axis (sense −1): at X = 100 mm the table
+    # sits at −100·(cos θ, sin θ), so nest − ball = (−100·(1 − cos θ), 100·sin θ, 0), exactly
+    theta = np.radians(10 / 3600)
+    dev = Model(SEED, ["COX"]).deviation(_one_pose([100.0, 0, 0, 0, 0]), np.array([theta]))
+    np.testing.assert_allclose(dev[0], [-100 * (1 - np.cos(theta)), 100 * np.sin(theta), 0],
+                               rtol=0, atol=ULPS_AT_100_MM)
+    at_zero = Model(SEED, ["COX"]).deviation(_one_pose([0.0, 0, 0, 0, 0]), np.array([1e-4]))
+    np.testing.assert_allclose(at_zero, 0, atol=1e-15)   # the carried frame is not turned
+
+
+@pytest.mark.parametrize("text, canon", [("X0C", "XOC"), ("E_X0C", "XOC"), ("EX0C", "XOC"),
+                                         ("B0A", "BOA"), ("ECC:h2", "ECC:h2"), ("EXX", "EXX")])
+def test_aliases(text, canon):
+    assert canonical(text) == canon
+
+
+@pytest.mark.parametrize("name, expected", [("ECC", "needs an order"), ("ECC:p1", "takes hN"),
+                                            ("EAA:h1", "takes pN"), ("XOC:h1", "takes"),
+                                            ("QQQ", "unknown effect"), ("ECC:h0", "N ≥ 1")])
+def test_bad_effect_names_say_what_is_accepted(name, expected):
+    with pytest.raises(CompgenError, match=expected):
+        resolve(SEED, name)
