@@ -2,18 +2,22 @@
 
 from __future__ import annotations
 
+import json
 import sys
 
 import click
 import numpy as np
 
-from .effects import catalogue, location_model
+from .diagnose import diagnose
+from .effects import catalogue, compose, location_model
 from .errors import CompgenError
 from .files import write_atomically
 from .identify import identify, parse_fixed
 from .machine import load_machine
 from .paths import generate
+from .results import load_fit
 from .rtest import SIGNS, format_rtest, read_rtest
+from .session import reload
 from .simulate import read_truth, simulate
 
 
@@ -77,29 +81,75 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, seed, ball, output, 
 
 
 @main.command("fit")
-@MACHINE
-@click.argument("data", nargs=-1, required=True, type=FILE)
+@click.option("--machine", "machine_file", type=FILE, default=None,
+              help="Machine file (TOML); with --from, the fit's own by default.")
+@click.argument("data", nargs=-1, type=FILE)
+@click.option("--from", "base", type=FILE, default=None,
+              help="Start from this fit.json: its machine, data, model and fixed parameters.")
 @click.option("--model", "model_names", default=None,
               help="Comma-separated parameters to fit (default: ball offset and the location "
                    "errors of every rotary axis, the seed's 11 on an A/C machine).")
+@click.option("--add", "add", multiple=True, metavar="EFFECT",
+              help="Add an effect to the model, e.g. --add ECC:h2 (see `compgen effects`). Repeatable.")
+@click.option("--remove", "remove", multiple=True, metavar="EFFECT", help="Take an effect out. Repeatable.")
 @click.option("--fix", "fixes", multiple=True, metavar="NAME=VALUE",
               help="Hold a parameter, e.g. --fix ZOW=0 or --fix BOA=12.3arcsec. Repeatable.")
 @click.option("--method", type=click.Choice(["exact", "linear"]), default="exact", show_default=True,
               help="exact: first-order start then Gauss–Newton on the exact model; linear: the "
                    "seed's first-order least squares only.")
-@click.option("--sign", type=click.Choice(SIGNS), default=SIGNS[0], show_default=True,
-              help="What the R-test device reports.")
+@click.option("--sign", type=click.Choice(SIGNS), default=None,
+              help="What the R-test device reports (default nest-minus-ball, or the --from fit's).")
 @OUTPUT
 @FORCE
-def fit_cmd(machine_file, data, model_names, fixes, method, sign, output, force):
-    """Identify location errors from R-test DATA files (CSV v1)."""
-    machine = load_machine(machine_file)
-    sets = [read_rtest(p, machine, sign) for p in data]
-    model = [n.strip() for n in model_names.split(",") if n.strip()] if model_names else None
-    result = identify(machine, sets, model, parse_fixed(machine, fixes), method, sign)
+def fit_cmd(machine_file, data, base, model_names, add, remove, fixes, method, sign, output, force):
+    """Identify location errors (and any added effects) from R-test DATA files (CSV v1)."""
+    if base:
+        start = load_fit(base)
+        machine, sets = reload(start, machine_file)
+        sign = sign or start.sign
+        if data:
+            sets = [read_rtest(p, machine, sign) for p in data]
+        model = start.model
+        fixed = {n: e.value for n, e in start.parameters.items() if e.fixed}
+    else:
+        if not machine_file or not data:
+            raise CompgenError("give --machine and DATA files, or --from a fit.json")
+        machine = load_machine(machine_file)
+        sign = sign or SIGNS[0]
+        sets = [read_rtest(p, machine, sign) for p in data]
+        model, fixed = location_model(machine), {}
+    if model_names:
+        model = [n.strip() for n in model_names.split(",") if n.strip()]
+    model = compose(machine, model, add, remove)
+    fixed = {n: v for n, v in fixed.items() if n in model} | parse_fixed(machine, fixes)
+    result = identify(machine, sets, model, fixed, method, sign)
     write_atomically(output, result.to_json(), force)
     click.echo(result.report(), nl=False)
     click.echo(f"\nwrote {output}")
+
+
+@main.command("diagnose")
+@click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
+@click.option("--json", "as_json", is_flag=True, help="Print the diagnosis as JSON.")
+@click.option("--candidates", default=None,
+              help="Comma-separated effects to try (default: the whole catalogue).")
+@click.option("--plots", "plots_dir", type=click.Path(file_okay=False), default=None,
+              help="Write PNG plots here: measured vs model per path, residual vs axis angle.")
+@click.option("--before", type=FILE, default=None,
+              help="An earlier fit.json of the same data, drawn beside this one in the plots.")
+def diagnose_cmd(base, as_json, candidates, plots_dir, before):
+    """Where the model fails, and which effects would explain the misfit."""
+    fit = load_fit(base)
+    machine, sets = reload(fit)
+    names = [c.strip() for c in candidates.split(",") if c.strip()] if candidates else None
+    result = diagnose(machine, sets, fit, names, fit_file=base)
+    if plots_dir:
+        from .plots import write_plots  # matplotlib only when asked for
+        earlier = load_fit(before) if before else None
+        for path in write_plots(plots_dir, machine, sets, fit, earlier):
+            click.echo(f"wrote {path}", err=as_json)
+    click.echo(json.dumps(result.to_dict(), indent=2, ensure_ascii=False) if as_json
+               else result.report(base), nl=as_json)
 
 
 @main.command("effects")

@@ -29,6 +29,7 @@ Placement in the chain (``kinematics.py``):
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,17 +106,17 @@ class Effect:
         return "mm" if self.direction in TRANSLATIONS else "rad"
 
 
-def _symbols(machine: Machine) -> dict[str, tuple[str, str, str, tuple[str, ...], str, str]]:
-    """symbol → (carrier, slot, direction, allowed basis kinds, words, cause), for a machine."""
+def _symbols(machine: Machine) -> dict[str, tuple[str, str, str, tuple[str, ...], str, str, int]]:
+    """symbol → (carrier, slot, direction, allowed basis kinds, words, cause, lowest order)."""
     out: dict = {}
     for d in TRANSLATIONS:
         D = d.upper()
         out[f"{D}OW"] = ("ball", "loc", d, ("const",), f"ball centre offset in {D} (table frame)",
-                         "ball not where the machine file says: set-up, not a machine error")
+                         "ball not where the machine file says: set-up, not a machine error", 0)
         out[f"nest_{D}"] = ("nest", "loc", d, ("const",), f"R-test nest offset in {D}",
-                            "nest centre off the spindle axis or wrong probe length")
+                            "nest centre off the spindle axis or wrong probe length", 0)
         out[f"drift_{D}"] = ("time", "loc", d, ("t",), f"thermal drift of tool to table in {D}",
-                             "warm-up of spindle, column or table during the test")
+                             "warm-up of spindle, column or table during the test", 1)
     for axis in machine.axes:
         out.update(_axis_symbols(axis))
     return out
@@ -132,7 +133,7 @@ def _axis_symbols(axis: Axis) -> dict:
                 about = "tilt about" if e in ROTATIONS else "offset in"
                 ref = TRANSLATIONS[ROTATIONS.index(e)].upper() if e in ROTATIONS else E
                 out[f"{E}O{L}"] = (L, "loc", e, ("const",), f"{L} axis line {about} {ref}",
-                                   "assembly or kinematics table not matching the machine")
+                                   "assembly or kinematics table not matching the machine", 0)
             if e == ROT_OF[d]:
                 words = f"angular positioning error of {L}"
                 cause = "encoder eccentricity (1/rev), worm or scale error (2/rev and up)"
@@ -147,13 +148,17 @@ def _axis_symbols(axis: Axis) -> dict:
             if e == d:
                 words, cause = f"positioning error of {L} (scale)", "scale error, thermal growth of the scale"
             elif e in TRANSLATIONS:
-                words, cause = f"straightness of {L} in {E}", "guideway straightness"
+                # the linear part of a straightness is a squareness (ISO 230-1), declared
+                # once below as COX, AOZ, BOZ; offering both would make them tie
+                out[f"E{E}{L}"] = (L, "comp", e, kinds, f"straightness of {L} in {E}",
+                                   "guideway straightness (bow)", 2)
+                continue
             else:
                 names = {"a": "roll", "b": "pitch", "c": "yaw"} if d == "x" else \
                         {"a": "pitch", "b": "roll", "c": "yaw"} if d == "y" else \
                         {"a": "pitch", "b": "yaw", "c": "roll"}
                 words, cause = f"{names[e]} of {L}", "guideway twist or bending"
-        out[f"E{E}{L}"] = (L, "comp", e, kinds, words, cause)
+        out[f"E{E}{L}"] = (L, "comp", e, kinds, words, cause, 1)
     if not axis.rotary:
         # ISO 230-1 squareness with Y as the reference (the seed's COX, AOZ, BOZ):
         # X is squared to Y about Z, Z to X and Y about X and Y.
@@ -161,7 +166,7 @@ def _axis_symbols(axis: Axis) -> dict:
         for r in about:
             other = {"c": "Y", "a": "Y", "b": "X"}[r]
             out[f"{r.upper()}O{L}"] = (L, "loc", r, ("const",), f"squareness of {L} to {other}",
-                                       "assembly or thermal bending of the frame")
+                                       "assembly or thermal bending of the frame", 0)
     return out
 
 
@@ -188,26 +193,33 @@ def resolve(machine: Machine, name: str) -> Effect:
     if symbol not in table:
         raise CompgenError(f"unknown effect {name!r} on machine {machine.name!r}",
                            hint="`compgen effects --machine M` lists them")
-    carrier, slot, direction, kinds, words, cause = table[symbol]
+    carrier, slot, direction, kinds, words, cause, first = table[symbol]
     if not order_txt:
         if "const" not in kinds:
             raise CompgenError(f"{symbol} needs an order, e.g. {symbol}:{kinds[0]}1",
                                where=name)
         basis = CONSTANT
     else:
-        m = re.fullmatch(r"([hpt])([1-9]\d?)", order_txt)
-        if not m or m[1] not in kinds:
+        m = re.fullmatch(r"([hpt])(\d{1,2})", order_txt)
+        if not m or m[1] not in kinds or int(m[2]) < first:
             raise CompgenError(f"{symbol} takes {' or '.join(k + 'N' for k in kinds)} "
-                               f"with N ≥ 1, not {order_txt!r}", where=name)
+                               f"with N ≥ {first}, not {order_txt!r}", where=name,
+                               hint="an order-1 straightness is a squareness: use COX, AOZ or BOZ"
+                               if first == 2 else None)
         basis = Basis(m[1], int(m[2]))
     return Effect(symbol, carrier, slot, direction, basis, words, cause)
+
+
+def effect_name(param: str) -> str:
+    """The name of the effect a parameter belongs to: ``ECC:h2c`` → ``ECC:h2``."""
+    param = canonical(param)
+    return param[:-1] if re.search(r":h\d+[cs]$", param) else param
 
 
 def effect_of_param(machine: Machine, param: str) -> Effect:
     """The effect a parameter name belongs to (``ECC:h2c`` → effect ``ECC:h2``)."""
     param = canonical(param)
-    name = param[:-1] if re.search(r":h\d+[cs]$", param) else param
-    effect = resolve(machine, name)
+    effect = resolve(machine, effect_name(param))
     if param not in effect.params:
         raise CompgenError(f"unknown parameter {param!r}",
                            hint=f"effect {effect.name} has parameters {', '.join(effect.params)}")
@@ -217,10 +229,10 @@ def effect_of_param(machine: Machine, param: str) -> Effect:
 def catalogue(machine: Machine) -> tuple[Effect, ...]:
     """Every effect this machine can carry, orders up to ``MAX_ORDER``: the candidate list."""
     out = []
-    for symbol, (_, _, _, kinds, _, _) in _symbols(machine).items():
+    for symbol, (_, _, _, kinds, _, _, first) in _symbols(machine).items():
         for kind in kinds:
             names = [symbol] if kind == "const" else [f"{symbol}:{kind}{k}"
-                                                      for k in range(1, MAX_ORDER[kind] + 1)]
+                                                      for k in range(first, MAX_ORDER[kind] + 1)]
             out.extend(resolve(machine, n) for n in names)
     return tuple(out)
 
@@ -234,3 +246,26 @@ def location_model(machine: Machine) -> tuple[str, ...]:
         names += [f"{e.upper()}O{axis.name}" for e in TRANSLATIONS if e != axis.direction]
         names += [f"{e.upper()}O{axis.name}" for e in ROTATIONS if e != ROT_OF[axis.direction]]
     return tuple(names)
+
+
+def compose(machine: Machine, params: Sequence[str], add: Sequence[str] = (),
+            remove: Sequence[str] = ()) -> tuple[str, ...]:
+    """``params`` with the effects ``add`` appended and the effects ``remove`` taken out
+    (effect names, e.g. ``ECC:h2``; a parameter name takes out its whole effect)."""
+    out = [canonical(p) for p in params]
+    present = {effect_name(p) for p in out}
+    for name in add:
+        effect = resolve(machine, name)
+        if effect.name in present:
+            raise CompgenError(f"{effect.name} is already in the model")
+        out += effect.params
+        present.add(effect.name)
+    for name in remove:
+        gone = resolve(machine, effect_name(name)).name
+        if gone not in present:
+            raise CompgenError(f"{gone} is not in the model", hint=f"the model has {', '.join(present)}")
+        out = [p for p in out if effect_name(p) != gone]
+        present.discard(gone)
+    if not out:
+        raise CompgenError("the model would be empty")
+    return tuple(out)

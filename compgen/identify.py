@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
 
 import numpy as np
 
@@ -16,7 +17,7 @@ from .effects import canonical, effect_of_param, location_model
 from .errors import CompgenError
 from .kinematics import Model, Poses
 from .machine import Machine
-from .paths import generate
+from .paths import alternative_measurements
 from .results import DataRef, Estimate, FitResult
 from .rtest import RTestData
 from .units import parse_quantity, shown
@@ -24,7 +25,6 @@ from .units import parse_quantity, shown
 COND_LIMIT = 1000.0       # column-normalised; the seed's K4 is 27, K4+K1+K2 is 6
 MAX_ITER = 30
 STEP_TOL_SHOWN = 1e-7     # µm or arcsec: Gauss–Newton has converged below this step
-SECOND_BALL_DZ_MM = 100.0  # the second ball position offered when one ball cannot separate
 
 
 def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] | None = None,
@@ -91,8 +91,8 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         k = free.index(i) if i in free else None
         params[n] = Estimate(float(x[i]), 0.0 if k is None else float(std[k]), e.unit, k is None)
     return FitResult(
-        machine={"name": machine.name, "file": machine.source, "sha256": machine.sha256},
-        data=tuple(DataRef(d.source, d.sha256, len(d), _counts(d.poses.path)) for d in data),
+        machine={"name": machine.name, "file": _absolute(machine.source), "sha256": machine.sha256},
+        data=tuple(DataRef(_absolute(d.source), d.sha256, len(d), _counts(d.poses.path)) for d in data),
         model=tuple(names), parameters=params, free=tuple(names[i] for i in free),
         correlation=np.clip(corr, -1.0, 1.0), singular_values=sv,
         residual=residual_stats(poses, r.reshape(-1, 3), dof),
@@ -156,21 +156,14 @@ def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarra
 
 def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.ndarray) -> str:
     options = []
-    table = np.asarray(machine.ball)
-    for ball, where in ((table, ""), (table + [0, 0, SECOND_BALL_DZ_MM],
-                                      f" with the ball {SECOND_BALL_DZ_MM:g} mm higher")):
-        for name in machine.paths:
-            try:
-                extra = generate(machine, [name], ball=ball)
-            except CompgenError:          # that path leaves the travel: not an option
-                continue
-            Je = m.jacobian(extra)[:, :, free].reshape(-1, len(free))
-            both = np.vstack([J, Je])
-            s = np.linalg.svd(both / np.linalg.norm(both, axis=0), compute_uv=False)
-            if s[-1] > s[0] / COND_LIMIT:
-                options.append((s[0] / s[-1], f"{name}{where}"))
+    for label, extra in alternative_measurements(machine):
+        Je = m.jacobian(extra)[:, :, free].reshape(-1, len(free))
+        both = np.vstack([J, Je])
+        s = np.linalg.svd(both / np.linalg.norm(both, axis=0), compute_uv=False)
+        if s[-1] > s[0] / COND_LIMIT:
+            options.append((s[0] / s[-1], label))
     if not options:
-        return "no single path of the machine file separates them"
+        return "no single path or ball position of the machine file separates them"
     best = ", ".join(f"{o} (condition {c:.0f})" for c, o in sorted(options)[:3])
     return f"adding one of these measurements would: {best}"
 
@@ -191,6 +184,11 @@ def residual_stats(poses: Poses, r: np.ndarray, dof: int) -> dict:
             "per_direction_rms_um": dict(zip(("dX", "dY", "dZ"),
                                              np.sqrt((r_um**2).mean(axis=0)).tolist(), strict=True)),
             "per_path": per_path}
+
+
+def _absolute(path: str) -> str:
+    """Where later commands (diagnose, kinematics) find the file again, whatever their cwd."""
+    return str(Path(path).resolve()) if path else path
 
 
 def _counts(labels: np.ndarray) -> dict[str, int]:

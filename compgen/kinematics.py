@@ -98,15 +98,7 @@ class Model:
     def relative(self, poses: Poses, values: np.ndarray | None = None) -> np.ndarray:
         """Nest centre minus ball centre, machine frame, (n, 3) mm."""
         values = np.zeros(len(self.names)) if values is None else np.asarray(values, float)
-        slots = self._slots(poses, values)
-        m = self.machine
-        zero = np.zeros((len(poses), 6))
-        table = _chain(m, m.workpiece, poses, slots, zero)
-        spindle = _chain(m, m.tool, poses, slots, zero) @ trans([0.0, 0.0, m.probe_length])
-        ball = apply(table, poses.ball + slots.get(("ball", "loc"), zero)[:, :3])
-        nest = apply(spindle, np.array([0.0, 0.0, -m.probe_length])
-                     + slots.get(("nest", "loc"), zero)[:, :3])
-        return nest - ball + slots.get(("time", "loc"), zero)[:, :3]
+        return relative(self.machine, poses, self._slots(poses, values))
 
     def deviation(self, poses: Poses, values: np.ndarray) -> np.ndarray:
         """Predicted R-test reading minus its nominal value, (n, 3) mm."""
@@ -140,6 +132,32 @@ def coordinate(machine: Machine, effect: Effect, poses: Poses) -> np.ndarray:
     axis = machine.axis(effect.carrier)
     q = poses.q[:, machine.index(axis.name)]
     return q if axis.rotary else q / POLY_SCALE_MM
+
+
+def relative(machine: Machine, poses: Poses, slots: Mapping[tuple[str, str], np.ndarray]) -> np.ndarray:
+    """Nest minus ball, (n, 3) mm, for errors given as slots: (carrier, "loc" | "comp") →
+    (n, 6) translations (mm) and rotations (rad) in ``TRANSLATIONS + ROTATIONS`` order."""
+    zero = np.zeros((len(poses), 6))
+    table = _chain(machine, machine.workpiece, poses, slots, zero)
+    spindle = _chain(machine, machine.tool, poses, slots, zero) @ trans([0.0, 0.0, machine.probe_length])
+    ball = apply(table, poses.ball + slots.get(("ball", "loc"), zero)[:, :3])
+    nest = apply(spindle, np.array([0.0, 0.0, -machine.probe_length])
+                 + slots.get(("nest", "loc"), zero)[:, :3])
+    return nest - ball + slots.get(("time", "loc"), zero)[:, :3]
+
+
+def slot_gains(machine: Machine, poses: Poses, keys) -> dict[tuple[str, str, str], np.ndarray]:
+    """First-order gains at zero of a unit error in each slot (carrier, slot, direction):
+    (n, 3) mm per mm or per rad. Any effect's Jacobian column at zero is its basis values
+    times the gain of its slot, so a whole catalogue costs one pair of evaluations a slot."""
+    out, n = {}, len(poses)
+    for carrier, slot, direction in keys:
+        col = SLOT_INDEX[direction]
+        plus, minus = np.zeros((n, 6)), np.zeros((n, 6))
+        plus[:, col], minus[:, col] = FD_STEP, -FD_STEP
+        out[(carrier, slot, direction)] = (relative(machine, poses, {(carrier, slot): plus})
+                                           - relative(machine, poses, {(carrier, slot): minus})) / (2 * FD_STEP)
+    return out
 
 
 def _link(axis: Axis, q: np.ndarray, loc: np.ndarray, comp: np.ndarray) -> np.ndarray:

@@ -74,3 +74,24 @@ def check_travel(machine: Machine, q: np.ndarray, label: str) -> None:
             f"pose {i + 1} of {label} puts {axis.name} at {value:.3f} {unit}, outside its travel "
             f"[{axis.travel[0]:g}, {axis.travel[1]:g}] {unit} ({int(bad.any(axis=1).sum())} poses "
             f"outside)", hint="move the ball, shorten the path or correct the machine file's travel")
+
+
+SECOND_BALL_DZ_MM = 100.0   # the second ball positions offered to separate what one cannot
+
+
+def alternative_measurements(machine: Machine) -> list[tuple[str, Poses]]:
+    """Measurements that could be added: each of the machine's paths at the bundled ball,
+    with the ball higher, and with the ball at half its radius (a tilt of an axis scales
+    with radius and height, an offset or an axial error motion does not). Those that would
+    leave the travel are not offered."""
+    ball = np.asarray(machine.ball, dtype=float)
+    places = (("", ball), (f" with the ball {SECOND_BALL_DZ_MM:g} mm higher", ball + [0, 0, SECOND_BALL_DZ_MM]),
+              (" with the ball at half its radius", ball * [0.5, 0.5, 1.0]))
+    out = []
+    for where, at in places:
+        for name in machine.paths:
+            try:
+                out.append((f"{name}{where}", generate(machine, [name], ball=at)))
+            except CompgenError:
+                continue
+    return out

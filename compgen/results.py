@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .effects import effect_name
 from .errors import CompgenError
 from .units import shown
 
@@ -77,6 +78,7 @@ class FitResult:
             "data": [d.__dict__ for d in self.data],
             "sign": self.sign,
             "model": list(self.model),
+            "effects": list(dict.fromkeys(effect_name(p) for p in self.model)),
             "method": self.method,
             "iterations": self.iterations,
             "parameters": {

@@ -107,7 +107,8 @@ def test_aliases(text, canon):
 
 @pytest.mark.parametrize("name, expected", [("ECC", "needs an order"), ("ECC:p1", "takes hN"),
                                             ("EAA:h1", "takes pN"), ("XOC:h1", "takes"),
-                                            ("QQQ", "unknown effect"), ("ECC:h0", "N ≥ 1")])
+                                            ("QQQ", "unknown effect"), ("ECC:h0", "N ≥ 1"),
+                                            ("EYX:p1", "squareness")])
 def test_bad_effect_names_say_what_is_accepted(name, expected):
     with pytest.raises(CompgenError, match=expected):
         resolve(SEED, name)

@@ -1,0 +1,325 @@
+"""Where the model fails, and which physical effect would explain it.
+
+For every catalogue effect not in the model: its first-order signature c on the measured
+poses (basis × slot gain), the part c⊥ that the model's parameters cannot absorb, the
+residual sum of squares it would remove, an F test, and Bonferroni's correction for the
+number of effects tried. An effect whose signature the model absorbs entirely (‖c⊥‖/‖c‖
+below ``VISIBLE``) is never "found": it is reported as confounded, with the measurement that
+would separate it.
+
+References: ``shared/research/identification.md`` §2 (visibility, bias, F and score tests).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy import stats
+
+from .effects import Effect, catalogue, effect_of_param, resolve
+from .errors import CompgenError
+from .kinematics import Model, Poses, coordinate, slot_gains
+from .machine import Machine
+from .paths import alternative_measurements
+from .results import FitResult
+from .rtest import RTestData
+from .units import shown
+
+ALPHA = 0.01          # family-wise false-alarm rate over all effects tried
+VISIBLE = 0.01        # ‖c⊥‖/‖c‖ below this: the model absorbs the effect entirely
+SEPARATES = 0.05      # visibility an extra measurement must give to count as separating
+ABSORBS = 0.25        # share of an effect's signature a parameter must take to be named
+SILENT_UM = 1e-9      # µm per unit over all readings: the effect moves nothing at all
+
+
+@dataclass(frozen=True)
+class Candidate:
+    effect: str
+    description: str
+    cause: str
+    visibility: float
+    rms_after_um: float
+    p_value: float          # Bonferroni-adjusted
+    significant: bool
+    confounded_with: tuple[str, ...]
+    amplitude: tuple[float, ...]     # first-order estimate, in its shown unit
+    unit: str
+    separated_by: tuple[str, ...] = ()
+    silent: bool = False    # moves no reading at all on these poses (no lever arm)
+
+    @property
+    def visible(self) -> bool:
+        return self.visibility >= VISIBLE
+
+
+@dataclass(frozen=True, eq=False)
+class Diagnosis:
+    machine: str
+    fit_file: str
+    model: tuple[str, ...]
+    rms_um: float
+    sigma_um: float
+    readings: int
+    per_path: dict
+    per_axis: dict
+    candidates: tuple[Candidate, ...]   # visible best first, then the invisible
+    bias: dict[str, dict[str, float]]   # parameter → {effect: shift per µm RMS of the effect}
+    bias_units: dict[str, str]
+    tested: int
+    after_best: tuple[str, ...] = ()    # still significant once the best candidate is added
+    alpha: float = ALPHA
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def significant(self) -> tuple[Candidate, ...]:
+        return tuple(c for c in self.candidates if c.significant)
+
+    def to_dict(self) -> dict:
+        return {
+            "format": "compgen.diagnose/1", "machine": self.machine, "fit": self.fit_file,
+            "model": list(self.model), "rms_um": self.rms_um, "sigma_um": self.sigma_um,
+            "readings": self.readings, "tested": self.tested, "alpha": self.alpha,
+            "explained_to_noise": not self.significant,
+            "still_significant_after_best": list(self.after_best),
+            "per_path": self.per_path, "per_axis": self.per_axis,
+            "candidates": [{
+                "effect": c.effect, "significant": c.significant, "visible": c.visible,
+                "visibility": c.visibility, "rms_after_um": c.rms_after_um,
+                "p_value": c.p_value, "confounded_with": list(c.confounded_with),
+                "separated_by": list(c.separated_by), "silent": c.silent,
+                "amplitude": list(c.amplitude),
+                "amplitude_unit": c.unit, "description": c.description, "cause": c.cause}
+                for c in self.candidates],
+            "bias_sensitivity": {"units": self.bias_units, "per": "µm RMS over the poses of the effect's displacement",
+                                 "shift": self.bias},
+        }
+
+    def report(self, fit_path: str = "fit.json", top: int = 8) -> str:
+        lines = [f"compgen diagnose: {self.machine}", f"  fit {self.fit_file}: {len(self.model)} "
+                 f"parameters; residual RMS {self.rms_um:.3f} µm (σ̂ {self.sigma_um:.3f} µm) over "
+                 f"{self.readings} readings", "",
+                 "  residual per path (µm)      RMS dX    dY    dZ"]
+        for name, p in self.per_path.items():
+            lines.append(f"    {name:<24}{p['rms_um'][0]:8.3f}{p['rms_um'][1]:6.3f}{p['rms_um'][2]:6.3f}")
+        lines += ["", "  residual against axis position (µm, amplitude in dX dY dZ)"]
+        for axis, a in self.per_axis.items():
+            for term, amp in a.items():
+                lines.append(f"    {axis:<3}{term:<10}{amp[0]:8.3f}{amp[1]:6.3f}{amp[2]:6.3f}")
+        visible = [c for c in self.candidates if c.visible]
+        lines += ["", f"  candidate effects, most residual removed first ({self.tested} tried; F test, "
+                      f"Bonferroni-corrected, α = {self.alpha:g}):"]
+        for i, c in enumerate(visible[:top], 1):
+            amp = " ".join(f"{a:+.2f}" for a in c.amplitude)
+            verdict = "SIGNIFICANT" if c.significant else "not significant"
+            lines.append(f"  {i:>2}. {c.effect:<12} RMS → {c.rms_after_um:.3f} µm   p = {c.p_value:.2g}  "
+                         f"{verdict}")
+            lines.append(f"      {c.description} (≈ {amp} {c.unit}); likely cause: {c.cause}")
+            if c.confounded_with:
+                lines.append(f"      partly absorbed by {', '.join(c.confounded_with)}")
+            if c.significant:
+                lines.append(f"      add it: compgen fit --from {fit_path} --add {c.effect} -o "
+                             f"{_next_name(fit_path)}")
+        if not self.significant:
+            lines += ["", "  No candidate is significant: the model explains these data to the "
+                          "noise level."]
+        elif len(self.significant) > 1:
+            best = self.significant[0].effect
+            lines += ["", f"  Effects share misfit: once {best} is added, "
+                          + (f"still significant: {', '.join(self.after_best)}." if self.after_best
+                             else "no other candidate stays significant.")
+                          + " Add one effect at a time and diagnose again."]
+        hidden = [c for c in self.candidates if not c.visible and not c.silent]
+        if hidden:
+            lines += ["", "  not visible in these data (never reported as found; the fit absorbs them):"]
+            for c in hidden:
+                where = (f"would be seen with {' or '.join(c.separated_by[:3])}" if c.separated_by
+                         else "no path or ball position of this machine file separates it: it needs "
+                              "an independent reference")
+                lines.append(f"    {c.effect:<12} {c.description}: absorbed by "
+                             f"{', '.join(c.confounded_with)}; {where}")
+        silent = [c.effect for c in self.candidates if c.silent]
+        if silent:
+            lines += ["", "  no effect on any reading here (no lever arm to the nest or ball in this "
+                          "machine file): " + ", ".join(silent)]
+        lines += ["", "  fragile parameters: largest shift per µm RMS of an effect not in the model"]
+        for name, row in self.bias.items():
+            worst = max(row, key=lambda k: abs(row[k]), default=None)
+            if worst is not None:
+                lines.append(f"    {name:<6} {row[worst]:+6.2f} {self.bias_units[name]} per µm of {worst}")
+        return "\n".join([*lines, *self.notes]) + "\n"
+
+
+def _next_name(path: str) -> str:
+    stem = path[:-5] if path.endswith(".json") else path
+    return f"{stem}+1.json"
+
+
+def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
+             candidates: Sequence[str] | None = None, alpha: float = ALPHA,
+             fit_file: str = "") -> Diagnosis:
+    """Rank the effects not in ``fit``'s model by how much of its residual they explain."""
+    poses = Poses.concat([d.poses for d in data])
+    y = np.concatenate([d.deviation for d in data]).ravel()
+    model = Model(machine, fit.model)
+    x = np.array([fit.parameters[n].value for n in fit.model])
+    free = [model.names.index(n) for n in fit.free]
+    r = y - model.deviation(poses, x).ravel()
+    J = model.jacobian(poses, x)[:, :, free].reshape(r.size, -1)
+    rss, dof = float(r @ r), r.size - len(free)
+
+    in_model = {effect_of_param(machine, n).name for n in fit.model}
+    effects = [e for e in (catalogue(machine) if candidates is None
+                           else [resolve(machine, c) for c in candidates]) if e.name not in in_model]
+    if not effects:
+        raise CompgenError("no candidate effect left to try: the model holds them all")
+    C = _columns(machine, poses, effects)
+    Q, _ = np.linalg.qr(J)
+    Cp = C - Q @ (Q.T @ C)                 # what the model's parameters cannot absorb
+    absorbed = np.linalg.lstsq(J, C, rcond=None)[0]   # J⁺C: what each parameter takes
+
+    rows, col = [], 0
+    for e in effects:
+        k = len(e.params)
+        c, cp = C[:, col:col + k], Cp[:, col:col + k]
+        norms = np.linalg.norm(c, axis=0)
+        vis_cols = np.where(norms > 0, np.linalg.norm(cp, axis=0) / np.where(norms > 0, norms, 1), 0.0)
+        keep = vis_cols >= VISIBLE
+        drop, amp = 0.0, np.zeros(k)
+        if keep.any():
+            coef = np.linalg.lstsq(cp[:, keep], r, rcond=None)[0]
+            drop = float(np.sum((cp[:, keep] @ coef) ** 2))
+            amp[keep] = coef
+        share = np.sqrt(np.sum((absorbed[:, col:col + k] * np.linalg.norm(J, axis=0)[:, None]) ** 2, axis=1)
+                        ) / max(np.linalg.norm(c), 1e-300)
+        names = [fit.free[i] for i in np.argsort(-share) if share[i] >= ABSORBS]
+        rows.append((e, float(vis_cols.max()), drop, int(keep.sum()), amp, tuple(names),
+                     bool(np.all(norms * 1e3 < SILENT_UM))))
+        col += k
+
+    tested = sum(1 for row in rows if row[3])
+    out = []
+    for e, vis, drop, k_eff, amp, names, silent in rows:
+        if k_eff:
+            F = (drop / k_eff) / max((rss - drop) / (dof - k_eff), 1e-300)
+            p = min(1.0, float(stats.f.sf(F, k_eff, dof - k_eff)) * tested)
+        else:
+            p = 1.0
+        shown_amp = tuple(shown(a, e.unit)[0] for a in amp)
+        out.append(Candidate(
+            effect=e.name, description=e.words, cause=e.cause, visibility=vis,
+            rms_after_um=float(np.sqrt((rss - drop) / r.size)) * 1e3, p_value=p,
+            significant=bool(k_eff and p < alpha), confounded_with=names,
+            amplitude=shown_amp, unit=shown(1.0, e.unit)[1], silent=silent))
+    out.sort(key=lambda c: (not c.visible, c.rms_after_um))
+    hidden = [c for c in out if not c.visible and not c.silent]
+    seen = _separating(machine, fit, poses, [resolve(machine, c.effect) for c in hidden]) if hidden else {}
+    out = [replace(c, separated_by=seen[c.effect]) if c.effect in seen else c for c in out]
+
+    # bias: data holding candidate column c shift the fitted parameters by J⁺c (first
+    # order); per µm RMS over the poses of the displacement c causes, so candidates compare
+    bias = {n: {} for n in fit.free}
+    units = {n: shown(1.0, model.effects[model.names.index(n)].unit)[1] for n in fit.free}
+    col = 0
+    for e in effects:
+        k = len(e.params)
+        rms_um = np.linalg.norm(C[:, col:col + k], axis=0) / np.sqrt(len(poses)) * 1e3
+        for i, n in enumerate(fit.free):
+            scale = shown(1.0, model.effects[model.names.index(n)].unit)[0]
+            per = np.abs(absorbed[i, col:col + k]) * scale / np.where(rms_um > 0, rms_um, np.inf)
+            if per.max() > 0:
+                bias[n][e.name] = float(per.max() * np.sign(absorbed[i, col + int(per.argmax())]))
+        col += k
+
+    after_best = ()
+    significant = [c for c in out if c.significant]
+    if len(significant) > 1:
+        first = effects.index(resolve(machine, significant[0].effect))
+        start = sum(len(e.params) for e in effects[:first])
+        Jb = np.column_stack([J, C[:, start:start + len(effects[first].params)]])
+        after_best = _still_significant(Jb, r, C, effects, [c.effect for c in significant[1:]], alpha)
+
+    return Diagnosis(
+        machine=machine.name, fit_file=fit_file, model=fit.model,
+        rms_um=float(np.sqrt(rss / r.size)) * 1e3, sigma_um=float(np.sqrt(rss / dof)) * 1e3,
+        readings=int(r.size), per_path=fit.residual["per_path"],
+        per_axis=_per_axis(machine, poses, r.reshape(-1, 3)),
+        candidates=tuple(out), bias=bias, bias_units=units, tested=tested, alpha=alpha,
+        after_best=after_best)
+
+
+def _columns(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np.ndarray:
+    """First-order signatures of the effects' parameters, (3n, Σ params), mm per unit."""
+    keys = sorted({(e.carrier, e.slot, e.direction) for e in effects})
+    gains = slot_gains(machine, poses, keys)
+    cols = []
+    for e in effects:
+        b = e.basis.values(coordinate(machine, e, poses))
+        g = gains[(e.carrier, e.slot, e.direction)]
+        cols += [(g * b[:, k:k + 1]).ravel() for k in range(b.shape[1])]
+    return np.column_stack(cols)
+
+
+def _separating(machine: Machine, fit: FitResult, poses: Poses,
+                effects: Sequence[Effect]) -> dict[str, tuple[str, ...]]:
+    """For effects these data cannot see: which measurement, added to them, would."""
+    model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
+    found: dict[str, list[str]] = {e.name: [] for e in effects}
+    J0, C0 = _columns(machine, poses, model_effects), _columns(machine, poses, effects)
+    for label, extra in alternative_measurements(machine):
+        Q, _ = np.linalg.qr(np.vstack([J0, _columns(machine, extra, model_effects)]))
+        C = np.vstack([C0, _columns(machine, extra, effects)])
+        vis = np.linalg.norm(C - Q @ (Q.T @ C), axis=0) / np.maximum(np.linalg.norm(C, axis=0), 1e-300)
+        col = 0
+        for e in effects:
+            if vis[col:col + len(e.params)].max() >= SEPARATES:
+                found[e.name].append(label)
+            col += len(e.params)
+    return {k: tuple(v) for k, v in found.items()}
+
+
+def _still_significant(J: np.ndarray, r: np.ndarray, C: np.ndarray, effects: Sequence[Effect],
+                       names: Sequence[str], alpha: float) -> tuple[str, ...]:
+    """Which of ``names`` stay significant once the model is ``J`` (first order)."""
+    Q, _ = np.linalg.qr(J)
+    r1 = r - Q @ (Q.T @ r)
+    rss, dof = float(r1 @ r1), r.size - J.shape[1]
+    out, col, tried = [], 0, len(names)
+    for e in effects:
+        k = len(e.params)
+        if e.name in names:
+            cp = C[:, col:col + k] - Q @ (Q.T @ C[:, col:col + k])
+            keep = np.linalg.norm(cp, axis=0) >= VISIBLE * np.linalg.norm(C[:, col:col + k], axis=0)
+            if keep.any():
+                fitted = cp[:, keep] @ np.linalg.lstsq(cp[:, keep], r1, rcond=None)[0]
+                drop, kk = float(fitted @ fitted), int(keep.sum())
+                F = (drop / kk) / max((rss - drop) / (dof - kk), 1e-300)
+                if float(stats.f.sf(F, kk, dof - kk)) * tried < alpha:
+                    out.append(e.name)
+        col += k
+    return tuple(n for n in names if n in out)
+
+
+def _per_axis(machine: Machine, poses: Poses, r: np.ndarray) -> dict:
+    """Residual structure against each axis: harmonic amplitudes for a full-turn axis,
+    the RMS of a quadratic trend otherwise; µm per direction."""
+    out = {}
+    r_um = r * 1e3
+    for axis in machine.axes:
+        q = poses.q[:, machine.index(axis.name)]
+        if np.ptp(q) < 1e-9:
+            continue
+        if axis.full_turn:
+            terms = {}
+            for k in range(1, 5):
+                B = np.column_stack([np.cos(k * q), np.sin(k * q)])
+                coef = np.linalg.lstsq(B, r_um, rcond=None)[0]
+                terms[f"{k}/rev"] = np.hypot(coef[0], coef[1]).tolist()
+            out[axis.name] = terms
+        else:
+            u = (q - q.mean()) / np.ptp(q)
+            B = np.column_stack([u, u**2 - (u**2).mean()])
+            coef = np.linalg.lstsq(B, r_um, rcond=None)[0]
+            out[axis.name] = {"trend": np.sqrt(((B @ coef) ** 2).mean(axis=0)).tolist()}
+    return out

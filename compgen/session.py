@@ -1,0 +1,29 @@
+"""Reloading what a fit was made from: its machine file and data, checked by checksum."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .errors import CompgenError
+from .machine import Machine, load_machine
+from .results import FitResult
+from .rtest import RTestData, read_rtest
+
+
+def reload(fit: FitResult, machine_file: str | None = None) -> tuple[Machine, list[RTestData]]:
+    """The machine and data sets of ``fit``, refusing any file that changed since."""
+    machine = load_machine(machine_file or fit.machine["file"])
+    if machine.sha256 != fit.machine["sha256"]:
+        raise CompgenError("machine file changed since the fit", where=machine.source,
+                           hint="refit with `compgen fit` on the current machine file")
+    data = []
+    for ref in fit.data:
+        if not Path(ref.file).exists():
+            raise CompgenError("data file of the fit is gone", where=ref.file,
+                               hint="put it back, or refit with the data where it is now")
+        d = read_rtest(ref.file, machine, fit.sign)
+        if d.sha256 != ref.sha256:
+            raise CompgenError("data file changed since the fit", where=ref.file,
+                               hint="refit with `compgen fit`")
+        data.append(d)
+    return machine, data
