@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import stats
 
-from .effects import Effect, catalogue, effect_of_param, resolve
+from .effects import Effect, catalogue, effect_name, effect_of_param, resolve
 from .errors import CompgenError
 from .kinematics import Model, Poses, coordinate, slot_gains
 from .machine import Machine
@@ -32,6 +32,7 @@ VISIBLE = 0.01        # ‖c⊥‖/‖c‖ below this: the model absorbs the eff
 SEPARATES = 0.05      # visibility an extra measurement must give to count as separating
 ABSORBS = 0.25        # share of an effect's signature a parameter must take to be named
 SILENT_UM = 1e-9      # µm per unit over all readings: the effect moves nothing at all
+RIVAL = 0.9           # removing this share of what the best removes makes a rival
 
 
 @dataclass(frozen=True)
@@ -65,10 +66,13 @@ class Diagnosis:
     per_path: dict
     per_axis: dict
     candidates: tuple[Candidate, ...]   # visible best first, then the invisible
-    bias: dict[str, dict[str, float]]   # parameter → {effect: shift per µm RMS of the effect}
-    bias_units: dict[str, str]
+    bias: dict[str, dict[str, float]]   # parameter → {candidate parameter: shift per unit}
+    bias_units: dict[str, str]          # shown unit of every parameter and candidate parameter
+    signature_um: dict[str, float]      # RMS displacement over the poses per unit, µm
     tested: int
     after_best: tuple[str, ...] = ()    # still significant once the best candidate is added
+    rivals: tuple[str, ...] = ()        # explain almost as much as the best: not told apart
+    rivals_separated_by: tuple[str, ...] = ()
     alpha: float = ALPHA
     notes: tuple[str, ...] = field(default_factory=tuple)
 
@@ -83,6 +87,8 @@ class Diagnosis:
             "readings": self.readings, "tested": self.tested, "alpha": self.alpha,
             "explained_to_noise": not self.significant,
             "still_significant_after_best": list(self.after_best),
+            "rivals_of_best": list(self.rivals),
+            "rivals_separated_by": list(self.rivals_separated_by),
             "per_path": self.per_path, "per_axis": self.per_axis,
             "candidates": [{
                 "effect": c.effect, "significant": c.significant, "visible": c.visible,
@@ -92,8 +98,8 @@ class Diagnosis:
                 "amplitude": list(c.amplitude),
                 "amplitude_unit": c.unit, "description": c.description, "cause": c.cause}
                 for c in self.candidates],
-            "bias_sensitivity": {"units": self.bias_units, "per": "µm RMS over the poses of the effect's displacement",
-                                 "shift": self.bias},
+            "bias_sensitivity": {"units": self.bias_units, "shift_per_unit": self.bias,
+                                 "signature_rms_um_per_unit": self.signature_um},
         }
 
     def report(self, fit_path: str = "fit.json", top: int = 8) -> str:
@@ -121,6 +127,14 @@ class Diagnosis:
             if c.significant:
                 lines.append(f"      add it: compgen fit --from {fit_path} --add {c.effect} -o "
                              f"{_next_name(fit_path)}")
+        if self.rivals:
+            best = self.significant[0].effect
+            verb = "explains" if len(self.rivals) == 1 else "explain"
+            lines += ["", f"  Not told apart: {', '.join(self.rivals)} {verb}"
+                          f" almost as much as {best} (≥ {RIVAL:.0%} of it); these data cannot choose "
+                          "between them. " + (f"Adding {' or '.join(self.rivals_separated_by[:3])} would."
+                                              if self.rivals_separated_by else
+                                              "No path or ball position of the machine file would.")]
         if not self.significant:
             lines += ["", "  No candidate is significant: the model explains these data to the "
                           "noise level."]
@@ -143,11 +157,14 @@ class Diagnosis:
         if silent:
             lines += ["", "  no effect on any reading here (no lever arm to the nest or ball in this "
                           "machine file): " + ", ".join(silent)]
-        lines += ["", "  fragile parameters: largest shift per µm RMS of an effect not in the model"]
+        lines += ["", "  fragile parameters: largest shift per µm (RMS over the poses) of an effect "
+                      "not in the model"]
         for name, row in self.bias.items():
-            worst = max(row, key=lambda k: abs(row[k]), default=None)
+            per_um = {k: v / self.signature_um[k] for k, v in row.items() if self.signature_um[k] > 0}
+            worst = max(per_um, key=lambda k: abs(per_um[k]), default=None)
             if worst is not None:
-                lines.append(f"    {name:<6} {row[worst]:+6.2f} {self.bias_units[name]} per µm of {worst}")
+                lines.append(f"    {name:<6} {per_um[worst]:+6.2f} {self.bias_units[name]} per µm of "
+                             f"{effect_name(worst)}")
         return "\n".join([*lines, *self.notes]) + "\n"
 
 
@@ -179,6 +196,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     Cp = C - Q @ (Q.T @ C)                 # what the model's parameters cannot absorb
     absorbed = np.linalg.lstsq(J, C, rcond=None)[0]   # J⁺C: what each parameter takes
 
+    units_of = {n: model.effects[model.names.index(n)].unit for n in fit.free}
     rows, col = [], 0
     for e in effects:
         k = len(e.params)
@@ -214,26 +232,37 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
             amplitude=shown_amp, unit=shown(1.0, e.unit)[1], silent=silent))
     out.sort(key=lambda c: (not c.visible, c.rms_after_um))
     hidden = [c for c in out if not c.visible and not c.silent]
-    seen = _separating(machine, fit, poses, [resolve(machine, c.effect) for c in hidden]) if hidden else {}
+    model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
+    seen = (_separating(machine, model_effects, poses, [resolve(machine, c.effect) for c in hidden])
+            if hidden else {})
     out = [replace(c, separated_by=seen[c.effect]) if c.effect in seen else c for c in out]
 
-    # bias: data holding candidate column c shift the fitted parameters by J⁺c (first
-    # order); per µm RMS over the poses of the displacement c causes, so candidates compare
+    # bias: data holding a unit of candidate parameter j shift the fitted parameters by
+    # (J⁺C)ᵢⱼ, first order; kept in shown units (µm or ″ per µm or ″ of j)
     bias = {n: {} for n in fit.free}
     units = {n: shown(1.0, model.effects[model.names.index(n)].unit)[1] for n in fit.free}
-    col = 0
+    signature_um, col = {}, 0
     for e in effects:
-        k = len(e.params)
-        rms_um = np.linalg.norm(C[:, col:col + k], axis=0) / np.sqrt(len(poses)) * 1e3
-        for i, n in enumerate(fit.free):
-            scale = shown(1.0, model.effects[model.names.index(n)].unit)[0]
-            per = np.abs(absorbed[i, col:col + k]) * scale / np.where(rms_um > 0, rms_um, np.inf)
-            if per.max() > 0:
-                bias[n][e.name] = float(per.max() * np.sign(absorbed[i, col + int(per.argmax())]))
-        col += k
+        for j, pname in enumerate(e.params):
+            units[pname] = shown(1.0, e.unit)[1]
+            per_shown = shown(1.0, e.unit)[0]
+            rms_um = float(np.linalg.norm(C[:, col + j]) / np.sqrt(len(poses))) * 1e3
+            signature_um[pname] = rms_um / per_shown
+            for i, n in enumerate(fit.free):
+                bias[n][pname] = float(absorbed[i, col + j] * shown(1.0, units_of[n])[0] / per_shown)
+        col += len(e.params)
 
-    after_best = ()
+    after_best, rivals, rivals_separated_by = (), (), ()
     significant = [c for c in out if c.significant]
+    if significant:
+        # near-equivalent explanations: each removes almost as much as the best
+        best_drop = rss - (significant[0].rms_after_um * 1e-3) ** 2 * r.size
+        rivals = tuple(c.effect for c in significant[1:]
+                       if rss - (c.rms_after_um * 1e-3) ** 2 * r.size >= RIVAL * best_drop)
+        if rivals:
+            base = [*model_effects, resolve(machine, significant[0].effect)]
+            seen = _separating(machine, base, poses, [resolve(machine, e) for e in rivals])
+            rivals_separated_by = tuple(dict.fromkeys(m for e in rivals for m in seen[e]))
     if len(significant) > 1:
         first = effects.index(resolve(machine, significant[0].effect))
         start = sum(len(e.params) for e in effects[:first])
@@ -245,8 +274,9 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         rms_um=float(np.sqrt(rss / r.size)) * 1e3, sigma_um=float(np.sqrt(rss / dof)) * 1e3,
         readings=int(r.size), per_path=fit.residual["per_path"],
         per_axis=_per_axis(machine, poses, r.reshape(-1, 3)),
-        candidates=tuple(out), bias=bias, bias_units=units, tested=tested, alpha=alpha,
-        after_best=after_best)
+        candidates=tuple(out), bias=bias, bias_units=units, signature_um=signature_um,
+        tested=tested, alpha=alpha,
+        after_best=after_best, rivals=rivals, rivals_separated_by=rivals_separated_by)
 
 
 def _columns(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np.ndarray:
@@ -261,10 +291,10 @@ def _columns(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np.nd
     return np.column_stack(cols)
 
 
-def _separating(machine: Machine, fit: FitResult, poses: Poses,
+def _separating(machine: Machine, model_effects: Sequence[Effect], poses: Poses,
                 effects: Sequence[Effect]) -> dict[str, tuple[str, ...]]:
-    """For effects these data cannot see: which measurement, added to them, would."""
-    model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
+    """For effects these data cannot tell from ``model_effects``: which measurement, added
+    to them, would."""
     found: dict[str, list[str]] = {e.name: [] for e in effects}
     J0, C0 = _columns(machine, poses, model_effects), _columns(machine, poses, effects)
     for label, extra in alternative_measurements(machine):

@@ -155,8 +155,8 @@ def slot_gains(machine: Machine, poses: Poses, keys) -> dict[tuple[str, str, str
         col = SLOT_INDEX[direction]
         plus, minus = np.zeros((n, 6)), np.zeros((n, 6))
         plus[:, col], minus[:, col] = FD_STEP, -FD_STEP
-        out[(carrier, slot, direction)] = (relative(machine, poses, {(carrier, slot): plus})
-                                           - relative(machine, poses, {(carrier, slot): minus})) / (2 * FD_STEP)
+        up, down = (relative(machine, poses, {(carrier, slot): d}) for d in (plus, minus))
+        out[(carrier, slot, direction)] = (up - down) / (2 * FD_STEP)
     return out
 
 

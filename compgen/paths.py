@@ -85,7 +85,8 @@ def alternative_measurements(machine: Machine) -> list[tuple[str, Poses]]:
     with radius and height, an offset or an axial error motion does not). Those that would
     leave the travel are not offered."""
     ball = np.asarray(machine.ball, dtype=float)
-    places = (("", ball), (f" with the ball {SECOND_BALL_DZ_MM:g} mm higher", ball + [0, 0, SECOND_BALL_DZ_MM]),
+    places = (("", ball),
+              (f" with the ball {SECOND_BALL_DZ_MM:g} mm higher", ball + [0, 0, SECOND_BALL_DZ_MM]),
               (" with the ball at half its radius", ball * [0.5, 0.5, 1.0]))
     out = []
     for where, at in places:
