@@ -119,8 +119,8 @@ class Diagnosis:
         for i, c in enumerate(visible[:top], 1):
             amp = " ".join(f"{a:+.2f}" for a in c.amplitude)
             verdict = "SIGNIFICANT" if c.significant else "not significant"
-            lines.append(f"  {i:>2}. {c.effect:<12} RMS → {c.rms_after_um:.3f} µm   p = {c.p_value:.2g}  "
-                         f"{verdict}")
+            p = f"p = {c.p_value:.2g}" if c.p_value > 0 else "p < 1e-300"
+            lines.append(f"  {i:>2}. {c.effect:<12} RMS → {c.rms_after_um:.3f} µm   {p}  {verdict}")
             lines.append(f"      {c.description} (≈ {amp} {c.unit}); likely cause: {c.cause}")
             if c.confounded_with:
                 lines.append(f"      partly absorbed by {', '.join(c.confounded_with)}")

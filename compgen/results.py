@@ -127,12 +127,12 @@ class FitResult:
             lines.append(f"  data  {d.file}: {d.rows} poses ({counts})")
         lines.append(f"  model {len(self.model)} parameters ({len(self.free)} fitted), method "
                      f"{self.method}, {self.iterations} iteration(s)")
-        lines += ["", f"  {'parameter':<12}{'value':>12}  {'std. unc.':>11}   meaning"]
+        lines += ["", f"  {'parameter':<12}{'value':>9}    {'std. unc.':<13}meaning"]
         for n, e in self.parameters.items():
             v, unit = shown(e.value, e.unit)
             s, _ = shown(e.std, e.unit)
             unc = "fixed" if e.fixed else f"± {s:.3f} {unit}"
-            lines.append(f"  {n:<12}{v:>9.3f} {unit:<2} {unc:>12}   {self.descriptions.get(n, '')}")
+            lines.append(f"  {n:<12}{v:>9.3f} {unit:<3}{unc:<13}{self.descriptions.get(n, '')}")
         lines += ["", f"  residual RMS {r['rms_um']:.3f} µm over {r['readings']} readings; "
                       f"σ̂ = {r['sigma_um']:.3f} µm with {r['dof']} degrees of freedom",
                   f"  {'path':<8}{'poses':>6}   RMS dX    dY    dZ    range dX    dY    dZ   (µm)"]

@@ -175,3 +175,65 @@ def test_simulate_writes_what_fit_reads_on_the_bc_machine(tmp_path):
     assert code == 0, err
     fit = json.loads((tmp_path / "f.json").read_text())
     assert abs(fit["parameters"]["XOB"]["value"] - 0.012) < 1e-8
+
+
+@pytest.fixture
+def hidden_session(tmp_path):
+    truth = tmp_path / "truth.json"
+    truth.write_text(json.dumps({"parameters": {"XOC": {"value": 5, "unit": "um"},
+                                                "ECC:h2c": {"value": 3, "unit": "arcsec"}}}))
+    data = tmp_path / "data.csv"
+    assert run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "--noise-um", 0.5,
+               "--seed", 11, "-o", data)[0] == 0
+    fit = tmp_path / "fit.json"
+    assert run("fit", "--machine", SEED_MACHINE, data, "-o", fit)[0] == 0
+    return tmp_path, data, fit
+
+
+def test_discovery_loop_on_the_command_line(hidden_session):
+    folder, data, fit = hidden_session
+    code, out, err = run("diagnose", "--from", fit)
+    assert code == 0, err
+    assert "1. ECC:h2" in out and "SIGNIFICANT" in out and f"--from {fit} --add ECC:h2" in out
+    code, out, err = run("diagnose", "--from", fit, "--json")
+    d = json.loads(out)
+    assert d["candidates"][0]["effect"] == "ECC:h2" and d["candidates"][0]["significant"]
+    fit2 = folder / "fit2.json"
+    code, out, err = run("fit", "--from", fit, "--add", "ECC:h2", "-o", fit2)
+    assert code == 0, err
+    after = json.loads(fit2.read_text())
+    assert after["effects"][-1] == "ECC:h2" and "ECC:h2c" in after["model"]
+    assert after["residual"]["rms_um"] < 0.55 < json.loads(fit.read_text())["residual"]["rms_um"]
+    code, out, err = run("diagnose", "--from", fit2, "--before", fit, "--plots", folder / "plots")
+    assert code == 0, err
+    assert "noise level" in out
+    pngs = sorted(p.name for p in (folder / "plots").iterdir())
+    assert pngs == ["measured-vs-model-K1.png", "measured-vs-model-K2.png",
+                    "measured-vs-model-K4.png", "residual-vs-A.png", "residual-vs-C.png"]
+    assert all((folder / "plots" / p).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in pngs)
+    fit3 = folder / "fit3.json"
+    assert run("fit", "--from", fit2, "--remove", "ECC:h2", "-o", fit3)[0] == 0
+    assert json.loads(fit3.read_text())["model"] == json.loads(fit.read_text())["model"]
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["--add", "ECC:h9x"], "takes hN"),
+    (["--add", "XOC"], "already in the model"),
+    (["--remove", "ECC:h2"], "not in the model"),
+    (["--add", "nest_X"], "cannot separate"),
+])
+def test_bad_discovery_requests_are_refused_cleanly(hidden_session, args, expected):
+    folder, _, fit = hidden_session
+    out = folder / "new.json"
+    code, _, err = run("fit", "--from", fit, *args, "-o", out)
+    assert code == 2 and expected in err and err.count("\n") == 1, err
+    assert not out.exists()
+
+
+def test_diagnose_refuses_changed_or_foreign_files(hidden_session, tmp_path):
+    folder, data, fit = hidden_session
+    code, _, err = run("diagnose", "--from", data)
+    assert code == 2 and "not a JSON fit file" in err
+    data.write_text(data.read_text() + "# edited\n")
+    code, _, err = run("diagnose", "--from", fit)
+    assert code == 2 and "changed since the fit" in err, err

@@ -1,0 +1,89 @@
+"""PNG plots of a fit: measured vs model along each path (as the seed's figures 7–9), and
+residual against each rotary axis angle; an earlier fit of the same data drawn beside."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")   # files only: no display on a machine-side laptop or CI
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .errors import CompgenError  # noqa: E402
+from .kinematics import Model, Poses  # noqa: E402
+from .machine import Machine  # noqa: E402
+from .results import FitResult  # noqa: E402
+from .rtest import RTestData  # noqa: E402
+
+DIRECTIONS = ("dX", "dY", "dZ")
+
+
+def _predicted(machine: Machine, poses: Poses, fit: FitResult) -> np.ndarray:
+    model = Model(machine, fit.model)
+    return model.deviation(poses, np.array([fit.parameters[n].value for n in fit.model])) * 1e3
+
+
+def write_plots(folder: str | Path, machine: Machine, data: Sequence[RTestData], fit: FitResult,
+                before: FitResult | None = None) -> list[Path]:
+    """Write the plots into ``folder`` (made if missing); returns the files written."""
+    if before is not None and [d.sha256 for d in before.data] != [d.sha256 for d in fit.data]:
+        raise CompgenError("--before must be a fit of the same data files",
+                           hint="compare fits made from the same R-test session")
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CompgenError(f"cannot make the plot folder: {exc.strerror}", where=str(folder)) from None
+    poses = Poses.concat([d.poses for d in data])
+    measured = np.concatenate([d.deviation for d in data]) * 1e3
+    model = _predicted(machine, poses, fit)
+    earlier = _predicted(machine, poses, before) if before else None
+    label = f"model ({len(fit.model)} parameters)"
+    written = []
+    for path in dict.fromkeys(poses.path):
+        sel = poses.path == path
+        fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
+        for k, ax in enumerate(axes):
+            ax.plot(measured[sel, k], ".", ms=3, color="0.25", label="measured")
+            if earlier is not None:
+                ax.plot(earlier[sel, k], "--", color="tab:orange",
+                        label=f"before ({len(before.model)} parameters)")
+            ax.plot(model[sel, k], "-", color="tab:blue", label=label)
+            ax.set_ylabel(f"{DIRECTIONS[k]} (µm)")
+            ax.grid(alpha=0.3)
+        axes[0].set_title(f"{path or 'data'}: measured vs model, {machine.name}")
+        axes[0].legend(loc="best", fontsize=8)
+        axes[-1].set_xlabel("pose")
+        written.append(_save(fig, folder / f"measured-vs-model-{_safe(path)}.png"))
+    for axis in machine.rotary_axes:
+        angle = np.degrees(poses.q[:, machine.index(axis.name)])
+        fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
+        for k, ax in enumerate(axes):
+            if earlier is not None:
+                ax.plot(angle, measured[:, k] - earlier[:, k], ".", ms=2, color="tab:orange",
+                        label=f"before: RMS {before.residual['rms_um']:.2f} µm")
+            ax.plot(angle, measured[:, k] - model[:, k], ".", ms=2, color="tab:blue",
+                    label=f"residual: RMS {fit.residual['rms_um']:.2f} µm")
+            ax.set_ylabel(f"{DIRECTIONS[k]} (µm)")
+            ax.grid(alpha=0.3)
+        axes[0].set_title(f"residual against {axis.name}, {machine.name}")
+        axes[0].legend(loc="best", fontsize=8)
+        axes[-1].set_xlabel(f"{axis.name} (deg)")
+        written.append(_save(fig, folder / f"residual-vs-{axis.name}.png"))
+    return written
+
+
+def _safe(label: str) -> str:
+    return "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in label) or "data"
+
+
+def _save(fig, path: Path) -> Path:
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    fig.tight_layout()
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(path)
+    return path

@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# Model discovery on the example session: fit the seed's 11 parameters, see where the model
+# fails, add the effect diagnose names, and watch the error fall.
+#   PY=.venv/bin/python examples/discover.sh [WORKDIR]      (from the repository root)
+# (`python -m compgen`, not `compgen`: in bash that word is a shell builtin.)
+set -euo pipefail
+work=${1:-discover}
+mkdir -p "$work"
+cg() { "${PY:-python3}" -m compgen "$@"; }
+
+echo "== 1. fit the default model (the seed's 11 location parameters)"
+cg fit --machine machines/ac-trunnion-itnc530.toml examples/seed-session.csv -o "$work/fit.json" --force
+
+echo "== 2. where does it fail, and what would explain it?"
+cg diagnose --from "$work/fit.json"
+
+echo "== 3. add the effect diagnose ranks first"
+best=$(cg diagnose --from "$work/fit.json" --json | "${PY:-python3}" -c \
+  'import json,sys; d=json.load(sys.stdin); print(d["candidates"][0]["effect"] if d["candidates"][0]["significant"] else "")')
+[ -n "$best" ] || { echo "nothing significant to add"; exit 0; }
+cg fit --from "$work/fit.json" --add "$best" -o "$work/fit2.json" --force
+
+echo "== 4. diagnose again, with before/after plots"
+cg diagnose --from "$work/fit2.json" --before "$work/fit.json" --plots "$work/plots"
