@@ -4,19 +4,23 @@ from __future__ import annotations
 
 import json
 import sys
+from datetime import date
+from pathlib import Path
 
 import click
 import numpy as np
 
 from .diagnose import diagnose
 from .effects import catalogue, compose, location_model
+from .emit import CONTROLLERS, controller
+from .emit.programs import MODES, measure_program, program_name
 from .errors import CompgenError
-from .files import write_atomically
-from .identify import identify, parse_fixed
+from .files import write_all, write_atomically
+from .identify import _version, identify, parse_fixed
 from .machine import load_machine
 from .paths import generate
 from .results import load_fit
-from .rtest import SIGNS, format_rtest, read_rtest
+from .rtest import SIGNS, format_rtest, read_poses, read_rtest
 from .session import reload
 from .simulate import read_truth, simulate
 
@@ -150,6 +154,47 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before):
             click.echo(f"wrote {path}", err=as_json)
     click.echo(json.dumps(result.to_dict(), indent=2, ensure_ascii=False) if as_json
                else result.report(base), nl=as_json)
+
+
+@main.command("measure-program")
+@MACHINE
+@click.option("--path", "path_names", default=None,
+              help="K1, K2, K4 (or BK1…), a comma list, or 'all': paths of the machine file.")
+@click.option("--poses", "poses_file", type=FILE, default=None,
+              help="A CSV of poses (rotary axes in deg; path, bx, by, bz optional) instead of --path.")
+@click.option("--controller", "controller_name", type=click.Choice(list(CONTROLLERS)), default=None,
+              help="Default: the machine file's.")
+@click.option("--mode", type=click.Choice(MODES), default="tcpm", show_default=True,
+              help="tcpm: the control's kinematics (FUNCTION TCPM / TRAORI); axes: compgen's.")
+@click.option("-o", "--output", type=FILE, default=None,
+              help="Program file; its pose list goes beside it as <name>.poses.csv. Default: stdout.")
+@FORCE
+def measure_program_cmd(machine_file, path_names, poses_file, controller_name, mode, output, force):
+    """Write an R-test measurement program for the control, checked against travel and feed."""
+    machine = load_machine(machine_file)
+    if bool(path_names) == bool(poses_file):
+        raise CompgenError("give either --path or --poses")
+    if poses_file:
+        poses, label = read_poses(poses_file, machine), Path(poses_file).stem
+    else:
+        names = (list(machine.paths) if path_names.strip().lower() == "all"
+                 else [p.strip() for p in path_names.split(",") if p.strip()])
+        poses, label = generate(machine, names), "+".join(names)
+    ctl = controller(controller_name or machine.controller)
+    name = program_name(Path(output).stem if output else f"RTEST_{label}")
+    emitted = measure_program(machine, poses, label, ctl.name, mode, name, _version(),
+                              date.today().isoformat())
+    program = emitted.files[ctl.program_ext]
+    if not output:
+        click.echo(program, nl=False)
+        click.echo("compgen: the pose list was not written; give -o FILE to get it beside the "
+                   "program", err=True)
+        return
+    out = Path(output)
+    files = {out: program, out.with_name(f"{name}.poses.csv"): emitted.files[".poses.csv"]}
+    write_all(files, force)
+    click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, {mode} mode, "
+               f"{ctl.words}", err=True)
 
 
 @main.command("effects")

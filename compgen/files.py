@@ -27,3 +27,14 @@ def write_atomically(path: str | Path, text: str, force: bool = False, newline: 
     except OSError as exc:
         Path(tmp).unlink(missing_ok=True)
         raise CompgenError(f"cannot write: {exc.strerror}", where=str(path)) from None
+
+
+def write_all(files: dict[str | Path, str], force: bool = False) -> None:
+    """Write several files as one: every target is checked before any is written, and each
+    goes through a temporary file, so a refusal leaves nothing behind."""
+    for path in files:
+        path = Path(path)
+        if path.exists() and not force:
+            raise CompgenError("output file exists", where=str(path), hint="use --force to overwrite it")
+    for path, text in files.items():
+        write_atomically(path, text, force=True)

@@ -95,10 +95,32 @@ class Model:
                 value * effect.basis.values(x)[:, term])
         return slots
 
-    def relative(self, poses: Poses, values: np.ndarray | None = None) -> np.ndarray:
-        """Nest centre minus ball centre, machine frame, (n, 3) mm."""
+    def relative(self, poses: Poses, values: np.ndarray | None = None,
+                 lines: Mapping[str, tuple] | None = None) -> np.ndarray:
+        """Nest centre minus ball centre, machine frame, (n, 3) mm. ``lines`` maps a rotary
+        axis to (offset mm, tilt rad): it then turns about that line, as a controller's
+        kinematics would hold it (``lines.py``)."""
         values = np.zeros(len(self.names)) if values is None else np.asarray(values, float)
-        return relative(self.machine, poses, self._slots(poses, values))
+        return relative(self.machine, poses, self._slots(poses, values), lines)
+
+    def ball_position(self, poses: Poses, values: np.ndarray | None = None,
+                      lines: Mapping[str, tuple] | None = None) -> np.ndarray:
+        """Ball centre in the machine frame, (n, 3) mm."""
+        values = np.zeros(len(self.names)) if values is None else np.asarray(values, float)
+        slots = self._slots(poses, values)
+        zero = np.zeros((len(poses), 6))
+        table = _chain(self.machine, self.machine.workpiece, poses, slots, zero, lines)
+        return apply(table, poses.ball + slots.get(("ball", "loc"), zero)[:, :3])
+
+    def frame_before_motion(self, poses: Poses, values: np.ndarray, chain, i: int) -> np.ndarray:
+        """Frame of axis ``chain[i]`` just before its own motion, machine frame, (n, 4, 4)."""
+        slots = self._slots(poses, np.asarray(values, float))
+        zero = np.zeros((len(poses), 6))
+        T = _chain(self.machine, chain[:i], poses, slots, zero)
+        axis = chain[i]
+        q = poses.q[:, self.machine.index(axis.name)]
+        return T @ _link(axis, q, slots.get((axis.name, "loc"), zero),
+                         slots.get((axis.name, "comp"), zero), motion=False)
 
     def deviation(self, poses: Poses, values: np.ndarray) -> np.ndarray:
         """Predicted R-test reading minus its nominal value, (n, 3) mm."""
@@ -134,12 +156,14 @@ def coordinate(machine: Machine, effect: Effect, poses: Poses) -> np.ndarray:
     return q if axis.rotary else q / POLY_SCALE_MM
 
 
-def relative(machine: Machine, poses: Poses, slots: Mapping[tuple[str, str], np.ndarray]) -> np.ndarray:
+def relative(machine: Machine, poses: Poses, slots: Mapping[tuple[str, str], np.ndarray],
+             lines: Mapping[str, tuple] | None = None) -> np.ndarray:
     """Nest minus ball, (n, 3) mm, for errors given as slots: (carrier, "loc" | "comp") →
     (n, 6) translations (mm) and rotations (rad) in ``TRANSLATIONS + ROTATIONS`` order."""
     zero = np.zeros((len(poses), 6))
-    table = _chain(machine, machine.workpiece, poses, slots, zero)
-    spindle = _chain(machine, machine.tool, poses, slots, zero) @ trans([0.0, 0.0, machine.probe_length])
+    table = _chain(machine, machine.workpiece, poses, slots, zero, lines)
+    spindle = _chain(machine, machine.tool, poses, slots, zero, lines) @ trans(
+        [0.0, 0.0, machine.probe_length])
     ball = apply(table, poses.ball + slots.get(("ball", "loc"), zero)[:, :3])
     nest = apply(spindle, np.array([0.0, 0.0, -machine.probe_length])
                  + slots.get(("nest", "loc"), zero)[:, :3])
@@ -160,11 +184,14 @@ def slot_gains(machine: Machine, poses: Poses, keys) -> dict[tuple[str, str, str
     return out
 
 
-def _link(axis: Axis, q: np.ndarray, loc: np.ndarray, comp: np.ndarray) -> np.ndarray:
+def _link(axis: Axis, q: np.ndarray, loc: np.ndarray, comp: np.ndarray, motion: bool = True,
+          line: tuple | None = None) -> np.ndarray:
     """Transform of one axis frame in its parent, (n, 4, 4) (seed eqs. 1 and 2).
 
     Factors that are exactly zero are skipped: the model is evaluated ~2p times per
-    Jacobian, and most parameters are zero in most slots.
+    Jacobian, and most parameters are zero in most slots. ``motion=False`` stops before the
+    axis's own motion. ``line`` (offset, tilt) turns a rotary axis about that line instead:
+    ``Trans(t)·Rot(r)·R(θ)·Rot(r)⁻¹·Trans(−t)``, the form a controller's kinematics holds.
     """
     offset = np.asarray(axis.offset)
     if axis.rotary:
@@ -175,27 +202,35 @@ def _link(axis: Axis, q: np.ndarray, loc: np.ndarray, comp: np.ndarray) -> np.nd
         for factor, build in ((loc[:, 3:], rot_exact), (comp[:, :3], trans), (tilt, rot_exact)):
             if factor.any():
                 T = T @ build(factor)
-        return T @ rot_axis(axis.direction, axis.sense * q + comp[:, own])
+        if not motion:
+            return T
+        turn = rot_axis(axis.direction, axis.sense * q + comp[:, own])
+        if line is not None:
+            t, r = (np.asarray(v, float) for v in line)
+            place = trans(t) @ rot_exact(r)
+            turn = place @ turn @ np.linalg.inv(place)
+        return T @ turn
     # squareness tilts the line of motion; the carriage itself turns only by its own
     # angular error motions
-    line = np.broadcast_to(UNIT[axis.direction], loc[:, :3].shape)
+    line_dir = np.broadcast_to(UNIT[axis.direction], loc[:, :3].shape)
     if loc[:, 3:].any():
-        line = apply(rot_exact(loc[:, 3:]), line)
-    T = trans(offset + loc[:, :3] + comp[:, :3] + (axis.sense * q)[:, None] * line)
+        line_dir = apply(rot_exact(loc[:, 3:]), line_dir)
+    T = trans(offset + loc[:, :3] + comp[:, :3] + (axis.sense * q * motion)[:, None] * line_dir)
     return T @ rot_exact(comp[:, 3:]) if comp[:, 3:].any() else T
 
 
 def _chain(machine: Machine, axes: Sequence[Axis], poses: Poses, slots: Mapping,
-           zero: np.ndarray) -> np.ndarray:
+           zero: np.ndarray, lines: Mapping[str, tuple] | None = None) -> np.ndarray:
     T = np.broadcast_to(np.eye(4), (len(poses), 4, 4))
     for axis in axes:
         q = poses.q[:, machine.index(axis.name)]
         T = T @ _link(axis, q, slots.get((axis.name, "loc"), zero),
-                      slots.get((axis.name, "comp"), zero))
+                      slots.get((axis.name, "comp"), zero), line=(lines or {}).get(axis.name))
     return T
 
 
-def inverse(machine: Machine, rotary_rad: np.ndarray, ball: np.ndarray) -> np.ndarray:
+def inverse(machine: Machine, rotary_rad: np.ndarray, ball: np.ndarray,
+            lines: Mapping[str, tuple] | None = None) -> np.ndarray:
     """Nominal inverse kinematics, as a controller's TCPM/TRAORI would compute it.
 
     Parameters
@@ -208,7 +243,8 @@ def inverse(machine: Machine, rotary_rad: np.ndarray, ball: np.ndarray) -> np.nd
     q : (n, k) full commanded poses (mm, rad) that put the nest centre on the ball centre.
 
     For fixed rotary angles the nest-minus-ball vector is affine in the linear axes, so
-    three unit steps give its matrix exactly, whatever the chain.
+    three unit steps give its matrix exactly, whatever the chain. ``lines`` gives the
+    rotary axis lines a controller holds (``lines.py``): its TCPM solution.
     """
     rotary_rad = np.atleast_2d(np.asarray(rotary_rad, float))
     n = len(rotary_rad)
@@ -220,7 +256,7 @@ def inverse(machine: Machine, rotary_rad: np.ndarray, ball: np.ndarray) -> np.nd
     blank = (np.full(n, np.nan), np.full(n, "", dtype=object))
 
     def rel(qq):
-        return nominal.relative(Poses(qq, ball.copy(), *blank))
+        return nominal.relative(Poses(qq, ball.copy(), *blank), lines=lines)
 
     r0 = rel(q)
     M = np.empty((n, 3, 3))

@@ -68,6 +68,32 @@ class PathDef:
 
 
 @dataclass(frozen=True)
+class ProgramSetup:
+    """How a measurement program runs on this machine (``[program]`` in the machine file).
+
+    ``safe_z`` is a retract height in machine coordinates (HEIDENHAIN M91, SINUMERIK SUPA),
+    mm; ``clearance`` the approach height above the first and last pose, mm.
+    """
+
+    tool: str
+    feed: float          # mm/min along the nest's path
+    dwell: float         # s at each pose, while the R-test samples
+    clearance: float
+    safe_z: float
+    work_offset: str = "G54"   # SINUMERIK settable frame holding the machine-frame origin
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Plausibility bounds for a kinematics edit (``[limits]``): larger is refused without
+    --force. Defaults are deliberately tight; a machine file can widen them."""
+
+    offset_um: float = 100.0
+    tilt_arcsec: float = 60.0
+    max_step_deg: float = 10.0   # largest rotary step between two poses of a program
+
+
+@dataclass(frozen=True)
 class Machine:
     name: str
     controller: str
@@ -76,6 +102,9 @@ class Machine:
     ball: tuple[float, float, float]
     probe_length: float
     paths: dict[str, PathDef] = field(default_factory=dict)
+    program: ProgramSetup | None = None
+    limits: Limits = Limits()
+    sinumerik: dict | None = None   # tcarr record and the axis vectors the control holds
     source: str = ""
     sha256: str = ""
 
@@ -153,7 +182,48 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
     paths = {}
     for name in get.table("paths", optional=True):
         paths[name] = _path(get.sub("paths").sub(name), name, machine)
-    return Machine(**{**machine.__dict__, "paths": paths})
+    program = None
+    if "program" in doc:
+        g = get.sub("program")
+        program = ProgramSetup(tool=str(g._get("tool")), feed=_positive(g, "feed"),
+                               dwell=_positive(g, "dwell", zero_ok=True),
+                               clearance=_positive(g, "clearance"), safe_z=g.number("safe_z"),
+                               work_offset=g.str("work_offset") if "work_offset" in g.doc else "G54")
+    limits = Limits()
+    if "limits" in doc:
+        g = get.sub("limits")
+        limits = Limits(**{k: _positive(g, k) for k in Limits.__dataclass_fields__ if k in g.doc})
+        unknown = set(g.doc) - set(Limits.__dataclass_fields__)
+        if unknown:
+            raise CompgenError(f"unknown keys {sorted(unknown)}", where=g.at(""),
+                               hint=f"[limits] takes {', '.join(Limits.__dataclass_fields__)}")
+    sinumerik = None
+    if "sinumerik" in doc:
+        g = get.sub("sinumerik")
+        record = int(g.number("tcarr"))
+        kinds = {a.name: "P" if a.side == "workpiece" else "T" for a in machine.rotary_axes}
+        vectors = {}
+        for a in machine.rotary_axes:
+            v = np.array(g.sub("vectors").vec3(a.name))
+            if abs(np.linalg.norm(v) - 1) > 1e-9 or abs(abs(v @ _unit(a.direction)) - 1) > 1e-9:
+                raise CompgenError(f"must be the unit vector ±{a.direction} the control holds for "
+                                   f"{a.name}, got {list(v)}", where=g.sub("vectors").at(a.name))
+            vectors[a.name] = v
+        kind = "".join(sorted(set(kinds.values())))
+        sinumerik = {"tcarr": record, "kind": {"P": "P", "T": "T"}.get(kind, "M"), "vectors": vectors}
+    return Machine(**{**machine.__dict__, "paths": paths, "program": program, "limits": limits,
+                      "sinumerik": sinumerik})
+
+
+def _positive(g: _Getter, key: str, zero_ok: bool = False) -> float:
+    v = g.number(key)
+    if v < 0 or (v == 0 and not zero_ok):
+        raise CompgenError(f"must be {'≥' if zero_ok else '>'} 0", where=g.at(key))
+    return v
+
+
+def _unit(direction: str) -> np.ndarray:
+    return np.eye(3)["xyz".index(direction)]
 
 
 def _axis(get: _Getter, side: str) -> Axis:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CompgenError
-from .kinematics import Model, Poses
+from .kinematics import Model, Poses, inverse
 from .machine import Machine
 
 DEVIATION = ("dX", "dY", "dZ")
@@ -46,6 +46,64 @@ def read_rtest(path: str | Path, machine: Machine, sign: str = "nest-minus-ball"
     """
     if sign not in SIGNS:
         raise CompgenError(f"sign must be one of {', '.join(SIGNS)}, not {sign!r}")
+    table = _read_table(path, machine, ["X", "Y", "Z", *(a.name for a in machine.rotary_axes),
+                                        *DEVIATION])
+    poses = table.poses(machine)
+    deviation = np.column_stack([table.columns[c] for c in DEVIATION]) * 1e-3
+    if sign == "ball-minus-nest":
+        deviation = -deviation
+    off = np.linalg.norm(Model(machine, ()).relative(poses), axis=1)
+    bad = np.flatnonzero(off > NOMINAL_TOLERANCE_MM)
+    if bad.size:
+        k = bad[0]
+        raise CompgenError(
+            f"commanded X, Y, Z are {off[k]:.3f} mm from the nominal ball centre at these "
+            f"rotary positions ({bad.size} rows like this)", where=f"{table.where}:{table.lines[k]}",
+            hint="the machine file's geometry or ball position does not match this data; "
+                 "give the ball per row in bx, by, bz if it moved")
+    return RTestData(poses, deviation, table.where, table.sha256)
+
+
+def read_poses(path: str | Path, machine: Machine) -> Poses:
+    """A pose list: rotary axes (deg) required; ``path`` and ``bx,by,bz`` optional. The linear
+    axes follow the ball by inverse kinematics; X, Y, Z, if given, must agree with it."""
+    table = _read_table(path, machine, [a.name for a in machine.rotary_axes])
+    rotary = np.radians(np.column_stack([table.columns[a.name] for a in machine.rotary_axes]))
+    ball = table.ball(machine)
+    q = inverse(machine, rotary, ball)
+    if all(c in table.columns for c in "XYZ"):
+        given = np.column_stack([table.columns[c] for c in "XYZ"])
+        linear = [machine.index(c) for c in "XYZ"]
+        off = np.linalg.norm(given - q[:, linear], axis=1)
+        bad = np.flatnonzero(off > NOMINAL_TOLERANCE_MM)
+        if bad.size:
+            raise CompgenError(f"X, Y, Z are {off[bad[0]]:.3f} mm from where the nest meets the ball",
+                               where=f"{table.where}:{table.lines[bad[0]]}",
+                               hint="drop the X, Y, Z columns (compgen computes them) or fix the ball")
+    return Poses(q, ball, table.columns.get("t", np.full(len(q), np.nan)), table.labels)
+
+
+@dataclass(frozen=True, eq=False)
+class _Table:
+    where: str
+    sha256: str
+    columns: dict[str, np.ndarray]
+    labels: np.ndarray
+    lines: list[int]
+
+    def ball(self, machine: Machine) -> np.ndarray:
+        if all(c in self.columns for c in BALL):
+            return np.column_stack([self.columns[c] for c in BALL])
+        return np.broadcast_to(machine.ball, (len(self.labels), 3)).copy()
+
+    def poses(self, machine: Machine) -> Poses:
+        q = np.column_stack([self.columns[a.name] if not a.rotary else np.radians(self.columns[a.name])
+                             for a in machine.axes])
+        return Poses(q, self.ball(machine), self.columns.get("t", np.full(len(q), np.nan)), self.labels)
+
+
+def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Table:
+    """A CSV v1 table with every cell checked: numbers finite, rows whole, columns present."""
     path = Path(path)
     where = str(path)
     try:
@@ -68,7 +126,6 @@ def read_rtest(path: str | Path, machine: Machine, sign: str = "nest-minus-ball"
     dup = sorted({h for h in header if header.count(h) > 1})
     if dup:
         raise CompgenError(f"column {dup[0]!r} appears twice in the header", where=f"{where}:{header_line}")
-    required = ["X", "Y", "Z", *(a.name for a in machine.rotary_axes), *DEVIATION]
     missing = [c for c in required if c not in header]
     if missing:
         raise CompgenError(f"missing column{'s' if len(missing) > 1 else ''} {', '.join(missing)}",
@@ -80,7 +137,7 @@ def read_rtest(path: str | Path, machine: Machine, sign: str = "nest-minus-ball"
     has_ball = [c in header for c in BALL]
     if any(has_ball) and not all(has_ball):
         raise CompgenError("give all of bx, by, bz or none", where=f"{where}:{header_line}")
-    numeric = required + [c for c in ("t", *BALL) if c in header]
+    numeric = required + [c for c in ("X", "Y", "Z", "t", *BALL) if c in header and c not in required]
     col = {c: header.index(c) for c in header}
 
     values = np.empty((len(lines) - 1, len(numeric)))
@@ -105,28 +162,8 @@ def read_rtest(path: str | Path, machine: Machine, sign: str = "nest-minus-ball"
             values[r, j] = v
         labels.append(cells[col["path"]].strip() if "path" in col else "")
         line_no.append(i)
-
-    get = {name: values[:, j] for j, name in enumerate(numeric)}
-    q = np.column_stack([get[a.name] if not a.rotary else np.radians(get[a.name])
-                         for a in machine.axes])
-    ball = (np.column_stack([get[c] for c in BALL]) if all(has_ball)
-            else np.broadcast_to(machine.ball, (len(q), 3)))
-    t = get.get("t", np.full(len(q), np.nan))
-    poses = Poses(q, ball, t, np.array(labels, dtype=object))
-    deviation = np.column_stack([get[c] for c in DEVIATION]) * 1e-3
-    if sign == "ball-minus-nest":
-        deviation = -deviation
-
-    off = np.linalg.norm(Model(machine, ()).relative(poses), axis=1)
-    bad = np.flatnonzero(off > NOMINAL_TOLERANCE_MM)
-    if bad.size:
-        k = bad[0]
-        raise CompgenError(
-            f"commanded X, Y, Z are {off[k]:.3f} mm from the nominal ball centre at these "
-            f"rotary positions ({bad.size} rows like this)", where=f"{where}:{line_no[k]}",
-            hint="the machine file's geometry or ball position does not match this data; "
-                 "give the ball per row in bx, by, bz if it moved")
-    return RTestData(poses, deviation, where, hashlib.sha256(raw).hexdigest())
+    columns = {name: values[:, j] for j, name in enumerate(numeric)}
+    return _Table(where, hashlib.sha256(raw).hexdigest(), columns, np.array(labels, dtype=object), line_no)
 
 
 def format_rtest(machine: Machine, data: RTestData, comments: tuple[str, ...] = ()) -> str:

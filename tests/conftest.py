@@ -19,6 +19,27 @@ TABLE4 = {"XOW": -3.2 * UM, "YOW": -21.6 * UM, "ZOW": -33.9 * UM, "YOA": 20.5 * 
           "YOC": -15.9 * UM, "AOC": -6.5 * ARCSEC, "BOC": -4.6 * ARCSEC}
 
 
+GOLDEN = ROOT / "tests" / "golden"
+
+
+def pytest_addoption(parser):
+    parser.addoption("--update-golden", action="store_true",
+                     help="rewrite tests/golden/ from the current output; review with git diff")
+
+
+@pytest.fixture
+def golden(request):
+    """Compare text with tests/golden/<name> byte for byte (line endings count)."""
+    def check(name: str, text: str) -> None:
+        path = GOLDEN / name
+        if request.config.getoption("--update-golden"):
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(text.encode("ascii"))
+        assert path.exists(), f"no golden file {path}: run pytest --update-golden and review"
+        assert text.encode("ascii") == path.read_bytes(), f"{name} differs from its golden file"
+    return check
+
+
 @pytest.fixture(scope="session")
 def seed_machine():
     return load_machine(SEED_MACHINE)

@@ -1,0 +1,91 @@
+"""Files for controllers: measurement programs, kinematics edits, compensation tables.
+
+Templates (``templates/<family>/``) hold layout only; this package prepares every number,
+formats it once (``fmt_*``) and checks it before anything is written. Syntax no source has
+confirmed lives in one place, ``templates/unconfirmed.j2``, and each emitted file lists the
+unconfirmed items it uses.
+"""
+
+from __future__ import annotations
+
+import unicodedata
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from jinja2 import Environment, FileSystemLoader, StrictUndefined
+
+from ..errors import CompgenError
+
+
+@dataclass(frozen=True)
+class Controller:
+    name: str
+    family: str           # template folder: heidenhain, sinumerik, linuxcnc
+    program_ext: str
+    words: str
+
+
+CONTROLLERS = {
+    "itnc530": Controller("itnc530", "heidenhain", ".H", "HEIDENHAIN iTNC 530"),
+    "tnc640": Controller("tnc640", "heidenhain", ".H", "HEIDENHAIN TNC 640"),
+    "sinumerik840d": Controller("sinumerik840d", "sinumerik", ".MPF", "SIEMENS SINUMERIK 840D sl"),
+}
+
+
+def controller(name: str) -> Controller:
+    if name not in CONTROLLERS:
+        raise CompgenError(f"unknown controller {name!r}", hint=f"use one of {', '.join(CONTROLLERS)}")
+    return CONTROLLERS[name]
+
+
+@dataclass(frozen=True)
+class Emitted:
+    """What one command writes: file name suffix → text, and what the user must know."""
+
+    files: dict[str, str]
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+
+def ascii_text(text: str) -> str:
+    """Controller editors expect plain ASCII: µm → um, ″ → arcsec, accents dropped."""
+    text = text.replace("µ", "u").replace("″", " arcsec").replace("°", " deg").replace("→", "->")
+    return unicodedata.normalize("NFKD", text).encode("ascii", "ignore").decode("ascii")
+
+
+def fmt_signed(value: float, decimals: int = 4) -> str:
+    """HEIDENHAIN style: an explicit sign, fixed decimals, no negative zero (+0.0000)."""
+    text = f"{value:+.{decimals}f}"
+    return "+" + text[1:] if float(text) == 0 else text
+
+
+def fmt_plain(value: float, decimals: int = 4) -> str:
+    """SINUMERIK style: a minus sign only, fixed decimals, no negative zero."""
+    text = f"{value:.{decimals}f}"
+    return text.lstrip("-") if float(text) == 0 else text
+
+
+def template_dir() -> Path:
+    """``compgen/templates`` in an installed wheel (pyproject's force-include), else the
+    top-level ``templates/`` of a source checkout."""
+    package = Path(__file__).resolve().parents[1]
+    for folder in (package / "templates", package.parent / "templates"):
+        if (folder / "unconfirmed.j2").is_file():
+            return folder
+    raise CompgenError("compgen's templates are missing", hint="reinstall compgen (pip install .)")
+
+
+def environment() -> Environment:
+    env = Environment(loader=FileSystemLoader(template_dir()), undefined=StrictUndefined,
+                      trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True,
+                      autoescape=False)
+    env.filters.update(signed=fmt_signed, plain=fmt_plain, ascii=ascii_text)
+    return env
+
+
+def render(template: str, **context) -> str:
+    text = environment().get_template(template).render(**context)
+    try:
+        text.encode("ascii")
+    except UnicodeEncodeError as exc:   # a template or a name let a non-ASCII character in
+        raise CompgenError(f"internal: {template} produced non-ASCII text at {exc.start}") from None
+    return text

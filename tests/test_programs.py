@@ -1,0 +1,148 @@
+"""Measurement programs: golden files, round trip, independent checks, refusals."""
+
+from io import StringIO
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from conftest import SEED_MACHINE, vector
+
+from compgen.cli import main
+from compgen.emit import CONTROLLERS
+from compgen.emit.programs import measure_program, read_program
+from compgen.kinematics import Model, Poses
+from compgen.paths import generate
+from compgen.rtest import read_rtest
+
+FORMAT_MM = 5.01e-5      # four decimals in the program
+FORMAT_DEG = 5.01e-5
+DATE = "2026-11-24"
+
+
+def _short(machine):
+    """Five poses of K4 and three of K1: small enough to review a golden file by eye."""
+    poses = generate(machine, ["K4", "K1"])
+    return poses.take(np.r_[0:5, 241:244])
+
+
+@pytest.mark.parametrize("controller", CONTROLLERS)
+@pytest.mark.parametrize("mode", ["tcpm", "axes"])
+def test_programs_match_golden_files(seed_machine, controller, mode, golden):
+    emitted = measure_program(seed_machine, _short(seed_machine), "K4+K1", controller, mode,
+                              "RTEST_GOLDEN", "0.1.0", DATE)
+    for suffix, text in emitted.files.items():
+        golden(f"ac-trunnion-itnc530/{controller}/rtest-{mode}{suffix}", text)
+
+
+@pytest.mark.parametrize("controller", CONTROLLERS)
+@pytest.mark.parametrize("mode", ["tcpm", "axes"])
+def test_round_trip_gives_the_same_poses(seed_machine, controller, mode):
+    poses = generate(seed_machine, ["K4", "K1", "K2"])
+    emitted = measure_program(seed_machine, poses, "all", controller, mode, "RT", "0.1.0", DATE)
+    text = emitted.files[CONTROLLERS[controller].program_ext]
+    text.encode("ascii")
+    got_mode, xyz, rot = read_program(text, seed_machine, controller)
+    assert got_mode == mode and len(xyz) == len(poses)
+    np.testing.assert_allclose(rot, np.degrees(poses.q[:, 3:]), atol=FORMAT_DEG)
+    listed = np.loadtxt(StringIO(emitted.files[".poses.csv"]), delimiter=",", skiprows=1,
+                        usecols=(1, 2, 3, 4, 5))
+    np.testing.assert_allclose(rot, listed[:, 3:], atol=1e-9)     # the list holds what is commanded
+    if mode == "axes":
+        np.testing.assert_allclose(xyz, listed[:, :3], atol=FORMAT_MM)
+
+
+def test_tcpm_k4_holds_the_ball_centre_fixed_in_workpiece_coordinates(seed_machine):
+    """Contract §2: the ball sits at Rx(A)·((0, 0, Zc) + Rz(C)·b); at A = C = 0 that is
+    b + (0, 0, Zc), whatever the pose. Every TCPM block must program exactly that point."""
+    poses = generate(seed_machine, ["K4"])
+    text = emitted_program(seed_machine, poses)
+    _, xyz, rot = read_program(text, seed_machine, "itnc530")
+    b, zc = np.array(seed_machine.ball), seed_machine.axis("C").offset[2]
+    np.testing.assert_allclose(xyz, np.broadcast_to(b + [0, 0, zc], xyz.shape), atol=FORMAT_MM)
+    # the pose list holds the machine axes the control must reach at the programmed angles:
+    # there the contract's formula puts the ball where the nest is
+    listed = np.loadtxt(StringIO(emitted_list(seed_machine, poses)), delimiter=",", skiprows=1,
+                        usecols=(1, 2, 3, 4, 5))
+    np.testing.assert_allclose(listed[:, 3:], rot, atol=1e-9)
+    A, C = np.radians(rot[:, 0]), np.radians(rot[:, 1])
+    s = b[0] * np.sin(C) + b[1] * np.cos(C)
+    ball = np.column_stack([b[0] * np.cos(C) - b[1] * np.sin(C),
+                            np.cos(A) * s - np.sin(A) * (zc + b[2]),
+                            np.sin(A) * s + np.cos(A) * (zc + b[2])])
+    np.testing.assert_allclose(ball, listed[:, :3], atol=1e-6)   # 6 decimals in the pose list
+
+
+def emitted_program(machine, poses):
+    return measure_program(machine, poses, "K4", "itnc530", "tcpm", "K4", "0.1.0", DATE).files[".H"]
+
+
+def emitted_list(machine, poses):
+    emitted = measure_program(machine, poses, "K4", "itnc530", "tcpm", "K4", "0.1.0", DATE)
+    return emitted.files[".poses.csv"]
+
+
+def test_axes_program_equals_the_shared_vectors_poses(seed_machine):
+    """The K4 axes-mode program against X Y Z from the independent simulator (4 decimals)."""
+    data = read_rtest(vector("seed-table4-noiseless.csv"), seed_machine)
+    k4 = data.poses.path == "K4"
+    poses = generate(seed_machine, ["K4"])
+    emitted = measure_program(seed_machine, poses, "K4", "sinumerik840d", "axes", "K4", "0.1.0", DATE)
+    text = emitted.files[".MPF"]
+    _, xyz, rot = read_program(text, seed_machine, "sinumerik840d")
+    # the vectors hold X Y Z of the exact angles, the program of the angles as written:
+    # they differ by up to lever × angle rounding, plus both roundings of X Y Z
+    lever_mm = np.linalg.norm(np.array(seed_machine.ball) + [0, 0, 29.794])
+    atol = lever_mm * np.radians(FORMAT_DEG) + 2 * FORMAT_MM
+    np.testing.assert_allclose(xyz, data.poses.q[k4, :3], atol=atol)
+    np.testing.assert_allclose(rot, np.degrees(data.poses.q[k4, 3:]), atol=2 * FORMAT_DEG)
+    # and, at the angles as written, they put the nest on the ball to the X Y Z rounding
+    back = Poses(np.column_stack([xyz, np.radians(rot)]), poses.ball, poses.t, poses.path)
+    assert np.abs(Model(seed_machine, ()).relative(back)).max() < FORMAT_MM
+
+
+def run(*args):
+    r = CliRunner().invoke(main, [str(a) for a in args])
+    return r.exit_code, r.stdout, r.stderr
+
+
+def test_cli_writes_program_and_pose_list(tmp_path):
+    out = tmp_path / "K4.H"
+    code, _, err = run("measure-program", "--machine", SEED_MACHINE, "--path", "BK4", "-o", out)
+    assert code == 0, err
+    assert out.read_text().startswith("0 BEGIN PGM K4 MM")
+    poses = (tmp_path / "K4.poses.csv").read_text().splitlines()
+    assert poses[0] == "path,X,Y,Z,A,C,bx,by,bz" and len(poses) == 242
+
+
+def _poses_file(tmp_path, rows):
+    path = tmp_path / "p.csv"
+    path.write_text("path,A,C\n" + "".join(f"P,{a},{c}\n" for a, c in rows))
+    return path
+
+
+@pytest.mark.parametrize("rows, expected", [
+    ([(0, 0), (-130, 0)], "pose 2 of p puts A at -130.000 deg, outside its travel"),
+    ([(0, 0), (0, 45)], "C jumps 45.00 deg between poses 1 and 2"),
+])
+def test_unsafe_pose_lists_are_refused(tmp_path, rows, expected):
+    out = tmp_path / "x.H"
+    code, _, err = run("measure-program", "--machine", SEED_MACHINE, "--poses",
+                       _poses_file(tmp_path, rows), "-o", out)
+    assert code == 2 and expected in err and err.count("\n") == 1, err
+    assert not out.exists() and not (tmp_path / "X.poses.csv").exists()
+
+
+def test_refusals(tmp_path):
+    out = tmp_path / "K4.H"
+    assert run("measure-program", "--machine", SEED_MACHINE, "--path", "K4", "--controller",
+               "fanuc", "-o", out)[0] == 2
+    code, _, err = run("measure-program", "--machine", SEED_MACHINE, "-o", out)
+    assert code == 2 and "either --path or --poses" in err
+    (tmp_path / "K4.poses.csv").write_text("mine")
+    code, _, err = run("measure-program", "--machine", SEED_MACHINE, "--path", "K4", "-o", out)
+    assert code == 2 and "--force" in err and not out.exists()     # nothing half-written
+    assert (tmp_path / "K4.poses.csv").read_text() == "mine"
+    bare = tmp_path / "m.toml"
+    bare.write_text(SEED_MACHINE.read_text().split("[program]")[0])
+    code, _, err = run("measure-program", "--machine", bare, "--path", "K4", "-o", out)
+    assert code == 2 and "no [program] section" in err
