@@ -13,6 +13,7 @@ import numpy as np
 from .diagnose import diagnose
 from .effects import catalogue, compose, location_model
 from .emit import CONTROLLERS, controller
+from .emit.kinematics import kinematics_edit
 from .emit.programs import MODES, measure_program, program_name
 from .errors import CompgenError
 from .files import write_all, write_atomically
@@ -195,6 +196,48 @@ def measure_program_cmd(machine_file, path_names, poses_file, controller_name, m
     write_all(files, force)
     click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, {mode} mode, "
                f"{ctl.words}", err=True)
+
+
+@main.command("kinematics")
+@click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
+@click.option("--controller", "controller_name", type=click.Choice(list(CONTROLLERS)), default=None,
+              help="Default: the machine file's.")
+@click.option("--current", type=FILE, default=None,
+              help="The control's current kinematics: iTNC 530 description table (*.TAB), or the "
+                   "SINUMERIK record's $TC_CARR lines.")
+@click.option("-o", "--output", type=FILE, required=True,
+              help="Main file (the new table, the change list or the .MPF); the sign check and any "
+                   "tables go beside it with the same stem.")
+@FORCE
+def kinematics_cmd(base, controller_name, current, output, force):
+    """Write the controller's kinematics edit for a fit, with a sign check and a backup step."""
+    fit = load_fit(base)
+    machine, _ = reload(fit)
+    ctl = controller(controller_name or machine.controller)
+    text = _read_text(current) if current else None
+    out = Path(output)
+    name = program_name(out.stem)
+    emitted = kinematics_edit(machine, fit, ctl.name, text, current or "", name, _version(),
+                              date.today().isoformat(), force)
+    main_key = (".TAB" if text is not None else ".txt") if ctl.family == "heidenhain" else ".MPF"
+    files = {(out if key == main_key else out.with_name(out.stem + key)): body
+             for key, body in emitted.files.items()}
+    write_all(files, force)
+    click.echo("\n".join(emitted.notes))
+    click.echo("wrote " + ", ".join(str(p) for p in files))
+
+
+def _read_text(path: str) -> str:
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise CompgenError(f"cannot read: {exc.strerror}", where=path) from None
+    if b"\x00" in raw:
+        raise CompgenError("binary file, not text", where=path)
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")    # controller exports are often ANSI
 
 
 @main.command("effects")

@@ -1,0 +1,200 @@
+"""Kinematics edits: golden files, round trip, the closed loop in simulation, refusals."""
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from conftest import ARCSEC, ROOT, SEED_MACHINE, TABLE4, UM
+
+from compgen.cli import main
+from compgen.effects import location_model
+from compgen.emit.kinematics import (
+    apply_cec,
+    kinematics_edit,
+    plan,
+    read_carr,
+    read_cec,
+    read_heidenhain_lines,
+    read_sinumerik_lines,
+)
+from compgen.errors import CompgenError
+from compgen.identify import identify
+from compgen.kinematics import Model, Poses
+from compgen.lines import controller_inverse
+from compgen.paths import generate
+from compgen.rtest import RTestData
+from compgen.simulate import simulate
+
+CURRENT_TAB = (ROOT / "examples" / "itnc530-current.TAB").read_text()
+CURRENT_CARR = (ROOT / "examples" / "bc-tcarr-current.txt").read_text()
+DATE = "2026-11-24"
+NOISE_UM = 0.5
+SETUP = ["XOW", "YOW", "ZOW"]
+BC_TRUTH = {"XOW": 5 * UM, "YOW": -8 * UM, "ZOW": 12 * UM, "XOB": 15 * UM, "ZOB": -20 * UM,
+            "AOB": 6 * ARCSEC, "COB": -9 * ARCSEC, "XOC": -7 * UM, "YOC": 11 * UM,
+            "AOC": 4 * ARCSEC, "BOC": -5 * ARCSEC, "ECC:h2c": 3 * ARCSEC, "EYY:p1": 8 * UM}
+
+
+def _fit(machine, truth, model=None, noise=0.0, seed=1):
+    poses = generate(machine, ["K4", "K1", "K2"])
+    data = simulate(machine, truth, poses, noise, np.random.default_rng(seed))
+    return identify(machine, [data], model), poses
+
+
+@pytest.fixture(scope="module")
+def seed_fit(seed_machine):
+    return _fit(seed_machine, TABLE4)[0]
+
+
+@pytest.fixture(scope="module")
+def bc_fit(bc_machine):
+    model = [*location_model(bc_machine), "ECC:h2c", "ECC:h2s", "EYY:p1"]
+    return _fit(bc_machine, BC_TRUTH, model)[0]
+
+
+@pytest.mark.parametrize("controller", ["itnc530", "tnc640"])
+def test_heidenhain_outputs_match_golden_files(seed_machine, seed_fit, controller, golden):
+    current = CURRENT_TAB if controller == "itnc530" else None
+    emitted = kinematics_edit(seed_machine, seed_fit, controller, current, "current.TAB", "KIN",
+                              "0.1.0", DATE)
+    for suffix, text in emitted.files.items():
+        golden(f"ac-trunnion-itnc530/{controller}/kinematics{suffix}", text)
+
+
+def test_sinumerik_outputs_match_golden_files(bc_machine, bc_fit, golden):
+    emitted = kinematics_edit(bc_machine, bc_fit, "sinumerik840d", CURRENT_CARR, "current", "KIN",
+                              "0.1.0", DATE)
+    assert set(emitted.files) == {".MPF", "_RESTORE.MPF", "_CEC.INI", "_SIGN.MPF"}
+    for suffix, text in emitted.files.items():
+        golden(f"bc-table-sinumerik840d/sinumerik840d/kinematics{suffix}", text)
+
+
+def test_heidenhain_round_trip(seed_machine, seed_fit):
+    p = plan(seed_machine, seed_fit)
+    emitted = kinematics_edit(seed_machine, seed_fit, "itnc530", CURRENT_TAB, "c", "KIN", "0.1.0", DATE)
+    for text in (emitted.files[".TAB"], emitted.files[".txt"]):
+        got = read_heidenhain_lines(text, seed_machine)
+        for axis, line in p.lines.items():
+            np.testing.assert_allclose(got[axis].offset, line.offset, atol=0.5e-5)  # 5 decimals, mm
+            np.testing.assert_allclose(got[axis].tilt, line.tilt, atol=np.radians(0.5e-7))
+
+
+def test_sinumerik_round_trip(bc_machine, bc_fit):
+    p = plan(bc_machine, bc_fit)
+    emitted = kinematics_edit(bc_machine, bc_fit, "sinumerik840d", CURRENT_CARR, "c", "KIN", "0.1.0", DATE)
+    got = read_sinumerik_lines(emitted.files[".MPF"], bc_machine, read_carr(CURRENT_CARR, "c", 1))
+    for axis, line in p.lines.items():
+        np.testing.assert_allclose(got[axis].offset, line.offset, atol=1e-5)    # l2 + l3, rounded
+        np.testing.assert_allclose(got[axis].tilt, line.tilt, atol=1e-9)
+    restore = read_carr(emitted.files["_RESTORE.MPF"], "r", 1)
+    assert all(restore[n] == v for n, v in read_carr(CURRENT_CARR, "c", 1).items())
+
+
+def _setup_only_rms(machine, poses, reading):
+    """RMS left once the ball's set-up offset is fitted: what a kinematics edit can remove."""
+    return identify(machine, [RTestData(poses, reading)], SETUP).residual["rms_um"]
+
+
+def _closed_loop(machine, truth, model, controller, current, rng):
+    poses = generate(machine, ["K4", "K1", "K2"])
+    pre = simulate(machine, truth, poses, NOISE_UM, rng)
+    fit = identify(machine, [pre], model)
+    emitted = kinematics_edit(machine, fit, controller, current, "current", "KIN", "0.1.0", DATE)
+    if controller == "sinumerik840d":        # apply the files, the way the control would
+        lines = read_sinumerik_lines(emitted.files[".MPF"], machine, read_carr(current, "c", 1))
+        tables = read_cec(emitted.files.get("_CEC.INI", ""))
+    else:
+        lines, tables = read_heidenhain_lines(emitted.files[".TAB"], machine), []
+    rotary = poses.q[:, [machine.index(a.name) for a in machine.rotary_axes]]
+    q = apply_cec(machine, tables, controller_inverse(machine, lines, rotary, poses.ball))
+    true = Model(machine, list(truth))
+    post_poses = Poses(q, poses.ball, poses.t, poses.path)
+    noise = rng.normal(0, NOISE_UM * 1e-3, q[:, :3].shape)
+    post = true.relative(post_poses, np.array(list(truth.values()))) + noise
+    return (_setup_only_rms(machine, poses, pre.deviation), _setup_only_rms(machine, post_poses, post))
+
+
+def test_closed_loop_itnc530_brings_the_seed_machine_to_the_noise(seed_machine, rng):
+    before, after = _closed_loop(seed_machine, TABLE4, None, "itnc530", CURRENT_TAB, rng)
+    assert before > 10.0                                       # µm: Table 4 is far from noise
+    assert after == pytest.approx(NOISE_UM, rel=0.05), (before, after)
+
+
+def test_closed_loop_sinumerik_with_cec_brings_the_bc_machine_to_the_noise(bc_machine, bc_fit, rng):
+    before, after = _closed_loop(bc_machine, BC_TRUTH, bc_fit.model, "sinumerik840d", CURRENT_CARR, rng)
+    assert before > 5.0
+    assert after == pytest.approx(NOISE_UM, rel=0.05), (before, after)
+
+
+def test_corrections_beyond_the_plausibility_limits_are_refused(seed_machine):
+    big = {k: 10 * v for k, v in TABLE4.items()}          # 325 µm, 123″
+    fit = _fit(seed_machine, big)[0]
+    with pytest.raises(CompgenError, match="beyond the plausibility limits"):
+        kinematics_edit(seed_machine, fit, "itnc530", CURRENT_TAB, "c", "KIN", "0.1.0", DATE)
+    forced = kinematics_edit(seed_machine, fit, "itnc530", CURRENT_TAB, "c", "KIN", "0.1.0", DATE,
+                             force=True)
+    assert ".TAB" in forced.files
+
+
+def run(*args):
+    r = CliRunner().invoke(main, [str(a) for a in args])
+    return r.exit_code, r.stdout, r.stderr
+
+
+@pytest.fixture
+def fit_file(tmp_path):
+    truth = tmp_path / "t.json"
+    truth.write_text('{"parameters": {"XOC": {"value": 3, "unit": "um"}, '
+                     '"BOA": {"value": 5, "unit": "arcsec"}}}')
+    data = tmp_path / "d.csv"
+    assert run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "-o", data)[0] == 0
+    fit = tmp_path / "fit.json"
+    assert run("fit", "--machine", SEED_MACHINE, data, "-o", fit)[0] == 0
+    return fit
+
+
+def test_cli_writes_table_change_list_and_sign_check(tmp_path, fit_file):
+    current = tmp_path / "cur.TAB"
+    current.write_text(CURRENT_TAB)
+    out = tmp_path / "new.TAB"
+    code, stdout, err = run("kinematics", "--from", fit_file, "--current", current, "-o", out)
+    assert code == 0, err
+    assert "X0C" in out.read_text() and "(new row)" in stdout
+    assert (tmp_path / "new.txt").exists() and (tmp_path / "new_SIGN.H").exists()
+    assert "sign check" in stdout
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["--controller", "fanuc"], "Invalid value for '--controller'"),
+    (["--controller", "sinumerik840d"], "needs --current"),
+])
+def test_cli_refusals(tmp_path, fit_file, args, expected):
+    out = tmp_path / "k.txt"
+    code, _, err = run("kinematics", "--from", fit_file, *args, "-o", out)
+    assert code == 2 and expected in err, err
+    assert not out.exists()
+
+
+def test_cli_existing_output_and_bad_current_table(tmp_path, fit_file):
+    out = tmp_path / "k.txt"
+    out.write_text("mine")
+    code, _, err = run("kinematics", "--from", fit_file, "-o", out)
+    assert code == 2 and "--force" in err and out.read_text() == "mine"
+    assert not (tmp_path / "k_SIGN.H").exists()
+    header = "NR  KEY       AXIS  COORD        DOC\n"
+    for row, expected in (("0   Trans     Z     abc          x", "not a number"),
+                          ("0 Trans Z +1 x", "not a kinematics key")):
+        bad = tmp_path / "bad.TAB"
+        bad.write_text(f"BEGIN X.TAB MM\n{header}{row}\n[END]\n")
+        code, _, err = run("kinematics", "--from", fit_file, "--current", bad, "-o", tmp_path / "n.TAB")
+        assert code == 2 and "bad.TAB:3" in err and expected in err, err
+    (tmp_path / "none.TAB").write_text(f"BEGIN X.TAB MM\n{header}0   MachAxis  Z\n[END]\n")
+    code, _, err = run("kinematics", "--from", fit_file, "--current", tmp_path / "none.TAB", "-o",
+                       tmp_path / "n2.TAB")
+    assert code == 2 and "no 'MachAxis A' row" in err, err
+
+
+def test_every_controller_file_is_ascii(seed_machine, seed_fit, bc_machine, bc_fit):
+    for emitted in (kinematics_edit(seed_machine, seed_fit, "itnc530", CURRENT_TAB, "c", "K", "0", DATE),
+                    kinematics_edit(bc_machine, bc_fit, "sinumerik840d", CURRENT_CARR, "c", "K", "0", DATE)):
+        for text in emitted.files.values():
+            text.encode("ascii")
