@@ -166,6 +166,8 @@ def test_cli_writes_table_change_list_and_sign_check(tmp_path, fit_file):
 @pytest.mark.parametrize("args, expected", [
     (["--controller", "fanuc"], "Invalid value for '--controller'"),
     (["--controller", "sinumerik840d"], "needs --current"),
+    (["--controller", "tnc640", "--current", ROOT / "examples" / "itnc530-current.TAB"],
+     "configuration editor"),
 ])
 def test_cli_refusals(tmp_path, fit_file, args, expected):
     out = tmp_path / "k.txt"

@@ -36,6 +36,11 @@ ARCSEC = np.pi / 648000.0
 MM_DECIMALS = 5          # 0.01 µm
 DEG_DECIMALS = 7         # 0.0004″
 CEC_POINTS = 37          # interpolation points of a generated CEC table
+BACKUP = {
+    "itnc530": "copy the kinematics description table (*.TAB), or Cycle 450 SAVE KINEMATICS",
+    "tnc640": "save the machine configuration, or Cycle 450 SAVE KINEMATICS",
+    "sinumerik840d": "a commissioning archive, and keep the _RESTORE program",
+}
 
 
 @dataclass(frozen=True)
@@ -384,9 +389,7 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
               f"from fit: {Path(fit.machine['file']).name} data "
               + ", ".join(Path(d.file).name for d in fit.data),
               "corrections add to the kinematics active while the R-test ran under TCPM/TRAORI",
-              "BACKUP FIRST: " + ("copy the kinematics description table (or Cycle 450 SAVE KINEMATICS)"
-                                  if ctl.family == "heidenhain" else
-                                  "a commissioning archive, and keep the RESTORE program"),
+              "BACKUP FIRST: " + BACKUP[ctl.name],
               f"then run the sign check {program_name_for(name, 'SIGN')}: see its expected changes"]
     lines_txt = [f"{n} line at its pivot: offset " + ", ".join(
         f"{t.upper()} {line.offset[i] * 1e3:+.2f} um" for i, t in enumerate("xyz") if t != line.nominal)
@@ -398,6 +401,9 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
     if p.setup:
         notes.append("left out, set-up not machine: " + ", ".join(p.setup))
     files = {}
+    if ctl.name == "tnc640" and current is not None:
+        raise CompgenError("a TNC 640 keeps its kinematics in the configuration editor, not in a "
+                           "*.TAB file", hint="leave out --current: compgen writes the entries to change")
     if ctl.family == "heidenhain":
         rows = heidenhain_rows(machine, p)
         tables = cec_tables(machine, p)
