@@ -5,15 +5,17 @@ from __future__ import annotations
 import json
 import sys
 from datetime import date
+from functools import partial
 from pathlib import Path
 
 import click
 import numpy as np
 
+from .compare import compare
 from .diagnose import diagnose
 from .effects import catalogue, compose, location_model
 from .emit import CONTROLLERS, controller
-from .emit.kinematics import kinematics_edit
+from .emit.kinematics import controller_model, kinematics_edit
 from .emit.programs import MODES, measure_program, program_name
 from .errors import CompgenError
 from .files import write_all, write_atomically
@@ -67,9 +69,14 @@ def main():
 @click.option("--seed", type=int, default=None, help="Random seed, for a repeatable noise draw.")
 @click.option("--ball", default=None, help="Ball centre in the table frame, mm: X,Y,Z "
                                             "(default: the machine file's).")
+@click.option("--edit", "edits", type=FILE, multiple=True,
+              help="A kinematics edit compgen wrote (table, change list, $TC_CARR program, CEC "
+                   "file): simulate the measurement after the control has loaded it. Repeatable.")
+@click.option("--current", type=FILE, default=None,
+              help="With a $TC_CARR program: the record's values before the edit.")
 @OUTPUT
 @FORCE
-def simulate_cmd(machine_file, truth, path_names, noise_um, seed, ball, output, force):
+def simulate_cmd(machine_file, truth, path_names, noise_um, seed, ball, edits, current, output, force):
     """Write the R-test CSV that a machine with the TRUTH errors would give."""
     machine = load_machine(machine_file)
     errors = read_truth(truth, machine)
@@ -77,9 +84,15 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, seed, ball, output, 
     if not names:
         raise CompgenError("--paths names no path")
     poses = generate(machine, names, ball=_vec3(ball, "--ball") if ball else None)
-    data = simulate(machine, errors, poses, noise_um, np.random.default_rng(seed))
+    drive = None
+    if edits:
+        held = controller_model(machine, {e: _read_text(e) for e in edits},
+                                _read_text(current) if current else None)
+        drive = partial(held.drive, machine)
+    data = simulate(machine, errors, poses, noise_um, np.random.default_rng(seed), drive)
     comments = (f"compgen simulate: machine {machine.name}", f"truth {truth}: "
                 + ", ".join(errors) if errors else "truth: nominal machine",
+                *(f"after the edit {e}" for e in edits),
                 f"noise {noise_um} µm σ, seed {seed}", "dX dY dZ: nest minus ball, µm")
     write_atomically(output, format_rtest(machine, data, comments), force)
     click.echo(f"wrote {output}: {len(poses)} poses ({', '.join(names)})")
@@ -238,6 +251,23 @@ def _read_text(path: str) -> str:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         return raw.decode("latin-1")    # controller exports are often ANSI
+
+
+@main.command("compare")
+@click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
+@click.option("--controller", "controller_name", type=click.Choice(list(CONTROLLERS)), default=None,
+              help="Default: the machine file's.")
+@click.option("--post", "post_files", type=FILE, multiple=True,
+              help="R-test data measured after the edit (CSV v1). Repeatable.")
+@click.option("--json", "as_json", is_flag=True, help="Print the comparison as JSON.")
+def compare_cmd(base, controller_name, post_files, as_json):
+    """What the kinematics edit will achieve, and, with --post data, whether it did."""
+    fit = load_fit(base)
+    machine, sets = reload(fit)
+    post = [read_rtest(p, machine, fit.sign) for p in post_files]
+    result = compare(machine, sets, fit, controller_name or machine.controller, post)
+    click.echo(json.dumps(result.to_dict(), indent=2, ensure_ascii=False) if as_json
+               else result.report(), nl=as_json)
 
 
 @main.command("effects")

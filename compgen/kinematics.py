@@ -230,7 +230,8 @@ def _chain(machine: Machine, axes: Sequence[Axis], poses: Poses, slots: Mapping,
 
 
 def inverse(machine: Machine, rotary_rad: np.ndarray, ball: np.ndarray,
-            lines: Mapping[str, tuple] | None = None) -> np.ndarray:
+            lines: Mapping[str, tuple] | None = None,
+            params: Mapping[str, float] | None = None) -> np.ndarray:
     """Nominal inverse kinematics, as a controller's TCPM/TRAORI would compute it.
 
     Parameters
@@ -244,7 +245,8 @@ def inverse(machine: Machine, rotary_rad: np.ndarray, ball: np.ndarray,
 
     For fixed rotary angles the nest-minus-ball vector is affine in the linear axes, so
     three unit steps give its matrix exactly, whatever the chain. ``lines`` gives the
-    rotary axis lines a controller holds (``lines.py``): its TCPM solution.
+    rotary axis lines a controller holds (``lines.py``), ``params`` (name → mm, rad) any
+    constant errors it holds too, such as squareness: its TCPM solution.
     """
     rotary_rad = np.atleast_2d(np.asarray(rotary_rad, float))
     n = len(rotary_rad)
@@ -252,11 +254,12 @@ def inverse(machine: Machine, rotary_rad: np.ndarray, ball: np.ndarray,
     q = np.zeros((n, len(machine.axes)))
     linear = [i for i, a in enumerate(machine.axes) if not a.rotary]
     q[:, [i for i, a in enumerate(machine.axes) if a.rotary]] = rotary_rad
-    nominal = Model(machine, ())
+    held = Model(machine, list(params or {}))
+    values = np.array(list((params or {}).values()))
     blank = (np.full(n, np.nan), np.full(n, "", dtype=object))
 
     def rel(qq):
-        return nominal.relative(Poses(qq, ball.copy(), *blank), lines=lines)
+        return held.relative(Poses(qq, ball.copy(), *blank), values, lines=lines)
 
     r0 = rel(q)
     M = np.empty((n, 3, 3))

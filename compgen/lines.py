@@ -90,10 +90,12 @@ def _nominal_pivot(chain, i) -> np.ndarray:
 
 
 def controller_inverse(machine: Machine, lines: Mapping[str, AxisLine], rotary_rad: np.ndarray,
-                       ball: np.ndarray) -> np.ndarray:
-    """The linear axis positions a controller holding ``lines`` commands under TCPM/TRAORI
-    to put the nest on the nominal ball: (n, k) poses, mm and rad."""
-    return inverse(machine, rotary_rad, ball, lines=_as_conjugations(machine, lines))
+                       ball: np.ndarray, squareness: Mapping[str, float] | None = None) -> np.ndarray:
+    """The linear axis positions a controller holding ``lines`` (and the linear axes'
+    ``squareness``, name → rad) commands under TCPM/TRAORI to put the nest on the nominal
+    ball: (n, k) poses, mm and rad."""
+    return inverse(machine, rotary_rad, ball, lines=_as_conjugations(machine, lines),
+                   params=dict(squareness or {}))
 
 
 def controller_relative(machine: Machine, lines: Mapping[str, AxisLine], poses: Poses) -> np.ndarray:

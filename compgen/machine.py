@@ -105,6 +105,7 @@ class Machine:
     program: ProgramSetup | None = None
     limits: Limits = Limits()
     sinumerik: dict | None = None   # tcarr record and the axis vectors the control holds
+    tolerances: dict[str, float] = field(default_factory=dict)   # path → max range, µm
     source: str = ""
     sha256: str = ""
 
@@ -211,8 +212,12 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
             vectors[a.name] = v
         kind = "".join(sorted(set(kinds.values())))
         sinumerik = {"tcarr": record, "kind": {"P": "P", "T": "T"}.get(kind, "M"), "vectors": vectors}
+    tolerances = {}
+    if "tolerances" in doc:
+        g = get.sub("tolerances")
+        tolerances = {name: _positive(g, name) for name in g.doc}
     return Machine(**{**machine.__dict__, "paths": paths, "program": program, "limits": limits,
-                      "sinumerik": sinumerik})
+                      "sinumerik": sinumerik, "tolerances": tolerances})
 
 
 def _positive(g: _Getter, key: str, zero_ok: bool = False) -> float:

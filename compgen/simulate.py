@@ -18,12 +18,22 @@ from .units import to_inside
 
 
 def simulate(machine: Machine, truth: Mapping[str, float], poses: Poses, noise_um: float = 0.0,
-             rng: np.random.Generator | None = None) -> RTestData:
-    """Readings of the exact model with ``truth`` (name → mm or rad) plus white noise, µm σ."""
+             rng: np.random.Generator | None = None, drive=None) -> RTestData:
+    """Readings of the exact model with ``truth`` (name → mm or rad) plus white noise, µm σ.
+
+    ``drive`` (poses → commanded axes, mm and rad) is the control's kinematics after an
+    edit: the machine goes where the control sends it, the R-test reads the true machine
+    there, and the file records the nominal poses, as a real session would.
+    """
     if not (math.isfinite(noise_um) and noise_um >= 0):
         raise CompgenError(f"noise must be a finite σ ≥ 0 µm, not {noise_um}")
     model = Model(machine, list(truth))
-    dev = model.deviation(poses, np.array(list(truth.values()), dtype=float))
+    values = np.array(list(truth.values()), dtype=float)
+    if drive is None:
+        dev = model.deviation(poses, values)
+    else:
+        actual = Poses(drive(poses), poses.ball, poses.t, poses.path)
+        dev = model.relative(actual, values) - Model(machine, ()).relative(poses)
     if noise_um:
         rng = rng or np.random.default_rng()
         dev = dev + rng.normal(0.0, noise_um * 1e-3, dev.shape)

@@ -431,7 +431,7 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
         new, diff = sinumerik_values(machine, p, held)
         rec = machine.sinumerik["tcarr"]
         cec = cec_tables(machine, p)
-        squares = _squareness_cec(machine, p)
+        squares = squareness_tables(machine, p)
         def carr(values):      # vectors are unitless (10 decimals), offsets mm
             return [(n, fmt_plain(v, 10 if n <= 12 else MM_DECIMALS)) for n, v in values.items()]
 
@@ -487,7 +487,7 @@ def _cec_text(t: dict, index: int) -> dict:
             "values": [fmt_plain(v, 6) for v in t["values"]]}
 
 
-def _squareness_cec(machine: Machine, p: Plan) -> list[dict]:
+def squareness_tables(machine: Machine, p: Plan) -> list[dict]:
     """A squareness as a linear CEC table: output axis along the tilt, input the tilted axis."""
     out = []
     for name, value in p.squareness.items():
@@ -598,3 +598,54 @@ def _pivot_of(machine: Machine, name: str) -> np.ndarray:
         if name in names:
             return np.sum([np.asarray(a.offset, float) for a in chain[:names.index(name) + 1]], axis=0)
     raise CompgenError(f"no axis {name}")
+
+
+@dataclass(frozen=True, eq=False)
+class ControllerModel:
+    """What a control holds after an edit: rotary axis lines, linear squareness (rad) and
+    CEC tables; ``drive`` gives the axis positions it commands for nominal poses."""
+
+    lines: dict[str, AxisLine]
+    squareness: dict[str, float]
+    tables: list[dict]
+
+    def drive(self, machine: Machine, poses: Poses) -> np.ndarray:
+        rotary = poses.q[:, [machine.index(a.name) for a in machine.rotary_axes]]
+        q = controller_inverse(machine, self.lines, rotary, poses.ball, self.squareness)
+        return apply_cec(machine, self.tables, q)
+
+
+def controller_model(machine: Machine, texts: dict[str, str], current: str | None) -> ControllerModel:
+    """Read emitted edit files back as a control would: HEIDENHAIN rows (table or change
+    list), a SINUMERIK ``$TC_CARR`` program (relative to ``current``), CEC tables."""
+    lines = {a.name: AxisLine(a.name, a.direction, _pivot_of(machine, a.name), np.zeros(3), np.zeros(3))
+             for a in machine.rotary_axes}
+    squareness, tables = {}, []
+    for where, text in texts.items():
+        if "$AN_CEC" in text:
+            tables += read_cec(text)
+        elif "$TC_CARR" in text:
+            if current is None or machine.sinumerik is None:
+                raise CompgenError("a $TC_CARR program needs --current and the machine's [sinumerik]",
+                                   where=where)
+            held = read_carr(current, "current", machine.sinumerik["tcarr"])
+            lines = read_sinumerik_lines(text, machine, held)
+        elif re.search(r"\bTrans\b", text):
+            lines = read_heidenhain_lines(text, machine)
+            squareness = read_heidenhain_squareness(text, machine)
+        else:
+            raise CompgenError("not a kinematics edit compgen wrote (no Trans rows, $TC_CARR or $AN_CEC)",
+                               where=where)
+    return ControllerModel(lines, squareness, tables)
+
+
+def read_heidenhain_squareness(text: str, machine: Machine) -> dict[str, float]:
+    """Squareness rows around a linear ``MachAxis`` (``C0X`` → COX, rad)."""
+    out = {}
+    linear = {a.name for a in machine.axes if not a.rotary}
+    for m in re.finditer(r"(?m)^\s*(?:\d+\s+)?(?:Trans\s+([ABC])\s+(\S+)\s+([ABC])0([XYZ])\b"
+                         r"|([ABC])0([XYZ])\s+Trans\s+([ABC])\s+(\S+))", text):
+        rot, axis, value = (m[3], m[4], m[2]) if m[1] else (m[5], m[6], m[8])
+        if axis in linear:
+            out[f"{rot}O{axis}"] = np.radians(float(value))
+    return out

@@ -1,0 +1,153 @@
+"""What a kinematics edit will achieve, and whether it did.
+
+Prediction, honest by construction: the fitted machine is driven the way the control will
+drive it after the edit (TCPM with the corrected axis lines, plus the CEC tables a SINUMERIK
+holds), and the part of the readings the model never explained (its residual) is added
+back. What the control cannot express is simply not in its model, so it stays. The ball's
+place on the table is set-up, not a machine error: a set-up-only fit (XOW YOW ZOW) removes
+it from every figure here, before and after alike, and it is named as left out.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .diagnose import diagnose
+from .emit import controller
+from .emit.kinematics import apply_cec, cec_tables, plan, squareness_tables
+from .errors import CompgenError
+from .identify import identify
+from .kinematics import Model, Poses
+from .lines import controller_inverse
+from .machine import Machine
+from .results import FitResult
+from .rtest import RTestData
+
+SETUP = ("XOW", "YOW", "ZOW")
+AS_PREDICTED = (1.25, 0.2)   # measured RMS within 1.25 × predicted + 0.2 µm counts as predicted
+
+
+@dataclass(frozen=True, eq=False)
+class Comparison:
+    controller: str
+    before: dict
+    predicted_post: dict
+    not_compensated: tuple[str, ...]
+    setup: tuple[str, ...]
+    measured_post: dict | None = None
+
+    def to_dict(self) -> dict:
+        out = {"format": "compgen.compare/1", "controller": self.controller, "before": self.before,
+               "predicted_post": self.predicted_post, "not_compensated": list(self.not_compensated),
+               "setup_left_out": list(self.setup)}
+        if self.measured_post is not None:
+            out["measured_post"] = self.measured_post
+        return out
+
+    def report(self) -> str:
+        ctl = controller(self.controller).words
+        lines = [f"compgen compare: after the kinematics edit for {ctl}",
+                 "  misfit beyond the ball's set-up (XOW YOW ZOW fitted out), µm:", "",
+                 f"  {'path':<8}{'before RMS':>11}{'predicted':>11}"
+                 + (f"{'measured':>10}" if self.measured_post else "")
+                 + "   predicted range dX dY dZ" + ("   tolerance" if self.measured_post else "")]
+        for name, pred in self.predicted_post["per_path"].items():
+            row = f"  {name:<8}{_rms(self.before['per_path'].get(name)):>11.3f}{_rms(pred):>11.3f}"
+            if self.measured_post:
+                meas = self.measured_post["per_path"].get(name)
+                row += f"{_rms(meas):>10.3f}" if meas else f"{'-':>10}"
+            row += "   " + " ".join(f"{v:5.2f}" for v in pred["range_um"])
+            if self.measured_post:
+                v = self.measured_post["verdicts"].get(name)
+                row += f"   {v}" if v else "   (none in machine file)"
+            lines.append(row)
+        lines.append(f"  {'all':<8}{self.before['rms_um']:>11.3f}{self.predicted_post['rms_um']:>11.3f}"
+                     + (f"{self.measured_post['rms_um']:>10.3f}" if self.measured_post else ""))
+        if self.not_compensated:
+            lines += ["", f"  stays in the prediction, {ctl} cannot hold it from compgen's files: "
+                          + ", ".join(self.not_compensated)]
+        lines.append(f"  left out, set-up not machine: {', '.join(self.setup)}")
+        if self.measured_post:
+            m = self.measured_post
+            lines += ["", "  " + m["statement"]]
+            if m.get("diagnose"):
+                lines.append("  diagnose on the post data: " + m["diagnose"])
+        return "\n".join(lines) + "\n"
+
+
+def _rms(stats: dict | None) -> float:
+    return float(np.sqrt(np.mean(np.square(stats["rms_um"])))) if stats else float("nan")
+
+
+def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, controller_name: str,
+            post: Sequence[RTestData] = ()) -> Comparison:
+    ctl = controller(controller_name)
+    poses = Poses.concat([d.poses for d in data])
+    y = np.concatenate([d.deviation for d in data])
+    model = Model(machine, fit.model)
+    x = np.array([fit.parameters[n].value for n in fit.model])
+    residual = y - model.deviation(poses, x)
+    p = plan(machine, fit, force=True)   # predict even what the limits would refuse to write
+    rotary = poses.q[:, [machine.index(a.name) for a in machine.rotary_axes]]
+    if ctl.family == "sinumerik":        # squareness and single-axis errors through CEC tables
+        tables = cec_tables(machine, p) + squareness_tables(machine, p)
+        q = controller_inverse(machine, p.lines, rotary, poses.ball)
+        q = apply_cec(machine, [_as_read(t) for t in tables], q)
+        not_held = list(p.not_compensable)
+    else:                                # squareness in the rows around MachAxis X / Z
+        q = controller_inverse(machine, p.lines, rotary, poses.ball, p.squareness)
+        not_held = [t["effect"] for t in p.tables] + list(p.not_compensable)
+    after = Poses(q, poses.ball, poses.t, poses.path)
+    predicted = model.relative(after, x) + residual
+    before = _beyond_setup(machine, poses, y)
+    pred = _beyond_setup(machine, after, predicted)
+    measured = _measured(machine, fit, post, pred) if post else None
+    return Comparison(ctl.name, before, pred, tuple(not_held), tuple(p.setup), measured)
+
+
+def _beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
+    fit = identify(machine, [RTestData(poses, reading)], list(SETUP))
+    return {"rms_um": fit.residual["rms_um"], "per_path": fit.residual["per_path"]}
+
+
+def _measured(machine: Machine, fit: FitResult, post: Sequence[RTestData], predicted: dict) -> dict:
+    poses = Poses.concat([d.poses for d in post])
+    y = np.concatenate([d.deviation for d in post])
+    got = _beyond_setup(machine, poses, y)
+    tolerances = machine.tolerances
+    verdicts = {}
+    for name, stats in got["per_path"].items():
+        if name in tolerances:
+            worst = max(stats["range_um"])
+            verdicts[name] = (f"PASS {worst:.2f} <= {tolerances[name]:g}" if worst <= tolerances[name]
+                              else f"FAIL {worst:.2f} > {tolerances[name]:g}")
+    factor, floor = AS_PREDICTED
+    ok = got["rms_um"] <= factor * predicted["rms_um"] + floor
+    out = {**got, "verdicts": verdicts, "as_predicted": bool(ok)}
+    if ok:
+        out["statement"] = (f"The machine improved as predicted: {got['rms_um']:.3f} µm measured, "
+                            f"{predicted['rms_um']:.3f} µm predicted.")
+    else:
+        out["statement"] = (f"The machine did NOT improve as predicted: {got['rms_um']:.3f} µm measured "
+                            f"against {predicted['rms_um']:.3f} µm predicted. Check that the edit was "
+                            "loaded with the right sign (sign check) and that the set-up did not change.")
+        try:
+            refit = identify(machine, list(post), fit.model)
+            found = diagnose(machine, list(post), refit)
+            best = found.candidates[0]
+            out["diagnose"] = (f"{best.effect} ({best.description}) would leave "
+                               f"{best.rms_after_um:.3f} µm of {found.rms_um:.3f} µm"
+                               + ("" if best.significant else "; nothing significant"))
+        except CompgenError as exc:   # the post data may not support the model: say so
+            out["diagnose"] = f"not possible on these post data: {exc}"
+    return out
+
+
+def _as_read(t: dict) -> dict:
+    """A generated table in the form ``read_cec`` returns, for ``apply_cec``."""
+    return {"input_axis": t["input"], "output_axis": t["output"], "min": t["min"], "max": t["max"],
+            "step": t["step"], "is_modulo": t["modulo"], "values": np.asarray(t["values"])}
+

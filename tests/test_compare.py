@@ -1,0 +1,93 @@
+"""compare: predicted against measured after a kinematics edit, in simulation."""
+
+import numpy as np
+import pytest
+from conftest import ARCSEC, ROOT, TABLE4, UM
+
+from compgen.compare import compare
+from compgen.effects import location_model
+from compgen.emit.kinematics import AxisLine, ControllerModel, controller_model, kinematics_edit
+from compgen.identify import identify
+from compgen.paths import generate
+from compgen.simulate import simulate
+
+NOISE_UM = 0.5
+HIDDEN = {"EXC:h2c": 1.5 * UM, "EXC:h2s": 0.8 * UM}       # radial 2/rev of C: no kinematics edit holds it
+CURRENT_TAB = (ROOT / "examples" / "itnc530-current.TAB").read_text()
+RMS_AGREE_UM = 0.05    # two RMS over 2169 readings of 0.5 µm noise differ by ~0.01 µm (1 s.d.)
+
+
+@pytest.fixture(scope="module")
+def session(seed_machine):
+    truth = {**TABLE4, **HIDDEN}
+    poses = generate(seed_machine, ["K4", "K1", "K2"])
+    pre = simulate(seed_machine, truth, poses, NOISE_UM, np.random.default_rng(5))
+    fit = identify(seed_machine, [pre], [*location_model(seed_machine), *HIDDEN])
+    return truth, poses, pre, fit
+
+
+def _post(machine, truth, poses, held, seed=6):
+    return simulate(machine, truth, poses, NOISE_UM, np.random.default_rng(seed),
+                    lambda p: held.drive(machine, p))
+
+
+def test_prediction_agrees_with_the_measurement_after_the_edit(seed_machine, session):
+    truth, poses, pre, fit = session
+    emitted = kinematics_edit(seed_machine, fit, "itnc530", CURRENT_TAB, "c", "K", "0", "d")
+    held = controller_model(seed_machine, {"new.TAB": emitted.files[".TAB"]}, None)
+    result = compare(seed_machine, [pre], fit, "itnc530", [_post(seed_machine, truth, poses, held)])
+    predicted, measured = result.predicted_post["rms_um"], result.measured_post["rms_um"]
+    assert result.before["rms_um"] > 10                       # what the edit removes
+    assert abs(predicted - measured) < RMS_AGREE_UM, (predicted, measured)
+    assert predicted > 1.3 * NOISE_UM                         # EXC:h2 stays: honest, not noise
+    assert result.not_compensated == ("EXC:h2",) and result.setup == ("XOW", "YOW", "ZOW")
+    assert result.measured_post["as_predicted"]
+    for name, stats in result.measured_post["per_path"].items():
+        assert abs(np.sqrt(np.mean(np.square(stats["rms_um"])))
+                   - np.sqrt(np.mean(np.square(result.predicted_post["per_path"][name]["rms_um"])))) < 0.1
+
+
+def test_sinumerik_holds_what_cec_can_and_predicts_the_noise(bc_machine):
+    truth = {"XOB": 15 * UM, "ZOB": -20 * UM, "AOB": 6 * ARCSEC, "XOC": -7 * UM, "YOC": 11 * UM,
+             "ECC:h2c": 3 * ARCSEC, "EYY:p1": 8 * UM}
+    poses = generate(bc_machine, ["K4", "K1", "K2"])
+    pre = simulate(bc_machine, truth, poses, NOISE_UM, np.random.default_rng(2))
+    fit = identify(bc_machine, [pre], [*location_model(bc_machine), "ECC:h2c", "ECC:h2s", "EYY:p1"])
+    result = compare(bc_machine, [pre], fit, "sinumerik840d")
+    assert result.not_compensated == ()
+    assert result.predicted_post["rms_um"] == pytest.approx(NOISE_UM, rel=0.05)
+    heidenhain = compare(bc_machine, [pre], fit, "itnc530")     # no CEC: those effects stay
+    assert set(heidenhain.not_compensated) == {"ECC:h2", "EYY:p1"}
+    assert heidenhain.predicted_post["rms_um"] > 2 * NOISE_UM
+
+
+def test_a_wrongly_signed_edit_is_caught_and_diagnosed(seed_machine, session):
+    truth, poses, pre, fit = session
+    emitted = kinematics_edit(seed_machine, fit, "itnc530", CURRENT_TAB, "c", "K", "0", "d")
+    right = controller_model(seed_machine, {"new.TAB": emitted.files[".TAB"]}, None)
+    wrong = ControllerModel({k: AxisLine(v.axis, v.nominal, v.pivot, -v.offset, -v.tilt)
+                             for k, v in right.lines.items()}, {}, [])
+    result = compare(seed_machine, [pre], fit, "itnc530", [_post(seed_machine, truth, poses, wrong)])
+    post = result.measured_post
+    assert not post["as_predicted"] and "did NOT improve as predicted" in post["statement"]
+    assert post["diagnose"]
+    assert post["rms_um"] > 10 * result.predicted_post["rms_um"]
+    assert "FAIL" in " ".join(post["verdicts"].values())
+
+
+def test_json_contract(seed_machine, session):
+    _, _, pre, fit = session
+    d = compare(seed_machine, [pre], fit, "itnc530").to_dict()
+    assert d["controller"] == "itnc530" and d["not_compensated"] == ["EXC:h2"]
+    assert {"rms_um", "per_path"} <= set(d["predicted_post"]) and "measured_post" not in d
+
+
+def test_end_to_end_example(tmp_path):
+    import os
+    import subprocess
+    import sys
+    done = subprocess.run(["bash", str(ROOT / "examples" / "end-to-end.sh"), str(tmp_path / "w")],
+                          cwd=ROOT, env={**os.environ, "PY": sys.executable}, capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "The machine improved as predicted: 0.816 µm measured, 0.822 µm predicted." in done.stdout
