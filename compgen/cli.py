@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from .checklist import checklist, markdown
 from .compare import compare
 from .diagnose import diagnose
 from .effects import catalogue, compose, location_model
@@ -22,6 +23,7 @@ from .files import write_all, write_atomically
 from .identify import _version, identify, parse_fixed
 from .machine import load_machine
 from .paths import generate
+from .report import report_html
 from .results import load_fit
 from .rtest import SIGNS, format_rtest, read_poses, read_rtest
 from .session import reload
@@ -268,6 +270,46 @@ def compare_cmd(base, controller_name, post_files, as_json):
     result = compare(machine, sets, fit, controller_name or machine.controller, post)
     click.echo(json.dumps(result.to_dict(), indent=2, ensure_ascii=False) if as_json
                else result.report(), nl=as_json)
+
+
+@main.command("checklist")
+@MACHINE
+@click.option("--dir", "folder", type=click.Path(file_okay=False), default=".", show_default=True,
+              help="Work folder whose artefacts tick the steps.")
+def checklist_cmd(machine_file, folder):
+    """The commissioning checklist as Markdown, ticked from the files in --dir."""
+    machine = load_machine(machine_file)
+    click.echo(markdown(machine, checklist(machine, folder)), nl=False)
+
+
+@main.command("report")
+@click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
+@click.option("--controller", "controller_name", type=click.Choice(list(CONTROLLERS)), default=None,
+              help="For the predicted comparison. Default: the machine file's.")
+@click.option("--post", "post_files", type=FILE, multiple=True, help="R-test data after the edit.")
+@click.option("--before", type=FILE, default=None, help="An earlier fit of the same data, for the plots.")
+@click.option("--emitted", "emitted", type=FILE, multiple=True,
+              help="Files sent to the control, listed with their checksums. Repeatable.")
+@click.option("--dir", "folder", type=click.Path(file_okay=False), default=None,
+              help="Work folder for the checklist (default: the fit file's folder).")
+@OUTPUT
+@FORCE
+def report_cmd(base, controller_name, post_files, before, emitted, folder, output, force):
+    """One self-contained HTML report: fit, diagnose, plots, comparison, files, checklist."""
+    from .plots import figures  # matplotlib only when asked for
+    fit = load_fit(base)
+    machine, sets = reload(fit)
+    for path in emitted:
+        _read_text(path)                       # a missing file fails before anything is drawn
+    post = [read_rtest(p, machine, fit.sign) for p in post_files]
+    found = diagnose(machine, sets, fit, fit_file=base)
+    comparison = compare(machine, sets, fit, controller_name or machine.controller, post)
+    images = figures(machine, sets, fit, load_fit(before) if before else None)
+    steps = checklist(machine, folder or Path(base).parent)
+    html = report_html(machine, fit, found, images, comparison, emitted, steps, _version(),
+                       date.today().isoformat())
+    write_atomically(output, html, force)
+    click.echo(f"wrote {output}")
 
 
 @main.command("effects")

@@ -3,6 +3,7 @@ residual against each rotary axis angle; an earlier fit of the same data drawn b
 
 from __future__ import annotations
 
+import io
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -29,20 +30,34 @@ def _predicted(machine: Machine, poses: Poses, fit: FitResult) -> np.ndarray:
 def write_plots(folder: str | Path, machine: Machine, data: Sequence[RTestData], fit: FitResult,
                 before: FitResult | None = None) -> list[Path]:
     """Write the plots into ``folder`` (made if missing); returns the files written."""
-    if before is not None and [d.sha256 for d in before.data] != [d.sha256 for d in fit.data]:
-        raise CompgenError("--before must be a fit of the same data files",
-                           hint="compare fits made from the same R-test session")
     folder = Path(folder)
+    images = figures(machine, data, fit, before)
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise CompgenError(f"cannot make the plot folder: {exc.strerror}", where=str(folder)) from None
+    written = []
+    for name, png in images.items():
+        path = folder / name
+        tmp = path.with_name(f".{path.name}.tmp")
+        tmp.write_bytes(png)
+        tmp.replace(path)
+        written.append(path)
+    return written
+
+
+def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
+            before: FitResult | None = None) -> dict[str, bytes]:
+    """PNG images by file name: measured vs model per path, residual vs each rotary axis."""
+    if before is not None and [d.sha256 for d in before.data] != [d.sha256 for d in fit.data]:
+        raise CompgenError("--before must be a fit of the same data files",
+                           hint="compare fits made from the same R-test session")
     poses = Poses.concat([d.poses for d in data])
     measured = np.concatenate([d.deviation for d in data]) * 1e3
     model = _predicted(machine, poses, fit)
     earlier = _predicted(machine, poses, before) if before else None
     label = f"model ({len(fit.model)} parameters)"
-    written = []
+    images = {}
     for path in dict.fromkeys(poses.path):
         sel = poses.path == path
         fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
@@ -57,7 +72,7 @@ def write_plots(folder: str | Path, machine: Machine, data: Sequence[RTestData],
         axes[0].set_title(f"{path or 'data'}: measured vs model, {machine.name}")
         axes[0].legend(loc="best", fontsize=8)
         axes[-1].set_xlabel("pose")
-        written.append(_save(fig, folder / f"measured-vs-model-{_safe(path)}.png"))
+        images[f"measured-vs-model-{_safe(path)}.png"] = _png(fig)
     for axis in machine.rotary_axes:
         angle = np.degrees(poses.q[:, machine.index(axis.name)])
         fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
@@ -72,18 +87,17 @@ def write_plots(folder: str | Path, machine: Machine, data: Sequence[RTestData],
         axes[0].set_title(f"residual against {axis.name}, {machine.name}")
         axes[0].legend(loc="best", fontsize=8)
         axes[-1].set_xlabel(f"{axis.name} (deg)")
-        written.append(_save(fig, folder / f"residual-vs-{axis.name}.png"))
-    return written
+        images[f"residual-vs-{axis.name}.png"] = _png(fig)
+    return images
 
 
 def _safe(label: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in label) or "data"
 
 
-def _save(fig, path: Path) -> Path:
-    tmp = path.with_name(f".{path.name}.tmp.png")
+def _png(fig) -> bytes:
+    buffer = io.BytesIO()
     fig.tight_layout()
-    fig.savefig(tmp, dpi=110)
+    fig.savefig(buffer, format="png", dpi=110)
     plt.close(fig)
-    tmp.replace(path)
-    return path
+    return buffer.getvalue()

@@ -1,0 +1,56 @@
+"""One self-contained HTML report: fit, diagnosis, plots, comparison, files, checklist."""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+from collections.abc import Sequence
+from pathlib import Path
+
+from jinja2 import Environment, FileSystemLoader, StrictUndefined, select_autoescape
+
+from .checklist import Step
+from .compare import Comparison
+from .diagnose import Diagnosis
+from .emit import template_dir
+from .machine import Machine
+from .results import FitResult
+from .units import shown
+
+
+def report_html(machine: Machine, fit: FitResult, diagnosis: Diagnosis, images: dict[str, bytes],
+                comparison: Comparison | None, emitted: Sequence[str], steps: Sequence[Step],
+                version: str, date: str) -> str:
+    env = Environment(loader=FileSystemLoader(template_dir()), undefined=StrictUndefined,
+                      autoescape=select_autoescape(["html", "j2"]), trim_blocks=True, lstrip_blocks=True)
+    params = []
+    for name, e in fit.parameters.items():
+        v, unit = shown(e.value, e.unit)
+        s, _ = shown(e.std, e.unit)
+        params.append({"name": name, "value": f"{v:+.3f}", "unit": unit,
+                       "std": "fixed" if e.fixed else f"± {s:.3f}",
+                       "words": fit.descriptions.get(name, "")})
+    n = len(fit.free)
+    corr = [[{"text": f"{fit.correlation[i, j]:+.2f}".replace("-0.00", "+0.00"),
+              "strong": i != j and abs(fit.correlation[i, j]) >= 0.9} for j in range(n)] for i in range(n)]
+    compare_rows = []
+    if comparison is not None:
+        measured = comparison.measured_post
+        for name, p in comparison.predicted_post["per_path"].items():
+            compare_rows.append({
+                "path": name, "before": max(comparison.before["per_path"][name]["rms_um"]),
+                "predicted": max(p["rms_um"]),
+                "measured": max(measured["per_path"][name]["rms_um"]) if measured and name in
+                measured["per_path"] else None,
+                "verdict": measured["verdicts"].get(name, "none in machine file") if measured else ""})
+    files = []
+    for path in emitted:
+        raw = Path(path).read_bytes()
+        files.append({"name": Path(path).name, "sha256": hashlib.sha256(raw).hexdigest(),
+                      "bytes": len(raw)})
+    return env.get_template("report/report.html.j2").render(
+        machine=machine, fit=fit, params=params, corr=corr, names=list(fit.free),
+        diagnosis=diagnosis, visible=[c for c in diagnosis.candidates if c.visible][:8],
+        hidden=[c for c in diagnosis.candidates if not c.visible and not c.silent],
+        images={k: base64.b64encode(v).decode("ascii") for k, v in images.items()},
+        comparison=comparison, compare_rows=compare_rows, files=files, steps=steps, version=version, date=date)

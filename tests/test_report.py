@@ -1,0 +1,89 @@
+"""The HTML report (opened in headless Chromium), the checklist, templates in the wheel."""
+
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from conftest import ROOT, SEED_MACHINE
+
+from compgen.cli import main
+
+SESSION = ROOT / "examples" / "seed-session.csv"
+
+
+def run(*args):
+    r = CliRunner().invoke(main, [str(a) for a in args])
+    return r.exit_code, r.stdout, r.stderr
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("work")
+    assert run("fit", "--machine", SEED_MACHINE, SESSION, "-o", folder / "fit.json")[0] == 0
+    assert run("fit", "--from", folder / "fit.json", "--add", "EXC:h2", "-o", folder / "fit2.json")[0] == 0
+    return folder
+
+
+def test_report_is_self_contained_and_complete(work):
+    out = work / "report.html"
+    code, _, err = run("report", "--from", work / "fit2.json", "--before", work / "fit.json", "-o", out)
+    assert code == 0, err
+    html = out.read_text()
+    assert html.count("data:image/png;base64,") == 5 and "http" not in html.replace("https://", "")
+    for part in ("Identified parameters", "Correlations", "Diagnose", "After the kinematics edit",
+                 "Commissioning checklist", "EXC:h2c", "predicted"):
+        assert part in html, part
+    code, _, err = run("report", "--from", work / "fit2.json", "-o", out)
+    assert code == 2 and "--force" in err
+
+
+def _chromium():
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+def test_report_screenshot_in_headless_chromium_is_not_blank(work, tmp_path):
+    browser = _chromium()
+    if browser is None:
+        if os.environ.get("COMPGEN_REQUIRE_BROWSER"):
+            pytest.fail("chromium is not installed, and CI requires it")
+        pytest.skip("chromium is not installed")
+    out = work / "report-shot.html"
+    assert run("report", "--from", work / "fit2.json", "-o", out, "--force")[0] == 0
+    shot = tmp_path / "shot.png"
+    subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                    "--no-first-run", "--disable-background-networking", "--disable-component-update",
+                    "--disable-sync", f"--user-data-dir={tmp_path / 'profile'}", "--window-size=1100,1600",
+                    f"--screenshot={shot}", out.as_uri()], capture_output=True, timeout=120, check=True)
+    from matplotlib.image import imread
+    pixels = imread(shot)[..., :3]
+    not_white = (pixels < 0.95).any(axis=-1).mean()
+    assert pixels.shape[0] >= 1000 and not_white > 0.05, not_white   # text, tables and plots drawn
+    assert pixels.std() > 0.05
+
+
+def test_checklist_ticks_from_artefacts_and_names_the_next_step(work):
+    code, out, err = run("checklist", "--machine", SEED_MACHINE, "--dir", work)
+    assert code == 0, err
+    assert "[x] Fit" in out and "[x] K4, K1, K2 measured" in out   # the fit names its data
+    assert "[ ] Measurement programs written" in out
+    assert "Next: `compgen measure-program" in out
+    assert "(by hand) Sign-off" in out and "[x] Sign-off" not in out
+    assert run("measure-program", "--machine", SEED_MACHINE, "--path", "K4", "-o", work / "K4.H")[0] == 0
+    code, out, _ = run("checklist", "--machine", SEED_MACHINE, "--dir", work)
+    assert "[x] Measurement programs written" in out and "Next: `compgen diagnose" in out
+
+
+def test_templates_ship_inside_the_installed_package(tmp_path):
+    """Run from outside the checkout: an installed wheel must carry compgen/templates."""
+    code = ("import compgen, compgen.emit as e, pathlib; "
+            "print(pathlib.Path(compgen.__file__).parent); print(e.template_dir())")
+    done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                          env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"}, check=True)
+    package, templates = done.stdout.split()
+    if not package.startswith(str(ROOT)):        # an installed wheel, not a source checkout
+        assert templates == f"{package}/templates", templates
+    assert (np.array([p for p in os.listdir(templates)]) == "unconfirmed.j2").any()
