@@ -53,4 +53,5 @@ def report_html(machine: Machine, fit: FitResult, diagnosis: Diagnosis, images: 
         diagnosis=diagnosis, visible=[c for c in diagnosis.candidates if c.visible][:8],
         hidden=[c for c in diagnosis.candidates if not c.visible and not c.silent],
         images={k: base64.b64encode(v).decode("ascii") for k, v in images.items()},
-        comparison=comparison, compare_rows=compare_rows, files=files, steps=steps, version=version, date=date)
+        comparison=comparison, compare_rows=compare_rows, files=files, steps=steps, version=version,
+        date=date)
