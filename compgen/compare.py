@@ -17,7 +17,7 @@ import numpy as np
 
 from .diagnose import diagnose
 from .emit import controller
-from .emit.kinematics import apply_cec, cec_tables, plan, squareness_tables
+from .emit.kinematics import apply_cec, cec_tables, held_lines, plan, squareness_tables
 from .errors import CompgenError
 from .identify import identify
 from .kinematics import Model, Poses
@@ -97,6 +97,10 @@ def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, control
         q = controller_inverse(machine, p.lines, rotary, poses.ball)
         q = apply_cec(machine, [_as_read(t) for t in tables], q)
         not_held = list(p.not_compensable)
+    elif ctl.family == "linuxcnc":       # line positions only: tilts and the rest stay
+        q = controller_inverse(machine, held_lines(p, ctl.family), rotary, poses.ball)
+        not_held = [f"{n} tilt" for n, line in p.lines.items() if line.tilt.any()]
+        not_held += list(p.squareness) + [t["effect"] for t in p.tables] + list(p.not_compensable)
     else:                                # squareness in the rows around MachAxis X / Z
         q = controller_inverse(machine, p.lines, rotary, poses.ball, p.squareness)
         not_held = [t["effect"] for t in p.tables] + list(p.not_compensable)

@@ -29,6 +29,7 @@ CONTROLLERS = {
     "itnc530": Controller("itnc530", "heidenhain", ".H", "HEIDENHAIN iTNC 530"),
     "tnc640": Controller("tnc640", "heidenhain", ".H", "HEIDENHAIN TNC 640"),
     "sinumerik840d": Controller("sinumerik840d", "sinumerik", ".MPF", "SIEMENS SINUMERIK 840D sl"),
+    "linuxcnc": Controller("linuxcnc", "linuxcnc", ".ngc", "LinuxCNC (trt kinematics)"),
 }
 
 

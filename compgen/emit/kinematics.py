@@ -37,6 +37,7 @@ MM_DECIMALS = 5          # 0.01 µm
 DEG_DECIMALS = 7         # 0.0004″
 CEC_POINTS = 37          # interpolation points of a generated CEC table
 BACKUP = {
+    "linuxcnc": "a copy of the HAL file that sets the trt kinematics pins",
     "itnc530": "copy the kinematics description table (*.TAB), or Cycle 450 SAVE KINEMATICS",
     "tnc640": "save the machine configuration, or Cycle 450 SAVE KINEMATICS",
     "sinumerik840d": "a commissioning archive, and keep the _RESTORE program",
@@ -86,6 +87,14 @@ def plan(machine: Machine, fit: FitResult, force: bool = False) -> Plan:
             other.append(name)
     _check_bounds(machine, lines, squareness, force)
     return Plan(lines, squareness, tables, other, setup, values)
+
+
+def held_lines(p: Plan, family: str) -> dict[str, AxisLine]:
+    """The axis lines a control of ``family`` can hold: LinuxCNC's trt kinematics takes the
+    line positions but no tilt; the others take both."""
+    if family != "linuxcnc":
+        return p.lines
+    return {n: AxisLine(n, line.nominal, line.pivot, line.offset, np.zeros(3)) for n, line in p.lines.items()}
 
 
 def _compensable_by_table(machine: Machine, e) -> bool:
@@ -362,7 +371,7 @@ def sign_check(machine: Machine, p: Plan, controller_name: str, name: str, versi
     rot = np.array(rows)
     ball = np.broadcast_to(machine.ball, (len(rot), 3))
     q_before = inverse(machine, rot, ball)
-    q_after = controller_inverse(machine, p.lines, rot, ball)
+    q_after = controller_inverse(machine, held_lines(p, controller(controller_name).family), rot, ball)
     truth = Model(machine, list(p.fit_params))
     values = np.array(list(p.fit_params.values()))
     path = np.array(labels, dtype=object)
@@ -419,7 +428,7 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
                                setup=p.setup)
         if tables:
             files[".comp.csv"] = _comp_csv(tables)
-    else:
+    elif ctl.family == "sinumerik":
         if machine.sinumerik is None:
             raise CompgenError(f"machine file {machine.source} has no [sinumerik] section",
                                hint="give tcarr (the record) and the axis vectors the control holds")
@@ -447,6 +456,12 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
         notes += ["$TC_CARR changes:", *diff]
         if p.squareness:
             notes.append("squareness goes to linear CEC tables: " + ", ".join(p.squareness))
+    elif ctl.family == "linuxcnc":
+        module, pins, other = linuxcnc_pins(machine, p, current, current_where)
+        files[".hal"] = render("linuxcnc/kinematics.hal.j2", header=header, module=module, lines=lines_txt,
+                               pins=pins, other=other)
+        notes += [f"setp {module}.{n} {v}  (was {w})" for n, v, w in pins]
+        notes.append("not expressible in the trt kinematics: " + ", ".join(other))
     files[f"_SIGN{ctl.program_ext}"] = signcheck
     if p.not_compensable:
         notes.append(f"not compensable on {ctl.words} by compgen: " + ", ".join(p.not_compensable))
@@ -630,6 +645,8 @@ def controller_model(machine: Machine, texts: dict[str, str], current: str | Non
                                    where=where)
             held = read_carr(current, "current", machine.sinumerik["tcarr"])
             lines = read_sinumerik_lines(text, machine, held)
+        elif SETP.search(text):
+            lines = read_linuxcnc_lines(text, machine, current)
         elif re.search(r"\bTrans\b", text):
             lines = read_heidenhain_lines(text, machine)
             squareness = read_heidenhain_squareness(text, machine)
@@ -649,3 +666,66 @@ def read_heidenhain_squareness(text: str, machine: Machine) -> dict[str, float]:
         if axis in linear:
             out[f"{rot}O{axis}"] = np.radians(float(value))
     return out
+
+
+# ---------------------------------------------------------------------------------- LinuxCNC
+
+SETP = re.compile(r"^\s*setp\s+(\S+?)\.(\S+)\s+(\S+)")
+
+
+def _trt(machine: Machine) -> tuple[str, object, object]:
+    """The trt module for a two-axis table (A or B tilting, C on it), or a clear refusal."""
+    axes = machine.rotary_axes
+    if (len(axes) != 2 or any(a.side != "workpiece" for a in axes) or axes[1].direction != "z"
+            or axes[0].direction not in "xy"):
+        raise CompgenError("LinuxCNC's trt kinematics is for a tilting table (A or B) carrying C",
+                           hint="this machine's chain is not one xyzac-/xyzbc-trt-kins can drive")
+    return f"xyz{axes[0].name.lower()}c-trt-kins", axes[0], axes[1]
+
+
+def linuxcnc_pins(machine: Machine, p: Plan, current: str | None,
+                  where: str) -> tuple[str, list[tuple[str, str, str]], list[str]]:
+    """trt pins (trtfuncs.c): C turns about the line through the rot point, the tilting
+    axis about the line through the rot point plus the offsets. Absolute values: the
+    current ones (a HAL file) or the machine file's nominal, plus the corrections."""
+    module, tilt, c = _trt(machine)
+    pivot_c, pivot_t = _pivot_of(machine, c.name), _pivot_of(machine, tilt.name)
+    along = "xyz".index(tilt.direction)
+    names = ["x-rot-point", "y-rot-point", "z-rot-point"] + [
+        f"{'xyz'[k]}-offset" for k in range(3) if k not in (along,)]
+    nominal_d = pivot_t - pivot_c
+    nominal = {**dict(zip(names[:3], pivot_c, strict=True)),
+               **{f"{'xyz'[k]}-offset": nominal_d[k] for k in range(3) if k != along}}
+    held = dict(nominal)
+    if current is not None:
+        found = {m[2]: float(m[3]) for m in map(SETP.match, current.splitlines()) if m and m[1] == module}
+        missing = [n for n in names if n not in found]
+        if missing:
+            raise CompgenError(f"--current sets no {module}.{missing[0]}", where=where,
+                               hint=f"give the setp lines of {', '.join(names)}")
+        held = found
+    delta_r = p.lines[c.name].offset
+    delta_d = p.lines[tilt.name].offset - delta_r
+    new = {n: held[n] + (delta_r if n.endswith("rot-point") else delta_d)["xyz".index(n[0])] for n in names}
+    other = [f"{n} tilt {line.tilt[i] / ARCSEC:+.2f} arcsec about {'XYZ'[i]}"
+             for n, line in p.lines.items() for i in range(3) if line.tilt[i] != 0]
+    other += list(p.squareness) + [t["effect"] for t in p.tables] + list(p.not_compensable)
+    pins = [(n, fmt_plain(new[n], 6), fmt_plain(held[n], 6)) for n in names]
+    return module, pins, other
+
+
+def read_linuxcnc_lines(text: str, machine: Machine, current: str | None = None) -> dict[str, AxisLine]:
+    """The axis lines a trt HAL edit sets, relative to ``current`` (default: nominal)."""
+    module, tilt, c = _trt(machine)
+    now = {m[2]: float(m[3]) for m in map(SETP.match, text.splitlines()) if m and m[1] == module}
+    before = ({m[2]: float(m[3]) for m in map(SETP.match, current.splitlines()) if m and m[1] == module}
+              if current else None)
+    pivot_c, pivot_t = _pivot_of(machine, c.name), _pivot_of(machine, tilt.name)
+    if before is None:
+        before = {"x-rot-point": pivot_c[0], "y-rot-point": pivot_c[1], "z-rot-point": pivot_c[2],
+                  **{f"{'xyz'[k]}-offset": (pivot_t - pivot_c)[k] for k in range(3)}}
+    r = np.array([now[f"{a}-rot-point"] - before[f"{a}-rot-point"] for a in "xyz"])
+    d = np.array([now.get(f"{a}-offset", 0.0) - before.get(f"{a}-offset", 0.0) for a in "xyz"])
+    zero = np.zeros(3)
+    return {c.name: AxisLine(c.name, c.direction, pivot_c, r, zero),
+            tilt.name: AxisLine(tilt.name, tilt.direction, pivot_t, r + d, zero)}

@@ -23,6 +23,7 @@ from ..rtest import BALL
 from . import Emitted, ascii_text, controller, fmt_plain, fmt_signed, render
 
 MODES = ("tcpm", "axes")
+TCP_WORDS = {"heidenhain": "FUNCTION TCPM", "sinumerik": "TRAORI", "linuxcnc": "trt kinematics"}
 LINEAR_DECIMALS = 4       # 0.1 µm
 ANGLE_DECIMALS = 4        # 0.0001°
 
@@ -90,7 +91,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     header = [
         f"compgen {version} R-test measurement program, {date}",
         f"machine: {ascii_text(machine.name)}; controller: {ctl.words}",
-        ("mode TCPM: FUNCTION TCPM/TRAORI, the control's kinematics moves X Y Z (tests the control)"
+        (f"mode TCPM: {TCP_WORDS[ctl.family]}, the control's kinematics moves X Y Z (tests the control)"
          if mode == "tcpm" else
          "mode AXES: X Y Z from compgen's inverse kinematics (tests compgen's nominal model)"),
         f"path {ascii_text(label)}: {len(poses)} poses; pose list {name}.poses.csv, same order",
@@ -155,6 +156,7 @@ def _check_feed(machine: Machine, poses: Poses, feed: float, label: str) -> None
 POSE_LINE = {
     "heidenhain": re.compile(r"^\d+ L X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)R0 F\S+ ; pose (\d+)"),
     "sinumerik": re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)"),
+    "linuxcnc": re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)"),
 }
 
 
@@ -164,7 +166,8 @@ def read_program(text: str, machine: Machine, controller_name: str) -> tuple[str
     In TCPM mode X Y Z are workpiece coordinates; in axes mode machine-axis positions.
     """
     family = controller(controller_name).family
-    switch_on = (r"^\d+ FUNCTION TCPM F" if family == "heidenhain" else r"^TRAORI\b")
+    switch_on = {"heidenhain": r"^\d+ FUNCTION TCPM F", "sinumerik": r"^TRAORI\b",
+                 "linuxcnc": r"^; mode TCPM"}[family]
     tcpm = re.search(switch_on, text, flags=re.MULTILINE) is not None
     xyz, rot, numbers = [], [], []
     names = [a.name for a in machine.rotary_axes]

@@ -1,0 +1,134 @@
+"""A real controller in the loop: a headless LinuxCNC (Debian's linuxcnc-uspace) with the
+xyzac-trt kinematics runs compgen's programs; its joints are checked against compgen, and
+compgen's kinematics edit, loaded into LinuxCNC, is shown to remove the errors it can hold.
+
+CI installs LinuxCNC and sets COMPGEN_REQUIRE_LINUXCNC; elsewhere the test is skipped when
+LinuxCNC is not installed.
+"""
+
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT, SEED_MACHINE, UM
+
+from compgen.emit.kinematics import kinematics_edit, read_linuxcnc_lines
+from compgen.emit.programs import measure_program
+from compgen.identify import identify
+from compgen.kinematics import Model, Poses
+from compgen.lines import controller_inverse
+from compgen.machine import load_machine
+from compgen.paths import generate
+from compgen.rtest import RTestData
+from compgen.simulate import simulate
+
+HERE = ROOT / "tests" / "linuxcnc"
+JOINT_MM = 1e-6     # LinuxCNC's trt inverse vs compgen's, both in double precision
+NOISE_UM = 0.5
+# what LinuxCNC's trt kinematics can hold: axis-line positions (and the ball's set-up)
+TRUTH = {"XOW": 4 * UM, "YOW": -6 * UM, "ZOW": 9 * UM, "YOA": 20 * UM, "ZOA": -15 * UM,
+         "XOC": 12 * UM, "YOC": -8 * UM}
+
+pytestmark = pytest.mark.skipif(
+    shutil.which("linuxcnc") is None and not os.environ.get("COMPGEN_REQUIRE_LINUXCNC"),
+    reason="LinuxCNC is not installed (apt-get install linuxcnc-uspace)")
+
+
+@pytest.fixture(scope="module")
+def machine(tmp_path_factory):
+    """The seed machine with a quick [program]: short dwell, brisk feed."""
+    path = tmp_path_factory.mktemp("m") / "seed-fast.toml"
+    path.write_text(SEED_MACHINE.read_text().replace("dwell = 1.0", "dwell = 0.05")
+                    .replace("feed = 500.0", "feed = 3000.0"))
+    return load_machine(path)
+
+
+def run_linuxcnc(folder, program: str, setp: str) -> dict[int, np.ndarray]:
+    """Run ``program`` on a headless LinuxCNC; settled joints by 1-based program line."""
+    assert shutil.which("linuxcnc"), "LinuxCNC is required here (COMPGEN_REQUIRE_LINUXCNC)"
+    folder.mkdir(exist_ok=True)
+    (folder / "sim.ini").write_text((HERE / "sim.ini.in").read_text()
+                                    .replace("@DRIVER@", str(HERE / "driver.py"))
+                                    .replace("@KINS@", "xyzac-trt-kins"))
+    (folder / "sim.hal").write_text((HERE / "sim.hal.in").read_text().replace("@SETP@", setp))
+    (folder / "sim.tbl").write_text("T1 P1 Z0 ;R-test nest\n")
+    (folder / "sim.var").write_text("")
+    (folder / "prog.ngc").write_text(program)
+    sockets = Path(tempfile.mkdtemp(prefix="compgen-rtapi-"))
+    sockets.chmod(0o777)                  # rtapi_app, no longer root, must create its socket
+    env = {**os.environ, "COMPGEN_NGC": str(folder / "prog.ngc"),
+           "COMPGEN_JOINTS": str(folder / "joints.txt"), "RTAPI_FIFO_PATH": str(sockets / "rtapi.sock")}
+    if os.geteuid() == 0:
+        env["RTAPI_UID"] = "65534"        # rtapi_app drops root to this uid
+    env.pop("PYTHONPATH", None)
+    done = subprocess.run(["linuxcnc", str(folder / "sim.ini")], cwd=folder, env=env, timeout=300,
+                          capture_output=True, text=True)
+    result = folder / "joints.txt"
+    assert result.exists(), f"LinuxCNC wrote no joints (exit {done.returncode}): {done.stdout[-1500:]}"
+    text = result.read_text()
+    assert text.rstrip().endswith("done"), text[-500:]
+    return {int(w[0]): np.array([float(v) for v in w[1:]])
+            for w in (ln.split() for ln in text.splitlines()) if w[0].isdigit()}
+
+
+def _at_poses(joints: dict[int, np.ndarray], program: str) -> np.ndarray:
+    """Joints at each pose block. A block that moves nothing (the first pose repeats the
+    approach) gets no motion line of its own: the machine is where the last one left it."""
+    lines = [i for i, ln in enumerate(program.splitlines(), start=1) if re.search(r"; pose \d+", ln)]
+    seen = np.array(sorted(joints))
+    return np.array([joints[seen[seen <= line].max()] for line in lines])
+
+
+def _every(machine, step=6):
+    return generate(machine, ["K4"]).take(np.arange(0, 241, step))
+
+
+def test_linuxcnc_runs_the_k4_program_where_compgen_puts_it(machine, tmp_path):
+    poses = _every(machine)
+    emitted = measure_program(machine, poses, "K4", "linuxcnc", "tcpm", "K4", "0", "d")
+    program, listed = emitted.files[".ngc"], emitted.files[".poses.csv"]
+    t0 = time.perf_counter()
+    joints = run_linuxcnc(tmp_path / "run", program,
+                          "setp xyzac-trt-kins.z-rot-point 29.794\nsetp xyzac-trt-kins.z-offset -29.794")
+    seconds = time.perf_counter() - t0
+    got = _at_poses(joints, program)
+    want = np.loadtxt(listed.splitlines()[1:], delimiter=",", usecols=(1, 2, 3, 4, 5))
+    np.testing.assert_allclose(got[:, :3], want[:, :3], rtol=0, atol=JOINT_MM)
+    np.testing.assert_allclose(got[:, 3:], want[:, 3:], rtol=0, atol=1e-9)
+    print(f"LinuxCNC ran {len(got)} K4 poses in {seconds:.1f} s")
+
+
+def test_compgens_edit_loaded_into_linuxcnc_removes_what_it_can_hold(machine, tmp_path):
+    full = generate(machine, ["K4", "K1", "K2"])
+    rng = np.random.default_rng(11)
+    pre = simulate(machine, TRUTH, full, NOISE_UM, rng)
+    fit = identify(machine, [pre])
+    hal = kinematics_edit(machine, fit, "linuxcnc", None, "", "KIN", "0", "d").files[".hal"]
+    setp = "\n".join(ln.split("#")[0] for ln in hal.splitlines() if ln.startswith("setp"))
+    subset = np.arange(0, 241, 6)                      # K4 comes first in ``full``
+    poses = full.take(subset)
+    program = measure_program(machine, poses, "K4", "linuxcnc", "tcpm", "K4", "0", "d").files[".ngc"]
+    joints = run_linuxcnc(tmp_path / "edit", program, setp)
+    q = _at_poses(joints, program)
+    q[:, 3:] = np.radians(q[:, 3:])
+    # LinuxCNC drives exactly as compgen's model of that controller says it will
+    held = controller_inverse(machine, read_linuxcnc_lines(hal, machine), q[:, 3:], poses.ball)
+    np.testing.assert_allclose(q[:, :3], held[:, :3], rtol=0, atol=JOINT_MM)
+    # the true machine, driven to LinuxCNC's joints, reads set-up and noise only; the
+    # session records the nominal poses, as a real one would
+    true = Model(machine, list(TRUTH))
+    reading = true.relative(Poses(q, poses.ball, poses.t, poses.path), np.array(list(TRUTH.values())))
+    reading = reading + rng.normal(0, NOISE_UM * 1e-3, reading.shape)
+    setup = ["XOW", "YOW", "ZOW"]
+    before = identify(machine, [RTestData(poses, pre.deviation[subset])], setup)
+    after = identify(machine, [RTestData(poses, reading)], setup)
+    print(f"LinuxCNC edit: K4 misfit beyond set-up {before.residual['rms_um']:.3f} -> "
+          f"{after.residual['rms_um']:.3f} um")
+    assert before.residual["rms_um"] > 10 * NOISE_UM
+    assert after.residual["rms_um"] == pytest.approx(NOISE_UM, rel=0.25)
