@@ -51,8 +51,8 @@ def bc_fit(bc_machine):
     return _fit(bc_machine, BC_TRUTH, model)[0]
 
 
-@pytest.mark.parametrize("controller", ["itnc530", "tnc640"])
-def test_heidenhain_outputs_match_golden_files(seed_machine, seed_fit, controller, golden):
+@pytest.mark.parametrize("controller", ["itnc530", "tnc640", "linuxcnc"])
+def test_heidenhain_and_linuxcnc_outputs_match_golden_files(seed_machine, seed_fit, controller, golden):
     current = CURRENT_TAB if controller == "itnc530" else None
     emitted = kinematics_edit(seed_machine, seed_fit, controller, current, "current.TAB", "KIN",
                               "0.1.0", DATE)
