@@ -3,7 +3,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
+from compgen.cli import main
 from compgen.machine import load_machine
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -53,6 +55,12 @@ def bc_machine():
 @pytest.fixture
 def rng():
     return np.random.default_rng(20261124)
+
+
+def run(*args):
+    """Invoke the CLI in-process: (exit code, stdout, stderr)."""
+    result = CliRunner().invoke(main, [str(a) for a in args])
+    return result.exit_code, result.stdout, result.stderr
 
 
 def vector(name: str) -> Path:

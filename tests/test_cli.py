@@ -4,18 +4,12 @@ output file written. Good input: the commands do what the README says."""
 import json
 
 import pytest
-from click.testing import CliRunner
-from conftest import BC_MACHINE, SEED_MACHINE, TABLE4
-
-from compgen.cli import main
+from conftest import BC_MACHINE, SEED_MACHINE, TABLE4, run
 
 GOOD_HEADER = "path,t,X,Y,Z,A,C,dX,dY,dZ"
 GOOD_ROW = "K4,0.000,-217.5040,-0.2790,241.3310,0.0000,0.0000,-7.8617,2.7427,-6.7288"
 
 
-def run(*args):
-    result = CliRunner().invoke(main, [str(a) for a in args])
-    return result.exit_code, result.stdout, result.stderr
 
 
 @pytest.fixture

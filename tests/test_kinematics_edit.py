@@ -2,10 +2,8 @@
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
-from conftest import ARCSEC, ROOT, SEED_MACHINE, TABLE4, UM
+from conftest import ARCSEC, ROOT, SEED_MACHINE, TABLE4, UM, run
 
-from compgen.cli import main
 from compgen.effects import location_model
 from compgen.emit.kinematics import (
     apply_cec,
@@ -135,9 +133,6 @@ def test_corrections_beyond_the_plausibility_limits_are_refused(seed_machine):
     assert ".TAB" in forced.files
 
 
-def run(*args):
-    r = CliRunner().invoke(main, [str(a) for a in args])
-    return r.exit_code, r.stdout, r.stderr
 
 
 @pytest.fixture

@@ -4,10 +4,8 @@ from io import StringIO
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
-from conftest import SEED_MACHINE, vector
+from conftest import SEED_MACHINE, run, vector
 
-from compgen.cli import main
 from compgen.emit import CONTROLLERS
 from compgen.emit.programs import measure_program, read_program
 from compgen.kinematics import Model, Poses
@@ -100,9 +98,6 @@ def test_axes_program_equals_the_shared_vectors_poses(seed_machine):
     assert np.abs(Model(seed_machine, ()).relative(back)).max() < FORMAT_MM
 
 
-def run(*args):
-    r = CliRunner().invoke(main, [str(a) for a in args])
-    return r.exit_code, r.stdout, r.stderr
 
 
 def test_cli_writes_program_and_pose_list(tmp_path):

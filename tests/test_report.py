@@ -7,17 +7,11 @@ import sys
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
-from conftest import ROOT, SEED_MACHINE
-
-from compgen.cli import main
+from conftest import ROOT, SEED_MACHINE, run
 
 SESSION = ROOT / "examples" / "seed-session.csv"
 
 
-def run(*args):
-    r = CliRunner().invoke(main, [str(a) for a in args])
-    return r.exit_code, r.stdout, r.stderr
 
 
 @pytest.fixture(scope="module")
