@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from . import __version__
 from .checklist import checklist, markdown
 from .compare import compare
 from .diagnose import diagnose
@@ -20,7 +21,7 @@ from .emit.kinematics import controller_model, kinematics_edit
 from .emit.programs import MODES, measure_program, program_name
 from .errors import CompgenError
 from .files import write_all, write_atomically
-from .identify import _version, identify, parse_fixed
+from .identify import identify, parse_fixed
 from .machine import load_machine
 from .paths import generate
 from .report import report_html
@@ -198,7 +199,7 @@ def measure_program_cmd(machine_file, path_names, poses_file, controller_name, m
         poses, label = generate(machine, names), "+".join(names)
     ctl = controller(controller_name or machine.controller)
     name = program_name(Path(output).stem if output else f"RTEST_{label}")
-    emitted = measure_program(machine, poses, label, ctl.name, mode, name, _version(),
+    emitted = measure_program(machine, poses, label, ctl.name, mode, name, __version__,
                               date.today().isoformat())
     program = emitted.files[ctl.program_ext]
     if not output:
@@ -232,7 +233,7 @@ def kinematics_cmd(base, controller_name, current, output, force):
     text = _read_text(current) if current else None
     out = Path(output)
     name = program_name(out.stem)
-    emitted = kinematics_edit(machine, fit, ctl.name, text, current or "", name, _version(),
+    emitted = kinematics_edit(machine, fit, ctl.name, text, current or "", name, __version__,
                               date.today().isoformat(), force)
     main_key = (".TAB" if text is not None else ".txt") if ctl.family == "heidenhain" else ".MPF"
     files = {(out if key == main_key else out.with_name(out.stem + key)): body
@@ -306,7 +307,7 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, outpu
     comparison = compare(machine, sets, fit, controller_name or machine.controller, post)
     images = figures(machine, sets, fit, load_fit(before) if before else None)
     steps = checklist(machine, folder or Path(base).parent)
-    html = report_html(machine, fit, found, images, comparison, emitted, steps, _version(),
+    html = report_html(machine, fit, found, images, comparison, emitted, steps, __version__,
                        date.today().isoformat())
     write_atomically(output, html, force)
     click.echo(f"wrote {output}")

@@ -8,11 +8,11 @@ References: seed report §3 (eq. 26); ``shared/research/identification.md`` §1.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
 
+from . import __version__
 from .effects import canonical, effect_of_param, location_model
 from .errors import CompgenError
 from .kinematics import Model, Poses
@@ -96,7 +96,7 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         model=tuple(names), parameters=params, free=tuple(names[i] for i in free),
         correlation=np.clip(corr, -1.0, 1.0), singular_values=sv,
         residual=residual_stats(poses, r.reshape(-1, 3), dof),
-        method=method, iterations=iterations, sign=sign, version=_version(),
+        method=method, iterations=iterations, sign=sign, version=__version__,
         descriptions={n: e.words for n, e in zip(names, m.effects, strict=True)})
 
 
@@ -193,13 +193,6 @@ def _absolute(path: str) -> str:
 
 def _counts(labels: np.ndarray) -> dict[str, int]:
     return {str(k) or "(unlabelled)": int((labels == k).sum()) for k in dict.fromkeys(labels)}
-
-
-def _version() -> str:
-    try:
-        return version("compgen")
-    except PackageNotFoundError:
-        return "0+unknown"
 
 
 def parse_fixed(machine: Machine, items: Sequence[str]) -> dict[str, float]:

@@ -103,15 +103,6 @@ class Model:
         values = np.zeros(len(self.names)) if values is None else np.asarray(values, float)
         return relative(self.machine, poses, self._slots(poses, values), lines)
 
-    def ball_position(self, poses: Poses, values: np.ndarray | None = None,
-                      lines: Mapping[str, tuple] | None = None) -> np.ndarray:
-        """Ball centre in the machine frame, (n, 3) mm."""
-        values = np.zeros(len(self.names)) if values is None else np.asarray(values, float)
-        slots = self._slots(poses, values)
-        zero = np.zeros((len(poses), 6))
-        table = _chain(self.machine, self.machine.workpiece, poses, slots, zero, lines)
-        return apply(table, poses.ball + slots.get(("ball", "loc"), zero)[:, :3])
-
     def frame_before_motion(self, poses: Poses, values: np.ndarray, chain, i: int) -> np.ndarray:
         """Frame of axis ``chain[i]`` just before its own motion, machine frame, (n, 4, 4)."""
         slots = self._slots(poses, np.asarray(values, float))

@@ -98,22 +98,5 @@ def controller_inverse(machine: Machine, lines: Mapping[str, AxisLine], rotary_r
                    params=dict(squareness or {}))
 
 
-def controller_relative(machine: Machine, lines: Mapping[str, AxisLine], poses: Poses) -> np.ndarray:
-    """Nest minus ball on the controller's model (its lines, nominal elsewhere), (n, 3) mm."""
-    return Model(machine, ()).relative(poses, lines=_as_conjugations(machine, lines))
-
-
 def _as_conjugations(machine: Machine, lines: Mapping[str, AxisLine]) -> dict[str, tuple]:
     return {name: (line.offset, line.tilt) for name, line in lines.items()}
-
-
-def ball_setup(machine: Machine, params: Mapping[str, float], lines: Mapping[str, AxisLine]) -> np.ndarray:
-    """Where the true ball sits at the zero pose relative to where a controller holding
-    ``lines`` expects it, mm (machine frame): the set-up term no kinematics edit removes."""
-    zero = Poses(np.zeros((1, len(machine.axes))), np.array([machine.ball]), np.zeros(1),
-                 np.array([""], dtype=object))
-    model = Model(machine, list(params))
-    true = model.ball_position(zero, np.array(list(params.values())))
-    expected = Model(machine, ()).ball_position(zero, lines=_as_conjugations(machine, lines))
-    return (true - expected)[0]
-

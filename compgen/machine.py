@@ -340,10 +340,6 @@ class _Getter:
         return _Getter(self.list(key)[index], f"{self.at(key)}[{index}]")
 
 
-def sha256_of(path: str | Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
 def travel_violations(machine: Machine, q: np.ndarray) -> np.ndarray:
     """Boolean (n, k): which pose coordinates (mm, rad) leave the machine's travel."""
     lo = np.array([a.travel[0] if not a.rotary else math.radians(a.travel[0]) for a in machine.axes])
