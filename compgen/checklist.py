@@ -12,6 +12,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .errors import CompgenError
 from .machine import Machine
 
 DONE, OPEN, BY_HAND = "done", "open", "by hand"
@@ -74,7 +75,9 @@ def _is_rtest(head: str) -> bool:
 
 def checklist(machine: Machine, folder: str | Path) -> list[Step]:
     folder = Path(folder)
-    f = _scan(folder) if folder.is_dir() else _Found()
+    if not folder.is_dir():
+        raise CompgenError("no such folder", where=str(folder), hint="give the work folder with --dir")
+    f = _scan(folder)
     m = machine.source
     fit = max(f.fits, key=lambda x: x[0].stat().st_mtime, default=None)
     fit_path = str(fit[0]) if fit else "fit.json"

@@ -69,6 +69,8 @@ def test_checklist_ticks_from_artefacts_and_names_the_next_step(work):
     assert run("measure-program", "--machine", SEED_MACHINE, "--path", "K4", "-o", work / "K4.H")[0] == 0
     code, out, _ = run("checklist", "--machine", SEED_MACHINE, "--dir", work)
     assert "[x] Measurement programs written" in out and "Next: `compgen diagnose" in out
+    code, _, err = run("checklist", "--machine", SEED_MACHINE, "--dir", work / "nope")
+    assert code == 2 and "no such folder" in err
 
 
 def test_templates_ship_inside_the_installed_package(tmp_path):
