@@ -1,5 +1,7 @@
 """Kinematics edits: golden files, round trip, the closed loop in simulation, refusals."""
 
+import re
+
 import numpy as np
 import pytest
 from conftest import ARCSEC, ROOT, SEED_MACHINE, TABLE4, UM, run
@@ -195,3 +197,32 @@ def test_every_controller_file_is_ascii(seed_machine, seed_fit, bc_machine, bc_f
                     kinematics_edit(bc_machine, bc_fit, "sinumerik840d", CURRENT_CARR, "c", "K", "0", DATE)):
         for text in emitted.files.values():
             text.encode("ascii")
+
+
+@pytest.mark.parametrize("controller", ["itnc530", "linuxcnc"])
+def test_sign_check_promises_what_the_loaded_edit_does(seed_machine, seed_fit, controller):
+    """The expected reading changes printed with an edit, against the change the edit makes
+    when its files are read back and loaded, pose by pose (µm, two decimals printed)."""
+    from compgen.emit.kinematics import controller_model
+    from compgen.emit.programs import read_program
+    emitted = kinematics_edit(seed_machine, seed_fit, controller, CURRENT_TAB if controller == "itnc530"
+                              else None, "c", "KIN", "0", DATE)
+    main = emitted.files[".TAB" if controller == "itnc530" else ".hal"]
+    held = controller_model(seed_machine, {"edit": main}, None)
+    _, _, rot = read_program(emitted.files[f"_SIGN{'.H' if controller == 'itnc530' else '.ngc'}"],
+                             seed_machine, controller)
+    listed = [ln for ln in emitted.notes if re.match(r"S\d+_", ln)]
+    assert len(listed) == len(rot)
+    truth = Model(seed_machine, list(seed_fit.model))
+    values = np.array([seed_fit.parameters[n].value for n in seed_fit.model])
+    from compgen.kinematics import inverse
+    rotary = np.radians(rot)
+    ball = np.broadcast_to(seed_machine.ball, (len(rot), 3))
+    blank = (np.zeros(len(rot)), np.full(len(rot), "", dtype=object))
+    before = truth.relative(Poses(inverse(seed_machine, rotary, ball), ball, *blank), values)
+    moved = held.drive(seed_machine, Poses(inverse(seed_machine, rotary, ball), ball, *blank))
+    after = truth.relative(Poses(moved, ball, *blank), values)
+    for line, change in zip(listed, (after - before) * 1e3, strict=True):
+        printed = [float(v) for v in re.findall(r"d[XYZ] ([+-]\d+\.\d+)", line)]
+        # printed to 0.01 µm (±0.005) from values the table rounds to 0.01 µm (±0.005)
+        np.testing.assert_allclose(printed, change, atol=0.011, err_msg=line)
