@@ -670,7 +670,7 @@ def read_heidenhain_squareness(text: str, machine: Machine) -> dict[str, float]:
 
 # ---------------------------------------------------------------------------------- LinuxCNC
 
-SETP = re.compile(r"^\s*setp\s+(\S+?)\.(\S+)\s+(\S+)")
+SETP = re.compile(r"^\s*setp\s+(\S+?)\.(\S+)\s+(\S+)", re.MULTILINE)
 
 
 def _trt(machine: Machine) -> tuple[str, object, object]:
