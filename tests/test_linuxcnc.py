@@ -67,6 +67,9 @@ def run_linuxcnc(folder, program: str, setp: str) -> dict[int, np.ndarray]:
     if os.geteuid() == 0:
         env["RTAPI_UID"] = "65534"        # rtapi_app drops root to this uid
     env.pop("PYTHONPATH", None)
+    lock = Path("/tmp/linuxcnc.lock")     # left by a run that died: the launcher would ask
+    if lock.exists() and subprocess.run(["pgrep", "-x", "milltask"], capture_output=True).returncode:
+        lock.unlink()
     done = subprocess.run(["linuxcnc", str(folder / "sim.ini")], cwd=folder, env=env, timeout=300,
                           capture_output=True, text=True)
     result = folder / "joints.txt"
