@@ -91,3 +91,14 @@ def test_end_to_end_example(tmp_path):
                           text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert "The machine improved as predicted: 0.816 µm measured, 0.822 µm predicted." in done.stdout
+
+
+def test_a_tilting_axis_positioning_error_goes_to_a_cec_table(seed_machine):
+    """EAA:p1 (A positioning, per rad of A): a non-modulo CEC table over A's travel."""
+    truth = {**TABLE4, "EAA:p1": 3 * ARCSEC}
+    poses = generate(seed_machine, ["K4", "K1", "K2"])
+    pre = simulate(seed_machine, truth, poses, NOISE_UM, np.random.default_rng(3))
+    fit = identify(seed_machine, [pre], [*location_model(seed_machine), "EAA:p1"])
+    result = compare(seed_machine, [pre], fit, "sinumerik840d")
+    assert result.not_compensated == ()
+    assert result.predicted_post["rms_um"] == pytest.approx(NOISE_UM, rel=0.05)

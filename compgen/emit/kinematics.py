@@ -310,9 +310,7 @@ def cec_tables(machine: Machine, p: Plan) -> list[dict]:
     out = []
     for t in p.tables:
         axis = machine.axis(t["axis"])
-        lo, hi = axis.travel
-        if axis.rotary:
-            lo, hi = 0.0, 360.0 if axis.full_turn else (lo, hi)
+        lo, hi = (0.0, 360.0) if axis.full_turn else axis.travel
         grid = np.linspace(lo, hi, CEC_POINTS)
         names = [n for n in p.fit_params if effect_name(n) == t["effect"]]
         only = Model(machine, names)
