@@ -17,11 +17,10 @@ import numpy as np
 
 from .diagnose import diagnose
 from .emit import controller
-from .emit.kinematics import apply_cec, cec_tables, held_lines, plan, squareness_tables
+from .emit.kinematics import held_by, plan
 from .errors import CompgenError
 from .identify import identify
 from .kinematics import Model, Poses
-from .lines import controller_inverse
 from .machine import Machine
 from .results import FitResult
 from .rtest import RTestData
@@ -91,20 +90,14 @@ def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, control
     x = np.array([fit.parameters[n].value for n in fit.model])
     residual = y - model.deviation(poses, x)
     p = plan(machine, fit, force=True)   # predict even what the limits would refuse to write
-    rotary = poses.q[:, [machine.index(a.name) for a in machine.rotary_axes]]
     if ctl.family == "sinumerik":        # squareness and single-axis errors through CEC tables
-        tables = cec_tables(machine, p) + squareness_tables(machine, p)
-        q = controller_inverse(machine, p.lines, rotary, poses.ball)
-        q = apply_cec(machine, [_as_read(t) for t in tables], q)
         not_held = list(p.not_compensable)
     elif ctl.family == "linuxcnc":       # line positions only: tilts and the rest stay
-        q = controller_inverse(machine, held_lines(p, ctl.family), rotary, poses.ball)
         not_held = [f"{n} tilt" for n, line in p.lines.items() if line.tilt.any()]
         not_held += list(p.squareness) + [t["effect"] for t in p.tables] + list(p.not_compensable)
     else:                                # squareness in the rows around MachAxis X / Z
-        q = controller_inverse(machine, p.lines, rotary, poses.ball, p.squareness)
         not_held = [t["effect"] for t in p.tables] + list(p.not_compensable)
-    after = Poses(q, poses.ball, poses.t, poses.path)
+    after = Poses(held_by(machine, p, ctl.family).drive(machine, poses), poses.ball, poses.t, poses.path)
     predicted = model.relative(after, x) + residual
     before = _beyond_setup(machine, poses, y)
     pred = _beyond_setup(machine, after, predicted)
@@ -148,10 +141,3 @@ def _measured(machine: Machine, fit: FitResult, post: Sequence[RTestData], predi
         except CompgenError as exc:   # the post data may not support the model: say so
             out["diagnose"] = f"not possible on these post data: {exc}"
     return out
-
-
-def _as_read(t: dict) -> dict:
-    """A generated table in the form ``read_cec`` returns, for ``apply_cec``."""
-    return {"input_axis": t["input"], "output_axis": t["output"], "min": t["min"], "max": t["max"],
-            "step": t["step"], "is_modulo": t["modulo"], "values": np.asarray(t["values"])}
-

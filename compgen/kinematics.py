@@ -63,6 +63,13 @@ class Poses:
         return Poses(self.q[index], self.ball[index], self.t[index], self.path[index])
 
     @staticmethod
+    def at(q: np.ndarray, ball) -> Poses:
+        """Poses with no time and no path label: ``ball`` (3,) or (n, 3) mm."""
+        n = len(q)
+        return Poses(q, np.broadcast_to(np.asarray(ball, float), (n, 3)), np.full(n, np.nan),
+                     np.full(n, "", dtype=object))
+
+    @staticmethod
     def concat(items: Sequence[Poses]) -> Poses:
         return Poses(*(np.concatenate([getattr(p, f) for p in items])
                        for f in ("q", "ball", "t", "path")))
@@ -247,10 +254,9 @@ def inverse(machine: Machine, rotary_rad: np.ndarray, ball: np.ndarray,
     q[:, [i for i, a in enumerate(machine.axes) if a.rotary]] = rotary_rad
     held = Model(machine, list(params or {}))
     values = np.array(list((params or {}).values()))
-    blank = (np.full(n, np.nan), np.full(n, "", dtype=object))
 
     def rel(qq):
-        return held.relative(Poses(qq, ball.copy(), *blank), values, lines=lines)
+        return held.relative(Poses.at(qq, ball), values, lines=lines)
 
     r0 = rel(q)
     M = np.empty((n, 3, 3))

@@ -63,8 +63,7 @@ def axis_lines(machine: Machine, params: Mapping[str, float]) -> dict[str, AxisL
     loc = location_params(machine, params)
     model = Model(machine, list(loc))
     values = np.array(list(loc.values()))
-    zero = Poses(np.zeros((1, len(machine.axes))), np.zeros((1, 3)), np.zeros(1),
-                 np.array([""], dtype=object))
+    zero = Poses.at(np.zeros((1, len(machine.axes))), np.zeros(3))
     lines = {}
     for chain in (machine.workpiece, machine.tool):
         for i, axis in enumerate(chain):

@@ -310,26 +310,41 @@ def cec_tables(machine: Machine, p: Plan) -> list[dict]:
     out = []
     for t in p.tables:
         axis = machine.axis(t["axis"])
-        lo, hi = (0.0, 360.0) if axis.full_turn else axis.travel
-        grid = np.linspace(lo, hi, CEC_POINTS)
         names = [n for n in p.fit_params if effect_name(n) == t["effect"]]
-        only = Model(machine, names)
-        q = np.zeros((CEC_POINTS, len(machine.axes)))
-        q[:, machine.index(axis.name)] = np.radians(grid) if axis.rotary else grid
-        poses = Poses(q, np.broadcast_to(machine.ball, (CEC_POINTS, 3)), np.zeros(CEC_POINTS),
-                      np.full(CEC_POINTS, "", dtype=object))
-        e = effect_of_param(machine, names[0])
         if axis.rotary:               # an angle error: undo it on the axis itself
-            out_axis, comp = axis.name, -np.degrees(dev_angle(machine, axis, names, p.fit_params, grid))
+            grid = _grid(axis)
+            comp = -np.degrees(dev_angle(machine, axis, names, p.fit_params, grid))
+            out.append(_table(t["effect"], t["words"], axis, axis.name, grid, comp, "deg"))
         else:
-            dev = only.deviation(poses, np.array([p.fit_params[n] for n in names]))
-            k = "xyz".index(e.direction)
-            out_axis = next(a.name for a in machine.axes if not a.rotary and a.direction == e.direction)
-            comp = -dev[:, k] / _gain(machine, out_axis, k)
-        out.append({"effect": t["effect"], "words": t["words"], "input": axis.name, "output": out_axis,
-                    "min": grid[0], "max": grid[-1], "step": grid[1] - grid[0],
-                    "values": comp, "modulo": axis.full_turn, "unit": "deg" if axis.rotary else "mm"})
+            k = "xyz".index(effect_of_param(machine, names[0]).direction)
+            out.append(_cancel_on_linear_axis(machine, axis, names, [p.fit_params[n] for n in names],
+                                              t["effect"], t["words"], k))
     return out
+
+
+def _grid(axis) -> np.ndarray:
+    """Table positions over the axis: a whole turn for a full-turn axis, else its travel."""
+    lo, hi = (0.0, 360.0) if axis.full_turn else axis.travel
+    return np.linspace(lo, hi, CEC_POINTS)
+
+
+def _table(effect, words, axis, out_axis, grid, values, unit) -> dict:
+    return {"effect": effect, "words": words, "input": axis.name, "output": out_axis,
+            "min": grid[0], "max": grid[-1], "step": grid[1] - grid[0], "values": values,
+            "modulo": axis.full_turn, "unit": unit}
+
+
+def _cancel_on_linear_axis(machine: Machine, axis, names, values, effect: str, words: str,
+                           k: int | None = None) -> dict:
+    """A table on the linear axis along machine direction ``k`` (default: the direction the
+    effect moves most) cancelling the effect's deviation as ``axis`` alone moves."""
+    grid = _grid(axis)
+    q = np.zeros((len(grid), len(machine.axes)))
+    q[:, machine.index(axis.name)] = grid
+    dev = Model(machine, names).deviation(Poses.at(q, machine.ball), np.array(values))
+    k = int(np.argmax(np.abs(dev).max(axis=0))) if k is None else k
+    out_axis = next(a.name for a in machine.axes if not a.rotary and a.direction == "xyz"[k])
+    return _table(effect, words, axis, out_axis, grid, -dev[:, k] / _gain(machine, out_axis, k), "mm")
 
 
 def dev_angle(machine, axis, names, params, grid) -> np.ndarray:
@@ -343,11 +358,9 @@ def dev_angle(machine, axis, names, params, grid) -> np.ndarray:
 
 def _gain(machine: Machine, axis_name: str, k: int) -> float:
     """∂(nest − ball)_k / ∂q of a linear axis on the nominal machine (+1 on ISO 841 machines)."""
-    zero = Poses(np.zeros((2, len(machine.axes))), np.broadcast_to(machine.ball, (2, 3)), np.zeros(2),
-                 np.array(["", ""], dtype=object))
-    q = zero.q.copy()
+    q = np.zeros((2, len(machine.axes)))
     q[1, machine.index(axis_name)] = 1.0
-    rel = Model(machine, ()).relative(Poses(q, zero.ball, zero.t, zero.path))
+    rel = Model(machine, ()).relative(Poses.at(q, machine.ball))
     return float(rel[1, k] - rel[0, k])
 
 
@@ -373,12 +386,13 @@ def sign_check(machine: Machine, p: Plan, controller_name: str, name: str, versi
     truth = Model(machine, list(p.fit_params))
     values = np.array(list(p.fit_params.values()))
     path = np.array(labels, dtype=object)
-    before = truth.relative(Poses(q_before, ball, np.zeros(len(rot)), path), values)
+    at_poses = Poses(q_before, ball, np.zeros(len(rot)), path)
+    before = truth.relative(at_poses, values)
     after = truth.relative(Poses(q_after, ball, np.zeros(len(rot)), path), values)
     change = (after - before) * 1e3
     expect = [f"{lab}: dX {c[0]:+.2f}  dY {c[1]:+.2f}  dZ {c[2]:+.2f} um"
               for lab, c in zip(labels, change, strict=True)]
-    program = measure_program(machine, Poses(q_before, ball, np.zeros(len(rot)), path), "sign check",
+    program = measure_program(machine, at_poses, "sign check",
                               controller_name, "tcpm", name, version, date)
     return program.files[controller(controller_name).program_ext], expect
 
@@ -502,23 +516,8 @@ def _cec_text(t: dict, index: int) -> dict:
 
 def squareness_tables(machine: Machine, p: Plan) -> list[dict]:
     """A squareness as a linear CEC table: output axis along the tilt, input the tilted axis."""
-    out = []
-    for name, value in p.squareness.items():
-        axis = machine.axis(name[2])
-        lo, hi = axis.travel
-        grid = np.linspace(lo, hi, CEC_POINTS)
-        q = np.zeros((CEC_POINTS, len(machine.axes)))
-        q[:, machine.index(axis.name)] = grid
-        poses = Poses(q, np.broadcast_to(machine.ball, (CEC_POINTS, 3)), np.zeros(CEC_POINTS),
-                      np.full(CEC_POINTS, "", dtype=object))
-        dev = Model(machine, [name]).deviation(poses, np.array([value]))
-        k = int(np.argmax(np.abs(dev).max(axis=0)))
-        out_axis = next(a.name for a in machine.axes if not a.rotary and a.direction == "xyz"[k])
-        out.append({"effect": name, "words": f"squareness {name}", "input": axis.name, "output": out_axis,
-                    "min": lo, "max": hi, "step": grid[1] - grid[0], "modulo": False, "unit": "mm",
-                    "values": -dev[:, k] / _gain(machine, out_axis, k)})
-    return out
-
+    return [_cancel_on_linear_axis(machine, machine.axis(name[2]), [name], [value], name,
+                                   f"squareness {name}") for name, value in p.squareness.items()]
 
 
 # ---------------------------------------------------------------------------------- readers
@@ -626,6 +625,23 @@ class ControllerModel:
         rotary = poses.q[:, [machine.index(a.name) for a in machine.rotary_axes]]
         q = controller_inverse(machine, self.lines, rotary, poses.ball, self.squareness)
         return apply_cec(machine, self.tables, q)
+
+
+def held_by(machine: Machine, p: Plan, family: str) -> ControllerModel:
+    """What a control of ``family`` holds once compgen's edit of plan ``p`` is loaded: the
+    lines it can take, the squareness (HEIDENHAIN rows), the CEC tables (SINUMERIK)."""
+    if family == "sinumerik":
+        tables = cec_tables(machine, p) + squareness_tables(machine, p)
+        return ControllerModel(p.lines, {}, [_as_read(t) for t in tables])
+    if family == "linuxcnc":
+        return ControllerModel(held_lines(p, family), {}, [])
+    return ControllerModel(p.lines, dict(p.squareness), [])
+
+
+def _as_read(t: dict) -> dict:
+    """A generated table in the form ``read_cec`` returns, for ``apply_cec``."""
+    return {"input_axis": t["input"], "output_axis": t["output"], "min": t["min"], "max": t["max"],
+            "step": t["step"], "is_modulo": t["modulo"], "values": np.asarray(t["values"])}
 
 
 def controller_model(machine: Machine, texts: dict[str, str], current: str | None) -> ControllerModel:
