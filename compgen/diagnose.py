@@ -200,15 +200,10 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     rows, col = [], 0
     for e in effects:
         k = len(e.params)
-        c, cp = C[:, col:col + k], Cp[:, col:col + k]
+        c = C[:, col:col + k]
         norms = np.linalg.norm(c, axis=0)
-        vis_cols = np.where(norms > 0, np.linalg.norm(cp, axis=0) / np.where(norms > 0, norms, 1), 0.0)
+        vis_cols, drop, amp = _explained(c, Cp[:, col:col + k], r)
         keep = vis_cols >= VISIBLE
-        drop, amp = 0.0, np.zeros(k)
-        if keep.any():
-            coef = np.linalg.lstsq(cp[:, keep], r, rcond=None)[0]
-            drop = float(np.sum((cp[:, keep] @ coef) ** 2))
-            amp[keep] = coef
         share = np.sqrt(np.sum((absorbed[:, col:col + k] * np.linalg.norm(J, axis=0)[:, None]) ** 2, axis=1)
                         ) / max(np.linalg.norm(c), 1e-300)
         names = [fit.free[i] for i in np.argsort(-share) if share[i] >= ABSORBS]
@@ -219,11 +214,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     tested = sum(1 for row in rows if row[3])
     out = []
     for e, vis, drop, k_eff, amp, names, silent in rows:
-        if k_eff:
-            F = (drop / k_eff) / max((rss - drop) / (dof - k_eff), 1e-300)
-            p = min(1.0, float(stats.f.sf(F, k_eff, dof - k_eff)) * tested)
-        else:
-            p = 1.0
+        p = _p_value(drop, k_eff, rss, dof, tested) if k_eff else 1.0
         shown_amp = tuple(shown(a, e.unit)[0] for a in amp)
         out.append(Candidate(
             effect=e.name, description=e.words, cause=e.cause, visibility=vis,
@@ -319,16 +310,33 @@ def _still_significant(J: np.ndarray, r: np.ndarray, C: np.ndarray, effects: Seq
     for e in effects:
         k = len(e.params)
         if e.name in names:
-            cp = C[:, col:col + k] - Q @ (Q.T @ C[:, col:col + k])
-            keep = np.linalg.norm(cp, axis=0) >= VISIBLE * np.linalg.norm(C[:, col:col + k], axis=0)
-            if keep.any():
-                fitted = cp[:, keep] @ np.linalg.lstsq(cp[:, keep], r1, rcond=None)[0]
-                drop, kk = float(fitted @ fitted), int(keep.sum())
-                F = (drop / kk) / max((rss - drop) / (dof - kk), 1e-300)
-                if float(stats.f.sf(F, kk, dof - kk)) * tried < alpha:
-                    out.append(e.name)
+            c = C[:, col:col + k]
+            vis_cols, drop, _ = _explained(c, c - Q @ (Q.T @ c), r1)
+            k_eff = int((vis_cols >= VISIBLE).sum())
+            if k_eff and _p_value(drop, k_eff, rss, dof, tried) < alpha:
+                out.append(e.name)
         col += k
     return tuple(n for n in names if n in out)
+
+
+def _explained(c: np.ndarray, cp: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+    """For an effect's columns ``c`` and the part ``cp`` the model cannot absorb: each
+    column's visibility, the residual sum of squares its visible columns remove, and their
+    first-order amplitudes (0 for the invisible)."""
+    norms = np.linalg.norm(c, axis=0)
+    vis = np.where(norms > 0, np.linalg.norm(cp, axis=0) / np.where(norms > 0, norms, 1), 0.0)
+    keep = vis >= VISIBLE
+    amp = np.zeros(c.shape[1])
+    if not keep.any():
+        return vis, 0.0, amp
+    amp[keep] = np.linalg.lstsq(cp[:, keep], r, rcond=None)[0]
+    return vis, float(np.sum((cp[:, keep] @ amp[keep]) ** 2)), amp
+
+
+def _p_value(drop: float, k: int, rss: float, dof: int, tried: int) -> float:
+    """F test of ``k`` added columns removing ``drop`` of ``rss``, Bonferroni over ``tried``."""
+    F = (drop / k) / max((rss - drop) / (dof - k), 1e-300)
+    return min(1.0, float(stats.f.sf(F, k, dof - k)) * tried)
 
 
 def _per_axis(machine: Machine, poses: Poses, r: np.ndarray) -> dict:
