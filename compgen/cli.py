@@ -20,7 +20,7 @@ from .emit import CONTROLLERS, controller
 from .emit.kinematics import controller_model, kinematics_edit
 from .emit.programs import MODES, measure_program, program_name
 from .errors import CompgenError
-from .files import write_all, write_atomically
+from .files import read_text, write_all, write_atomically
 from .identify import identify, parse_fixed
 from .machine import load_machine
 from .paths import generate
@@ -89,8 +89,8 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, seed, ball, edits, c
     poses = generate(machine, names, ball=_vec3(ball, "--ball") if ball else None)
     drive = None
     if edits:
-        held = controller_model(machine, {e: _read_text(e) for e in edits},
-                                _read_text(current) if current else None)
+        held = controller_model(machine, {e: read_text(e, "edit", ansi_ok=True)[0] for e in edits},
+                                read_text(current, "file", ansi_ok=True)[0] if current else None)
         drive = partial(held.drive, machine)
     data = simulate(machine, errors, poses, noise_um, np.random.default_rng(seed), drive)
     comments = (f"compgen simulate: machine {machine.name}", f"truth {truth}: "
@@ -230,7 +230,7 @@ def kinematics_cmd(base, controller_name, current, output, force):
     fit = load_fit(base)
     machine, _ = reload(fit)
     ctl = controller(controller_name or machine.controller)
-    text = _read_text(current) if current else None
+    text = read_text(current, "file", ansi_ok=True)[0] if current else None
     out = Path(output)
     name = program_name(out.stem)
     emitted = kinematics_edit(machine, fit, ctl.name, text, current or "", name, __version__,
@@ -241,19 +241,6 @@ def kinematics_cmd(base, controller_name, current, output, force):
     write_all(files, force)
     click.echo("\n".join(emitted.notes))
     click.echo("wrote " + ", ".join(str(p) for p in files))
-
-
-def _read_text(path: str) -> str:
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        raise CompgenError(f"cannot read: {exc.strerror}", where=path) from None
-    if b"\x00" in raw:
-        raise CompgenError("binary file, not text", where=path)
-    try:
-        return raw.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        return raw.decode("latin-1")    # controller exports are often ANSI
 
 
 @main.command("compare")
@@ -301,7 +288,7 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, outpu
     fit = load_fit(base)
     machine, sets = reload(fit)
     for path in emitted:
-        _read_text(path)                       # a missing file fails before anything is drawn
+        read_text(path, "file", ansi_ok=True)   # a missing file fails before anything is drawn
     post = [read_rtest(p, machine, fit.sign) for p in post_files]
     found = diagnose(machine, sets, fit, fit_file=base)
     comparison = compare(machine, sets, fit, controller_name or machine.controller, post)

@@ -9,6 +9,25 @@ from pathlib import Path
 from .errors import CompgenError
 
 
+def read_text(path: str | Path, what: str, ansi_ok: bool = False) -> tuple[str, bytes]:
+    """A user's text file: its text and raw bytes (for checksums), or one clear line.
+
+    ``ansi_ok`` accepts Latin-1 where UTF-8 fails: controller exports are often ANSI.
+    """
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise CompgenError(f"cannot read {what}: {exc.strerror}", where=str(path)) from None
+    if b"\x00" in raw:
+        raise CompgenError(f"binary file, not a text {what}", where=str(path))
+    try:
+        return raw.decode("utf-8-sig"), raw
+    except UnicodeDecodeError as exc:
+        if ansi_ok:
+            return raw.decode("latin-1"), raw
+        raise CompgenError(f"{what} is not UTF-8 text (byte {exc.start})", where=str(path)) from None
+
+
 def write_atomically(path: str | Path, text: str, force: bool = False, newline: str = "\n") -> None:
     """Write ``text`` to ``path`` via a temporary file and ``os.replace``: nothing half-written."""
     path = Path(path)

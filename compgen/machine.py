@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CompgenError
+from .files import read_text
 
 LINEAR, ROTARY = "linear", "rotary"
 DIRECTIONS = ("x", "y", "z")
@@ -141,15 +142,9 @@ class Machine:
 
 def load_machine(path: str | Path) -> Machine:
     """Read and check a machine file; every problem names the file and the key."""
-    path = Path(path)
+    text, raw = read_text(path, "machine file")
     try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise CompgenError(f"cannot read machine file: {exc.strerror}", where=str(path)) from None
-    try:
-        doc = tomllib.loads(raw.decode("utf-8"))
-    except UnicodeDecodeError:
-        raise CompgenError("machine file is not UTF-8 text", where=str(path)) from None
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise CompgenError(f"not valid TOML: {exc}", where=str(path)) from None
     return _machine_from_dict(doc, str(path), hashlib.sha256(raw).hexdigest())

@@ -16,6 +16,7 @@ import numpy as np
 
 from .effects import effect_name
 from .errors import CompgenError
+from .files import read_text
 from .units import shown
 
 FORMAT = "compgen.fit/1"
@@ -153,10 +154,8 @@ class FitResult:
 def load_fit(path: str | Path) -> FitResult:
     path = Path(path)
     try:
-        d = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise CompgenError(f"cannot read fit file: {exc.strerror}", where=str(path)) from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        d = json.loads(read_text(path, "fit file")[0])
+    except json.JSONDecodeError as exc:
         raise CompgenError(f"not a JSON fit file ({exc})", where=str(path)) from None
     if not isinstance(d, dict):
         raise CompgenError("not a compgen fit file", where=str(path))

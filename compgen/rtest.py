@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CompgenError
+from .files import read_text
 from .kinematics import Model, Poses, inverse
 from .machine import Machine
 
@@ -104,18 +105,8 @@ class _Table:
 
 def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Table:
     """A CSV v1 table with every cell checked: numbers finite, rows whole, columns present."""
-    path = Path(path)
     where = str(path)
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise CompgenError(f"cannot read data file: {exc.strerror}", where=where) from None
-    if b"\x00" in raw:
-        raise CompgenError("binary file, not CSV text", where=where)
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise CompgenError(f"not UTF-8 text (byte {exc.start})", where=where) from None
+    text, raw = read_text(path, "data file")
 
     lines = [(i, line) for i, line in enumerate(text.splitlines(), start=1)
              if line.strip() and not line.lstrip().startswith("#")]

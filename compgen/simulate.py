@@ -11,6 +11,7 @@ import numpy as np
 
 from .effects import effect_of_param
 from .errors import CompgenError
+from .files import read_text
 from .kinematics import Model, Poses
 from .machine import Machine
 from .rtest import RTestData
@@ -45,10 +46,8 @@ def read_truth(path: str | Path, machine: Machine) -> dict[str, float]:
     "unit": u}}}`` → {canonical name: value in mm or rad}."""
     where = str(path)
     try:
-        doc = json.loads(Path(path).read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise CompgenError(f"cannot read truth file: {exc.strerror}", where=where) from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        doc = json.loads(read_text(path, "truth file")[0])
+    except json.JSONDecodeError as exc:
         raise CompgenError(f"not a JSON file ({exc})", where=where) from None
     params = doc.get("parameters") if isinstance(doc, dict) else None
     if not isinstance(params, dict):
