@@ -103,18 +103,20 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
 def _gauss_newton(residual, jac, x, free, m):
     """Gauss–Newton with step halving (a Levenberg–Marquardt safeguard never needed here,
     since the problem is mildly non-linear and well started by the first-order solution)."""
-    cost = float(residual(x) @ residual(x))
+    r = residual(x)
+    cost = float(r @ r)
     for it in range(1, MAX_ITER + 1):
         J = jac(x)
-        dx = np.linalg.lstsq(J, residual(x), rcond=None)[0]
+        dx = np.linalg.lstsq(J, r, rcond=None)[0]
         for _ in range(30):
             trial = x.copy()
             trial[free] += dx
-            new = float(residual(trial) @ residual(trial))
+            r_trial = residual(trial)
+            new = float(r_trial @ r_trial)
             if new <= cost * (1 + 1e-12):
                 break
             dx /= 2
-        x, cost = trial, new
+        x, r, cost = trial, r_trial, new
         step = max(abs(shown(v, m.effects[i].unit)[0]) for i, v in zip(free, dx, strict=True))
         if step < STEP_TOL_SHOWN:   # J at a point 1e-7 µm away is the Jacobian at the solution
             return x, J, it
