@@ -11,7 +11,8 @@ from __future__ import annotations
 import hashlib
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -110,7 +111,7 @@ class Machine:
     source: str = ""
     sha256: str = ""
 
-    @property
+    @cached_property
     def axes(self) -> tuple[Axis, ...]:
         """Linear axes in X, Y, Z order, then rotary axes from the base outwards.
 
@@ -121,11 +122,11 @@ class Machine:
         rotary = [a for a in self.workpiece + self.tool if a.rotary]
         return tuple(linear + rotary)
 
-    @property
+    @cached_property
     def axis_names(self) -> tuple[str, ...]:
         return tuple(a.name for a in self.axes)
 
-    @property
+    @cached_property
     def rotary_axes(self) -> tuple[Axis, ...]:
         return tuple(a for a in self.axes if a.rotary)
 
@@ -211,8 +212,8 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
     if "tolerances" in doc:
         g = get.sub("tolerances")
         tolerances = {name: _positive(g, name) for name in g.doc}
-    return Machine(**{**machine.__dict__, "paths": paths, "program": program, "limits": limits,
-                      "sinumerik": sinumerik, "tolerances": tolerances})
+    return replace(machine, paths=paths, program=program, limits=limits, sinumerik=sinumerik,
+                   tolerances=tolerances)
 
 
 def _positive(g: _Getter, key: str, zero_ok: bool = False) -> float:
