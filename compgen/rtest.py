@@ -157,6 +157,11 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
     return _Table(where, hashlib.sha256(raw).hexdigest(), columns, np.array(labels, dtype=object), line_no)
 
 
+def axis_cells(machine: Machine, q: np.ndarray) -> list[str]:
+    """One pose's axis positions as CSV v1 cells: mm and deg, to 1 nm and 1e-6 deg."""
+    return [f"{np.degrees(v) if a.rotary else v:.6f}" for a, v in zip(machine.axes, q, strict=True)]
+
+
 def format_rtest(machine: Machine, data: RTestData, comments: tuple[str, ...] = ()) -> str:
     """CSV v1 text: path, t, linear axes, rotary axes (deg), dX dY dZ (µm), ball if not default."""
     p = data.poses
@@ -170,8 +175,7 @@ def format_rtest(machine: Machine, data: RTestData, comments: tuple[str, ...] = 
     w = csv.writer(out, lineterminator="\n")
     w.writerow(header)
     for i in range(len(p)):
-        axes = [f"{np.degrees(v) if a.rotary else v:.6f}" for a, v in zip(machine.axes, p.q[i], strict=True)]
-        row = [p.path[i], *([f"{p.t[i]:.3f}"] if timed else []), *axes,
+        row = [p.path[i], *([f"{p.t[i]:.3f}"] if timed else []), *axis_cells(machine, p.q[i]),
                *(f"{v * 1e3:.6f}" for v in data.deviation[i])]
         if not ball_default:
             row += [f"{v:.6f}" for v in p.ball[i]]

@@ -19,7 +19,7 @@ from ..errors import CompgenError
 from ..kinematics import Poses, inverse
 from ..machine import Machine
 from ..paths import check_travel
-from ..rtest import BALL
+from ..rtest import BALL, axis_cells
 from . import Emitted, ascii_text, controller, fmt_plain, fmt_signed, render
 
 MODES = ("tcpm", "axes")
@@ -119,9 +119,8 @@ def pose_list(machine: Machine, poses: Poses) -> str:
     head = ["path", *machine.axis_names, *BALL]
     lines = [",".join(head)]
     for i in range(len(poses)):
-        axes = [f"{np.degrees(v) if a.rotary else v:.6f}"
-                for a, v in zip(machine.axes, poses.q[i], strict=True)]
-        lines.append(",".join([ascii_text(str(poses.path[i])), *axes, *(f"{v:.6f}" for v in poses.ball[i])]))
+        lines.append(",".join([ascii_text(str(poses.path[i])), *axis_cells(machine, poses.q[i]),
+                               *(f"{v:.6f}" for v in poses.ball[i])]))
     return "\n".join(lines) + "\n"
 
 
