@@ -16,11 +16,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy import stats
 
 from .effects import Effect, catalogue, effect_name, effect_of_param, resolve
 from .errors import CompgenError
-from .kinematics import Model, Poses, coordinate, slot_gains
+from .kinematics import Model, Poses, SlotGains, coordinate
 from .machine import Machine
 from .paths import alternative_measurements
 from .results import FitResult
@@ -183,7 +182,8 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     x = np.array([fit.parameters[n].value for n in fit.model])
     free = [model.names.index(n) for n in fit.free]
     r = y - model.deviation(poses, x).ravel()
-    J = model.jacobian(poses, x)[:, :, free].reshape(r.size, -1)
+    # only Q and R of the model's Jacobian are kept: J's column norms are R's
+    Q, R = np.linalg.qr(model.jacobian(poses, x)[:, :, free].reshape(r.size, -1))
     rss, dof = float(r @ r), r.size - len(free)
 
     in_model = {effect_of_param(machine, n).name for n in fit.model}
@@ -191,25 +191,22 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
                            else [resolve(machine, c) for c in candidates]) if e.name not in in_model]
     if not effects:
         raise CompgenError("no candidate effect left to try: the model holds them all")
-    C = _columns(machine, poses, effects)
-    Q, _ = np.linalg.qr(J)
-    Cp = C - Q @ (Q.T @ C)                 # what the model's parameters cannot absorb
-    absorbed = np.linalg.lstsq(J, C, rcond=None)[0]   # J⁺C: what each parameter takes
-
+    J_norm = np.linalg.norm(R, axis=0)
     units_of = {n: model.effects[model.names.index(n)].unit for n in fit.free}
-    rows, col = [], 0
-    for e in effects:
-        k = len(e.params)
-        c = C[:, col:col + k]
+    found, absorbed, col_norm = {}, {}, {}
+    for e, c in _signatures(machine, poses, effects):   # one effect at a time: memory as fit's
         norms = np.linalg.norm(c, axis=0)
-        vis_cols, drop, amp = _explained(c, Cp[:, col:col + k], r)
+        qc = Q.T @ c
+        vis_cols, drop, amp = _explained(c, c - Q @ qc, r)   # c − QQᵀc: what the model cannot absorb
         keep = vis_cols >= VISIBLE
-        share = np.sqrt(np.sum((absorbed[:, col:col + k] * np.linalg.norm(J, axis=0)[:, None]) ** 2, axis=1)
-                        ) / max(np.linalg.norm(c), 1e-300)
+        absorbed[e.name] = np.linalg.solve(R, qc)             # J⁺c: what each parameter takes
+        col_norm[e.name] = norms
+        share = np.sqrt(np.sum((absorbed[e.name] * J_norm[:, None]) ** 2, axis=1)) / max(
+            np.linalg.norm(c), 1e-300)
         names = [fit.free[i] for i in np.argsort(-share) if share[i] >= ABSORBS]
-        rows.append((e, float(vis_cols.max()), drop, int(keep.sum()), amp, tuple(names),
-                     bool(np.all(norms * 1e3 < SILENT_UM))))
-        col += k
+        found[e.name] = (e, float(vis_cols.max()), drop, int(keep.sum()), amp, tuple(names),
+                         bool(np.all(norms * 1e3 < SILENT_UM)))
+    rows = [found[e.name] for e in effects]
 
     tested = sum(1 for row in rows if row[3])
     out = []
@@ -232,16 +229,14 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     # (J⁺C)ᵢⱼ, first order; kept in shown units (µm or ″ per µm or ″ of j)
     bias = {n: {} for n in fit.free}
     units = {n: shown(1.0, model.effects[model.names.index(n)].unit)[1] for n in fit.free}
-    signature_um, col = {}, 0
+    signature_um = {}
     for e in effects:
         for j, pname in enumerate(e.params):
             units[pname] = shown(1.0, e.unit)[1]
             per_shown = shown(1.0, e.unit)[0]
-            rms_um = float(np.linalg.norm(C[:, col + j]) / np.sqrt(len(poses))) * 1e3
-            signature_um[pname] = rms_um / per_shown
+            signature_um[pname] = float(col_norm[e.name][j] / np.sqrt(len(poses))) * 1e3 / per_shown
             for i, n in enumerate(fit.free):
-                bias[n][pname] = float(absorbed[i, col + j] * shown(1.0, units_of[n])[0] / per_shown)
-        col += len(e.params)
+                bias[n][pname] = float(absorbed[e.name][i, j] * shown(1.0, units_of[n])[0] / per_shown)
 
     after_best, rivals, rivals_separated_by = (), (), ()
     significant = [c for c in out if c.significant]
@@ -255,10 +250,10 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
             seen = _separating(machine, base, poses, [resolve(machine, e) for e in rivals])
             rivals_separated_by = tuple(dict.fromkeys(m for e in rivals for m in seen[e]))
     if len(significant) > 1:
-        first = effects.index(resolve(machine, significant[0].effect))
-        start = sum(len(e.params) for e in effects[:first])
-        Jb = np.column_stack([J, C[:, start:start + len(effects[first].params)]])
-        after_best = _still_significant(Jb, r, C, effects, [c.effect for c in significant[1:]], alpha)
+        best = _columns(machine, poses, [resolve(machine, significant[0].effect)])
+        others = [resolve(machine, c.effect) for c in significant[1:]]
+        kept = _still_significant(Q, best, r, _signatures(machine, poses, others), alpha)
+        after_best = tuple(e.name for e in others if e.name in kept)
 
     return Diagnosis(
         machine=machine.name, fit_file=fit_file, model=fit.model,
@@ -270,28 +265,39 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         after_best=after_best, rivals=rivals, rivals_separated_by=rivals_separated_by)
 
 
-def _columns(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np.ndarray:
-    """First-order signatures of the effects' parameters, (3n, Σ params), mm per unit."""
-    keys = sorted({(e.carrier, e.slot, e.direction) for e in effects})
-    gains = slot_gains(machine, poses, keys)
-    cols = []
+def _signatures(machine: Machine, poses: Poses, effects: Sequence[Effect]):
+    """Each effect with its first-order signature, (3n, its params) mm per unit, one at a
+    time, so that only the chain's frames and one effect's columns are held."""
+    gains = SlotGains(machine, poses)
     for e in effects:
+        g = gains((e.carrier, e.slot, e.direction))
         b = e.basis.values(coordinate(machine, e, poses))
-        g = gains[(e.carrier, e.slot, e.direction)]
-        cols += [(g * b[:, k:k + 1]).ravel() for k in range(b.shape[1])]
-    return np.column_stack(cols)
+        yield e, np.column_stack([(g * b[:, k:k + 1]).ravel() for k in range(b.shape[1])])
+
+
+def _columns(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np.ndarray:
+    """First-order signatures of the effects' parameters, (3n, Σ params), mm per unit, in
+    the order of ``effects``."""
+    return np.column_stack([c for _, c in _signatures(machine, poses, effects)])
 
 
 def _separating(machine: Machine, model_effects: Sequence[Effect], poses: Poses,
                 effects: Sequence[Effect]) -> dict[str, tuple[str, ...]]:
     """For effects these data cannot tell from ``model_effects``: which measurement, added
-    to them, would."""
+    to them, would.
+
+    With R the triangular factor of [model columns | effect columns] over all poses, an
+    effect column's part that the model cannot absorb has the norm of its column below the
+    model's rows of R; R of stacked data is R of the stacked R factors, so the measured
+    poses are reduced once, in chunks, and each extra measurement adds only its own rows.
+    """
     found: dict[str, list[str]] = {e.name: [] for e in effects}
-    J0, C0 = _columns(machine, poses, model_effects), _columns(machine, poses, effects)
+    both = [*model_effects, *effects]
+    p = sum(len(e.params) for e in model_effects)
+    R0 = _r_factor(machine, poses, both)
     for label, extra in alternative_measurements(machine):
-        Q, _ = np.linalg.qr(np.vstack([J0, _columns(machine, extra, model_effects)]))
-        C = np.vstack([C0, _columns(machine, extra, effects)])
-        vis = np.linalg.norm(C - Q @ (Q.T @ C), axis=0) / np.maximum(np.linalg.norm(C, axis=0), 1e-300)
+        R = _r_factor(machine, extra, both, R0)
+        vis = np.linalg.norm(R[p:, p:], axis=0) / np.maximum(np.linalg.norm(R[:, p:], axis=0), 1e-300)
         col = 0
         for e in effects:
             if vis[col:col + len(e.params)].max() >= SEPARATES:
@@ -300,23 +306,33 @@ def _separating(machine: Machine, model_effects: Sequence[Effect], poses: Poses,
     return {k: tuple(v) for k, v in found.items()}
 
 
-def _still_significant(J: np.ndarray, r: np.ndarray, C: np.ndarray, effects: Sequence[Effect],
-                       names: Sequence[str], alpha: float) -> tuple[str, ...]:
-    """Which of ``names`` stay significant once the model is ``J`` (first order)."""
-    Q, _ = np.linalg.qr(J)
-    r1 = r - Q @ (Q.T @ r)
-    rss, dof = float(r1 @ r1), r.size - J.shape[1]
-    out, col, tried = [], 0, len(names)
-    for e in effects:
-        k = len(e.params)
-        if e.name in names:
-            c = C[:, col:col + k]
-            vis_cols, drop, _ = _explained(c, c - Q @ (Q.T @ c), r1)
-            k_eff = int((vis_cols >= VISIBLE).sum())
-            if k_eff and _p_value(drop, k_eff, rss, dof, tried) < alpha:
-                out.append(e.name)
-        col += k
-    return tuple(n for n in names if n in out)
+def _r_factor(machine: Machine, poses: Poses, effects: Sequence[Effect],
+              start: np.ndarray | None = None, chunk: int = 4096) -> np.ndarray:
+    """R of the QR factorisation of the effects' columns on ``poses`` stacked under ``start``."""
+    R = start
+    for i in range(0, len(poses), chunk):
+        block = _columns(machine, poses.take(slice(i, i + chunk)), effects)
+        R = np.linalg.qr(block if R is None else np.vstack([R, block]), mode="r")
+    return R
+
+
+def _still_significant(Q: np.ndarray, added: np.ndarray, r: np.ndarray, signatures,
+                       alpha: float) -> set[str]:
+    """Which effects of ``signatures`` ((effect, columns) pairs) stay significant once the
+    model (orthonormal columns ``Q``) is joined by the columns ``added``, first order;
+    Bonferroni over all of them. Only the added columns are orthogonalised anew."""
+    Qa, _ = np.linalg.qr(added - Q @ (Q.T @ added))
+
+    def off(v):   # what the joined model cannot absorb
+        return v - Q @ (Q.T @ v) - Qa @ (Qa.T @ v)
+
+    r1 = off(r)
+    rss, dof = float(r1 @ r1), r.size - Q.shape[1] - added.shape[1]
+    drops = []
+    for e, c in signatures:
+        vis_cols, drop, _ = _explained(c, off(c), r1)
+        drops.append((e.name, drop, int((vis_cols >= VISIBLE).sum())))
+    return {name for name, drop, k in drops if k and _p_value(drop, k, rss, dof, len(drops)) < alpha}
 
 
 def _explained(c: np.ndarray, cp: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
@@ -335,8 +351,10 @@ def _explained(c: np.ndarray, cp: np.ndarray, r: np.ndarray) -> tuple[np.ndarray
 
 def _p_value(drop: float, k: int, rss: float, dof: int, tried: int) -> float:
     """F test of ``k`` added columns removing ``drop`` of ``rss``, Bonferroni over ``tried``."""
+    from scipy.special import fdtrc  # 0.3 s of import: only when a test is made
+
     F = (drop / k) / max((rss - drop) / (dof - k), 1e-300)
-    return min(1.0, float(stats.f.sf(F, k, dof - k)) * tried)
+    return min(1.0, float(fdtrc(k, dof - k, F)) * tried)
 
 
 def _per_axis(machine: Machine, poses: Poses, r: np.ndarray) -> dict:

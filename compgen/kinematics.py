@@ -168,18 +168,62 @@ def relative(machine: Machine, poses: Poses, slots: Mapping[tuple[str, str], np.
     return nest - ball + slots.get(("time", "loc"), zero)[:, :3]
 
 
+class SlotGains:
+    """First-order gains at zero of a unit error in a slot (carrier, slot, direction):
+    ``gains(key)`` is (n, 3) mm per mm or per rad. Any effect's Jacobian column at zero is
+    its basis values times the gain of its slot.
+
+    Analytic, from one nominal evaluation of each chain: a unit translation e in a frame F
+    moves the chain's end point P by R_F e, a unit rotation by R_F e × (P − o_F); the ball
+    is the workpiece chain's end (its motion counts negatively: nest minus ball), the nest
+    the tool chain's. A squareness turns the line of motion, moving P by q·(e × line).
+    Only the frames are held, (n, 3, 3) and two (n, 3) an axis; a gain is made when asked.
+    (``tests/test_kinematics.py`` checks every slot against central differences.)
+    """
+
+    def __init__(self, machine: Machine, poses: Poses):
+        n = len(poses)
+        zero = np.zeros((n, 6))
+        self.n, self.frames = n, {}
+        for chain, end, sign in ((machine.workpiece, poses.ball, -1.0),
+                                 (machine.tool, np.zeros((n, 3)), 1.0)):
+            T = np.broadcast_to(np.eye(4), (n, 4, 4))
+            before = []
+            for axis in chain:
+                q = poses.q[:, machine.index(axis.name)]
+                # where a slot acts: the axis's reference point; a linear axis's carriage
+                # (its component rotations) sits where its motion took it
+                at = np.broadcast_to(np.asarray(axis.offset, float), (n, 3))
+                if not axis.rotary:
+                    at = at + (axis.sense * q)[:, None] * UNIT[axis.direction]
+                before.append((axis, q, T[:, :3, :3].copy(), apply(T, at)))
+                T = T @ _link(axis, q, zero, zero)
+            P = apply(T, end)
+            for axis, q, R, origin in before:
+                self.frames[axis.name] = (sign, R, P - origin, axis, q)
+            self.frames["ball" if chain is machine.workpiece else "nest"] = (sign, T[:, :3, :3].copy())
+
+    def __call__(self, key: tuple[str, str, str]) -> np.ndarray:
+        carrier, slot, direction = key
+        k = SLOT_INDEX[direction]
+        e = UNIT["xyz"[k % 3]]
+        if carrier == "time":
+            return np.broadcast_to(e * (k < 3), (self.n, 3)).copy()
+        if carrier in ("ball", "nest"):
+            sign, R = self.frames[carrier]
+            return sign * (R @ e) * (k < 3)
+        sign, R, lever, axis, q = self.frames[carrier]
+        if k < 3:
+            return sign * (R @ e)
+        if not axis.rotary and slot == "loc":   # squareness: the line of motion turns
+            return sign * (axis.sense * q)[:, None] * (R @ np.cross(e, UNIT[axis.direction]))
+        return sign * np.cross(R @ e, lever)
+
+
 def slot_gains(machine: Machine, poses: Poses, keys) -> dict[tuple[str, str, str], np.ndarray]:
-    """First-order gains at zero of a unit error in each slot (carrier, slot, direction):
-    (n, 3) mm per mm or per rad. Any effect's Jacobian column at zero is its basis values
-    times the gain of its slot, so a whole catalogue costs one pair of evaluations a slot."""
-    out, n = {}, len(poses)
-    for carrier, slot, direction in keys:
-        col = SLOT_INDEX[direction]
-        plus, minus = np.zeros((n, 6)), np.zeros((n, 6))
-        plus[:, col], minus[:, col] = FD_STEP, -FD_STEP
-        up, down = (relative(machine, poses, {(carrier, slot): d}) for d in (plus, minus))
-        out[(carrier, slot, direction)] = (up - down) / (2 * FD_STEP)
-    return out
+    """``SlotGains`` of each key, as a dict."""
+    gains = SlotGains(machine, poses)
+    return {key: gains(key) for key in keys}
 
 
 def _link(axis: Axis, q: np.ndarray, loc: np.ndarray, comp: np.ndarray, motion: bool = True,

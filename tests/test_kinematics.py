@@ -7,13 +7,15 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, TABLE4, UM, vector
 
-from compgen.kinematics import Model, Poses, inverse
+from compgen.effects import catalogue
+from compgen.kinematics import FD_STEP, SLOT_INDEX, Model, Poses, inverse, relative, slot_gains
 from compgen.paths import generate
 from compgen.rtest import read_rtest
 from compgen.transforms import rot_exact
 
 ATOL_VECTORS_UM = 1e-4   # contract: shared vectors (issue 2)
 ATOL_GAIN = 1e-6         # central differences vs Table 2 formulas, µm per µm (or per rad·1e-3)
+ATOL_FD_REL = 1e-7       # analytic gains vs central differences, relative to the largest gain
 
 
 def _rows(name):
@@ -106,3 +108,22 @@ def test_rot_exact_matches_scipy(rng):
     w = rng.normal(size=(40, 3)) * np.repeat([1, 1e-3, 1e-7, 1e-10, 0], 8)[:, None]
     np.testing.assert_allclose(rot_exact(w)[:, :3, :3], Rotation.from_rotvec(w).as_matrix(),
                                rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("machine_name", ["seed_machine", "bc_machine"])
+def test_analytic_slot_gains_equal_central_differences_of_the_exact_model(machine_name, request):
+    """Every slot of the catalogue, on both machines (both chain layouts, linear axes on
+    either side, squareness among them), against the exact model moved by ±1e-6."""
+    machine = request.getfixturevalue(machine_name)
+    poses = generate(machine, list(machine.paths))
+    keys = sorted({(e.carrier, e.slot, e.direction) for e in catalogue(machine)})
+    gains = slot_gains(machine, poses, keys)
+    for carrier, slot, direction in keys:
+        step = np.zeros((len(poses), 6))
+        step[:, SLOT_INDEX[direction]] = FD_STEP
+        numeric = (relative(machine, poses, {(carrier, slot): step})
+                   - relative(machine, poses, {(carrier, slot): -step})) / (2 * FD_STEP)
+        scale = max(np.abs(numeric).max(), 1.0)   # mm per mm, or mm per rad (levers ~300 mm)
+        # central differences of 1e-6 on ~300 mm carry ~1e-8 of rounding
+        np.testing.assert_allclose(gains[(carrier, slot, direction)], numeric, rtol=0,
+                                   atol=ATOL_FD_REL * scale, err_msg=f"{carrier} {slot} {direction}")
