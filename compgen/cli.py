@@ -42,10 +42,22 @@ class _Group(click.Group):
     """Turns every CompgenError into one line on stderr and exit code 2."""
 
     def invoke(self, ctx):
+        from threadpoolctl import threadpool_limits
+
+        # compgen's matrices are tall and skinny (3n × p, p ≤ ~130): a second BLAS thread only
+        # adds hand-over cost, which is large on a loaded machine (benchmarks/startup.py)
         try:
-            return super().invoke(ctx)
+            with threadpool_limits(limits=1, user_api="blas"):
+                return super().invoke(ctx)
         except CompgenError as exc:
             raise _Failed(str(exc)) from None
+
+
+def _progress(message: str) -> None:
+    """One line on stderr before work that can take seconds, for a person at a terminal
+    (a pipe or a script gets nothing)."""
+    if sys.stderr.isatty():
+        click.echo(f"compgen: {message} ...", err=True)
 
 
 FILE = click.Path(dir_okay=False)
@@ -143,6 +155,7 @@ def fit_cmd(machine_file, data, base, model_names, add, remove, fixes, method, s
         model = [n.strip() for n in model_names.split(",") if n.strip()]
     model = compose(machine, model, add, remove)
     fixed = {n: v for n, v in fixed.items() if n in model} | parse_fixed(machine, fixes)
+    _progress(f"fitting {len(model)} effects to {sum(len(s) for s in sets)} poses")
     result = identify(machine, sets, model, fixed, method, sign)
     write_atomically(output, result.to_json(), force)
     click.echo(result.report(), nl=False)
@@ -163,6 +176,8 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before):
     fit = load_fit(base)
     machine, sets = reload(fit)
     names = [c.strip() for c in candidates.split(",") if c.strip()] if candidates else None
+    _progress(f"trying {'the catalogue' if names is None else len(names)} effects against "
+              f"{sum(len(s) for s in sets)} poses")
     result = diagnose(machine, sets, fit, names, fit_file=base)
     if plots_dir:
         from .plots import write_plots  # matplotlib only when asked for
@@ -290,8 +305,11 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, outpu
     for path in emitted:
         read_text(path, "file", ansi_ok=True)   # a missing file fails before anything is drawn
     post = [read_rtest(p, machine, fit.sign) for p in post_files]
+    _progress("1/3 diagnose")
     found = diagnose(machine, sets, fit, fit_file=base)
+    _progress("2/3 compare")
     comparison = compare(machine, sets, fit, controller_name or machine.controller, post)
+    _progress("3/3 plots")
     images = figures(machine, sets, fit, load_fit(before) if before else None)
     steps = checklist(machine, folder or Path(base).parent)
     html = report_html(machine, fit, found, images, comparison, emitted, steps, __version__,

@@ -7,8 +7,6 @@ import hashlib
 from collections.abc import Sequence
 from pathlib import Path
 
-from jinja2 import Environment, FileSystemLoader, StrictUndefined, select_autoescape
-
 from .checklist import Step
 from .compare import Comparison
 from .diagnose import Diagnosis
@@ -21,6 +19,8 @@ from .units import shown
 def report_html(machine: Machine, fit: FitResult, diagnosis: Diagnosis, images: dict[str, bytes],
                 comparison: Comparison | None, emitted: Sequence[str], steps: Sequence[Step],
                 version: str, date: str) -> str:
+    from jinja2 import Environment, FileSystemLoader, StrictUndefined, select_autoescape
+
     env = Environment(loader=FileSystemLoader(template_dir()), undefined=StrictUndefined,
                       autoescape=select_autoescape(["html", "j2"]), trim_blocks=True, lstrip_blocks=True)
     params = []
