@@ -12,6 +12,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .emit.registry import comment_marks, controller
 from .errors import CompgenError
 from .machine import Machine
 
@@ -41,15 +42,16 @@ class _Found:
 
 def _scan(folder: Path) -> _Found:
     found = _Found()
+    marks = re.escape(comment_marks())
     for path in sorted(p for p in folder.rglob("*") if p.is_file() and p.stat().st_size < MAX_READ):
         try:
             text = path.read_text(encoding="utf-8")
         except (UnicodeDecodeError, OSError):
             continue
         head = text[:2000]
-        if re.search(r"(?m)^(?:\d+ )?; compgen \S+ R-test measurement program", head):
+        if re.search(rf"(?m)^(?:\d+ )?[{marks}] compgen \S+ R-test measurement program", head):
             (found.signchecks if "path sign check" in head else found.programs).append(path)
-        elif re.search(r"(?m)^; compgen \S+ kinematics edit", head):
+        elif re.search(rf"(?m)^[{marks}] compgen \S+ kinematics edit", head):
             found.edits.append(path)
         elif path.suffix.lower() == ".csv" and _is_rtest(head):
             found.data.append(path)
@@ -125,7 +127,7 @@ def _names(paths) -> tuple[str, ...]:
 
 
 def _ext(machine: Machine) -> str:
-    return ".MPF" if machine.controller == "sinumerik840d" else ".H"
+    return controller(machine.controller).program_ext
 
 
 def markdown(machine: Machine, steps: list[Step]) -> str:

@@ -16,9 +16,9 @@ from .checklist import checklist, markdown
 from .compare import compare
 from .diagnose import diagnose
 from .effects import catalogue, compose, location_model
-from .emit import CONTROLLERS, controller
-from .emit.kinematics import controller_model, kinematics_edit
+from .emit.kinematics import kinematics_edit
 from .emit.programs import MODES, measure_program, program_name
+from .emit.registry import CONTROLLERS, controller, read_edits
 from .errors import CompgenError
 from .files import read_text, write_all, write_atomically
 from .identify import identify, parse_fixed
@@ -61,6 +61,7 @@ def _progress(message: str) -> None:
 
 
 FILE = click.Path(dir_okay=False)
+CONTROLLER_NAMES = " | ".join(CONTROLLERS)
 MACHINE = click.option("--machine", "machine_file", type=FILE, required=True,
                        help="Machine file (TOML), e.g. machines/ac-trunnion-itnc530.toml.")
 OUTPUT = click.option("-o", "--output", type=FILE, required=True, help="File to write.")
@@ -101,8 +102,8 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, seed, ball, edits, c
     poses = generate(machine, names, ball=_vec3(ball, "--ball") if ball else None)
     drive = None
     if edits:
-        held = controller_model(machine, {e: read_text(e, "edit", ansi_ok=True)[0] for e in edits},
-                                read_text(current, "file", ansi_ok=True)[0] if current else None)
+        held = read_edits(machine, {e: read_text(e, "edit", ansi_ok=True)[0] for e in edits},
+                          read_text(current, "file", ansi_ok=True)[0] if current else None)
         drive = partial(held.drive, machine)
     data = simulate(machine, errors, poses, noise_um, np.random.default_rng(seed), drive)
     comments = (f"compgen simulate: machine {machine.name}", f"truth {truth}: "
@@ -194,8 +195,8 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before):
               help="K1, K2, K4 (or BK1…), a comma list, or 'all': paths of the machine file.")
 @click.option("--poses", "poses_file", type=FILE, default=None,
               help="A CSV of poses (rotary axes in deg; path, bx, by, bz optional) instead of --path.")
-@click.option("--controller", "controller_name", type=click.Choice(list(CONTROLLERS)), default=None,
-              help="Default: the machine file's.")
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
 @click.option("--mode", type=click.Choice(MODES), default="tcpm", show_default=True,
               help="tcpm: the control's kinematics (FUNCTION TCPM / TRAORI); axes: compgen's.")
 @click.option("-o", "--output", type=FILE, default=None,
@@ -231,8 +232,8 @@ def measure_program_cmd(machine_file, path_names, poses_file, controller_name, m
 
 @main.command("kinematics")
 @click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
-@click.option("--controller", "controller_name", type=click.Choice(list(CONTROLLERS)), default=None,
-              help="Default: the machine file's.")
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
 @click.option("--current", type=FILE, default=None,
               help="The control's current kinematics: iTNC 530 description table (*.TAB), or the "
                    "SINUMERIK record's $TC_CARR lines.")
@@ -250,7 +251,7 @@ def kinematics_cmd(base, controller_name, current, output, force):
     name = program_name(out.stem)
     emitted = kinematics_edit(machine, fit, ctl.name, text, current or "", name, __version__,
                               date.today().isoformat(), force)
-    main_key = (".TAB" if text is not None else ".txt") if ctl.family == "heidenhain" else ".MPF"
+    main_key = ctl.main_suffix(text)
     files = {(out if key == main_key else out.with_name(out.stem + key)): body
              for key, body in emitted.files.items()}
     write_all(files, force)
@@ -260,8 +261,8 @@ def kinematics_cmd(base, controller_name, current, output, force):
 
 @main.command("compare")
 @click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
-@click.option("--controller", "controller_name", type=click.Choice(list(CONTROLLERS)), default=None,
-              help="Default: the machine file's.")
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
 @click.option("--post", "post_files", type=FILE, multiple=True,
               help="R-test data measured after the edit (CSV v1). Repeatable.")
 @click.option("--json", "as_json", is_flag=True, help="Print the comparison as JSON.")
@@ -287,8 +288,8 @@ def checklist_cmd(machine_file, folder):
 
 @main.command("report")
 @click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
-@click.option("--controller", "controller_name", type=click.Choice(list(CONTROLLERS)), default=None,
-              help="For the predicted comparison. Default: the machine file's.")
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. For the predicted comparison. Default: the machine file's.")
 @click.option("--post", "post_files", type=FILE, multiple=True, help="R-test data after the edit.")
 @click.option("--before", type=FILE, default=None, help="An earlier fit of the same data, for the plots.")
 @click.option("--emitted", "emitted", type=FILE, multiple=True,

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .correction import plan
 from .diagnose import diagnose
-from .emit import controller
-from .emit.kinematics import held_by, plan
+from .emit.registry import controller
 from .errors import CompgenError
 from .identify import identify
 from .kinematics import Model, Poses
@@ -90,14 +90,8 @@ def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, control
     x = np.array([fit.parameters[n].value for n in fit.model])
     residual = y - model.deviation(poses, x)
     p = plan(machine, fit, force=True)   # predict even what the limits would refuse to write
-    if ctl.family == "sinumerik":        # squareness and single-axis errors through CEC tables
-        not_held = list(p.not_compensable)
-    elif ctl.family == "linuxcnc":       # line positions only: tilts and the rest stay
-        not_held = [f"{n} tilt" for n, line in p.lines.items() if line.tilt.any()]
-        not_held += list(p.squareness) + [t["effect"] for t in p.tables] + list(p.not_compensable)
-    else:                                # squareness in the rows around MachAxis X / Z
-        not_held = [t["effect"] for t in p.tables] + list(p.not_compensable)
-    after = Poses(held_by(machine, p, ctl.family).drive(machine, poses), poses.ball, poses.t, poses.path)
+    not_held = ctl.not_held(p)
+    after = Poses(ctl.holds(machine, p).drive(machine, poses), poses.ball, poses.t, poses.path)
     predicted = model.relative(after, x) + residual
     before = _beyond_setup(machine, poses, y)
     pred = _beyond_setup(machine, after, predicted)

@@ -22,7 +22,6 @@ from .files import read_text
 
 LINEAR, ROTARY = "linear", "rotary"
 DIRECTIONS = ("x", "y", "z")
-CONTROLLERS = ("itnc530", "tnc640", "sinumerik840d", "linuxcnc")
 
 
 @dataclass(frozen=True)
@@ -153,6 +152,8 @@ def load_machine(path: str | Path) -> Machine:
 
 def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
     get = _Getter(doc, source)
+    from .emit.registry import CONTROLLERS  # the registry's modules build on this one
+
     controller = get.str("controller")
     if controller not in CONTROLLERS:
         raise CompgenError(f"unknown controller {controller!r}", where=f"{source}: controller",

@@ -5,9 +5,12 @@ import pytest
 from conftest import ARCSEC, ROOT, TABLE4, UM
 
 from compgen.compare import compare
+from compgen.correction import Held
 from compgen.effects import location_model
-from compgen.emit.kinematics import AxisLine, ControllerModel, controller_model, kinematics_edit
+from compgen.emit.kinematics import kinematics_edit
+from compgen.emit.registry import read_edits
 from compgen.identify import identify
+from compgen.lines import AxisLine
 from compgen.paths import generate
 from compgen.simulate import simulate
 
@@ -34,7 +37,7 @@ def _post(machine, truth, poses, held, seed=6):
 def test_prediction_agrees_with_the_measurement_after_the_edit(seed_machine, session):
     truth, poses, pre, fit = session
     emitted = kinematics_edit(seed_machine, fit, "itnc530", CURRENT_TAB, "c", "K", "0", "d")
-    held = controller_model(seed_machine, {"new.TAB": emitted.files[".TAB"]}, None)
+    held = read_edits(seed_machine, {"new.TAB": emitted.files[".TAB"]}, None)
     result = compare(seed_machine, [pre], fit, "itnc530", [_post(seed_machine, truth, poses, held)])
     predicted, measured = result.predicted_post["rms_um"], result.measured_post["rms_um"]
     assert result.before["rms_um"] > 10                       # what the edit removes
@@ -64,9 +67,9 @@ def test_sinumerik_holds_what_cec_can_and_predicts_the_noise(bc_machine):
 def test_a_wrongly_signed_edit_is_caught_and_diagnosed(seed_machine, session):
     truth, poses, pre, fit = session
     emitted = kinematics_edit(seed_machine, fit, "itnc530", CURRENT_TAB, "c", "K", "0", "d")
-    right = controller_model(seed_machine, {"new.TAB": emitted.files[".TAB"]}, None)
-    wrong = ControllerModel({k: AxisLine(v.axis, v.nominal, v.pivot, -v.offset, -v.tilt)
-                             for k, v in right.lines.items()}, {}, [])
+    right = read_edits(seed_machine, {"new.TAB": emitted.files[".TAB"]}, None)
+    wrong = Held({k: AxisLine(v.axis, v.nominal, v.pivot, -v.offset, -v.tilt)
+                  for k, v in right.lines.items()}, {})
     result = compare(seed_machine, [pre], fit, "itnc530", [_post(seed_machine, truth, poses, wrong)])
     post = result.measured_post
     assert not post["as_predicted"] and "did NOT improve as predicted" in post["statement"]

@@ -6,20 +6,14 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, ROOT, SEED_MACHINE, TABLE4, UM, run
 
+from compgen.correction import nominal_lines, plan
 from compgen.effects import location_model
-from compgen.emit.kinematics import (
-    apply_cec,
-    kinematics_edit,
-    plan,
-    read_carr,
-    read_cec,
-    read_heidenhain_lines,
-    read_sinumerik_lines,
-)
+from compgen.emit import heidenhain, sinumerik
+from compgen.emit.kinematics import kinematics_edit
+from compgen.emit.registry import read_edits
 from compgen.errors import CompgenError
 from compgen.identify import identify
 from compgen.kinematics import Model, Poses
-from compgen.lines import controller_inverse
 from compgen.paths import generate
 from compgen.rtest import RTestData
 from compgen.simulate import simulate
@@ -72,7 +66,7 @@ def test_heidenhain_round_trip(seed_machine, seed_fit):
     p = plan(seed_machine, seed_fit)
     emitted = kinematics_edit(seed_machine, seed_fit, "itnc530", CURRENT_TAB, "c", "KIN", "0.1.0", DATE)
     for text in (emitted.files[".TAB"], emitted.files[".txt"]):
-        got = read_heidenhain_lines(text, seed_machine)
+        got = heidenhain.read_lines(text, seed_machine, nominal_lines(seed_machine))
         for axis, line in p.lines.items():
             np.testing.assert_allclose(got[axis].offset, line.offset, atol=0.5e-5)  # 5 decimals, mm
             np.testing.assert_allclose(got[axis].tilt, line.tilt, atol=np.radians(0.5e-7))
@@ -81,12 +75,13 @@ def test_heidenhain_round_trip(seed_machine, seed_fit):
 def test_sinumerik_round_trip(bc_machine, bc_fit):
     p = plan(bc_machine, bc_fit)
     emitted = kinematics_edit(bc_machine, bc_fit, "sinumerik840d", CURRENT_CARR, "c", "KIN", "0.1.0", DATE)
-    got = read_sinumerik_lines(emitted.files[".MPF"], bc_machine, read_carr(CURRENT_CARR, "c", 1))
+    got = sinumerik.read_lines(emitted.files[".MPF"], bc_machine, sinumerik.read_carr(CURRENT_CARR, "c", 1),
+                               nominal_lines(bc_machine))
     for axis, line in p.lines.items():
         np.testing.assert_allclose(got[axis].offset, line.offset, atol=1e-5)    # l2 + l3, rounded
         np.testing.assert_allclose(got[axis].tilt, line.tilt, atol=1e-9)
-    restore = read_carr(emitted.files["_RESTORE.MPF"], "r", 1)
-    assert all(restore[n] == v for n, v in read_carr(CURRENT_CARR, "c", 1).items())
+    restore = sinumerik.read_carr(emitted.files["_RESTORE.MPF"], "r", 1)
+    assert all(restore[n] == v for n, v in sinumerik.read_carr(CURRENT_CARR, "c", 1).items())
 
 
 def _setup_only_rms(machine, poses, reading):
@@ -99,13 +94,9 @@ def _closed_loop(machine, truth, model, controller, current, rng):
     pre = simulate(machine, truth, poses, NOISE_UM, rng)
     fit = identify(machine, [pre], model)
     emitted = kinematics_edit(machine, fit, controller, current, "current", "KIN", "0.1.0", DATE)
-    if controller == "sinumerik840d":        # apply the files, the way the control would
-        lines = read_sinumerik_lines(emitted.files[".MPF"], machine, read_carr(current, "c", 1))
-        tables = read_cec(emitted.files.get("_CEC.INI", ""))
-    else:
-        lines, tables = read_heidenhain_lines(emitted.files[".TAB"], machine), []
-    rotary = poses.q[:, [machine.index(a.name) for a in machine.rotary_axes]]
-    q = apply_cec(machine, tables, controller_inverse(machine, lines, rotary, poses.ball))
+    # apply the files, the way the control would
+    loaded = {k: v for k, v in emitted.files.items() if k in (".MPF", "_CEC.INI", ".TAB")}
+    q = read_edits(machine, loaded, current).drive(machine, poses)
     true = Model(machine, list(truth))
     post_poses = Poses(q, poses.ball, poses.t, poses.path)
     noise = rng.normal(0, NOISE_UM * 1e-3, q[:, :3].shape)
@@ -161,7 +152,7 @@ def test_cli_writes_table_change_list_and_sign_check(tmp_path, fit_file):
 
 
 @pytest.mark.parametrize("args, expected", [
-    (["--controller", "fanuc"], "Invalid value for '--controller'"),
+    (["--controller", "fanuc"], "unknown controller 'fanuc'"),
     (["--controller", "sinumerik840d"], "needs --current"),
     (["--controller", "tnc640", "--current", ROOT / "examples" / "itnc530-current.TAB"],
      "configuration editor"),
@@ -203,12 +194,11 @@ def test_every_controller_file_is_ascii(seed_machine, seed_fit, bc_machine, bc_f
 def test_sign_check_promises_what_the_loaded_edit_does(seed_machine, seed_fit, controller):
     """The expected reading changes printed with an edit, against the change the edit makes
     when its files are read back and loaded, pose by pose (µm, two decimals printed)."""
-    from compgen.emit.kinematics import controller_model
     from compgen.emit.programs import read_program
     emitted = kinematics_edit(seed_machine, seed_fit, controller, CURRENT_TAB if controller == "itnc530"
                               else None, "c", "KIN", "0", DATE)
     main = emitted.files[".TAB" if controller == "itnc530" else ".hal"]
-    held = controller_model(seed_machine, {"edit": main}, None)
+    held = read_edits(seed_machine, {"edit": main}, None)
     _, _, rot = read_program(emitted.files[f"_SIGN{'.H' if controller == 'itnc530' else '.ngc'}"],
                              seed_machine, controller)
     listed = [ln for ln in emitted.notes if re.match(r"S\d+_", ln)]

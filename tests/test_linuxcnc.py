@@ -18,7 +18,9 @@ import numpy as np
 import pytest
 from conftest import ROOT, SEED_MACHINE, UM
 
-from compgen.emit.kinematics import kinematics_edit, read_linuxcnc_lines
+from compgen.correction import nominal_lines
+from compgen.emit import linuxcnc
+from compgen.emit.kinematics import kinematics_edit
 from compgen.emit.programs import measure_program
 from compgen.identify import identify
 from compgen.kinematics import Model, Poses
@@ -121,7 +123,8 @@ def test_compgens_edit_loaded_into_linuxcnc_removes_what_it_can_hold(machine, tm
     q = _at_poses(joints, program)
     q[:, 3:] = np.radians(q[:, 3:])
     # LinuxCNC drives exactly as compgen's model of that controller says it will
-    held = controller_inverse(machine, read_linuxcnc_lines(hal, machine), q[:, 3:], poses.ball)
+    lines = linuxcnc.read_lines(hal, machine, None, nominal_lines(machine))
+    held = controller_inverse(machine, lines, q[:, 3:], poses.ball)
     np.testing.assert_allclose(q[:, :3], held[:, :3], rtol=0, atol=JOINT_MM)
     # the true machine, driven to LinuxCNC's joints, reads set-up and noise only; the
     # session records the nominal poses, as a real one would

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from conftest import SEED_MACHINE, run, vector
 
-from compgen.emit import CONTROLLERS
 from compgen.emit.programs import measure_program, read_program
+from compgen.emit.registry import CONTROLLERS
 from compgen.kinematics import Model, Poses
 from compgen.paths import generate
 from compgen.rtest import read_rtest

@@ -20,28 +20,6 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
-class Controller:
-    name: str
-    family: str           # template folder: heidenhain, sinumerik, linuxcnc
-    program_ext: str
-    words: str
-
-
-CONTROLLERS = {
-    "itnc530": Controller("itnc530", "heidenhain", ".H", "HEIDENHAIN iTNC 530"),
-    "tnc640": Controller("tnc640", "heidenhain", ".H", "HEIDENHAIN TNC 640"),
-    "sinumerik840d": Controller("sinumerik840d", "sinumerik", ".MPF", "SIEMENS SINUMERIK 840D sl"),
-    "linuxcnc": Controller("linuxcnc", "linuxcnc", ".ngc", "LinuxCNC (trt kinematics)"),
-}
-
-
-def controller(name: str) -> Controller:
-    if name not in CONTROLLERS:
-        raise CompgenError(f"unknown controller {name!r}", hint=f"use one of {', '.join(CONTROLLERS)}")
-    return CONTROLLERS[name]
-
-
-@dataclass(frozen=True)
 class Emitted:
     """What one command writes: file name suffix → text, and what the user must know."""
 

@@ -20,10 +20,10 @@ from ..kinematics import Poses, inverse
 from ..machine import Machine
 from ..paths import check_travel
 from ..rtest import BALL, axis_cells
-from . import Emitted, ascii_text, controller, fmt_plain, fmt_signed, render
+from . import Emitted, ascii_text, render
+from .registry import controller
 
 MODES = ("tcpm", "axes")
-TCP_WORDS = {"heidenhain": "FUNCTION TCPM", "sinumerik": "TRAORI", "linuxcnc": "trt kinematics"}
 LINEAR_DECIMALS = 4       # 0.1 µm
 ANGLE_DECIMALS = 4        # 0.0001°
 
@@ -67,7 +67,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
         xyz = inverse(machine, np.zeros((len(poses), len(rotary))), poses.ball)[:, linear]
     else:
         xyz = poses.q[:, linear]
-    fmt = fmt_signed if ctl.family == "heidenhain" else fmt_plain
+    fmt = ctl.number
 
     def rot(i):
         return " ".join(f"{a.name}{fmt(np.degrees(poses.q[i, j]), ANGLE_DECIMALS)}"
@@ -91,7 +91,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     header = [
         f"compgen {version} R-test measurement program, {date}",
         f"machine: {ascii_text(machine.name)}; controller: {ctl.words}",
-        (f"mode TCPM: {TCP_WORDS[ctl.family]}, the control's kinematics moves X Y Z (tests the control)"
+        (f"mode TCPM: {ctl.tcp_words}, the control's kinematics moves X Y Z (tests the control)"
          if mode == "tcpm" else
          "mode AXES: X Y Z from compgen's inverse kinematics (tests compgen's nominal model)"),
         f"path {ascii_text(label)}: {len(poses)} poses; pose list {name}.poses.csv, same order",
@@ -152,26 +152,17 @@ def _check_feed(machine: Machine, poses: Poses, feed: float, label: str) -> None
                                f"its feed_max {a.feed_max:g}", hint="lower [program] feed")
 
 
-POSE_LINE = {
-    "heidenhain": re.compile(r"^\d+ L X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)R0 F\S+ ; pose (\d+)"),
-    "sinumerik": re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)"),
-    "linuxcnc": re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)"),
-}
-
-
 def read_program(text: str, machine: Machine, controller_name: str) -> tuple[str, np.ndarray, np.ndarray]:
     """Parse an emitted program back: (mode, X Y Z per pose (n, 3) mm, rotary (n, r) deg).
 
     In TCPM mode X Y Z are workpiece coordinates; in axes mode machine-axis positions.
     """
-    family = controller(controller_name).family
-    switch_on = {"heidenhain": r"^\d+ FUNCTION TCPM F", "sinumerik": r"^TRAORI\b",
-                 "linuxcnc": r"^; mode TCPM"}[family]
-    tcpm = re.search(switch_on, text, flags=re.MULTILINE) is not None
+    ctl = controller(controller_name)
+    tcpm = ctl.tcpm_on.search(text) is not None
     xyz, rot, numbers = [], [], []
     names = [a.name for a in machine.rotary_axes]
     for line in text.splitlines():
-        m = POSE_LINE[family].match(line)
+        m = ctl.pose_line.match(line)
         if not m:
             continue
         words = dict((w[0], float(w[1:])) for w in m[4].split())

@@ -1,0 +1,257 @@
+"""What a fit asks of any control, in no controller's syntax.
+
+A control can hold:
+* the rotary axis lines (``lines.py``);
+* the squareness of the linear axes;
+* position-dependent translation errors of linear axes and positioning errors of rotary
+  axes, as single-axis compensation tables (SINUMERIK CEC, HEIDENHAIN axis-error tables).
+Everything else is not compensable. The ball offset (XOW YOW ZOW) and nest offsets are
+set-up, not machine errors, and are never written. Every effect is evaluated through the
+model (``Model``), never by re-implementing its basis.
+
+A fit of data measured under TCPM/TRAORI gives errors relative to the kinematics the
+control held during the measurement, so corrections add to the values held then.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .effects import ROT_OF, TRANSLATIONS, effect_name, effect_of_param
+from .errors import CompgenError
+from .kinematics import Model, Poses
+from .lines import AxisLine, axis_lines, controller_inverse
+from .machine import Machine
+from .results import FitResult
+
+ARCSEC = np.pi / 648000.0
+TABLE_POINTS = 37        # interpolation points of a generated compensation table
+
+
+@dataclass(frozen=True)
+class CompTable:
+    """A single-axis compensation table: ``values`` (in ``unit``, mm or deg) are added to
+    the ``output`` axis as a function of the ``input`` axis on an even grid."""
+
+    effect: str
+    words: str
+    input: str
+    output: str
+    start: float
+    stop: float
+    values: tuple[float, ...]
+    modulo: bool
+    unit: str
+
+    @property
+    def step(self) -> float:
+        return (self.stop - self.start) / (len(self.values) - 1)
+
+    @property
+    def grid(self) -> np.ndarray:
+        return np.linspace(self.start, self.stop, len(self.values))
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """Everything a kinematics edit needs, independent of the controller's syntax."""
+
+    lines: dict[str, AxisLine]
+    squareness: dict[str, float]           # COX, AOZ, BOZ: rad
+    tables: tuple[str, ...]                # effects a single-axis table holds exactly
+    not_compensable: tuple[str, ...]
+    setup: tuple[str, ...]                 # set-up terms left out on purpose
+    fit_params: dict[str, float]
+
+
+def plan(machine: Machine, fit: FitResult, force: bool = False) -> Plan:
+    """Split a fit into what a control can hold, checking every correction's size."""
+    values = {n: e.value for n, e in fit.parameters.items()}
+    lines = axis_lines(machine, values)
+    squareness, tables, other, setup = {}, [], [], []
+    linear = {a.name for a in machine.axes if not a.rotary}
+    effects = {}
+    for param in fit.model:
+        effects.setdefault(effect_name(param), effect_of_param(machine, param))
+    for name, e in effects.items():
+        if e.carrier in ("ball", "nest"):
+            setup.append(name)
+        elif e.basis.kind == "const" and e.carrier in linear:
+            squareness[name] = values[name]
+        elif e.basis.kind == "const":
+            continue                                   # rotary location: in the lines
+        elif _compensable_by_table(machine, e):
+            tables.append(name)
+        else:
+            other.append(name)
+    _check_bounds(machine, lines, squareness, force)
+    return Plan(lines, squareness, tuple(tables), tuple(other), tuple(setup), values)
+
+
+def _compensable_by_table(machine: Machine, e) -> bool:
+    """A translation error of a linear axis ahead of every rotary axis in its chain, or the
+    positioning error of a rotary axis: single-axis tables hold those exactly."""
+    axis = machine.axis(e.carrier)
+    if axis.rotary:
+        return e.direction == ROT_OF[axis.direction]
+    chain = machine.workpiece if axis.side == "workpiece" else machine.tool
+    ahead = chain[:chain.index(axis)]
+    return e.direction in TRANSLATIONS and not any(a.rotary for a in ahead)
+
+
+def _check_bounds(machine: Machine, lines, squareness, force: bool) -> None:
+    lim = machine.limits
+    too_big = []
+    for line in lines.values():
+        off = np.abs(line.offset).max() * 1e3
+        tilt = np.abs(line.tilt).max() / ARCSEC
+        if off > lim.offset_um:
+            too_big.append(f"{line.axis} line offset {off:.1f} um > {lim.offset_um:g} um")
+        if tilt > lim.tilt_arcsec:
+            too_big.append(f"{line.axis} line tilt {tilt:.1f} arcsec > {lim.tilt_arcsec:g} arcsec")
+    for name, v in squareness.items():
+        if abs(v) / ARCSEC > lim.tilt_arcsec:
+            too_big.append(f"{name} {v / ARCSEC:.1f} arcsec > {lim.tilt_arcsec:g} arcsec")
+    if too_big and not force:
+        raise CompgenError("correction beyond the plausibility limits: " + "; ".join(too_big),
+                           hint="check the R-test set-up and the fit first; a real error this large "
+                                "needs the OEM. Raise [limits] in the machine file or use --force")
+
+
+def lines_text(p: Plan) -> list[str]:
+    """The corrections in words, µm and arcsec, for every file's header."""
+    out = [f"{n} line at its pivot: offset " + ", ".join(
+        f"{t.upper()} {line.offset[i] * 1e3:+.2f} um" for i, t in enumerate("xyz") if t != line.nominal)
+        + "; tilt " + ", ".join(f"about {t.upper()} {line.tilt[i] / ARCSEC:+.2f} arcsec"
+                                for i, t in enumerate("xyz") if t != line.nominal)
+        for n, line in p.lines.items()]
+    return out + [f"{n} squareness {v / ARCSEC:+.2f} arcsec" for n, v in p.squareness.items()]
+
+
+def pivot_of(machine: Machine, name: str) -> np.ndarray:
+    """Nominal pivot of a rotary axis at the zero pose: the sum of the offsets up to it."""
+    for chain in (machine.workpiece, machine.tool):
+        names = [a.name for a in chain]
+        if name in names:
+            return np.sum([np.asarray(a.offset, float) for a in chain[:names.index(name) + 1]], axis=0)
+    raise CompgenError(f"no axis {name}")
+
+
+def nominal_lines(machine: Machine) -> dict[str, AxisLine]:
+    return {a.name: AxisLine(a.name, a.direction, pivot_of(machine, a.name), np.zeros(3), np.zeros(3))
+            for a in machine.rotary_axes}
+
+
+# ---------------------------------------------------------------------------- compensation tables
+
+def comp_tables(machine: Machine, p: Plan) -> list[CompTable]:
+    """For each compensable effect, the table that cancels its deviation: on a grid over
+    its axis, the value to add to the output axis."""
+    out = []
+    for effect in p.tables:
+        names = [n for n in p.fit_params if effect_name(n) == effect]
+        e = effect_of_param(machine, names[0])
+        axis = machine.axis(e.carrier)
+        if axis.rotary:               # an angle error: undo it on the axis itself
+            grid = _grid(axis)
+            comp = -np.degrees(_positioning_error(machine, axis, names, p.fit_params, grid))
+            out.append(_table(effect, e.words, axis, axis.name, grid, comp, "deg"))
+        else:
+            out.append(_cancel_on_linear_axis(machine, axis, names, [p.fit_params[n] for n in names],
+                                              effect, e.words, "xyz".index(e.direction)))
+    return out
+
+
+def squareness_tables(machine: Machine, p: Plan) -> list[CompTable]:
+    """A squareness as a linear table: output axis along the tilt, input the tilted axis."""
+    return [_cancel_on_linear_axis(machine, machine.axis(name[2]), [name], [value], name,
+                                   f"squareness {name}") for name, value in p.squareness.items()]
+
+
+def _grid(axis) -> np.ndarray:
+    """Table positions over the axis: a whole turn for a full-turn axis, else its travel."""
+    lo, hi = (0.0, 360.0) if axis.full_turn else axis.travel
+    return np.linspace(lo, hi, TABLE_POINTS)
+
+
+def _table(effect, words, axis, out_axis, grid, values, unit) -> CompTable:
+    return CompTable(effect, words, axis.name, out_axis, float(grid[0]), float(grid[-1]),
+                     tuple(float(v) for v in values), axis.full_turn, unit)
+
+
+def _alone(machine: Machine, axis, grid_deg_or_mm: np.ndarray) -> Poses:
+    """Poses with ``axis`` alone moved over the grid (deg for a rotary axis, mm otherwise)."""
+    q = np.zeros((len(grid_deg_or_mm), len(machine.axes)))
+    q[:, machine.index(axis.name)] = np.radians(grid_deg_or_mm) if axis.rotary else grid_deg_or_mm
+    return Poses.at(q, machine.ball)
+
+
+def _cancel_on_linear_axis(machine: Machine, axis, names, values, effect: str, words: str,
+                           k: int | None = None) -> CompTable:
+    """A table on the linear axis along machine direction ``k`` (default: the direction the
+    effect moves most) cancelling the effect's deviation as ``axis`` alone moves."""
+    grid = _grid(axis)
+    dev = Model(machine, names).deviation(_alone(machine, axis, grid), np.array(values))
+    k = int(np.argmax(np.abs(dev).max(axis=0))) if k is None else k
+    out_axis = next(a.name for a in machine.axes if not a.rotary and a.direction == "xyz"[k])
+    return _table(effect, words, axis, out_axis, grid, -dev[:, k] / _gain(machine, out_axis, k), "mm")
+
+
+def _positioning_error(machine: Machine, axis, names, params, grid_deg) -> np.ndarray:
+    """A rotary axis's positioning error (rad, in the sense of its commanded angle) at the
+    grid angles, through the model: the angle the axis must be turned back by so that the
+    model's reading equals the nominal one."""
+    model = Model(machine, names)
+    values = np.array([params[n] for n in names])
+    # the error enters as the angle turned in addition to the command: its gain is the
+    # model's own derivative with respect to the commanded angle
+    poses = _alone(machine, axis, grid_deg)
+    dev = model.deviation(poses, values)
+    i = machine.index(axis.name)
+    step = 1e-6
+    q_up = poses.q.copy()
+    q_up[:, i] += step
+    nominal = Model(machine, ())
+    gain = (nominal.relative(Poses.at(q_up, machine.ball)) - nominal.relative(poses)) / step
+    lever = np.sum(gain**2, axis=1)
+    return np.where(lever > 0, np.sum(dev * gain, axis=1) / np.where(lever > 0, lever, 1.0), 0.0)
+
+
+def _gain(machine: Machine, axis_name: str, k: int) -> float:
+    """∂(nest − ball)_k / ∂q of a linear axis on the nominal machine (+1 on ISO 841 machines)."""
+    q = np.zeros((2, len(machine.axes)))
+    q[1, machine.index(axis_name)] = 1.0
+    rel = Model(machine, ()).relative(Poses.at(q, machine.ball))
+    return float(rel[1, k] - rel[0, k])
+
+
+def apply_tables(machine: Machine, tables, q: np.ndarray) -> np.ndarray:
+    """Commanded poses (mm, rad) with the tables' compensation added, as a control adds it."""
+    q = q.copy()
+    for t in tables:
+        i, o = machine.index(t.input), machine.index(t.output)
+        x = np.degrees(q[:, i]) if machine.axes[i].rotary else q[:, i]
+        if t.modulo:
+            x = t.start + np.mod(x - t.start, t.stop - t.start)
+        comp = np.interp(x, t.grid, t.values)
+        q[:, o] += np.radians(comp) if machine.axes[o].rotary else comp
+    return q
+
+
+# ---------------------------------------------------------------------------- what a control holds
+
+@dataclass(frozen=True, eq=False)
+class Held:
+    """What a control holds: rotary axis lines, linear squareness (rad) and compensation
+    tables; ``drive`` gives the axis positions it commands for nominal poses."""
+
+    lines: dict[str, AxisLine]
+    squareness: dict[str, float]
+    tables: tuple[CompTable, ...] = ()
+
+    def drive(self, machine: Machine, poses: Poses) -> np.ndarray:
+        rotary = poses.q[:, [machine.index(a.name) for a in machine.rotary_axes]]
+        q = controller_inverse(machine, self.lines, rotary, poses.ball, self.squareness)
+        return apply_tables(machine, self.tables, q)

@@ -1,0 +1,76 @@
+"""The contract every controller module fulfils (scikit-rf's calibration classes are the
+model): its program syntax, its kinematics edit, its reader of the current state and of its
+own edits, and what the control holds once the edit is loaded. Nothing outside a controller
+module tests a controller's name."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+from ..correction import Held, Plan
+from ..machine import Machine
+from . import fmt_plain
+
+
+@dataclass(frozen=True)
+class EditContext:
+    """What every edit file says in its header, and the sign check it points to."""
+
+    name: str                 # program name of the edit (its stem)
+    header: tuple[str, ...]
+    lines: tuple[str, ...]    # the corrections in words (``correction.lines_text``)
+    expect: tuple[str, ...]   # the sign check's expected reading changes
+    version: str
+    date: str
+
+
+@dataclass(frozen=True)
+class EditFiles:
+    """An edit's files (suffix → text) and what the user must read on the terminal."""
+
+    files: dict[str, str]
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+
+class Controller:
+    """A control. Subclasses set the class attributes and override the methods."""
+
+    name = ""                 # the machine file's ``controller`` and ``--controller``
+    family = ""               # folder of its templates
+    words = ""                # how people name it
+    program_ext = ""          # suffix of its programs
+    comment = ";"             # what starts a comment line in its files
+    tcp_words = ""            # its name for tool-centre-point control
+    backup = ""               # what to save before an edit
+    pose_line: re.Pattern     # one measuring pose of a program it wrote
+    tcpm_on: re.Pattern       # a program it wrote switches TCP on
+
+    @staticmethod
+    def number(value: float, decimals: int) -> str:
+        return fmt_plain(value, decimals)
+
+    def main_suffix(self, current: str | None) -> str:
+        """Suffix of the file ``-o`` names; the others go beside it with the same stem."""
+        raise NotImplementedError
+
+    def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
+             ctx: EditContext) -> EditFiles:
+        """The edit's files. ``current`` is the control's state as a text (or None)."""
+        raise NotImplementedError
+
+    def holds(self, machine: Machine, p: Plan) -> Held:
+        """What the control holds once compgen's edit of ``p`` is loaded."""
+        raise NotImplementedError
+
+    def not_held(self, p: Plan) -> list[str]:
+        """What of ``p`` stays in the machine after the edit, in words."""
+        raise NotImplementedError
+
+    def reads(self, text: str) -> bool:
+        """Whether ``text`` is one of the edit files this controller writes."""
+        return False
+
+    def read(self, machine: Machine, text: str, current: str | None, held: Held, where: str) -> Held:
+        """``held`` with the edit file ``text`` loaded, as the control reads it."""
+        raise NotImplementedError

@@ -1,0 +1,213 @@
+"""HEIDENHAIN iTNC 530 and TNC 640: Klartext programs, kinematics description-table edits
+(iTNC 530) and change lists (TNC 640), and their readers.
+
+HEIDENHAIN's scheme for position errors: error rows before ``MachAxis``, their inverse after
+it (iTNC 530 HSCI Technical Manual p.684, ``B0X``/``C0X`` for squareness); the ``DOC``
+column names each row by its ISO symbol, so a later edit finds and increases it.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..correction import Held, Plan, comp_tables
+from ..effects import ROT_OF, ROTATIONS, TRANSLATIONS
+from ..errors import CompgenError
+from ..lines import AxisLine
+from ..machine import Machine
+from . import fmt_signed, render
+from .base import Controller, EditContext, EditFiles
+from .tab import TabTable
+
+MM_DECIMALS = 5          # 0.01 µm
+DEG_DECIMALS = 7         # 0.0004″
+# a Trans row naming its ISO symbol, in a table (``NR KEY AXIS COORD DOC``) or a change list
+ROW = re.compile(r"^\s*(?:\d+\s+)?(?:Trans\s+([XYZABC])\s+(\S+)\s+(-?[XYZABC]0[A-Z])\b"
+                 r"|(-?[XYZABC]0[A-Z])\s+Trans\s+([XYZABC])\s+(\S+))", re.MULTILINE)
+
+
+@dataclass(frozen=True)
+class Row:
+    """One ``Trans`` row: ``doc`` is its ISO name (``Y0A``, ``-Y0A`` after the axis)."""
+
+    doc: str
+    axis: str          # X Y Z (mm) or A B C (deg)
+    coord: float
+
+
+def rows_of(machine: Machine, p: Plan) -> dict[str, tuple[list[Row], list[Row]]]:
+    """Rows before and after each ``MachAxis``: error rows, then the inverse in reverse."""
+    out = {}
+    for name, line in p.lines.items():
+        d = line.nominal
+        before = [Row(f"{t.upper()}0{name}", t.upper(), line.offset["xyz".index(t)])
+                  for t in TRANSLATIONS if t != d]
+        before += [Row(f"{r.upper()}0{name}", r.upper(), np.degrees(line.tilt[ROTATIONS.index(r)]))
+                   for r in ROTATIONS if r != ROT_OF[d]]
+        out[name] = (before, [Row(f"-{r.doc}", r.axis, -r.coord) for r in reversed(before)])
+    for name, value in p.squareness.items():       # e.g. COX: Trans C around MachAxis X
+        axis, r = name[2], name[0]
+        before = [Row(f"{r}0{axis}", r, np.degrees(value))]
+        prior = out.get(axis, ([], []))
+        out[axis] = (prior[0] + before, [Row(f"-{r}0{axis}", r, -np.degrees(value))] + prior[1])
+    return out
+
+
+def _decimals(axis: str) -> int:
+    return MM_DECIMALS if axis in "XYZ" else DEG_DECIMALS
+
+
+def edit_table(table: TabTable, rows: dict[str, tuple[list[Row], list[Row]]]) -> tuple[TabTable, list[str]]:
+    """Add the corrections to the current table: an existing row of the same ISO name (DOC)
+    gets its COORD increased; a missing one is inserted next to its ``MachAxis``, the error
+    rows just before it in order, the inverse rows just after it in order."""
+    if "DOC" not in table.columns:
+        raise CompgenError("the current table has no DOC column to name the correction rows",
+                           hint="add a DOC column (the enhanced kinematics description has one)")
+    new = [dict(r) for r in table.rows]
+    diff = []
+
+    def machaxis(axis):
+        i = next((i for i, r in enumerate(new) if r.get("KEY") == "MachAxis" and r.get("AXIS") == axis), None)
+        if i is None:
+            raise CompgenError(f"the current table has no 'MachAxis {axis}' row",
+                               hint="is this the table of the machine that was measured?")
+        return i
+
+    for axis, (before, after) in rows.items():
+        for side, group in (("before", before), ("after", after)):
+            for k, row in enumerate(group):
+                unit = "mm" if row.axis in "XYZ" else "deg"
+                dec = _decimals(row.axis)
+                idx = next((i for i, r in enumerate(new) if r.get("DOC") == row.doc), None)
+                if idx is not None:
+                    old = float(new[idx]["COORD"])
+                    new[idx]["COORD"] = fmt_signed(old + row.coord, dec)
+                    diff.append(f"{row.doc:<6} Trans {row.axis}  {fmt_signed(old, dec)} -> "
+                                f"{new[idx]['COORD']} {unit}")
+                    continue
+                at = machaxis(axis) if side == "before" else machaxis(axis) + 1 + k
+                new.insert(at, {"KEY": "Trans", "AXIS": row.axis, "COORD": fmt_signed(row.coord, dec),
+                                "DOC": row.doc})
+                diff.append(f"{row.doc:<6} Trans {row.axis}  (new row) -> "
+                            f"{fmt_signed(row.coord, dec)} {unit}")
+    return TabTable(table.name, table.columns, table.starts, new), diff
+
+
+def read_lines(text: str, machine: Machine, lines: dict[str, AxisLine]) -> dict[str, AxisLine]:
+    """The rotary axis lines a description table (or compgen's change list) holds: the
+    ISO-named rows before each ``MachAxis``, checked against their inverse rows after it."""
+    rows = [((m[3], m[1], float(m[2])) if m[1] else (m[4], m[5], float(m[6]))) for m in ROW.finditer(text)]
+    out = dict(lines)
+    for a in machine.rotary_axes:
+        mine = {doc: (axis, v) for doc, axis, v in rows if doc.lstrip("-").endswith(a.name)}
+        offset, tilt = np.zeros(3), np.zeros(3)
+        for doc, (axis, v) in mine.items():
+            if doc.startswith("-"):
+                continue
+            inverse_row = mine.get(f"-{doc}")
+            if inverse_row is None or abs(inverse_row[1] + v) > 1e-12:
+                raise CompgenError(f"row {doc} has no matching inverse row -{doc}",
+                                   hint="error rows before MachAxis need their inverse after it")
+            if axis in "XYZ":
+                offset["XYZ".index(axis)] = v
+            else:
+                tilt["ABC".index(axis)] = np.radians(v)
+        out[a.name] = AxisLine(a.name, a.direction, lines[a.name].pivot, offset, tilt)
+    return out
+
+
+def read_squareness(text: str, machine: Machine) -> dict[str, float]:
+    """Squareness rows around a linear ``MachAxis`` (``C0X`` → COX, rad)."""
+    out = {}
+    linear = {a.name for a in machine.axes if not a.rotary}
+    for doc, axis, value in ((m[3] or m[4], m[1] or m[5], m[2] or m[6]) for m in ROW.finditer(text)):
+        if doc[0] != "-" and doc[2] in linear and axis in "ABC":
+            out[f"{doc[0]}O{doc[2]}"] = np.radians(float(value))
+    return out
+
+
+def _row(r: Row) -> dict:
+    unit = "mm" if r.axis in "XYZ" else "deg"
+    shown = f"{r.coord * 1e3:+.2f} um" if unit == "mm" else f"{r.coord * 3600:+.2f} arcsec"
+    return {"doc": r.doc, "axis": r.axis, "coord": fmt_signed(r.coord, _decimals(r.axis)), "unit": unit,
+            "shown": shown}
+
+
+def _comp_csv(tables) -> str:
+    out = ["# compgen: values for the control's axis-error compensation tables (U8: the file layout of",
+           "# HEIDENHAIN COM tables is unconfirmed: enter these values, this file is not a control file)",
+           "effect,input_axis,position,output_axis,compensation,unit"]
+    for t in tables:
+        for x, v in zip(t.grid, t.values, strict=True):
+            out.append(f"{t.effect},{t.input},{x:.4f},{t.output},{v:.6f},{t.unit}")
+    return "\n".join(out) + "\n"
+
+
+class Heidenhain(Controller):
+    family = "heidenhain"
+    program_ext = ".H"
+    comment = ";"
+    tcp_words = "FUNCTION TCPM"
+    pose_line = re.compile(r"^\d+ L X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)R0 F\S+ ; pose (\d+)")
+    tcpm_on = re.compile(r"^\d+ FUNCTION TCPM F", re.MULTILINE)
+    number = staticmethod(fmt_signed)
+
+    def main_suffix(self, current: str | None) -> str:
+        return ".TAB" if current is not None else ".txt"
+
+    def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
+             ctx: EditContext) -> EditFiles:
+        rows = rows_of(machine, p)
+        tables = comp_tables(machine, p)
+        files, notes = {}, []
+        if current is not None:
+            table, diff = edit_table(TabTable.parse(current, where), rows)
+            files[".TAB"] = table.text()
+            notes += ["table changes:", *diff]
+        files[".txt"] = render(
+            "heidenhain/kinematics.txt.j2", header=ctx.header, controller=self.name,
+            rows=[{"axis": a, "before": [_row(r) for r in b], "after": [_row(r) for r in f]}
+                  for a, (b, f) in rows.items()],
+            lines=ctx.lines, expect=ctx.expect,
+            tables=[{"effect": t.effect, "words": t.words, "output": t.output, "unit": t.unit,
+                     "range": f"{t.input} {t.start:g}..{t.stop:g} step {t.step:g}"} for t in tables],
+            other=p.not_compensable, setup=p.setup)
+        if tables:
+            files[".comp.csv"] = _comp_csv(tables)
+        return EditFiles(files, tuple(notes))
+
+    def holds(self, machine: Machine, p: Plan) -> Held:
+        return Held(p.lines, dict(p.squareness))
+
+    def not_held(self, p: Plan) -> list[str]:
+        return [*p.tables, *p.not_compensable]
+
+    def reads(self, text: str) -> bool:
+        return ROW.search(text) is not None
+
+    def read(self, machine: Machine, text: str, current: str | None, held: Held, where: str) -> Held:
+        return Held(read_lines(text, machine, held.lines),
+                    {**held.squareness, **read_squareness(text, machine)}, held.tables)
+
+
+class ITNC530(Heidenhain):
+    name = "itnc530"
+    words = "HEIDENHAIN iTNC 530"
+    backup = "copy the kinematics description table (*.TAB), or Cycle 450 SAVE KINEMATICS"
+
+
+class TNC640(Heidenhain):
+    name = "tnc640"
+    words = "HEIDENHAIN TNC 640"
+    backup = "save the machine configuration, or Cycle 450 SAVE KINEMATICS"
+
+    def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
+             ctx: EditContext) -> EditFiles:
+        if current is not None:
+            raise CompgenError("a TNC 640 keeps its kinematics in the configuration editor, not in a "
+                               "*.TAB file", hint="leave out --current: compgen writes the entries to change")
+        return super().edit(machine, p, current, where, ctx)

@@ -1,0 +1,115 @@
+"""LinuxCNC with the trt kinematics (``xyzac-trt-kins``, ``xyzbc-trt-kins``): G-code
+programs and HAL edits of the kinematics pins, and their reader.
+
+The pins (``src/emc/kinematics/trtfuncs.c``): C turns about the line through the rot
+point, the tilting axis about the line through the rot point plus the offsets. They hold
+axis-line positions only: angular location errors cannot be expressed.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from ..correction import ARCSEC, Held, Plan, pivot_of
+from ..errors import CompgenError
+from ..lines import AxisLine
+from ..machine import Machine
+from . import fmt_plain, render
+from .base import Controller, EditContext, EditFiles
+
+SETP = re.compile(r"^\s*setp\s+(\S+?)\.(\S+)\s+(\S+)", re.MULTILINE)
+
+
+def _trt(machine: Machine) -> tuple[str, object, object]:
+    """The trt module for a two-axis table (A or B tilting, C on it), or a clear refusal."""
+    axes = machine.rotary_axes
+    if (len(axes) != 2 or any(a.side != "workpiece" for a in axes) or axes[1].direction != "z"
+            or axes[0].direction not in "xy"):
+        raise CompgenError("LinuxCNC's trt kinematics is for a tilting table (A or B) carrying C",
+                           hint="this machine's chain is not one xyzac-/xyzbc-trt-kins can drive")
+    return f"xyz{axes[0].name.lower()}c-trt-kins", axes[0], axes[1]
+
+
+def _nominal(machine: Machine, tilt, c) -> dict[str, float]:
+    pivot_c, pivot_t = pivot_of(machine, c.name), pivot_of(machine, tilt.name)
+    return {"x-rot-point": pivot_c[0], "y-rot-point": pivot_c[1], "z-rot-point": pivot_c[2],
+            **{f"{'xyz'[k]}-offset": (pivot_t - pivot_c)[k] for k in range(3)}}
+
+
+def pins(machine: Machine, p: Plan, current: str | None,
+         where: str) -> tuple[str, list[tuple[str, str, str]], list[str]]:
+    """trt pin values: the current ones (a HAL file) or the machine file's nominal, plus the
+    corrections; and what the pins cannot express."""
+    module, tilt, c = _trt(machine)
+    along = "xyz".index(tilt.direction)
+    names = ["x-rot-point", "y-rot-point", "z-rot-point"] + [
+        f"{'xyz'[k]}-offset" for k in range(3) if k != along]
+    held = _nominal(machine, tilt, c)
+    if current is not None:
+        found = {m[2]: float(m[3]) for m in map(SETP.match, current.splitlines()) if m and m[1] == module}
+        missing = [n for n in names if n not in found]
+        if missing:
+            raise CompgenError(f"--current sets no {module}.{missing[0]}", where=where,
+                               hint=f"give the setp lines of {', '.join(names)}")
+        held = found
+    delta_r = p.lines[c.name].offset
+    delta_d = p.lines[tilt.name].offset - delta_r
+    new = {n: held[n] + (delta_r if n.endswith("rot-point") else delta_d)["xyz".index(n[0])] for n in names}
+    other = [f"{n} tilt {line.tilt[i] / ARCSEC:+.2f} arcsec about {'XYZ'[i]}"
+             for n, line in p.lines.items() for i in range(3) if line.tilt[i] != 0]
+    other += [*p.squareness, *p.tables, *p.not_compensable]
+    return module, [(n, fmt_plain(new[n], 6), fmt_plain(held[n], 6)) for n in names], other
+
+
+def read_lines(text: str, machine: Machine, current: str | None,
+               lines: dict[str, AxisLine]) -> dict[str, AxisLine]:
+    """The axis lines a trt HAL edit sets, relative to ``current`` (default: nominal)."""
+    module, tilt, c = _trt(machine)
+    now = {m[2]: float(m[3]) for m in map(SETP.match, text.splitlines()) if m and m[1] == module}
+    before = ({m[2]: float(m[3]) for m in map(SETP.match, current.splitlines()) if m and m[1] == module}
+              if current else _nominal(machine, tilt, c))
+    r = np.array([now[f"{a}-rot-point"] - before[f"{a}-rot-point"] for a in "xyz"])
+    d = np.array([now.get(f"{a}-offset", 0.0) - before.get(f"{a}-offset", 0.0) for a in "xyz"])
+    zero = np.zeros(3)
+    return {**lines, c.name: AxisLine(c.name, c.direction, lines[c.name].pivot, r, zero),
+            tilt.name: AxisLine(tilt.name, tilt.direction, lines[tilt.name].pivot, r + d, zero)}
+
+
+class LinuxCNC(Controller):
+    name = "linuxcnc"
+    family = "linuxcnc"
+    words = "LinuxCNC (trt kinematics)"
+    program_ext = ".ngc"
+    comment = "#"
+    tcp_words = "trt kinematics"
+    backup = "a copy of the HAL file that sets the trt kinematics pins"
+    pose_line = re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)")
+    tcpm_on = re.compile(r"^; mode TCPM", re.MULTILINE)
+
+    def main_suffix(self, current: str | None) -> str:
+        return ".hal"
+
+    def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
+             ctx: EditContext) -> EditFiles:
+        module, values, other = pins(machine, p, current, where)
+        text = render("linuxcnc/kinematics.hal.j2", header=ctx.header, module=module, lines=ctx.lines,
+                      pins=values, other=other)
+        notes = [f"setp {module}.{n} {v}  (was {w})" for n, v, w in values]
+        notes.append("not expressible in the trt kinematics: " + ", ".join(other))
+        return EditFiles({".hal": text}, tuple(notes))
+
+    def holds(self, machine: Machine, p: Plan) -> Held:
+        return Held({n: AxisLine(n, line.nominal, line.pivot, line.offset, np.zeros(3))
+                     for n, line in p.lines.items()}, {})
+
+    def not_held(self, p: Plan) -> list[str]:
+        tilts = [f"{n} tilt" for n, line in p.lines.items() if line.tilt.any()]
+        return [*tilts, *p.squareness, *p.tables, *p.not_compensable]
+
+    def reads(self, text: str) -> bool:
+        return SETP.search(text) is not None
+
+    def read(self, machine: Machine, text: str, current: str | None, held: Held, where: str) -> Held:
+        return Held(read_lines(text, machine, current, held.lines), held.squareness, held.tables)

@@ -1,0 +1,199 @@
+"""SIEMENS SINUMERIK 840D sl: G-code programs under TRAORI, ``$TC_CARR`` kinematic-record
+edits (fine offsets and axis vectors), CEC compensation tables, and their readers.
+
+References: Commissioning Manual 12/2017 p.572–573 (``$TC_CARR``, table axes entered
+reversed); Function Manual K3 03/2013 §4.4 (CEC, machine-axis names p.248).
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from ..correction import CompTable, Held, Plan, comp_tables, squareness_tables
+from ..errors import CompgenError
+from ..lines import AxisLine
+from ..machine import Machine
+from . import ascii_text, fmt_plain, render
+from .base import Controller, EditContext, EditFiles
+
+MM_DECIMALS = 5
+VECTOR_DECIMALS = 10
+CARR = re.compile(r"^\s*\$TC_CARR(\d+)\[(\d+)\]\s*=\s*(\S+?)\s*(?:;.*)?$")
+CEC = re.compile(r"^\$AN_CEC(_[A-Z_]+)?\[(\d+)(?:,(\d+))?\]=\(?([^);\s]+)\)?")
+FINE = {"l2": (44, 45, 46), "l3": (55, 56, 57), "l4": (58, 59, 60)}
+VECTOR = {1: (7, 8, 9), 2: (10, 11, 12)}
+
+
+def read_carr(text: str, where: str, record: int) -> dict[int, float]:
+    """``$TC_CARRn[record]=value`` assignments of one record (other lines are ignored)."""
+    out = {}
+    for k, line in enumerate(text.splitlines(), start=1):
+        m = CARR.match(line)
+        if m and int(m[2]) == record:
+            try:
+                out[int(m[1])] = float(m[3])
+            except ValueError:
+                if m[3].startswith('"'):
+                    continue
+                raise CompgenError(f"$TC_CARR{m[1]} value {m[3]!r} is not a number",
+                                   where=f"{where}:{k}") from None
+    return out
+
+
+def _sign(machine: Machine, axis) -> float:
+    """+1 where the record holds the axis along +its direction, −1 where reversed."""
+    held = machine.sinumerik["vectors"][axis.name]
+    return float(held @ np.eye(3)["xyz".index(axis.direction)])
+
+
+def carr_values(machine: Machine, p: Plan, current: dict[int, float]) -> tuple[dict[int, float], list[str]]:
+    """New ``$TC_CARR`` values: fine offsets l2, l3, l4 plus the corrections; direction
+    vectors v1, v2 as exact unit vectors with the sign the control holds."""
+    cfg = machine.sinumerik
+    axes = list(machine.rotary_axes)
+    if len(axes) != 2 or cfg["kind"] != "P":
+        raise CompgenError("compgen writes $TC_CARR for two table axes (kind P) only",
+                           hint="this machine's kinematics is not a table-table one")
+    t1, t2 = (p.lines[a.name].offset for a in axes)
+    delta = {"l2": t1, "l3": t2 - t1, "l4": -t2}
+    missing = [n for idx in (*FINE.values(), *VECTOR.values()) for n in idx if n not in current]
+    if missing:
+        raise CompgenError(f"--current lacks $TC_CARR{missing[0]}[{cfg['tcarr']}] (and "
+                           f"{len(missing) - 1} more)",
+                           hint="give every fine offset (44-46, 55-60) and vector (7-12) of the "
+                                "record as the control holds them")
+    new, diff = {}, []
+    for vec, idx in FINE.items():
+        for k, n in enumerate(idx):
+            new[n] = current[n] + delta[vec][k]
+            diff.append(f"$TC_CARR{n} ({vec}.{'xyz'[k]} fine) {fmt_plain(current[n], MM_DECIMALS)} -> "
+                        f"{fmt_plain(new[n], MM_DECIMALS)} mm")
+    for i, a in enumerate(axes, start=1):
+        held = cfg["vectors"][a.name]
+        now = np.array([current[n] for n in VECTOR[i]])
+        if np.abs(now - held).max() > 1e-3:
+            raise CompgenError(f"the control's vector for {a.name} {list(now)} is not the one the machine "
+                               f"file says it holds {list(held)}", hint="correct [sinumerik] vectors")
+        v = _sign(machine, a) * p.lines[a.name].direction
+        v = v / np.linalg.norm(v)
+        for k, n in enumerate(VECTOR[i]):
+            new[n] = v[k]
+            diff.append(f"$TC_CARR{n} (v{i}.{'xyz'[k]}) {fmt_plain(current[n], VECTOR_DECIMALS)} -> "
+                        f"{fmt_plain(v[k], VECTOR_DECIMALS)}")
+    return new, diff
+
+
+def read_lines(text: str, machine: Machine, current: dict[int, float],
+               lines: dict[str, AxisLine]) -> dict[str, AxisLine]:
+    """The rotary axis lines an emitted ``$TC_CARR`` program sets, relative to ``current``."""
+    new = read_carr(text, "program", machine.sinumerik["tcarr"])
+    t1 = np.array([new[n] - current[n] for n in FINE["l2"]])
+    t2 = t1 + np.array([new[n] - current[n] for n in FINE["l3"]])
+    closure = np.array([new[n] - current[n] for n in FINE["l4"]])
+    if np.abs(closure + t2).max() > 1.5 * 10.0 ** -MM_DECIMALS:   # three values, each rounded
+        raise CompgenError("l4 fine offsets do not close the chain l4 = -(l2 + l3)")
+    out = dict(lines)
+    for i, (a, t) in enumerate(zip(machine.rotary_axes, (t1, t2), strict=True), start=1):
+        d = _sign(machine, a) * np.array([new[n] for n in VECTOR[i]])
+        e = np.eye(3)["xyz".index(a.direction)]
+        turn = np.cross(e, d)
+        s = np.linalg.norm(turn)
+        tilt = np.zeros(3) if s == 0 else turn / s * np.arctan2(s, e @ d)
+        out[a.name] = AxisLine(a.name, a.direction, lines[a.name].pivot, t, tilt)
+    return out
+
+
+def read_cec(text: str, machine: Machine) -> list[CompTable]:
+    """Tables of a CEC file, as the control interpolates them: from MIN in steps of STEP."""
+    found: dict[int, dict] = {}
+    for line in text.splitlines():
+        m = CEC.match(line.strip())
+        if not m:
+            continue
+        t = found.setdefault(int(m[2]), {"values": {}})
+        if m[1] is None:
+            t["values"][int(m[3])] = float(m[4])
+        else:
+            t[m[1][1:].lower()] = m[4] if m[1] in ("_INPUT_AXIS", "_OUTPUT_AXIS") else float(m[4])
+    out = []
+    for k in sorted(found):
+        t = found[k]
+        values = tuple(t["values"][i] for i in sorted(t["values"]))
+        output = machine.axis(t["output_axis"])
+        out.append(CompTable("", "", t["input_axis"], t["output_axis"], t["min"],
+                             t["min"] + t["step"] * (len(values) - 1), values, bool(t["is_modulo"]),
+                             "deg" if output.rotary else "mm"))
+    return out
+
+
+def _cec_text(t: CompTable, index: int) -> dict:
+    return {"index": index, "effect": t.effect, "words": ascii_text(t.words), "input": t.input,
+            "output": t.output, "step": fmt_plain(t.step, 6), "min": fmt_plain(t.start, 4),
+            "max": fmt_plain(t.stop, 4), "modulo": int(t.modulo), "unit": t.unit,
+            "values": [fmt_plain(v, 6) for v in t.values]}
+
+
+class Sinumerik840D(Controller):
+    name = "sinumerik840d"
+    family = "sinumerik"
+    words = "SIEMENS SINUMERIK 840D sl"
+    program_ext = ".MPF"
+    comment = ";"
+    tcp_words = "TRAORI"
+    backup = "a commissioning archive, and keep the _RESTORE program"
+    pose_line = re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)")
+    tcpm_on = re.compile(r"^TRAORI\b", re.MULTILINE)
+
+    def main_suffix(self, current: str | None) -> str:
+        return ".MPF"
+
+    def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
+             ctx: EditContext) -> EditFiles:
+        if machine.sinumerik is None:
+            raise CompgenError(f"machine file {machine.source} has no [sinumerik] section",
+                               hint="give tcarr (the record) and the axis vectors the control holds")
+        if current is None:
+            raise CompgenError("SINUMERIK needs --current: the record's $TC_CARR values as the control "
+                               "holds them", hint="copy the $TC_CARR7-12, 44-46, 55-60 lines of the record "
+                                                  "from the archive into a file")
+        held = read_carr(current, where, machine.sinumerik["tcarr"])
+        new, diff = carr_values(machine, p, held)
+        rec = machine.sinumerik["tcarr"]
+        tables = comp_tables(machine, p) + squareness_tables(machine, p)
+
+        def carr(values):      # vectors are unitless, offsets mm
+            return [(n, fmt_plain(v, VECTOR_DECIMALS if n <= 12 else MM_DECIMALS)) for n, v in values.items()]
+
+        files = {".MPF": render("sinumerik/kinematics.MPF.j2", name=ctx.name, header=ctx.header, record=rec,
+                                values=carr(new), lines=ctx.lines, expect=ctx.expect)}
+        files["_RESTORE.MPF"] = render(
+            "sinumerik/kinematics.MPF.j2", name=f"{ctx.name}_RESTORE", record=rec, lines=[], expect=[],
+            header=[f"compgen {ctx.version}: restores record {rec} as it was", *ctx.header[1:3]],
+            values=carr({n: held[n] for n in new}))
+        if tables:
+            files["_CEC.INI"] = render("sinumerik/cec.INI.j2", header=ctx.header,
+                                       tables=[_cec_text(t, i) for i, t in enumerate(tables)])
+        notes = ["$TC_CARR changes:", *diff]
+        if p.squareness:
+            notes.append("squareness goes to linear CEC tables: " + ", ".join(p.squareness))
+        return EditFiles(files, tuple(notes))
+
+    def holds(self, machine: Machine, p: Plan) -> Held:
+        return Held(p.lines, {}, tuple(comp_tables(machine, p) + squareness_tables(machine, p)))
+
+    def not_held(self, p: Plan) -> list[str]:
+        return list(p.not_compensable)
+
+    def reads(self, text: str) -> bool:
+        return "$TC_CARR" in text or "$AN_CEC" in text
+
+    def read(self, machine: Machine, text: str, current: str | None, held: Held, where: str) -> Held:
+        if "$AN_CEC" in text:
+            return Held(held.lines, held.squareness, (*held.tables, *read_cec(text, machine)))
+        if current is None or machine.sinumerik is None:
+            raise CompgenError("a $TC_CARR program needs --current and the machine's [sinumerik]",
+                               where=where)
+        state = read_carr(current, "current", machine.sinumerik["tcarr"])
+        return Held(read_lines(text, machine, state, held.lines), held.squareness, held.tables)

@@ -1,0 +1,121 @@
+"""The controller seam: a controller is one module. A toy controller, declared here and
+nowhere else, goes through the whole loop (edit, read back, drive, compare, checklist)
+without a line of compgen changing; every registered controller passes the same checks."""
+
+import re
+
+import numpy as np
+import pytest
+from conftest import SEED_MACHINE, TABLE4, UM
+
+from compgen.checklist import checklist, markdown
+from compgen.compare import compare
+from compgen.correction import Held, Plan
+from compgen.emit.base import Controller, EditContext, EditFiles
+from compgen.emit.kinematics import kinematics_edit
+from compgen.emit.linuxcnc import LinuxCNC
+from compgen.emit.registry import CONTROLLERS, read_edits, register
+from compgen.identify import identify
+from compgen.lines import AxisLine
+from compgen.machine import load_machine
+from compgen.paths import generate
+from compgen.rtest import RTestData
+from compgen.simulate import simulate
+
+NOISE_UM = 0.5
+LINE = re.compile(r"^TOYLINE (\w) ((?:\S+ ){5}\S+)$", re.MULTILINE)
+
+
+class Toy(Controller):
+    """Speaks LinuxCNC's G-code for programs; holds axis lines as plain numbers, mm and rad."""
+
+    name = "toy"
+    family = "linuxcnc"
+    words = "a toy control"
+    program_ext = ".ngc"
+    comment = "#"
+    tcp_words = "toy TCP"
+    backup = "nothing to back up: it is a toy"
+    pose_line = LinuxCNC.pose_line
+    tcpm_on = LinuxCNC.tcpm_on
+
+    def main_suffix(self, current):
+        return ".toy"
+
+    def edit(self, machine, p: Plan, current, where, ctx: EditContext) -> EditFiles:
+        body = [f"# {h}" for h in ctx.header]
+        body += [f"TOYLINE {n} " + " ".join(f"{v:.12e}" for v in (*line.offset, *line.tilt))
+                 for n, line in p.lines.items()]
+        return EditFiles({".toy": "\n".join(body) + "\n"}, ("toy lines written",))
+
+    def holds(self, machine, p: Plan) -> Held:
+        return Held(p.lines, {})
+
+    def not_held(self, p: Plan) -> list[str]:
+        return [*p.squareness, *p.tables, *p.not_compensable]
+
+    def reads(self, text):
+        return LINE.search(text) is not None
+
+    def read(self, machine, text, current, held, where):
+        lines = dict(held.lines)
+        for m in LINE.finditer(text):
+            v = np.array([float(x) for x in m[2].split()])
+            old = lines[m[1]]
+            lines[m[1]] = AxisLine(old.axis, old.nominal, old.pivot, v[:3], v[3:])
+        return Held(lines, held.squareness, held.tables)
+
+
+@pytest.fixture
+def toy():
+    register(Toy())
+    yield CONTROLLERS["toy"]
+    del CONTROLLERS["toy"]
+
+
+def test_a_toy_controller_in_one_module_runs_the_whole_loop(seed_machine, toy, tmp_path):
+    poses = generate(seed_machine, ["K4", "K1", "K2"])
+    rng = np.random.default_rng(5)
+    pre = simulate(seed_machine, TABLE4, poses, NOISE_UM, rng)
+    fit = identify(seed_machine, [pre])
+    emitted = kinematics_edit(seed_machine, fit, "toy", None, "", "KIN", "0", "d")
+    assert set(emitted.files) == {".toy", "_SIGN.ngc"}
+    held = read_edits(seed_machine, {"KIN.toy": emitted.files[".toy"]}, None)
+    post = simulate(seed_machine, TABLE4, poses, NOISE_UM, rng, lambda p: held.drive(seed_machine, p))
+    after = identify(seed_machine, [RTestData(poses, post.deviation)], ["XOW", "YOW", "ZOW"])
+    assert after.residual["rms_um"] == pytest.approx(NOISE_UM, rel=0.1)
+    result = compare(seed_machine, [pre], fit, "toy", [post])
+    assert result.measured_post["as_predicted"], result.measured_post["statement"]
+    (tmp_path / "KIN.toy").write_text(emitted.files[".toy"])
+    steps = {s.title: s for s in checklist(seed_machine, tmp_path)}
+    assert steps["Kinematics edit emitted (with backup step and sign check)"].status == "done"
+
+
+@pytest.fixture
+def linuxcnc_machine(tmp_path):
+    path = tmp_path / "seed-linuxcnc.toml"
+    path.write_text(SEED_MACHINE.read_text().replace('controller = "itnc530"', 'controller = "linuxcnc"'))
+    return load_machine(path)
+
+
+def test_checklist_knows_each_controllers_files(linuxcnc_machine, tmp_path):
+    """LinuxCNC's edit starts with '#', its programs end in .ngc: the checklist asks the
+    registry instead of assuming HEIDENHAIN's ';' and '.H'."""
+    work = tmp_path / "work"
+    work.mkdir()
+    fit = identify(linuxcnc_machine, [simulate(linuxcnc_machine, {"XOC": 5 * UM},
+                                               generate(linuxcnc_machine, ["K4", "K1", "K2"]))])
+    emitted = kinematics_edit(linuxcnc_machine, fit, "linuxcnc", None, "", "KIN", "0", "d")
+    text = markdown(linuxcnc_machine, checklist(linuxcnc_machine, work))
+    assert "RTEST.ngc" in text and "RTEST.H" not in text
+    (work / "KIN.hal").write_text(emitted.files[".hal"])
+    steps = {s.title: s for s in checklist(linuxcnc_machine, work)}
+    assert steps["Kinematics edit emitted (with backup step and sign check)"].status == "done"
+
+
+@pytest.mark.parametrize("name", ["itnc530", "tnc640", "sinumerik840d", "linuxcnc"])
+def test_every_controller_fulfils_the_contract(name):
+    ctl = CONTROLLERS[name]
+    assert ctl.name == name and ctl.words and ctl.backup and ctl.program_ext.startswith(".")
+    assert ctl.comment in "#;" and ctl.tcp_words
+    assert type(ctl).edit is not Controller.edit and type(ctl).read is not Controller.read
