@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field, replace
 from functools import cached_property
@@ -208,7 +209,17 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
                                    f"{a.name}, got {list(v)}", where=g.sub("vectors").at(a.name))
             vectors[a.name] = v
         kind = "".join(sorted(set(kinds.values())))
-        sinumerik = {"tcarr": record, "kind": {"P": "P", "T": "T"}.get(kind, "M"), "vectors": vectors}
+        names = {}
+        if "machine_axes" in g.doc:     # channel axis -> machine axis, for CEC tables (K3 p.248)
+            m = g.sub("machine_axes")
+            for axis in machine.axes:
+                name = m.str(axis.name)
+                if not re.fullmatch(r"[A-Z][A-Z0-9_]{0,15}", name):
+                    raise CompgenError(f"machine-axis name {name!r} is not a SINUMERIK axis name "
+                                       "(letters, digits, _; e.g. X1, AX1)", where=m.at(axis.name))
+                names[axis.name] = name
+        sinumerik = {"tcarr": record, "kind": {"P": "P", "T": "T"}.get(kind, "M"), "vectors": vectors,
+                     "machine_axes": names}
     tolerances = {}
     if "tolerances" in doc:
         g = get.sub("tolerances")

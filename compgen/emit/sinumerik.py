@@ -15,6 +15,7 @@ from ..correction import CompTable, Held, Plan, comp_tables, squareness_tables
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
+from ..transforms import rot_exact
 from . import ascii_text, fmt_plain, render
 from .base import Controller, EditContext, EditFiles
 
@@ -24,6 +25,7 @@ CARR = re.compile(r"^\s*\$TC_CARR(\d+)\[(\d+)\]\s*=\s*(\S+?)\s*(?:;.*)?$")
 CEC = re.compile(r"^\$AN_CEC(_[A-Z_]+)?\[(\d+)(?:,(\d+))?\]=\(?([^);\s]+)\)?")
 FINE = {"l2": (44, 45, 46), "l3": (55, 56, 57), "l4": (58, 59, 60)}
 VECTOR = {1: (7, 8, 9), 2: (10, 11, 12)}
+SAME_AXIS_DEG = 1.0     # a record's vector further than this from the machine file's: wrong record
 
 
 def read_carr(text: str, where: str, record: int) -> dict[int, float]:
@@ -40,12 +42,6 @@ def read_carr(text: str, where: str, record: int) -> dict[int, float]:
                 raise CompgenError(f"$TC_CARR{m[1]} value {m[3]!r} is not a number",
                                    where=f"{where}:{k}") from None
     return out
-
-
-def _sign(machine: Machine, axis) -> float:
-    """+1 where the record holds the axis along +its direction, −1 where reversed."""
-    held = machine.sinumerik["vectors"][axis.name]
-    return float(held @ np.eye(3)["xyz".index(axis.direction)])
 
 
 def carr_values(machine: Machine, p: Plan, current: dict[int, float]) -> tuple[dict[int, float], list[str]]:
@@ -73,11 +69,15 @@ def carr_values(machine: Machine, p: Plan, current: dict[int, float]) -> tuple[d
     for i, a in enumerate(axes, start=1):
         held = cfg["vectors"][a.name]
         now = np.array([current[n] for n in VECTOR[i]])
-        if np.abs(now - held).max() > 1e-3:
+        size = np.linalg.norm(now)
+        if size == 0 or np.degrees(np.arccos(np.clip(now @ held / size, -1, 1))) > SAME_AXIS_DEG:
             raise CompgenError(f"the control's vector for {a.name} {list(now)} is not the one the machine "
-                               f"file says it holds {list(held)}", hint="correct [sinumerik] vectors")
-        v = _sign(machine, a) * p.lines[a.name].direction
-        v = v / np.linalg.norm(v)
+                               f"file says it holds {list(held)}",
+                               hint="is this the record of the measured machine? else correct [sinumerik] "
+                                    "vectors")
+        # compose: turn what the record holds (the OEM's or an earlier edit's tilt included)
+        # by the tilt the fit found, measured relative to that state
+        v = rot_exact(p.lines[a.name].tilt)[:3, :3] @ (now / size)
         for k, n in enumerate(VECTOR[i]):
             new[n] = v[k]
             diff.append(f"$TC_CARR{n} (v{i}.{'xyz'[k]}) {fmt_plain(current[n], VECTOR_DECIMALS)} -> "
@@ -96,13 +96,18 @@ def read_lines(text: str, machine: Machine, current: dict[int, float],
         raise CompgenError("l4 fine offsets do not close the chain l4 = -(l2 + l3)")
     out = dict(lines)
     for i, (a, t) in enumerate(zip(machine.rotary_axes, (t1, t2), strict=True), start=1):
-        d = _sign(machine, a) * np.array([new[n] for n in VECTOR[i]])
-        e = np.eye(3)["xyz".index(a.direction)]
-        turn = np.cross(e, d)
-        s = np.linalg.norm(turn)
-        tilt = np.zeros(3) if s == 0 else turn / s * np.arctan2(s, e @ d)
-        out[a.name] = AxisLine(a.name, a.direction, lines[a.name].pivot, t, tilt)
+        d = np.array([new[n] for n in VECTOR[i]])
+        was = np.array([current[n] for n in VECTOR[i]])
+        out[a.name] = AxisLine(a.name, a.direction, lines[a.name].pivot, t, _turn(was, d))
     return out
+
+
+def _turn(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rotation vector (rad) turning direction ``a`` onto ``b`` by the shortest way."""
+    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    axis = np.cross(a, b)
+    s = np.linalg.norm(axis)
+    return np.zeros(3) if s == 0 else axis / s * np.arctan2(s, a @ b)
 
 
 def read_cec(text: str, machine: Machine) -> list[CompTable]:
@@ -117,20 +122,35 @@ def read_cec(text: str, machine: Machine) -> list[CompTable]:
             t["values"][int(m[3])] = float(m[4])
         else:
             t[m[1][1:].lower()] = m[4] if m[1] in ("_INPUT_AXIS", "_OUTPUT_AXIS") else float(m[4])
+    channel = {m: a for a, m in _machine_axes(machine).items()}
     out = []
     for k in sorted(found):
         t = found[k]
         values = tuple(t["values"][i] for i in sorted(t["values"]))
-        output = machine.axis(t["output_axis"])
-        out.append(CompTable("", "", t["input_axis"], t["output_axis"], t["min"],
+        unknown = [n for n in (t["input_axis"], t["output_axis"]) if n not in channel]
+        if unknown:
+            raise CompgenError(f"CEC table {k} names machine axis {unknown[0]!r}, which the machine file's "
+                               "[sinumerik] machine_axes does not name")
+        inp, out_axis = channel[t["input_axis"]], channel[t["output_axis"]]
+        output = machine.axis(out_axis)
+        out.append(CompTable("", "", inp, out_axis, t["min"],
                              t["min"] + t["step"] * (len(values) - 1), values, bool(t["is_modulo"]),
                              "deg" if output.rotary else "mm"))
     return out
 
 
-def _cec_text(t: CompTable, index: int) -> dict:
-    return {"index": index, "effect": t.effect, "words": ascii_text(t.words), "input": t.input,
-            "output": t.output, "step": fmt_plain(t.step, 6), "min": fmt_plain(t.start, 4),
+def _machine_axes(machine: Machine) -> dict[str, str]:
+    names = machine.sinumerik["machine_axes"]
+    if not names:
+        raise CompgenError("CEC tables address machine axes (X1, AX1, ...), and the machine file does "
+                           "not name them", where=f"{machine.source}: [sinumerik]",
+                           hint='add machine_axes = { X = "X1", ... } (MD10000 AXCONF_MACHAX_NAME_TAB)')
+    return names
+
+
+def _cec_text(t: CompTable, index: int, names: dict[str, str]) -> dict:
+    return {"index": index, "effect": t.effect, "words": ascii_text(t.words), "input": names[t.input],
+            "output": names[t.output], "step": fmt_plain(t.step, 6), "min": fmt_plain(t.start, 4),
             "max": fmt_plain(t.stop, 4), "modulo": int(t.modulo), "unit": t.unit,
             "values": [fmt_plain(v, 6) for v in t.values]}
 
@@ -174,7 +194,8 @@ class Sinumerik840D(Controller):
             values=carr({n: held[n] for n in new}))
         if tables:
             files["_CEC.INI"] = render("sinumerik/cec.INI.j2", header=ctx.header,
-                                       tables=[_cec_text(t, i) for i, t in enumerate(tables)])
+                                       tables=[_cec_text(t, i, _machine_axes(machine))
+                                               for i, t in enumerate(tables)])
         notes = ["$TC_CARR changes:", *diff]
         if p.squareness:
             notes.append("squareness goes to linear CEC tables: " + ", ".join(p.squareness))
