@@ -1,0 +1,131 @@
+"""Edits compose with what the control holds: edit A, then edit B written over the result,
+equals one edit of A + B from the original state, to first order; for every controller,
+from a non-zero starting state (an OEM's tilts and offsets, compgen's own earlier rows).
+
+How the expected numbers are derived: A, B and A + B are noiseless fits of location errors
+(exact to 1e-9 µm), so the three edits are computed from exactly those. The lines of A + B
+differ from the sum of the lines of A and of B only by second-order terms, tilt × offset
+× lever: with 10″ (5e-5 rad) and 30 µm at 300 mm levers, below 1e-3 µm; the files round
+to 1e-5 mm and 1e-7 deg (HEIDENHAIN), 1e-5 mm and 1e-10 (SINUMERIK), 1e-6 mm (LinuxCNC).
+"""
+
+import numpy as np
+import pytest
+from conftest import ARCSEC, ROOT, UM
+
+from compgen.correction import nominal_lines, plan
+from compgen.emit import heidenhain, sinumerik
+from compgen.emit.kinematics import kinematics_edit
+from compgen.emit.linuxcnc import SETP
+from compgen.identify import identify
+from compgen.paths import generate
+from compgen.simulate import simulate
+from compgen.transforms import rot_exact
+
+SEED_A = {"YOA": 20 * UM, "ZOA": -15 * UM, "BOA": 8 * ARCSEC, "COA": -6 * ARCSEC,
+          "XOC": 12 * UM, "YOC": -9 * UM, "AOC": 5 * ARCSEC, "BOC": -7 * ARCSEC}
+SEED_B = {"YOA": -6 * UM, "ZOA": 9 * UM, "BOA": -3 * ARCSEC, "COA": 4 * ARCSEC,
+          "XOC": 4 * UM, "YOC": 7 * UM, "AOC": -2 * ARCSEC, "BOC": 3 * ARCSEC}
+BC_A = {"XOB": 15 * UM, "ZOB": -20 * UM, "AOB": 6 * ARCSEC, "COB": -9 * ARCSEC,
+        "XOC": -7 * UM, "YOC": 11 * UM, "AOC": 4 * ARCSEC, "BOC": -5 * ARCSEC}
+BC_B = {"XOB": -5 * UM, "ZOB": 6 * UM, "AOB": -2 * ARCSEC, "COB": 3 * ARCSEC,
+        "XOC": 3 * UM, "YOC": -4 * UM, "AOC": 2 * ARCSEC, "BOC": 2 * ARCSEC}
+SECOND_ORDER_MM = 1e-6
+TILT_RAD = 1e-9          # SINUMERIK vectors: 1e-10 rounding and second-order products
+
+# an OEM's table: nominal rows plus KinematicsOpt-style rows already named by ISO symbol
+OEM_TAB = """BEGIN KINEMATIC_AC.TAB MM
+NR  KEY       AXIS  COORD        DOC
+0   Trans     Z     +0           spindle gauge line
+1   MachAxis  Z
+2   MachAxis  Y
+3   MachBase
+4   MachAxis  X
+5   Trans     Z     +0           to the A/C intersection
+6   Trans     Y     +0.00310     Y0A
+7   Trans     B     +0.0012000   B0A
+8   MachAxis  A
+9   Trans     B     -0.0012000   -B0A
+10  Trans     Y     -0.00310     -Y0A
+11  Trans     Z     +29.794      Zc: C table origin
+12  MachAxis  C
+[END]
+"""
+# an OEM's record: fine offsets already set, the C vector tilted by about 20″
+OEM_CARR = (ROOT / "examples" / "bc-tcarr-current.txt").read_text().replace(
+    "$TC_CARR44[1]=0.0", "$TC_CARR44[1]=0.0123").replace(
+    "$TC_CARR57[1]=0.0", "$TC_CARR57[1]=-0.0045").replace(
+    "$TC_CARR11[1]=0.0", "$TC_CARR11[1]=0.0000969627")
+
+
+def _fit(machine, truth):
+    poses = generate(machine, ["K4", "K1", "K2"])
+    return identify(machine, [simulate(machine, truth, poses)])
+
+
+def _sum(a, b):
+    return {k: a.get(k, 0.0) + b.get(k, 0.0) for k in {**a, **b}}
+
+
+def _edit(machine, truth, controller, current):
+    return kinematics_edit(machine, _fit(machine, truth), controller, current, "current", "KIN", "0", "d")
+
+
+def test_heidenhain_second_round_adds_to_compgens_own_rows(seed_machine):
+    first = _edit(seed_machine, SEED_A, "itnc530", OEM_TAB).files[".TAB"]
+    second = _edit(seed_machine, SEED_B, "itnc530", first).files[".TAB"]
+    once = _edit(seed_machine, _sum(SEED_A, SEED_B), "itnc530", OEM_TAB).files[".TAB"]
+    nominal = nominal_lines(seed_machine)
+    two, one = (heidenhain.read_lines(t, seed_machine, nominal) for t in (second, once))
+    for axis in two:
+        np.testing.assert_allclose(two[axis].offset, one[axis].offset, atol=3e-5)   # three roundings
+        np.testing.assert_allclose(two[axis].tilt, one[axis].tilt, atol=np.radians(3e-7))
+    # and the OEM's Y0A/B0A rows hold their value plus both corrections, not one of them
+    oem = heidenhain.read_lines(OEM_TAB, seed_machine, nominal)["A"]
+    a, b = (heidenhain.read_lines(_edit(seed_machine, t, "itnc530", OEM_TAB).files[".TAB"],
+                                  seed_machine, nominal)["A"] for t in (SEED_A, SEED_B))
+    np.testing.assert_allclose(two["A"].offset, a.offset + b.offset - oem.offset, atol=3e-5)
+    assert abs(two["A"].offset[1] - oem.offset[1]) > 10 * UM    # the rows really moved
+
+
+def test_sinumerik_second_round_composes_vectors_and_offsets(bc_machine):
+    rec = bc_machine.sinumerik["tcarr"]
+    first = _edit(bc_machine, BC_A, "sinumerik840d", OEM_CARR).files[".MPF"]
+    second = _edit(bc_machine, BC_B, "sinumerik840d", first).files[".MPF"]
+    once = _edit(bc_machine, _sum(BC_A, BC_B), "sinumerik840d", OEM_CARR).files[".MPF"]
+    two, one, oem = (sinumerik.read_carr(t, "t", rec) for t in (second, once, OEM_CARR))
+    for n in (*sinumerik.FINE["l2"], *sinumerik.FINE["l3"], *sinumerik.FINE["l4"]):
+        assert two[n] == pytest.approx(one[n], abs=2e-5 + SECOND_ORDER_MM), n
+    for idx in sinumerik.VECTOR.values():
+        v2, v1, v0 = (np.array([d[n] for n in idx]) for d in (two, one, oem))
+        np.testing.assert_allclose(v2, v1, atol=TILT_RAD)
+        # the OEM's tilt is kept: the edited vector is the OEM's turned by the fit's tilt
+        assert np.linalg.norm(v1 - v0) < 1e-3 and np.linalg.norm(v1 - v0) > 1e-6
+    # exactly: the OEM's vectors turned by the tilt of A + B's lines
+    lines = plan(bc_machine, _fit(bc_machine, _sum(BC_A, BC_B))).lines
+    for axis, idx in zip(("B", "C"), sinumerik.VECTOR.values(), strict=True):
+        v0 = np.array([oem[n] for n in idx])
+        want = rot_exact(lines[axis].tilt)[:3, :3] @ (v0 / np.linalg.norm(v0))
+        np.testing.assert_allclose([one[n] for n in idx], want, atol=1e-10)
+
+
+def test_linuxcnc_second_round_adds_to_the_pins(seed_machine):
+    def pins(text):
+        return {m[2]: float(m[3]) for m in SETP.finditer(text)}
+
+    first = _edit(seed_machine, SEED_A, "linuxcnc", None).files[".hal"]
+    second = _edit(seed_machine, SEED_B, "linuxcnc", first).files[".hal"]
+    once = _edit(seed_machine, _sum(SEED_A, SEED_B), "linuxcnc", None).files[".hal"]
+    two, one = pins(second), pins(once)
+    assert set(two) == set(one) and len(two) == 5
+    for name in two:
+        assert two[name] == pytest.approx(one[name], abs=2e-6 + SECOND_ORDER_MM), name
+    # trtfuncs.c: the rot point lies on the C line, rot point + offsets on the A line (the
+    # offset along A itself is not a pin); the lines at their pivots are the plan's
+    lines = plan(seed_machine, _fit(seed_machine, _sum(SEED_A, SEED_B))).lines
+    on_c = nominal_lines(seed_machine)["C"].pivot + lines["C"].offset
+    on_a = nominal_lines(seed_machine)["A"].pivot + lines["A"].offset
+    for k, axis in enumerate("xyz"):
+        assert one[f"{axis}-rot-point"] == pytest.approx(on_c[k], abs=1e-6)
+        if axis != "x":
+            assert one[f"{axis}-rot-point"] + one[f"{axis}-offset"] == pytest.approx(on_a[k], abs=2e-6)
