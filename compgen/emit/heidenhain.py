@@ -13,18 +13,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..correction import Held, Plan, comp_tables
+from ..correction import Held, Plan, comp_tables, pivot_of
 from ..effects import ROT_OF, ROTATIONS, TRANSLATIONS
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
 from . import fmt_signed, render
 from .base import Controller, EditContext, EditFiles
-from .tab import TabTable
+from .tab import MM_PER, TabTable
 
 MM_DECIMALS = 5          # 0.01 µm
 DEG_DECIMALS = 7         # 0.0004″
 # a Trans row naming its ISO symbol, in a table (``NR KEY AXIS COORD DOC``) or a change list
+ISO = re.compile(r"-?[XYZABC]0[A-Z]")
 ROW = re.compile(r"^\s*(?:\d+\s+)?(?:Trans\s+([XYZABC])\s+(\S+)\s+(-?[XYZABC]0[A-Z])\b"
                  r"|(-?[XYZABC]0[A-Z])\s+Trans\s+([XYZABC])\s+(\S+))", re.MULTILINE)
 
@@ -60,18 +61,19 @@ def _decimals(axis: str) -> int:
     return MM_DECIMALS if axis in "XYZ" else DEG_DECIMALS
 
 
-def edit_table(table: TabTable, rows: dict[str, tuple[list[Row], list[Row]]]) -> tuple[TabTable, list[str]]:
-    """Add the corrections to the current table: an existing row of the same ISO name (DOC)
+def edit_table(table: TabTable, rows: dict[str, tuple[list[Row], list[Row]]], where: str) -> list[str]:
+    """Add the corrections to the table in place: an existing row of the same ISO name (DOC)
     gets its COORD increased; a missing one is inserted next to its ``MachAxis``, the error
-    rows just before it in order, the inverse rows just after it in order."""
+    rows just before it in order, the inverse rows just after it in order. The changes, in
+    the table's units."""
     if "DOC" not in table.columns:
         raise CompgenError("the current table has no DOC column to name the correction rows",
                            hint="add a DOC column (the enhanced kinematics description has one)")
-    new = [dict(r) for r in table.rows]
     diff = []
 
     def machaxis(axis):
-        i = next((i for i, r in enumerate(new) if r.get("KEY") == "MachAxis" and r.get("AXIS") == axis), None)
+        i = next((i for i, r in enumerate(table.rows)
+                  if r.get("KEY") == "MachAxis" and r.get("AXIS") == axis), None)
         if i is None:
             raise CompgenError(f"the current table has no 'MachAxis {axis}' row",
                                hint="is this the table of the machine that was measured?")
@@ -80,27 +82,77 @@ def edit_table(table: TabTable, rows: dict[str, tuple[list[Row], list[Row]]]) ->
     for axis, (before, after) in rows.items():
         for side, group in (("before", before), ("after", after)):
             for k, row in enumerate(group):
-                unit = "mm" if row.axis in "XYZ" else "deg"
-                dec = _decimals(row.axis)
-                idx = next((i for i, r in enumerate(new) if r.get("DOC") == row.doc), None)
+                unit = table.unit.lower() if row.axis in "XYZ" else "deg"
+                idx = next((i for i, r in enumerate(table.rows) if r.get("DOC") == row.doc), None)
                 if idx is not None:
-                    old = float(new[idx]["COORD"])
-                    new[idx]["COORD"] = fmt_signed(old + row.coord, dec)
-                    diff.append(f"{row.doc:<6} Trans {row.axis}  {fmt_signed(old, dec)} -> "
-                                f"{new[idx]['COORD']} {unit}")
+                    old = table.rows[idx]["COORD"]
+                    new = table.coord(table.mm(old, row.axis) + row.coord, row.axis, _decimals(row.axis))
+                    table.set(idx, {"COORD": new}, where)
+                    diff.append(f"{row.doc:<6} Trans {row.axis}  {old} -> {new} {unit}")
                     continue
                 at = machaxis(axis) if side == "before" else machaxis(axis) + 1 + k
-                new.insert(at, {"KEY": "Trans", "AXIS": row.axis, "COORD": fmt_signed(row.coord, dec),
-                                "DOC": row.doc})
-                diff.append(f"{row.doc:<6} Trans {row.axis}  (new row) -> "
-                            f"{fmt_signed(row.coord, dec)} {unit}")
-    return TabTable(table.name, table.columns, table.starts, new), diff
+                new = table.coord(row.coord, row.axis, _decimals(row.axis))
+                table.insert(at, {"NR": str(at), "KEY": "Trans", "AXIS": row.axis, "COORD": new,
+                                  "DOC": row.doc})
+                diff.append(f"{row.doc:<6} Trans {row.axis}  (new row) -> {new} {unit}")
+    return diff
+
+
+def _resolution(table: TabTable) -> list[str]:
+    """Say so where the table's declared decimals round the corrections coarser than compgen."""
+    dec = table.decimals.get("COORD")
+    if dec is None:
+        return []
+    out = []
+    linear_um = 10.0 ** -dec * MM_PER[table.unit] * 1e3
+    if linear_um > 10.0 ** -MM_DECIMALS * 1e3 * 1.001:
+        out.append(f"COORD has {dec} decimals (table description): linear values rounded to "
+                   f"{linear_um:.3g} um")
+    if dec < DEG_DECIMALS:
+        out.append(f"COORD has {dec} decimals: rotations rounded to {10.0 ** -dec * 3600:.3g} arcsec")
+    return out
+
+
+def check_pivots(table: TabTable, machine: Machine, where: str) -> str | None:
+    """The table-side rotary axes must sit where the machine file puts them: the ``Trans``
+    rows from ``MachBase`` to each ``MachAxis`` add up to its pivot (within [limits]
+    offset_um; same sign convention as the rows compgen writes, U3). Returns why the check
+    could not be made, if so."""
+    linear, rotary = np.zeros(3), {a.name for a in machine.rotary_axes}
+    after_base = False
+    for r in table.rows:
+        if r.get("KEY") == "MachBase":
+            after_base = True
+        elif after_base and r.get("KEY") == "Trans" and r.get("AXIS") in "XYZ":
+            linear["XYZ".index(r["AXIS"])] += table.mm(r["COORD"], r["AXIS"])
+        elif after_base and r.get("KEY") == "Trans" and abs(float(r["COORD"])) > 1e-3:
+            return (f"pivot check stopped at the rotation {r['AXIS']} {r['COORD']} deg "
+                    "(the table turns the frame)")
+        elif after_base and r.get("KEY") == "MachAxis" and r.get("AXIS") in rotary:
+            want = pivot_of(machine, r["AXIS"])
+            if np.abs(linear - want).max() * 1e3 > machine.limits.offset_um:
+                raise CompgenError(
+                    f"the table puts the {r['AXIS']} axis at ({', '.join(f'{v:.4f}' for v in linear)}) mm "
+                    f"from MachBase, the machine file at ({', '.join(f'{v:.4f}' for v in want)}) mm",
+                    where=where, hint="is this the table of the measured machine? If it is, correct the "
+                                      "machine file's offsets")
+    return None if after_base else "pivot check not made: the table has no MachBase row"
+
+
+def _iso_rows(text: str) -> list[tuple[str, str, float]]:
+    """(DOC, AXIS, value in mm or deg) of the ISO-named Trans rows of a table (in its unit)
+    or of compgen's change list (mm)."""
+    if text.lstrip().startswith("BEGIN"):
+        t = TabTable.parse(text, "table")
+        return [(r["DOC"], r["AXIS"], t.mm(r["COORD"], r["AXIS"])) for r in t.rows
+                if r.get("KEY") == "Trans" and ISO.fullmatch(r.get("DOC", ""))]
+    return [((m[3], m[1], float(m[2])) if m[1] else (m[4], m[5], float(m[6]))) for m in ROW.finditer(text)]
 
 
 def read_lines(text: str, machine: Machine, lines: dict[str, AxisLine]) -> dict[str, AxisLine]:
     """The rotary axis lines a description table (or compgen's change list) holds: the
     ISO-named rows before each ``MachAxis``, checked against their inverse rows after it."""
-    rows = [((m[3], m[1], float(m[2])) if m[1] else (m[4], m[5], float(m[6]))) for m in ROW.finditer(text)]
+    rows = _iso_rows(text)
     out = dict(lines)
     for a in machine.rotary_axes:
         mine = {doc: (axis, v) for doc, axis, v in rows if doc.lstrip("-").endswith(a.name)}
@@ -109,7 +161,7 @@ def read_lines(text: str, machine: Machine, lines: dict[str, AxisLine]) -> dict[
             if doc.startswith("-"):
                 continue
             inverse_row = mine.get(f"-{doc}")
-            if inverse_row is None or abs(inverse_row[1] + v) > 1e-12:
+            if inverse_row is None or abs(inverse_row[1] + v) > 1e-9:
                 raise CompgenError(f"row {doc} has no matching inverse row -{doc}",
                                    hint="error rows before MachAxis need their inverse after it")
             if axis in "XYZ":
@@ -124,7 +176,7 @@ def read_squareness(text: str, machine: Machine) -> dict[str, float]:
     """Squareness rows around a linear ``MachAxis`` (``C0X`` → COX, rad)."""
     out = {}
     linear = {a.name for a in machine.axes if not a.rotary}
-    for doc, axis, value in ((m[3] or m[4], m[1] or m[5], m[2] or m[6]) for m in ROW.finditer(text)):
+    for doc, axis, value in _iso_rows(text):
         if doc[0] != "-" and doc[2] in linear and axis in "ABC":
             out[f"{doc[0]}O{doc[2]}"] = np.radians(float(value))
     return out
@@ -165,9 +217,11 @@ class Heidenhain(Controller):
         tables = comp_tables(machine, p)
         files, notes = {}, []
         if current is not None:
-            table, diff = edit_table(TabTable.parse(current, where), rows)
+            table = TabTable.parse(current, where)
+            skipped = check_pivots(table, machine, where)
+            diff = edit_table(table, rows, where)
             files[".TAB"] = table.text()
-            notes += ["table changes:", *diff]
+            notes += ["table changes:", *diff, *([skipped] if skipped else []), *_resolution(table)]
         files[".txt"] = render(
             "heidenhain/kinematics.txt.j2", header=ctx.header, controller=self.name,
             rows=[{"axis": a, "before": [_row(r) for r in b], "after": [_row(r) for r in f]}

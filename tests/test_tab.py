@@ -1,0 +1,106 @@
+"""HEIDENHAIN description tables as a control keeps them: fixed-width columns, a column
+description block, CRLF line ends, columns compgen does not use, INCH units. An edit changes
+only the cells it must and keeps every other byte."""
+
+import numpy as np
+import pytest
+from conftest import ARCSEC, UM
+
+from compgen.correction import nominal_lines, plan
+from compgen.emit import heidenhain
+from compgen.emit.kinematics import kinematics_edit
+from compgen.emit.tab import TabTable
+from compgen.errors import CompgenError
+from compgen.identify import identify
+from compgen.paths import generate
+from compgen.simulate import simulate
+
+TRUTH = {"YOA": 20.5 * UM, "ZOA": 32.5 * UM, "BOA": 12.3 * ARCSEC, "COA": -7.2 * ARCSEC,
+         "XOC": 1.4 * UM, "YOC": -15.9 * UM, "AOC": -6.5 * ARCSEC, "BOC": -4.6 * ARCSEC}
+COLS = "NR   KEY        AXIS  COORD         FILE                DOC               COMPTAB"
+STRUCT = ["#STRUCTBEGIN", "   NAME = NR", "     TYPE = C", "     WIDTH = 4", "     DEC = 0",
+          "   NAME = COORD", "     TYPE = N", "     WIDTH = 13", "     DEC = 5",
+          "     DIA-GERMAN = Wert", "#STRUCTEND"]
+
+
+def _table(unit="MM", zc="+29.794", y0a="+0.01000", newline="\r\n"):
+    rows = [
+        "0    Trans      Z     +0                                spindle gauge line",
+        "1    MachAxis   Z",
+        "2    MachAxis   Y",
+        "3    MachBase",
+        "4    MachAxis   X                   PLC:\\KINEMAT\\X.CMO",
+        "5    Trans      Z     +0                                to A/C",
+        f"6    Trans      Y     {y0a:<13} {'':<19} Y0A",
+        "7    MachAxis   A                                                         COMP_A.COM",
+        f"8    Trans      Y     {'-' + y0a[1:]:<13} {'':<19} -Y0A",
+        f"9    Trans      Z     {zc:<13} {'':<19} Zc",
+        "10   MachAxis   C",
+        "[END]", "; kept after END", ""]
+    return newline.join([f"BEGIN KINEMATIC_AC.TAB {unit}".rstrip(), *STRUCT, COLS, *rows])
+
+
+@pytest.fixture(scope="module")
+def fit(seed_machine):
+    poses = generate(seed_machine, ["K4", "K1", "K2"])
+    return identify(seed_machine, [simulate(seed_machine, TRUTH, poses)])
+
+
+def _edit(machine, fit, text):
+    return kinematics_edit(machine, fit, "itnc530", text, "KIN.TAB", "KIN", "0", "d").files[".TAB"]
+
+
+def test_an_edit_keeps_every_byte_it_does_not_change(seed_machine, fit):
+    before = _table()
+    after = _edit(seed_machine, fit, before)
+    assert after.count("\r\n") == after.count("\n"), "line ends are the table's own (CRLF)"
+    old, new = before.split("\r\n"), after.split("\r\n")
+    assert new[:len(STRUCT) + 2] == old[:len(STRUCT) + 2]          # BEGIN, description, header
+    assert new[-3:] == old[-3:]                                     # [END] and what follows
+    kept = [ln for ln in old if ln not in new]
+    # only Y0A/-Y0A (COORD increased) and the renumbered rows after the insertions differ
+    assert all(("Y0A" in ln) or ln[:5].strip().isdigit() for ln in kept), kept
+    table = TabTable.parse(after, "new")
+    assert table.columns == COLS.split() and table.unit == "MM"
+    for r in table.rows:                       # inserted rows sit in the columns
+        assert r["KEY"] in ("Trans", "MachAxis", "MachBase")
+        if r["DOC"].lstrip("-")[:1] in "XYZABC" and r["DOC"][-2:-1] == "0":
+            assert r["FILE"] == "" and r["COMPTAB"] == "" and float(r["COORD"]) != 0
+    assert [int(r["NR"]) for r in table.rows] == list(range(len(table.rows)))
+    machaxis_a = next(r for r in table.rows if r["KEY"] == "MachAxis" and r["AXIS"] == "A")
+    assert machaxis_a["COMPTAB"] == "COMP_A.COM"
+    for k, r in enumerate(table.rows):         # untouched cells are untouched
+        if r["DOC"] == "Y0A":
+            assert float(r["COORD"]) == pytest.approx(0.01 + plan(seed_machine, fit).lines["A"].offset[1],
+                                                      abs=0.5e-5)
+            line = after.split("\r\n")[table.row_at[k]]
+            assert len(line) == len(before.split("\r\n")[len(STRUCT) + 2 + 6])
+
+
+def test_inch_tables_get_inch_and_read_back_in_mm(seed_machine, fit):
+    mm = _edit(seed_machine, fit, _table())
+    inch = _edit(seed_machine, fit, _table(unit="INCH", zc=f"+{29.794 / 25.4:.6f}",
+                                         y0a=f"+{0.01 / 25.4:.6f}"))
+    nominal = nominal_lines(seed_machine)
+    a, b = (heidenhain.read_lines(t, seed_machine, nominal) for t in (mm, inch))
+    for axis in a:
+        # the description block gives COORD 5 decimals: 1e-5 inch = 0.254 µm, rounded to half
+        np.testing.assert_allclose(b[axis].offset, a[axis].offset, atol=0.5e-5 * 25.4 + 0.5e-5)
+        np.testing.assert_allclose(b[axis].tilt, a[axis].tilt, atol=1e-12)
+    x0c = next(r for r in TabTable.parse(inch, "i").rows if r["DOC"] == "X0C")
+    assert float(x0c["COORD"]) == pytest.approx(plan(seed_machine, fit).lines["C"].offset[0] / 25.4,
+                                                abs=0.5e-5)
+
+
+@pytest.mark.parametrize("text, message", [
+    (_table(unit=""), "states no unit"),
+    (_table(zc="+30.500"), "the table puts the C axis at (0.0000, 0.0000, 30.5000) mm"),
+    (_table().replace("COORD         FILE", "COORD FILE        "), "holds 5"),
+])
+def test_tables_that_would_mislead_are_refused(seed_machine, fit, text, message):
+    with pytest.raises(CompgenError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        _edit(seed_machine, fit, text)
+
+
+def test_a_small_pivot_difference_passes(seed_machine, fit):
+    assert _edit(seed_machine, fit, _table(zc="+29.7945"))
