@@ -2,8 +2,10 @@
 xyzac-trt kinematics runs compgen's programs; its joints are checked against compgen, and
 compgen's kinematics edit, loaded into LinuxCNC, is shown to remove the errors it can hold.
 
-CI installs LinuxCNC and sets COMPGEN_REQUIRE_LINUXCNC; elsewhere the test is skipped when
-LinuxCNC is not installed.
+Both trt kinematics run: xyzac-trt-kins (the seed machine) and xyzbc-trt-kins (the B/C
+table), each with a configuration that sets one pin through a signal, so the edit must
+respect the configuration's nets. CI installs LinuxCNC and sets COMPGEN_REQUIRE_LINUXCNC;
+elsewhere the test is skipped when LinuxCNC is not installed.
 """
 
 import os
@@ -16,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, SEED_MACHINE, UM
+from conftest import BC_MACHINE, ROOT, SEED_MACHINE, UM
 
 from compgen.correction import nominal_lines
 from compgen.emit import linuxcnc
@@ -34,32 +36,53 @@ HERE = ROOT / "tests" / "linuxcnc"
 JOINT_MM = 1e-6     # LinuxCNC's trt inverse vs compgen's, both in double precision
 NOISE_UM = 0.5
 # what LinuxCNC's trt kinematics can hold: axis-line positions (and the ball's set-up)
-TRUTH = {"XOW": 4 * UM, "YOW": -6 * UM, "ZOW": 9 * UM, "YOA": 20 * UM, "ZOA": -15 * UM,
-         "XOC": 12 * UM, "YOC": -8 * UM}
+TRUTH = {
+    "xyzac": {"XOW": 4 * UM, "YOW": -6 * UM, "ZOW": 9 * UM, "YOA": 20 * UM, "ZOA": -15 * UM,
+              "XOC": 12 * UM, "YOC": -8 * UM},
+    "xyzbc": {"XOW": -3 * UM, "YOW": 5 * UM, "ZOW": 7 * UM, "XOB": 18 * UM, "ZOB": -12 * UM,
+              "XOC": -9 * UM, "YOC": 14 * UM},
+}
 
 pytestmark = pytest.mark.skipif(
     shutil.which("linuxcnc") is None and not os.environ.get("COMPGEN_REQUIRE_LINUXCNC"),
     reason="LinuxCNC is not installed (apt-get install linuxcnc-uspace)")
 
 
-@pytest.fixture(scope="module")
-def machine(tmp_path_factory):
-    """The seed machine with a quick [program]: short dwell, brisk feed."""
-    path = tmp_path_factory.mktemp("m") / "seed-fast.toml"
-    path.write_text(SEED_MACHINE.read_text().replace("dwell = 1.0", "dwell = 0.05")
-                    .replace("feed = 500.0", "feed = 3000.0"))
+@pytest.fixture(scope="module", params=["xyzac", "xyzbc"])
+def machine(request, tmp_path_factory):
+    """The seed machine (xyzac-trt) and the B/C table (xyzbc-trt) on LinuxCNC, with a quick
+    [program]: short dwell, brisk feed, a numbered tool."""
+    source = SEED_MACHINE if request.param == "xyzac" else BC_MACHINE
+    path = tmp_path_factory.mktemp("m") / f"{request.param}.toml"
+    path.write_text(re.sub(r'controller = "\w+"', 'controller = "linuxcnc"', source.read_text())
+                    .replace("dwell = 1.0", "dwell = 0.05").replace("feed = 500.0", "feed = 3000.0")
+                    .replace('tool = "RTEST"', 'tool = "7"'))
     return load_machine(path)
 
 
-def run_linuxcnc(folder, program: str, setp: str) -> dict[int, np.ndarray]:
-    """Run ``program`` on a headless LinuxCNC; settled joints by 1-based program line."""
+def current_hal(machine) -> str:
+    """The configuration's HAL file, pins nominal: what ``--current`` is given."""
+    module, tilt, _ = linuxcnc._trt(machine)
+    nominal = linuxcnc._nominal(machine, tilt, machine.rotary_axes[1])
+    pins = [f"setp {module}.{n} {nominal[n]:.6f}" for n in linuxcnc._pin_names(tilt) if n != "z-rot-point"]
+    return (HERE / "sim.hal.in").read_text().replace("@KINS@", module).replace(
+        "@PINS@", "\n".join([*pins, f"sets zrot {nominal['z-rot-point']:.6f}"]))
+
+
+def run_linuxcnc(folder, machine, program: str, edit: str) -> dict[int, np.ndarray]:
+    """Run ``program`` on a headless LinuxCNC with the configuration's pins and ``edit`` (a
+    further HAL file, as a user loads compgen's edit); settled joints by 1-based program
+    line, with the nest's tool length taken off Z (G43 adds it to the joint)."""
     assert shutil.which("linuxcnc"), "LinuxCNC is required here (COMPGEN_REQUIRE_LINUXCNC)"
+    module, tilt, _ = linuxcnc._trt(machine)
     folder.mkdir(exist_ok=True)
     (folder / "sim.ini").write_text((HERE / "sim.ini.in").read_text()
                                     .replace("@DRIVER@", str(HERE / "driver.py"))
-                                    .replace("@KINS@", "xyzac-trt-kins"))
-    (folder / "sim.hal").write_text((HERE / "sim.hal.in").read_text().replace("@SETP@", setp))
-    (folder / "sim.tbl").write_text("T1 P1 Z0 ;R-test nest\n")
+                                    .replace("@KINS@", module).replace("@TILT@", tilt.name))
+    (folder / "sim.hal").write_text(current_hal(machine))
+    (folder / "edit.hal").write_text(edit or "# no edit\n")
+    tool = machine.program.tool
+    (folder / "sim.tbl").write_text(f"T{tool} P1 Z{machine.probe_length:.6f} ;R-test nest\n")
     (folder / "sim.var").write_text("")
     (folder / "prog.ngc").write_text(program)
     sockets = Path(tempfile.mkdtemp(prefix="compgen-rtapi-"))
@@ -78,8 +101,9 @@ def run_linuxcnc(folder, program: str, setp: str) -> dict[int, np.ndarray]:
     assert result.exists(), f"LinuxCNC wrote no joints (exit {done.returncode}): {done.stdout[-1500:]}"
     text = result.read_text()
     assert text.rstrip().endswith("done"), text[-500:]
-    return {int(w[0]): np.array([float(v) for v in w[1:]])
-            for w in (ln.split() for ln in text.splitlines()) if w[0].isdigit()}
+    joints = {int(w[0]): np.array([float(v) for v in w[1:]])
+              for w in (ln.split() for ln in text.splitlines()) if w[0].isdigit()}
+    return {k: v - [0, 0, machine.probe_length, 0, 0] for k, v in joints.items()}
 
 
 def _at_poses(joints: dict[int, np.ndarray], program: str) -> np.ndarray:
@@ -99,8 +123,7 @@ def test_linuxcnc_runs_the_k4_program_where_compgen_puts_it(machine, tmp_path):
     emitted = measure_program(machine, poses, "K4", "linuxcnc", "tcpm", "K4", "0", "d")
     program, listed = emitted.files[".ngc"], emitted.files[".poses.csv"]
     t0 = time.perf_counter()
-    joints = run_linuxcnc(tmp_path / "run", program,
-                          "setp xyzac-trt-kins.z-rot-point 29.794\nsetp xyzac-trt-kins.z-offset -29.794")
+    joints = run_linuxcnc(tmp_path / "run", machine, program, "")
     seconds = time.perf_counter() - t0
     got = _at_poses(joints, program)
     want = np.loadtxt(listed.splitlines()[1:], delimiter=",", usecols=(1, 2, 3, 4, 5))
@@ -110,26 +133,28 @@ def test_linuxcnc_runs_the_k4_program_where_compgen_puts_it(machine, tmp_path):
 
 
 def test_compgens_edit_loaded_into_linuxcnc_removes_what_it_can_hold(machine, tmp_path):
+    truth = TRUTH[linuxcnc._trt(machine)[0][:5]]
     full = generate(machine, ["K4", "K1", "K2"])
     rng = np.random.default_rng(11)
-    pre = simulate(machine, TRUTH, full, NOISE_UM, rng)
+    pre = simulate(machine, truth, full, NOISE_UM, rng)
     fit = identify(machine, [pre])
-    hal = kinematics_edit(machine, fit, "linuxcnc", None, "", "KIN", "0", "d").files[".hal"]
-    setp = "\n".join(ln.split("#")[0] for ln in hal.splitlines() if ln.startswith("setp"))
+    current = current_hal(machine)
+    hal = kinematics_edit(machine, fit, "linuxcnc", current, "sim.hal", "KIN", "0", "d").files[".hal"]
+    assert re.search(r"(?m)^sets zrot ", hal) and not re.search(r"(?m)^setp \S+z-rot-point", hal)
     subset = np.arange(0, 241, 6)                      # K4 comes first in ``full``
     poses = full.take(subset)
     program = measure_program(machine, poses, "K4", "linuxcnc", "tcpm", "K4", "0", "d").files[".ngc"]
-    joints = run_linuxcnc(tmp_path / "edit", program, setp)
+    joints = run_linuxcnc(tmp_path / "edit", machine, program, hal)
     q = _at_poses(joints, program)
     q[:, 3:] = np.radians(q[:, 3:])
     # LinuxCNC drives exactly as compgen's model of that controller says it will
-    lines = linuxcnc.read_lines(hal, machine, None, nominal_lines(machine))
+    lines = linuxcnc.read_lines(hal, machine, current, nominal_lines(machine))
     held = controller_inverse(machine, lines, q[:, 3:], poses.ball)
     np.testing.assert_allclose(q[:, :3], held[:, :3], rtol=0, atol=JOINT_MM)
     # the true machine, driven to LinuxCNC's joints, reads set-up and noise only; the
     # session records the nominal poses, as a real one would
-    true = Model(machine, list(TRUTH))
-    reading = true.relative(Poses(q, poses.ball, poses.t, poses.path), np.array(list(TRUTH.values())))
+    true = Model(machine, list(truth))
+    reading = true.relative(Poses(q, poses.ball, poses.t, poses.path), np.array(list(truth.values())))
     reading = reading + rng.normal(0, NOISE_UM * 1e-3, reading.shape)
     setup = ["XOW", "YOW", "ZOW"]
     before = identify(machine, [RTestData(poses, pre.deviation[subset])], setup)

@@ -50,6 +50,9 @@ class Controller:
     def number(value: float, decimals: int) -> str:
         return fmt_plain(value, decimals)
 
+    def check_setup(self, machine: Machine) -> None:
+        """Refuse a [program] set-up this control cannot run (e.g. a tool it cannot call)."""
+
     def main_suffix(self, current: str | None) -> str:
         """Suffix of the file ``-o`` names; the others go beside it with the same stem."""
         raise NotImplementedError

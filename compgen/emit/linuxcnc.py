@@ -20,6 +20,8 @@ from . import fmt_plain, render
 from .base import Controller, EditContext, EditFiles
 
 SETP = re.compile(r"^\s*setp\s+(\S+?)\.(\S+)\s+(\S+)", re.MULTILINE)
+SETS = re.compile(r"^\s*sets\s+(\S+)\s+(\S+)", re.MULTILINE)
+NET = re.compile(r"^\s*net\s+(\S+)\s+(.*)$", re.MULTILINE)
 
 
 def _trt(machine: Machine) -> tuple[str, object, object]:
@@ -32,44 +34,80 @@ def _trt(machine: Machine) -> tuple[str, object, object]:
     return f"xyz{axes[0].name.lower()}c-trt-kins", axes[0], axes[1]
 
 
+def _pin_names(tilt) -> list[str]:
+    along = "xyz".index(tilt.direction)
+    return ["x-rot-point", "y-rot-point", "z-rot-point"] + [
+        f"{'xyz'[k]}-offset" for k in range(3) if k != along]
+
+
 def _nominal(machine: Machine, tilt, c) -> dict[str, float]:
     pivot_c, pivot_t = pivot_of(machine, c.name), pivot_of(machine, tilt.name)
     return {"x-rot-point": pivot_c[0], "y-rot-point": pivot_c[1], "z-rot-point": pivot_c[2],
             **{f"{'xyz'[k]}-offset": (pivot_t - pivot_c)[k] for k in range(3)}}
 
 
+def _number(text: str, what: str, where: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise CompgenError(f"{what} value {text!r} is not a number", where=where) from None
+
+
+def read_hal(text: str, module: str, where: str) -> tuple[dict[str, float], dict[str, str]]:
+    """A HAL file's values of the module's pins (``setp``, or ``sets`` on the signal a pin is
+    netted to) and the signal each netted pin is on."""
+    signal = {}
+    for m in NET.finditer(text):
+        for word in m[2].split():
+            if word.startswith(f"{module}."):
+                signal[word[len(module) + 1:]] = m[1]
+    on_signal = {m[1]: _number(m[2], f"sets {m[1]}", where) for m in SETS.finditer(text)}
+    values = {}
+    for m in SETP.finditer(text):
+        if m[1] == module:
+            if m[2] in signal:
+                raise CompgenError(f"{module}.{m[2]} is set by setp and netted to {signal[m[2]]}: LinuxCNC "
+                                   "refuses to start such a configuration", where=where)
+            values[m[2]] = _number(m[3], f"setp {module}.{m[2]}", where)
+    values |= {pin: on_signal[sig] for pin, sig in signal.items() if sig in on_signal}
+    return values, signal
+
+
 def pins(machine: Machine, p: Plan, current: str | None,
-         where: str) -> tuple[str, list[tuple[str, str, str]], list[str]]:
-    """trt pin values: the current ones (a HAL file) or the machine file's nominal, plus the
-    corrections; and what the pins cannot express."""
+         where: str) -> tuple[str, list[tuple[str, str, str, str]], list[str]]:
+    """The HAL assignments of the trt pins: (``setp`` or ``sets``, pin or signal, new value,
+    old value), each pin the way the current file sets it (a netted pin through its signal);
+    the current values (the HAL file) or the machine file's nominal, plus the corrections;
+    and what the pins cannot express."""
     module, tilt, c = _trt(machine)
-    along = "xyz".index(tilt.direction)
-    names = ["x-rot-point", "y-rot-point", "z-rot-point"] + [
-        f"{'xyz'[k]}-offset" for k in range(3) if k != along]
-    held = _nominal(machine, tilt, c)
+    names = _pin_names(tilt)
+    held, signal = _nominal(machine, tilt, c), {}
     if current is not None:
-        found = {m[2]: float(m[3]) for m in map(SETP.match, current.splitlines()) if m and m[1] == module}
-        missing = [n for n in names if n not in found]
-        if missing:
-            raise CompgenError(f"--current sets no {module}.{missing[0]}", where=where,
-                               hint=f"give the setp lines of {', '.join(names)}")
-        held = found
+        held, signal = read_hal(current, module, where)
+        for n in names:
+            if n not in held:
+                why = (f"is netted to {signal[n]}, which another component drives" if n in signal
+                       else "is set neither by setp nor through a signal")
+                raise CompgenError(f"in --current, {module}.{n} {why}", where=where,
+                                   hint=f"give the HAL file that sets {', '.join(names)}")
     delta_r = p.lines[c.name].offset
     delta_d = p.lines[tilt.name].offset - delta_r
     new = {n: held[n] + (delta_r if n.endswith("rot-point") else delta_d)["xyz".index(n[0])] for n in names}
     other = [f"{n} tilt {line.tilt[i] / ARCSEC:+.2f} arcsec about {'XYZ'[i]}"
              for n, line in p.lines.items() for i in range(3) if line.tilt[i] != 0]
     other += [*p.squareness, *p.tables, *p.not_compensable]
-    return module, [(n, fmt_plain(new[n], 6), fmt_plain(held[n], 6)) for n in names], other
+    rows = [("sets", signal[n], fmt_plain(new[n], 6), fmt_plain(held[n], 6)) if n in signal else
+            ("setp", f"{module}.{n}", fmt_plain(new[n], 6), fmt_plain(held[n], 6)) for n in names]
+    return module, rows, other
 
 
 def read_lines(text: str, machine: Machine, current: str | None,
                lines: dict[str, AxisLine]) -> dict[str, AxisLine]:
     """The axis lines a trt HAL edit sets, relative to ``current`` (default: nominal)."""
     module, tilt, c = _trt(machine)
-    now = {m[2]: float(m[3]) for m in map(SETP.match, text.splitlines()) if m and m[1] == module}
-    before = ({m[2]: float(m[3]) for m in map(SETP.match, current.splitlines()) if m and m[1] == module}
-              if current else _nominal(machine, tilt, c))
+    before = read_hal(current, module, "current")[0] if current else _nominal(machine, tilt, c)
+    # the edit is loaded after the configuration's files: its nets are the current file's
+    now = {**before, **read_hal(f"{current or ''}\n{text}", module, "edit")[0]}
     r = np.array([now[f"{a}-rot-point"] - before[f"{a}-rot-point"] for a in "xyz"])
     d = np.array([now.get(f"{a}-offset", 0.0) - before.get(f"{a}-offset", 0.0) for a in "xyz"])
     zero = np.zeros(3)
@@ -93,11 +131,14 @@ class LinuxCNC(Controller):
 
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:
-        module, values, other = pins(machine, p, current, where)
+        module, rows, other = pins(machine, p, current, where)
         text = render("linuxcnc/kinematics.hal.j2", header=ctx.header, module=module, lines=ctx.lines,
-                      pins=values, other=other)
-        notes = [f"setp {module}.{n} {v}  (was {w})" for n, v, w in values]
+                      rows=rows, other=other)
+        notes = [f"{cmd} {target} {v}  (was {w})" for cmd, target, v, w in rows]
         notes.append("not expressible in the trt kinematics: " + ", ".join(other))
+        if current is not None and "tool-offset" not in read_hal(current, module, where)[1]:
+            notes.append(f"{module}.tool-offset is not netted: net it to motion.tooloffset.z, or the "
+                         "table turns about the spindle nose instead of the nest (G43 lengths)")
         return EditFiles({".hal": text}, tuple(notes))
 
     def holds(self, machine: Machine, p: Plan) -> Held:
@@ -109,7 +150,12 @@ class LinuxCNC(Controller):
         return [*tilts, *p.squareness, *p.tables, *p.not_compensable]
 
     def reads(self, text: str) -> bool:
-        return SETP.search(text) is not None
+        return SETP.search(text) is not None or (SETS.search(text) is not None and "kinematics edit" in text)
+
+    def check_setup(self, machine: Machine) -> None:
+        if not re.fullmatch(r"\d{1,5}", machine.program.tool):
+            raise CompgenError(f"LinuxCNC calls tools by number; [program] tool is {machine.program.tool!r}",
+                               where=f"{machine.source}: [program] tool", hint='e.g. tool = "99"')
 
     def read(self, machine: Machine, text: str, current: str | None, held: Held, where: str) -> Held:
         return Held(read_lines(text, machine, current, held.lines), held.squareness, held.tables)

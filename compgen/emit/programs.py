@@ -48,6 +48,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     if setup is None:
         raise CompgenError(f"machine file {machine.source} has no [program] section",
                            hint="add tool, feed, dwell, clearance and safe_z (see the bundled machines)")
+    ctl.check_setup(machine)
     linear = [machine.index(c) for c in "XYZ"]
     rotary = [machine.index(a.name) for a in machine.rotary_axes]
     # the machine executes the angles as written (0.0001 deg): solve X Y Z at exactly those,
