@@ -237,11 +237,14 @@ def measure_program_cmd(machine_file, path_names, poses_file, controller_name, m
 @click.option("--current", type=FILE, default=None,
               help="The control's current kinematics: iTNC 530 description table (*.TAB), or the "
                    "SINUMERIK record's $TC_CARR lines.")
+@click.option("--measured-with", "measured", type=FILE, default=None,
+              help="The control's kinematics while the data were measured, if it is not --current "
+                   "(part of a correction already loaded): the edit writes the rest.")
 @click.option("-o", "--output", type=FILE, required=True,
               help="Main file (the new table, the change list or the .MPF); the sign check and any "
                    "tables go beside it with the same stem.")
 @FORCE
-def kinematics_cmd(base, controller_name, current, output, force):
+def kinematics_cmd(base, controller_name, current, measured, output, force):
     """Write the controller's kinematics edit for a fit, with a sign check and a backup step."""
     fit = load_fit(base)
     machine, _ = reload(fit)
@@ -250,7 +253,8 @@ def kinematics_cmd(base, controller_name, current, output, force):
     out = Path(output)
     name = program_name(out.stem)
     emitted = kinematics_edit(machine, fit, ctl.name, text, current or "", name, __version__,
-                              date.today().isoformat(), force)
+                              date.today().isoformat(), force,
+                              read_text(measured, "file", ansi_ok=True)[0] if measured else None)
     main_key = ctl.main_suffix(text)
     files = {(out if key == main_key else out.with_name(out.stem + key)): body
              for key, body in emitted.files.items()}

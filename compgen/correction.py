@@ -120,6 +120,17 @@ def _check_bounds(machine: Machine, lines, squareness, force: bool) -> None:
                                 "needs the OEM. Raise [limits] in the machine file or use --force")
 
 
+def rest(machine: Machine, p: Plan, held: Held, force: bool = False) -> Plan:
+    """The part of ``p`` still to write when the control already holds ``held`` (relative to
+    the state the data were measured in): offsets and tilts add to first order."""
+    lines = {n: AxisLine(n, line.nominal, line.pivot, line.offset - held.lines[n].offset,
+                         line.tilt - held.lines[n].tilt) for n, line in p.lines.items()}
+    squareness = {k: p.squareness.get(k, 0.0) - held.squareness.get(k, 0.0)
+                  for k in {**p.squareness, **held.squareness}}
+    _check_bounds(machine, lines, squareness, force)
+    return Plan(lines, squareness, p.tables, p.not_compensable, p.setup, p.fit_params)
+
+
 def lines_text(p: Plan) -> list[str]:
     """The corrections in words, µm and arcsec, for every file's header."""
     out = [f"{n} line at its pivot: offset " + ", ".join(

@@ -129,3 +129,37 @@ def test_linuxcnc_second_round_adds_to_the_pins(seed_machine):
         assert one[f"{axis}-rot-point"] == pytest.approx(on_c[k], abs=1e-6)
         if axis != "x":
             assert one[f"{axis}-rot-point"] + one[f"{axis}-offset"] == pytest.approx(on_a[k], abs=2e-6)
+
+
+@pytest.mark.parametrize("controller", ["itnc530", "sinumerik840d", "linuxcnc"])
+def test_an_edit_against_a_state_that_holds_part_of_it_writes_the_rest(seed_machine, bc_machine, controller):
+    """Measured in state S0; meanwhile part of the correction (say, the A line) was loaded:
+    S1. The edit of the fit, against S1 with S0 named as the measured state, lands where
+    the edit against S0 lands; without naming S0 it would add the part twice."""
+    main = {"itnc530": ".TAB", "sinumerik840d": ".MPF", "linuxcnc": ".hal"}[controller]
+    machine, truth = (bc_machine, BC_A) if controller == "sinumerik840d" else (seed_machine, SEED_A)
+    s0 = {"itnc530": OEM_TAB, "sinumerik840d": OEM_CARR,     # LinuxCNC: its nominal pins
+          "linuxcnc": _edit(seed_machine, {"XOC": 0.0}, "linuxcnc", None).files[".hal"]}[controller]
+    first = machine.rotary_axes[0].name
+    part = {k: v for k, v in truth.items() if k.endswith(first)}
+    s1 = _edit(machine, part, controller, s0).files[main]
+    fit = _fit(machine, truth)
+    direct = kinematics_edit(machine, fit, controller, s0, "s0", "KIN", "0", "d").files[main]
+    rest = kinematics_edit(machine, fit, controller, s1, "s1", "KIN", "0", "d", measured=s0).files[main]
+    twice = kinematics_edit(machine, fit, controller, s1, "s1", "KIN", "0", "d").files[main]
+    nominal = nominal_lines(machine)
+    if controller == "itnc530":
+        a, b, c = (heidenhain.read_lines(t, machine, nominal) for t in (direct, rest, twice))
+        for axis in a:
+            np.testing.assert_allclose(b[axis].offset, a[axis].offset, atol=3e-5)
+        assert np.abs(c[first].offset - a[first].offset).max() > 10 * UM
+    elif controller == "sinumerik840d":
+        a, b, c = (sinumerik.read_carr(t, "t", 1) for t in (direct, rest, twice))
+        for n in a:
+            assert b[n] == pytest.approx(a[n], abs=3e-5), n
+        assert max(abs(c[n] - a[n]) for n in sinumerik.FINE["l2"]) > 10 * UM
+    else:
+        a, b, c = ({m[2]: float(m[3]) for m in SETP.finditer(t)} for t in (direct, rest, twice))
+        for n in a:
+            assert b[n] == pytest.approx(a[n], abs=3e-6), n
+        assert max(abs(c[n] - a[n]) for n in a) > 10 * UM

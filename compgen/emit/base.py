@@ -70,6 +70,11 @@ class Controller:
         """What of ``p`` stays in the machine after the edit, in words."""
         raise NotImplementedError
 
+    def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
+        """What the control holds now (``current``) beyond the state the data were measured
+        in (``measured``): lines and squareness, relative."""
+        raise NotImplementedError
+
     def reads(self, text: str) -> bool:
         """Whether ``text`` is one of the edit files this controller writes."""
         return False

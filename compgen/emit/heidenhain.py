@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..correction import Held, Plan, comp_tables, pivot_of
+from ..correction import Held, Plan, comp_tables, nominal_lines, pivot_of
 from ..effects import ROT_OF, ROTATIONS, TRANSLATIONS
 from ..errors import CompgenError
 from ..lines import AxisLine
@@ -239,6 +239,14 @@ class Heidenhain(Controller):
 
     def not_held(self, p: Plan) -> list[str]:
         return [*p.tables, *p.not_compensable]
+
+    def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
+        nominal = nominal_lines(machine)
+        now, then = (read_lines(t, machine, nominal) for t in (current, measured))
+        lines = {n: AxisLine(n, line.nominal, line.pivot, line.offset - then[n].offset,
+                             line.tilt - then[n].tilt) for n, line in now.items()}
+        sq_now, sq_then = (read_squareness(t, machine) for t in (current, measured))
+        return Held(lines, {k: sq_now.get(k, 0.0) - sq_then.get(k, 0.0) for k in {**sq_now, **sq_then}})
 
     def reads(self, text: str) -> bool:
         return ROW.search(text) is not None

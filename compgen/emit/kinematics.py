@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..correction import Plan, lines_text, plan
+from ..correction import Plan, lines_text, plan, rest
+from ..errors import CompgenError
 from ..kinematics import Model, Poses, inverse
 from ..lines import controller_inverse
 from ..machine import Machine
@@ -49,10 +50,20 @@ def sign_check(machine: Machine, p: Plan, ctl: Controller, name: str, version: s
 
 
 def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, current: str | None,
-                    current_where: str, name: str, version: str, date: str, force: bool = False) -> Emitted:
-    """The files of a kinematics edit for one control, with the sign check and notes."""
+                    current_where: str, name: str, version: str, date: str, force: bool = False,
+                    measured: str | None = None) -> Emitted:
+    """The files of a kinematics edit for one control, with the sign check and notes.
+
+    ``measured`` is the control's state while the data were measured, when it differs from
+    ``current`` (part of a correction already loaded, say): the edit then writes the rest.
+    """
     ctl = controller(controller_name)
     p = plan(machine, fit, force)
+    if measured is not None:
+        if current is None:
+            raise CompgenError("the state the data were measured in only counts against --current",
+                               hint="give --current as well")
+        p = rest(machine, p, ctl.since(machine, measured, current, current_where), force)
     sign_name = program_name(f"{name}_SIGN")
     signcheck, expect = sign_check(machine, p, ctl, sign_name, version, date)
     header = (f"compgen {version} kinematics edit, {date}",

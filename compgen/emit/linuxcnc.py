@@ -12,7 +12,7 @@ import re
 
 import numpy as np
 
-from ..correction import ARCSEC, Held, Plan, pivot_of
+from ..correction import ARCSEC, Held, Plan, nominal_lines, pivot_of
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
@@ -148,6 +148,9 @@ class LinuxCNC(Controller):
     def not_held(self, p: Plan) -> list[str]:
         tilts = [f"{n} tilt" for n, line in p.lines.items() if line.tilt.any()]
         return [*tilts, *p.squareness, *p.tables, *p.not_compensable]
+
+    def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
+        return Held(read_lines(current, machine, measured, nominal_lines(machine)), {})
 
     def reads(self, text: str) -> bool:
         return SETP.search(text) is not None or (SETS.search(text) is not None and "kinematics edit" in text)

@@ -11,7 +11,7 @@ import re
 
 import numpy as np
 
-from ..correction import CompTable, Held, Plan, comp_tables, squareness_tables
+from ..correction import CompTable, Held, Plan, comp_tables, nominal_lines, squareness_tables
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
@@ -206,6 +206,12 @@ class Sinumerik840D(Controller):
 
     def not_held(self, p: Plan) -> list[str]:
         return list(p.not_compensable)
+
+    def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
+        if machine.sinumerik is None:
+            raise CompgenError(f"machine file {machine.source} has no [sinumerik] section")
+        then = read_carr(measured, where, machine.sinumerik["tcarr"])
+        return Held(read_lines(current, machine, then, nominal_lines(machine)), {})
 
     def reads(self, text: str) -> bool:
         return "$TC_CARR" in text or "$AN_CEC" in text
