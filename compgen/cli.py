@@ -18,7 +18,7 @@ from .diagnose import diagnose
 from .effects import catalogue, compose, location_model
 from .emit.kinematics import kinematics_edit
 from .emit.programs import MODES, measure_program, program_name
-from .emit.registry import CONTROLLERS, controller, read_edits
+from .emit.registry import CONTROLLERS, controller, for_program, read_edits
 from .errors import CompgenError
 from .files import read_text, write_all, write_atomically
 from .identify import identify, parse_fixed
@@ -228,6 +228,27 @@ def measure_program_cmd(machine_file, path_names, poses_file, controller_name, m
     write_all(files, force)
     click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, {mode} mode, "
                f"{ctl.words}", err=True)
+
+
+@main.command("check-program")
+@MACHINE
+@click.argument("program", type=FILE)
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. Default: from the file's suffix.")
+def check_program_cmd(machine_file, program, controller_name):
+    """Simulate PROGRAM block by block against the R-test set-up, travel and feeds."""
+    from .motion import run
+
+    machine = load_machine(machine_file)
+    ctl = controller(controller_name) if controller_name else for_program(Path(program).suffix, machine)
+    text = read_text(program, "program", ansi_ok=True)[0]
+    result = run(machine, ctl.blocks(text))
+    for finding in result.findings:
+        click.echo(finding.text(program))
+    if result.findings:
+        raise SystemExit(1)
+    click.echo(f"{program}: OK ({ctl.words}): {result.blocks} moves, about {result.seconds / 60:.1f} min; "
+               f"closest approach {result.closest_mm:.1f} mm ({result.closest_at})")
 
 
 @main.command("kinematics")

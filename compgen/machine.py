@@ -73,16 +73,39 @@ class PathDef:
 class ProgramSetup:
     """How a measurement program runs on this machine (``[program]`` in the machine file).
 
-    ``safe_z`` is a retract height in machine coordinates (HEIDENHAIN M91, SINUMERIK SUPA),
-    mm; ``clearance`` the approach height above the first and last pose, mm.
+    ``clearance`` is the approach height above the first and last pose along the nest's
+    axis, mm. The safe height for turning the rotary axes is not given: compgen derives it
+    from the set-up (``motion.safe_height``).
     """
 
     tool: str
     feed: float          # mm/min along the nest's path
     dwell: float         # s at each pose, while the R-test samples
     clearance: float
-    safe_z: float
     work_offset: str = "G54"   # SINUMERIK settable frame holding the machine-frame origin
+
+
+@dataclass(frozen=True)
+class Setup:
+    """The R-test set-up as solids, mm (``[rtest]``), for the motion check: a ball on a stem
+    standing on the table top, the nest housing and the spindle around the tool axis.
+    ``table_top`` and the table's axis are in the frame the ball is given in (the last
+    workpiece axis's); ``table_radius`` defaults to the ball's distance from that axis plus
+    50 mm. ``nest_range`` is how far from the ball's centre the nest still measures (its
+    sensors' range): there, and on the straight approach along the nest's axis, the nest
+    and housing may surround the ball and its stem."""
+
+    ball_diameter: float = 25.4
+    stem_diameter: float = 10.0
+    table_top: float = 0.0
+    table_radius: float = 0.0
+    table_thickness: float = 50.0
+    nest_radius: float = 30.0
+    nest_below: float = 5.0       # the housing reaches this far below the nest centre
+    spindle_radius: float = 60.0  # spindle and holder, from the gauge line up
+    spindle_length: float = 250.0
+    nest_range: float = 1.0
+    margin: float = 5.0           # kept between the set-up and the nest at the safe height
 
 
 @dataclass(frozen=True)
@@ -103,6 +126,7 @@ class Machine:
     tool: tuple[Axis, ...]
     ball: tuple[float, float, float]
     probe_length: float
+    setup: Setup = Setup()
     paths: dict[str, PathDef] = field(default_factory=dict)
     program: ProgramSetup | None = None
     limits: Limits = Limits()
@@ -172,10 +196,23 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
     if not any(a.rotary for a in axes):
         raise CompgenError("the machine has no rotary axis", where=source)
     rtest = get.sub("rtest")
+    ball = rtest.vec3("ball")
+    fields = set(Setup.__dataclass_fields__)
+    unknown = set(rtest.doc) - fields - {"ball", "probe_length"}
+    if unknown:
+        raise CompgenError(f"unknown keys {sorted(unknown)}", where=rtest.at(""),
+                           hint=f"[rtest] takes ball, probe_length, {', '.join(sorted(fields))}")
+    solids = {k: rtest.number(k) if k == "table_top" else _positive(rtest, k)
+              for k in fields if k in rtest.doc}
+    solids.setdefault("table_radius", math.hypot(ball[0], ball[1]) + 50.0)
+    setup = Setup(**solids)
+    if ball[2] - setup.ball_diameter / 2 <= setup.table_top:
+        raise CompgenError(f"the ball (z {ball[2]:g} mm, diameter {setup.ball_diameter:g}) does not stand "
+                           f"above the table top (z {setup.table_top:g})", where=rtest.at("ball"))
     machine = Machine(
         name=get.str("name"), controller=controller,
         workpiece=chains["workpiece"], tool=chains["tool"],
-        ball=rtest.vec3("ball"), probe_length=rtest.number("probe_length"),
+        ball=ball, probe_length=_positive(rtest, "probe_length"), setup=setup,
         source=source, sha256=sha256,
     )
     paths = {}
@@ -184,9 +221,13 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
     program = None
     if "program" in doc:
         g = get.sub("program")
+        if "safe_z" in g.doc:
+            raise CompgenError("safe_z (a height in machine coordinates) is no longer read: compgen "
+                               "derives the safe height from the [rtest] set-up and checks it",
+                               where=g.at("safe_z"), hint="delete the line; describe the set-up in [rtest]")
         program = ProgramSetup(tool=str(g._get("tool")), feed=_positive(g, "feed"),
                                dwell=_positive(g, "dwell", zero_ok=True),
-                               clearance=_positive(g, "clearance"), safe_z=g.number("safe_z"),
+                               clearance=_positive(g, "clearance"),
                                work_offset=g.str("work_offset") if "work_offset" in g.doc else "G54")
     limits = Limits()
     if "limits" in doc:

@@ -38,6 +38,10 @@ class Toy(Controller):
     backup = "nothing to back up: it is a toy"
     pose_line = LinuxCNC.pose_line
     tcpm_on = LinuxCNC.tcpm_on
+    tcp_switchable = False
+
+    def blocks(self, text):
+        return LinuxCNC().blocks(text)
 
     def main_suffix(self, current):
         return ".toy"

@@ -55,7 +55,7 @@ def machine(request, tmp_path_factory):
     source = SEED_MACHINE if request.param == "xyzac" else BC_MACHINE
     path = tmp_path_factory.mktemp("m") / f"{request.param}.toml"
     path.write_text(re.sub(r'controller = "\w+"', 'controller = "linuxcnc"', source.read_text())
-                    .replace("dwell = 1.0", "dwell = 0.05").replace("feed = 500.0", "feed = 3000.0")
+                    .replace("dwell = 1.0", "dwell = 0.05").replace("feed = 500.0", "feed = 2000.0")
                     .replace('tool = "RTEST"', 'tool = "7"'))
     return load_machine(path)
 

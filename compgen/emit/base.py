@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 from ..correction import Held, Plan
 from ..machine import Machine
+from ..motion import Block
 from . import fmt_plain
 
 
@@ -45,10 +46,15 @@ class Controller:
     backup = ""               # what to save before an edit
     pose_line: re.Pattern     # one measuring pose of a program it wrote
     tcpm_on: re.Pattern       # a program it wrote switches TCP on
+    tcp_switchable = True     # a program switches TCP on and off (else: the configuration's)
 
     @staticmethod
     def number(value: float, decimals: int) -> str:
         return fmt_plain(value, decimals)
+
+    def blocks(self, text: str) -> list[Block]:
+        """A program as this control executes it, block by block (``motion.Block``)."""
+        raise NotImplementedError
 
     def check_setup(self, machine: Machine) -> None:
         """Refuse a [program] set-up this control cannot run (e.g. a tool it cannot call)."""

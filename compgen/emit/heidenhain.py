@@ -18,6 +18,7 @@ from ..effects import ROT_OF, ROTATIONS, TRANSLATIONS
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
+from ..motion import Block, unknown, words
 from . import fmt_signed, render
 from .base import Controller, EditContext, EditFiles
 from .tab import MM_PER, TabTable
@@ -199,8 +200,45 @@ def _comp_csv(tables) -> str:
     return "\n".join(out) + "\n"
 
 
+def program_blocks(text: str) -> list[Block]:
+    """A Klartext program as the control executes it (the blocks compgen writes)."""
+    out = []
+    for k, raw in enumerate(text.splitlines(), start=1):
+        body = raw.split(";", 1)[0].strip()
+        m = re.fullmatch(r"\d+\s*(.*)", body)
+        if m is None:
+            if body:
+                raise unknown(k, raw)
+            continue
+        b = m[1].strip()
+        if not b or b.startswith(("BEGIN PGM", "END PGM")) or b in (
+                "M30", "M126", "PLANE RESET STAY", "CYCL DEF 7.0 DATUM SHIFT", "CYCL DEF 9.0 DWELL TIME"):
+            continue
+        if b == "FUNCTION RESET TCPM":
+            out.append(Block(k, raw, "tcp", on=False))
+        elif b.startswith("FUNCTION TCPM"):
+            out.append(Block(k, raw, "tcp", on=True))
+        elif (d := re.fullmatch(r"CYCL DEF 7\.[123] [XYZ]([+-]?[\d.]+)", b)) is not None:
+            if float(d[1]) != 0:
+                raise CompgenError(f"line {k}: a datum shift moves the preset compgen's positions are in")
+        elif re.fullmatch(r"TOOL CALL \S+ Z( S\S*)?", b):
+            out += [Block(k, raw, "tool"), Block(k, raw, "length", on=True)]
+        elif (d := re.fullmatch(r"CYCL DEF 9\.1 DWELL ([\d.]+)", b)) is not None:
+            out.append(Block(k, raw, "dwell", seconds=float(d[1])))
+        elif b.startswith("L "):
+            tokens = b.split()[1:]
+            rapid, m91 = "FMAX" in tokens, "M91" in tokens
+            w = words([t for t in tokens if t not in ("FMAX", "M91", "R0")], k)
+            feed = w.pop("F", None)
+            out.append(Block(k, raw, "move", target=w, rapid=rapid, feed=feed, machine_coords=m91))
+        else:
+            raise unknown(k, raw)
+    return out
+
+
 class Heidenhain(Controller):
     family = "heidenhain"
+    tcp_switchable = True
     program_ext = ".H"
     comment = ";"
     tcp_words = "FUNCTION TCPM"
@@ -210,6 +248,9 @@ class Heidenhain(Controller):
 
     def main_suffix(self, current: str | None) -> str:
         return ".TAB" if current is not None else ".txt"
+
+    def blocks(self, text: str) -> list[Block]:
+        return program_blocks(text)
 
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:

@@ -16,6 +16,7 @@ from ..correction import ARCSEC, Held, Plan, nominal_lines, pivot_of
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
+from ..motion import Block, unknown, words
 from . import fmt_plain, render
 from .base import Controller, EditContext, EditFiles
 
@@ -115,6 +116,42 @@ def read_lines(text: str, machine: Machine, current: str | None,
             tilt.name: AxisLine(tilt.name, tilt.direction, lines[tilt.name].pivot, r + d, zero)}
 
 
+POSITION = {"5420": "X", "5421": "Y", "5422": "Z", "5423": "A", "5424": "B", "5425": "C"}
+
+
+def program_blocks(text: str, tcp: bool) -> list[Block]:
+    """A G-code program as LinuxCNC executes it (the blocks compgen writes); ``tcp``: the
+    trt kinematics are active (the configuration's choice, stated in compgen's header)."""
+    out, modal, feed = [Block(0, "kinematics", "tcp", on=tcp)], None, None
+    for k, raw in enumerate(text.splitlines(), start=1):
+        b = raw.split(";", 1)[0].strip()
+        if not b or b in ("G21 G90 G94 G17", "M2", "M30", "o100 endif") or re.fullmatch(
+                r"\(abort,[^)]*\)", b):
+            continue
+        if (d := re.fullmatch(r"o100 if \[(.*)\]", b)) is not None:
+            # compgen's guard: stop unless every named axis is at zero
+            parts = re.findall(r"\[ABS\[#(\d+)\] GT 0\.0001\]", d[1])
+            if not parts or " OR ".join(f"[ABS[#{p}] GT 0.0001]" for p in parts) != d[1]:
+                raise unknown(k, raw)
+            out.append(Block(k, raw, "require", target={POSITION[p]: 0.0 for p in parts}))
+        elif re.fullmatch(r"T\d+ M6", b):
+            out.append(Block(k, raw, "tool"))
+        elif re.fullmatch(r"G43 H\d+", b) or b == "G49":
+            out.append(Block(k, raw, "length", on=b != "G49"))
+        elif (d := re.fullmatch(r"G4 P([\d.]+)", b)) is not None:
+            out.append(Block(k, raw, "dwell", seconds=float(d[1])))
+        else:
+            tokens = b.split()
+            modal = next((t for t in reversed(tokens) if t in ("G0", "G1")), modal)
+            w = words([t for t in tokens if t not in ("G0", "G1", "G53")], k)
+            feed = w.pop("F", feed)
+            if not w or modal is None:
+                raise unknown(k, raw)
+            out.append(Block(k, raw, "move", target=w, rapid=modal == "G0", feed=feed,
+                             machine_coords="G53" in tokens))
+    return out
+
+
 class LinuxCNC(Controller):
     name = "linuxcnc"
     family = "linuxcnc"
@@ -125,9 +162,13 @@ class LinuxCNC(Controller):
     backup = "a copy of the HAL file that sets the trt kinematics pins"
     pose_line = re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)")
     tcpm_on = re.compile(r"^; mode TCPM", re.MULTILINE)
+    tcp_switchable = False
 
     def main_suffix(self, current: str | None) -> str:
         return ".hal"
+
+    def blocks(self, text: str) -> list[Block]:
+        return program_blocks(text, self.tcpm_on.search(text) is not None)
 
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:

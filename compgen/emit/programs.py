@@ -15,9 +15,11 @@ import re
 
 import numpy as np
 
+from .. import motion
 from ..errors import CompgenError
 from ..kinematics import Poses, inverse
 from ..machine import Machine
+from ..motion import safe_height
 from ..paths import check_travel
 from ..rtest import BALL, axis_cells
 from . import Emitted, ascii_text, render
@@ -47,7 +49,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     setup = machine.program
     if setup is None:
         raise CompgenError(f"machine file {machine.source} has no [program] section",
-                           hint="add tool, feed, dwell, clearance and safe_z (see the bundled machines)")
+                           hint="add tool, feed, dwell and clearance (see the bundled machines)")
     ctl.check_setup(machine)
     linear = [machine.index(c) for c in "XYZ"]
     rotary = [machine.index(a.name) for a in machine.rotary_axes]
@@ -64,29 +66,15 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
         part = poses.take(seg)
         _check_steps(machine, part, str(part.path[0]) or label)
         _check_feed(machine, part, setup.feed, str(part.path[0]) or label)
-    if mode == "tcpm":   # the ball centre in workpiece coordinates: the pose with rotary axes at 0
-        xyz = inverse(machine, np.zeros((len(poses), len(rotary))), poses.ball)[:, linear]
-    else:
-        xyz = poses.q[:, linear]
+    safe = safe_height(machine)
+    up = np.zeros(len(machine.axes))
+    up[linear[2]] = safe
+    check_travel(machine, up[None], f"the safe height Z {safe:g} above the rotary axes")
+    steps = _steps(machine, poses, segments, mode, ctl.tcp_switchable, safe, setup.clearance, label)
     fmt = ctl.number
-
-    def rot(i):
-        return " ".join(f"{a.name}{fmt(np.degrees(poses.q[i, j]), ANGLE_DECIMALS)}"
-                        for a, j in zip(machine.rotary_axes, rotary, strict=True))
-
-    rows = [{"k": i + 1, "path": ascii_text(str(poses.path[i])), "rotary": rot(i),
-             **{c: fmt(xyz[i, j], LINEAR_DECIMALS) for j, c in enumerate("XYZ")}}
-            for i in range(len(poses))]
-
-    def end(i):
-        z = poses.q[i, linear[2]]
-        return {"rotary": rot(i), "X": fmt(poses.q[i, linear[0]], LINEAR_DECIMALS),
-                "Y": fmt(poses.q[i, linear[1]], LINEAR_DECIMALS), "Z": fmt(z, LINEAR_DECIMALS),
-                "Z_clear": fmt(z + setup.clearance, LINEAR_DECIMALS)}
-
-    parts = [{"label": ascii_text(str(poses.path[seg[0]]) or label), "first": end(seg[0]),
-              "last": end(seg[-1]), "poses": [rows[i] for i in seg]}
-             for seg in segments]
+    for step in steps:
+        step["words"] = " ".join(f"{n}{fmt(v, ANGLE_DECIMALS if n in ROT else LINEAR_DECIMALS)}"
+                                 for n, v in step.get("axes", {}).items())
     span = {c: (poses.q[:, j].min(), poses.q[:, j].max()) for c, j in zip("XYZ", linear, strict=True)}
     ball = poses.ball[0]
     header = [
@@ -101,18 +89,120 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
         + f" mm; nest on tool {setup.tool}",
         "active preset: the machine file's origin (nominal intersection of the rotary axes)",
         f"feed {setup.feed:g} mm/min; dwell {setup.dwell:g} s per pose; clearance "
-        f"{setup.clearance:g} mm; safe Z {setup.safe_z:g} mm (machine)",
+        f"{setup.clearance:g} mm; safe height Z {safe:g} mm above the rotary axes (from the set-up)",
         "travel checked: " + ", ".join(f"{c} {lo:.3f}..{hi:.3f}" for c, (lo, hi) in span.items())
         + " mm; " + ", ".join(f"{a.name} {np.degrees(poses.q[:, j].min()):.3f}.."
                               f"{np.degrees(poses.q[:, j].max()):.3f}"
                               for a, j in zip(machine.rotary_axes, rotary, strict=True)) + " deg",
+        "rotary axes turn only at the safe height; the nest moves onto and off the ball along its axis",
         "first run: single block, feed override low, nest and ball clear of clamps",
     ]
     text = render(f"{ctl.family}/program{ctl.program_ext}.j2", name=name, header=header, mode=mode,
                   tool=setup.tool, feed=f"{setup.feed:g}", dwell=f"{setup.dwell:g}" if setup.dwell else "",
-                  safe_z=fmt(setup.safe_z, 3), work_offset=setup.work_offset,
-                  max_step=f"{machine.limits.max_step_deg:g}", segments=parts)
+                  work_offset=setup.work_offset, max_step=f"{machine.limits.max_step_deg:g}",
+                  steps=steps, rotary=[a.name for a in machine.rotary_axes])
+    result = motion.run(machine, ctl.blocks(text))
+    if result.findings:     # compgen's own safety net: nothing unsafe leaves this function
+        raise CompgenError(f"internal: the program compgen wrote fails its own motion check: "
+                           f"{result.findings[0].text(name)} (and {len(result.findings) - 1} more)")
     return Emitted({ctl.program_ext: text, ".poses.csv": pose_list(machine, poses)})
+
+
+ROT = set("ABC")
+TURN_STEP_DEG = 2.0     # rotary steps at the safe height under TCP: the nest keeps within 0.1 mm
+
+
+def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool, safe: float,
+           clearance: float, label: str) -> list[dict]:
+    """The program as steps any control's template lays out: rapid and feed moves (axis →
+    mm or deg), TCP on and off, dwells, pose markers.
+
+    Rotary axes turn only with the nest at ``safe`` above their intersection; the nest goes
+    onto and off the ball along its own axis. A control that switches TCP in the program
+    does all this with TCP off, in machine axes; one whose TCP is its configuration
+    (LinuxCNC's trt kinematics) gets every point in TCP coordinates, with turns in small
+    steps so that the nest stays where it is.
+    """
+    linear = [machine.index(c) for c in "XYZ"]
+    rotary = [machine.index(a.name) for a in machine.rotary_axes]
+    names = [a.name for a in machine.rotary_axes]
+    tcp_always = mode == "tcpm" and not switchable
+    steps: list[dict] = []
+    state = {"q": None}
+
+    def at(q, rapid=True, note="", pose=None, tcp=tcp_always):
+        """A move to the machine pose ``q`` (nest centre), written in the active frame (TCP
+        coordinates are filled in below, all at once)."""
+        axes = {**dict(zip("XYZ", q[linear], strict=True)),
+                **{n: np.degrees(q[i]) for n, i in zip(names, rotary, strict=True)}}
+        steps.append({"kind": "rapid" if rapid else "feed", "axes": axes, "note": note, "pose": pose,
+                      "q": q if tcp else None})
+        state["q"] = q
+
+    def lifted(q, z):
+        out = q.copy()
+        out[linear[2]] = z
+        return out
+
+    def turn_to(target):
+        """At the safe height: turn the rotary axes to ``target``'s, the nest kept in place."""
+        q = state["q"]
+        delta = np.degrees(np.abs(target[rotary] - q[rotary])).max()
+        n = max(1, int(np.ceil(delta / TURN_STEP_DEG))) if tcp_always else 1
+        for k in range(1, n + 1):
+            step = q.copy()
+            step[rotary] = q[rotary] + (target[rotary] - q[rotary]) * k / n
+            at(step, note="turn at the safe height" if k == n else "")
+
+    start = np.zeros(len(machine.axes))
+    start[linear[2]] = safe
+    if tcp_always:   # TCP coordinates equal machine ones only with the rotary axes at zero
+        steps.append({"kind": "require_zero", "axes": {}})
+    steps.append({"kind": "rapid", "axes": {"Z": safe}, "note": "nest up along its axis to the safe height"})
+    state["q"] = start.copy()
+    state["q"][linear[:2]] = np.nan
+    if tcp_always:
+        at(start, note="above the rotary axes")
+    for seg in segments:
+        first, last = poses.q[seg[0]], poses.q[seg[-1]]
+        steps.append({"kind": "comment", "note": f"---- {ascii_text(str(poses.path[seg[0]]) or label)}: "
+                                                 f"poses {seg[0] + 1} to {seg[-1] + 1}"})
+        if not np.isnan(state["q"][linear[:2]]).any():
+            turn_to(first)
+        else:                            # XY not yet known: turn in place at the safe height
+            steps.append({"kind": "rapid", "axes": {n: np.degrees(first[i]) for n, i in
+                                                    zip(names, rotary, strict=True)},
+                          "note": "turn at the safe height"})
+            state["q"] = state["q"].copy()
+            state["q"][rotary] = first[rotary]
+        at(lifted(first, safe), note="above the first pose")
+        at(lifted(first, first[linear[2]] + clearance))
+        at(first, rapid=False, note="nest onto the ball, along its axis")
+        if mode == "tcpm" and switchable:
+            steps.append({"kind": "tcp_on"})
+        for i in seg:
+            q = poses.q[i]
+            at(q, rapid=False, pose=f"pose {i + 1} {ascii_text(str(poses.path[i]))}",
+               tcp=mode == "tcpm")    # the ball centre in TCP coordinates
+            steps.append({"kind": "dwell"})
+        if mode == "tcpm" and switchable:
+            steps.append({"kind": "tcp_off"})
+        at(lifted(last, last[linear[2]] + clearance), rapid=False, note="nest off the ball, along its axis")
+        at(lifted(last, safe))
+        if tcp_always:
+            above = last.copy()
+            above[linear] = start[linear]
+            at(above, note="above the rotary axes")
+    if tcp_always:
+        zero = state["q"].copy()
+        zero[rotary] = 0.0
+        turn_to(zero)
+    tcp = [s for s in steps if s.get("q") is not None]
+    if tcp:
+        xyz = motion.world(machine, np.array([s["q"] for s in tcp]))
+        for s, w in zip(tcp, xyz, strict=True):
+            s["axes"].update(zip("XYZ", w, strict=True))
+    return steps
 
 
 def pose_list(machine: Machine, poses: Poses) -> str:

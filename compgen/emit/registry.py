@@ -30,6 +30,18 @@ def controller(name: str) -> Controller:
     return CONTROLLERS[name]
 
 
+def for_program(path_suffix: str, machine: Machine) -> Controller:
+    """The controller whose programs end in ``path_suffix``: the machine's own if it does."""
+    own = CONTROLLERS.get(machine.controller)
+    if own is not None and own.program_ext.lower() == path_suffix.lower():
+        return own
+    ctl = next((c for c in CONTROLLERS.values() if c.program_ext.lower() == path_suffix.lower()), None)
+    if ctl is None:
+        raise CompgenError(f"no controller writes programs ending in {path_suffix!r}",
+                           hint="name it with --controller")
+    return ctl
+
+
 def comment_marks() -> str:
     """Every controller's comment character, for recognising compgen's files by content."""
     return "".join(sorted({c.comment for c in CONTROLLERS.values()}))

@@ -15,6 +15,7 @@ from ..correction import CompTable, Held, Plan, comp_tables, nominal_lines, squa
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
+from ..motion import Block, unknown, words
 from ..transforms import rot_exact
 from . import ascii_text, fmt_plain, render
 from .base import Controller, EditContext, EditFiles
@@ -155,6 +156,36 @@ def _cec_text(t: CompTable, index: int, names: dict[str, str]) -> dict:
             "values": [fmt_plain(v, 6) for v in t.values]}
 
 
+def program_blocks(text: str) -> list[Block]:
+    """A SINUMERIK part program as the control executes it (the blocks compgen writes)."""
+    out, modal, feed = [], None, None
+    for k, raw in enumerate(text.splitlines(), start=1):
+        b = raw.split(";", 1)[0].strip()
+        if not b or b in ("ORIWKS", "ORIAXES", "M30", "M17", "M6", "G17 G90 G71 G94") or re.fullmatch(
+                r"G5[4-7]|G50[0-9]", b):
+            continue
+        if b in ("TRAFOOF", "TRAORI"):
+            out.append(Block(k, raw, "tcp", on=b == "TRAORI"))
+        elif re.fullmatch(r'T="[^"]*"', b):
+            out.append(Block(k, raw, "tool"))
+        elif b in ("D0", "D1"):
+            out.append(Block(k, raw, "length", on=b == "D1"))
+        elif (d := re.fullmatch(r"G4 F([\d.]+)", b)) is not None:
+            out.append(Block(k, raw, "dwell", seconds=float(d[1])))
+        else:
+            tokens = b.split()
+            modal = next((t for t in reversed(tokens) if t in ("G0", "G1")), modal)
+            w = words([t for t in tokens if t not in ("G0", "G1", "SUPA", "D0")], k)
+            feed = w.pop("F", feed)
+            if not w or modal is None:
+                raise unknown(k, raw)
+            if "D0" in tokens:
+                out.append(Block(k, raw, "length", on=False))
+            out.append(Block(k, raw, "move", target=w, rapid=modal == "G0", feed=feed,
+                             machine_coords="SUPA" in tokens))
+    return out
+
+
 class Sinumerik840D(Controller):
     name = "sinumerik840d"
     family = "sinumerik"
@@ -165,9 +196,13 @@ class Sinumerik840D(Controller):
     backup = "a commissioning archive, and keep the _RESTORE program"
     pose_line = re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)")
     tcpm_on = re.compile(r"^TRAORI\b", re.MULTILINE)
+    tcp_switchable = True
 
     def main_suffix(self, current: str | None) -> str:
         return ".MPF"
+
+    def blocks(self, text: str) -> list[Block]:
+        return program_blocks(text)
 
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:

@@ -1,0 +1,389 @@
+"""What a program makes the machine do, block by block, against the R-test set-up.
+
+Each controller module turns its program text into ``Block``s with the control's own
+meaning of each word (machine or workpiece coordinates, TCP on or off, tool and length
+compensation, dwell, feed). This module moves the machine model through them, sampled at
+≤ 1 mm and ≤ 0.5°, and reports what would hit: the nest housing or the spindle entering the
+ball, its stem or the table; an axis leaving its travel (between blocks too); a feed above
+an axis's ``feed_max``; motion without the tool called and its length compensated.
+
+Geometry (table frame, mm): the ball a sphere; the stem a cylinder from the table top to the
+ball; the table a disc about the last rotary axis; the nest housing and the spindle spheres
+along the tool axis (a capsule each, conservative at their ends). The nest may surround
+the ball and stem where it measures: while its axis passes within ``nest_range`` of the
+ball's centre (the measuring poses and the straight approach along the nest's axis).
+
+Positions are compgen's: the preset at the nominal intersection of the rotary axes, X Y Z
+of the nest centre with the tool length compensated. A block in machine coordinates (M91,
+SUPA, G53) cannot be placed against the set-up, since no machine file says where the
+machine datum lies; it is a finding.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import CompgenError
+from .kinematics import Poses, _chain, inverse
+from .machine import Machine
+from .transforms import apply
+
+STEP_MM, STEP_DEG = 1.0, 0.5
+POINT_MM = 2.0           # spacing of the spheres along the housing and spindle axes
+CHUNK = 2000             # samples checked at once (memory: ~250 spheres each)
+ON_BALL_MM = 1e-3        # the nest centre this close to the ball's: a measuring pose
+
+
+@dataclass(frozen=True)
+class Block:
+    """One line as the control executes it. ``target`` maps axis letters to the written
+    values (mm, deg) of a move; ``on`` is the state a tcp or length block switches to."""
+
+    line: int
+    text: str
+    kind: str                    # move, dwell, tcp, tool, length, require
+    target: dict = field(default_factory=dict)
+    rapid: bool = False
+    feed: float | None = None    # mm/min (deg/min for a block that only turns)
+    machine_coords: bool = False
+    seconds: float = 0.0
+    on: bool = False             # tcp / length: switched on (True) or off
+
+
+@dataclass(frozen=True)
+class Finding:
+    line: int
+    rule: str
+    detail: str
+    depth_mm: float
+    axes: str
+
+    def text(self, where: str) -> str:
+        depth = f" by {self.depth_mm:.1f} mm" if self.depth_mm > 0 else ""
+        return f"{where}:{self.line}: {self.rule}{depth}: {self.detail} (at {self.axes})"
+
+
+@dataclass(frozen=True)
+class Check:
+    blocks: int
+    seconds: float
+    closest_mm: float            # smallest clearance outside the measuring exemption
+    closest_at: str
+    findings: tuple[Finding, ...]
+
+
+WORD = re.compile(r"^([A-Z])([+-]?(?:\d+\.?\d*|\.\d+))$")
+
+
+def words(tokens: list[str], line: int, allowed: str = "XYZABCF") -> dict[str, float]:
+    """Address words (``X+1.5``, ``A-90``, ``F500``) of a block; anything else is refused."""
+    out = {}
+    for t in tokens:
+        m = WORD.match(t)
+        if not m or m[1] not in allowed or m[1] in out:
+            raise CompgenError(f"line {line}: {t!r} is not a word this check reads in a move",
+                               hint="check-program reads the blocks compgen writes; edit nothing else in")
+        out[m[1]] = float(m[2])
+    return out
+
+
+def unknown(line: int, text: str) -> CompgenError:
+    return CompgenError(f"line {line}: {text.strip()!r} is not a block this check knows",
+                        hint="check-program reads the blocks compgen writes; a program with other "
+                             "blocks cannot be shown safe")
+
+
+def safe_height(machine: Machine) -> float:
+    """The height of the nest centre above the rotary axes' intersection at which nothing
+    of the set-up can be touched at any orientation: every solid lies within R of the
+    intersection, and the housing reaches ``nest_below`` and its radius below the centre."""
+    s = machine.setup
+    table = _table_frame(machine, np.zeros((1, len(machine.axes))))[0]
+    ball = np.asarray(machine.ball)
+    rim = [[s.table_radius * np.cos(t), s.table_radius * np.sin(t), z]
+           for t in np.linspace(0, 2 * np.pi, 73) for z in (s.table_top, s.table_top - s.table_thickness)]
+    points = apply(table, np.array([*rim, ball]))
+    reach = max(np.linalg.norm(points[:-1], axis=1).max(), np.linalg.norm(points[-1]) + s.ball_diameter / 2)
+    return float(np.ceil(reach + s.nest_below + s.nest_radius + s.margin))
+
+
+def _table_frame(machine: Machine, q: np.ndarray) -> np.ndarray:
+    poses = Poses.at(q, np.zeros(3))
+    return _chain(machine, machine.workpiece, poses, {}, np.zeros((len(q), 6)))
+
+
+def table_point(machine: Machine, q: np.ndarray) -> np.ndarray:
+    """The table-frame point under the nest centre at poses ``q`` (n, k), mm."""
+    poses = Poses.at(q, np.zeros(3))
+    zero = np.zeros((len(q), 6))
+    table = _chain(machine, machine.workpiece, poses, {}, zero)
+    nest = _chain(machine, machine.tool, poses, {}, zero)[:, :3, 3]
+    return np.einsum("nji,nj->ni", table[:, :3, :3], nest - table[:, :3, 3])
+
+
+def world(machine: Machine, q: np.ndarray) -> np.ndarray:
+    """The TCP coordinates of poses ``q``: the linear axes that put the nest on the same
+    table point with the rotary axes at zero (what compgen writes under TCPM/TRAORI/trt)."""
+    rot = np.zeros((len(q), len(machine.rotary_axes)))
+    linear = [machine.index(c) for c in "XYZ"]
+    return inverse(machine, rot, table_point(machine, q))[:, linear]
+
+
+def from_world(machine: Machine, xyz: np.ndarray, rot_rad: np.ndarray) -> np.ndarray:
+    """Poses that put the nest on the table point with TCP coordinates ``xyz`` at ``rot_rad``."""
+    q0 = np.zeros((len(xyz), len(machine.axes)))
+    q0[:, [machine.index(c) for c in "XYZ"]] = xyz
+    return inverse(machine, rot_rad, table_point(machine, q0))
+
+
+def clearances(machine: Machine, q: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Per pose: the clearance (mm, negative = inside) of each pair (housing or spindle
+    against ball, stem, table), and whether the nest is measuring there (its axis within
+    ``nest_range`` of the ball's centre, the nest on the ball or above it)."""
+    s = machine.setup
+    poses = Poses.at(q, np.zeros(3))
+    zero = np.zeros((len(q), 6))
+    table = _chain(machine, machine.workpiece, poses, {}, zero)
+    tool = _chain(machine, machine.tool, poses, {}, zero)
+    R = table[:, :3, :3]
+    nest = np.einsum("nji,nj->ni", R, tool[:, :3, 3] - table[:, :3, 3])     # table frame
+    axis = np.einsum("nji,nj->ni", R, tool[:, :3, 2])
+    ball = np.asarray(machine.ball)
+    rb = s.ball_diameter / 2
+    out = {}
+    parts = {"housing": (-s.nest_below, machine.probe_length, s.nest_radius),
+             "spindle": (machine.probe_length, machine.probe_length + s.spindle_length, s.spindle_radius)}
+    for part, (lo, hi, radius) in parts.items():
+        t = np.arange(lo, hi + POINT_MM / 2, POINT_MM)
+        pts = nest[:, None, :] + t[None, :, None] * axis[:, None, :]            # (n, m, 3)
+        out[f"{part} / ball"] = (np.linalg.norm(pts - ball, axis=2) - rb).min(axis=1) - radius
+        stem_top = ball[2] - rb
+        z = np.clip(pts[..., 2], s.table_top, stem_top)
+        d_stem = np.linalg.norm(pts - np.stack([np.full_like(z, ball[0]), np.full_like(z, ball[1]), z], -1),
+                                axis=2)
+        out[f"{part} / stem"] = (d_stem - s.stem_diameter / 2).min(axis=1) - radius
+        radial, z = np.hypot(pts[..., 0], pts[..., 1]), pts[..., 2]
+        top, bottom = s.table_top, s.table_top - s.table_thickness
+        dz = np.maximum(np.maximum(z - top, bottom - z), 0.0)
+        dr = np.maximum(radial - s.table_radius, 0.0)
+        depth = np.minimum(np.minimum(top - z, z - bottom), s.table_radius - radial)
+        d_table = np.where((dz == 0) & (dr == 0), -depth, np.hypot(dz, dr))
+        out[f"{part} / table"] = d_table.min(axis=1) - radius
+    off_axis = np.linalg.norm(np.cross(ball - nest, axis), axis=1)
+    above = np.einsum("ni,ni->n", nest - ball, axis) > -s.nest_range
+    return out, (off_axis <= s.nest_range) & above
+
+
+@dataclass
+class _Segment:
+    block: Block
+    tcp: bool
+    start: np.ndarray        # machine pose (axes mode) or TCP xyz + rotary (rad)
+    end: np.ndarray
+    blind: bool              # some axis came from an unknown place
+    path: np.ndarray | None = None
+
+
+def run(machine: Machine, blocks: list[Block]) -> Check:
+    """Move the machine model through ``blocks`` and check every sample. The blocks are
+    walked once to find each move's ends (TCP moves in TCP coordinates); the samples of
+    all moves are then converted and checked together."""
+    k = len(machine.axes)
+    linear = [machine.index(c) for c in "XYZ"]
+    rotary = [machine.index(a.name) for a in machine.rotary_axes]
+    letters = {a.name: machine.index(a.name) for a in machine.axes}
+    q = np.full(k, np.nan)         # machine pose; under TCP, valid only where ``w`` is None
+    w = None                       # TCP coordinates while TCP is on and known
+    tcp = tool = length = False
+    seconds, findings, segments = 0.0, [], []
+    safe = safe_height(machine)
+
+    def settle():                  # the machine pose behind the TCP coordinates
+        nonlocal q
+        if w is not None:
+            q = from_world(machine, w[None, :3], w[None, 3:])[0]
+
+    for b in blocks:
+        if b.kind == "require":      # the program stops unless these axes are at these values
+            settle()
+            w = None
+            for letter, v in b.target.items():
+                q[letters[letter]] = np.radians(v) if letters[letter] in rotary else v
+        elif b.kind == "tcp":
+            settle()
+            w, tcp = None, b.on
+        elif b.kind == "tool":
+            tool = True
+        elif b.kind == "length":
+            length = b.on
+        elif b.kind == "dwell":
+            seconds += b.seconds
+        if b.kind != "move":
+            continue
+        if b.machine_coords:
+            findings.append(Finding(b.line, "machine coordinates", "the machine file does not say where the "
+                                    "machine datum lies against the set-up: this move cannot be checked",
+                                    0.0, b.text.strip()))
+            continue
+        if not (tool and length):
+            findings.append(Finding(b.line, "no tool call or length compensation", "the nest's length is not "
+                                    "active: every position would be off by its length", 0.0, b.text.strip()))
+            break
+        unknown_axes = sorted(set(b.target) - set(letters))
+        if unknown_axes:
+            raise CompgenError(f"line {b.line} moves {', '.join(unknown_axes)}, which this machine lacks")
+        # with the rotary axes at zero, TCP coordinates are machine coordinates
+        zero_turn = w is None and not np.isnan(q[rotary]).any() and not q[rotary].any()
+        if tcp and not (zero_turn and np.isnan(q[linear]).any()):
+            if w is None:
+                if np.isnan(q).any():
+                    findings.append(Finding(b.line, "TCP before positioning", "TCP is on before every axis "
+                                            "has been positioned", 0.0, b.text.strip()))
+                    break
+                w = np.concatenate([world(machine, q[None])[0], q[rotary]])
+            end = w.copy()
+            for letter, v in b.target.items():
+                i = letters[letter]
+                if i in linear:
+                    end[linear.index(i)] = v
+                else:
+                    end[3 + rotary.index(i)] = np.radians(v)
+            segments.append(_Segment(b, True, w, end, False))
+            w = end
+            continue
+        settle()
+        w = None
+        end = q.copy()
+        for letter, v in b.target.items():
+            i = letters[letter]
+            end[i] = np.radians(v) if i in rotary else v
+        segments.append(_Segment(b, False, q, end, bool((np.isnan(q) & ~np.isnan(end)).any())))
+        q = end
+    _paths(machine, segments, linear, rotary)
+    closest = (np.inf, "")
+    checkable = []
+    for seg in segments:
+        b, path = seg.block, seg.path
+        delta = np.nan_to_num(path[-1] - path[0])
+        if seg.tcp:
+            travel_mm = float(np.linalg.norm(seg.end[:3] - seg.start[:3]))
+        else:
+            travel_mm = float(np.linalg.norm(delta[linear]))
+        turn_deg = float(np.degrees(np.abs(delta[rotary])).max()) if rotary else 0.0
+        seconds += _seconds(machine, b, path, travel_mm, turn_deg, findings)
+        _check_travel(machine, b, path, findings)
+        # an axis whose start is unknown (the program's first moves) is safe only where
+        # nothing can be touched: at the safe height
+        if seg.blind or np.isnan(path).any():
+            z = path[:, linear[2]]
+            if np.isnan(z).any() or z.min() < safe:
+                findings.append(Finding(b.line, "axes positioned from an unknown place below the safe height",
+                                        f"the nest is below Z {safe:g} before every axis has been positioned "
+                                        "there", 0.0, b.text.strip()))
+                break
+        else:
+            checkable.append(seg)
+    if checkable:
+        closest = _check_collisions(machine, checkable, findings)
+    findings.sort(key=lambda f: f.line)
+    return Check(len(segments), seconds, closest[0], closest[1], tuple(findings))
+
+
+def _paths(machine: Machine, segments: list[_Segment], linear, rotary) -> None:
+    """Every move's samples (≤ 1 mm, ≤ 0.5°) as machine poses; TCP moves interpolate in TCP
+    coordinates and are converted together."""
+    tcp_parts, where = [], []
+    for seg in segments:
+        if seg.tcp:
+            d = seg.end - seg.start
+            n = _samples(np.abs(d[:3]).max(), np.degrees(np.abs(d[3:])).max())
+            tcp_parts.append(seg.start + np.linspace(0, 1, n + 1)[:, None] * d)
+            where.append(seg)
+        else:
+            q0 = seg.start
+            delta = np.where(np.isnan(q0), 0.0, seg.end - q0)
+            n = _samples(np.abs(delta[linear]).max(), np.degrees(np.abs(delta[rotary])).max())
+            f = np.linspace(0, 1, n + 1)[:, None]
+            seg.path = np.where(np.isnan(q0), seg.end, q0 + f * delta)
+    if tcp_parts:
+        allw = np.concatenate(tcp_parts)
+        q = from_world(machine, allw[:, :3], allw[:, 3:])
+        start = 0
+        for seg, part in zip(where, tcp_parts, strict=True):
+            seg.path = q[start:start + len(part)]
+            start += len(part)
+
+
+def _samples(mm: float, deg: float) -> int:
+    return max(1, int(np.ceil(max(mm / STEP_MM, deg / STEP_DEG))))
+
+
+def _axes_text(machine: Machine, q: np.ndarray) -> str:
+    return " ".join(f"{a.name}{np.degrees(v) if a.rotary else v:+.3f}"
+                    for a, v in zip(machine.axes, q, strict=True))
+
+
+def _seconds(machine: Machine, b: Block, path: np.ndarray, travel_mm: float, turn_deg: float,
+             findings: list) -> float:
+    """Time of a move, and a finding where an axis would exceed its feed_max."""
+    step = np.abs(np.diff(path, axis=0))
+    step = np.where(np.isnan(step), 0.0, step)
+    per_axis = np.array([np.degrees(step[:, i]).sum() if a.rotary else step[:, i].sum()
+                         for i, a in enumerate(machine.axes)])
+    limits = np.array([a.feed_max for a in machine.axes])
+    if b.rapid or b.feed is None:
+        return float((per_axis / limits).max() * 60.0) if per_axis.any() else 0.0
+    # the control's feed: along the nest's path in its active frame; a block that only
+    # turns takes F as deg/min (LinuxCNC's and, unconfirmed U9, the others' meaning)
+    minutes = (travel_mm if travel_mm > 1e-9 else turn_deg) / b.feed
+    if minutes <= 0:
+        return 0.0
+    speed = np.array([np.degrees(step[:, i]).max() if a.rotary else step[:, i].max()
+                      for i, a in enumerate(machine.axes)]) * (len(step) / minutes)
+    over = np.flatnonzero(speed > limits * (1 + 1e-9))
+    if over.size:
+        i = over[int(np.argmax(speed[over] / limits[over]))]
+        unit = "deg" if machine.axes[i].rotary else "mm"
+        findings.append(Finding(b.line, "feed above feed_max", f"{machine.axes[i].name} would move at "
+                                f"{speed[i]:.0f} {unit}/min, its feed_max is {limits[i]:g}", 0.0,
+                                _axes_text(machine, path[-1])))
+    return float(minutes * 60.0)
+
+
+def _check_travel(machine: Machine, b: Block, path: np.ndarray, findings: list) -> None:
+    for i, a in enumerate(machine.axes):
+        v = np.degrees(path[:, i]) if a.rotary else path[:, i]
+        lo, hi = a.travel
+        bad = np.flatnonzero((v < lo - 1e-9) | (v > hi + 1e-9))
+        if bad.size:
+            j = bad[0]
+            findings.append(Finding(b.line, "outside travel", f"{a.name} reaches {v[j]:.3f}, travel "
+                                    f"{lo:g}..{hi:g}", 0.0, _axes_text(machine, path[j])))
+            return
+
+
+def _check_collisions(machine: Machine, segments: list[_Segment], findings: list):
+    """Clearances of all samples at once (in chunks); the first violation of each pair in
+    each block is a finding. Returns the closest approach outside the measuring exemption."""
+    paths = np.concatenate([seg.path for seg in segments])
+    owner = np.concatenate([np.full(len(seg.path), i) for i, seg in enumerate(segments)])
+    chunks = [clearances(machine, paths[i:i + CHUNK]) for i in range(0, len(paths), CHUNK)]
+    measuring = np.concatenate([c[1] for c in chunks])
+    closest = (np.inf, "")
+    for pair in chunks[0][0]:
+        c = np.concatenate([ch[0][pair] for ch in chunks])
+        if pair in ("housing / ball", "housing / stem"):
+            c = np.where(measuring, np.inf, c)
+        j = int(np.argmin(c))
+        if c[j] < closest[0]:
+            closest = (float(c[j]), f"{pair}, line {segments[owner[j]].block.line}")
+        for i in np.unique(owner[c < 0]):
+            j = int(np.flatnonzero((owner == i) & (c < 0))[np.argmin(c[(owner == i) & (c < 0)])])
+            b = segments[i].block
+            part, thing = pair.split(" / ")
+            findings.append(Finding(b.line, f"{part} enters the {thing}", b.text.strip(), float(-c[j]),
+                                    _axes_text(machine, paths[j])))
+    return closest

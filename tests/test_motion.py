@@ -1,0 +1,165 @@
+"""Programs simulated block by block against the R-test set-up (`compgen check-program`):
+every program compgen writes passes; crafted defects are refused; LinuxCNC's own
+interpreter (rs274) reads compgen's programs to the same positions as the simulator."""
+
+import os
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+from conftest import BC_MACHINE, SEED_MACHINE, run
+
+from compgen.emit.registry import controller
+from compgen.machine import load_machine
+from compgen.motion import safe_height
+
+PROGRAMS = [(m, c, mode, path) for m in ("seed", "bc") for c in ("itnc530", "sinumerik840d", "linuxcnc")
+            for mode in ("tcpm", "axes") for path in ("K4", "K1,K2", "all")]
+
+
+@pytest.fixture(scope="module")
+def machines(tmp_path_factory):
+    """The bundled machines; the B/C one with a numbered tool, as LinuxCNC calls tools."""
+    folder = tmp_path_factory.mktemp("m")
+    bc = folder / "bc.toml"
+    bc.write_text(BC_MACHINE.read_text().replace('tool = "RTEST"', 'tool = "7"'))
+    return {"seed": SEED_MACHINE, "bc": bc}
+
+
+def _write(tmp_path, machine_file, ctl, mode, path, name="RT"):
+    out = tmp_path / f"{name}{controller(ctl).program_ext}"
+    code, _, err = run("measure-program", "--machine", machine_file, "--path", path, "--controller", ctl,
+                       "--mode", mode, "-o", out, "--force")
+    assert code == 0, err
+    return out
+
+
+@pytest.mark.parametrize("m, ctl, mode, path", PROGRAMS)
+def test_every_program_compgen_writes_passes_the_check(machines, tmp_path, m, ctl, mode, path):
+    program = _write(tmp_path, machines[m], ctl, mode, path)
+    code, out, err = run("check-program", "--machine", machines[m], program)
+    assert code == 0, out + err
+    closest = float(re.search(r"closest approach (-?[\d.]+) mm", out)[1])
+    assert closest > 0, out
+
+
+def _check(machine_file, path, text):
+    path.write_text(text)
+    return run("check-program", "--machine", machine_file, path)
+
+
+def test_a_plunge_through_the_ball_is_refused(machines, tmp_path):
+    program = _write(tmp_path, machines["seed"], "itnc530", "tcpm", "K4").read_text()
+    bad = re.sub(r"Z\+241\.3310 (A\S+ C\S+) R0 F500 ; nest onto the ball", r"Z+200.0000 \1 R0 F500 ; plunge",
+                 program)
+    assert bad != program
+    code, out, _ = _check(machines["seed"], tmp_path / "PLUNGE.H", bad)
+    assert code == 1 and "housing enters the ball" in out and "housing enters the stem" in out, out
+    depth = float(re.search(r"housing enters the ball by ([\d.]+) mm", out)[1])
+    assert depth > 10
+
+
+def test_a_retract_through_the_table_is_refused(machines, tmp_path):
+    program = _write(tmp_path, machines["bc"], "sinumerik840d", "tcpm", "K2").read_text()
+    bad = re.sub(r"(G1 X\S+ Y\S+ )Z\S+( B\S+ C\S+ F500) ; nest off the ball, along its axis",
+                 r"\1Z-150.0000\2 ; down", program, count=1)
+    assert bad != program
+    code, out, _ = _check(machines["bc"], tmp_path / "DOWN.MPF", bad)
+    assert code == 1 and "enters the table" in out, out
+
+
+def test_a_feed_above_the_limit_is_refused(machines, tmp_path):
+    program = _write(tmp_path, machines["seed"], "linuxcnc", "tcpm", "K4").read_text()
+    bad = program.replace("F500 ; pose 10 ", "F900000 ; pose 10 ")
+    assert bad != program
+    code, out, _ = _check(machines["seed"], tmp_path / "fast.ngc", bad)
+    assert code == 1 and "feed above feed_max" in out and ":" in out.split("feed above")[0], out
+
+
+def test_a_pose_past_travel_is_refused(machines, tmp_path):
+    program = _write(tmp_path, machines["seed"], "itnc530", "axes", "K1,K2").read_text()
+    bad = re.sub(r"A-90\.0000 C\+0\.0000 R0 F500 ; pose 1 ", "A-130.0000 C+0.0000 R0 F500 ; pose 1 ", program)
+    assert bad != program
+    code, out, _ = _check(machines["seed"], tmp_path / "FAR.H", bad)
+    assert code == 1 and "outside travel" in out and "A reaches -130.000" in out, out
+
+
+def test_turning_with_the_nest_down_is_refused(machines, tmp_path):
+    program = _write(tmp_path, machines["seed"], "itnc530", "axes", "K2").read_text()
+    lines = program.splitlines()
+    at = next(i for i, ln in enumerate(lines) if "nest onto the ball" in ln)
+    bad = "\n".join([*lines[:at + 1], "999 L C+90.0000 R0 FMAX", *lines[at + 1:]]) + "\n"
+    code, out, _ = _check(machines["seed"], tmp_path / "TURN.H", bad)
+    assert code == 1 and f"TURN.H:{at + 2}: " in out and "enters the" in out, out
+
+
+def test_no_tool_call_and_machine_coordinates_are_refused(machines, tmp_path):
+    program = _write(tmp_path, machines["bc"], "sinumerik840d", "axes", "K4").read_text()
+    no_tool = re.sub(r'(?m)^T="[^"]*".*\n', "", program)
+    assert no_tool != program
+    code, out, _ = _check(machines["bc"], tmp_path / "NOTOOL.MPF", no_tool)
+    assert code == 1 and "no tool call or length compensation" in out, out
+    supa = program.replace("G0 Z", "G0 SUPA Z", 1)
+    code, out, _ = _check(machines["bc"], tmp_path / "SUPA.MPF", supa)
+    assert code == 1 and "machine coordinates" in out, out
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("0 BEGIN PGM X MM\n1 L X+1 Q7 R0 FMAX\n", "'Q7' is not a word"),
+    ("0 BEGIN PGM X MM\n1 CALL LBL 5\n", "is not a block this check knows"),
+])
+def test_blocks_it_cannot_read_are_an_error_not_a_pass(machines, tmp_path, text, expected):
+    code, _, err = _check(machines["seed"], tmp_path / "ODD.H", text)
+    assert code == 2 and expected in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_the_safe_height_clears_the_set_up_at_every_orientation(machines):
+    seed, bc = (load_machine(machines[k]) for k in ("seed", "bc"))
+    # the seed ball is 325 mm from the A/C intersection: 337.6 with its radius, + 5 + 30 + 5
+    assert safe_height(seed) == 378.0
+    assert safe_height(bc) < bc.axis("Z").travel[1]
+
+
+@pytest.mark.parametrize("mode", ["tcpm", "axes"])
+def test_linuxcnc_reads_compgens_program_to_the_simulators_positions(machines, tmp_path, mode):
+    if shutil.which("rs274") is None:
+        if os.environ.get("COMPGEN_REQUIRE_LINUXCNC"):
+            pytest.fail("rs274 (LinuxCNC's interpreter) is required here")
+        pytest.skip("rs274 is not installed (apt-get install linuxcnc-uspace)")
+    program = _write(tmp_path, machines["seed"], "linuxcnc", mode, "K4,K1")
+    (tmp_path / "t.tbl").write_text("T99 P1 Z184.67 ;nest\n")
+    (tmp_path / "v.var").write_text("")
+    (tmp_path / "rs.ini").write_text("[RS274NGC]\nPARAMETER_FILE = v.var\n[TRAJ]\nLINEAR_UNITS = mm\n"
+                                     "ANGULAR_UNITS = degree\nCOORDINATES = XYZAC\n")
+    done = subprocess.run(["rs274", "-i", "rs.ini", "-t", "t.tbl", "-v", "v.var", "-g", program.name,
+                           "canon.txt"], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    canon = (tmp_path / "canon.txt").read_text()
+    assert "STRAIGHT" in canon, done.stdout + done.stderr
+    theirs = np.array([[float(v) for v in m[1].split(",")] for m in
+                       re.finditer(r"STRAIGHT_(?:TRAVERSE|FEED)\(([^)]*)\)", canon)])[:, [0, 1, 2, 3, 5]]
+    # the simulator's reading of the same blocks: each move's end, modal words carried
+    blocks = [b for b in controller("linuxcnc").blocks(program.read_text()) if b.kind == "move"]
+    pos, ours = dict.fromkeys("XYZAC", 0.0), []
+    for b in blocks:
+        pos.update(b.target)
+        ours.append([pos[c] for c in "XYZAC"])
+    assert len(ours) == len(theirs)
+    np.testing.assert_allclose(np.array(ours), theirs, rtol=0, atol=1e-4)   # both print 4 decimals
+
+
+@pytest.mark.parametrize("edit, expected", [
+    (("probe_length = 184.670", "probe_length = 184.670\nball_diametre = 25.4"),
+     "unknown keys ['ball_diametre']"),
+    (("ball_diameter = 25.4", "ball_diameter = -25.4"), "ball_diameter"),
+    (("table_top = 0.0", "table_top = 300.0"), "does not stand above the table top"),
+    (("clearance = 20.0", "clearance = 20.0\nsafe_z = -5.0"), "safe_z (a height in machine coordinates)"),
+])
+def test_a_bad_set_up_is_refused_with_its_key(tmp_path, edit, expected):
+    text = SEED_MACHINE.read_text()
+    assert edit[0] in text
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace(edit[0], edit[1], 1))
+    code, _, err = run("check-program", "--machine", bad, tmp_path / "x.H")
+    assert code == 2 and expected in err and len(err.strip().splitlines()) == 1, err
