@@ -90,6 +90,19 @@ def words(tokens: list[str], line: int, allowed: str = "XYZABCF") -> dict[str, f
     return out
 
 
+def gcode_move(raw: str, line: int, tokens: list[str], modal: str | None, feed: float | None,
+               machine_word: str, skip: tuple[str, ...] = ()) -> tuple[Block, str, float | None]:
+    """A G-code move block (modal G0/G1, modal F); ``machine_word`` (SUPA, G53) marks a
+    block in machine coordinates. Returns the block and the modal state after it."""
+    modal = next((t for t in reversed(tokens) if t in ("G0", "G1")), modal)
+    w = words([t for t in tokens if t not in ("G0", "G1", machine_word, *skip)], line)
+    feed = w.pop("F", feed)
+    if not w or modal is None:
+        raise unknown(line, raw)
+    return (Block(line, raw, "move", target=w, rapid=modal == "G0", feed=feed,
+                  machine_coords=machine_word in tokens), modal, feed)
+
+
 def unknown(line: int, text: str) -> CompgenError:
     return CompgenError(f"line {line}: {text.strip()!r} is not a block this check knows",
                         hint="check-program reads the blocks compgen writes; a program with other "

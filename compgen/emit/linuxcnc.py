@@ -16,7 +16,7 @@ from ..correction import ARCSEC, Held, Plan, nominal_lines, pivot_of
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
-from ..motion import Block, unknown, words
+from ..motion import Block, gcode_move, unknown
 from . import fmt_plain, render
 from .base import Controller, EditContext, EditFiles
 
@@ -141,14 +141,8 @@ def program_blocks(text: str, tcp: bool) -> list[Block]:
         elif (d := re.fullmatch(r"G4 P([\d.]+)", b)) is not None:
             out.append(Block(k, raw, "dwell", seconds=float(d[1])))
         else:
-            tokens = b.split()
-            modal = next((t for t in reversed(tokens) if t in ("G0", "G1")), modal)
-            w = words([t for t in tokens if t not in ("G0", "G1", "G53")], k)
-            feed = w.pop("F", feed)
-            if not w or modal is None:
-                raise unknown(k, raw)
-            out.append(Block(k, raw, "move", target=w, rapid=modal == "G0", feed=feed,
-                             machine_coords="G53" in tokens))
+            move, modal, feed = gcode_move(raw, k, b.split(), modal, feed, "G53")
+            out.append(move)
     return out
 
 

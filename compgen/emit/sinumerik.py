@@ -15,7 +15,7 @@ from ..correction import CompTable, Held, Plan, comp_tables, nominal_lines, squa
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
-from ..motion import Block, unknown, words
+from ..motion import Block, gcode_move
 from ..transforms import rot_exact
 from . import ascii_text, fmt_plain, render
 from .base import Controller, EditContext, EditFiles
@@ -174,15 +174,10 @@ def program_blocks(text: str) -> list[Block]:
             out.append(Block(k, raw, "dwell", seconds=float(d[1])))
         else:
             tokens = b.split()
-            modal = next((t for t in reversed(tokens) if t in ("G0", "G1")), modal)
-            w = words([t for t in tokens if t not in ("G0", "G1", "SUPA", "D0")], k)
-            feed = w.pop("F", feed)
-            if not w or modal is None:
-                raise unknown(k, raw)
+            move, modal, feed = gcode_move(raw, k, tokens, modal, feed, "SUPA", skip=("D0",))
             if "D0" in tokens:
                 out.append(Block(k, raw, "length", on=False))
-            out.append(Block(k, raw, "move", target=w, rapid=modal == "G0", feed=feed,
-                             machine_coords="SUPA" in tokens))
+            out.append(move)
     return out
 
 
