@@ -160,11 +160,13 @@ def relative(machine: Machine, poses: Poses, slots: Mapping[tuple[str, str], np.
     (n, 6) translations (mm) and rotations (rad) in ``TRANSLATIONS + ROTATIONS`` order."""
     zero = np.zeros((len(poses), 6))
     table = _chain(machine, machine.workpiece, poses, slots, zero, lines)
-    spindle = _chain(machine, machine.tool, poses, slots, zero, lines) @ trans(
-        [0.0, 0.0, machine.probe_length])
+    # the tool side's frames sit at the spindle gauge line, probe_length above the nest
+    # centre (q is the nest centre: the tool length compensated), so an angular error of a
+    # tool-side carriage turns the nest with the tool length as its lever
+    gauge = np.array([0.0, 0.0, machine.probe_length])
+    spindle = trans(gauge) @ _chain(machine, machine.tool, poses, slots, zero, lines)
     ball = apply(table, poses.ball + slots.get(("ball", "loc"), zero)[:, :3])
-    nest = apply(spindle, np.array([0.0, 0.0, -machine.probe_length])
-                 + slots.get(("nest", "loc"), zero)[:, :3])
+    nest = apply(spindle, -gauge + slots.get(("nest", "loc"), zero)[:, :3])
     return nest - ball + slots.get(("time", "loc"), zero)[:, :3]
 
 
@@ -185,8 +187,10 @@ class SlotGains:
         n = len(poses)
         zero = np.zeros((n, 6))
         self.n, self.frames = n, {}
+        # the tool side's end is the nest, probe_length below its frames (see ``relative``)
         for chain, end, sign in ((machine.workpiece, poses.ball, -1.0),
-                                 (machine.tool, np.zeros((n, 3)), 1.0)):
+                                 (machine.tool, np.broadcast_to([0.0, 0.0, -machine.probe_length], (n, 3)),
+                                  1.0)):
             T = np.broadcast_to(np.eye(4), (n, 4, 4))
             before = []
             for axis in chain:

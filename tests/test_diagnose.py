@@ -46,8 +46,13 @@ def test_hidden_effect_is_named_first_and_adding_it_brings_rms_to_noise(seed_mac
     base = identify(seed_machine, data)
     found = diagnose(seed_machine, data, base)
     best = found.candidates[0]
-    assert best.effect == name and best.significant, [c.effect for c in found.candidates[:3]]
+    # a squareness of Z (BOZ, AOZ) and an angular error of the Z carriage growing with Z
+    # (EBZ:p1, EAZ:p1) both move the nest by the tool length times an angle ∝ Z: with one
+    # nest length no R-test path separates them, and diagnose must say so, not choose
+    assert best.significant and (best.effect == name or name in found.rivals), \
+        ([c.effect for c in found.candidates[:3]], found.rivals)
     assert base.residual["rms_um"] > 1.05 * NOISE_UM      # the misfit was there to be found
+    best = next(c for c in found.candidates if c.effect == name)
     refit = identify(seed_machine, data, compose(seed_machine, base.model, [best.effect]))
     assert abs(refit.residual["rms_um"] - NOISE_UM) < RMS_AFTER_TOLERANCE * NOISE_UM
     assert abs(refit.residual["rms_um"] - best.rms_after_um) < 0.02   # first order predicted it

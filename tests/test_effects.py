@@ -23,6 +23,10 @@ def test_every_effect_is_well_formed_and_moves_the_readings(effect):
     assert np.isfinite(J).all()
     assert J.shape == (len(POSES), 3, len(effect.params))
     assert effect.words and effect.unit in ("mm", "rad")
+    # every column moves the readings, except a turn about the tool axis of a carriage that
+    # carries the spindle: its axis passes through the nest, which it cannot move
+    about_the_nest = effect.carrier in ("Y", "Z") and effect.direction == "c"
+    assert (np.abs(J).max(axis=(0, 1)) > 1e-6).all() != about_the_nest, effect.name
 
 
 def test_catalogue_names_are_unique_and_hold_the_default_model():

@@ -1,0 +1,183 @@
+"""Mutation testing of the sign-critical modules: does the suite notice a wrong sign, unit
+or axis index? A benchmark, run outside CI (it takes minutes).
+
+    python benchmarks/mutation.py [--jobs 2] [--only compgen/units.py] [--list]
+
+Each mutant is one small change (the issue's kinds): ``+`` ↔ ``-``, ``*`` ↔ ``/``, a unary
+minus dropped or added, an integer index 0/1/2 shifted, a numeric constant changed (0 → 1,
+1 → 0, x → 2x). A mutant is *killed* when the module's tests fail with it. The module's
+tests are a fixed selection (``TESTS``), so a run stays in minutes. Survivors are printed
+with their line; ``benchmarks/mutation-survivors.md`` says why each cannot change an output.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+TESTS = {
+    "compgen/lines.py": ["tests/test_lines.py", "tests/test_kinematics_edit.py", "tests/test_compose.py"],
+    "compgen/identify.py": ["tests/test_identify.py", "tests/test_startup.py"],
+    "compgen/kinematics.py": ["tests/test_kinematics.py", "tests/test_effects.py", "tests/test_identify.py"],
+    "compgen/units.py": ["tests/test_units.py"],
+    "compgen/correction.py": ["tests/test_kinematics_edit.py", "tests/test_compose.py", "tests/test_signs.py"],
+    "compgen/emit/heidenhain.py": ["tests/test_kinematics_edit.py", "tests/test_compose.py", "tests/test_tab.py",
+                                   "tests/test_signs.py"],
+    "compgen/emit/tab.py": ["tests/test_tab.py", "tests/test_kinematics_edit.py"],
+    "compgen/emit/sinumerik.py": ["tests/test_kinematics_edit.py", "tests/test_compose.py", "tests/test_signs.py"],
+    "compgen/emit/linuxcnc.py": ["tests/test_compose.py", "tests/test_signs.py", "tests/test_kinematics_edit.py"],
+    "compgen/diagnose.py": ["tests/test_diagnose_stats.py", "tests/test_diagnose.py"],
+}
+# functions of diagnose.py that are its statistics (the rest is reporting)
+ONLY_FUNCTIONS = {"compgen/diagnose.py": {"_p_value", "_explained", "_still_significant"}}
+
+
+class Sites(ast.NodeVisitor):
+    """Where a mutation can go: (line, col, kind, before, after) with a node id."""
+
+    def __init__(self, functions: set[str] | None):
+        self.sites, self.functions, self.inside = [], functions, [] if functions else None
+
+    def visit_FunctionDef(self, node):
+        if self.inside is not None:
+            self.inside.append(node.name)
+            self.generic_visit(node)
+            self.inside.pop()
+        else:
+            self.generic_visit(node)
+
+    def _ok(self):
+        return self.functions is None or (self.inside and self.inside[-1] in self.functions)
+
+    def visit_BinOp(self, node):
+        swap = {ast.Add: ast.Sub, ast.Sub: ast.Add, ast.Mult: ast.Div, ast.Div: ast.Mult}
+        if self._ok() and type(node.op) in swap:
+            self.sites.append((node, "op", swap[type(node.op)]))
+        self.generic_visit(node)
+
+    def visit_UnaryOp(self, node):
+        if self._ok() and isinstance(node.op, ast.USub):
+            self.sites.append((node, "drop-minus", None))
+        self.generic_visit(node)
+
+    def visit_Subscript(self, node):
+        s = node.slice
+        if self._ok() and isinstance(s, ast.Constant) and type(s.value) is int and s.value in (0, 1, 2):
+            self.sites.append((s, "index", (s.value + 1) % 3))
+        self.generic_visit(node)
+
+    def visit_Constant(self, node):
+        if self._ok() and type(node.value) in (int, float) and not isinstance(node.value, bool):
+            new = {0: 1, 1: 0}.get(node.value, node.value * 2)
+            self.sites.append((node, "const", new))
+
+    def visit_JoinedStr(self, node):     # f-string formats are presentation, not physics
+        return
+
+
+def mutants(path: Path, functions: set[str] | None):
+    source = path.read_text()
+    tree = ast.parse(source)
+    finder = Sites(functions)
+    finder.visit(tree)
+    seen = set()
+    for i, (node, kind, arg) in enumerate(finder.sites):
+        tree = ast.parse(source)            # a fresh tree per mutant
+        target = [n for n in ast.walk(tree) if (getattr(n, "lineno", None), getattr(n, "col_offset", None),
+                                                type(n)) == (node.lineno, node.col_offset, type(node))]
+        if not target:
+            continue
+        t = target[0]
+        if kind == "op":
+            t.op = arg()
+        elif kind == "drop-minus":
+            parent = next(p for p in ast.walk(tree) for f, v in ast.iter_fields(p)
+                          if v is t or (isinstance(v, list) and any(x is t for x in v)))
+            for f, v in ast.iter_fields(parent):
+                if v is t:
+                    setattr(parent, f, t.operand)
+                elif isinstance(v, list):
+                    v[:] = [t.operand if x is t else x for x in v]
+        else:
+            t.value = arg
+        text = ast.unparse(tree)
+        if text in seen or text == ast.unparse(ast.parse(source)):
+            continue
+        seen.add(text)
+        yield i, node.lineno, kind, text
+
+
+def run_mutant(work: Path, module: str, text: str, tests: list[str]) -> bool:
+    """True when the tests fail (the mutant is killed)."""
+    target = work / module
+    original = target.read_text()
+    target.write_text(text)
+    try:
+        env = {**os.environ, "PYTHONPATH": str(work), "PYTHONDONTWRITEBYTECODE": "1"}
+        done = subprocess.run([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
+                               "--deselect", "tests/test_linuxcnc.py", *tests], cwd=work, env=env,
+                              capture_output=True, timeout=600)
+        return done.returncode != 0
+    except subprocess.TimeoutExpired:
+        return True
+    finally:
+        target.write_text(original)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--only", action="append", default=None, help="a module path (repeatable)")
+    ap.add_argument("--list", action="store_true", help="count the mutants, run nothing")
+    args = ap.parse_args()
+    modules = args.only or list(TESTS)
+    plan = [(m, i, line, kind, text) for m in modules
+            for i, line, kind, text in mutants(ROOT / m, ONLY_FUNCTIONS.get(m))]
+    print(f"{len(plan)} mutants in {len(modules)} modules")
+    if args.list:
+        for m in modules:
+            print(f"  {m}: {sum(1 for p in plan if p[0] == m)}")
+        return
+    works = []
+    for j in range(args.jobs):
+        work = Path(tempfile.mkdtemp(prefix=f"compgen-mut{j}-"))
+        for part in ("compgen", "tests", "templates", "machines", "examples", "pyproject.toml"):
+            src = ROOT / part
+            (shutil.copytree if src.is_dir() else shutil.copy)(src, work / part)
+        (work.parent / "shared").exists() or os.symlink(ROOT.parent / "shared", work.parent / "shared") \
+            if (ROOT.parent / "shared").exists() and not (work.parent / "shared").exists() else None
+        works.append(work)
+    t0 = time.perf_counter()
+    chunks = [plan[j::args.jobs] for j in range(args.jobs)]
+
+    def worker(j):
+        return [(p, run_mutant(works[j], p[0], p[4], TESTS[p[0]])) for p in chunks[j]]
+
+    with ThreadPoolExecutor(args.jobs) as pool:
+        results = [r for part in pool.map(worker, range(args.jobs)) for r in part]
+    for w in works:
+        shutil.rmtree(w, ignore_errors=True)
+    killed = sum(k for _, k in results)
+    print(f"killed {killed} of {len(results)}: score {100 * killed / max(len(results), 1):.1f} % "
+          f"({time.perf_counter() - t0:.0f} s)")
+    for m in modules:
+        mine = [(p, k) for p, k in results if p[0] == m]
+        if mine:
+            print(f"  {m}: {sum(k for _, k in mine)}/{len(mine)}")
+    for (m, i, line, kind, _), k in sorted(results, key=lambda r: (r[0][0], r[0][2])):
+        if not k:
+            src = (ROOT / m).read_text().splitlines()[line - 1].strip()
+            print(f"SURVIVED {m}:{line} {kind}: {src[:100]}")
+
+
+if __name__ == "__main__":
+    main()
