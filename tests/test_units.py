@@ -1,0 +1,46 @@
+"""Units at the edge: every factor compgen accepts, pinned by its definition (not by
+compgen's own table), and the bare zero that --fix NAME=0 relies on."""
+
+import math
+
+import pytest
+
+from compgen.errors import CompgenError
+from compgen.units import parse_quantity, shown, to_inside
+
+# definitions: 1 µm = 1/1000 mm; 1 µrad = 1e-6 rad; 360° = 2π rad; 1″ = 1/3600 °
+DEFINED = [("1mm", "mm", 1.0), ("1um", "mm", 0.001), ("1µm", "mm", 0.001), ("2.5um", "mm", 0.0025),
+           ("1rad", "rad", 1.0), ("1urad", "rad", 1e-6), ("1µrad", "rad", 1e-6),
+           ("180deg", "rad", math.pi), ("3600arcsec", "rad", math.pi / 180), ("-7.2arcsec", "rad",
+                                                                          -7.2 / 3600 * math.pi / 180)]
+
+
+@pytest.mark.parametrize("text, inside, value", DEFINED)
+def test_every_unit_converts_by_its_definition(text, inside, value):
+    assert parse_quantity(text, inside, "t") == pytest.approx(value, rel=1e-15)
+
+
+@pytest.mark.parametrize("inside", ["mm", "rad"])
+def test_a_bare_zero_is_zero_and_a_bare_number_is_refused(inside):
+    for zero in ("0", "0.0", " -0 ", "0um" if inside == "mm" else "0arcsec"):
+        assert parse_quantity(zero, inside, "t") == 0.0
+    with pytest.raises(CompgenError, match="has no unit"):
+        parse_quantity("1", inside, "t")
+
+
+@pytest.mark.parametrize("text, inside", [("1um", "rad"), ("1arcsec", "mm"), ("1deg", "mm"), ("1mm", "rad")])
+def test_a_wrong_dimension_is_refused(text, inside):
+    with pytest.raises(CompgenError, match="is not a"):
+        parse_quantity(text, inside, "t")
+
+
+def test_non_finite_and_unknown_units_are_refused():
+    with pytest.raises(CompgenError, match="not a finite number"):
+        to_inside(float("inf"), "um", "mm")
+    with pytest.raises(CompgenError, match="unknown unit"):
+        parse_quantity("1in", "mm", "t")
+
+
+def test_shown_units_are_micrometres_and_arcseconds():
+    assert shown(0.0015, "mm") == (pytest.approx(1.5, rel=1e-15), "µm")
+    assert shown(math.pi / 180 / 3600, "rad") == (pytest.approx(1.0, rel=1e-15), "″")
