@@ -24,17 +24,17 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+EDITS = ["tests/test_kinematics_edit.py", "tests/test_compose.py", "tests/test_signs.py"]
 TESTS = {
-    "compgen/lines.py": ["tests/test_lines.py", "tests/test_kinematics_edit.py", "tests/test_compose.py"],
+    "compgen/lines.py": ["tests/test_lines.py", *EDITS],
     "compgen/identify.py": ["tests/test_identify.py", "tests/test_startup.py"],
     "compgen/kinematics.py": ["tests/test_kinematics.py", "tests/test_effects.py", "tests/test_identify.py"],
     "compgen/units.py": ["tests/test_units.py"],
-    "compgen/correction.py": ["tests/test_kinematics_edit.py", "tests/test_compose.py", "tests/test_signs.py"],
-    "compgen/emit/heidenhain.py": ["tests/test_kinematics_edit.py", "tests/test_compose.py", "tests/test_tab.py",
-                                   "tests/test_signs.py"],
+    "compgen/correction.py": EDITS,
+    "compgen/emit/heidenhain.py": [*EDITS, "tests/test_tab.py"],
     "compgen/emit/tab.py": ["tests/test_tab.py", "tests/test_kinematics_edit.py"],
-    "compgen/emit/sinumerik.py": ["tests/test_kinematics_edit.py", "tests/test_compose.py", "tests/test_signs.py"],
-    "compgen/emit/linuxcnc.py": ["tests/test_compose.py", "tests/test_signs.py", "tests/test_kinematics_edit.py"],
+    "compgen/emit/sinumerik.py": EDITS,
+    "compgen/emit/linuxcnc.py": EDITS,
     "compgen/diagnose.py": ["tests/test_diagnose_stats.py", "tests/test_diagnose.py"],
 }
 # functions of diagnose.py that are its statistics (the rest is reporting)
@@ -173,7 +173,7 @@ def main() -> None:
         mine = [(p, k) for p, k in results if p[0] == m]
         if mine:
             print(f"  {m}: {sum(k for _, k in mine)}/{len(mine)}")
-    for (m, i, line, kind, _), k in sorted(results, key=lambda r: (r[0][0], r[0][2])):
+    for (m, _, line, kind, _text), k in sorted(results, key=lambda r: (r[0][0], r[0][2])):
         if not k:
             src = (ROOT / m).read_text().splitlines()[line - 1].strip()
             print(f"SURVIVED {m}:{line} {kind}: {src[:100]}")

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, TABLE4, UM, vector
+from conftest import ARCSEC, ROOT, TABLE4, UM, vector
 
 from compgen.errors import CompgenError
 from compgen.identify import identify
@@ -109,3 +109,31 @@ def test_fit_json_round_trips_exactly(seed_machine):
     for p in d["parameters"].values():
         assert p["unit"] in {"mm", "um", "rad", "urad", "deg", "arcsec"}
         assert {"value", "unit", "std"} <= set(p)
+
+
+def test_uncertainty_correlation_and_condition_equal_their_definitions(seed_machine):
+    """σ̂²(JᵀJ)⁻¹ at the solution, its correlation, and the singular values of J with unit
+    columns, computed here from the model's Jacobian."""
+    from compgen.kinematics import Model
+    data = read_rtest(ROOT / "examples" / "seed-session.csv", seed_machine)
+    fit = identify(seed_machine, [data])
+    m = Model(seed_machine, fit.model)
+    x = np.array([fit.parameters[n].value for n in fit.model])
+    J = m.jacobian(data.poses, x).reshape(-1, len(x))
+    r = (data.deviation - m.deviation(data.poses, x)).ravel()
+    cov = (r @ r) / (r.size - len(x)) * np.linalg.inv(J.T @ J)
+    std = np.sqrt(np.diag(cov))
+    np.testing.assert_allclose([fit.parameters[n].std for n in fit.model], std, rtol=1e-6)
+    np.testing.assert_allclose(fit.correlation, cov / np.outer(std, std), atol=1e-6)
+    assert np.abs(fit.correlation).max() <= 1.0 and np.allclose(np.diag(fit.correlation), 1.0)
+    s = np.linalg.svd(J / np.linalg.norm(J, axis=0), compute_uv=False)
+    np.testing.assert_allclose(fit.singular_values, s, rtol=1e-6)
+    assert s[0] / s[-1] == pytest.approx(6.0, abs=0.1)          # the README's K4+K1+K2 figure
+
+
+def test_the_seed_first_order_method_recovers_table4(seed_machine):
+    """Its bias grows with the square of the errors: 1.63 µm at 30× Table 4, so ~0.002 µm at 1×."""
+    result = identify(seed_machine, [read_rtest(vector("seed-table4-noiseless.csv"), seed_machine)],
+                      method="linear")
+    for name, err in _errors(result, TABLE4).items():
+        assert abs(err) < {"mm": 0.005 * UM, "rad": 0.005 * ARCSEC}[result.parameters[name].unit], name

@@ -8,6 +8,7 @@ respect the configuration's nets. CI installs LinuxCNC and sets COMPGEN_REQUIRE_
 elsewhere the test is skipped when LinuxCNC is not installed.
 """
 
+import fcntl
 import os
 import re
 import shutil
@@ -92,11 +93,15 @@ def run_linuxcnc(folder, machine, program: str, edit: str) -> dict[int, np.ndarr
     if os.geteuid() == 0:
         env["RTAPI_UID"] = "65534"        # rtapi_app drops root to this uid
     env.pop("PYTHONPATH", None)
-    lock = Path("/tmp/linuxcnc.lock")     # left by a run that died: the launcher would ask
-    if lock.exists() and subprocess.run(["pgrep", "-x", "milltask"], capture_output=True).returncode:
-        lock.unlink()
-    done = subprocess.run(["linuxcnc", str(folder / "sim.ini")], cwd=folder, env=env, timeout=300,
-                          capture_output=True, text=True)
+    # one LinuxCNC at a time on a machine (its launcher keeps /tmp/linuxcnc.lock): tests
+    # run at once (two pytest processes, xdist) wait here for each other
+    with open(Path(tempfile.gettempdir()) / "compgen-linuxcnc-test.lock", "w") as guard:
+        fcntl.flock(guard, fcntl.LOCK_EX)
+        lock = Path("/tmp/linuxcnc.lock")     # left by a run that died: the launcher would ask
+        if lock.exists() and subprocess.run(["pgrep", "-x", "milltask"], capture_output=True).returncode:
+            lock.unlink()
+        done = subprocess.run(["linuxcnc", str(folder / "sim.ini")], cwd=folder, env=env, timeout=300,
+                              capture_output=True, text=True)
     result = folder / "joints.txt"
     assert result.exists(), f"LinuxCNC wrote no joints (exit {done.returncode}): {done.stdout[-1500:]}"
     text = result.read_text()

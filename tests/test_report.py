@@ -4,6 +4,7 @@ import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -80,6 +81,8 @@ def test_templates_ship_inside_the_installed_package(tmp_path):
     done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
                           env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"}, check=True)
     package, templates = done.stdout.split()
-    if not package.startswith(str(ROOT)):        # an installed wheel, not a source checkout
-        assert templates == f"{package}/templates", templates
+    # a source checkout (an editable install, or this copy) serves its top-level templates/;
+    # an installed wheel its own compgen/templates
+    checkout = (Path(package).parent / "pyproject.toml").exists()
+    assert Path(templates) == (Path(package).parent if checkout else Path(package)) / "templates", templates
     assert (np.array([p for p in os.listdir(templates)]) == "unconfirmed.j2").any()

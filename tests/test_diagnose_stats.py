@@ -1,0 +1,57 @@
+"""diagnose's statistics on inputs whose answers are known in closed form."""
+
+import numpy as np
+import pytest
+
+from compgen.diagnose import VISIBLE, _explained, _p_value, _still_significant
+
+E = np.eye(6)
+
+
+def test_explained_by_hand():
+    """Columns e1 (fully visible) and 0.5·e2 + ~e3 (the model absorbs e3): residual 3·e1 + 2·e2."""
+    c = np.column_stack([E[0], 0.5 * E[1] + 1e-4 * E[2]])
+    cp = np.column_stack([E[0], 0.5 * E[1]])            # what the model cannot absorb
+    r = 3 * E[0] + 2 * E[1] + 1.0 * E[3]
+    vis, drop, amp = _explained(c, cp, r)
+    np.testing.assert_allclose(vis, [1.0, 0.5 / np.hypot(0.5, 1e-4)], rtol=1e-12)
+    np.testing.assert_allclose(amp, [3.0, 4.0], rtol=1e-12)           # 0.5·4 = 2
+    assert drop == pytest.approx(9.0 + 4.0, rel=1e-12)
+
+
+def test_an_invisible_column_explains_nothing():
+    c = np.column_stack([E[0], E[1]])
+    cp = np.column_stack([E[0], 0.5 * VISIBLE * E[1]])   # below the visibility threshold
+    vis, drop, amp = _explained(c, cp, 2 * E[0] + 5 * E[1])
+    assert vis[1] < VISIBLE and amp[1] == 0.0 and amp[0] == pytest.approx(2.0)
+    assert drop == pytest.approx(4.0)
+    vis, drop, amp = _explained(c, 0 * cp, E[0])
+    assert drop == 0.0 and not amp.any()
+
+
+def test_p_value_by_the_f_distribution_and_bonferroni():
+    # F(2, d) has the closed-form tail (1 + 2F/d)^(−d/2)
+    drop, k, rss, dof = 40.0, 2, 540.0, 502
+    F = (drop / k) / ((rss - drop) / (dof - k))
+    tail = (1 + k * F / (dof - k)) ** (-(dof - k) / 2)
+    assert _p_value(drop, k, rss, dof, 1) == pytest.approx(tail, rel=1e-10)
+    assert _p_value(drop, k, rss, dof, 7) == pytest.approx(7 * tail, rel=1e-10)
+    assert _p_value(1e-9, k, rss, dof, 50) == 1.0                 # never above one
+    assert _p_value(400.0, k, 420.0, dof, 1) < 1e-100
+
+
+def test_still_significant_after_the_best():
+    rng = np.random.default_rng(1)
+    n = 600
+    Q = np.linalg.qr(rng.normal(size=(n, 2)))[0]
+    best, other, null = (rng.normal(size=(n, 1)) for _ in range(3))
+    r = 4 * best[:, 0] + 3 * other[:, 0] + rng.normal(size=n)
+    r -= Q @ (Q.T @ r)
+
+    class Effect:
+        def __init__(self, name):
+            self.name = name
+
+    sig = [(Effect("other"), other), (Effect("null"), null)]
+    assert _still_significant(Q, best, r, sig, 0.01) == {"other"}
+    assert _still_significant(Q, np.column_stack([best, other]), r, [(Effect("null"), null)], 0.01) == set()
