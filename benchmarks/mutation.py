@@ -19,8 +19,9 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -157,13 +158,26 @@ def main() -> None:
             if (ROOT.parent / "shared").exists() and not (work.parent / "shared").exists() else None
         works.append(work)
     t0 = time.perf_counter()
-    chunks = [plan[j::args.jobs] for j in range(args.jobs)]
+    free = list(range(args.jobs))
+    lock = threading.Lock()
 
-    def worker(j):
-        return [(p, run_mutant(works[j], p[0], p[4], TESTS[p[0]])) for p in chunks[j]]
+    def one(p):
+        with lock:
+            j = free.pop()
+        try:
+            return p, run_mutant(works[j], p[0], p[4], TESTS[p[0]])
+        finally:
+            with lock:
+                free.append(j)
 
-    with ThreadPoolExecutor(args.jobs) as pool:
-        results = [r for part in pool.map(worker, range(args.jobs)) for r in part]
+    results = []
+    with ThreadPoolExecutor(args.jobs) as pool:     # each result printed as it comes: a run
+        for future in as_completed([pool.submit(one, p) for p in plan]):   # cut short keeps them
+            (m, _, line, kind, _text), killed = future.result()
+            results.append(future.result())
+            if not killed:
+                src = (ROOT / m).read_text().splitlines()[line - 1].strip()
+                print(f"SURVIVED {m}:{line} {kind}: {src[:100]}", flush=True)
     for w in works:
         shutil.rmtree(w, ignore_errors=True)
     killed = sum(k for _, k in results)
@@ -173,10 +187,6 @@ def main() -> None:
         mine = [(p, k) for p, k in results if p[0] == m]
         if mine:
             print(f"  {m}: {sum(k for _, k in mine)}/{len(mine)}")
-    for (m, _, line, kind, _text), k in sorted(results, key=lambda r: (r[0][0], r[0][2])):
-        if not k:
-            src = (ROOT / m).read_text().splitlines()[line - 1].strip()
-            print(f"SURVIVED {m}:{line} {kind}: {src[:100]}")
 
 
 if __name__ == "__main__":

@@ -39,7 +39,7 @@ def test_table4_lines_by_hand(seed_machine):
 def test_an_offset_alone_gives_a_line_with_no_tilt(seed_machine, name, value):
     lines = axis_lines(seed_machine, {name: value})
     for line in lines.values():
-        assert np.all(np.isfinite(line.offset)) and np.all(line.tilt == 0.0)
+        assert line.tilt.shape == (3,) and np.all(np.isfinite(line.offset)) and np.all(line.tilt == 0.0)
         assert np.allclose(line.direction, np.eye(3)["xyz".index(line.nominal)])
     axis = lines[name[-1]]
     assert axis.offset["XYZ".index(name[0])] == pytest.approx(value, abs=1e-15)

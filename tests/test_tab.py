@@ -2,6 +2,8 @@
 description block, CRLF line ends, columns compgen does not use, INCH units. An edit changes
 only the cells it must and keeps every other byte."""
 
+import re
+
 import numpy as np
 import pytest
 from conftest import ARCSEC, UM
@@ -69,6 +71,7 @@ def test_an_edit_keeps_every_byte_it_does_not_change(seed_machine, fit):
     assert [int(r["NR"]) for r in table.rows] == list(range(len(table.rows)))
     machaxis_a = next(r for r in table.rows if r["KEY"] == "MachAxis" and r["AXIS"] == "A")
     assert machaxis_a["COMPTAB"] == "COMP_A.COM"
+    assert sum(r["DOC"] == "Y0A" for r in table.rows) == 1
     for k, r in enumerate(table.rows):         # untouched cells are untouched
         if r["DOC"] == "Y0A":
             assert float(r["COORD"]) == pytest.approx(0.01 + plan(seed_machine, fit).lines["A"].offset[1],
@@ -104,3 +107,48 @@ def test_tables_that_would_mislead_are_refused(seed_machine, fit, text, message)
 
 def test_a_small_pivot_difference_passes(seed_machine, fit):
     assert _edit(seed_machine, fit, _table(zc="+29.7945"))
+
+
+NEW_STYLE = [
+    "TableDescription (",
+    "  columns:=[",
+    "    CfgColumnDescription (",
+    '      key:="COORD"',
+    "      width:=13",
+    "      decimals:=3",
+    "    )",
+    "    CfgColumnDescription (",
+    '      key:="DOC"',
+    "      decimals:=0",
+    "    )",
+    "  ]",
+    ")",
+]
+
+
+def test_a_new_style_description_block_is_kept_and_its_decimals_honoured(seed_machine, fit):
+    before = _table(newline="\n").split("\n")
+    old_block = len(STRUCT)
+    text = "\n".join([before[0], *NEW_STYLE, "", *before[1 + old_block:]])   # a blank line too
+    table = TabTable.parse(text, "t")
+    assert table.decimals == {"COORD": 3, "DOC": 0} and table.columns == COLS.split()
+    emitted = kinematics_edit(seed_machine, fit, "itnc530", text, "KIN.TAB", "KIN", "0", "d")
+    after = emitted.files[".TAB"].split("\n")
+    assert after[:len(NEW_STYLE) + 3] == text.split("\n")[:len(NEW_STYLE) + 3]
+    y0a = next(r for r in TabTable.parse(emitted.files[".TAB"], "n").rows if r["DOC"] == "Y0A")
+    assert re.fullmatch(r"[+-]\d+\.\d{3}", y0a["COORD"]), y0a["COORD"]
+    assert any("3 decimals" in n and "1 um" in n for n in emitted.notes), emitted.notes
+
+
+def test_an_old_style_block_gives_each_column_its_decimals():
+    table = TabTable.parse(_table(newline="\n"), "t")
+    assert table.decimals == {"NR": 0, "COORD": 5}
+
+
+def test_an_inch_table_without_declared_decimals_gets_one_more_decimal(seed_machine, fit):
+    text = _table(unit="INCH", zc=f"+{29.794 / 25.4:.6f}", y0a="+0.000394", newline="\n")
+    text = "\n".join(ln for ln in text.split("\n") if not ln.startswith(("#", "   ", "     ")))
+    assert TabTable.parse(text, "t").decimals == {}
+    tab = kinematics_edit(seed_machine, fit, "itnc530", text, "KIN.TAB", "KIN", "0", "d").files[".TAB"]
+    x0c = next(r for r in TabTable.parse(tab, "n").rows if r["DOC"] == "X0C")
+    assert re.fullmatch(r"[+-]\d+\.\d{6}", x0c["COORD"]), x0c["COORD"]      # 1e-6 inch = 0.0254 µm
