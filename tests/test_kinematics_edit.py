@@ -217,3 +217,23 @@ def test_sign_check_promises_what_the_loaded_edit_does(seed_machine, seed_fit, c
         printed = [float(v) for v in re.findall(r"d[XYZ] ([+-]\d+\.\d+)", line)]
         # printed to 0.01 µm (±0.005) from values the table rounds to 0.01 µm (±0.005)
         np.testing.assert_allclose(printed, change, atol=0.011, err_msg=line)
+
+
+def test_a_linuxcnc_edit_sets_a_netted_pin_through_its_signal(seed_machine, seed_fit):
+    """setp on a pin the configuration nets stops LinuxCNC; compgen must write sets."""
+    from compgen.emit.linuxcnc import read_hal
+    hal = ("loadrt xyzac-trt-kins\nnet zrot => xyzac-trt-kins.z-rot-point\nsets zrot 29.8\n"
+           "net tool-offset motion.tooloffset.z => xyzac-trt-kins.tool-offset\n"
+           + "".join(f"setp xyzac-trt-kins.{p} {v}\n" for p, v in (
+               ("x-rot-point", 0.001), ("y-rot-point", -0.002), ("y-offset", 0.0), ("z-offset", -29.8))))
+    values, signal = read_hal(hal, "xyzac-trt-kins", "h")
+    assert signal == {"z-rot-point": "zrot", "tool-offset": "tool-offset"}
+    assert values == {"x-rot-point": 0.001, "y-rot-point": -0.002, "y-offset": 0.0, "z-offset": -29.8,
+                      "z-rot-point": 29.8}
+    out = kinematics_edit(seed_machine, seed_fit, "linuxcnc", hal, "h", "KIN", "0", "d").files[".hal"]
+    z = plan(seed_machine, seed_fit).lines["C"].offset[2]
+    assert re.search(rf"(?m)^sets zrot {29.8 + z:.6f}\s+# was 29.800000$", out), out
+    assert re.search(r"(?m)^setp xyzac-trt-kins\.x-rot-point ", out)
+    assert not re.search(r"(?m)^setp \S+z-rot-point", out)
+    with pytest.raises(CompgenError, match="refuses to start"):
+        read_hal(hal + "setp xyzac-trt-kins.z-rot-point 29.8\n", "xyzac-trt-kins", "h")
