@@ -21,6 +21,25 @@ TABLE4 = {"XOW": -3.2 * UM, "YOW": -21.6 * UM, "ZOW": -33.9 * UM, "YOA": 20.5 * 
           "YOC": -15.9 * UM, "AOC": -6.5 * ARCSEC, "BOC": -4.6 * ARCSEC}
 
 
+# an OEM's table: nominal rows plus KinematicsOpt-style rows already named by ISO symbol
+OEM_TAB = """BEGIN KINEMATIC_AC.TAB MM
+NR  KEY       AXIS  COORD        DOC
+0   Trans     Z     +0           spindle gauge line
+1   MachAxis  Z
+2   MachAxis  Y
+3   MachBase
+4   MachAxis  X
+5   Trans     Z     +0           to the A/C intersection
+6   Trans     Y     +0.00310     Y0A
+7   Trans     B     +0.0012000   B0A
+8   MachAxis  A
+9   Trans     B     -0.0012000   -B0A
+10  Trans     Y     -0.00310     -Y0A
+11  Trans     Z     +29.794      Zc: C table origin
+12  MachAxis  C
+[END]
+"""
+
 GOLDEN = ROOT / "tests" / "golden"
 
 

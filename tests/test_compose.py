@@ -11,7 +11,7 @@ to 1e-5 mm and 1e-7 deg (HEIDENHAIN), 1e-5 mm and 1e-10 (SINUMERIK), 1e-6 mm (Li
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, ROOT, UM
+from conftest import ARCSEC, OEM_TAB, ROOT, UM
 
 from compgen.correction import nominal_lines, plan
 from compgen.emit import heidenhain, sinumerik
@@ -33,24 +33,6 @@ BC_B = {"XOB": -5 * UM, "ZOB": 6 * UM, "AOB": -2 * ARCSEC, "COB": 3 * ARCSEC,
 SECOND_ORDER_MM = 1e-6
 TILT_RAD = 1e-9          # SINUMERIK vectors: 1e-10 rounding and second-order products
 
-# an OEM's table: nominal rows plus KinematicsOpt-style rows already named by ISO symbol
-OEM_TAB = """BEGIN KINEMATIC_AC.TAB MM
-NR  KEY       AXIS  COORD        DOC
-0   Trans     Z     +0           spindle gauge line
-1   MachAxis  Z
-2   MachAxis  Y
-3   MachBase
-4   MachAxis  X
-5   Trans     Z     +0           to the A/C intersection
-6   Trans     Y     +0.00310     Y0A
-7   Trans     B     +0.0012000   B0A
-8   MachAxis  A
-9   Trans     B     -0.0012000   -B0A
-10  Trans     Y     -0.00310     -Y0A
-11  Trans     Z     +29.794      Zc: C table origin
-12  MachAxis  C
-[END]
-"""
 # an OEM's record: fine offsets already set, the C vector tilted by about 20″
 OEM_CARR = (ROOT / "examples" / "bc-tcarr-current.txt").read_text().replace(
     "$TC_CARR44[1]=0.0", "$TC_CARR44[1]=0.0123").replace(

@@ -12,7 +12,7 @@ import re
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, BC_MACHINE, ROOT, SEED_MACHINE, UM
+from conftest import ARCSEC, BC_MACHINE, OEM_TAB, ROOT, SEED_MACHINE, UM
 
 from compgen.correction import plan
 from compgen.effects import location_model
@@ -147,23 +147,6 @@ def lines_from_pins(text: str, nominal: str, tilt_axis: str) -> dict[str, tuple]
 
 # ---------------------------------------------------------------------- the loop
 
-OEM_TAB = """BEGIN KINEMATIC_AC.TAB MM
-NR  KEY       AXIS  COORD        DOC
-0   Trans     Z     +0           spindle gauge line
-1   MachAxis  Z
-2   MachAxis  Y
-3   MachBase
-4   MachAxis  X
-5   Trans     Z     +0           to the A/C intersection
-6   Trans     Y     +0.00310     Y0A
-7   Trans     B     +0.0012000   B0A
-8   MachAxis  A
-9   Trans     B     -0.0012000   -B0A
-10  Trans     Y     -0.00310     -Y0A
-11  Trans     Z     +29.794      Zc: C table origin
-12  MachAxis  C
-[END]
-"""
 NOMINAL_CARR = (ROOT / "examples" / "bc-tcarr-current.txt").read_text()
 
 
