@@ -22,7 +22,7 @@ import numpy as np
 from .effects import ROT_OF, TRANSLATIONS, effect_name, effect_of_param
 from .errors import CompgenError
 from .kinematics import Model, Poses
-from .lines import AxisLine, axis_lines, controller_inverse
+from .lines import AxisLine, axis_lines, controller_inverse, nominal_pivot
 from .machine import Machine
 from .results import FitResult
 
@@ -146,7 +146,7 @@ def pivot_of(machine: Machine, name: str) -> np.ndarray:
     for chain in (machine.workpiece, machine.tool):
         names = [a.name for a in chain]
         if name in names:
-            return np.sum([np.asarray(a.offset, float) for a in chain[:names.index(name) + 1]], axis=0)
+            return nominal_pivot(chain, names.index(name))
     raise CompgenError(f"no axis {name}")
 
 

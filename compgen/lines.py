@@ -70,7 +70,7 @@ def axis_lines(machine: Machine, params: Mapping[str, float]) -> dict[str, AxisL
             if not axis.rotary:
                 continue
             frame = model.frame_before_motion(zero, values, chain, i)[0]
-            nominal = _nominal_pivot(chain, i)
+            nominal = nominal_pivot(chain, i)
             e = UNIT[axis.direction]
             point, d = frame[:3, 3], frame[:3, :3] @ e
             # where the true line crosses the plane through the nominal pivot ⟂ e
@@ -82,7 +82,7 @@ def axis_lines(machine: Machine, params: Mapping[str, float]) -> dict[str, AxisL
     return lines
 
 
-def _nominal_pivot(chain, i) -> np.ndarray:
+def nominal_pivot(chain, i) -> np.ndarray:
     """Nominal pivot of axis ``i`` at the zero pose: the sum of the nominal offsets up to it
     (every link is a pure translation at the zero pose of a nominal machine)."""
     return np.sum([np.asarray(a.offset, float) for a in chain[:i + 1]], axis=0)

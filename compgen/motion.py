@@ -114,7 +114,7 @@ def safe_height(machine: Machine) -> float:
     of the set-up can be touched at any orientation: every solid lies within R of the
     intersection, and the housing reaches ``nest_below`` and its radius below the centre."""
     s = machine.setup
-    table = _table_frame(machine, np.zeros((1, len(machine.axes))))[0]
+    table = _frames(machine, np.zeros((1, len(machine.axes))))[0][0]
     ball = np.asarray(machine.ball)
     rim = [[s.table_radius * np.cos(t), s.table_radius * np.sin(t), z]
            for t in np.linspace(0, 2 * np.pi, 73) for z in (s.table_top, s.table_top - s.table_thickness)]
@@ -123,18 +123,20 @@ def safe_height(machine: Machine) -> float:
     return float(np.ceil(reach + s.nest_below + s.nest_radius + s.margin))
 
 
-def _table_frame(machine: Machine, q: np.ndarray) -> np.ndarray:
+def _frames(machine: Machine, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The nominal table frame (n, 4, 4), and in it the nest centre and the tool axis (n, 3)."""
     poses = Poses.at(q, np.zeros(3))
-    return _chain(machine, machine.workpiece, poses, {}, np.zeros((len(q), 6)))
+    zero = np.zeros((len(q), 6))
+    table = _chain(machine, machine.workpiece, poses, {}, zero)
+    tool = _chain(machine, machine.tool, poses, {}, zero)
+    R = table[:, :3, :3]
+    return (table, np.einsum("nji,nj->ni", R, tool[:, :3, 3] - table[:, :3, 3]),
+            np.einsum("nji,nj->ni", R, tool[:, :3, 2]))
 
 
 def table_point(machine: Machine, q: np.ndarray) -> np.ndarray:
     """The table-frame point under the nest centre at poses ``q`` (n, k), mm."""
-    poses = Poses.at(q, np.zeros(3))
-    zero = np.zeros((len(q), 6))
-    table = _chain(machine, machine.workpiece, poses, {}, zero)
-    nest = _chain(machine, machine.tool, poses, {}, zero)[:, :3, 3]
-    return np.einsum("nji,nj->ni", table[:, :3, :3], nest - table[:, :3, 3])
+    return _frames(machine, q)[1]
 
 
 def world(machine: Machine, q: np.ndarray) -> np.ndarray:
@@ -157,13 +159,7 @@ def clearances(machine: Machine, q: np.ndarray) -> tuple[dict[str, np.ndarray], 
     against ball, stem, table), and whether the nest is measuring there (its axis within
     ``nest_range`` of the ball's centre, the nest on the ball or above it)."""
     s = machine.setup
-    poses = Poses.at(q, np.zeros(3))
-    zero = np.zeros((len(q), 6))
-    table = _chain(machine, machine.workpiece, poses, {}, zero)
-    tool = _chain(machine, machine.tool, poses, {}, zero)
-    R = table[:, :3, :3]
-    nest = np.einsum("nji,nj->ni", R, tool[:, :3, 3] - table[:, :3, 3])     # table frame
-    axis = np.einsum("nji,nj->ni", R, tool[:, :3, 2])
+    _, nest, axis = _frames(machine, q)                                      # table frame
     ball = np.asarray(machine.ball)
     rb = s.ball_diameter / 2
     out = {}
