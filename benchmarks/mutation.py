@@ -144,6 +144,7 @@ def main() -> None:
     plan = [(m, i, line, kind, text) for m in modules
             for i, line, kind, text in mutants(ROOT / m, ONLY_FUNCTIONS.get(m))]
     print(f"{len(plan)} mutants in {len(modules)} modules")
+    lines = {m: (ROOT / m).read_text().splitlines() for m in modules}    # as mutated, not as edited since
     if args.list:
         for m in modules:
             print(f"  {m}: {sum(1 for p in plan if p[0] == m)}")
@@ -176,7 +177,7 @@ def main() -> None:
             (m, _, line, kind, _text), killed = future.result()
             results.append(future.result())
             if not killed:
-                src = (ROOT / m).read_text().splitlines()[line - 1].strip()
+                src = lines[m][line - 1].strip()
                 print(f"SURVIVED {m}:{line} {kind}: {src[:100]}", flush=True)
     for w in works:
         shutil.rmtree(w, ignore_errors=True)

@@ -23,6 +23,25 @@ from .files import read_text
 
 LINEAR, ROTARY = "linear", "rotary"
 DIRECTIONS = ("x", "y", "z")
+# Strings that become words of an NC block are checked, never cleaned: an axis letter as
+# DIN 66025 names them, a tool number or name, a SINUMERIK settable frame, a path label
+IDENTIFIERS = {
+    "axis": (r"[XYZABCUVW]", "one of the letters X Y Z A B C U V W"),
+    "tool": (r"\d{1,5}|[A-Za-z][A-Za-z0-9_.]{0,31}", "a tool number or a name of letters, digits, _ and ."),
+    "work_offset": (r"G5[4-7]|G50[5-9]|G5[1-9]\d", "a settable frame G54…G57 or G505…G599"),
+    "path": (r"[A-Za-z][A-Za-z0-9_]{0,15}", "a letter, then up to 15 letters, digits or _"),
+}
+TOP_KEYS = {"name", "controller", "workpiece", "tool", "rtest", "paths", "program", "limits",
+            "sinumerik", "tolerances"}
+
+
+def identifier(kind: str, text, where: str) -> str:
+    """``text`` if it is a valid ``kind`` of identifier, else one clear refusal."""
+    pattern, words = IDENTIFIERS[kind]
+    if not isinstance(text, str) or not re.fullmatch(pattern, text):
+        raise CompgenError(f"{text!r} is not a valid {kind.replace('_', ' ')} name: it must be {words}",
+                           where=where)
+    return text
 
 
 @dataclass(frozen=True)
@@ -179,6 +198,8 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
     get = _Getter(doc, source)
     from .emit.registry import CONTROLLERS  # the registry's modules build on this one
 
+    get.only(TOP_KEYS)
+
     controller = get.str("controller")
     if controller not in CONTROLLERS:
         raise CompgenError(f"unknown controller {controller!r}", where=f"{source}: controller",
@@ -198,10 +219,7 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
     rtest = get.sub("rtest")
     ball = rtest.vec3("ball")
     fields = set(Setup.__dataclass_fields__)
-    unknown = set(rtest.doc) - fields - {"ball", "probe_length"}
-    if unknown:
-        raise CompgenError(f"unknown keys {sorted(unknown)}", where=rtest.at(""),
-                           hint=f"[rtest] takes ball, probe_length, {', '.join(sorted(fields))}")
+    rtest.only(fields | {"ball", "probe_length"})
     solids = {k: rtest.number(k) if k == "table_top" else _positive(rtest, k)
               for k in fields if k in rtest.doc}
     solids.setdefault("table_radius", math.hypot(ball[0], ball[1]) + 50.0)
@@ -225,21 +243,24 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
             raise CompgenError("safe_z (a height in machine coordinates) is no longer read: compgen "
                                "derives the safe height from the [rtest] set-up and checks it",
                                where=g.at("safe_z"), hint="delete the line; describe the set-up in [rtest]")
-        program = ProgramSetup(tool=str(g._get("tool")), feed=_positive(g, "feed"),
-                               dwell=_positive(g, "dwell", zero_ok=True),
+        g.only(set(ProgramSetup.__dataclass_fields__))
+        tool = g._get("tool")
+        program = ProgramSetup(tool=identifier("tool", str(tool) if isinstance(tool, int) else tool,
+                                               g.at("tool")),
+                               feed=_positive(g, "feed"), dwell=_positive(g, "dwell", zero_ok=True),
                                clearance=_positive(g, "clearance"),
-                               work_offset=g.str("work_offset") if "work_offset" in g.doc else "G54")
+                               work_offset=identifier("work_offset", g.doc.get("work_offset", "G54"),
+                                                      g.at("work_offset")))
     limits = Limits()
     if "limits" in doc:
         g = get.sub("limits")
+        g.only(set(Limits.__dataclass_fields__))
         limits = Limits(**{k: _positive(g, k) for k in Limits.__dataclass_fields__ if k in g.doc})
-        unknown = set(g.doc) - set(Limits.__dataclass_fields__)
-        if unknown:
-            raise CompgenError(f"unknown keys {sorted(unknown)}", where=g.at(""),
-                               hint=f"[limits] takes {', '.join(Limits.__dataclass_fields__)}")
     sinumerik = None
     if "sinumerik" in doc:
         g = get.sub("sinumerik")
+        g.only({"tcarr", "vectors", "machine_axes"})
+        g.sub("vectors").only({a.name for a in machine.rotary_axes})
         record = int(g.number("tcarr"))
         kinds = {a.name: "P" if a.side == "workpiece" else "T" for a in machine.rotary_axes}
         vectors = {}
@@ -253,6 +274,7 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
         names = {}
         if "machine_axes" in g.doc:     # channel axis -> machine axis, for CEC tables (K3 p.248)
             m = g.sub("machine_axes")
+            m.only(set(machine.axis_names))
             for axis in machine.axes:
                 name = m.str(axis.name)
                 if not re.fullmatch(r"[A-Z][A-Z0-9_]{0,15}", name):
@@ -264,6 +286,7 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
     tolerances = {}
     if "tolerances" in doc:
         g = get.sub("tolerances")
+        g.only(set(paths))
         tolerances = {name: _positive(g, name) for name in g.doc}
     return replace(machine, paths=paths, program=program, limits=limits, sinumerik=sinumerik,
                    tolerances=tolerances)
@@ -281,7 +304,8 @@ def _unit(direction: str) -> np.ndarray:
 
 
 def _axis(get: _Getter, side: str) -> Axis:
-    name = get.str("axis")
+    get.only({"axis", "type", "direction", "sense", "offset", "travel", "feed_max"})
+    name = identifier("axis", get._get("axis"), get.at("axis"))
     kind = get.str("type")
     if kind not in (LINEAR, ROTARY):
         raise CompgenError(f"type must be {LINEAR!r} or {ROTARY!r}, not {kind!r}", where=get.at("type"))
@@ -304,6 +328,7 @@ def _axis(get: _Getter, side: str) -> Axis:
 
 
 def _path(get: _Getter, name: str, machine: Machine) -> PathDef:
+    identifier("path", name, get.where)
     n = int(get.number("n"))
     if n < 2:
         raise CompgenError("a path needs n ≥ 2 poses", where=get.at("n"))
@@ -311,22 +336,19 @@ def _path(get: _Getter, name: str, machine: Machine) -> PathDef:
     for axis in machine.rotary_axes:
         spec = get.doc.get(axis.name, 0.0)
         where = get.at(axis.name)
+        sub = _Getter(spec, where) if isinstance(spec, dict) else None
         if isinstance(spec, int | float) and not isinstance(spec, bool):
-            rotary[axis.name] = ("const", float(spec))
-        elif isinstance(spec, dict) and set(spec) == {"from", "to"}:
-            rotary[axis.name] = ("ramp", float(spec["from"]), float(spec["to"]))
-        elif isinstance(spec, dict) and {"amplitude", "cycles"} <= set(spec) <= {
-                "amplitude", "cycles", "offset"}:
-            rotary[axis.name] = ("sine", float(spec.get("offset", 0.0)),
-                                 float(spec["amplitude"]), float(spec["cycles"]))
+            rotary[axis.name] = ("const", get.number(axis.name))
+        elif sub and set(spec) == {"from", "to"}:
+            rotary[axis.name] = ("ramp", sub.number("from"), sub.number("to"))
+        elif sub and {"amplitude", "cycles"} <= set(spec) <= {"amplitude", "cycles", "offset"}:
+            rotary[axis.name] = ("sine", sub.number("offset", 0.0), sub.number("amplitude"),
+                                 sub.number("cycles"))
         else:
             raise CompgenError(f"cannot read {spec!r}", where=where,
                                hint="give a number (deg), {from=…, to=…} or "
                                     "{amplitude=…, cycles=…, offset=…}")
-    unknown = set(get.doc) - {"n", "seconds_per_pose"} - set(rotary)
-    if unknown:
-        raise CompgenError(f"unknown keys {sorted(unknown)}", where=get.at(""),
-                           hint=f"a path names rotary axes {', '.join(rotary)}, n and seconds_per_pose")
+    get.only({"n", "seconds_per_pose", *rotary})
     return PathDef(name=name, n=n, seconds_per_pose=get.number("seconds_per_pose", default=1.0),
                    rotary=rotary)
 
@@ -339,6 +361,13 @@ class _Getter:
 
     def at(self, key: str) -> str:
         return f"{self.where}: {key}" if key else self.where
+
+    def only(self, keys: set[str]) -> None:
+        """Refuse a key this table does not take: a typo (``sence``, ``ofset``) is not ignored."""
+        unknown = sorted(set(self.doc) - keys)
+        if unknown:
+            raise CompgenError(f"unknown key{'s' * (len(unknown) > 1)} {', '.join(unknown)}",
+                               where=self.where, hint=f"this table takes {', '.join(sorted(keys))}")
 
     def _get(self, key: str, default=None):
         if key not in self.doc:

@@ -8,6 +8,7 @@ unconfirmed items it uses.
 
 from __future__ import annotations
 
+import re
 import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,9 +29,28 @@ class Emitted:
 
 
 def ascii_text(text: str) -> str:
-    """Controller editors expect plain ASCII: µm → um, ″ → arcsec, accents dropped."""
+    """Free text (a machine's name, a file name) made safe for a comment of any control:
+    plain ASCII (µm → um, ″ → arcsec, accents dropped), one line (control characters become
+    spaces), and no comment terminator (LinuxCNC's parentheses become brackets)."""
     text = text.replace("µ", "u").replace("″", " arcsec").replace("°", " deg").replace("→", "->")
-    return unicodedata.normalize("NFKD", text).encode("ascii", "ignore").decode("ascii")
+    text = unicodedata.normalize("NFKD", text).encode("ascii", "ignore").decode("ascii")
+    return re.sub(r"[\x00-\x1f\x7f]", " ", text).replace("(", "[").replace(")", "]")
+
+
+def _one_line(value) -> None:
+    """Every string a template is given, however deep: a line break or control character in
+    it would start a block of its own on the control, so it is refused (free text goes
+    through ``ascii_text``, identifiers are checked where they are read)."""
+    if isinstance(value, str):
+        if re.search(r"[\x00-\x1f\x7f]", value):
+            raise CompgenError(f"refusing to write {value[:40]!r}: a line break or control "
+                               "character in a value would become a block of its own")
+    elif isinstance(value, dict):
+        for v in (*value.keys(), *value.values()):
+            _one_line(v)
+    elif isinstance(value, list | tuple):
+        for v in value:
+            _one_line(v)
 
 
 def fmt_signed(value: float, decimals: int = 4) -> str:
@@ -66,6 +86,7 @@ def environment() -> Environment:
 
 
 def render(template: str, **context) -> str:
+    _one_line(context)
     text = environment().get_template(template).render(**context)
     try:
         text.encode("ascii")
