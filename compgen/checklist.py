@@ -58,7 +58,7 @@ def _scan(folder: Path) -> _Found:
         elif path.suffix.lower() == ".json":
             try:
                 doc = json.loads(text)
-            except json.JSONDecodeError:
+            except (json.JSONDecodeError, RecursionError):   # a stray file is not compgen's
                 continue
             kind = doc.get("format") if isinstance(doc, dict) else None
             if kind == "compgen.fit/1":

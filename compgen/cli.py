@@ -110,7 +110,8 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, seed, ball, edits, c
                 + ", ".join(errors) if errors else "truth: nominal machine",
                 *(f"after the edit {e}" for e in edits),
                 f"noise {noise_um} µm σ, seed {seed}", "dX dY dZ: nest minus ball, µm")
-    write_atomically(output, format_rtest(machine, data, comments), force)
+    write_atomically(output, format_rtest(machine, data, comments), force,
+                     inputs=(machine_file, truth, *edits, current))
     click.echo(f"wrote {output}: {len(poses)} poses ({', '.join(names)})")
 
 
@@ -158,7 +159,8 @@ def fit_cmd(machine_file, data, base, model_names, add, remove, fixes, method, s
     fixed = {n: v for n, v in fixed.items() if n in model} | parse_fixed(machine, fixes)
     _progress(f"fitting {len(model)} effects to {sum(len(s) for s in sets)} poses")
     result = identify(machine, sets, model, fixed, method, sign)
-    write_atomically(output, result.to_json(), force)
+    write_atomically(output, result.to_json(Path(output).resolve().parent), force,
+                     inputs=(machine.source, base, *(s.source for s in sets)))
     click.echo(result.report(), nl=False)
     click.echo(f"\nwrote {output}")
 
@@ -225,7 +227,7 @@ def measure_program_cmd(machine_file, path_names, poses_file, controller_name, m
         return
     out = Path(output)
     files = {out: program, out.with_name(f"{name}.poses.csv"): emitted.files[".poses.csv"]}
-    write_all(files, force)
+    write_all(files, force, inputs=(machine_file, poses_file))
     click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, {mode} mode, "
                f"{ctl.words}", err=True)
 
@@ -279,7 +281,7 @@ def kinematics_cmd(base, controller_name, current, measured, output, force):
     main_key = ctl.main_suffix(text)
     files = {(out if key == main_key else out.with_name(out.stem + key)): body
              for key, body in emitted.files.items()}
-    write_all(files, force)
+    write_all(files, force, inputs=(base, current, measured, machine.source, *(d.file for d in fit.data)))
     click.echo("\n".join(emitted.notes))
     click.echo("wrote " + ", ".join(str(p) for p in files))
 
@@ -340,7 +342,7 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, outpu
     steps = checklist(machine, folder or Path(base).parent)
     html = report_html(machine, fit, found, images, comparison, emitted, steps, __version__,
                        date.today().isoformat())
-    write_atomically(output, html, force)
+    write_atomically(output, html, force, inputs=(base, before, *post_files, *emitted))
     click.echo(f"wrote {output}")
 
 

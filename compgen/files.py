@@ -1,12 +1,29 @@
-"""Writing outputs: atomically, and never over a user's file without ``force``."""
+"""The file edge: reading a user's files (regular files only, JSON without NaN or runaway
+nesting) and writing outputs atomically, as one transaction, never over an input or a
+user's file without ``force``."""
 
 from __future__ import annotations
 
+import json
 import os
+import stat
 import tempfile
 from pathlib import Path
 
 from .errors import CompgenError
+
+MAX_BYTES = 64 * 2**20      # an R-test session is a few MB; more is not one of compgen's files
+
+
+def _regular(path: Path, what: str) -> None:
+    try:
+        st = path.stat()
+    except OSError as exc:
+        raise CompgenError(f"cannot read {what}: {exc.strerror}", where=str(path)) from None
+    if not stat.S_ISREG(st.st_mode):     # a FIFO would hang, a device would never end
+        raise CompgenError(f"not a regular file, cannot be a {what}", where=str(path))
+    if st.st_size > MAX_BYTES:
+        raise CompgenError(f"{st.st_size / 2**20:.0f} MB is too large for a {what}", where=str(path))
 
 
 def read_text(path: str | Path, what: str, ansi_ok: bool = False) -> tuple[str, bytes]:
@@ -14,8 +31,10 @@ def read_text(path: str | Path, what: str, ansi_ok: bool = False) -> tuple[str, 
 
     ``ansi_ok`` accepts Latin-1 where UTF-8 fails: controller exports are often ANSI.
     """
+    path = Path(path)
+    _regular(path, what)
     try:
-        raw = Path(path).read_bytes()
+        raw = path.read_bytes()
     except OSError as exc:
         raise CompgenError(f"cannot read {what}: {exc.strerror}", where=str(path)) from None
     if b"\x00" in raw:
@@ -28,32 +47,84 @@ def read_text(path: str | Path, what: str, ansi_ok: bool = False) -> tuple[str, 
         raise CompgenError(f"{what} is not UTF-8 text (byte {exc.start})", where=str(path)) from None
 
 
-def write_atomically(path: str | Path, text: str, force: bool = False, newline: str = "\n") -> None:
-    """Write ``text`` to ``path`` via a temporary file and ``os.replace``: nothing half-written."""
-    path = Path(path)
-    if path.exists() and not force:
-        raise CompgenError("output file exists", where=str(path), hint="use --force to overwrite it")
-    if path.is_dir():
-        raise CompgenError("output path is a directory", where=str(path))
+def _no_constant(name: str):
+    raise ValueError(f"{name} is not a number compgen accepts")
+
+
+def read_json(path: str | Path, what: str) -> dict:
+    """A JSON object from a user's file: NaN and Infinity refused, nesting bounded."""
+    text = read_text(path, what)[0]
+    try:
+        doc = json.loads(text, parse_constant=_no_constant)
+    except (json.JSONDecodeError, ValueError) as exc:
+        raise CompgenError(f"not a JSON {what} ({exc})", where=str(path)) from None
+    except RecursionError:
+        raise CompgenError(f"JSON nested too deeply for a {what}", where=str(path)) from None
+    if not isinstance(doc, dict):
+        raise CompgenError(f"a {what} is a JSON object, not {type(doc).__name__}", where=str(path))
+    return doc
+
+
+def _target(path: Path, force: bool, inputs: tuple[Path, ...]) -> None:
+    """Refuse an output path before anything is written."""
+    for source in inputs:
+        if path.resolve() == source.resolve() or (path.exists() and source.exists()
+                                                  and path.samefile(source)):
+            raise CompgenError("output would overwrite an input of this command", where=str(path),
+                               hint="write to a new file; keep the input as it is (it may be the only copy)")
+    if path.is_symlink() or path.exists():
+        if not path.is_file() or path.is_symlink():
+            raise CompgenError("output path exists and is not a regular file", where=str(path))
+        if not force:
+            raise CompgenError("output file exists", where=str(path), hint="use --force to overwrite it")
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise CompgenError("output folder does not exist", where=str(folder))
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=folder)
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise CompgenError("output folder is not writable", where=str(folder))
+
+
+def write_atomically(path: str | Path, text: str, force: bool = False, newline: str = "\n",
+                     inputs: tuple = ()) -> None:
+    """Write ``text`` to ``path`` via a temporary file and ``os.replace``: nothing half-written."""
+    write_all({path: text}, force, inputs, newline)
+
+
+def write_all(files: dict[str | Path, str], force: bool = False, inputs: tuple = (),
+              newline: str = "\n") -> None:
+    """Write several files as one transaction: every target is checked, then every file is
+    written to a temporary beside it, then all are renamed; a failure on the way removes the
+    temporaries, so nothing of the set is left behind. Files get the umask's permissions."""
+    paths = {Path(p): text for p, text in files.items()}
+    sources = tuple(Path(p) for p in inputs if p)
+    for path in paths:
+        _target(path, force, sources)
+    umask = os.umask(0)
+    os.umask(umask)
+    temps: dict[Path, str] = {}
+    saved: dict[Path, str] = {}      # a target that existed, moved aside until all are in place
+    placed: list[Path] = []
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline=newline) as f:
-            f.write(text)
-        os.replace(tmp, path)
+        for path, text in paths.items():
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent if str(path.parent) else ".")
+            temps[path] = tmp
+            os.fchmod(fd, 0o666 & ~umask)
+            with os.fdopen(fd, "w", encoding="utf-8", newline=newline) as f:
+                f.write(text)
+        for path, tmp in temps.items():
+            if path.exists():
+                saved[path] = f"{tmp}.old"
+                os.replace(path, saved[path])
+            os.replace(tmp, path)
+            placed.append(path)
     except OSError as exc:
-        Path(tmp).unlink(missing_ok=True)
-        raise CompgenError(f"cannot write: {exc.strerror}", where=str(path)) from None
-
-
-def write_all(files: dict[str | Path, str], force: bool = False) -> None:
-    """Write several files as one: every target is checked before any is written, and each
-    goes through a temporary file, so a refusal leaves nothing behind."""
-    for path in files:
-        path = Path(path)
-        if path.exists() and not force:
-            raise CompgenError("output file exists", where=str(path), hint="use --force to overwrite it")
-    for path, text in files.items():
-        write_atomically(path, text, force=True)
+        for path in placed:
+            path.unlink(missing_ok=True)
+        for path, old in saved.items():
+            if Path(old).exists():
+                os.rename(old, path)
+        for tmp in temps.values():
+            Path(tmp).unlink(missing_ok=True)
+        raise CompgenError(f"cannot write: {exc.strerror}", where=str(exc.filename or path)) from None
+    for old in saved.values():
+        Path(old).unlink(missing_ok=True)

@@ -367,7 +367,7 @@ class _Getter:
         unknown = sorted(set(self.doc) - keys)
         if unknown:
             raise CompgenError(f"unknown key{'s' * (len(unknown) > 1)} {', '.join(unknown)}",
-                               where=self.where, hint=f"this table takes {', '.join(sorted(keys))}")
+                               where=self.where, hint=f"the table takes {', '.join(sorted(keys))}")
 
     def _get(self, key: str, default=None):
         if key not in self.doc:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -16,8 +17,8 @@ import numpy as np
 
 from .effects import effect_name
 from .errors import CompgenError
-from .files import read_text
-from .units import shown
+from .files import read_json
+from .units import LENGTH, shown, to_inside
 
 FORMAT = "compgen.fit/1"
 
@@ -71,12 +72,17 @@ class FitResult:
         s = self.singular_values
         return float(s[0] / s[-1]) if len(s) and s[-1] > 0 else math.inf
 
-    def to_dict(self) -> dict:
+    def to_dict(self, folder: str | Path | None = None) -> dict:
+        """fit.json's content; with ``folder`` (where it is written), file names relative to
+        it, so the job folder can move."""
+        def rel(file: str) -> str:
+            return os.path.relpath(file, folder) if folder is not None and file else file
+
         return {
             "format": FORMAT,
             "compgen_version": self.version,
-            "machine": self.machine,
-            "data": [d.__dict__ for d in self.data],
+            "machine": {**self.machine, "file": rel(self.machine["file"])},
+            "data": [{**d.__dict__, "file": rel(d.file)} for d in self.data],
             "sign": self.sign,
             "model": list(self.model),
             "effects": list(dict.fromkeys(effect_name(p) for p in self.model)),
@@ -94,19 +100,24 @@ class FitResult:
             "residual": self.residual,
         }
 
-    def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=2, allow_nan=False, ensure_ascii=False) + "\n"
+    def to_json(self, folder: str | Path | None = None) -> str:
+        return json.dumps(self.to_dict(folder), indent=2, allow_nan=False, ensure_ascii=False) + "\n"
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "fit.json") -> FitResult:
         if d.get("format") != FORMAT:
             raise CompgenError(f"not a compgen fit file (format {d.get('format')!r})", where=where,
                                hint="make one with `compgen fit`")
+        base = Path(where).parent
+
+        def file(name: str) -> str:      # relative to the fit file; older fits hold absolute paths
+            return str(base / name) if name else name
+
         try:
-            params = {n: Estimate(float(p["value"]), float(p["std"]), p["unit"], bool(p.get("fixed")))
-                      for n, p in d["parameters"].items()}
+            params = {n: _estimate(p, f"{where}: parameters.{n}") for n, p in d["parameters"].items()}
             return cls(
-                machine=d["machine"], data=tuple(DataRef(**x) for x in d["data"]),
+                machine={**d["machine"], "file": file(d["machine"]["file"])},
+                data=tuple(DataRef(**{**x, "file": file(x["file"])}) for x in d["data"]),
                 model=tuple(d["model"]), parameters=params,
                 free=tuple(d["correlation"]["names"]),
                 correlation=np.array(d["correlation"]["matrix"], float).reshape(
@@ -151,12 +162,17 @@ class FitResult:
         return "\n".join(lines) + "\n"
 
 
+def _estimate(p: dict, where: str) -> Estimate:
+    """A parameter of fit.json in inside units, whatever unit it was written in."""
+    if not isinstance(p, dict) or not isinstance(p.get("unit"), str) or not all(
+            isinstance(p.get(k), int | float) and not isinstance(p.get(k), bool) for k in ("value", "std")):
+        raise CompgenError('must be {"value": number, "unit": text, "std": number}', where=where)
+    inside = "mm" if p["unit"] in LENGTH else "rad"
+    std = to_inside(p["std"], p["unit"], inside, where)
+    if std < 0:
+        raise CompgenError(f"negative uncertainty {p['std']}", where=where)
+    return Estimate(to_inside(p["value"], p["unit"], inside, where), std, inside, p.get("fixed") is True)
+
+
 def load_fit(path: str | Path) -> FitResult:
-    path = Path(path)
-    try:
-        d = json.loads(read_text(path, "fit file")[0])
-    except json.JSONDecodeError as exc:
-        raise CompgenError(f"not a JSON fit file ({exc})", where=str(path)) from None
-    if not isinstance(d, dict):
-        raise CompgenError("not a compgen fit file", where=str(path))
-    return FitResult.from_dict(d, str(path))
+    return FitResult.from_dict(read_json(path, "fit file"), str(path))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .effects import effect_of_param
 from .errors import CompgenError
 from .machine import Machine, load_machine
 from .results import FitResult
@@ -16,6 +17,10 @@ def reload(fit: FitResult, machine_file: str | None = None) -> tuple[Machine, li
     if machine.sha256 != fit.machine["sha256"]:
         raise CompgenError("machine file changed since the fit", where=machine.source,
                            hint="refit with `compgen fit` on the current machine file")
+    for name, e in fit.parameters.items():
+        if effect_of_param(machine, name).unit != e.unit:
+            raise CompgenError(f"{name} is given in a unit of {'length' if e.unit == 'mm' else 'angle'}",
+                               where=f"fit file: parameters.{name}", hint="the fit file is damaged: refit")
     data = []
     for ref in fit.data:
         if not Path(ref.file).exists():

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -11,7 +10,7 @@ import numpy as np
 
 from .effects import effect_of_param
 from .errors import CompgenError
-from .files import read_text
+from .files import read_json
 from .kinematics import Model, Poses
 from .machine import Machine
 from .rtest import RTestData
@@ -45,11 +44,7 @@ def read_truth(path: str | Path, machine: Machine) -> dict[str, float]:
     """Parameters from a truth file or a fit.json: ``{"parameters": {NAME: {"value": v,
     "unit": u}}}`` → {canonical name: value in mm or rad}."""
     where = str(path)
-    try:
-        doc = json.loads(read_text(path, "truth file")[0])
-    except json.JSONDecodeError as exc:
-        raise CompgenError(f"not a JSON file ({exc})", where=where) from None
-    params = doc.get("parameters") if isinstance(doc, dict) else None
+    params = read_json(path, "truth file").get("parameters")
     if not isinstance(params, dict):
         raise CompgenError('needs an object "parameters": {NAME: {"value": v, "unit": u}}',
                            where=where)

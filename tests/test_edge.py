@@ -2,8 +2,13 @@
 that enters an emitted file is checked or cleaned, every edit is guarded. Each case here
 failed before its fix (issue 9)."""
 
+import json
+import os
+import shutil
+from pathlib import Path
+
 import pytest
-from conftest import SEED_MACHINE, run
+from conftest import ROOT, SEED_MACHINE, run
 
 from compgen.emit.registry import CONTROLLERS
 
@@ -59,3 +64,156 @@ def test_free_text_cannot_add_a_block(tmp_path, controller):
     assert evil[0].startswith(";") or evil[0].split(" ", 1)[1].startswith(";"), evil[0]
     injected = evil[0][evil[0].index("evil"):evil[0].index("; controller")]
     assert "(" not in injected and ")" not in injected, injected
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    """A fit of the example session (Table 4 and a hidden 2/rev radial motion of C), and
+    the same with that effect added: the fit a user would take to the control."""
+    folder = tmp_path_factory.mktemp("job")
+    code, _, err = run("fit", "--machine", SEED_MACHINE, ROOT / "examples" / "seed-session.csv",
+                       "-o", folder / "fit.json")
+    assert code == 0, err
+    code, _, err = run("fit", "--from", folder / "fit.json", "--add", "EXC:h2", "-o", folder / "fit2.json")
+    assert code == 0, err
+    return folder
+
+
+def _edited_fit(folder, tmp_path, change):
+    doc = json.loads((folder / "fit2.json").read_text())
+    change(doc)
+    path = folder / f"variant-{tmp_path.name}.json"    # beside the fit: its relative paths hold
+    path.write_text(json.dumps(doc))
+    return path
+
+
+BAD_FITS = {
+    "NaN value": (lambda d: d["parameters"]["XOC"].update(value=float("nan")), "not a number"),
+    "Infinity std": (lambda d: d["parameters"]["BOA"].update(std=float("inf")), "not a number"),
+    "unknown unit": (lambda d: d["parameters"]["XOC"].update(unit="furlong"), "unknown unit"),
+    "angle unit for a length": (lambda d: d["parameters"]["XOC"].update(unit="arcsec"), "unit of angle"),
+    "value as text": (lambda d: d["parameters"]["XOC"].update(value="0.001"), "must be"),
+    "unknown parameter": (lambda d: d["parameters"].update(XOQ={"value": 0, "std": 0, "unit": "mm"}),
+                          "XOQ"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_FITS)
+def test_a_damaged_fit_never_reaches_the_control(fitted, tmp_path, case):
+    change, expected = BAD_FITS[case]
+    fit = _edited_fit(fitted, tmp_path, change)
+    out = tmp_path / "K.TAB"
+    code, _, err = run("kinematics", "--from", fit, "--controller", "itnc530", "-o", out)
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
+    assert expected in err, err
+    assert not list(tmp_path.iterdir())
+
+
+def test_the_unit_of_a_fit_is_honoured(fitted, tmp_path):
+    """XOC written in µm instead of mm gives the same edit, not one 1000 times larger."""
+    def in_um(d):
+        p = d["parameters"]["XOC"]
+        p.update(value=p["value"] * 1e3, std=p["std"] * 1e3, unit="um")
+    outs = []
+    for fit in (fitted / "fit2.json", _edited_fit(fitted, tmp_path, in_um)):
+        out = tmp_path / f"K{len(outs)}.txt"
+        code, stdout, err = run("kinematics", "--from", fit, "--controller", "itnc530", "-o", out)
+        assert code == 0, err
+        outs.append(stdout)
+    assert outs[0] == outs[1].replace("K1", "K0")
+
+
+def test_a_job_folder_can_move(fitted, tmp_path):
+    """fit.json names its machine and data relative to itself."""
+    doc = json.loads((fitted / "fit.json").read_text())
+    assert not Path(doc["machine"]["file"]).is_absolute()
+    assert not Path(doc["data"][0]["file"]).is_absolute()
+    moved = tmp_path / "a" / "b"
+    moved.mkdir(parents=True)
+    fit = moved / "fit.json"
+    # machine and data at the same relative places from the moved fit
+    for ref in (doc["machine"]["file"], doc["data"][0]["file"]):
+        target = (moved / ref).resolve()
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy((fitted / ref).resolve(), target)
+    fit.write_text((fitted / "fit.json").read_text())
+    code, _, err = run("diagnose", "--from", fit, "--json")
+    assert code == 0, err
+
+
+def test_json_that_would_crash_the_parser_is_refused(tmp_path, fitted):
+    deep = tmp_path / "deep.json"
+    deep.write_text("[" * 100000 + "]" * 100000)
+    for args in (("diagnose", "--from", deep),
+                 ("simulate", "--machine", SEED_MACHINE, "--truth", deep, "-o", tmp_path / "x.csv")):
+        code, _, err = run(*args)
+        assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
+    stray = fitted / "stray.json"      # a checklist of the folder skips a file that is not compgen's
+    stray.write_text("[" * 100000 + "]" * 100000)
+    try:
+        code, _, err = run("checklist", "--machine", SEED_MACHINE, "--dir", fitted)
+        assert code == 0, err
+    finally:
+        stray.unlink()
+
+
+def test_a_fifo_is_refused_not_waited_on(tmp_path):
+    fifo = tmp_path / "data.csv"
+    os.mkfifo(fifo)
+    code, _, err = run("fit", "--machine", SEED_MACHINE, fifo, "-o", tmp_path / "f.json")
+    assert code == 2 and "not a regular file" in err, err
+
+
+def test_outputs_never_replace_an_input_or_a_device(fitted, tmp_path):
+    current = tmp_path / "KINEMATIC.TAB"
+    current.write_text((ROOT / "examples" / "itnc530-current.TAB").read_text())
+    before = current.read_bytes()
+    code, _, err = run("kinematics", "--from", fitted / "fit2.json", "--current", current, "-o", current,
+                       "--force")
+    assert code == 2 and "overwrite an input" in err, err
+    assert current.read_bytes() == before
+    code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", ROOT / "examples" / "truth-table4.json",
+                       "-o", "/dev/null", "--force")
+    assert code == 2 and "not a regular file" in err, err
+
+
+def test_outputs_are_written_whole_with_normal_permissions(fitted, tmp_path):
+    code, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", "/proc/K.TAB")
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    try:
+        if os.access(locked, os.W_OK):
+            pytest.skip("running as a user who can write anywhere")
+        code, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", locked / "K.TAB")
+        assert code == 2 and err.count("\n") == 1 and "not writable" in err, err
+    finally:
+        locked.chmod(0o755)
+    old = os.umask(0o022)
+    try:
+        code, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", tmp_path / "K.TAB")
+    finally:
+        os.umask(old)
+    assert code == 0, err
+    for f in tmp_path.glob("K*"):
+        assert f.stat().st_mode & 0o777 == 0o644, f
+
+
+def test_an_edit_is_one_transaction(fitted, tmp_path, monkeypatch):
+    """When its last file cannot be written, none of the edit's files is left, and a file it
+    was to replace (with --force) is as it was."""
+    (tmp_path / "K.TAB").write_text("the user's")
+    real = os.replace
+    calls = []
+
+    def failing(src, dst):
+        calls.append(dst)
+        if len(calls) == 3:
+            raise OSError(28, "No space left on device", str(dst))
+        return real(src, dst)
+    monkeypatch.setattr(os, "replace", failing)
+    code, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", tmp_path / "K.TAB", "--force")
+    assert code == 2 and "No space left" in err, err
+    assert [p.name for p in tmp_path.iterdir()] == ["K.TAB"]
+    assert (tmp_path / "K.TAB").read_text() == "the user's"

@@ -151,7 +151,7 @@ def test_linuxcnc_reads_compgens_program_to_the_simulators_positions(machines, t
 
 @pytest.mark.parametrize("edit, expected", [
     (("probe_length = 184.670", "probe_length = 184.670\nball_diametre = 25.4"),
-     "unknown keys ['ball_diametre']"),
+     "unknown key ball_diametre"),
     (("ball_diameter = 25.4", "ball_diameter = -25.4"), "ball_diameter"),
     (("table_top = 0.0", "table_top = 300.0"), "does not stand above the table top"),
     (("clearance = 20.0", "clearance = 20.0\nsafe_z = -5.0"), "safe_z (a height in machine coordinates)"),
