@@ -172,7 +172,8 @@ def test_outputs_never_replace_an_input_or_a_device(fitted, tmp_path):
                        "--force")
     assert code == 2 and "overwrite an input" in err, err
     assert current.read_bytes() == before
-    code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", ROOT / "examples" / "truth-table4.json",
+    truth = ROOT / "examples" / "truth-table4.json"
+    code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", truth,
                        "-o", "/dev/null", "--force")
     assert code == 2 and "not a regular file" in err, err
 
