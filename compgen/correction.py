@@ -86,8 +86,13 @@ def plan(machine: Machine, fit: FitResult, force: bool = False) -> Plan:
             tables.append(name)
         else:
             other.append(name)
-    _check_bounds(machine, lines, squareness, force)
-    return Plan(lines, squareness, tuple(tables), tuple(other), tuple(setup), values)
+    bad = [n for n, v in values.items() if not np.isfinite(v)]
+    if bad:
+        raise CompgenError(f"{', '.join(bad)} {'is' if len(bad) == 1 else 'are'} not a finite number",
+                           hint="refit: no edit is written from a damaged fit")
+    p = Plan(lines, squareness, tuple(tables), tuple(other), tuple(setup), values)
+    _check_bounds(machine, p, force)
+    return p
 
 
 def _compensable_by_table(machine: Machine, e) -> bool:
@@ -101,22 +106,27 @@ def _compensable_by_table(machine: Machine, e) -> bool:
     return e.direction in TRANSLATIONS and not any(a.rotary for a in ahead)
 
 
-def _check_bounds(machine: Machine, lines, squareness, force: bool) -> None:
+def _check_bounds(machine: Machine, p: Plan, force: bool) -> None:
+    """Every correction the edit writes against [limits]: lines, squareness and tables
+    (``not <=`` so that a NaN is never within bounds)."""
     lim = machine.limits
     too_big = []
-    for line in lines.values():
-        off = np.abs(line.offset).max() * 1e3
-        tilt = np.abs(line.tilt).max() / ARCSEC
-        if off > lim.offset_um:
-            too_big.append(f"{line.axis} line offset {off:.1f} um > {lim.offset_um:g} um")
-        if tilt > lim.tilt_arcsec:
-            too_big.append(f"{line.axis} line tilt {tilt:.1f} arcsec > {lim.tilt_arcsec:g} arcsec")
-    for name, v in squareness.items():
-        if abs(v) / ARCSEC > lim.tilt_arcsec:
-            too_big.append(f"{name} {v / ARCSEC:.1f} arcsec > {lim.tilt_arcsec:g} arcsec")
+
+    def check(what: str, value: float, unit: str) -> None:
+        limit = lim.offset_um if unit == "um" else lim.tilt_arcsec
+        if not value <= limit:
+            too_big.append(f"{what} {value:.1f} {unit} > {limit:g} {unit}")
+    for line in p.lines.values():
+        check(f"{line.axis} line offset", np.abs(line.offset).max() * 1e3, "um")
+        check(f"{line.axis} line tilt", np.abs(line.tilt).max() / ARCSEC, "arcsec")
+    for name, v in p.squareness.items():
+        check(name, abs(v) / ARCSEC, "arcsec")
+    for t in comp_tables(machine, p):
+        peak = np.abs(t.values).max()
+        check(f"{t.effect} table", *((peak * 3600, "arcsec") if t.unit == "deg" else (peak * 1e3, "um")))
     if too_big and not force:
         raise CompgenError("correction beyond the plausibility limits: " + "; ".join(too_big),
-                           hint="check the R-test set-up and the fit first; a real error this large "
+                           hint="Check the R-test set-up and the fit first; a real error this large "
                                 "needs the OEM. Raise [limits] in the machine file or use --force")
 
 
@@ -127,8 +137,9 @@ def rest(machine: Machine, p: Plan, held: Held, force: bool = False) -> Plan:
                          line.tilt - held.lines[n].tilt) for n, line in p.lines.items()}
     squareness = {k: p.squareness.get(k, 0.0) - held.squareness.get(k, 0.0)
                   for k in {**p.squareness, **held.squareness}}
-    _check_bounds(machine, lines, squareness, force)
-    return Plan(lines, squareness, p.tables, p.not_compensable, p.setup, p.fit_params)
+    p = Plan(lines, squareness, p.tables, p.not_compensable, p.setup, p.fit_params)
+    _check_bounds(machine, p, force)
+    return p
 
 
 def lines_text(p: Plan) -> list[str]:

@@ -29,6 +29,18 @@ def to_inside(value: float, unit: str, inside_unit: str, where: str = "") -> flo
     return value * TO_INSIDE[unit]
 
 
+def number(text: str, what: str, where: str) -> float:
+    """A number read from a user's or a control's file: finite, or one clear refusal (Python's
+    float() would take ``nan``, ``inf`` and ``1e999``)."""
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        value = math.nan
+    if not math.isfinite(value):
+        raise CompgenError(f"{what} {text!r} is not a number (a finite one)", where=where)
+    return value
+
+
 def shown(value: float, inside_unit: str) -> tuple[float, str]:
     """``value`` in mm or rad as a person reads it: µm or arcsec."""
     unit, factor = DISPLAY[inside_unit]

@@ -218,3 +218,35 @@ def test_an_edit_is_one_transaction(fitted, tmp_path, monkeypatch):
     assert code == 2 and "No space left" in err, err
     assert [p.name for p in tmp_path.iterdir()] == ["K.TAB"]
     assert (tmp_path / "K.TAB").read_text() == "the user's"
+
+
+def _big_table(d):
+    d["model"].append("ECC:h2c")
+    d["parameters"]["ECC:h2c"] = {"value": 0.5, "std": 0.001, "unit": "rad"}
+
+
+def test_compensation_tables_are_held_to_the_limits(fitted, tmp_path):
+    fit = _edited_fit(fitted, tmp_path, _big_table)
+    out = tmp_path / "K.MPF"
+    code, _, err = run("kinematics", "--from", fit, "--controller", "sinumerik840d", "-o", out)
+    assert code == 2 and "ECC:h2 table" in err and "arcsec > 60 arcsec" in err, err
+    assert not out.exists()
+
+
+NAN_STATES = {
+    "itnc530": ("examples/itnc530-current.TAB", "+29.794", "nan"),
+    "sinumerik840d": (None, "$TC_CARR1[1]=0.0", "$TC_CARR1[1]=nan"),
+    "linuxcnc": (None, "setp xyzac-trt-kins.z-offset 0.0", "setp xyzac-trt-kins.z-offset inf"),
+}
+
+
+@pytest.mark.parametrize("controller", NAN_STATES)
+def test_a_non_finite_current_state_is_refused(fitted, tmp_path, controller):
+    source, good, bad = NAN_STATES[controller]
+    text = (ROOT / source).read_text() if source else good + "\n"
+    assert good in text
+    current = tmp_path / "current.txt"
+    current.write_text(text.replace(good, bad))
+    code, _, err = run("kinematics", "--from", fitted / "fit2.json", "--controller", controller,
+                       "--current", current, "-o", tmp_path / "K.out")
+    assert code == 2 and "not a number" in err and "Traceback" not in err, err

@@ -19,6 +19,7 @@ from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
 from ..motion import Block, unknown, words
+from ..units import number
 from . import fmt_signed, render
 from .base import Controller, EditContext, EditFiles
 from .tab import MM_PER, TabTable
@@ -147,7 +148,8 @@ def _iso_rows(text: str) -> list[tuple[str, str, float]]:
         t = TabTable.parse(text, "table")
         return [(r["DOC"], r["AXIS"], t.mm(r["COORD"], r["AXIS"])) for r in t.rows
                 if r.get("KEY") == "Trans" and ISO.fullmatch(r.get("DOC", ""))]
-    return [((m[3], m[1], float(m[2])) if m[1] else (m[4], m[5], float(m[6]))) for m in ROW.finditer(text)]
+    return [((m[3], m[1], number(m[2], "change-list value", "change list")) if m[1] else
+             (m[4], m[5], number(m[6], "change-list value", "change list"))) for m in ROW.finditer(text)]
 
 
 def read_lines(text: str, machine: Machine, lines: dict[str, AxisLine]) -> dict[str, AxisLine]:

@@ -17,6 +17,7 @@ from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
 from ..motion import Block, gcode_move, unknown
+from ..units import number
 from . import fmt_plain, render
 from .base import Controller, EditContext, EditFiles
 
@@ -47,11 +48,6 @@ def _nominal(machine: Machine, tilt, c) -> dict[str, float]:
             **{f"{'xyz'[k]}-offset": (pivot_t - pivot_c)[k] for k in range(3)}}
 
 
-def _number(text: str, what: str, where: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise CompgenError(f"{what} value {text!r} is not a number", where=where) from None
 
 
 def read_hal(text: str, module: str, where: str) -> tuple[dict[str, float], dict[str, str]]:
@@ -62,14 +58,14 @@ def read_hal(text: str, module: str, where: str) -> tuple[dict[str, float], dict
         for word in m[2].split():
             if word.startswith(f"{module}."):
                 signal[word[len(module) + 1:]] = m[1]
-    on_signal = {m[1]: _number(m[2], f"sets {m[1]}", where) for m in SETS.finditer(text)}
+    on_signal = {m[1]: number(m[2], f"sets {m[1]}", where) for m in SETS.finditer(text)}
     values = {}
     for m in SETP.finditer(text):
         if m[1] == module:
             if m[2] in signal:
                 raise CompgenError(f"{module}.{m[2]} is set by setp and netted to {signal[m[2]]}: LinuxCNC "
                                    "refuses to start such a configuration", where=where)
-            values[m[2]] = _number(m[3], f"setp {module}.{m[2]}", where)
+            values[m[2]] = number(m[3], f"setp {module}.{m[2]}", where)
     values |= {pin: on_signal[sig] for pin, sig in signal.items() if sig in on_signal}
     return values, signal
 

@@ -17,6 +17,7 @@ from ..lines import AxisLine
 from ..machine import Machine
 from ..motion import Block, gcode_move
 from ..transforms import rot_exact
+from ..units import number
 from . import ascii_text, fmt_plain, render
 from .base import Controller, EditContext, EditFiles
 
@@ -34,14 +35,8 @@ def read_carr(text: str, where: str, record: int) -> dict[int, float]:
     out = {}
     for k, line in enumerate(text.splitlines(), start=1):
         m = CARR.match(line)
-        if m and int(m[2]) == record:
-            try:
-                out[int(m[1])] = float(m[3])
-            except ValueError:
-                if m[3].startswith('"'):
-                    continue
-                raise CompgenError(f"$TC_CARR{m[1]} value {m[3]!r} is not a number",
-                                   where=f"{where}:{k}") from None
+        if m and int(m[2]) == record and not m[3].startswith('"'):
+            out[int(m[1])] = number(m[3], f"$TC_CARR{m[1]} value", f"{where}:{k}")
     return out
 
 
@@ -120,9 +115,10 @@ def read_cec(text: str, machine: Machine) -> list[CompTable]:
             continue
         t = found.setdefault(int(m[2]), {"values": {}})
         if m[1] is None:
-            t["values"][int(m[3])] = float(m[4])
+            t["values"][int(m[3])] = number(m[4], "$AN_CEC value", "CEC file")
         else:
-            t[m[1][1:].lower()] = m[4] if m[1] in ("_INPUT_AXIS", "_OUTPUT_AXIS") else float(m[4])
+            t[m[1][1:].lower()] = (m[4] if m[1] in ("_INPUT_AXIS", "_OUTPUT_AXIS")
+                                   else number(m[4], f"$AN_CEC{m[1]}", "CEC file"))
     channel = {m: a for a, m in _machine_axes(machine).items()}
     out = []
     for k in sorted(found):

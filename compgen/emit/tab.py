@@ -17,6 +17,7 @@ import re
 from dataclasses import dataclass, field
 
 from ..errors import CompgenError
+from ..units import number
 
 KEYS = {"Trans", "MachAxis", "MachBase", "CMO", "ToolAxis", "TOOLFILE", "SUBFILE1", "SUBFILE2"}
 BEGIN = re.compile(r"^BEGIN\s+(\S+?)(?:\.TAB)?(?:\s+(MM|INCH))?(?:\s.*)?$", re.IGNORECASE)
@@ -70,11 +71,7 @@ class TabTable:
                                    where=f"{where}:{k + 1}",
                                    hint="the table's columns must line up with its header line")
             if cells.get("KEY") == "Trans":
-                try:
-                    float(cells.get("COORD", ""))
-                except ValueError:
-                    raise CompgenError(f"Trans row has COORD {cells.get('COORD')!r}, not a number",
-                                       where=f"{where}:{k + 1}") from None
+                number(cells.get("COORD", ""), "Trans row's COORD", f"{where}:{k + 1}")
             table.rows.append(cells)
             table.row_at.append(k)
         raise CompgenError("no [END] line", where=where)
