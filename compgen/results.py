@@ -68,6 +68,15 @@ class FitResult:
             a.setflags(write=False)
 
     @property
+    def marker(self) -> str:
+        """``fit:`` and 6 hex digits naming this fit's numbers and data, wherever its files
+        are: every edit carries it, so that applying the same fit twice can be refused."""
+        import hashlib
+        key = json.dumps([self.model, {n: [e.value, e.unit] for n, e in self.parameters.items()},
+                          [d.sha256 for d in self.data]], sort_keys=True)
+        return "fit:" + hashlib.sha256(key.encode()).hexdigest()[:6]
+
+    @property
     def condition_number(self) -> float:
         s = self.singular_values
         return float(s[0] / s[-1]) if len(s) and s[-1] > 0 else math.inf

@@ -250,3 +250,24 @@ def test_a_non_finite_current_state_is_refused(fitted, tmp_path, controller):
     code, _, err = run("kinematics", "--from", fitted / "fit2.json", "--controller", controller,
                        "--current", current, "-o", tmp_path / "K.out")
     assert code == 2 and "not a number" in err and "Traceback" not in err, err
+
+
+@pytest.mark.parametrize("controller", CONTROLLERS)
+def test_the_same_fit_is_not_applied_twice(fitted, tmp_path, controller):
+    """The edited state, given back as --current, carries the fit's marker: refused."""
+    ctl = CONTROLLERS[controller]
+    carr = tmp_path / "carr.txt"     # the seed machine's A/C record as the control holds it
+    held = dict(zip(range(7, 13), (-1.0, 0.0, 0.0, 0.0, 0.0, -1.0), strict=True))
+    carr.write_text("".join(f"$TC_CARR{k}[1]={held.get(k, 0.0)}\n"
+                            for k in (*held, 44, 45, 46, *range(55, 61))))
+    first = {"itnc530": ["--current", ROOT / "examples" / "itnc530-current.TAB"],
+             "sinumerik840d": ["--current", carr]}.get(controller, [])
+    out = tmp_path / "K1.out"
+    code, _, err = run("kinematics", "--from", fitted / "fit2.json", "--controller", controller, *first,
+                       "-o", out)
+    assert code == 0, err
+    again = tmp_path / "K2.out"
+    code, _, err = run("kinematics", "--from", fitted / "fit2.json", "--controller", controller,
+                       "--current", out, "-o", again)
+    assert code == 2 and "already carries this fit's correction" in err, (ctl.name, err)
+    assert not again.exists()

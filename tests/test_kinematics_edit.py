@@ -156,7 +156,7 @@ def test_cli_writes_table_change_list_and_sign_check(tmp_path, fit_file):
     (["--controller", "sinumerik840d"], "needs --current"),
     (["--controller", "tnc640", "--current", ROOT / "examples" / "itnc530-current.TAB"],
      "configuration editor"),
-    (["--measured-with", ROOT / "examples" / "itnc530-current.TAB"], "give --current as well"),
+    (["--measured-with", ROOT / "examples" / "itnc530-current.TAB"], "Give --current as well"),
 ])
 def test_cli_refusals(tmp_path, fit_file, args, expected):
     out = tmp_path / "k.txt"

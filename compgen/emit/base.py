@@ -24,6 +24,7 @@ class EditContext:
     expect: tuple[str, ...]   # the sign check's expected reading changes
     version: str
     date: str
+    marker: str = ""          # the fit's marker (``FitResult.marker``)
 
 
 @dataclass(frozen=True)

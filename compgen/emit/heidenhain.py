@@ -63,15 +63,23 @@ def _decimals(axis: str) -> int:
     return MM_DECIMALS if axis in "XYZ" else DEG_DECIMALS
 
 
-def edit_table(table: TabTable, rows: dict[str, tuple[list[Row], list[Row]]], where: str) -> list[str]:
-    """Add the corrections to the table in place: an existing row of the same ISO name (DOC)
-    gets its COORD increased; a missing one is inserted next to its ``MachAxis``, the error
-    rows just before it in order, the inverse rows just after it in order. The changes, in
-    the table's units."""
+def edit_table(table: TabTable, rows: dict[str, tuple[list[Row], list[Row]]], where: str,
+               marker: str = "") -> list[str]:
+    """Add the corrections to the table in place: an existing row of the same ISO name (the
+    DOC's first word) gets its COORD increased; a missing one is inserted next to its
+    ``MachAxis``, the error rows just before it in order, the inverse rows just after it in
+    order. Each row written carries ``marker`` after its name where the DOC column holds it
+    (the table has no comments). The changes, in the table's units."""
     if "DOC" not in table.columns:
         raise CompgenError("the current table has no DOC column to name the correction rows",
                            hint="add a DOC column (the enhanced kinematics description has one)")
     diff = []
+    start, end = table.slot("DOC")
+    room = None if end is None else end - start - 1
+    if marker and room is not None and room < len(f"-X0A {marker}"):
+        diff.append(f"the DOC column ({room} characters) cannot carry the fit's marker {marker}: "
+                    "compgen cannot tell later that this table holds this fit's correction")
+        marker = ""
 
     def machaxis(axis):
         i = next((i for i, r in enumerate(table.rows)
@@ -85,19 +93,26 @@ def edit_table(table: TabTable, rows: dict[str, tuple[list[Row], list[Row]]], wh
         for side, group in (("before", before), ("after", after)):
             for k, row in enumerate(group):
                 unit = table.unit.lower() if row.axis in "XYZ" else "deg"
-                idx = next((i for i, r in enumerate(table.rows) if r.get("DOC") == row.doc), None)
+                doc = f"{row.doc} {marker}".strip()
+                idx = next((i for i, r in enumerate(table.rows) if _name(r) == row.doc), None)
                 if idx is not None:
                     old = table.rows[idx]["COORD"]
                     new = table.coord(table.mm(old, row.axis) + row.coord, row.axis, _decimals(row.axis))
-                    table.set(idx, {"COORD": new}, where)
+                    table.set(idx, {"COORD": new, "DOC": doc}, where)
                     diff.append(f"{row.doc:<6} Trans {row.axis}  {old} -> {new} {unit}")
                     continue
                 at = machaxis(axis) if side == "before" else machaxis(axis) + 1 + k
                 new = table.coord(row.coord, row.axis, _decimals(row.axis))
                 table.insert(at, {"NR": str(at), "KEY": "Trans", "AXIS": row.axis, "COORD": new,
-                                  "DOC": row.doc})
+                                  "DOC": doc})
                 diff.append(f"{row.doc:<6} Trans {row.axis}  (new row) -> {new} {unit}")
     return diff
+
+
+def _name(row: dict) -> str:
+    """A row's ISO name: the first word of its DOC (compgen's marker may follow)."""
+    words = (row.get("DOC") or "").split()
+    return words[0] if words else ""
 
 
 def _resolution(table: TabTable) -> list[str]:
@@ -146,8 +161,8 @@ def _iso_rows(text: str) -> list[tuple[str, str, float]]:
     or of compgen's change list (mm)."""
     if text.lstrip().startswith("BEGIN"):
         t = TabTable.parse(text, "table")
-        return [(r["DOC"], r["AXIS"], t.mm(r["COORD"], r["AXIS"])) for r in t.rows
-                if r.get("KEY") == "Trans" and ISO.fullmatch(r.get("DOC", ""))]
+        return [(_name(r), r["AXIS"], t.mm(r["COORD"], r["AXIS"])) for r in t.rows
+                if r.get("KEY") == "Trans" and ISO.fullmatch(_name(r))]
     return [((m[3], m[1], number(m[2], "change-list value", "change list")) if m[1] else
              (m[4], m[5], number(m[6], "change-list value", "change list"))) for m in ROW.finditer(text)]
 
@@ -262,7 +277,7 @@ class Heidenhain(Controller):
         if current is not None:
             table = TabTable.parse(current, where)
             skipped = check_pivots(table, machine, where)
-            diff = edit_table(table, rows, where)
+            diff = edit_table(table, rows, where, ctx.marker)
             files[".TAB"] = table.text()
             notes += ["table changes:", *diff, *([skipped] if skipped else []), *_resolution(table)]
         files[".txt"] = render(

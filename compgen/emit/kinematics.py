@@ -3,6 +3,7 @@ module writes them), the sign-check program and the notes every edit carries."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -58,6 +59,12 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
     ``current`` (part of a correction already loaded, say): the edit then writes the rest.
     """
     ctl = controller(controller_name)
+    for text in (current, measured):
+        if text is not None and re.search(rf"\b{fit.marker}\b", text):
+            raise CompgenError(f"the current state already carries this fit's correction ({fit.marker}): "
+                               "applying it again would double it",
+                               hint="measure again and fit the new data; or give the state the data "
+                                    "were measured in with --measured-with")
     p = plan(machine, fit, force)
     if measured is not None:
         if current is None:
@@ -68,13 +75,13 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
     signcheck, expect = sign_check(machine, p, ctl, sign_name, version, date)
     header = (f"compgen {version} kinematics edit, {date}",
               f"machine: {ascii_text(machine.name)}; controller: {ctl.words}",
-              f"from fit: {Path(fit.machine['file']).name} data "
-              + ", ".join(Path(d.file).name for d in fit.data),
+              f"from {fit.marker}: machine file {ascii_text(Path(fit.machine['file']).name)}, data "
+              + ", ".join(ascii_text(Path(d.file).name) for d in fit.data),
               "corrections add to the kinematics active while the R-test ran under TCPM/TRAORI",
               "BACKUP FIRST: " + ctl.backup,
               f"then run the sign check {sign_name}: see its expected changes")
     words = lines_text(p)
-    ctx = EditContext(name, header, tuple(words), tuple(expect), version, date)
+    ctx = EditContext(name, header, tuple(words), tuple(expect), version, date, fit.marker)
     edit = ctl.edit(machine, p, current, current_where, ctx)
     notes = [*words]
     if p.setup:

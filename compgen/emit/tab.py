@@ -107,8 +107,9 @@ class TabTable:
                                    f"{column} column holds {width}", where=f"{where}:{k + 1}",
                                    hint="widen the column on the control, or enter the value by hand")
             line = line.ljust(start)
-            cell = value if end is None else value.ljust(end - start)
-            line = line[:start] + cell + (line[end:] if end is not None else "")
+            rest = line[end:] if end is not None else ""
+            cell = value.ljust(end - start) if rest.strip() else value   # no padding at the end
+            line = line[:start] + cell + (rest if rest.strip() else "")
             self.rows[row][column] = value
         self.lines[k] = line
 
