@@ -6,3 +6,29 @@ try:
     __version__ = version("compgen")
 except PackageNotFoundError:   # a source checkout that was never installed
     __version__ = "0+unknown"
+
+
+_program = "compgen-cli"
+
+
+def me() -> str:
+    """How every hint calls compgen: as this run was called, in a form bash does not take
+    for its own ``compgen`` builtin (a path, ``python -m compgen``, or the ``compgen-cli``
+    alias). The command line sets it (``cli._Group``)."""
+    return _program
+
+
+def called_as(argv0: str, executable: str) -> None:
+    """Remember how compgen was called, for ``me``."""
+    import os
+    import shutil
+
+    global _program
+    name = os.path.basename(argv0)
+    if name == "__main__.py":
+        python = "python" if shutil.which("python") == executable else executable
+        _program = f"{python} -m compgen"
+    elif name == "compgen" and os.sep in argv0:
+        _program = argv0
+    elif name.startswith("compgen"):
+        _program = "compgen-cli"

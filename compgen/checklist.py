@@ -11,7 +11,9 @@ import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from shlex import quote
 
+from . import me
 from .emit.registry import comment_marks, controller
 from .errors import CompgenError
 from .machine import Machine
@@ -75,19 +77,30 @@ def _is_rtest(head: str) -> bool:
     return {"dX", "dY", "dZ"} <= {c.strip() for c in header.split(",")}
 
 
-def checklist(machine: Machine, folder: str | Path) -> list[Step]:
+def checklist(machine: Machine, folder: str | Path, comparison: dict | None = None) -> list[Step]:
+    """The steps, ticked from the files in ``folder`` (and from ``comparison``, a compare
+    result's dict, when the caller has just made one); every command it suggests writes
+    into ``folder``."""
     folder = Path(folder)
     if not folder.is_dir():
         raise CompgenError("no such folder", where=str(folder), hint="give the work folder with --dir")
     f = _scan(folder)
-    m = machine.source
+    m = quote(machine.source)
     fit = max(f.fits, key=lambda x: x[0].stat().st_mtime, default=None)
-    fit_path = str(fit[0]) if fit else "fit.json"
+    fit_path = quote(str(fit[0])) if fit else quote(str(folder / "fit.json"))
+
+    def out(name: str) -> str:
+        return quote(str(folder / name))
     edit_time = max((p.stat().st_mtime for p in f.edits), default=None)
     post = [p for p in f.data if edit_time is not None and p.stat().st_mtime > edit_time]
-    fitted = [Path(d["file"]) for _, doc in f.fits for d in doc.get("data", []) if Path(d["file"]).exists()]
-    pre = list(dict.fromkeys([p for p in f.data if p not in post] + [p for p in fitted if p not in post]))
+    fitted = [(p.parent / d["file"]).resolve() for p, doc in f.fits for d in doc.get("data", [])
+              if isinstance(d, dict) and isinstance(d.get("file"), str) and (p.parent / d["file"]).is_file()]
+    post = [p.resolve() for p in post]
+    pre = list(dict.fromkeys([p.resolve() for p in f.data if p.resolve() not in post]
+                             + [p for p in fitted if p not in post]))
     measured = [doc for _, doc in f.compares if "measured_post" in doc]
+    if comparison and "measured_post" in comparison:
+        measured.append(comparison)
     passed = measured and measured[-1]["measured_post"].get("as_predicted") and all(
         v.startswith("PASS") for v in measured[-1]["measured_post"].get("verdicts", {}).values())
     steps = [
@@ -96,25 +109,27 @@ def checklist(machine: Machine, folder: str | Path) -> list[Step]:
         Step("R-test set-up: ball on the table, nest in the spindle, sensors checked", BY_HAND,
              note=f"ball where [rtest] says: {machine.ball} mm; nest length gauge line to centre"),
         Step("Measurement programs written", DONE if f.programs else OPEN, _names(f.programs),
-             f"compgen measure-program --machine {m} --path all -o RTEST{_ext(machine)}"),
+             f"{me()} measure-program --machine {m} --path all -o {out('RTEST' + _ext(machine))}"),
         Step("K4, K1, K2 measured (R-test CSV with dX dY dZ)", DONE if pre else OPEN, _names(pre),
              "run the program; export the readings as CSV v1 beside the pose list"),
         Step("Fit", DONE if fit else OPEN, _names([fit[0]] if fit else []),
-             f"compgen fit --machine {m} {' '.join(_names(pre)) or 'DATA.csv'} -o fit.json"),
+             f"{me()} fit --machine {m} {' '.join(map(quote, _names(pre))) or 'DATA.csv'} "
+             f"-o {out('fit.json')}"),
         Step("Diagnose: where the model fails", DONE if f.diagnoses else OPEN, _names(f.diagnoses),
-             f"compgen diagnose --from {fit_path} --json > diagnose.json"),
+             f"{me()} diagnose --from {fit_path} --json > {out('diagnose.json')}"),
         Step("Review confounded effects and fragile parameters", BY_HAND,
              note="diagnose lists what these data cannot see and what would separate it"),
         Step("Kinematics edit emitted (with backup step and sign check)", DONE if f.edits else OPEN,
              _names(f.edits + f.signchecks),
-             f"compgen kinematics --from {fit_path} --current CURRENT -o KIN"),
+             f"{me()} kinematics --from {fit_path} --current CURRENT -o {out('KIN')}"),
         Step("Backup taken, edit loaded, sign check run with the R-test", BY_HAND,
              note="the expected reading changes are in the edit's header"),
         Step("Re-measured after the edit", DONE if post else OPEN, _names(post),
              "run the measurement program again; save the CSV after the edit file"),
         Step("Compared: predicted against measured", DONE if measured else OPEN,
-             _names([p for p, d in f.compares if "measured_post" in d]),
-             f"compgen compare --from {fit_path} --post POST.csv --json > compare.json"),
+             _names([p for p, d in f.compares if "measured_post" in d])
+             + (("this report's comparison",) if comparison and "measured_post" in comparison else ()),
+             f"{me()} compare --from {fit_path} --post POST.csv --json > {out('compare.json')}"),
         Step("Sign-off", BY_HAND,
              note="ready: improved as predicted, every path within tolerance" if passed else
                   "not ready: no comparison yet, or a path out of tolerance or not as predicted"),

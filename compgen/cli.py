@@ -11,10 +11,10 @@ from pathlib import Path
 import click
 import numpy as np
 
-from . import __version__
+from . import __version__, called_as, me
 from .checklist import checklist, markdown
 from .compare import compare
-from .diagnose import diagnose
+from .diagnose import diagnose, fit_gate, unit_suspicion
 from .effects import catalogue, compose, location_model
 from .emit.kinematics import kinematics_edit
 from .emit.programs import MODES, measure_program, program_name
@@ -40,6 +40,12 @@ class _Failed(click.ClickException):
 
 class _Group(click.Group):
     """Turns every CompgenError into one line on stderr and exit code 2."""
+
+    def main(self, *args, **kwargs):
+        # usage lines and hints name compgen so that, pasted into bash, it is compgen that runs
+        called_as(sys.argv[0], sys.executable)
+        kwargs["prog_name"] = me() if kwargs.get("prog_name") in (None, "compgen") else kwargs["prog_name"]
+        return super().main(*args, **kwargs)
 
     def invoke(self, ctx):
         from threadpoolctl import threadpool_limits
@@ -163,6 +169,9 @@ def fit_cmd(machine_file, data, base, model_names, add, remove, fixes, method, s
                      inputs=(machine.source, base, *(s.source for s in sets)))
     click.echo(result.report(), nl=False)
     click.echo(f"\nwrote {output}")
+    suspicion = unit_suspicion(sets)
+    if suspicion:
+        click.echo(f"compgen: warning: {suspicion}; kinematics will refuse this fit", err=True)
 
 
 @main.command("diagnose")
@@ -270,9 +279,15 @@ def check_program_cmd(machine_file, program, controller_name):
 def kinematics_cmd(base, controller_name, current, measured, output, force):
     """Write the controller's kinematics edit for a fit, with a sign check and a backup step."""
     fit = load_fit(base)
-    machine, _ = reload(fit)
+    machine, sets = reload(fit)
     ctl = controller(controller_name or machine.controller)
     text = read_text(current, "file", ansi_ok=True)[0] if current else None
+    _progress("checking that the fit explains its data")
+    reasons = fit_gate(machine, sets, fit)
+    if reasons and not force:
+        raise CompgenError("this fit should not reach the control: " + "; ".join(reasons),
+                           hint=f"settle that first (see {me()} diagnose --from {base}); --force writes "
+                                "the edit anyway")
     out = Path(output)
     name = program_name(out.stem)
     emitted = kinematics_edit(machine, fit, ctl.name, text, current or "", name, __version__,
@@ -339,7 +354,7 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, outpu
     comparison = compare(machine, sets, fit, controller_name or machine.controller, post)
     _progress("3/3 plots")
     images = figures(machine, sets, fit, load_fit(before) if before else None)
-    steps = checklist(machine, folder or Path(base).parent)
+    steps = checklist(machine, folder or Path(base).parent, comparison.to_dict())
     html = report_html(machine, fit, found, images, comparison, emitted, steps, __version__,
                        date.today().isoformat())
     write_atomically(output, html, force, inputs=(base, before, *post_files, *emitted))

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from . import me
 from .effects import Effect, catalogue, effect_name, effect_of_param, resolve
 from .errors import CompgenError
 from .kinematics import Model, Poses, SlotGains, coordinate
@@ -124,7 +125,7 @@ class Diagnosis:
             if c.confounded_with:
                 lines.append(f"      partly absorbed by {', '.join(c.confounded_with)}")
             if c.significant:
-                lines.append(f"      add it: compgen fit --from {fit_path} --add {c.effect} -o "
+                lines.append(f"      add it: {me()} fit --from {fit_path} --add {c.effect} -o "
                              f"{_next_name(fit_path)}")
         if self.rivals:
             best = self.significant[0].effect
@@ -170,6 +171,44 @@ class Diagnosis:
 def _next_name(path: str) -> str:
     stem = path[:-5] if path.endswith(".json") else path
     return f"{stem}+1.json"
+
+
+# An R-test's sphere-centre repeatability is 0.5–1 µm and drift adds a few µm over a run
+# (shared/research/identification.md, "Noise of R-test sensors"): a fit leaving more than
+# this has missed something physical, or the data are not what they claim.
+SIGMA_PLAUSIBLE_UM = 3.0
+# Below this spread the readings cannot be µm of a real machine (mm given as µm, say)
+SPREAD_PLAUSIBLE_UM = 0.5
+
+
+def unit_suspicion(data: Sequence[RTestData]) -> str | None:
+    """Why the readings look like another unit than µm, or None."""
+    y = np.concatenate([d.deviation for d in data]) * 1e3
+    spread = float((y.max(axis=0) - y.min(axis=0)).max()) if y.size else 0.0
+    if spread < SPREAD_PLAUSIBLE_UM:
+        return (f"the readings spread over {spread:.3g} µm at most, far below any R-test's noise "
+                f"(0.5–1 µm): they are likely in mm, not µm")
+    return None
+
+
+def fit_gate(machine: Machine, data: Sequence[RTestData], fit: FitResult) -> list[str]:
+    """Why this fit should not reach a controller: what a user must settle first (empty when
+    the fit explains its data to an R-test's noise with nothing significant missing)."""
+    reasons = []
+    suspicion = unit_suspicion(data)
+    if suspicion:
+        reasons.append(suspicion + "; check the CSV's dX dY dZ unit")
+    sigma = fit.residual["sigma_um"]
+    if not sigma <= SIGMA_PLAUSIBLE_UM:
+        reasons.append(f"the fit leaves σ̂ = {sigma:.2f} µm, above the {SIGMA_PLAUSIBLE_UM:g} µm an R-test's "
+                       "noise allows: the model misses an effect, or the data are wrong (columns "
+                       "swapped, a sign, a mismatched machine file)")
+    found = diagnose(machine, data, fit)
+    if found.significant:
+        reasons.append("diagnose finds effects the model misses: "
+                       + ", ".join(c.effect for c in found.significant[:3])
+                       + " (run diagnose, add the effect with fit --add, and refit)")
+    return reasons
 
 
 def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import me
 from .effects import effect_name
 from .errors import CompgenError
 from .files import read_json
@@ -116,7 +117,7 @@ class FitResult:
     def from_dict(cls, d: dict, where: str = "fit.json") -> FitResult:
         if d.get("format") != FORMAT:
             raise CompgenError(f"not a compgen fit file (format {d.get('format')!r})", where=where,
-                               hint="make one with `compgen fit`")
+                               hint=f"make one with `{me()} fit`")
         base = Path(where).parent
 
         def file(name: str) -> str:      # relative to the fit file; older fits hold absolute paths

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from . import me
 from .effects import effect_of_param
 from .errors import CompgenError
 from .machine import Machine, load_machine
@@ -16,7 +17,7 @@ def reload(fit: FitResult, machine_file: str | None = None) -> tuple[Machine, li
     machine = load_machine(machine_file or fit.machine["file"])
     if machine.sha256 != fit.machine["sha256"]:
         raise CompgenError("machine file changed since the fit", where=machine.source,
-                           hint="refit with `compgen fit` on the current machine file")
+                           hint=f"refit with `{me()} fit` on the current machine file")
     for name, e in fit.parameters.items():
         if effect_of_param(machine, name).unit != e.unit:
             raise CompgenError(f"{name} is given in a unit of {'length' if e.unit == 'mm' else 'angle'}",
@@ -29,6 +30,6 @@ def reload(fit: FitResult, machine_file: str | None = None) -> tuple[Machine, li
         d = read_rtest(ref.file, machine, fit.sign)
         if d.sha256 != ref.sha256:
             raise CompgenError("data file changed since the fit", where=ref.file,
-                               hint="refit with `compgen fit`")
+                               hint=f"refit with `{me()} fit`")
         data.append(d)
     return machine, data

@@ -10,7 +10,11 @@ from pathlib import Path
 import pytest
 from conftest import ROOT, SEED_MACHINE, run
 
+from compgen.correction import plan
 from compgen.emit.registry import CONTROLLERS
+from compgen.errors import CompgenError
+from compgen.results import load_fit
+from compgen.session import reload
 
 # (replace this, with that) in the seed machine file → the one line that must come back
 BAD_MACHINE_EDITS = {
@@ -226,11 +230,11 @@ def _big_table(d):
 
 
 def test_compensation_tables_are_held_to_the_limits(fitted, tmp_path):
-    fit = _edited_fit(fitted, tmp_path, _big_table)
-    out = tmp_path / "K.MPF"
-    code, _, err = run("kinematics", "--from", fit, "--controller", "sinumerik840d", "-o", out)
-    assert code == 2 and "ECC:h2 table" in err and "arcsec > 60 arcsec" in err, err
-    assert not out.exists()
+    fit = load_fit(_edited_fit(fitted, tmp_path, _big_table))
+    machine, _ = reload(fit)
+    with pytest.raises(CompgenError, match=r"ECC:h2 table \d+\.\d arcsec > 60 arcsec"):
+        plan(machine, fit)
+    assert plan(machine, fit, force=True).tables == ("ECC:h2",)
 
 
 NAN_STATES = {
@@ -271,3 +275,59 @@ def test_the_same_fit_is_not_applied_twice(fitted, tmp_path, controller):
                        "--current", out, "-o", again)
     assert code == 2 and "already carries this fit's correction" in err, (ctl.name, err)
     assert not again.exists()
+
+
+def _swap_dx_dy(text):
+    lines = text.splitlines()
+    head = next(i for i, ln in enumerate(lines) if ln.startswith("path,"))
+    cols = lines[head].split(",")
+    ix, iy = cols.index("dX"), cols.index("dY")
+    out = lines[:head + 1]
+    for ln in lines[head + 1:]:
+        c = ln.split(",")
+        c[ix], c[iy] = c[iy], c[ix]
+        out.append(",".join(c))
+    return "\n".join(out) + "\n"
+
+
+def _in_mm(text):
+    lines = text.splitlines()
+    head = next(i for i, ln in enumerate(lines) if ln.startswith("path,"))
+    cols = lines[head].split(",")
+    idx = [cols.index(c) for c in ("dX", "dY", "dZ")]
+    out = lines[:head + 1]
+    for ln in lines[head + 1:]:
+        c = ln.split(",")
+        for i in idx:
+            c[i] = f"{float(c[i]) / 1000:.7f}"
+        out.append(",".join(c))
+    return "\n".join(out) + "\n"
+
+
+@pytest.mark.parametrize("data, expected", [
+    (None, "diagnose finds effects the model misses: EXC:h2"),
+    (_swap_dx_dy, "above the 3 µm an R-test's noise allows"),
+    (_in_mm, "likely in mm, not µm"),
+])
+def test_a_fit_that_does_not_explain_its_data_writes_no_edit(fitted, tmp_path, data, expected):
+    fit = fitted / "fit.json"          # the example session's fit: EXC:h2 hidden, not modelled
+    if data:
+        csv = tmp_path / "session.csv"
+        csv.write_text(data((ROOT / "examples" / "seed-session.csv").read_text()))
+        fit = tmp_path / "fit.json"
+        code, _, err = run("fit", "--machine", SEED_MACHINE, csv, "-o", fit)
+        assert code == 0, err
+        assert ("likely in mm" in err) == (data is _in_mm), err
+    out = tmp_path / "K.txt"
+    code, _, err = run("kinematics", "--from", fit, "--controller", "itnc530", "-o", out)
+    assert code == 2 and err.count("\n") == 1 and expected in err, err
+    assert "diagnose --from" in err and "see compgen diagnose" not in err
+    assert not out.exists()
+    code, _, err = run("kinematics", "--from", fit, "--controller", "itnc530", "-o", out, "--force")
+    assert code == 0 or "plausibility" in err, err
+
+
+def test_a_fit_that_explains_its_data_passes_the_gate(fitted, tmp_path):
+    code, _, err = run("kinematics", "--from", fitted / "fit2.json", "--controller", "itnc530",
+                       "-o", tmp_path / "K.txt")
+    assert code == 0, err

@@ -1,6 +1,7 @@
 """The HTML report (opened in headless Chromium), the checklist, templates in the wheel."""
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -65,11 +66,15 @@ def test_checklist_ticks_from_artefacts_and_names_the_next_step(work):
     assert code == 0, err
     assert "[x] Fit" in out and "[x] K4, K1, K2 measured" in out   # the fit names its data
     assert "[ ] Measurement programs written" in out
-    assert "Next: `compgen measure-program" in out
+    # the hint runs compgen when pasted into bash (a bare `compgen` is bash's builtin), and
+    # writes into the work folder
+    nxt = re.search(r"Next: `(.*) measure-program (.*)`", out)
+    assert nxt and nxt[1] != "compgen" and nxt[1].split()[-1] in ("compgen", "compgen-cli"), out
+    assert f"-o {work / 'RTEST.H'}" in nxt[2], nxt[2]
     assert "(by hand) Sign-off" in out and "[x] Sign-off" not in out
     assert run("measure-program", "--machine", SEED_MACHINE, "--path", "K4", "-o", work / "K4.H")[0] == 0
     code, out, _ = run("checklist", "--machine", SEED_MACHINE, "--dir", work)
-    assert "[x] Measurement programs written" in out and "Next: `compgen diagnose" in out
+    assert "[x] Measurement programs written" in out and f"diagnose --from {work / 'fit2.json'}" in out
     code, _, err = run("checklist", "--machine", SEED_MACHINE, "--dir", work / "nope")
     assert code == 2 and "no such folder" in err
 
