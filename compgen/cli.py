@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 from datetime import date
 from functools import partial
@@ -38,6 +39,10 @@ class _Failed(click.ClickException):
         click.echo(f"compgen: error: {self.message}", err=True)
 
 
+class _Internal(_Failed):
+    exit_code = 3
+
+
 class _Group(click.Group):
     """Turns every CompgenError into one line on stderr and exit code 2."""
 
@@ -57,6 +62,13 @@ class _Group(click.Group):
                 return super().invoke(ctx)
         except CompgenError as exc:
             raise _Failed(str(exc)) from None
+        except (click.exceptions.Exit, click.ClickException, click.Abort, SystemExit, KeyboardInterrupt):
+            raise
+        except Exception as exc:     # a bug of compgen's: one line, and the way to the details
+            if os.environ.get("COMPGEN_DEBUG"):
+                raise
+            raise _Internal(f"internal error ({type(exc).__name__}: {exc}); this is a bug in compgen. "
+                            "Run again with COMPGEN_DEBUG=1 for the traceback and report it") from None
 
 
 def _progress(message: str) -> None:
@@ -69,7 +81,8 @@ def _progress(message: str) -> None:
 FILE = click.Path(dir_okay=False)
 CONTROLLER_NAMES = " | ".join(CONTROLLERS)
 MACHINE = click.option("--machine", "machine_file", type=FILE, required=True,
-                       help="Machine file (TOML), e.g. machines/ac-trunnion-itnc530.toml.")
+                       help="Machine file (TOML), or a bundled machine by name: ac-trunnion-itnc530, "
+                            "bc-table-sinumerik840d.")
 OUTPUT = click.option("-o", "--output", type=FILE, required=True, help="File to write.")
 FORCE = click.option("--force", is_flag=True, help="Overwrite an existing output file.")
 

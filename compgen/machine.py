@@ -184,8 +184,32 @@ class Machine:
         return self.axis_names.index(self.axis(name).name)
 
 
+def bundled_machines() -> dict[str, Path]:
+    """The machine files that come with compgen, by name: ``compgen/machines`` in an
+    installed wheel, the top-level ``machines/`` of a source checkout."""
+    package = Path(__file__).resolve().parent
+    for folder in (package / "machines", package.parent / "machines"):
+        if folder.is_dir():
+            return {f.stem: f for f in sorted(folder.glob("*.toml"))}
+    return {}
+
+
+def machine_path(name: str | Path) -> Path:
+    """A path as given, or a bundled machine's file for a bare name (``ac-trunnion-itnc530``)."""
+    path = Path(name)
+    if path.exists() or len(path.parts) > 1 or path.suffix:
+        return path
+    bundled = bundled_machines()
+    if str(name) in bundled:
+        return bundled[str(name)]
+    raise CompgenError(f"no machine file {str(name)!r} here, and no bundled machine of that name",
+                       hint=f"give a path, or one of {', '.join(bundled) or '(none installed)'}")
+
+
 def load_machine(path: str | Path) -> Machine:
-    """Read and check a machine file; every problem names the file and the key."""
+    """Read and check a machine file (a path, or a bundled machine's name); every problem
+    names the file and the key."""
+    path = machine_path(path)
     text, raw = read_text(path, "machine file")
     try:
         doc = tomllib.loads(text)

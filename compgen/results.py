@@ -133,7 +133,7 @@ class FitResult:
                 correlation=np.array(d["correlation"]["matrix"], float).reshape(
                     len(d["correlation"]["names"]), -1),
                 singular_values=np.array(d["identifiability"]["singular_values"], float),
-                residual=d["residual"], method=d["method"], iterations=int(d["iterations"]),
+                residual=_residual(d["residual"], where), method=d["method"], iterations=int(d["iterations"]),
                 sign=d["sign"], version=d["compgen_version"],
                 descriptions={n: p["description"] for n, p in d["parameters"].items()
                               if "description" in p})
@@ -170,6 +170,23 @@ class FitResult:
         if strong:
             lines.append("  strongly correlated: " + ", ".join(f"{a}–{b} {c:+.2f}" for _, a, b, c in strong))
         return "\n".join(lines) + "\n"
+
+
+def _number(v) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _residual(r, where: str) -> dict:
+    """fit.json's residual statistics, whole: every later command reads them."""
+    per_path = r.get("per_path") if isinstance(r, dict) else None
+    if not (isinstance(per_path, dict)
+            and all(_number(r.get(k)) for k in ("rms_um", "sigma_um", "readings", "dof"))
+            and all(isinstance(p, dict) and _number(p.get("n")) and all(
+                isinstance(p.get(k), list) and len(p[k]) == 3 and all(map(_number, p[k]))
+                for k in ("rms_um", "range_um", "max_abs_um")) for p in per_path.values())):
+        raise CompgenError("fit file's residual statistics are incomplete or damaged",
+                           where=f"{where}: residual", hint=f"refit with `{me()} fit`")
+    return r
 
 
 def _estimate(p: dict, where: str) -> Estimate:

@@ -18,7 +18,7 @@ import numpy as np
 from .errors import CompgenError
 from .files import read_text
 from .kinematics import Model, Poses, inverse
-from .machine import Machine
+from .machine import Machine, identifier
 
 DEVIATION = ("dX", "dY", "dZ")
 BALL = ("bx", "by", "bz")
@@ -51,6 +51,13 @@ def read_rtest(path: str | Path, machine: Machine, sign: str = "nest-minus-ball"
                                         *DEVIATION])
     poses = table.poses(machine)
     deviation = np.column_stack([table.columns[c] for c in DEVIATION]) * 1e-3
+    beyond = np.flatnonzero(np.abs(deviation).max(axis=1) > machine.setup.nest_range)
+    if beyond.size:
+        k = beyond[0]
+        raise CompgenError(f"a reading of {np.abs(deviation[k]).max() * 1e3:.4g} µm is beyond the nest's "
+                           f"range ({machine.setup.nest_range:g} mm, [rtest] nest_range)",
+                           where=f"{table.where}:{table.lines[k]}", hint="readings are µm; check the "
+                           "column's unit and the row")
     if sign == "ball-minus-nest":
         deviation = -deviation
     off = np.linalg.norm(Model(machine, ()).relative(poses), axis=1)
@@ -103,6 +110,13 @@ class _Table:
         return Poses(q, self.ball(machine), self.columns.get("t", np.full(len(q), np.nan)), self.labels)
 
 
+def _cells(line: str, where: str) -> list[str]:
+    try:
+        return next(csv.reader([line]))
+    except csv.Error as exc:
+        raise CompgenError(f"not a CSV row ({exc})", where=where) from None
+
+
 def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Table:
     """A CSV v1 table with every cell checked: numbers finite, rows whole, columns present."""
     where = str(path)
@@ -113,7 +127,7 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
     if not lines:
         raise CompgenError("empty file: no header and no data", where=where)
     header_line, header_text = lines[0]
-    header = [h.strip() for h in next(csv.reader([header_text]))]
+    header = [h.strip() for h in _cells(header_text, f"{where}:{header_line}")]
     dup = sorted({h for h in header if header.count(h) > 1})
     if dup:
         raise CompgenError(f"column {dup[0]!r} appears twice in the header", where=f"{where}:{header_line}")
@@ -134,7 +148,7 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
     values = np.empty((len(lines) - 1, len(numeric)))
     labels, line_no = [], []
     for r, (i, line) in enumerate(lines[1:]):
-        cells = next(csv.reader([line]))
+        cells = _cells(line, f"{where}:{i}")
         if len(cells) != len(header):
             raise CompgenError(f"{len(cells)} fields where the header has {len(header)}",
                                where=f"{where}:{i}")
@@ -151,7 +165,10 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
                 raise CompgenError(f"column {name}: {cell or 'empty cell'!r} is not a finite number",
                                    where=f"{where}:{i}:{col[name] + 1}")
             values[r, j] = v
-        labels.append(cells[col["path"]].strip() if "path" in col else "")
+        label = cells[col["path"]].strip() if "path" in col else ""
+        if label:     # a label is written into programs' comments and pose lists
+            identifier("path", label, f"{where}:{i}:{col['path'] + 1}")
+        labels.append(label)
         line_no.append(i)
     columns = {name: values[:, j] for j, name in enumerate(numeric)}
     return _Table(where, hashlib.sha256(raw).hexdigest(), columns, np.array(labels, dtype=object), line_no)

@@ -13,6 +13,7 @@ from .errors import CompgenError
 TO_INSIDE = {"mm": 1.0, "um": 1e-3, "µm": 1e-3, "rad": 1.0, "urad": 1e-6, "µrad": 1e-6,
              "deg": math.pi / 180.0, "arcsec": math.pi / 648000.0}
 LENGTH = {"mm", "um", "µm"}
+PLAUSIBLE = {"mm": 10.0, "rad": 0.1}     # far beyond any real error; keeps the model's arithmetic sane
 DISPLAY = {"mm": ("um", 1e3), "rad": ("arcsec", 648000.0 / math.pi)}   # inside unit → shown
 
 
@@ -26,7 +27,11 @@ def to_inside(value: float, unit: str, inside_unit: str, where: str = "") -> flo
                            where=where)
     if not math.isfinite(value):
         raise CompgenError(f"value {value!r} is not a finite number", where=where)
-    return value * TO_INSIDE[unit]
+    inside = value * TO_INSIDE[unit]
+    if abs(inside) > PLAUSIBLE[inside_unit]:
+        raise CompgenError(f"{value:g} {unit} is not the size of a machine error", where=where,
+                           hint=f"errors up to {PLAUSIBLE[inside_unit]:g} {inside_unit} are taken")
+    return inside
 
 
 def number(text: str, what: str, where: str) -> float:

@@ -5,6 +5,8 @@ failed before its fix (issue 9)."""
 import json
 import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -226,7 +228,7 @@ def test_an_edit_is_one_transaction(fitted, tmp_path, monkeypatch):
 
 def _big_table(d):
     d["model"].append("ECC:h2c")
-    d["parameters"]["ECC:h2c"] = {"value": 0.5, "std": 0.001, "unit": "rad"}
+    d["parameters"]["ECC:h2c"] = {"value": 0.05, "std": 0.001, "unit": "rad"}
 
 
 def test_compensation_tables_are_held_to_the_limits(fitted, tmp_path):
@@ -331,3 +333,52 @@ def test_a_fit_that_explains_its_data_passes_the_gate(fitted, tmp_path):
     code, _, err = run("kinematics", "--from", fitted / "fit2.json", "--controller", "itnc530",
                        "-o", tmp_path / "K.txt")
     assert code == 0, err
+
+
+def _session_with(tmp_path, change):
+    """The example session with one data row's cells changed."""
+    lines = (ROOT / "examples" / "seed-session.csv").read_text().splitlines()
+    head = next(i for i, ln in enumerate(lines) if ln.startswith("path,"))
+    cols = lines[head].split(",")
+    row = lines[head + 5].split(",")
+    for column, value in change.items():
+        row[cols.index(column)] = value
+    lines[head + 5] = ",".join(row)
+    path = tmp_path / "session.csv"
+    path.write_text("\n".join(lines) + "\n")
+    return path, head + 6
+
+
+@pytest.mark.parametrize("change, expected", [
+    ({"dX": "1e300"}, "beyond the nest's range"),
+    ({"dY": "2000"}, "beyond the nest's range"),
+    ({"dZ": "1" + "0" * 140000}, "not a CSV row"),
+    ({"path": "K4 G0 Z-500"}, "not a valid path name"),
+    ({"path": '"K4\nG0 Z-500"'}, "fields where the header has"),
+])
+def test_hostile_data_rows_are_refused_with_their_line(tmp_path, change, expected):
+    csv, line = _session_with(tmp_path, change)
+    code, _, err = run("fit", "--machine", SEED_MACHINE, csv, "-o", tmp_path / "f.json")
+    assert code == 2 and err.count("\n") == 1 and expected in err, err
+    assert f"session.csv:{line}" in err, err
+
+
+@pytest.mark.parametrize("change, expected", [
+    (lambda d: d.update(residual={}), "residual statistics are incomplete"),
+    (lambda d: d["parameters"]["XOC"].update(value=1e300), "not the size of a machine error"),
+])
+def test_a_fit_with_damaged_numbers_is_refused_by_every_command(fitted, tmp_path, change, expected):
+    fit = _edited_fit(fitted, tmp_path, change)
+    for args in (("diagnose", "--from", fit), ("compare", "--from", fit),
+                 ("kinematics", "--from", fit, "-o", tmp_path / "K.txt", "--force"),
+                 ("report", "--from", fit, "-o", tmp_path / "r.html")):
+        code, _, err = run(*args)
+        assert code == 2 and err.count("\n") == 1 and expected in err, (args[0], err)
+
+
+def test_a_bundled_machine_is_named_from_anywhere(tmp_path):
+    done = subprocess.run([sys.executable, "-m", "compgen", "effects", "--machine", "bc-table-sinumerik840d"],
+                          cwd=tmp_path, capture_output=True, text=True)
+    assert done.returncode == 0 and "EXC" in done.stdout, done.stderr
+    code, _, err = run("effects", "--machine", "no-such-machine")
+    assert code == 2 and "ac-trunnion-itnc530, bc-table-sinumerik840d" in err, err
