@@ -18,7 +18,7 @@ from .compare import compare
 from .diagnose import diagnose, fit_gate, unit_suspicion
 from .effects import catalogue, compose, location_model
 from .emit.kinematics import kinematics_edit
-from .emit.programs import MODES, measure_program, program_name
+from .emit.programs import MODES, NAME_MAX, measure_program, program_name
 from .emit.registry import CONTROLLERS, controller, for_program, read_edits
 from .errors import CompgenError
 from .files import read_text, write_all, write_atomically
@@ -144,7 +144,7 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, seed, ball, edits, c
               help="Comma-separated parameters to fit (default: ball offset and the location "
                    "errors of every rotary axis, the seed's 11 on an A/C machine).")
 @click.option("--add", "add", multiple=True, metavar="EFFECT",
-              help="Add an effect to the model, e.g. --add ECC:h2 (see `compgen effects`). Repeatable.")
+              help="Add an effect to the model, e.g. --add ECC:h2 (see `compgen-cli effects`). Repeatable.")
 @click.option("--remove", "remove", multiple=True, metavar="EFFECT", help="Take an effect out. Repeatable.")
 @click.option("--fix", "fixes", multiple=True, metavar="NAME=VALUE",
               help="Hold a parameter, e.g. --fix ZOW=0 or --fix BOA=12.3arcsec. Repeatable.")
@@ -238,7 +238,7 @@ def measure_program_cmd(machine_file, path_names, poses_file, controller_name, m
                  else [p.strip() for p in path_names.split(",") if p.strip()])
         poses, label = generate(machine, names), "+".join(names)
     ctl = controller(controller_name or machine.controller)
-    name = program_name(Path(output).stem if output else f"RTEST_{label}")
+    name = program_name(Path(output).stem if output else f"RTEST_{label}"[:NAME_MAX])
     emitted = measure_program(machine, poses, label, ctl.name, mode, name, __version__,
                               date.today().isoformat())
     program = emitted.files[ctl.program_ext]
@@ -302,7 +302,7 @@ def kinematics_cmd(base, controller_name, current, measured, output, force):
                            hint=f"settle that first (see {me()} diagnose --from {base}); --force writes "
                                 "the edit anyway")
     out = Path(output)
-    name = program_name(out.stem)
+    name = program_name(out.stem, room=len("_SIGN"))
     emitted = kinematics_edit(machine, fit, ctl.name, text, current or "", name, __version__,
                               date.today().isoformat(), force,
                               read_text(measured, "file", ansi_ok=True)[0] if measured else None)

@@ -25,7 +25,7 @@ from .machine import Machine
 from .paths import alternative_measurements
 from .results import FitResult
 from .rtest import RTestData
-from .units import shown
+from .units import shown, three, three_header
 
 ALPHA = 0.01          # family-wise false-alarm rate over all effects tried
 VISIBLE = 0.01        # ‖c⊥‖/‖c‖ below this: the model absorbs the effect entirely
@@ -106,13 +106,13 @@ class Diagnosis:
         lines = [f"compgen diagnose: {self.machine}", f"  fit {self.fit_file}: {len(self.model)} "
                  f"parameters; residual RMS {self.rms_um:.3f} µm (σ̂ {self.sigma_um:.3f} µm) over "
                  f"{self.readings} readings", "",
-                 "  residual per path (µm)      RMS dX    dY    dZ"]
+                 f"  {'residual per path (µm)':<24}{three_header(('RMS dX', 'dY', 'dZ'))}"]
         for name, p in self.per_path.items():
-            lines.append(f"    {name:<24}{p['rms_um'][0]:8.3f}{p['rms_um'][1]:6.3f}{p['rms_um'][2]:6.3f}")
+            lines.append(f"    {name:<22}{three(p['rms_um'])}")
         lines += ["", "  residual against axis position (µm, amplitude in dX dY dZ)"]
         for axis, a in self.per_axis.items():
             for term, amp in a.items():
-                lines.append(f"    {axis:<3}{term:<10}{amp[0]:8.3f}{amp[1]:6.3f}{amp[2]:6.3f}")
+                lines.append(f"    {axis:<3}{term:<19}{three(amp)}")
         visible = [c for c in self.candidates if c.visible]
         lines += ["", f"  candidate effects, most residual removed first ({self.tested} tried; F test, "
                       f"Bonferroni-corrected, α = {self.alpha:g}):"]

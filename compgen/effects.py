@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import me
 from .errors import CompgenError
 from .machine import Axis, Machine
 
@@ -146,7 +147,7 @@ def _axis_symbols(axis: Axis) -> dict:
                 words, cause = f"tilt error motion of {L} about {about}", "wobble of the bearing"
         else:
             if e == d:
-                words, cause = f"positioning error of {L} (scale)", "scale error, thermal growth of the scale"
+                words, cause = f"positioning error of {L}", "scale error, thermal growth of the scale"
             elif e in TRANSLATIONS:
                 # the linear part of a straightness is a squareness (ISO 230-1), declared
                 # once below as COX, AOZ, BOZ; offering both would make them tie
@@ -192,7 +193,7 @@ def resolve(machine: Machine, name: str) -> Effect:
     table = _symbols(machine)
     if symbol not in table:
         raise CompgenError(f"unknown effect {name!r} on machine {machine.name!r}",
-                           hint="`compgen effects --machine M` lists them")
+                           hint=f"`{me()} effects --machine M` lists them")
     carrier, slot, direction, kinds, words, cause, first = table[symbol]
     if not order_txt:
         if "const" not in kinds:
@@ -207,6 +208,8 @@ def resolve(machine: Machine, name: str) -> Effect:
                                hint="an order-1 straightness is a squareness: use COX, AOZ or BOZ"
                                if first == 2 else None)
         basis = Basis(m[1], int(m[2]))
+        if basis == Basis("p", 1) and words.startswith("positioning error"):   # a linear axis's
+            words += " (scale: linear in position)"
     return Effect(symbol, carrier, slot, direction, basis, words, cause)
 
 

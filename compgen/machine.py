@@ -292,7 +292,7 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
             v = np.array(g.sub("vectors").vec3(a.name))
             if abs(np.linalg.norm(v) - 1) > 1e-9 or abs(abs(v @ _unit(a.direction)) - 1) > 1e-9:
                 raise CompgenError(f"must be the unit vector ±{a.direction} the control holds for "
-                                   f"{a.name}, got {list(v)}", where=g.sub("vectors").at(a.name))
+                                   f"{a.name}, got {v.tolist()}", where=g.sub("vectors").at(a.name))
             vectors[a.name] = v
         kind = "".join(sorted(set(kinds.values())))
         names = {}

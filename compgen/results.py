@@ -19,7 +19,7 @@ from . import me
 from .effects import effect_name
 from .errors import CompgenError
 from .files import read_json
-from .units import LENGTH, shown, to_inside
+from .units import LENGTH, shown, three, three_header, to_inside
 
 FORMAT = "compgen.fit/1"
 
@@ -157,11 +157,10 @@ class FitResult:
             lines.append(f"  {n:<12}{v:>9.3f} {unit:<3}{unc:<13}{self.descriptions.get(n, '')}")
         lines += ["", f"  residual RMS {r['rms_um']:.3f} µm over {r['readings']} readings; "
                       f"σ̂ = {r['sigma_um']:.3f} µm with {r['dof']} degrees of freedom",
-                  f"  {'path':<8}{'poses':>6}   RMS dX    dY    dZ    range dX    dY    dZ   (µm)"]
+                  f"  {'path':<8}{'poses':>6} {three_header(('RMS dX', 'dY', 'dZ'))}  "
+                  f"{three_header(('range dX', 'dY', 'dZ'))}   (µm)"]
         for name, p in r["per_path"].items():
-            rms, rng = p["rms_um"], p["range_um"]
-            lines.append(f"  {name:<8}{p['n']:>6}   {rms[0]:7.3f}{rms[1]:6.3f}{rms[2]:6.3f}"
-                         f"    {rng[0]:8.3f}{rng[1]:6.3f}{rng[2]:6.3f}")
+            lines.append(f"  {name:<8}{p['n']:>6} {three(p['rms_um'])}  {three(p['range_um'])}")
         lines += ["", f"  condition number {self.condition_number:.1f} (columns scaled to unit "
                       f"norm; above 100 the estimates are fragile)"]
         pairs = [(abs(self.correlation[i, j]), self.free[i], self.free[j], self.correlation[i, j])

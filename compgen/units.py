@@ -67,3 +67,12 @@ def parse_quantity(text: str, inside_unit: str, where: str) -> float:
             raise CompgenError(f"{text!r} has no unit", where=where, hint="write e.g. 12.3arcsec or -5um")
         return 0.0
     return to_inside(value, unit, inside_unit, where)
+
+
+def three(v, width: int = 9) -> str:
+    """dX dY dZ (µm) in columns that never run together: each at least one space apart."""
+    return "".join(f"{x:{width}.3f}" for x in v)
+
+
+def three_header(words: tuple[str, str, str], width: int = 9) -> str:
+    return "".join(f"{w:>{width}}" for w in words)

@@ -350,8 +350,8 @@ def _session_with(tmp_path, change):
 
 
 @pytest.mark.parametrize("change, expected", [
-    ({"dX": "1e300"}, "beyond the nest's range"),
-    ({"dY": "2000"}, "beyond the nest's range"),
+    ({"dX": "1e300"}, "beyond any R-test's measuring range"),
+    ({"dY": "6000"}, "beyond any R-test's measuring range"),
     ({"dZ": "1" + "0" * 140000}, "not a CSV row"),
     ({"path": "K4 G0 Z-500"}, "not a valid path name"),
     ({"path": '"K4\nG0 Z-500"'}, "fields where the header has"),

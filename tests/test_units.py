@@ -10,9 +10,9 @@ from compgen.units import parse_quantity, shown, to_inside
 
 # definitions: 1 µm = 1/1000 mm; 1 µrad = 1e-6 rad; 360° = 2π rad; 1″ = 1/3600 °
 DEFINED = [("1mm", "mm", 1.0), ("1um", "mm", 0.001), ("1µm", "mm", 0.001), ("2.5um", "mm", 0.0025),
-           ("1rad", "rad", 1.0), ("1urad", "rad", 1e-6), ("1µrad", "rad", 1e-6),
-           ("180deg", "rad", math.pi), ("3600arcsec", "rad", math.pi / 180), ("-7.2arcsec", "rad",
-                                                                          -7.2 / 3600 * math.pi / 180)]
+           ("0.03rad", "rad", 0.03), ("1urad", "rad", 1e-6), ("1µrad", "rad", 1e-6),
+           ("1.8deg", "rad", math.pi / 100), ("3600arcsec", "rad", math.pi / 180), ("-7.2arcsec", "rad",
+                                                                              -7.2 / 3600 * math.pi / 180)]
 
 
 @pytest.mark.parametrize("text, inside, value", DEFINED)
@@ -32,6 +32,14 @@ def test_a_bare_zero_is_zero_and_a_bare_number_is_refused(inside):
 def test_a_wrong_dimension_is_refused(text, inside):
     with pytest.raises(CompgenError, match="is not a"):
         parse_quantity(text, inside, "t")
+
+
+def test_a_value_no_machine_error_has_is_refused():
+    """Beyond 10 mm or 0.1 rad the model's arithmetic would carry nonsense to the control."""
+    assert parse_quantity("9.99mm", "mm", "t") == 9.99
+    for text, inside in (("10.01mm", "mm"), ("0.11rad", "rad"), ("6deg", "rad"), ("1e300um", "mm")):
+        with pytest.raises(CompgenError, match="not the size of a machine error"):
+            parse_quantity(text, inside, "t")
 
 
 def test_non_finite_and_unknown_units_are_refused():

@@ -30,10 +30,19 @@ LINEAR_DECIMALS = 4       # 0.1 µm
 ANGLE_DECIMALS = 4        # 0.0001°
 
 
-def program_name(text: str) -> str:
-    """A name both controls accept: upper-case letters, digits, underscore, a letter first."""
-    name = re.sub(r"[^A-Z0-9_]", "_", text.upper())[:24] or "RTEST"
-    return name if name[0].isalpha() else f"P{name}"[:24]
+NAME_MAX = 24      # characters of a program name every control here keeps
+
+
+def program_name(text: str, room: int = 0) -> str:
+    """A name every control accepts: upper-case letters, digits, underscore, a letter first.
+    A name longer than the controls keep (less ``room`` for a suffix compgen adds) is
+    refused, not cut: two cut names could be one program and one pose list."""
+    name = re.sub(r"[^A-Z0-9_]", "_", text.upper()) or "RTEST"
+    name = name if name[0].isalpha() else f"P{name}"
+    if len(name) > NAME_MAX - room:
+        raise CompgenError(f"program name {name} is {len(name)} characters; the control keeps "
+                           f"{NAME_MAX - room}", hint="give a shorter output file name")
+    return name
 
 
 def measure_program(machine: Machine, poses: Poses, label: str, controller_name: str, mode: str,
