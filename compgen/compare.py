@@ -46,6 +46,19 @@ class Comparison:
             out["measured_post"] = self.measured_post
         return out
 
+    def rows(self) -> list[dict]:
+        """Per path: RMS before, predicted and measured (µm, over dX dY dZ), the predicted
+        range per direction and the verdict: what every view of the comparison shows."""
+        out = []
+        for name, pred in self.predicted_post["per_path"].items():
+            meas = self.measured_post["per_path"].get(name) if self.measured_post else None
+            out.append({"path": name, "before": _rms(self.before["per_path"].get(name)),
+                        "predicted": _rms(pred), "measured": _rms(meas) if meas else None,
+                        "range": pred["range_um"],
+                        "verdict": (self.measured_post["verdicts"].get(name, "(none in machine file)")
+                                    if self.measured_post else "")})
+        return out
+
     def report(self) -> str:
         ctl = controller(self.controller).words
         lines = [f"compgen compare: after the kinematics edit for {ctl}",
@@ -53,15 +66,13 @@ class Comparison:
                  f"  {'path':<8}{'before RMS':>11}{'predicted':>11}"
                  + (f"{'measured':>10}" if self.measured_post else "")
                  + "   predicted range dX dY dZ" + ("   tolerance" if self.measured_post else "")]
-        for name, pred in self.predicted_post["per_path"].items():
-            row = f"  {name:<8}{_rms(self.before['per_path'].get(name)):>11.3f}{_rms(pred):>11.3f}"
+        for r in self.rows():
+            row = f"  {r['path']:<8}{r['before']:>11.3f}{r['predicted']:>11.3f}"
             if self.measured_post:
-                meas = self.measured_post["per_path"].get(name)
-                row += f"{_rms(meas):>10.3f}" if meas else f"{'-':>10}"
-            row += "   " + " ".join(f"{v:5.2f}" for v in pred["range_um"])
+                row += f"{r['measured']:>10.3f}" if r["measured"] is not None else f"{'-':>10}"
+            row += "   " + " ".join(f"{v:5.2f}" for v in r["range"])
             if self.measured_post:
-                v = self.measured_post["verdicts"].get(name)
-                row += f"   {v}" if v else "   (none in machine file)"
+                row += f"   {r['verdict']}"
             lines.append(row)
         lines.append(f"  {'all':<8}{self.before['rms_um']:>11.3f}{self.predicted_post['rms_um']:>11.3f}"
                      + (f"{self.measured_post['rms_um']:>10.3f}" if self.measured_post else ""))

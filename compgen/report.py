@@ -33,16 +33,7 @@ def report_html(machine: Machine, fit: FitResult, diagnosis: Diagnosis, images: 
     n = len(fit.free)
     corr = [[{"text": f"{fit.correlation[i, j]:+.2f}".replace("-0.00", "+0.00"),
               "strong": i != j and abs(fit.correlation[i, j]) >= 0.9} for j in range(n)] for i in range(n)]
-    compare_rows = []
-    if comparison is not None:
-        measured = comparison.measured_post
-        for name, p in comparison.predicted_post["per_path"].items():
-            compare_rows.append({
-                "path": name, "before": max(comparison.before["per_path"][name]["rms_um"]),
-                "predicted": max(p["rms_um"]),
-                "measured": max(measured["per_path"][name]["rms_um"]) if measured and name in
-                measured["per_path"] else None,
-                "verdict": measured["verdicts"].get(name, "none in machine file") if measured else ""})
+    compare_rows = comparison.rows() if comparison is not None else []
     files = []
     for path in emitted:
         raw = Path(path).read_bytes()

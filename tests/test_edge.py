@@ -382,3 +382,16 @@ def test_a_bundled_machine_is_named_from_anywhere(tmp_path):
     assert done.returncode == 0 and "EXC" in done.stdout, done.stderr
     code, _, err = run("effects", "--machine", "no-such-machine")
     assert code == 2 and "ac-trunnion-itnc530, bc-table-sinumerik840d" in err, err
+
+
+def test_report_and_compare_show_the_same_figures(fitted, tmp_path):
+    code, text, err = run("compare", "--from", fitted / "fit2.json")
+    assert code == 0, err
+    out = tmp_path / "r.html"
+    code, _, err = run("report", "--from", fitted / "fit2.json", "-o", out)
+    assert code == 0, err
+    html = out.read_text()
+    for path in ("K4", "K1", "K2"):
+        row = next(ln.split() for ln in text.splitlines() if ln.strip().startswith(path + " "))
+        before, predicted = row[1], row[2]
+        assert f'<td class="l">{path}</td><td>{before}</td><td>{predicted}</td>' in html, (path, row)
