@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 from datetime import date
 from functools import partial
@@ -36,7 +37,13 @@ class _Failed(click.ClickException):
     exit_code = 2
 
     def show(self, file=None):
-        click.echo(f"compgen: error: {self.message}", err=True)
+        click.echo(f"compgen: error: {_one_line(self.message)}", err=True)
+
+
+def _one_line(text: str) -> str:
+    """A message names what the user gave, which may hold line breaks: they are shown, not
+    obeyed, so that an error is always one line."""
+    return re.sub(r"[\x00-\x1f\x7f]", lambda m: repr(m[0])[1:-1], text)
 
 
 class _Internal(_Failed):
@@ -50,7 +57,25 @@ class _Group(click.Group):
         # usage lines and hints name compgen so that, pasted into bash, it is compgen that runs
         called_as(sys.argv[0], sys.executable)
         kwargs["prog_name"] = me() if kwargs.get("prog_name") in (None, "compgen") else kwargs["prog_name"]
-        return super().main(*args, **kwargs)
+        standalone = kwargs.pop("standalone_mode", True)
+        try:
+            return super().main(*args, standalone_mode=False, **kwargs)
+        except click.UsageError as exc:    # one line too, with the way to the usage
+            if not standalone:
+                raise
+            command = f"{exc.ctx.command_path} --help" if exc.ctx else f"{me()} --help"
+            click.echo(f"compgen: error: {_one_line(exc.format_message())} (see {command})", err=True)
+            sys.exit(exc.exit_code)
+        except click.ClickException as exc:
+            if not standalone:
+                raise
+            exc.show()
+            sys.exit(exc.exit_code)
+        except click.Abort:
+            if not standalone:
+                raise
+            click.echo("Aborted!", err=True)
+            sys.exit(1)
 
     def invoke(self, ctx):
         from threadpoolctl import threadpool_limits

@@ -67,6 +67,8 @@ def read_json(path: str | Path, what: str) -> dict:
 
 def _target(path: Path, force: bool, inputs: tuple[Path, ...]) -> None:
     """Refuse an output path before anything is written."""
+    if any(ord(ch) < 32 or ord(ch) == 127 for ch in str(path)):
+        raise CompgenError(f"output name {str(path)!r} holds a control character", hint="choose a plain name")
     for source in inputs:
         if path.resolve() == source.resolve() or (path.exists() and source.exists()
                                                   and path.samefile(source)):

@@ -9,7 +9,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import io
-import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,6 +23,8 @@ from .machine import Machine, identifier
 DEVIATION = ("dX", "dY", "dZ")
 BALL = ("bx", "by", "bz")
 SIGNS = ("nest-minus-ball", "ball-minus-nest")
+NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?", re.ASCII)
+CELL_MAX = 1e6               # mm, deg or µm: beyond any machine's coordinates
 READING_MAX_MM = 5.0          # no R-test nest measures further from the ball's centre
 NOMINAL_TOLERANCE_MM = 0.01   # commanded XYZ vs nominal ball: far above 4-decimal rounding
 
@@ -155,16 +157,13 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
                                where=f"{where}:{i}")
         for j, name in enumerate(numeric):
             cell = cells[col[name]].strip()
-            try:
-                v = float(cell)
-            except ValueError:
-                v = math.nan if cell.lower() in ("nan", "") else None
-                if v is None:
-                    raise CompgenError(f"column {name}: {cell!r} is not a number",
-                                       where=f"{where}:{i}:{col[name] + 1}") from None
-            if not math.isfinite(v):
-                raise CompgenError(f"column {name}: {cell or 'empty cell'!r} is not a finite number",
-                                   where=f"{where}:{i}:{col[name] + 1}")
+            at = f"{where}:{i}:{col[name] + 1}"
+            if not NUMBER.fullmatch(cell):     # ASCII digits only: float() takes any script's
+                raise CompgenError(f"column {name}: {cell or 'an empty cell'!r} is not a number", where=at)
+            v = float(cell)
+            if not abs(v) < CELL_MAX:          # no coordinate or reading is this large
+                raise CompgenError(f"column {name}: {cell!r} is not a finite number of a sensible size",
+                                   where=at)
             values[r, j] = v
         label = cells[col["path"]].strip() if "path" in col else ""
         if label:     # a label is written into programs' comments and pose lists

@@ -350,7 +350,8 @@ def _session_with(tmp_path, change):
 
 
 @pytest.mark.parametrize("change, expected", [
-    ({"dX": "1e300"}, "beyond any R-test's measuring range"),
+    ({"dX": "1e300"}, "not a finite number of a sensible size"),
+    ({"dZ": "١٢"}, "is not a number"),
     ({"dY": "6000"}, "beyond any R-test's measuring range"),
     ({"dZ": "1" + "0" * 140000}, "not a CSV row"),
     ({"path": "K4 G0 Z-500"}, "not a valid path name"),
@@ -395,3 +396,20 @@ def test_report_and_compare_show_the_same_figures(fitted, tmp_path):
         row = next(ln.split() for ln in text.splitlines() if ln.strip().startswith(path + " "))
         before, predicted = row[1], row[2]
         assert f'<td class="l">{path}</td><td>{before}</td><td>{predicted}</td>' in html, (path, row)
+
+
+def test_every_error_is_one_line(tmp_path, fitted):
+    """Usage errors too, and a message quoting a line break shows it rather than breaking."""
+    for args in (("fit", "--bogus"), ("kinematics", "--from", fitted / "fit2.json", "-o", tmp_path),
+                 ("measure-program", "--machine", SEED_MACHINE, "--path", "K2", "--mode", "nope")):
+        done = subprocess.run([sys.executable, "-m", "compgen", *map(str, args)], capture_output=True,
+                              text=True)
+        assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+        assert done.stderr.startswith("compgen: error:") and "--help" in done.stderr, done.stderr
+    text = SEED_MACHINE.read_text().replace("[paths.K2]", '[paths."K2\\nG0 Z-500"]')
+    machine = tmp_path / "m.toml"
+    machine.write_text(text)
+    code, _, err = run("effects", "--machine", machine)
+    assert code == 2 and err.count("\n") == 1 and "K2\\nG0 Z-500" in err, err
+    code, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", tmp_path / "K\nG0.txt")
+    assert code == 2 and "control character" in err and not list(tmp_path.glob("K*")), err

@@ -1,0 +1,383 @@
+"""Hostile inputs against the command line: does anything wrong reach a controller file?
+
+    python benchmarks/fuzz.py [--jobs 2] [--seed 1] [--show]
+
+Each case is a file or option a user (or an accident) could give: R-test CSVs, machine
+files, fit.json files, the control's current state, text meant to be injected, and output
+paths. Each runs the real command in a fresh process (so a hang is seen: 60 s) and is
+judged against what it must do:
+
+* ``refuse``: exit 2, one line on stderr, no traceback, no output file;
+* ``accept``: exit 0, and no emitted file holds a line that starts with the injected text.
+
+Counted: tracebacks (or exit 3, an internal error), silent accepts (exit 0 where a refusal
+was due), injected lines, hangs, and wrong refusals of good input. Outside CI: a benchmark.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SEED = ROOT / "machines" / "ac-trunnion-itnc530.toml"
+SESSION = ROOT / "examples" / "seed-session.csv"
+TAB = ROOT / "examples" / "itnc530-current.TAB"
+EVIL = "G0 Z-500 INJECTED"          # what an injection would make a block of
+CONTROLLERS = ("itnc530", "tnc640", "sinumerik840d", "linuxcnc")
+
+
+@dataclass
+class Case:
+    kind: str
+    name: str
+    files: dict[str, str | bytes]         # file name in the case folder → content
+    args: list[str]                       # the command; {dir} is the case folder
+    expect: str                           # "refuse" or "accept"
+    outputs: list[str] = field(default_factory=list)   # files that must not exist after a refusal
+    special: str = ""                     # "fifo": the data file is a FIFO
+
+
+def _csv_rows():
+    lines = SESSION.read_text().splitlines()
+    head = next(i for i, ln in enumerate(lines) if ln.startswith("path,"))
+    return lines[:head + 1], [ln.split(",") for ln in lines[head + 1:]], lines[head].split(",")
+
+
+def _csv(rows, top):
+    return "\n".join([*top, *(",".join(r) for r in rows)]) + "\n"
+
+
+def csv_cases(rng: random.Random) -> list[Case]:
+    top, rows, cols = _csv_rows()
+    fit = ["fit", "--machine", str(SEED), "{dir}/data.csv", "-o", "{dir}/new.json"]
+    out = []
+
+    def cell(name, column, value, expect="refuse"):
+        r = [list(x) for x in rows]
+        r[rng.randrange(len(r))][cols.index(column)] = value
+        out.append(Case("csv", name, {"data.csv": _csv(r, top)}, fit, expect, ["new.json"]))
+
+    for column in ("X", "Y", "Z", "A", "C", "dX", "dY", "dZ"):
+        for value in ("nan", "inf", "-inf", "1e308", "", "abc", "0x10", "1e999", "--1", "١٢"):
+            cell(f"{column}={value!r}", column, value)
+    for value in ("K4\rG0", "K4 G0 Z-500", "K4;" + EVIL, "K4(" + EVIL + ")", "4K", "K" * 40, "K4\x1b[2J"):
+        cell(f"path={value!r}", "path", value)
+    cell("huge cell", "dX", "1" * 200_000)
+    whole = _csv(rows, top)
+    out += [
+        Case("csv", "empty", {"data.csv": ""}, fit, "refuse", ["new.json"]),
+        Case("csv", "header only", {"data.csv": "\n".join(top) + "\n"}, fit, "refuse", ["new.json"]),
+        Case("csv", "NUL byte", {"data.csv": whole[:500].encode() + b"\x00" + whole[500:].encode()}, fit,
+             "refuse", ["new.json"]),
+        Case("csv", "latin-1 byte", {"data.csv": whole.encode() + b"K4,\xe9\n"}, fit, "refuse", ["new.json"]),
+        Case("csv", "swapped header", {"data.csv": whole.replace("dX,dY,dZ", "dY,dX,dZ", 1)},
+             [*fit, "&&", "kinematics", "--from", "{dir}/new.json", "-o", "{dir}/K.txt"], "refuse",
+             ["K.txt"]),
+        Case("csv", "duplicate column", {"data.csv": whole.replace("dX,dY,dZ", "dX,dX,dZ", 1)}, fit, "refuse",
+             ["new.json"]),
+        Case("csv", "ragged row", {"data.csv": whole + "K4,1,2\n"}, fit, "refuse", ["new.json"]),
+        Case("csv", "a FIFO", {}, fit, "refuse", ["new.json"], special="fifo"),
+        Case("csv", "BOM and CRLF (good)", {"data.csv": ("\ufeff" + whole).replace("\n", "\r\n")}, fit,
+             "accept"),
+    ]
+    for _ in range(6):     # a file cut short: a row cut inside its last number cannot be told
+        cut = rng.randrange(len(whole) // 3, len(whole))
+        text = whole[:cut]
+        last = text.rstrip("\n").splitlines()[-1].split(",")
+        ok = len(last) == len(cols) and not text.endswith((",", "-", "."))
+        out.append(Case("csv", f"cut at byte {cut}", {"data.csv": text}, fit, "accept" if ok else "refuse",
+                        ["new.json"]))
+    # readings in mm: fit warns, the edit is refused
+    mm = [list(r) for r in rows]
+    for r in mm:
+        for c in ("dX", "dY", "dZ"):
+            r[cols.index(c)] = f"{float(r[cols.index(c)]) / 1000:.9f}"
+    out.append(Case("csv", "readings in mm", {"data.csv": _csv(mm, top)},
+                    [*fit, "&&", "kinematics", "--from", "{dir}/new.json", "-o", "{dir}/K.txt"], "refuse",
+                    ["K.txt"]))
+    swapped = [list(r) for r in rows]
+    for r in swapped:
+        r[cols.index("dX")], r[cols.index("dY")] = r[cols.index("dY")], r[cols.index("dX")]
+    out.append(Case("csv", "dX and dY swapped", {"data.csv": _csv(swapped, top)},
+                    [*fit, "&&", "kinematics", "--from", "{dir}/new.json", "-o", "{dir}/K.txt"], "refuse",
+                    ["K.txt"]))
+    return out
+
+
+MACHINE_EDITS = [
+    # (name, before, after, expect)
+    ("typo sense", "sense = -1 ", "sence = -1 ", "refuse"),
+    ("typo offset", "offset = [0.0, 0.0, 29.794]", "ofset = [0.0, 0.0, 29.794]", "refuse"),
+    ("typo travel", "travel = [-120.0, 120.0]", "travle = [-120.0, 120.0]", "refuse"),
+    ("typo feed_max", "feed_max = 5400.0", "feedmax = 5400.0", "refuse"),
+    ("typo ball", "ball = [", "bal = [", "refuse"),
+    ("typo top-level", 'controller = "itnc530"', 'controler = "itnc530"', "refuse"),
+    ("typo limits", "offset_um = 100.0", "ofset_um = 100.0", "refuse"),
+    ("nan offset", "offset = [0.0, 0.0, 29.794]", "offset = [0.0, 0.0, nan]", "refuse"),
+    ("inf travel", "travel = [-720.0, 720.0]", "travel = [-720.0, inf]", "refuse"),
+    ("nan ramp", "C = { from = 0.0, to = 360.0 }", "C = { from = nan, to = 360.0 }", "refuse"),
+    ("nan sine", "amplitude = -90.0", "amplitude = nan", "refuse"),
+    ("nan const", "C = 0.0", "C = nan", "refuse"),
+    ("string number", "feed = 500.0", 'feed = "500"', "refuse"),
+    ("negative feed", "feed = 500.0", "feed = -500.0", "refuse"),
+    ("zero n", "n = 121", "n = 0", "refuse"),
+    ("bool sense", "sense = -1 ", "sense = true ", "refuse"),
+    ("sense 2", "sense = -1 ", "sense = 2 ", "refuse"),
+    ("reversed travel", "travel = [-120.0, 120.0]", "travel = [120.0, -120.0]", "refuse"),
+    ("axis injection", 'axis = "C"', f'axis = "C0 {EVIL} C"', "refuse"),
+    ("axis newline", 'axis = "C"', f'axis = "C\\n{EVIL}"', "refuse"),
+    ("axis lower", 'axis = "C"', 'axis = "c"', "refuse"),
+    ("tool injection", 'tool = "99"', f'tool = "99\\n{EVIL}"', "refuse"),
+    ("tool spaces", 'tool = "99"', 'tool = "99 M3"', "refuse"),
+    ("work offset injection", "clearance = 20.0", f'clearance = 20.0\nwork_offset = "{EVIL}"', "refuse"),
+    ("path comma", "[paths.K2]", '[paths."K2,x"]', "refuse"),
+    ("path newline", "[paths.K2]", f'[paths."K2\\n{EVIL}"]', "refuse"),
+    ("unknown controller", 'controller = "itnc530"', 'controller = "fanuc"', "refuse"),
+    ("duplicate axis", 'axis = "Y"', 'axis = "X"', "refuse"),
+    ("safe_z", "clearance = 20.0", "clearance = 20.0\nsafe_z = -500", "refuse"),
+    ("tolerance of no path", "K2 = 8.0", "K2 = 8.0\nK9 = 1.0", "refuse"),
+    ("vector not unit", "C = [0.0, 0.0, -1.0] }", "C = [0.0, 0.0, -2.0] }", "refuse"),
+    ("name injection (free text, kept in one comment)", 'name = "A/C trunnion, iTNC 530 (seed report)"',
+     f'name = "x\\n{EVIL}\\r\\n) {EVIL} ("', "accept"),
+    ("unicode name (good)", 'name = "A/C trunnion, iTNC 530 (seed report)"', 'name = "Fräse µ 5-Achs ″"',
+     "accept"),
+]
+
+
+def machine_cases() -> list[Case]:
+    text = SEED.read_text()
+    out = []
+    for name, before, after, expect in MACHINE_EDITS:
+        assert before in text, name
+        for ctl in CONTROLLERS:
+            ext = {"itnc530": ".H", "tnc640": ".H", "sinumerik840d": ".MPF", "linuxcnc": ".ngc"}[ctl]
+            out.append(Case("machine", f"{name} [{ctl}]", {"m.toml": text.replace(before, after, 1)},
+                            ["measure-program", "--machine", "{dir}/m.toml", "--path", "K2",
+                             "--controller", ctl, "-o", f"{{dir}}/P{ext}"], expect, [f"P{ext}"]))
+    out.append(Case("machine", "not TOML", {"m.toml": "name = [\n"},
+                    ["effects", "--machine", "{dir}/m.toml"], "refuse"))
+    out.append(Case("machine", "binary", {"m.toml": b"\x89PNG\x00\x00"},
+                    ["effects", "--machine", "{dir}/m.toml"], "refuse"))
+    return out
+
+
+FIT = Path()      # set in main: a good fit.json of the example session with EXC:h2 added
+
+
+def _absolute(doc: dict) -> dict:
+    """The fit with absolute file names, so that a case's copy elsewhere still finds them."""
+    doc["machine"]["file"] = str((FIT.parent / doc["machine"]["file"]).resolve())
+    for d in doc["data"]:
+        d["file"] = str((FIT.parent / d["file"]).resolve())
+    return doc
+
+
+def fit_cases() -> list[Case]:
+    good = json.dumps(_absolute(json.loads(FIT.read_text())))
+    d = json.loads(good)
+    out = []
+
+    def variant(name, change, expect="refuse", raw=None):
+        doc = json.loads(good)
+        if change:
+            change(doc)
+        text = raw if raw is not None else json.dumps(doc)
+        for cmd in (["kinematics", "--from", "{dir}/fit.json", "-o", "{dir}/K.txt"],
+                    ["compare", "--from", "{dir}/fit.json"]):
+            out.append(Case("fit.json", f"{name} [{cmd[0]}]", {"fit.json": text}, cmd, expect, ["K.txt"]))
+
+    def param(k, v):
+        return lambda doc: doc["parameters"]["XOC"].update({k: v})
+
+    xoc, boa = d["parameters"]["XOC"]["value"], d["parameters"]["BOA"]["std"]
+    variant("NaN value", None, raw=good.replace(f'"value": {xoc!r}', '"value": NaN', 1))
+    variant("Infinity std", None, raw=good.replace(f'"std": {boa!r}', '"std": Infinity', 1))
+    for k, v in (("value", 1e300), ("value", "0.001"), ("value", None), ("value", True), ("unit", "furlong"),
+                 ("unit", "arcsec"), ("unit", 5), ("std", -1.0)):
+        variant(f"XOC {k}={v!r}", param(k, v))
+    variant("value in µm (good: unit honoured)", lambda doc: doc["parameters"]["XOC"].update(
+        value=doc["parameters"]["XOC"]["value"] * 1e3, std=doc["parameters"]["XOC"]["std"] * 1e3, unit="um"),
+        "accept")
+    variant("unknown parameter",
+            lambda doc: doc["parameters"].update(XOQ={"value": 0, "std": 0, "unit": "mm"}))
+    variant("no parameters", lambda doc: doc.pop("parameters"))
+    variant("residual empty", lambda doc: doc.update(residual={}))
+    variant("residual NaN-free but text", lambda doc: doc["residual"].update(sigma_um="0.5"))
+    variant("format", lambda doc: doc.update(format="compgen.fit/9"))
+    variant("machine gone", lambda doc: doc["machine"].update(file="nowhere.toml"))
+    variant("data gone", lambda doc: doc["data"][0].update(file="nowhere.csv"))
+    variant("checksum", lambda doc: doc["data"][0].update(sha256="0" * 64))
+    variant("deep nesting", None, raw="[" * 100_000 + "]" * 100_000)
+    variant("not an object", None, raw="[1, 2, 3]")
+    variant("not JSON", None, raw="{'a': 1}")
+    variant("empty", None, raw="")
+    return out
+
+
+def hal_good() -> str:
+    return (ROOT / "tests" / "golden" / "ac-trunnion-itnc530" / "linuxcnc" / "kinematics.hal").read_text()
+
+
+def current_cases() -> list[Case]:
+    tab = TAB.read_text()
+    vectors = {7: -1.0, 8: 0.0, 9: 0.0, 10: 0.0, 11: 0.0, 12: -1.0}
+    carr_good = "".join(f"$TC_CARR{k}[1]={vectors.get(k, 0.0)}\n"
+                        for k in (*vectors, 44, 45, 46, *range(55, 61)))
+    out = []
+
+    def case(name, ctl, text, expect="refuse"):
+        assert expect == "accept" or ctl == "tnc640" or text not in (tab, carr_good, hal_good()), name
+        out.append(Case("current", f"{name} [{ctl}]", {"current.txt": text},
+                        ["kinematics", "--from", "{dir}/fit.json", "--controller", ctl, "--current",
+                         "{dir}/current.txt", "-o", "{dir}/K.out"], expect, ["K.out"]))
+
+    case("a table for a TNC 640 (it keeps no *.TAB)", "tnc640", tab)
+    for ctl in ("itnc530",):
+        case("good table", ctl, tab, "accept")
+        case("NaN COORD", ctl, tab.replace("+29.794", "nan     "))
+        case("inf COORD", ctl, tab.replace("+29.794", "inf     "))
+        case("text COORD", ctl, tab.replace("+29.794", "abc     "))
+        case("no END", ctl, tab.replace("[END]", ""))
+        case("no MachAxis C", ctl, tab.replace("MachAxis  C", "MachAxis  W"))
+        case("wrong pivot", ctl, tab.replace("+29.794", "+30.500"))
+        case("no unit", ctl, tab.replace(" MM\n", "\n", 1))
+        case("misaligned columns", ctl, tab.replace("Trans     Z     +29.794", "Trans Z +29.794"))
+        case("binary", ctl, b"\x00\x01\x02")
+        case("CRLF (good)", ctl, tab.replace("\n", "\r\n"), "accept")
+    case("good record", "sinumerik840d", carr_good, "accept")
+    case("NaN", "sinumerik840d", carr_good.replace("$TC_CARR7[1]=-1.0", "$TC_CARR7[1]=nan"))
+    case("inf", "sinumerik840d", carr_good.replace("$TC_CARR44[1]=0.0", "$TC_CARR44[1]=inf"))
+    case("text", "sinumerik840d", carr_good.replace("$TC_CARR44[1]=0.0", "$TC_CARR44[1]=abc"))
+    case("missing entry", "sinumerik840d", carr_good.replace("$TC_CARR44[1]=0.0\n", ""))
+    case("other record only", "sinumerik840d", carr_good.replace("[1]", "[2]"))
+    case("wrong vector", "sinumerik840d", carr_good.replace("$TC_CARR7[1]=-1.0", "$TC_CARR7[1]=0.0")
+         .replace("$TC_CARR8[1]=0.0", "$TC_CARR8[1]=-1.0"))
+    hal = hal_good()
+    case("good HAL (an edit of another fit)", "linuxcnc", hal, "accept")
+    for bad in ("abc", "nan", "-inf", "1e999"):
+        case(f"HAL {bad}", "linuxcnc", re.sub(r"(setp \S+z-rot-point\s+)\S+", rf"\g<1>{bad}", hal))
+    return out
+
+
+def output_cases() -> list[Case]:
+    k = ["kinematics", "--from", "{dir}/fit.json", "--controller", "itnc530"]
+    return [
+        Case("output", "-o is --current", {"current.TAB": TAB.read_text()},
+             [*k, "--current", "{dir}/current.TAB", "-o", "{dir}/current.TAB", "--force"], "refuse"),
+        Case("output", "-o is the fit", {}, [*k, "-o", "{dir}/fit.json", "--force"], "refuse"),
+        Case("output", "-o /dev/null", {}, [*k, "-o", "/dev/null", "--force"], "refuse"),
+        Case("output", "-o a folder", {}, [*k, "-o", "{dir}", "--force"], "refuse"),
+        Case("output", "-o in a missing folder", {}, [*k, "-o", "{dir}/no/such/K.txt"], "refuse"),
+        Case("output", "-o in /proc", {}, [*k, "-o", "/proc/K.txt"], "refuse"),
+        Case("output", "-o exists, no --force", {"K.txt": "the user's"}, [*k, "-o", "{dir}/K.txt"], "refuse"),
+        Case("output", "-o over-long program name", {}, [*k, "-o", "{dir}/" + "K" * 40 + ".txt"], "refuse",
+             ["K" * 40 + ".txt"]),
+        Case("output", "-o name with a newline", {}, [*k, "-o", "{dir}/K\nG0.txt"], "refuse", ["K\nG0.txt"]),
+        Case("output", "simulate -o is the machine file", {"m.toml": SEED.read_text()},
+             ["simulate", "--machine", "{dir}/m.toml", "--truth",
+              str(ROOT / "examples" / "truth-table4.json"), "-o", "{dir}/m.toml", "--force"], "refuse"),
+        Case("output", "measure-program -o is --poses", {"p.csv": "path,A,C\nK2,0,0\nK2,0,5\n"},
+             ["measure-program", "--machine", str(SEED), "--poses", "{dir}/p.csv", "-o", "{dir}/p.csv",
+              "--force"], "refuse"),
+        Case("output", "good (accept)", {}, [*k, "-o", "{dir}/K.txt"], "accept"),
+    ]
+
+
+def run_case(case: Case, work: Path, compgen: list[str]) -> tuple[Case, str, str]:
+    folder = Path(tempfile.mkdtemp(dir=work))
+    (folder / "fit.json").write_text(json.dumps(_absolute(json.loads(FIT.read_text()))))
+    for name, content in case.files.items():
+        (folder / name).write_bytes(content if isinstance(content, bytes) else content.encode("utf-8"))
+    if case.special == "fifo":
+        os.mkfifo(folder / "data.csv")
+    args = [a.replace("{dir}", str(folder)) for a in case.args]
+    steps, current = [], []
+    for a in args:
+        if a == "&&":
+            steps.append(current)
+            current = []
+        else:
+            current.append(a)
+    steps.append(current)
+    code, err = 0, ""
+    before = {p.name for p in folder.iterdir()}
+    for step in steps:
+        try:
+            done = subprocess.run([*compgen, *step], capture_output=True, text=True, timeout=60,
+                                  cwd=folder, stdin=subprocess.DEVNULL)
+        except subprocess.TimeoutExpired:
+            return case, "hang", ""
+        code, err = done.returncode, done.stderr
+        if code != 0:
+            break
+    if "Traceback" in err or code == 3 or code not in (0, 1, 2):
+        return case, "traceback", err.strip().splitlines()[-1] if err.strip() else f"exit {code}"
+    written = [p for p in folder.iterdir() if p.name not in before and p.is_file()]
+    block = re.compile(rf"(?m)^\s*\d*\s*{re.escape(EVIL)}")      # the text as a block of its own
+    injected = [p.name for p in written if block.search(p.read_text("latin-1"))]
+    if injected:
+        return case, "injected", ", ".join(injected)
+    if case.expect == "refuse":
+        if code == 0:
+            return case, "silent accept", ""
+        lines = [ln for ln in err.splitlines() if ln.strip() and "warning" not in ln]
+        if len(lines) != 1 or not lines[0].startswith("compgen: error:"):
+            return case, "unclear refusal", err.strip()[:200]
+        left = [o for o in case.outputs if (folder / o).exists() and o not in before]
+        if left:
+            return case, "half-written", ", ".join(left)
+        return case, "ok", lines[0][:160]
+    if code != 0:
+        return case, "wrong refusal", err.strip()[:200]
+    return case, "ok", ""
+
+
+def main() -> None:
+    global FIT
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--show", action="store_true", help="print every case's outcome")
+    args = ap.parse_args()
+    compgen = [sys.executable, "-m", "compgen"]
+    work = Path(tempfile.mkdtemp(prefix="compgen-fuzz-"))
+    FIT = work / "fit.json"
+    for step in (["fit", "--machine", str(SEED), str(SESSION), "-o", str(work / "fit0.json")],
+                 ["fit", "--from", str(work / "fit0.json"), "--add", "EXC:h2", "-o", str(FIT)]):
+        subprocess.run([*compgen, *step], check=True, capture_output=True, cwd=ROOT)
+    rng = random.Random(args.seed)
+    cases = [*csv_cases(rng), *machine_cases(), *fit_cases(), *current_cases(), *output_cases()]
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(args.jobs) as pool:
+        results = list(pool.map(lambda c: run_case(c, work, compgen), cases))
+    shutil.rmtree(work, ignore_errors=True)
+    kinds = sorted({c.kind for c in cases})
+    outcomes = ["ok", "traceback", "silent accept", "injected", "hang", "wrong refusal", "unclear refusal",
+                "half-written"]
+    print(f"{len(cases)} cases in {time.perf_counter() - t0:.0f} s (seed {args.seed})")
+    print(f"{'kind':<10}{'cases':>6}" + "".join(f"{o:>16}" for o in outcomes))
+    for k in kinds:
+        mine = [r for r in results if r[0].kind == k]
+        print(f"{k:<10}{len(mine):>6}" + "".join(f"{sum(r[1] == o for r in mine):>16}" for o in outcomes))
+    print(f"{'all':<10}{len(results):>6}"
+          + "".join(f"{sum(r[1] == o for r in results):>16}" for o in outcomes))
+    for case, outcome, detail in results:
+        if outcome != "ok" or args.show:
+            print(f"  {outcome:<16}{case.kind}: {case.name!r}: {detail}")
+    sys.exit(0 if all(r[1] == "ok" for r in results) else 1)
+
+
+if __name__ == "__main__":
+    main()
