@@ -413,3 +413,18 @@ def test_every_error_is_one_line(tmp_path, fitted):
     assert code == 2 and err.count("\n") == 1 and "K2\\nG0 Z-500" in err, err
     code, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", tmp_path / "K\nG0.txt")
     assert code == 2 and "control character" in err and not list(tmp_path.glob("K*")), err
+
+
+@pytest.mark.parametrize("rows, expected", [
+    ("6   Trans     Y     +0.01000     Y0A\n7   MachAxis  A\n", "has no partner row -Y0A"),
+    ("6   Trans     Y     +0.01000     Y0A\n7   MachAxis  A\n8   Trans     Y     -0.01100     -Y0A\n",
+     "do not cancel"),
+])
+def test_a_broken_pair_of_rows_is_not_edited(fitted, tmp_path, rows, expected):
+    """A correction added to one half of an error/inverse pair would leave them inconsistent."""
+    table = (ROOT / "examples" / "itnc530-current.TAB").read_text().replace("6   MachAxis  A\n", rows)
+    current = tmp_path / "current.TAB"
+    current.write_text(table)
+    code, _, err = run("kinematics", "--from", fitted / "fit2.json", "--current", current,
+                       "-o", tmp_path / "K.TAB")
+    assert code == 2 and expected in err, err

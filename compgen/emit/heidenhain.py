@@ -73,6 +73,7 @@ def edit_table(table: TabTable, rows: dict[str, tuple[list[Row], list[Row]]], wh
     if "DOC" not in table.columns:
         raise CompgenError("the current table has no DOC column to name the correction rows",
                            hint="add a DOC column (the enhanced kinematics description has one)")
+    _check_pairs(table, where)
     diff = []
     start, end = table.slot("DOC")
     room = None if end is None else end - start - 1
@@ -107,6 +108,24 @@ def edit_table(table: TabTable, rows: dict[str, tuple[list[Row], list[Row]]], wh
                                   "DOC": doc})
                 diff.append(f"{row.doc:<6} Trans {row.axis}  (new row) -> {new} {unit}")
     return diff
+
+
+def _check_pairs(table: TabTable, where: str) -> None:
+    """An ISO-named row and its inverse come together and cancel (the error before its
+    MachAxis, the inverse after it): adding a correction to one half of a broken pair would
+    write an inconsistent table, so it is refused."""
+    rows = {_name(r): r for r in table.rows if r.get("KEY") == "Trans" and ISO.fullmatch(_name(r))}
+    for name, row in rows.items():
+        pair = name[1:] if name.startswith("-") else f"-{name}"
+        if pair not in rows:
+            raise CompgenError(f"row {name} has no partner row {pair}: compgen's rows come in pairs "
+                               "that cancel around their MachAxis", where=where,
+                               hint=f"add the {pair} row, or rename the row if it is the OEM's own geometry")
+        # both rounded to the table's decimals: they may differ by one unit of the last one
+        unit = 10.0 ** -table.decimals.get("COORD", _decimals(row["AXIS"]))
+        if abs(float(row["COORD"]) + float(rows[pair]["COORD"])) > 1.01 * unit:
+            raise CompgenError(f"rows {name} ({row['COORD']}) and {pair} ({rows[pair]['COORD']}) do not "
+                               "cancel", where=where, hint="correct the table by hand before a new edit")
 
 
 def _name(row: dict) -> str:
