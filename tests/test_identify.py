@@ -1,5 +1,7 @@
 """Identification against the seed's Table 4, the x30 vectors and Monte-Carlo truth."""
 
+import re
+
 import numpy as np
 import pytest
 from conftest import ARCSEC, ROOT, TABLE4, UM, vector
@@ -67,11 +69,78 @@ def test_reported_sigma_matches_monte_carlo_spread(seed_machine, rng):
 
 
 def test_k2_alone_cannot_separate_and_says_what_would(seed_machine, rng):
+    """K2 turns C at A = 0: four combinations are invisible, with coefficients derived here
+    from the geometry, and the separating measurements are ranked by the condition number
+    computed here from the stacked, column-normalised Jacobians."""
+    from compgen.identify import COND_LIMIT
+    from compgen.kinematics import Model
+    from compgen.paths import alternative_measurements
     data = simulate(seed_machine, TABLE4, generate(seed_machine, ["K2"]), NOISE_UM, rng)
     with pytest.raises(CompgenError) as exc:
         identify(seed_machine, [data])
     text = str(exc.value)
-    assert "ZOW" in text and "ZOA" in text and "K4" in text and "--fix" in text
+    cond = float(re.search(r"condition number (\S+)\)", text)[1])
+    assert cond > 1e12                                  # exactly singular, up to rounding
+    # at A = 0 a tilt θ of A's line about Z moves the ball (x = -217.504 mm) by θ·x in Y:
+    # -1 µm of YOW is undone by COA = -1e-3/217.504 rad = -0.948″
+    coa = -1e-3 / abs(seed_machine.ball[0]) / ARCSEC
+    combos = text.split(": moving ")[1].split(" changes the readings")[0].split("; or ")
+    assert f"YOW by -1.00 µm together with COA by {coa:+.2f} ″" in combos, combos
+    assert "BOA by -1.00 ″ together with BOC by +1.00 ″" in combos, combos   # both tilt about Y at A = 0
+    # the others span {ZOW−ZOA, YOA−YOC} (any basis of that plane): each, applied to the
+    # model, must leave every reading unchanged
+    m = Model(seed_machine, list(TABLE4))
+    named = set()
+    for combo in combos:
+        x = np.zeros(len(TABLE4))
+        for name, value, unit in re.findall(r"(\w+) by ([-+]\d+\.\d+) (µm|″)", combo):
+            x[list(TABLE4).index(name)] = float(value) * (UM if unit == "µm" else ARCSEC)
+            named.add(name)
+        # the message leaves out parts under 15 % of the largest (here XOW's 0.14 µm that
+        # BOA−BOC's pivot distance of 29.8 mm needs) and rounds to 0.01
+        moved = np.abs(m.deviation(data.poses, x)).max() / UM
+        assert moved < 0.15, (combo, moved)
+    assert named == {"YOW", "COA", "BOA", "BOC", "ZOW", "ZOA", "YOA", "YOC"}, named
+    assert f"less than 1/{COND_LIMIT:g} of the best-seen combination" in text and COND_LIMIT == 1000
+    J = m.jacobian(data.poses).reshape(-1, len(TABLE4))
+    ranked = []
+    for label, extra in alternative_measurements(seed_machine):
+        both = np.vstack([J, m.jacobian(extra).reshape(-1, len(TABLE4))])
+        c = np.linalg.cond(both / np.linalg.norm(both, axis=0))
+        if c < COND_LIMIT:
+            ranked.append((c, label))
+    best = ", ".join(f"{o} (condition {c:.0f})" for c, o in sorted(ranked)[:3])
+    assert f"Adding one of these measurements would: {best}; or hold one parameter" in text, (best, text)
+    assert best.startswith("K4 (condition 6)")
+
+
+def test_residual_statistics_per_path_by_hand():
+    """RMS, range and largest magnitude per path and direction (µm), on numbers done by hand."""
+    from compgen.identify import residual_stats
+    from compgen.kinematics import Poses
+    r = np.array([[1.0, -2.0, 0.0], [3.0, 2.0, 0.0], [-4.0, 0.0, 1.0]]) * 1e-3    # mm
+    poses = Poses(np.zeros((3, 5)), np.zeros((3, 3)), np.zeros(3), np.array(["K4", "K4", "K1"], dtype=object))
+    s = residual_stats(poses, r, dof=4)
+    assert s["per_path"]["K4"] == {"n": 2, "rms_um": pytest.approx([np.sqrt(5), 2.0, 0.0]),
+                                   "range_um": pytest.approx([2.0, 4.0, 0.0]),
+                                   "max_abs_um": pytest.approx([3.0, 2.0, 0.0])}
+    assert s["per_path"]["K1"]["range_um"] == [0.0, 0.0, 0.0] and s["per_path"]["K1"]["n"] == 1
+    total = 1 + 4 + 9 + 4 + 16 + 1                       # sum of squares, µm²
+    assert s["rms_um"] == pytest.approx(np.sqrt(total / 9))
+    assert s["sigma_um"] == pytest.approx(np.sqrt(total / 4))
+    assert s["readings"] == 9 and s["dof"] == 4
+    assert s["per_direction_rms_um"] == pytest.approx({"dX": np.sqrt(26 / 3), "dY": np.sqrt(8 / 3),
+                                                       "dZ": np.sqrt(1 / 3)})
+
+
+def test_fixed_parameters_report_no_uncertainty_and_linear_no_iterations(seed_machine):
+    data = read_rtest(vector("seed-table4-noiseless.csv"), seed_machine)
+    fit = identify(seed_machine, [data], fixed={"BOC": TABLE4["BOC"]}, method="linear")
+    assert fit.parameters["BOC"].fixed and fit.parameters["BOC"].std == 0.0
+    assert fit.iterations == 0 and "BOC" not in fit.free
+    exact = identify(seed_machine, [data])
+    # Gauss–Newton from the first-order start: one chord step, then converged twice over
+    assert 2 <= exact.iterations <= 6, exact.iterations
 
 
 def test_fixing_what_cannot_be_separated_makes_it_fit(seed_machine, rng):
