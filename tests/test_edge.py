@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import ROOT, SEED_MACHINE, run
 
@@ -428,3 +429,36 @@ def test_a_broken_pair_of_rows_is_not_edited(fitted, tmp_path, rows, expected):
     code, _, err = run("kinematics", "--from", fitted / "fit2.json", "--current", current,
                        "-o", tmp_path / "K.TAB")
     assert code == 2 and expected in err, err
+
+
+def _only(name, value, extra=()):
+    """fit2 with every parameter zero but ``name`` (and ``extra`` added to the model)."""
+    def change(d):
+        for n in extra:
+            d["model"].append(n)
+            d["parameters"][n] = {"value": 0.0, "std": 0.0, "unit": "rad"}
+        for n, p in d["parameters"].items():
+            p["value"] = value if n == name else 0.0
+    return change
+
+
+@pytest.mark.parametrize("name, value, extra, expected", [
+    ("XOC", 0.15, (), "C line offset 150.0 um > 100 um"),        # at the pivot: XOC itself
+    ("ZOA", -0.12, (), "A line offset 120.0 um > 100 um"),
+    ("BOC", 100 * np.pi / 648000, (), "C line tilt 100.0 arcsec > 60 arcsec"),
+    ("COX", -70 * np.pi / 648000, ("COX",), "COX 70.0 arcsec > 60 arcsec"),
+    ("XOC", 0.099, (), None),
+    ("COX", 59 * np.pi / 648000, ("COX",), None),
+])
+def test_each_correction_is_held_to_its_limit(fitted, tmp_path, name, value, extra, expected):
+    """[limits] of the seed machine: 100 µm, 60″; the sizes in the refusal derived here."""
+    fit = load_fit(_edited_fit(fitted, tmp_path, _only(name, value, extra)))
+    machine, _ = reload(fit)
+    if expected is None:
+        plan(machine, fit)
+        return
+    with pytest.raises(CompgenError) as exc:
+        plan(machine, fit)
+    assert expected in str(exc.value), str(exc.value)
+    assert str(exc.value).count(">") == 1, str(exc.value)       # nothing else is over
+    plan(machine, fit, force=True)

@@ -253,3 +253,36 @@ def test_two_rounds_from_a_non_zero_state_bring_the_machine_to_the_noise(tmp_pat
         across = [k for k in range(3) if k != "xyz".index(line.nominal)]
         np.testing.assert_allclose(line.offset[across], truth_lines[axis].offset[across], atol=0.3 * UM)
         np.testing.assert_allclose(line.tilt, truth_lines[axis].tilt, atol=0.3 * ARCSEC)
+
+
+def test_sinumerik_squareness_goes_to_a_cec_table_that_cancels_it(bc_machine):
+    """COX (X's line turned about Z): moving the tool-side X by x puts the nest COX·x off in
+    +Y (a positive turn about Z takes +x towards +y). The CEC table must therefore add
+    −COX·x to Y (machine axis Y1) as a function of X (X1), read here from the file."""
+    cox = 5 * ARCSEC
+    truth = {"XOC": 11 * UM, "COX": cox}
+    model = [*location_model(bc_machine), "COX"]
+    poses = generate(bc_machine, ["K4", "K1", "K2"])
+    fit = identify(bc_machine, [simulate(bc_machine, truth, poses)], model)
+    cec = kinematics_edit(bc_machine, fit, "sinumerik840d", NOMINAL_CARR, "c", "KIN", "0",
+                          "d").files["_CEC.INI"]
+    tables = {}
+    for m in re.finditer(r"(?m)^\$AN_CEC(_[A-Z_]+)?\[(\d+)(?:,(\d+))?\]=\(?([^)\s]+)\)?$", cec):
+        t = tables.setdefault(int(m[2]), {"values": {}})
+        if m[1] is None:
+            t["values"][int(m[3])] = float(m[4])
+        else:
+            t[m[1]] = m[4]
+    square = [t for t in tables.values() if t["_INPUT_AXIS"] == "X1" and t["_OUTPUT_AXIS"] == "Y1"]
+    assert len(square) == 1, tables
+    t = square[0]
+    x = float(t["_MIN"]) + float(t["_STEP"]) * np.arange(len(t["values"]))
+    x_axis = bc_machine.axis("X")
+    assert x[0] == pytest.approx(x_axis.travel[0]) and x[-1] == pytest.approx(x_axis.travel[1])
+    values = np.array([t["values"][i] for i in range(len(x))])
+    np.testing.assert_allclose(values, -np.tan(cox) * x, atol=2e-6)      # 6 decimals of mm
+    # the model agrees with the hand rule (it is the truth the fit was made from)
+    q = np.zeros((len(x), len(bc_machine.axes)))
+    q[:, bc_machine.index("X")] = x
+    dev = Model(bc_machine, ["COX"]).deviation(Poses.at(q, bc_machine.ball), np.array([cox]))
+    np.testing.assert_allclose(dev[:, 1], np.tan(cox) * x, rtol=1e-6, atol=1e-12)
