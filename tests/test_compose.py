@@ -145,3 +145,24 @@ def test_an_edit_against_a_state_that_holds_part_of_it_writes_the_rest(seed_mach
         for n in a:
             assert b[n] == pytest.approx(a[n], abs=3e-6), n
         assert max(abs(c[n] - a[n]) for n in a) > 10 * UM
+
+
+def test_the_rest_of_a_plan_subtracts_what_the_control_holds(seed_machine):
+    """rest(): offsets, tilts and squareness the control already holds come off the plan,
+    each by its own key; one the plan lacks goes back with the opposite sign."""
+    from compgen.correction import Held, rest
+    from compgen.effects import location_model
+    truth = {"XOC": 9 * UM, "BOA": 4 * ARCSEC, "COX": 5 * ARCSEC}
+    model = [*location_model(seed_machine), "COX"]
+    fit = identify(seed_machine, [simulate(seed_machine, truth, generate(seed_machine, ["K4", "K1", "K2"]))],
+                   model)
+    p = plan(seed_machine, fit)
+    held_lines = {n: type(line)(n, line.nominal, line.pivot, line.offset * 0.25, line.tilt * 0.5)
+                  for n, line in p.lines.items()}
+    r = rest(seed_machine, p, Held(held_lines, {"COX": 2 * ARCSEC, "BOZ": 1 * ARCSEC}))
+    assert r.squareness["COX"] == pytest.approx(p.squareness["COX"] - 2 * ARCSEC, abs=1e-15)
+    assert r.squareness["BOZ"] == pytest.approx(-1 * ARCSEC, abs=1e-15)
+    for n, line in r.lines.items():
+        np.testing.assert_allclose(line.offset, 0.75 * p.lines[n].offset, atol=1e-15)
+        np.testing.assert_allclose(line.tilt, 0.5 * p.lines[n].tilt, atol=1e-15)
+    assert r.tables == p.tables and r.fit_params == p.fit_params

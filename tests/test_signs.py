@@ -286,3 +286,25 @@ def test_sinumerik_squareness_goes_to_a_cec_table_that_cancels_it(bc_machine):
     q[:, bc_machine.index("X")] = x
     dev = Model(bc_machine, ["COX"]).deviation(Poses.at(q, bc_machine.ball), np.array([cox]))
     np.testing.assert_allclose(dev[:, 1], np.tan(cox) * x, rtol=1e-6, atol=1e-12)
+
+
+def test_linuxcnc_pins_of_a_c_axis_off_the_z_axis(tmp_path):
+    """With C's pivot at x = 1.5, y = -2.0 mm (above A's, which is at the origin) the trt
+    pins are, by trtfuncs.c's meaning: the rot point at C's pivot, the offsets from it to
+    A's pivot, and XOC/YOC added to the rot point (and taken out of the offsets, so A's
+    line stays where it is)."""
+    text = SEED_MACHINE.read_text().replace("offset = [0.0, 0.0, 29.794]", "offset = [1.5, -2.0, 29.794]")
+    path = tmp_path / "m.toml"
+    path.write_text(text)
+    machine = load_machine(path)
+    truth = {"XOC": 3 * UM, "YOC": -4 * UM}
+    poses = generate(machine, ["K4", "K1", "K2"])
+    fit = identify(machine, [simulate(machine, truth, poses)])
+    hal = kinematics_edit(machine, fit, "linuxcnc", None, "", "KIN", "0", "d").files[".hal"]
+    got = {m[1]: (float(m[2]), float(m[3])) for m in
+           re.finditer(r"(?m)^setp xyzac-trt-kins\.(\S+) (\S+)\s+# was (\S+)$", hal)}
+    assert got["x-rot-point"] == (pytest.approx(1.5 + 0.003, abs=1e-6), 1.5)
+    assert got["y-rot-point"] == (pytest.approx(-2.0 - 0.004, abs=1e-6), -2.0)
+    assert got["z-rot-point"] == (pytest.approx(29.794, abs=1e-6), 29.794)
+    assert got["y-offset"] == (pytest.approx(2.0 + 0.004, abs=1e-6), 2.0)
+    assert got["z-offset"] == (pytest.approx(-29.794, abs=1e-6), -29.794)
