@@ -153,3 +153,98 @@ def test_an_inch_table_without_declared_decimals_gets_one_more_decimal(seed_mach
     tab = kinematics_edit(seed_machine, fit, "itnc530", text, "KIN.TAB", "KIN", "0", "d").files[".TAB"]
     x0c = next(r for r in TabTable.parse(tab, "n").rows if r["DOC"].split()[:1] == ["X0C"])
     assert re.fullmatch(r"[+-]\d+\.\d{6}", x0c["COORD"]), x0c["COORD"]      # 1e-6 inch = 0.0254 µm
+
+
+@pytest.mark.parametrize("unit, dec, noted", [
+    ("MM", 5, False),       # 1e-5 mm = 0.01 µm: compgen's own resolution
+    ("MM", 4, True),        # 0.1 µm
+    ("INCH", 6, True),      # 1e-6 inch = 0.0254 µm, coarser than 0.01 µm
+    ("INCH", 7, False),     # 0.00254 µm
+])
+def test_the_resolution_note_appears_exactly_when_the_table_is_coarser(seed_machine, fit, unit, dec, noted):
+    zc = f"+{29.794:.{dec}f}" if unit == "MM" else f"+{29.794 / 25.4:.{dec}f}"
+    text = _table(unit=unit, zc=zc, y0a=f"+{0.01 / (25.4 if unit == 'INCH' else 1):.{dec}f}",
+                  newline="\n").replace("     DEC = 5", f"     DEC = {dec}")
+    notes = kinematics_edit(seed_machine, fit, "itnc530", text, "KIN.TAB", "KIN", "0", "d").notes
+    assert any(f"COORD has {dec} decimals (table description): linear" in n for n in notes) == noted, notes
+    # rotations (deg, 7 decimals = 0.00036″ in compgen) are rounded coarser below 7 decimals
+    assert any(f"COORD has {dec} decimals: rotations" in n for n in notes) == (dec < 7), notes
+
+
+def test_the_pivot_check_takes_offsets_up_to_the_limit(seed_machine, fit):
+    """[limits] offset_um = 100: a table 80 µm off the machine file passes, 120 µm does not."""
+    assert _edit(seed_machine, fit, _table(zc="+29.874"))
+    with pytest.raises(CompgenError, match="puts the C axis at"):
+        _edit(seed_machine, fit, _table(zc="+29.914"))
+
+
+def test_an_oem_rotation_row_stops_the_pivot_check_and_says_so(seed_machine, fit):
+    """A rotation above 1e-3° (3.6″) in the chain turns the frame: the check stops there."""
+    text = _table(newline="\n").replace("5    Trans      Z     +0                                to A/C",
+                                        "5    Trans      B     +0.0015                           OEM tilt")
+    notes = kinematics_edit(seed_machine, fit, "itnc530", text, "KIN.TAB", "KIN", "0", "d").notes
+    assert any("pivot check stopped at the rotation B +0.0015 deg" in n for n in notes), notes
+
+
+SQUARE = {"COX": 5 * ARCSEC, "BOZ": -4 * ARCSEC}
+
+
+@pytest.fixture(scope="module")
+def square_fit(seed_machine):
+    from compgen.effects import location_model
+    poses = generate(seed_machine, ["K4", "K1", "K2"])
+    return identify(seed_machine, [simulate(seed_machine, TRUTH | SQUARE, poses)],
+                    [*location_model(seed_machine), *SQUARE])
+
+
+def test_the_change_list_reads_back_as_the_table_does(seed_machine, square_fit):
+    """The .txt change list and the edited .TAB of one edit hold the same lines and
+    squareness when read (the change list is what `simulate --edit` and --measured-with
+    may be given)."""
+    files = kinematics_edit(seed_machine, square_fit, "itnc530", _table(newline="\n"), "KIN.TAB", "KIN",
+                            "0", "d").files
+    nominal = nominal_lines(seed_machine)
+    from_txt = heidenhain.read_lines(files[".txt"], seed_machine, nominal)
+    want = plan(seed_machine, square_fit).lines
+    for axis, line in want.items():
+        np.testing.assert_allclose(from_txt[axis].offset, line.offset, atol=0.5e-5)
+        np.testing.assert_allclose(from_txt[axis].tilt, line.tilt, atol=1e-9)
+    # the change list has 7 decimals of a degree; this table declares 5 (half of 1e-5°)
+    for text, tol in ((files[".txt"], 0.5e-7), (files[".TAB"], 0.5e-5)):
+        square = heidenhain.read_squareness(text, seed_machine)
+        assert set(square) == set(SQUARE)
+        for name, value in SQUARE.items():
+            assert square[name] == pytest.approx(value, abs=np.radians(tol) * 1.01), name
+
+
+def test_since_is_what_the_control_holds_beyond_the_measured_state(seed_machine, square_fit):
+    """--measured-with: the table then, the table now; their difference row by row."""
+    then = _table(newline="\n")
+    now = kinematics_edit(seed_machine, square_fit, "itnc530", then, "KIN.TAB", "KIN", "0", "d").files[".TAB"]
+    held = heidenhain.ITNC530().since(seed_machine, then, now, "now")
+    want = plan(seed_machine, square_fit)
+    for axis, line in want.lines.items():
+        np.testing.assert_allclose(held.lines[axis].offset, line.offset, atol=0.5e-5)
+        np.testing.assert_allclose(held.lines[axis].tilt, line.tilt, atol=np.radians(0.5e-5) * 1.01)
+    assert held.squareness == pytest.approx(want.squareness, abs=np.radians(0.5e-5) * 1.01)
+    back = heidenhain.ITNC530().since(seed_machine, now, then, "then")       # and the other way
+    assert back.squareness == pytest.approx({k: -v for k, v in want.squareness.items()},
+                                            abs=np.radians(0.5e-5) * 1.01)
+    for axis, line in want.lines.items():
+        np.testing.assert_allclose(back.lines[axis].tilt, -line.tilt, atol=np.radians(0.5e-5) * 1.01)
+
+
+def test_a_positioning_table_goes_to_the_comp_csv_with_the_values_that_cancel(seed_machine):
+    """ECC:h2 (C's angle error 8″·cos 2C) on an iTNC 530: a table over C, -8″·cos 2C in deg."""
+    from compgen.effects import location_model
+    poses = generate(seed_machine, ["K4", "K1", "K2"])
+    truth = {"XOC": 2 * UM, "ECC:h2c": 8 * ARCSEC}
+    fit = identify(seed_machine, [simulate(seed_machine, truth, poses)],
+                   [*location_model(seed_machine), "ECC:h2c", "ECC:h2s"])
+    csv = kinematics_edit(seed_machine, fit, "itnc530", None, "", "KIN", "0", "d").files[".comp.csv"]
+    rows = [ln.split(",") for ln in csv.strip().splitlines() if ln.startswith("ECC:h2,")]
+    assert {(r[1], r[3], r[5]) for r in rows} == {("C", "C", "deg")}
+    c = np.array([float(r[2]) for r in rows])
+    value = np.array([float(r[4]) for r in rows])
+    assert c[0] == 0 and c[-1] == 360 and len(c) == 37
+    np.testing.assert_allclose(value, -8 / 3600 * np.cos(np.radians(2 * c)), atol=0.6e-6)   # 6 decimals
