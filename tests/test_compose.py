@@ -9,6 +9,9 @@ differ from the sum of the lines of A and of B only by second-order terms, tilt 
 to 1e-5 mm and 1e-7 deg (HEIDENHAIN), 1e-5 mm and 1e-10 (SINUMERIK), 1e-6 mm (LinuxCNC).
 """
 
+import re
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from conftest import ARCSEC, OEM_TAB, ROOT, UM
@@ -17,6 +20,7 @@ from compgen.correction import nominal_lines, plan
 from compgen.emit import heidenhain, sinumerik
 from compgen.emit.kinematics import kinematics_edit
 from compgen.emit.linuxcnc import SETP
+from compgen.errors import CompgenError
 from compgen.identify import identify
 from compgen.paths import generate
 from compgen.simulate import simulate
@@ -166,3 +170,86 @@ def test_the_rest_of_a_plan_subtracts_what_the_control_holds(seed_machine):
         np.testing.assert_allclose(line.offset, 0.75 * p.lines[n].offset, atol=1e-15)
         np.testing.assert_allclose(line.tilt, 0.5 * p.lines[n].tilt, atol=1e-15)
     assert r.tables == p.tables and r.fit_params == p.fit_params
+
+
+def _record(**values):
+    text = OEM_CARR
+    for n, v in values.items():
+        text = re.sub(rf"\$TC_CARR{n[1:]}\[1\]=\S+", f"$TC_CARR{n[1:]}[1]={v}", text)
+    return text
+
+
+def test_sinumerik_vectors_of_any_length_and_a_wrong_record(bc_machine):
+    """A record may hold its vectors unnormalised: the edit writes unit vectors, turned by the
+    fit's tilt; a vector more than 1° from the machine file's is another record's, refused."""
+    fit = _fit(bc_machine, BC_A)
+    lines = plan(bc_machine, fit).lines
+    twice = _record(c10=0.0, c11=0.000193925, c12=-2.0)       # C's vector, length 2, ~20″ off
+    new = sinumerik.read_carr(kinematics_edit(bc_machine, fit, "sinumerik840d", twice, "c", "K", "0",
+                                              "d").files[".MPF"], "t", 1)
+    v = np.array([new[n] for n in (10, 11, 12)])
+    want = rot_exact(lines["C"].tilt)[:3, :3] @ (np.array([0.0, 0.000193925, -2.0]) / 2.0000000094)
+    np.testing.assert_allclose(v, want, atol=1e-9)
+    assert np.linalg.norm(v) == pytest.approx(1.0, abs=1e-9)
+    off = np.radians([0.5, 2.0])
+    near, far = (_record(c11=2 * np.sin(a), c12=-2 * np.cos(a)) for a in off)
+    kinematics_edit(bc_machine, fit, "sinumerik840d", near, "c", "K", "0", "d")
+    with pytest.raises(CompgenError, match="is not the one the machine file says it holds"):
+        kinematics_edit(bc_machine, fit, "sinumerik840d", far, "c", "K", "0", "d")
+
+
+def test_sinumerik_edit_reads_back_as_its_plan_from_any_record(bc_machine):
+    """read_lines (what `simulate --edit` and --measured-with use) on an edit made from a
+    record with non-zero l2, l3 and l4: the plan's offsets and tilts."""
+    fit = _fit(bc_machine, BC_A)
+    p = plan(bc_machine, fit)
+    record = _record(c58=-0.0123, c59=0.0, c60=0.0045)      # l4 closes the OEM's l2 + l3
+    mpf = kinematics_edit(bc_machine, fit, "sinumerik840d", record, "c", "K", "0", "d").files[".MPF"]
+    got = sinumerik.read_lines(mpf, bc_machine, sinumerik.read_carr(record, "r", 1),
+                               nominal_lines(bc_machine))
+    for axis, line in p.lines.items():
+        across = [k for k in range(3) if k != "xyz".index(line.nominal)]
+        np.testing.assert_allclose(got[axis].offset[across], line.offset[across], atol=1e-6)
+        # a vector's turn about itself is not held; the OEM's 20″ tilt adds second-order terms
+        np.testing.assert_allclose(got[axis].tilt[across], line.tilt[across], atol=1e-8)
+
+
+def test_a_cec_file_reads_back_as_the_tables_it_was_written_from(bc_machine):
+    from compgen.correction import comp_tables
+    from compgen.effects import location_model
+    truth = {"XOC": 3 * UM, "ECC:h2c": 6 * ARCSEC, "EYY:p1": 4 * UM}
+    model = [*location_model(bc_machine), "ECC:h2c", "ECC:h2s", "EYY:p1"]
+    fit = identify(bc_machine, [simulate(bc_machine, truth, generate(bc_machine, ["K4", "K1", "K2"]))], model)
+    cec = kinematics_edit(bc_machine, fit, "sinumerik840d", OEM_CARR, "c", "K", "0", "d").files["_CEC.INI"]
+    read = sinumerik.read_cec(cec, bc_machine)
+    wrote = comp_tables(bc_machine, plan(bc_machine, fit))
+    assert [(t.input, t.output, t.modulo) for t in read] == [(t.input, t.output, t.modulo) for t in wrote]
+    for r, w in zip(read, wrote, strict=True):
+        assert (r.start, r.stop) == (pytest.approx(w.start), pytest.approx(w.stop, abs=1e-4))
+        np.testing.assert_allclose(r.values, w.values, atol=0.6e-6)
+
+
+def test_a_modulo_table_wraps_and_a_ball_on_the_axis_has_no_positioning_error(seed_machine, tmp_path):
+    from compgen.correction import CompTable, _positioning_error, apply_tables
+    grid = np.linspace(0, 360, 37)
+    t = CompTable("ECC:h1", "", "C", "C", 0.0, 360.0, tuple(np.sin(np.radians(grid)) * 1e-3), True, "deg")
+    q = np.zeros((4, len(seed_machine.axes)))
+    c = seed_machine.index("C")
+    q[:, c] = np.radians([-90.0, 270.0, 450.0, 90.0])
+    out = np.degrees(apply_tables(seed_machine, [t], q)[:, c]) - np.degrees(q[:, c])
+    np.testing.assert_allclose(out, [-1e-3, -1e-3, 1e-3, 1e-3], atol=1e-9)
+    # a ball on C's axis does not move when C turns: no positioning error can be seen there
+    on_axis = replace(seed_machine, ball=(0.0, 0.0, seed_machine.ball[2]))
+    c_axis = on_axis.axis("C")
+    err = _positioning_error(on_axis, c_axis, ["ECC:h1c"], {"ECC:h1c": 5 * ARCSEC}, np.array([0.0, 90.0]))
+    assert err.tolist() == [0.0, 0.0]
+
+
+def test_linuxcnc_says_when_the_tool_offset_pin_is_not_netted(seed_machine):
+    fit = _fit(seed_machine, {"XOC": 3 * UM})
+    nominal = _fit(seed_machine, {})
+    base = kinematics_edit(seed_machine, nominal, "linuxcnc", None, "", "N", "0", "d").files[".hal"]
+    netted = base + "net tooloffset motion.tooloffset.z => xyzac-trt-kins.tool-offset\n"
+    for current, warned in ((base, True), (netted, False)):
+        notes = kinematics_edit(seed_machine, fit, "linuxcnc", current, "c", "K", "0", "d").notes
+        assert any("tool-offset is not netted" in n for n in notes) == warned, notes

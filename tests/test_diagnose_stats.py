@@ -55,3 +55,35 @@ def test_still_significant_after_the_best():
     sig = [(Effect("other"), other), (Effect("null"), null)]
     assert _still_significant(Q, best, r, sig, 0.01) == {"other"}
     assert _still_significant(Q, np.column_stack([best, other]), r, [(Effect("null"), null)], 0.01) == set()
+
+
+def test_still_significant_tests_against_the_joined_model(monkeypatch):
+    """The F test after the best: residual and candidates taken off the model AND the added
+    columns (projections done here), with n − model − added degrees of freedom."""
+    import compgen.diagnose as d
+    rng = np.random.default_rng(2)
+    n = 40
+    Q = np.linalg.qr(rng.normal(size=(n, 3)))[0]
+    added = rng.normal(size=(n, 2)) + Q @ rng.normal(size=(3, 2))    # not orthogonal to Q
+    cand = rng.normal(size=(n, 1))
+    r = rng.normal(size=n)
+    seen = []
+    monkeypatch.setattr(d, "_p_value", lambda *args: seen.append(args) or 1.0)
+
+    class Effect:
+        name = "cand"
+    d._still_significant(Q, added, r, [(Effect(), cand)], 0.01)
+    A = np.column_stack([Q, added])
+    P = A @ np.linalg.pinv(A)                    # projector onto the joined model
+    r1, c1 = r - P @ r, cand - P @ cand
+    amp = (c1[:, 0] @ r1) / (c1[:, 0] @ c1[:, 0])
+    drop, k, rss, dof, tried = seen[0]
+    assert (k, dof, tried) == (1, n - 3 - 2, 1)
+    assert rss == pytest.approx(r1 @ r1, rel=1e-10)
+    assert drop == pytest.approx(amp**2 * (c1[:, 0] @ c1[:, 0]), rel=1e-10)
+
+
+def test_a_column_that_moves_nothing_is_invisible():
+    c = np.column_stack([E[0], np.zeros(6)])
+    vis, drop, amp = _explained(c, c, E[0] + E[1])
+    assert vis.tolist() == [1.0, 0.0] and amp[1] == 0.0 and drop == pytest.approx(1.0)

@@ -127,3 +127,11 @@ def test_analytic_slot_gains_equal_central_differences_of_the_exact_model(machin
         # central differences of 1e-6 on ~300 mm carry ~1e-8 of rounding
         np.testing.assert_allclose(gains[(carrier, slot, direction)], numeric, rtol=0,
                                    atol=ATOL_FD_REL * scale, err_msg=f"{carrier} {slot} {direction}")
+
+
+def test_a_parameter_of_exactly_one_is_not_taken_for_zero(seed_machine):
+    """The model skips parameters that are exactly zero: one of exactly 1 mm must count.
+    A ball 1 mm off along the table's X reads 1 mm in every pose (the table only turns it)."""
+    poses = generate(seed_machine, ["K4"])
+    dev = Model(seed_machine, ["XOW"]).deviation(poses, np.array([1.0]))
+    np.testing.assert_allclose(np.linalg.norm(dev, axis=1), 1.0, rtol=1e-9)

@@ -67,8 +67,8 @@ def carr_values(machine: Machine, p: Plan, current: dict[int, float]) -> tuple[d
         now = np.array([current[n] for n in VECTOR[i]])
         size = np.linalg.norm(now)
         if size == 0 or np.degrees(np.arccos(np.clip(now @ held / size, -1, 1))) > SAME_AXIS_DEG:
-            raise CompgenError(f"the control's vector for {a.name} {list(now)} is not the one the machine "
-                               f"file says it holds {list(held)}",
+            raise CompgenError(f"the control's vector for {a.name} {now.tolist()} is not the one the machine "
+                               f"file says it holds {held.tolist()}",
                                hint="is this the record of the measured machine? else correct [sinumerik] "
                                     "vectors")
         # compose: turn what the record holds (the OEM's or an earlier edit's tilt included)
