@@ -26,16 +26,17 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 EDITS = ["tests/test_kinematics_edit.py", "tests/test_compose.py", "tests/test_signs.py"]
+PROGRAMS = ["tests/test_motion.py", "tests/test_programs.py"]     # the controllers' program readers
 TESTS = {
     "compgen/lines.py": ["tests/test_lines.py", *EDITS],
     "compgen/identify.py": ["tests/test_identify.py", "tests/test_startup.py"],
     "compgen/kinematics.py": ["tests/test_kinematics.py", "tests/test_effects.py", "tests/test_identify.py"],
-    "compgen/units.py": ["tests/test_units.py"],
-    "compgen/correction.py": EDITS,
-    "compgen/emit/heidenhain.py": [*EDITS, "tests/test_tab.py"],
+    "compgen/units.py": ["tests/test_units.py", "tests/test_edge.py"],
+    "compgen/correction.py": [*EDITS, "tests/test_edge.py"],
+    "compgen/emit/heidenhain.py": [*EDITS, "tests/test_tab.py", "tests/test_edge.py", *PROGRAMS],
     "compgen/emit/tab.py": ["tests/test_tab.py", "tests/test_kinematics_edit.py"],
-    "compgen/emit/sinumerik.py": EDITS,
-    "compgen/emit/linuxcnc.py": EDITS,
+    "compgen/emit/sinumerik.py": [*EDITS, "tests/test_edge.py", *PROGRAMS],
+    "compgen/emit/linuxcnc.py": [*EDITS, "tests/test_edge.py", *PROGRAMS],
     "compgen/diagnose.py": ["tests/test_diagnose_stats.py", "tests/test_diagnose.py"],
 }
 # functions of diagnose.py that are its statistics (the rest is reporting)
@@ -88,6 +89,7 @@ class Sites(ast.NodeVisitor):
 def mutants(path: Path, functions: set[str] | None):
     source = path.read_text()
     tree = ast.parse(source)
+    original = ast.unparse(tree)
     finder = Sites(functions)
     finder.visit(tree)
     seen = set()
@@ -111,10 +113,12 @@ def mutants(path: Path, functions: set[str] | None):
         else:
             t.value = arg
         text = ast.unparse(tree)
-        if text in seen or text == ast.unparse(ast.parse(source)):
+        if text in seen or text == original:
             continue
         seen.add(text)
-        yield i, node.lineno, kind, text
+        pairs = zip(original.splitlines(), text.splitlines(), strict=False)
+        changed = next((b for a, b in pairs if a != b), "")
+        yield i, node.lineno, f"{kind} -> {changed.strip()[:90]}", text
 
 
 def run_mutant(work: Path, module: str, text: str, tests: list[str]) -> bool:
@@ -126,7 +130,7 @@ def run_mutant(work: Path, module: str, text: str, tests: list[str]) -> bool:
         env = {**os.environ, "PYTHONPATH": str(work), "PYTHONDONTWRITEBYTECODE": "1"}
         done = subprocess.run([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
                                "--deselect", "tests/test_linuxcnc.py", *tests], cwd=work, env=env,
-                              capture_output=True, timeout=120)   # a mutant that loops is killed
+                              capture_output=True, timeout=600)   # a mutant that loops is killed
         return done.returncode != 0
     except subprocess.TimeoutExpired:
         return True

@@ -257,6 +257,9 @@ def test_a_non_finite_current_state_is_refused(fitted, tmp_path, controller):
     code, _, err = run("kinematics", "--from", fitted / "fit2.json", "--controller", controller,
                        "--current", current, "-o", tmp_path / "K.out")
     assert code == 2 and "not a number" in err and "Traceback" not in err, err
+    if controller != "linuxcnc":        # the line of the bad value (a HAL value names its pin)
+        line = 1 + next(i for i, ln in enumerate(text.replace(good, bad).splitlines()) if bad in ln)
+        assert f"current.txt:{line}" in err, err
 
 
 @pytest.mark.parametrize("controller", CONTROLLERS)
