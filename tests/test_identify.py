@@ -60,12 +60,13 @@ def test_reported_sigma_matches_monte_carlo_spread(seed_machine, rng):
     seed's set-up, where the parameters are most correlated)."""
     poses = generate(seed_machine, ["K4"])
     runs = [identify(seed_machine, [simulate(seed_machine, TABLE4, poses, NOISE_UM, rng)])
-            for _ in range(150)]
+            for _ in range(60)]
     values = np.array([[r.parameters[n].value for n in TABLE4] for r in runs])
     reported = np.array([[r.parameters[n].std for n in TABLE4] for r in runs]).mean(axis=0)
     spread = values.std(axis=0, ddof=1)
-    # 150 draws estimate a σ to ±5.8 % (1 s.d.): 20 % is 3.4 s.d. per parameter
-    np.testing.assert_allclose(reported, spread, rtol=0.20)
+    # 60 draws estimate a σ to ±9.2 % (1 s.d., 1/√(2·59)): 33 % is 3.6 s.d. per parameter,
+    # the same confidence as 150 draws at 20 % (the benchmark fit_efficiency.py runs 300)
+    np.testing.assert_allclose(reported, spread, rtol=0.33)
 
 
 def test_k2_alone_cannot_separate_and_says_what_would(seed_machine, rng):
