@@ -159,9 +159,10 @@ def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarra
         combos.append(" together with ".join(
             f"{names[j]} by {shown(v[j] * scale, m.effects[free[j]].unit)[0]:+.2f} "
             f"{shown(1, m.effects[free[j]].unit)[1]}" for j in big))
-    cond = s[0] / s[-1] if s[-1] > 0 else np.inf
+    # below 1e-12 of the largest, a singular value is rounding: the problem is singular
+    cond = "singular" if s[-1] <= s[0] * 1e-12 else f"condition number {s[0] / s[-1]:.3g}"
     raise CompgenError(
-        f"these data cannot separate the parameters (condition number {cond:.3g}): moving "
+        f"these data cannot separate the parameters ({cond}): moving "
         + "; or ".join(combos) + " changes the readings by less than 1/"
         + f"{COND_LIMIT:g} of the best-seen combination",
         hint=_separating_measurements(machine, m, free, J) +
