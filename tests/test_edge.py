@@ -439,7 +439,7 @@ def _only(name, value, extra=()):
     def change(d):
         for n in extra:
             d["model"].append(n)
-            d["parameters"][n] = {"value": 0.0, "std": 0.0, "unit": "rad"}
+            d["parameters"][n] = {"value": 0.0, "std": 0.0, "unit": "rad" if n[:3] != "EYY" else "mm"}
         for n, p in d["parameters"].items():
             p["value"] = value if n == name else 0.0
     return change
@@ -450,6 +450,10 @@ def _only(name, value, extra=()):
     ("ZOA", -0.12, (), "A line offset 120.0 um > 100 um"),
     ("BOC", 100 * np.pi / 648000, (), "C line tilt 100.0 arcsec > 60 arcsec"),
     ("COX", -70 * np.pi / 648000, ("COX",), "COX 70.0 arcsec > 60 arcsec"),
+    ("ECC:h2c", 70 * np.pi / 648000, ("ECC:h2c", "ECC:h2s"), "ECC:h2 table 70.0 arcsec > 60 arcsec"),
+    ("ECC:h2c", 50 * np.pi / 648000, ("ECC:h2c", "ECC:h2s"), None),
+    ("EYY:p1", 0.3, ("EYY:p1",), "EYY:p1 table 105.0 um > 100 um"),     # 0.3 mm/m over ±350 mm
+    ("EYY:p1", 0.25, ("EYY:p1",), None),                               # 87.5 µm
     ("XOC", 0.099, (), None),
     ("COX", 59 * np.pi / 648000, ("COX",), None),
 ])

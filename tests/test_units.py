@@ -52,3 +52,11 @@ def test_non_finite_and_unknown_units_are_refused():
 def test_shown_units_are_micrometres_and_arcseconds():
     assert shown(0.0015, "mm") == (pytest.approx(1.5, rel=1e-15), "µm")
     assert shown(math.pi / 180 / 3600, "rad") == (pytest.approx(1.0, rel=1e-15), "″")
+
+
+def test_three_columns_never_run_together():
+    """The per-path tables: 9 characters a value, so 10 µm and more keep a space between."""
+    from compgen.units import three, three_header
+    assert three([1.0, 22.5, -333.25]) == "    1.000   22.500 -333.250"
+    assert three([8.9, 10.263, 12.676]).split() == ["8.900", "10.263", "12.676"]
+    assert three_header(("RMS dX", "dY", "dZ")) == "   RMS dX       dY       dZ"
