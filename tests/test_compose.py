@@ -166,6 +166,8 @@ def test_the_rest_of_a_plan_subtracts_what_the_control_holds(seed_machine):
     r = rest(seed_machine, p, Held(held_lines, {"COX": 2 * ARCSEC, "BOZ": 1 * ARCSEC}))
     assert r.squareness["COX"] == pytest.approx(p.squareness["COX"] - 2 * ARCSEC, abs=1e-15)
     assert r.squareness["BOZ"] == pytest.approx(-1 * ARCSEC, abs=1e-15)
+    only_held = rest(seed_machine, p, Held(held_lines, {"BOZ": 1 * ARCSEC}))   # COX: none held
+    assert only_held.squareness["COX"] == pytest.approx(p.squareness["COX"], abs=1e-15)
     for n, line in r.lines.items():
         np.testing.assert_allclose(line.offset, 0.75 * p.lines[n].offset, atol=1e-15)
         np.testing.assert_allclose(line.tilt, 0.5 * p.lines[n].tilt, atol=1e-15)
@@ -243,6 +245,11 @@ def test_a_modulo_table_wraps_and_a_ball_on_the_axis_has_no_positioning_error(se
     c_axis = on_axis.axis("C")
     err = _positioning_error(on_axis, c_axis, ["ECC:h1c"], {"ECC:h1c": 5 * ARCSEC}, np.array([0.0, 90.0]))
     assert err.tolist() == [0.0, 0.0]
+    # half a millimetre off the axis it is seen again, whole: 5″·cos C
+    near = replace(seed_machine, ball=(0.5, 0.0, seed_machine.ball[2]))
+    err = _positioning_error(near, near.axis("C"), ["ECC:h1c"], {"ECC:h1c": 5 * ARCSEC},
+                             np.array([0.0, 60.0]))
+    np.testing.assert_allclose(err, [5 * ARCSEC, 2.5 * ARCSEC], rtol=1e-4)
 
 
 def test_linuxcnc_says_when_the_tool_offset_pin_is_not_netted(seed_machine):
