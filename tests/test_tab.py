@@ -248,3 +248,20 @@ def test_a_positioning_table_goes_to_the_comp_csv_with_the_values_that_cancel(se
     value = np.array([float(r[4]) for r in rows])
     assert c[0] == 0 and c[-1] == 360 and len(c) == 37
     np.testing.assert_allclose(value, -8 / 3600 * np.cos(np.radians(2 * c)), atol=0.6e-6)   # 6 decimals
+
+
+@pytest.mark.parametrize("width, carries", [(16, True), (15, False)])
+def test_the_fit_marker_goes_into_the_doc_only_where_it_fits(seed_machine, fit, width, carries):
+    """"-X0A fit:xxxxxx" is 15 characters; a column keeps a space before the next one."""
+    cols = COLS.replace("DOC               ", "DOC".ljust(width))
+    text = _table(newline="\n").replace(COLS, cols)
+    lines = text.split("\n")
+    doc_at = cols.index("DOC")
+    for i, ln in enumerate(lines):      # move the COMPTAB cells to the new column start
+        if ln.rstrip().endswith("COMP_A.COM"):
+            lines[i] = ln.rstrip()[:-len("COMP_A.COM")].rstrip().ljust(doc_at + width) + "COMP_A.COM"
+    emitted = kinematics_edit(seed_machine, fit, "itnc530", "\n".join(lines), "KIN.TAB", "KIN", "0", "d")
+    rows = TabTable.parse(emitted.files[".TAB"], "n").rows
+    y0a = next(r for r in rows if r["DOC"].split()[:1] == ["Y0A"])
+    assert (y0a["DOC"] == f"Y0A {fit.marker}") == carries, y0a["DOC"]
+    assert any("cannot carry the fit's marker" in n for n in emitted.notes) != carries
