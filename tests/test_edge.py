@@ -469,3 +469,15 @@ def test_each_correction_is_held_to_its_limit(fitted, tmp_path, name, value, ext
     assert expected in str(exc.value), str(exc.value)
     assert str(exc.value).count(">") == 1, str(exc.value)       # nothing else is over
     plan(machine, fit, force=True)
+
+
+@pytest.mark.parametrize("inverse, ok", [("-0.01001", True), ("-0.01002", False)])
+def test_a_pair_may_differ_by_one_unit_of_its_last_decimal(fitted, tmp_path, inverse, ok):
+    """Both halves are rounded to the table's 5 decimals: 1e-5 mm apart is rounding, 2e-5 is not."""
+    rows = f"6   Trans     Y     +0.01000     Y0A\n7   MachAxis  A\n8   Trans     Y     {inverse}     -Y0A\n"
+    table = (ROOT / "examples" / "itnc530-current.TAB").read_text().replace("6   MachAxis  A\n", rows)
+    current = tmp_path / "current.TAB"
+    current.write_text(table)
+    code, _, err = run("kinematics", "--from", fitted / "fit2.json", "--current", current,
+                       "-o", tmp_path / "K.TAB")
+    assert (code == 0) == ok and (ok or "do not cancel" in err), err
