@@ -265,3 +265,17 @@ def test_the_fit_marker_goes_into_the_doc_only_where_it_fits(seed_machine, fit, 
     y0a = next(r for r in rows if r["DOC"].split()[:1] == ["Y0A"])
     assert (y0a["DOC"] == f"Y0A {fit.marker}") == carries, y0a["DOC"]
     assert any("cannot carry the fit's marker" in n for n in emitted.notes) != carries
+
+
+def test_table_rows_without_their_header_read_as_the_table(seed_machine, square_fit):
+    """Rows copied out of a table (no BEGIN line, NR first, the name last) read as the table."""
+    tab = kinematics_edit(seed_machine, square_fit, "itnc530", _table(newline="\n"), "KIN.TAB", "KIN", "0",
+                          "d").files[".TAB"]
+    rows = "\n".join(ln for ln in tab.split("\n") if ln[:1].isdigit())
+    nominal = nominal_lines(seed_machine)
+    whole, part = (heidenhain.read_lines(t, seed_machine, nominal) for t in (tab, rows))
+    for axis in whole:
+        np.testing.assert_allclose(part[axis].offset, whole[axis].offset, atol=1e-12)
+        np.testing.assert_allclose(part[axis].tilt, whole[axis].tilt, atol=1e-12)
+    assert heidenhain.read_squareness(rows, seed_machine) == pytest.approx(
+        heidenhain.read_squareness(tab, seed_machine), abs=1e-15)
