@@ -165,3 +165,12 @@ def test_a_bad_set_up_is_refused_with_its_key(tmp_path, edit, expected):
     bad.write_text(text.replace(edit[0], edit[1], 1))
     code, _, err = run("check-program", "--machine", bad, tmp_path / "x.H")
     assert code == 2 and expected in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_a_heidenhain_datum_shift_is_refused_at_its_line(machines, tmp_path):
+    program = _write(tmp_path, machines["seed"], "itnc530", "tcpm", "K2").read_text()
+    lines = program.splitlines()
+    at = next(i for i, ln in enumerate(lines) if "CYCL DEF 7.1 X+0" in ln)
+    lines[at] = lines[at].replace("X+0", "X+5")
+    code, out, err = _check(machines["seed"], tmp_path / "SHIFT.H", "\n".join(lines) + "\n")
+    assert code == 2 and f"line {at + 1}: a datum shift" in err, err
