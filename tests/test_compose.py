@@ -264,3 +264,20 @@ def test_linuxcnc_says_when_the_tool_offset_pin_is_not_netted(seed_machine):
     for current, warned in ((base, True), (netted, False)):
         notes = kinematics_edit(seed_machine, fit, "linuxcnc", current, "c", "K", "0", "d").notes
         assert any("tool-offset is not netted" in n for n in notes) == warned, notes
+
+
+@pytest.mark.parametrize("l4_off_mm, ok", [(0.0, True), (1e-5, True), (2e-5, False), (1e-3, False)])
+def test_sinumerik_l4_must_close_the_chain_to_its_rounding(bc_machine, l4_off_mm, ok):
+    """l4 = −(l2 + l3): three values each rounded to 1e-5 mm may miss by 1.5e-5, not more."""
+    current = sinumerik.read_carr(OEM_CARR, "c", 1)
+    new = dict(current)
+    new[44] += 0.010
+    new[55] += 0.004
+    new[58] += -0.014 + l4_off_mm
+    text = "".join(f"$TC_CARR{n}[1]={v:.5f}\n" for n, v in new.items())
+    read = lambda: sinumerik.read_lines(text, bc_machine, current, nominal_lines(bc_machine))  # noqa: E731
+    if ok:
+        assert read()["C"].offset[0] == pytest.approx(0.014, abs=1e-9)
+    else:
+        with pytest.raises(CompgenError, match="do not close the chain"):
+            read()
