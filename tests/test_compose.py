@@ -278,6 +278,7 @@ def test_sinumerik_l4_must_close_the_chain_to_its_rounding(bc_machine, l4_off_mm
     read = lambda: sinumerik.read_lines(text, bc_machine, current, nominal_lines(bc_machine))  # noqa: E731
     if ok:
         assert read()["C"].offset[0] == pytest.approx(0.014, abs=1e-9)
+        assert read()["C"].tilt.tolist() == [0.0, 0.0, 0.0]      # the vectors did not turn
     else:
         with pytest.raises(CompgenError, match="do not close the chain"):
             read()
