@@ -174,3 +174,13 @@ def test_a_heidenhain_datum_shift_is_refused_at_its_line(machines, tmp_path):
     lines[at] = lines[at].replace("X+0", "X+5")
     code, out, err = _check(machines["seed"], tmp_path / "SHIFT.H", "\n".join(lines) + "\n")
     assert code == 2 and f"line {at + 1}: a datum shift" in err, err
+
+
+@pytest.mark.parametrize("ctl, junk", [("itnc530", "25 FOO BAR"), ("sinumerik840d", "FOO BAR"),
+                                       ("linuxcnc", "M999 FOO")])
+def test_a_block_the_check_cannot_read_is_named_by_its_line(machines, tmp_path, ctl, junk):
+    program = _write(tmp_path, machines["seed"], ctl, "tcpm", "K2").read_text().splitlines()
+    at = len(program) // 2
+    text = "\n".join([*program[:at], junk, *program[at:]]) + "\n"
+    code, out, err = _check(machines["seed"], tmp_path / f"JUNK{controller(ctl).program_ext}", text)
+    assert code == 2 and f"line {at + 1}: " in err, err
