@@ -37,11 +37,12 @@ class Comparison:
     not_compensated: tuple[str, ...]
     setup: tuple[str, ...]
     measured_post: dict | None = None
+    warnings: tuple[str, ...] = ()      # what the prediction says against the edit
 
     def to_dict(self) -> dict:
         out = {"format": "compgen.compare/1", "controller": self.controller, "before": self.before,
                "predicted_post": self.predicted_post, "not_compensated": list(self.not_compensated),
-               "setup_left_out": list(self.setup)}
+               "setup_left_out": list(self.setup), "warnings": list(self.warnings)}
         if self.measured_post is not None:
             out["measured_post"] = self.measured_post
         return out
@@ -80,6 +81,7 @@ class Comparison:
             lines += ["", f"  stays in the prediction, {ctl} cannot hold it from compgen's files: "
                           + ", ".join(self.not_compensated)]
         lines.append(f"  left out, set-up not machine: {', '.join(self.setup)}")
+        lines += [f"  WARNING: {w}" for w in self.warnings]
         if self.measured_post:
             m = self.measured_post
             lines += ["", "  " + m["statement"]]
@@ -107,7 +109,25 @@ def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, control
     before = _beyond_setup(machine, poses, y)
     pred = _beyond_setup(machine, after, predicted)
     measured = _measured(machine, fit, post, pred) if post else None
-    return Comparison(ctl.name, before, pred, tuple(not_held), tuple(p.setup), measured)
+    return Comparison(ctl.name, before, pred, tuple(not_held), tuple(p.setup), measured,
+                      tuple(_warnings(machine, fit, pred)))
+
+
+def _warnings(machine: Machine, fit: FitResult, pred: dict) -> list[str]:
+    """Where the prediction itself says the edit will not do: the fit leaves more than an
+    R-test's noise, or a path stays out of its tolerance even as predicted."""
+    from .diagnose import SIGMA_PLAUSIBLE_UM
+    out = []
+    if not fit.residual["sigma_um"] <= SIGMA_PLAUSIBLE_UM:
+        out.append(f"the fit leaves σ̂ = {fit.residual['sigma_um']:.2f} µm, above the "
+                   f"{SIGMA_PLAUSIBLE_UM:g} µm an R-test's noise allows: the prediction inherits what the "
+                   "model misses (run diagnose)")
+    for name, stats in pred["per_path"].items():
+        tol = machine.tolerances.get(name)
+        if tol is not None and max(stats["range_um"]) > tol:
+            out.append(f"{name} is predicted at {max(stats['range_um']):.2f} µm range, beyond its tolerance "
+                       f"{tol:g} µm: this edit alone cannot bring it into tolerance")
+    return out
 
 
 def _beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
