@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import sys
 from datetime import date
 from functools import partial
@@ -21,7 +20,7 @@ from .effects import catalogue, compose, location_model
 from .emit.kinematics import kinematics_edit
 from .emit.programs import MODES, NAME_MAX, measure_program, program_name
 from .emit.registry import CONTROLLERS, controller, for_program, read_edits
-from .errors import CompgenError
+from .errors import CONTROL, CompgenError
 from .files import read_text, write_all, write_atomically
 from .identify import identify, parse_fixed
 from .machine import load_machine
@@ -43,7 +42,7 @@ class _Failed(click.ClickException):
 def _one_line(text: str) -> str:
     """A message names what the user gave, which may hold line breaks: they are shown, not
     obeyed, so that an error is always one line."""
-    return re.sub(r"[\x00-\x1f\x7f]", lambda m: repr(m[0])[1:-1], text)
+    return CONTROL.sub(lambda m: repr(m[0])[1:-1], text)
 
 
 class _Internal(_Failed):

@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
+import re
+
+# a line break or other control character: in an emitted file it would start a block of its
+# own, in a message a second line
+CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
 
 class CompgenError(Exception):
     """What is wrong and where, in one line a person can act on.

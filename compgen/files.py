@@ -10,7 +10,7 @@ import stat
 import tempfile
 from pathlib import Path
 
-from .errors import CompgenError
+from .errors import CONTROL, CompgenError
 
 MAX_BYTES = 64 * 2**20      # an R-test session is a few MB; more is not one of compgen's files
 
@@ -67,7 +67,7 @@ def read_json(path: str | Path, what: str) -> dict:
 
 def _target(path: Path, force: bool, inputs: tuple[Path, ...]) -> None:
     """Refuse an output path before anything is written."""
-    if any(ord(ch) < 32 or ord(ch) == 127 for ch in str(path)):
+    if CONTROL.search(str(path)):
         raise CompgenError(f"output name {str(path)!r} holds a control character", hint="choose a plain name")
     for source in inputs:
         if path.resolve() == source.resolve() or (path.exists() and source.exists()

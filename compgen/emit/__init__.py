@@ -8,13 +8,12 @@ unconfirmed items it uses.
 
 from __future__ import annotations
 
-import re
 import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..errors import CompgenError
+from ..errors import CONTROL, CompgenError
 
 if TYPE_CHECKING:
     from jinja2 import Environment
@@ -34,7 +33,7 @@ def ascii_text(text: str) -> str:
     spaces), and no comment terminator (LinuxCNC's parentheses become brackets)."""
     text = text.replace("µ", "u").replace("″", " arcsec").replace("°", " deg").replace("→", "->")
     text = unicodedata.normalize("NFKD", text).encode("ascii", "ignore").decode("ascii")
-    return re.sub(r"[\x00-\x1f\x7f]", " ", text).replace("(", "[").replace(")", "]")
+    return CONTROL.sub(" ", text).replace("(", "[").replace(")", "]")
 
 
 def _one_line(value) -> None:
@@ -42,7 +41,7 @@ def _one_line(value) -> None:
     it would start a block of its own on the control, so it is refused (free text goes
     through ``ascii_text``, identifiers are checked where they are read)."""
     if isinstance(value, str):
-        if re.search(r"[\x00-\x1f\x7f]", value):
+        if CONTROL.search(value):
             raise CompgenError(f"refusing to write {value[:40]!r}: a line break or control "
                                "character in a value would become a block of its own")
     elif isinstance(value, dict):
