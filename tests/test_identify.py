@@ -240,3 +240,67 @@ def test_the_seed_first_order_method_recovers_table4(seed_machine):
                       method="linear")
     for name, err in _errors(result, TABLE4).items():
         assert abs(err) < {"mm": 0.005 * UM, "rad": 0.005 * ARCSEC}[result.parameters[name].unit], name
+
+
+def test_a_weak_pair_is_refused_and_only_what_separates_it_is_offered(seed_machine):
+    """On a machine whose only path is K2 (C turns at A = 0), YOW and COA move the ball in Y
+    alike but for the ball's radius: condition above 1000, both singular values small
+    against the first. Of the K2 variants only the ball at half its radius separates them
+    (condition computed here); K2 again, or higher, adds nothing and is not offered."""
+    import dataclasses
+
+    from compgen.identify import COND_LIMIT, check_identifiable
+    from compgen.kinematics import Model
+    from compgen.paths import alternative_measurements
+    k2 = dataclasses.replace(seed_machine, paths={"K2": seed_machine.paths["K2"]})
+    m = Model(k2, ["YOW", "COA"])
+    J = m.jacobian(generate(k2, ["K2"])).reshape(-1, 2)
+    s = np.linalg.svd(J / np.linalg.norm(J, axis=0), compute_uv=False)
+    assert s[0] / s[1] > COND_LIMIT            # weak against the first, not against the second
+    with pytest.raises(CompgenError) as exc:
+        check_identifiable(k2, m, [0, 1], J)
+    text = str(exc.value)
+    assert f"(condition number {s[0] / s[1]:.3g})" in text, text
+    offered = {}
+    for label, extra in alternative_measurements(k2):
+        both = np.vstack([J, m.jacobian(extra).reshape(-1, 2)])
+        offered[label] = np.linalg.cond(both / np.linalg.norm(both, axis=0))
+    assert offered["K2"] > COND_LIMIT and offered["K2 with the ball 100 mm higher"] > COND_LIMIT
+    half = offered["K2 with the ball at half its radius"]
+    assert half < 10
+    assert f"Adding one of these measurements would: K2 with the ball at half its radius " \
+           f"(condition {half:.0f}); or hold" in text, text
+
+
+def test_when_no_measurement_separates_the_refusal_says_so(seed_machine, rng):
+    """With K2 the only path, every variant of it leaves the four combinations unseen."""
+    import dataclasses
+    k2 = dataclasses.replace(seed_machine, paths={"K2": seed_machine.paths["K2"]})
+    data = simulate(k2, TABLE4, generate(k2, ["K2"]), NOISE_UM, rng)
+    with pytest.raises(CompgenError, match="No single path or ball position of the machine file "
+                                           "separates them; or hold"):
+        identify(k2, [data])
+
+
+def test_a_small_part_of_a_combination_is_named(seed_machine):
+    """BOC's column is AOC's plus a fifth of YOC's: the unseen combination has three parts,
+    the smallest near 20 % of the largest, above the 15 % below which parts are left out.
+    Applied to J, the amounts the message names (rounded to 0.01) cancel."""
+    from compgen.identify import check_identifiable
+    from compgen.kinematics import Model
+    rng = np.random.default_rng(7)
+    m = Model(seed_machine, list(TABLE4))
+    J = rng.normal(size=(300, 11))
+    J[:, 10] = J[:, 9] + 0.2 * J[:, 8] + 1e-4 * rng.normal(size=300)
+    with pytest.raises(CompgenError) as exc:
+        check_identifiable(seed_machine, m, list(range(11)), J)
+    combos = str(exc.value).split(": moving ")[1].split(" changes the readings")[0].split("; or ")
+    assert len(combos) == 1, combos
+    parts = re.findall(r"(\w+) by ([-+]\d+\.\d+) (µm|″)", combos[0])
+    assert [p[0] for p in parts] == ["YOC", "AOC", "BOC"], combos
+    x = np.zeros(11)
+    for name, value, unit in parts:
+        x[list(TABLE4).index(name)] = float(value) * (UM if unit == "µm" else ARCSEC)
+    share = np.abs(x * np.linalg.norm(J, axis=0))
+    assert 0.15 < share[8] / share.max() < 0.3, share
+    assert np.linalg.norm(J @ x) < 1e-3 * np.linalg.norm(J[:, 8]) * abs(x[8]) / 0.2
