@@ -22,6 +22,7 @@ from .effects import Effect, catalogue, effect_name, effect_of_param, resolve
 from .errors import CompgenError
 from .kinematics import Model, Poses, SlotGains, coordinate
 from .machine import Machine
+from .noise import ar1, outliers, segments, whiten
 from .paths import alternative_measurements
 from .results import FitResult
 from .rtest import RTestData
@@ -49,6 +50,7 @@ class Candidate:
     unit: str
     separated_by: tuple[str, ...] = ()
     silent: bool = False    # moves no reading at all on these poses (no lever arm)
+    share: float = 0.0      # of the (whitened) residual sum of squares it removes: the ranking
 
     @property
     def visible(self) -> bool:
@@ -75,6 +77,8 @@ class Diagnosis:
     rivals_separated_by: tuple[str, ...] = ()
     alpha: float = ALPHA
     notes: tuple[str, ...] = field(default_factory=tuple)
+    outliers: tuple[dict, ...] = ()     # {"file", "line", "path", "size_um"}: left out of the tests
+    noise: dict = field(default_factory=dict)   # path → AR(1) ρ̂ per direction used by the tests
 
     @property
     def significant(self) -> tuple[Candidate, ...]:
@@ -89,11 +93,13 @@ class Diagnosis:
             "still_significant_after_best": list(self.after_best),
             "rivals_of_best": list(self.rivals),
             "rivals_separated_by": list(self.rivals_separated_by),
+            "outliers": list(self.outliers),
+            "noise_ar1_rho": self.noise,
             "per_path": self.per_path, "per_axis": self.per_axis,
             "candidates": [{
                 "effect": c.effect, "significant": c.significant, "visible": c.visible,
                 "visibility": c.visibility, "rms_after_um": c.rms_after_um,
-                "p_value": c.p_value, "confounded_with": list(c.confounded_with),
+                "p_value": c.p_value, "share_explained": c.share, "confounded_with": list(c.confounded_with),
                 "separated_by": list(c.separated_by), "silent": c.silent,
                 "amplitude": list(c.amplitude),
                 "amplitude_unit": c.unit, "description": c.description, "cause": c.cause}
@@ -109,6 +115,16 @@ class Diagnosis:
                  f"  {'residual per path (µm)':<24}{three_header(('RMS dX', 'dY', 'dZ'))}"]
         for name, p in self.per_path.items():
             lines.append(f"    {name:<22}{three(p['rms_um'])}")
+        if self.outliers:
+            lines += ["", f"  {len(self.outliers)} outlying reading{'s' if len(self.outliers) > 1 else ''} "
+                          "(a step from their neighbours), left out of the tests below; check them, "
+                          "and delete their rows to leave them out of the fit too:"]
+            lines += [f"    {o['file']}:{o['line'] or '?'}  path {o['path'] or '(unlabelled)'}  "
+                      f"{o['size_um']:.1f} µm" for o in self.outliers]
+        if any(any(v) for v in self.noise.values()):
+            lines += ["", "  the noise is correlated from reading to reading: AR(1) ρ̂ per path (dX dY dZ): "
+                      + "; ".join(f"{k} {' '.join(f'{v:.2f}' for v in p)}" for k, p in self.noise.items()),
+                      "  the tests below are made on readings made white with it (generalised least squares)"]
         lines += ["", "  residual against axis position (µm, amplitude in dX dY dZ)"]
         for axis, a in self.per_axis.items():
             for term, amp in a.items():
@@ -214,15 +230,27 @@ def fit_gate(machine: Machine, data: Sequence[RTestData], fit: FitResult) -> lis
 def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
              candidates: Sequence[str] | None = None, alpha: float = ALPHA,
              fit_file: str = "") -> Diagnosis:
-    """Rank the effects not in ``fit``'s model by how much of its residual they explain."""
+    """Rank the effects not in ``fit``'s model by how much of its residual they explain.
+
+    Outlying readings are listed and left out; the tests are made on the readings made white
+    by their segments' AR(1) correlation (``noise.py``), estimated from the residual once the
+    best candidate is added (the misfit of a missing effect is not noise)."""
     poses = Poses.concat([d.poses for d in data])
-    y = np.concatenate([d.deviation for d in data]).ravel()
+    y = np.concatenate([d.deviation for d in data])
     model = Model(machine, fit.model)
     x = np.array([fit.parameters[n].value for n in fit.model])
     free = [model.names.index(n) for n in fit.free]
-    r = y - model.deviation(poses, x).ravel()
+    r3 = y - model.deviation(poses, x)
+    seg = segments(np.repeat(np.arange(len(data)), [len(d) for d in data]), poses.path)
+    bad, size = outliers(r3 * 1e3, seg)
+    keep = np.ones(len(poses), bool)
+    keep[bad] = False
+    poses, r3, seg = poses.take(keep), r3[keep], seg[keep]
+    r = r3.ravel()
+    J = model.jacobian(poses, x)[:, :, free].reshape(r.size, -1)
     # only Q and R of the model's Jacobian are kept: J's column norms are R's
-    Q, R = np.linalg.qr(model.jacobian(poses, x)[:, :, free].reshape(r.size, -1))
+    Q, R = np.linalg.qr(J)
+    r = r - Q @ (Q.T @ r)             # the fit's residual without the outliers
     rss, dof = float(r @ r), r.size - len(free)
 
     in_model = {effect_of_param(machine, n).name for n in fit.model}
@@ -230,34 +258,29 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
                            else [resolve(machine, c) for c in candidates]) if e.name not in in_model]
     if not effects:
         raise CompgenError("no candidate effect left to try: the model holds them all")
-    J_norm = np.linalg.norm(R, axis=0)
-    units_of = {n: model.effects[model.names.index(n)].unit for n in fit.free}
-    found, absorbed, col_norm = {}, {}, {}
-    for e, c in _signatures(machine, poses, effects):   # one effect at a time: memory as fit's
-        norms = np.linalg.norm(c, axis=0)
-        qc = Q.T @ c
-        vis_cols, drop, amp = _explained(c, c - Q @ qc, r)   # c − QQᵀc: what the model cannot absorb
-        keep = vis_cols >= VISIBLE
-        absorbed[e.name] = np.linalg.solve(R, qc)             # J⁺c: what each parameter takes
-        col_norm[e.name] = norms
-        share = np.sqrt(np.sum((absorbed[e.name] * J_norm[:, None]) ** 2, axis=1)) / max(
-            np.linalg.norm(c), 1e-300)
-        names = [fit.free[i] for i in np.argsort(-share) if share[i] >= ABSORBS]
-        found[e.name] = (e, float(vis_cols.max()), drop, int(keep.sum()), amp, tuple(names),
-                         bool(np.all(norms * 1e3 < SILENT_UM)))
-    rows = [found[e.name] for e in effects]
+    rho = ar1(r.reshape(-1, 3), seg)
+    ranked = _rank(machine, poses, effects, fit.free, Q, R, r, _Noise(seg, rho, J))
+    if rho.any():         # again, with ρ from the residual once the best candidate is added
+        best = max(ranked.values(), key=lambda row: (row.vis >= VISIBLE, row.share))
+        c = _columns(machine, poses, [best.effect])
+        rest = r - c @ np.linalg.lstsq(c - Q @ (Q.T @ c), r, rcond=None)[0]
+        rho = ar1((rest - Q @ (Q.T @ rest)).reshape(-1, 3), seg)
+        ranked = _rank(machine, poses, effects, fit.free, Q, R, r, _Noise(seg, rho, J))
+    noise = _Noise(seg, rho, J)
+    rss_w = noise.rss(r)
 
-    tested = sum(1 for row in rows if row[3])
+    tested = sum(1 for row in ranked.values() if row.k_eff)
     out = []
-    for e, vis, drop, k_eff, amp, names, silent in rows:
-        p = _p_value(drop, k_eff, rss, dof, tested) if k_eff else 1.0
-        shown_amp = tuple(shown(a, e.unit)[0] for a in amp)
+    for e in effects:
+        row = ranked[e.name]
+        p = _p_value(row.drop_w, row.k_eff, rss_w, dof, tested) if row.k_eff else 1.0
         out.append(Candidate(
-            effect=e.name, description=e.words, cause=e.cause, visibility=vis,
-            rms_after_um=float(np.sqrt((rss - drop) / r.size)) * 1e3, p_value=p,
-            significant=bool(k_eff and p < alpha), confounded_with=names,
-            amplitude=shown_amp, unit=shown(1.0, e.unit)[1], silent=silent))
-    out.sort(key=lambda c: (not c.visible, c.rms_after_um))
+            effect=e.name, description=e.words, cause=e.cause, visibility=row.vis,
+            rms_after_um=float(np.sqrt(max(rss - row.drop, 0.0) / r.size)) * 1e3, p_value=p,
+            significant=bool(row.k_eff and p < alpha), confounded_with=row.names,
+            amplitude=tuple(shown(a, e.unit)[0] for a in row.amp), unit=shown(1.0, e.unit)[1],
+            silent=row.silent, share=row.share))
+    out.sort(key=lambda c: (not c.visible, -c.share))
     hidden = [c for c in out if not c.visible and not c.silent]
     model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
     seen = (_separating(machine, model_effects, poses, [resolve(machine, c.effect) for c in hidden])
@@ -266,32 +289,34 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
 
     # bias: data holding a unit of candidate parameter j shift the fitted parameters by
     # (J⁺C)ᵢⱼ, first order; kept in shown units (µm or ″ per µm or ″ of j)
+    units_of = {n: model.effects[model.names.index(n)].unit for n in fit.free}
     bias = {n: {} for n in fit.free}
-    units = {n: shown(1.0, model.effects[model.names.index(n)].unit)[1] for n in fit.free}
+    units = {n: shown(1.0, units_of[n])[1] for n in fit.free}
     signature_um = {}
     for e in effects:
+        row = ranked[e.name]
         for j, pname in enumerate(e.params):
             units[pname] = shown(1.0, e.unit)[1]
             per_shown = shown(1.0, e.unit)[0]
-            signature_um[pname] = float(col_norm[e.name][j] / np.sqrt(len(poses))) * 1e3 / per_shown
+            signature_um[pname] = float(row.norms[j] / np.sqrt(len(poses))) * 1e3 / per_shown
             for i, n in enumerate(fit.free):
-                bias[n][pname] = float(absorbed[e.name][i, j] * shown(1.0, units_of[n])[0] / per_shown)
+                bias[n][pname] = float(row.absorbed[i, j] * shown(1.0, units_of[n])[0] / per_shown)
 
     after_best, rivals, rivals_separated_by = (), (), ()
     significant = [c for c in out if c.significant]
     if significant:
         # near-equivalent explanations: each removes almost as much as the best
-        best_drop = rss - (significant[0].rms_after_um * 1e-3) ** 2 * r.size
-        rivals = tuple(c.effect for c in significant[1:]
-                       if rss - (c.rms_after_um * 1e-3) ** 2 * r.size >= RIVAL * best_drop)
+        best_drop = ranked[significant[0].effect].drop_w
+        rivals = tuple(c.effect for c in significant[1:] if ranked[c.effect].drop_w >= RIVAL * best_drop)
         if rivals:
             base = [*model_effects, resolve(machine, significant[0].effect)]
             seen = _separating(machine, base, poses, [resolve(machine, e) for e in rivals])
             rivals_separated_by = tuple(dict.fromkeys(m for e in rivals for m in seen[e]))
     if len(significant) > 1:
-        best = _columns(machine, poses, [resolve(machine, significant[0].effect)])
+        best = noise.white(_columns(machine, poses, [resolve(machine, significant[0].effect)]))
         others = [resolve(machine, c.effect) for c in significant[1:]]
-        kept = _still_significant(Q, best, r, _signatures(machine, poses, others), alpha)
+        kept = _still_significant(noise.Q, best, noise.white(r), (
+            (e, noise.white(c)) for e, c in _signatures(machine, poses, others)), alpha)
         after_best = tuple(e.name for e in others if e.name in kept)
 
     return Diagnosis(
@@ -301,7 +326,96 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         per_axis=_per_axis(machine, poses, r.reshape(-1, 3)),
         candidates=tuple(out), bias=bias, bias_units=units, signature_um=signature_um,
         tested=tested, alpha=alpha,
-        after_best=after_best, rivals=rivals, rivals_separated_by=rivals_separated_by)
+        after_best=after_best, rivals=rivals, rivals_separated_by=rivals_separated_by,
+        outliers=_outlier_rows(data, bad, size), noise=_noise_summary(seg, rho, poses.path))
+
+
+@dataclass(frozen=True)
+class _Row:
+    """One candidate's numbers: unwhitened (visibility, what the model absorbs, RMS after)
+    and whitened (what the test and the ranking use)."""
+
+    effect: Effect
+    vis: float
+    drop: float
+    drop_w: float
+    share: float
+    k_eff: int
+    amp: np.ndarray
+    names: tuple[str, ...]
+    silent: bool
+    norms: np.ndarray
+    absorbed: np.ndarray
+
+
+class _Noise:
+    """The whitening of one diagnosis: segments, ρ per reading and direction, and the
+    model's whitened Jacobian's Q. With ρ = 0 everywhere it is the identity."""
+
+    def __init__(self, seg: np.ndarray, rho: np.ndarray, J: np.ndarray):
+        self.seg, self.rho = seg, rho
+        self.Q = np.linalg.qr(self.white(J))[0]
+
+    def white(self, x: np.ndarray) -> np.ndarray:
+        """(3n,) or (3n, k), readings in (n, 3) order, made white."""
+        if not self.rho.any():
+            return x
+        return whiten(x.reshape(len(self.seg), 3, *x.shape[1:]), self.seg, self.rho).reshape(x.shape)
+
+    def off(self, v: np.ndarray) -> np.ndarray:
+        """What the whitened model cannot absorb of whitened v."""
+        return v - self.Q @ (self.Q.T @ v)
+
+    def rss(self, r: np.ndarray) -> float:
+        rw = self.off(self.white(r))
+        return float(rw @ rw)
+
+
+def _rank(machine: Machine, poses: Poses, effects: Sequence[Effect], free: Sequence[str],
+          Q: np.ndarray, R: np.ndarray, r: np.ndarray, noise: _Noise) -> dict[str, _Row]:
+    """Every candidate's numbers, one effect at a time (memory as fit's)."""
+    J_norm = np.linalg.norm(R, axis=0)
+    rw = noise.off(noise.white(r))
+    rss_w = float(rw @ rw)
+    out = {}
+    for e, c in _signatures(machine, poses, effects):
+        norms = np.linalg.norm(c, axis=0)
+        qc = Q.T @ c
+        vis_cols, drop, amp = _explained(c, c - Q @ qc, r)   # c − QQᵀc: what the model cannot absorb
+        keep = vis_cols >= VISIBLE
+        drop_w = drop
+        if noise.rho.any() and keep.any():
+            cw = noise.white(c)
+            _, drop_w, _ = _explained(cw, noise.off(cw), rw, keep)
+        absorbed = np.linalg.solve(R, qc)             # J⁺c: what each parameter takes
+        share = np.sqrt(np.sum((absorbed * J_norm[:, None]) ** 2, axis=1)) / max(np.linalg.norm(c), 1e-300)
+        names = tuple(free[i] for i in np.argsort(-share) if share[i] >= ABSORBS)
+        out[e.name] = _Row(e, float(vis_cols.max()), drop, drop_w, drop_w / max(rss_w, 1e-300),
+                           int(keep.sum()), amp, names, bool(np.all(norms * 1e3 < SILENT_UM)),
+                           norms, absorbed)
+    return out
+
+
+def _outlier_rows(data: Sequence[RTestData], bad: np.ndarray, size: np.ndarray) -> tuple[dict, ...]:
+    """Each outlying reading where a user finds it: its file and CSV line (header = 1)."""
+    start = np.cumsum([0, *(len(d) for d in data)])
+    rows = []
+    for i, s in zip(bad, size, strict=True):
+        f = int(np.searchsorted(start, i, side="right") - 1)
+        d, k = data[f], int(i - start[f])
+        rows.append({"file": d.source or f"data set {f + 1}", "line": d.lines[k] if d.lines else None,
+                     "path": str(d.poses.path[k]), "size_um": round(float(s), 3)})
+    return tuple(rows)
+
+
+def _noise_summary(seg: np.ndarray, rho: np.ndarray, path: np.ndarray) -> dict:
+    """The largest ρ̂ of each path label, per direction (one path may span several files)."""
+    out: dict[str, list[float]] = {}
+    for s in np.unique(seg):
+        at = np.flatnonzero(seg == s)
+        label = str(path[at[0]]) or "(unlabelled)"
+        out[label] = np.maximum(out.get(label, [0.0] * 3), rho[at[0]]).round(3).tolist()
+    return out
 
 
 def _signatures(machine: Machine, poses: Poses, effects: Sequence[Effect]):
@@ -374,13 +488,14 @@ def _still_significant(Q: np.ndarray, added: np.ndarray, r: np.ndarray, signatur
     return {name for name, drop, k in drops if k and _p_value(drop, k, rss, dof, len(drops)) < alpha}
 
 
-def _explained(c: np.ndarray, cp: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+def _explained(c: np.ndarray, cp: np.ndarray, r: np.ndarray, keep: np.ndarray | None = None
+               ) -> tuple[np.ndarray, float, np.ndarray]:
     """For an effect's columns ``c`` and the part ``cp`` the model cannot absorb: each
-    column's visibility, the residual sum of squares its visible columns remove, and their
-    first-order amplitudes (0 for the invisible)."""
+    column's visibility, the residual sum of squares its visible columns (or ``keep``)
+    remove, and their first-order amplitudes (0 for the invisible)."""
     norms = np.linalg.norm(c, axis=0)
     vis = np.where(norms > 0, np.linalg.norm(cp, axis=0) / np.where(norms > 0, norms, 1), 0.0)
-    keep = vis >= VISIBLE
+    keep = vis >= VISIBLE if keep is None else keep
     amp = np.zeros(c.shape[1])
     if not keep.any():
         return vis, 0.0, amp

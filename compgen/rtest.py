@@ -37,6 +37,7 @@ class RTestData:
     deviation: np.ndarray
     source: str = ""
     sha256: str = ""
+    lines: tuple[int, ...] = ()     # the CSV line of each reading (header = 1), when read from one
 
     def __len__(self) -> int:
         return len(self.poses)
@@ -72,7 +73,7 @@ def read_rtest(path: str | Path, machine: Machine, sign: str = "nest-minus-ball"
             f"rotary positions ({bad.size} rows like this)", where=f"{table.where}:{table.lines[k]}",
             hint="the machine file's geometry or ball position does not match this data; "
                  "give the ball per row in bx, by, bz if it moved")
-    return RTestData(poses, deviation, table.where, table.sha256)
+    return RTestData(poses, deviation, table.where, table.sha256, tuple(table.lines))
 
 
 def read_poses(path: str | Path, machine: Machine) -> Poses:

@@ -1,0 +1,83 @@
+"""What R-test noise really is: ordered in time, partly correlated, now and then a bad reading.
+
+Readings come in *segments*: one path of one file, in the order they were taken. Within a
+segment the noise of each direction is taken as AR(1), e[i] = ρ·e[i−1] + white (a drift of
+the set-up between readings does this); its ρ is estimated from the residual, and a linear
+model of the readings is made white (and so an F test honest) by the Prais–Winsten transform
+x'[0] = √(1−ρ²)·x[0], x'[i] = x[i] − ρ·x[i−1] (generalised least squares). A ρ̂ within two
+standard errors of zero (2/√n) is taken as zero: white noise is left as it is.
+
+A reading is an *outlier* when it stands apart from its neighbours in the segment (two each
+side): beyond ``OUTLIER_Z`` robust standard deviations of that difference, and beyond
+``OUTLIER_MIN_UM``. A smooth error of any size follows its neighbours and is never one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+RHO_MAX = 0.99          # beyond this the noise is a random walk: whitening would divide by ~0
+OUTLIER_Z = 8.0         # robust s.d. of the step from the neighbours' median
+OUTLIER_MIN_UM = 1.0    # a step below this is noise on any R-test (0.5–1 µm repeatability)
+NEIGHBOURS = 2          # each side
+
+
+def segments(files: Sequence[int], paths: Sequence[str]) -> np.ndarray:
+    """Segment number of each reading: a new one wherever the file or the path label changes."""
+    files, paths = np.asarray(files), np.asarray(paths, dtype=object)
+    new = np.ones(len(files), bool)
+    new[1:] = (files[1:] != files[:-1]) | (paths[1:] != paths[:-1])
+    return np.cumsum(new) - 1
+
+
+def _previous(x: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """x shifted one reading later within each segment; zero at a segment's first reading."""
+    prev = np.zeros_like(x)
+    same = seg[1:] == seg[:-1]
+    prev[1:][same] = x[:-1][same]
+    return prev
+
+
+def ar1(r: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """ρ̂ of each reading's segment and direction, (n, 3), from residuals r (n, 3)."""
+    rho = np.zeros_like(r, dtype=float)
+    lag = r * _previous(r, seg)
+    for s in np.unique(seg):
+        at = seg == s
+        n = int(at.sum())
+        energy = (r[at] ** 2).sum(axis=0)
+        est = np.divide(lag[at].sum(axis=0), energy, out=np.zeros(3), where=energy > 0)
+        est = est + (1 + 3 * est) / n     # the lag-1 estimate's bias (Kendall, 1954)
+        rho[at] = np.where(est > 2 / np.sqrt(max(n, 1)), np.minimum(est, RHO_MAX), 0.0)
+    return rho
+
+
+def whiten(x: np.ndarray, seg: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    """The Prais–Winsten transform of x, (n, 3) or (n, 3, k), with ρ (n, 3) per reading."""
+    r = rho if x.ndim == 2 else rho[:, :, None]
+    first = np.ones(len(seg), bool)
+    first[1:] = seg[1:] != seg[:-1]
+    out = x - r * _previous(x, seg)
+    out[first] = np.sqrt(1 - r[first] ** 2) * x[first]
+    return out
+
+
+def outliers(r_um: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Readings that stand apart from their neighbours: their indices and how far, µm."""
+    n = len(r_um)
+    near = np.full((n, 2 * NEIGHBOURS, 3), np.nan)
+    for k, shift in enumerate((*range(-NEIGHBOURS, 0), *range(1, NEIGHBOURS + 1))):
+        src = np.arange(n) + shift
+        ok = (src >= 0) & (src < n)
+        ok[ok] = seg[src[ok]] == seg[ok]
+        near[ok, k] = r_um[src[ok]]
+    alone = np.isnan(near).all(axis=(1, 2))
+    step = np.zeros_like(r_um)
+    step[~alone] = r_um[~alone] - np.nanmedian(near[~alone], axis=1)
+    scale = 1.4826 * np.median(np.abs(step[~alone]), axis=0) if (~alone).any() else np.zeros(3)
+    z = np.abs(step) / np.maximum(scale, 1e-9)
+    size = np.linalg.norm(step, axis=1)
+    bad = np.flatnonzero((z > OUTLIER_Z).any(axis=1) & (size > OUTLIER_MIN_UM))
+    return bad, size[bad]
