@@ -243,6 +243,8 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before):
               help="K1, K2, K4 (or BK1…), a comma list, or 'all': paths of the machine file.")
 @click.option("--poses", "poses_file", type=FILE, default=None,
               help="A CSV of poses (rotary axes in deg; path, bx, by, bz optional) instead of --path.")
+@click.option("--ball", default=None, help="With --path: the ball centre in the table frame, mm, "
+                                            "X,Y,Z (default: the machine file's).")
 @click.option("--controller", "controller_name", default=None, metavar="NAME",
               help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
 @click.option("--mode", type=click.Choice(MODES), default="tcpm", show_default=True,
@@ -250,17 +252,19 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before):
 @click.option("-o", "--output", type=FILE, default=None,
               help="Program file; its pose list goes beside it as <name>.poses.csv. Default: stdout.")
 @FORCE
-def measure_program_cmd(machine_file, path_names, poses_file, controller_name, mode, output, force):
+def measure_program_cmd(machine_file, path_names, poses_file, ball, controller_name, mode, output, force):
     """Write an R-test measurement program for the control, checked against travel and feed."""
     machine = load_machine(machine_file)
     if bool(path_names) == bool(poses_file):
         raise CompgenError("give either --path or --poses")
+    if ball and poses_file:
+        raise CompgenError("--ball goes with --path: a pose list gives its ball in bx, by, bz")
     if poses_file:
         poses, label = read_poses(poses_file, machine), Path(poses_file).stem
     else:
         names = (list(machine.paths) if path_names.strip().lower() == "all"
                  else [p.strip() for p in path_names.split(",") if p.strip()])
-        poses, label = generate(machine, names), "+".join(names)
+        poses, label = generate(machine, names, ball=_vec3(ball, "--ball") if ball else None), "+".join(names)
     ctl = controller(controller_name or machine.controller)
     name = program_name(Path(output).stem if output else f"RTEST_{label}"[:NAME_MAX])
     emitted = measure_program(machine, poses, label, ctl.name, mode, name, __version__,

@@ -23,7 +23,7 @@ from .errors import CompgenError
 from .kinematics import Model, Poses, SlotGains, coordinate
 from .machine import Machine
 from .noise import ar1, outliers, segments, whiten
-from .paths import alternative_measurements
+from .paths import Measurement, alternative_measurements
 from .results import FitResult
 from .rtest import RTestData
 from .units import shown, three, three_header
@@ -33,7 +33,8 @@ VISIBLE = 0.01        # ‖c⊥‖/‖c‖ below this: the model absorbs the eff
 SEPARATES = 0.05      # visibility an extra measurement must give to count as separating
 ABSORBS = 0.25        # share of an effect's signature a parameter must take to be named
 SILENT_UM = 1e-9      # µm per unit over all readings: the effect moves nothing at all
-RIVAL = 0.9           # removing this share of what the best removes makes a rival
+RIVAL = 0.9           # removing this share of what the best removes makes a rival (misfit left)
+TELLS_APART = 25.0    # σ̂² of misfit a measurement must add between two rivals (5 σ)
 
 
 @dataclass(frozen=True)
@@ -48,7 +49,7 @@ class Candidate:
     confounded_with: tuple[str, ...]
     amplitude: tuple[float, ...]     # first-order estimate, in its shown unit
     unit: str
-    separated_by: tuple[str, ...] = ()
+    separated_by: tuple[Measurement, ...] = ()
     silent: bool = False    # moves no reading at all on these poses (no lever arm)
     share: float = 0.0      # of the (whitened) residual sum of squares it removes: the ranking
 
@@ -74,7 +75,7 @@ class Diagnosis:
     tested: int
     after_best: tuple[str, ...] = ()    # still significant once the best candidate is added
     rivals: tuple[str, ...] = ()        # explain almost as much as the best: not told apart
-    rivals_separated_by: tuple[str, ...] = ()
+    rivals_separated_by: tuple[Measurement, ...] = ()
     alpha: float = ALPHA
     notes: tuple[str, ...] = field(default_factory=tuple)
     outliers: tuple[dict, ...] = ()     # {"file", "line", "path", "size_um"}: left out of the tests
@@ -84,6 +85,11 @@ class Diagnosis:
     def significant(self) -> tuple[Candidate, ...]:
         return tuple(c for c in self.candidates if c.significant)
 
+    @property
+    def found(self) -> str | None:
+        """The effect named as missing: significant, first, and with no rival."""
+        return self.significant[0].effect if self.significant and not self.rivals else None
+
     def to_dict(self) -> dict:
         return {
             "format": "compgen.diagnose/1", "machine": self.machine, "fit": self.fit_file,
@@ -92,7 +98,8 @@ class Diagnosis:
             "explained_to_noise": not self.significant,
             "still_significant_after_best": list(self.after_best),
             "rivals_of_best": list(self.rivals),
-            "rivals_separated_by": list(self.rivals_separated_by),
+            "found": self.found,
+            "rivals_separated_by": [m.to_dict() for m in self.rivals_separated_by],
             "outliers": list(self.outliers),
             "noise_ar1_rho": self.noise,
             "per_path": self.per_path, "per_axis": self.per_axis,
@@ -100,7 +107,7 @@ class Diagnosis:
                 "effect": c.effect, "significant": c.significant, "visible": c.visible,
                 "visibility": c.visibility, "rms_after_um": c.rms_after_um,
                 "p_value": c.p_value, "share_explained": c.share, "confounded_with": list(c.confounded_with),
-                "separated_by": list(c.separated_by), "silent": c.silent,
+                "separated_by": [m.to_dict() for m in c.separated_by], "silent": c.silent,
                 "amplitude": list(c.amplitude),
                 "amplitude_unit": c.unit, "description": c.description, "cause": c.cause}
                 for c in self.candidates],
@@ -140,17 +147,24 @@ class Diagnosis:
             lines.append(f"      {c.description} (≈ {amp} {c.unit}); likely cause: {c.cause}")
             if c.confounded_with:
                 lines.append(f"      partly absorbed by {', '.join(c.confounded_with)}")
-            if c.significant:
+            if self.rivals and (c.effect in self.rivals or c is self.significant[0]):
+                lines.append("      not told apart from the others marked so: see below")
+            elif c.significant:
                 lines.append(f"      add it: {me()} fit --from {fit_path} --add {c.effect} -o "
                              f"{_next_name(fit_path)}")
         if self.rivals:
             best = self.significant[0].effect
             verb = "explains" if len(self.rivals) == 1 else "explain"
-            lines += ["", f"  Not told apart: {', '.join(self.rivals)} {verb}"
-                          f" almost as much as {best} (≥ {RIVAL:.0%} of it); these data cannot choose "
-                          "between them. " + (f"Adding {' or '.join(self.rivals_separated_by[:3])} would."
-                                              if self.rivals_separated_by else
-                                              "No path or ball position of the machine file would.")]
+            lines += ["", f"  Not told apart: {', '.join(self.rivals)} {verb} these data as well as "
+                          f"{best}, within their noise; no one of them is named as found."]
+            if self.rivals_separated_by:
+                lines.append("  Measuring one of these would tell them apart (shortest first):")
+                for m in self.rivals_separated_by[:3]:
+                    lines.append(f"    {m.label}: {me()} measure-program --path {m.path} --ball "
+                                 f"{','.join(f'{v:g}' for v in m.ball)} -o <program>")
+                lines.append("  then fit the new CSV together with these, and diagnose again.")
+            else:
+                lines.append("  No path or ball position of the machine file tells them apart.")
         if not self.significant:
             lines += ["", "  No candidate is significant: the model explains these data to the "
                           "noise level."]
@@ -164,7 +178,8 @@ class Diagnosis:
         if hidden:
             lines += ["", "  not visible in these data (never reported as found; the fit absorbs them):"]
             for c in hidden:
-                where = (f"would be seen with {' or '.join(c.separated_by[:3])}" if c.separated_by
+                where = (f"would be seen with {' or '.join(m.label for m in c.separated_by[:3])}"
+                         if c.separated_by
                          else "no path or ball position of this machine file separates it: it needs "
                               "an independent reference")
                 lines.append(f"    {c.effect:<12} {c.description}: absorbed by "
@@ -304,20 +319,22 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
 
     after_best, rivals, rivals_separated_by = (), (), ()
     significant = [c for c in out if c.significant]
-    if significant:
-        # near-equivalent explanations: each removes almost as much as the best
-        best_drop = ranked[significant[0].effect].drop_w
-        rivals = tuple(c.effect for c in significant[1:] if ranked[c.effect].drop_w >= RIVAL * best_drop)
-        if rivals:
-            base = [*model_effects, resolve(machine, significant[0].effect)]
-            seen = _separating(machine, base, poses, [resolve(machine, e) for e in rivals])
-            rivals_separated_by = tuple(dict.fromkeys(m for e in rivals for m in seen[e]))
     if len(significant) > 1:
         best = noise.white(_columns(machine, poses, [resolve(machine, significant[0].effect)]))
         others = [resolve(machine, c.effect) for c in significant[1:]]
         kept = _still_significant(noise.Q, best, noise.white(r), (
             (e, noise.white(c)) for e, c in _signatures(machine, poses, others)), alpha)
         after_best = tuple(e.name for e in others if e.name in kept)
+    if significant:
+        best = ranked[significant[0].effect]
+        rivals = _rivals(best, [ranked[c.effect] for c in out if c.visible and c.effect != best.effect.name],
+                         rss_w / dof,
+                         alpha, bool(after_best))
+        by_rival = {e: _telling_apart(machine, model_effects, poses, best, ranked[e], rss / dof)
+                    for e in rivals}
+        out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
+        rivals_separated_by = tuple(sorted({m.label: m for ms in by_rival.values() for m in ms}.values(),
+                                           key=lambda m: len(m.poses)))
 
     return Diagnosis(
         machine=machine.name, fit_file=fit_file, model=fit.model,
@@ -423,9 +440,10 @@ def _signatures(machine: Machine, poses: Poses, effects: Sequence[Effect]):
     time, so that only the chain's frames and one effect's columns are held."""
     gains = SlotGains(machine, poses)
     for e in effects:
-        g = gains((e.carrier, e.slot, e.direction))
-        b = e.basis.values(coordinate(machine, e, poses))
-        yield e, np.column_stack([(g * b[:, k:k + 1]).ravel() for k in range(b.shape[1])])
+        c = 0.0
+        for direction, b in e.parts(coordinate(machine, e, poses)):
+            c = c + gains((e.carrier, e.slot, direction))[:, :, None] * b[:, None, :]
+        yield e, c.reshape(-1, len(e.params))
 
 
 def _columns(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np.ndarray:
@@ -444,19 +462,52 @@ def _separating(machine: Machine, model_effects: Sequence[Effect], poses: Poses,
     model's rows of R; R of stacked data is R of the stacked R factors, so the measured
     poses are reduced once, in chunks, and each extra measurement adds only its own rows.
     """
-    found: dict[str, list[str]] = {e.name: [] for e in effects}
+    found: dict[str, list[Measurement]] = {e.name: [] for e in effects}
     both = [*model_effects, *effects]
     p = sum(len(e.params) for e in model_effects)
     R0 = _r_factor(machine, poses, both)
-    for label, extra in alternative_measurements(machine):
-        R = _r_factor(machine, extra, both, R0)
+    for extra in alternative_measurements(machine, poses):
+        R = _r_factor(machine, extra.poses, both, R0)
         vis = np.linalg.norm(R[p:, p:], axis=0) / np.maximum(np.linalg.norm(R[:, p:], axis=0), 1e-300)
         col = 0
         for e in effects:
             if vis[col:col + len(e.params)].max() >= SEPARATES:
-                found[e.name].append(label)
+                found[e.name].append(extra)
             col += len(e.params)
-    return {k: tuple(v) for k, v in found.items()}
+    return {k: tuple(sorted(v, key=lambda m: len(m.poses))) for k, v in found.items()}
+
+
+def _rivals(best: _Row, others: Sequence[_Row], sigma2_w: float, alpha: float,
+            misfit_left: bool) -> tuple[str, ...]:
+    """The candidates these data cannot tell from the best: each removes as much of the
+    (whitened) residual within the noise, χ²(k, α)·σ̂², whatever its rank; and while the
+    best leaves misfit (it is not the whole story), also those removing ``RIVAL`` of it."""
+    from scipy.special import chdtri
+
+    within = chdtri(max(best.k_eff, 1), alpha) * sigma2_w
+    return tuple(o.effect.name for o in others if o.k_eff and (
+        best.drop_w - o.drop_w < within or (misfit_left and o.drop_w >= RIVAL * best.drop_w)))
+
+
+def _telling_apart(machine: Machine, model_effects: Sequence[Effect], poses: Poses, best: _Row,
+                   rival: _Row, sigma2: float) -> tuple[Measurement, ...]:
+    """The measurements, not made yet, after which the best and a rival at their fitted
+    sizes differ by ``TELLS_APART`` σ̂² more than now, shortest first: each hypothesis, were
+    it true, would leave that much misfit in a fit of the other (first order)."""
+    orders = ([*model_effects, rival.effect, best.effect], [*model_effects, best.effect, rival.effect])
+    amps = (best.amp, rival.amp)
+
+    def apart(Rs):
+        return min(float(np.sum((R[-len(a):, -len(a):] @ a) ** 2)) for R, a in zip(Rs, amps, strict=True))
+
+    R0 = [_r_factor(machine, poses, o) for o in orders]
+    now = apart(R0)
+    found = []
+    for extra in alternative_measurements(machine, poses):
+        gain = apart([_r_factor(machine, extra.poses, o, R) for o, R in zip(orders, R0, strict=True)]) - now
+        if gain >= TELLS_APART * sigma2:
+            found.append((len(extra.poses), -gain, extra.label, extra))
+    return tuple(f[-1] for f in sorted(found))
 
 
 def _r_factor(machine: Machine, poses: Poses, effects: Sequence[Effect],

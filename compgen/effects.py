@@ -5,13 +5,23 @@ letter O as in the seed report; ``X0C`` and ``E_X0C`` are accepted at input):
 
 =====================  ====================================================================
 ``XOC``                constant: a location error (``<dir>O<axis>``), or a set-up offset
-``ECC:h2``             2nd harmonic of a component error of a full-turn rotary axis;
-                       parameters ``ECC:h2c`` (× cos 2C) and ``ECC:h2s`` (× sin 2C)
+``ECC:h2``             2nd harmonic of a component error of a rotary axis; parameters
+                       ``ECC:h2c`` (× cos 2C) and ``ECC:h2s`` (× sin 2C). On a tilting axis
+                       the shapes are taken from angle 0: ``EZA:h1c`` × (cos A − 1) (gravity
+                       and bearings: sin A and 1 − cos A)
+``EXC+EYC:h2``         a 2-D error motion of a rotary axis as ISO 230-7 describes it: the
+                       radial (or tilt) vector of size r turning *with* the axis at 2/rev,
+                       (EXC, EYC) = r·(cos(2C + φ), sin(2C + φ)) with C the angle turned (the
+                       coordinate times the axis's sense); ``:h-2`` turns against it.
+                       Parameters ``…:h2c`` = r·cos φ and ``…:h2s`` = r·sin φ; the pair is
+                       named in the axis's right-handed order (``EYA+EZA``, ``EZB+EXB``)
 ``EAA:p1``             1st-order polynomial of a component error of a tilting axis, in the
                        axis angle in rad; of a linear axis, in its position per 1000 mm
                        (so ``EXX:p1`` in µm is a scale error in µm/m)
 ``drift_Z:t1``         thermal drift of the tool relative to the table along machine Z,
                        polynomial in the session time per hour (µm/h for ``t1``)
+``XOC:e15``            a location error (or ``drift_Z``) growing as 1 − exp(−t/τ) with τ =
+                       15 min: thermal growth that saturates (the value it tends to)
 ``nest_X``             R-test nest (tool side) set-up offset along the spindle frame X
 =====================  ====================================================================
 
@@ -43,14 +53,18 @@ ROT_OF = dict(zip(TRANSLATIONS, ROTATIONS, strict=True))  # rotation about a dir
 POLY_SCALE_MM = 1000.0       # linear-axis polynomials run in q / 1 m
 TIME_SCALE_S = 3600.0        # drift polynomials run in t / 1 h
 MAX_ORDER = {"h": 4, "p": 3, "t": 2}  # the candidate list offered by catalogue()
+MAX_ORDER_TILTING = 2        # harmonics of a tilting axis over its part of a turn
+TAUS_MIN = (5, 15, 45)       # saturating thermal growth offered: time constants, min
 
 
 @dataclass(frozen=True)
 class Basis:
-    """Shape of an effect in its coordinate: constant, harmonic k, polynomial k, time k."""
+    """Shape of an effect in its coordinate: constant, harmonic k, polynomial k, time
+    polynomial k, or saturating in time with τ = ``order`` minutes."""
 
-    kind: str            # "const", "h", "p" or "t"
-    order: int = 0
+    kind: str            # "const", "h", "p", "t" or "e"
+    order: int = 0       # a compound's harmonic is signed: − turns against the axis
+    origin: bool = False  # harmonics of a tilting axis: taken from angle 0 (cos kθ − 1)
 
     @property
     def suffix(self) -> str:
@@ -63,12 +77,14 @@ class Basis:
         return (self.suffix,)
 
     def values(self, x: np.ndarray) -> np.ndarray:
-        """(n, len(terms)) basis values at coordinate ``x`` (rad, scaled length or time)."""
+        """(n, len(terms)) basis values at coordinate ``x`` (rad, scaled length or hours)."""
         x = np.asarray(x, dtype=float)
         if self.kind == "const":
             return np.ones(x.shape + (1,))
         if self.kind == "h":
-            return np.stack([np.cos(self.order * x), np.sin(self.order * x)], axis=-1)
+            return np.stack([np.cos(self.order * x) - self.origin, np.sin(self.order * x)], axis=-1)
+        if self.kind == "e":
+            return (1 - np.exp(-x * (60.0 / self.order)))[..., None]
         return (x**self.order)[..., None]
 
 
@@ -80,9 +96,10 @@ class Effect:
     """One physical effect.
 
     ``carrier`` is the axis whose transform carries it, or ``"ball"``, ``"nest"``,
-    ``"time"``; ``slot`` is ``"loc"`` (before the motion, constant) or ``"comp"``
-    (component error, a function of the axis coordinate); ``direction`` is ``x y z`` for a
-    translation (mm) and ``a b c`` for a rotation (rad) about x, y, z.
+    ``"time"``; ``slot`` is ``"loc"`` (before the motion) or ``"comp"`` (component error,
+    a function of the axis coordinate); ``direction`` is ``x y z`` for a translation (mm)
+    and ``a b c`` for a rotation (rad) about x, y, z, or two of them for a vector that
+    turns (a compound).
     """
 
     symbol: str
@@ -92,6 +109,7 @@ class Effect:
     basis: Basis
     words: str
     cause: str = ""
+    sense: int = 1       # a compound turns with the axis's physical angle: sense × coordinate
 
     @property
     def name(self) -> str:
@@ -104,7 +122,18 @@ class Effect:
     @property
     def unit(self) -> str:
         """Inside unit of each parameter: mm for a translation, rad for a rotation."""
-        return "mm" if self.direction in TRANSLATIONS else "rad"
+        return "mm" if self.direction[0] in TRANSLATIONS else "rad"
+
+    def parts(self, x: np.ndarray) -> list[tuple[str, np.ndarray]]:
+        """(direction, (n, len(params)) values) of each direction the effect moves: one,
+        or the two of a compound, whose vector r·(cos, sin)(kθ + φ) is c·(cos kθ, sin kθ) +
+        s·(−sin kθ, cos kθ)."""
+        b = self.basis.values(x)
+        if len(self.direction) == 1:
+            return [(self.direction, b)]
+        cos, sin = b[..., 0], self.sense * b[..., 1]
+        return [(self.direction[0], np.stack([cos, -sin], axis=-1)),
+                (self.direction[1], np.stack([sin, cos], axis=-1))]
 
 
 def _symbols(machine: Machine) -> dict[str, tuple[str, str, str, tuple[str, ...], str, str, int]]:
@@ -116,7 +145,7 @@ def _symbols(machine: Machine) -> dict[str, tuple[str, str, str, tuple[str, ...]
                          "ball not where the machine file says: set-up, not a machine error", 0)
         out[f"nest_{D}"] = ("nest", "loc", d, ("const",), f"R-test nest offset in {D}",
                             "nest centre off the spindle axis or wrong probe length", 0)
-        out[f"drift_{D}"] = ("time", "loc", d, ("t",), f"thermal drift of tool to table in {D}",
+        out[f"drift_{D}"] = ("time", "loc", d, ("t", "e"), f"thermal drift of tool to table in {D}",
                              "warm-up of spindle, column or table during the test", 1)
     for axis in machine.axes:
         out.update(_axis_symbols(axis))
@@ -125,7 +154,7 @@ def _symbols(machine: Machine) -> dict[str, tuple[str, str, str, tuple[str, ...]
 
 def _axis_symbols(axis: Axis) -> dict:
     L, d, out = axis.name, axis.direction, {}
-    kinds = ("h",) if axis.full_turn else ("p",)
+    kinds = ("h",) if axis.full_turn else ("p", "h") if axis.rotary else ("p",)
     for e in TRANSLATIONS + ROTATIONS:
         E = e.upper()
         own = e in (d, ROT_OF[d])
@@ -133,8 +162,9 @@ def _axis_symbols(axis: Axis) -> dict:
             if not own:
                 about = "tilt about" if e in ROTATIONS else "offset in"
                 ref = TRANSLATIONS[ROTATIONS.index(e)].upper() if e in ROTATIONS else E
-                out[f"{E}O{L}"] = (L, "loc", e, ("const",), f"{L} axis line {about} {ref}",
-                                   "assembly or kinematics table not matching the machine", 0)
+                out[f"{E}O{L}"] = (L, "loc", e, ("const", "e"), f"{L} axis line {about} {ref}",
+                                   "assembly or kinematics table not matching the machine; "
+                                   "with a time constant: its thermal growth", 0)
             if e == ROT_OF[d]:
                 words = f"angular positioning error of {L}"
                 cause = "encoder eccentricity (1/rev), worm or scale error (2/rev and up)"
@@ -160,7 +190,14 @@ def _axis_symbols(axis: Axis) -> dict:
                         {"a": "pitch", "b": "yaw", "c": "roll"}
                 words, cause = f"{names[e]} of {L}", "guideway twist or bending"
         out[f"E{E}{L}"] = (L, "comp", e, kinds, words, cause, 1)
-    if not axis.rotary:
+    if axis.rotary:
+        u, w = _turning_pair(d)
+        for pair, kind in (((u, w), "radial"), ((ROT_OF[u], ROT_OF[w]), "tilt")):
+            out["+".join(f"E{e.upper()}{L}" for e in pair)] = (
+                L, "comp", "".join(pair), ("h",), f"{kind} error motion of {L}, a vector turning",
+                "bearing runout or wobble (1/rev: eccentric, 2/rev: oval)" if kind == "radial" else
+                "bearing wobble; on a tilting axis, gravity turning with it", 1)
+    else:
         # ISO 230-1 squareness with Y as the reference (the seed's COX, AOZ, BOZ):
         # X is squared to Y about Z, Z to X and Y about X and Y.
         about = {"x": "c", "z": "ab"}.get(d, "")
@@ -169,6 +206,12 @@ def _axis_symbols(axis: Axis) -> dict:
             out[f"{r.upper()}O{L}"] = (L, "loc", r, ("const",), f"squareness of {L} to {other}",
                                        "assembly or thermal bending of the frame", 0)
     return out
+
+
+def _turning_pair(d: str) -> tuple[str, str]:
+    """The two directions across axis direction ``d``, in right-handed order about it."""
+    i = TRANSLATIONS.index(d)
+    return TRANSLATIONS[(i + 1) % 3], TRANSLATIONS[(i + 2) % 3]
 
 
 ALIAS = re.compile(r"^(?:E_?)?([XYZABC])0([A-Z])$")
@@ -181,9 +224,6 @@ def canonical(name: str) -> str:
     if m:
         return f"{m[1]}O{m[2]}" + name[len(name.split(":")[0]):]
     return name
-
-
-NAME = re.compile(r"^([A-Za-z_]+):?([hpt]?)(\d*)$")
 
 
 def resolve(machine: Machine, name: str) -> Effect:
@@ -201,22 +241,35 @@ def resolve(machine: Machine, name: str) -> Effect:
                                where=name)
         basis = CONSTANT
     else:
-        m = re.fullmatch(r"([hpt])(\d{1,2})", order_txt)
-        if not m or m[1] not in kinds or int(m[2]) < first:
-            raise CompgenError(f"{symbol} takes {' or '.join(k + 'N' for k in kinds)} "
-                               f"with N ≥ {first}, not {order_txt!r}", where=name,
+        m = re.fullmatch(r"([hpte])(-?)(\d{1,3})", order_txt)
+        kind, order = (m[1], int(m[2] + m[3])) if m else ("", 0)
+        compound = len(direction) == 2
+        if not m or kind not in kinds or (kind == "e" and not 1 <= order <= 999) or (
+                kind != "e" and (abs(order) < first or abs(order) > 99 or (order < 0 and not compound))):
+            turns = " (N < 0 turns against the axis)" if compound else ""
+            raise CompgenError(f"{symbol} takes {' or '.join(k + 'N' for k in kinds)} with N ≥ {first}"
+                               f"{turns}, not {order_txt!r}" + (" (eN: τ = N min, 1…999)" if "e" in kinds
+                                                                 else ""), where=name,
                                hint="an order-1 straightness is a squareness: use COX, AOZ or BOZ"
                                if first == 2 else None)
-        basis = Basis(m[1], int(m[2]))
+        tilting = carrier in machine.axis_names and machine.axis(carrier).rotary \
+            and not machine.axis(carrier).full_turn
+        basis = Basis(kind, order, origin=kind == "h" and tilting)
         if basis == Basis("p", 1) and words.startswith("positioning error"):   # a linear axis's
             words += " (scale: linear in position)"
-    return Effect(symbol, carrier, slot, direction, basis, words, cause)
+        if compound:
+            words = words.replace("turning", f"turning {'with' if order > 0 else 'against'} the axis "
+                                             f"at {abs(order)}/rev")
+        if kind == "e":
+            words += f", growing as 1 − exp(−t/{order} min)"
+    sense = machine.axis(carrier).sense if len(direction) == 2 else 1
+    return Effect(symbol, carrier, slot, direction, basis, words, cause, sense)
 
 
 def effect_name(param: str) -> str:
     """The name of the effect a parameter belongs to: ``ECC:h2c`` → ``ECC:h2``."""
     param = canonical(param)
-    return param[:-1] if re.search(r":h\d+[cs]$", param) else param
+    return param[:-1] if re.search(r":h-?\d+[cs]$", param) else param
 
 
 def effect_of_param(machine: Machine, param: str) -> Effect:
@@ -232,11 +285,20 @@ def effect_of_param(machine: Machine, param: str) -> Effect:
 def catalogue(machine: Machine) -> tuple[Effect, ...]:
     """Every effect this machine can carry, orders up to ``MAX_ORDER``: the candidate list."""
     out = []
-    for symbol, (_, _, _, kinds, _, _, first) in _symbols(machine).items():
+    for symbol, (carrier, _, direction, kinds, _, _, first) in _symbols(machine).items():
         for kind in kinds:
-            names = [symbol] if kind == "const" else [f"{symbol}:{kind}{k}"
-                                                      for k in range(first, MAX_ORDER[kind] + 1)]
-            out.extend(resolve(machine, n) for n in names)
+            if kind == "const":
+                orders: list = [None]
+            elif kind == "e":
+                orders = list(TAUS_MIN)
+            else:
+                top = MAX_ORDER[kind]
+                if kind == "h" and not machine.axis(carrier).full_turn:
+                    top = MAX_ORDER_TILTING
+                orders = list(range(first, top + 1))
+                if len(direction) == 2:
+                    orders += [-k for k in orders]
+            out.extend(resolve(machine, symbol if k is None else f"{symbol}:{kind}{k}") for k in orders)
     return tuple(out)
 
 

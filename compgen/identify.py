@@ -66,7 +66,7 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         return m.jacobian(poses, x)[:, :, free].reshape(readings, p)
 
     J = jac(x)
-    check_identifiable(machine, m, free, J)
+    check_identifiable(machine, m, free, J, poses)
     # first order about zero (seed eq. 26): y − dev(fixed) ≈ J a
     x[free] += np.linalg.lstsq(J, residual(x), rcond=None)[0]
     iterations = 0
@@ -137,9 +137,11 @@ def _gauss_newton(residual, jac, x, J, free, m):
                             "to see the first-order estimate")
 
 
-def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarray) -> None:
+def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarray,
+                       measured: Poses | None = None) -> None:
     """Refuse a rank-deficient or badly conditioned problem, naming what cannot be separated
-    and which of the machine's paths, or a second ball position, would separate it."""
+    and which of the machine's paths, or a second ball position, not ``measured`` already,
+    would separate it."""
     norm = np.linalg.norm(J, axis=0)
     names = [m.names[i] for i in free]
     dead = [names[k] for k in np.flatnonzero(norm == 0)]
@@ -165,18 +167,19 @@ def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarra
         f"these data cannot separate the parameters ({cond}): moving "
         + "; or ".join(combos) + " changes the readings by less than 1/"
         + f"{COND_LIMIT:g} of the best-seen combination",
-        hint=_separating_measurements(machine, m, free, J) +
+        hint=_separating_measurements(machine, m, free, J, measured) +
              "; or hold one parameter of each combination with --fix NAME=VALUE")
 
 
-def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.ndarray) -> str:
+def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.ndarray,
+                             measured: Poses | None) -> str:
     options = []
-    for label, extra in alternative_measurements(machine):
-        Je = m.jacobian(extra)[:, :, free].reshape(-1, len(free))
+    for extra in alternative_measurements(machine, measured):
+        Je = m.jacobian(extra.poses)[:, :, free].reshape(-1, len(free))
         both = np.vstack([J, Je])
         s = np.linalg.svd(both / np.linalg.norm(both, axis=0), compute_uv=False)
         if s[-1] > s[0] / COND_LIMIT:
-            options.append((s[0] / s[-1], label))
+            options.append((s[0] / s[-1], extra.label))
     if not options:
         return "no single path or ball position of the machine file separates them"
     best = ", ".join(f"{o} (condition {c:.0f})" for c, o in sorted(options)[:3])

@@ -97,9 +97,9 @@ class Model:
                 continue
             term = effect.params.index(name)
             x = coordinate(self.machine, effect, poses)
-            key = (effect.carrier, effect.slot)
-            slots.setdefault(key, np.zeros((n, 6)))[:, SLOT_INDEX[effect.direction]] += (
-                value * effect.basis.values(x)[:, term])
+            slot = slots.setdefault((effect.carrier, effect.slot), np.zeros((n, 6)))
+            for direction, b in effect.parts(x):
+                slot[:, SLOT_INDEX[direction]] += value * b[:, term]
         return slots
 
     def relative(self, poses: Poses, values: np.ndarray | None = None,
@@ -143,7 +143,7 @@ class Model:
 
 def coordinate(machine: Machine, effect: Effect, poses: Poses) -> np.ndarray:
     """The coordinate an effect's basis runs in: rad, position per 1000 mm, or hours."""
-    if effect.carrier == "time":
+    if effect.carrier == "time" or effect.basis.kind == "e":
         if np.isnan(poses.t).any():
             raise CompgenError(f"{effect.name} needs the time column t in every data row")
         return poses.t / TIME_SCALE_S

@@ -7,6 +7,7 @@ in the machine file. ISO 10791-6:2014's BK1/BK2/BK4 are accepted as aliases of K
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -79,20 +80,40 @@ def check_travel(machine: Machine, q: np.ndarray, label: str) -> None:
 SECOND_BALL_DZ_MM = 100.0   # the second ball positions offered to separate what one cannot
 
 
-def alternative_measurements(machine: Machine) -> list[tuple[str, Poses]]:
+@dataclass(frozen=True, eq=False)
+class Measurement:
+    """A measurement that could be added: a path of the machine file with the ball at
+    ``ball`` (mm, table frame, as a CSV's bx, by, bz), and its poses."""
+
+    label: str
+    path: str
+    ball: tuple[float, float, float]
+    poses: Poses
+
+    def to_dict(self) -> dict:
+        return {"label": self.label, "path": self.path, "ball": [round(v, 4) for v in self.ball]}
+
+
+def alternative_measurements(machine: Machine, measured: Poses | None = None) -> list[Measurement]:
     """Measurements that could be added: each of the machine's paths at the bundled ball,
     with the ball higher, and with the ball at half its radius (a tilt of an axis scales
     with radius and height, an offset or an axial error motion does not). Those that would
-    leave the travel are not offered."""
+    leave the travel, and those ``measured`` holds already (same path, same ball), are not
+    offered."""
     ball = np.asarray(machine.ball, dtype=float)
     places = (("", ball),
               (f" with the ball {SECOND_BALL_DZ_MM:g} mm higher", ball + [0, 0, SECOND_BALL_DZ_MM]),
               (" with the ball at half its radius", ball * [0.5, 0.5, 1.0]))
+    done = set() if measured is None else {
+        (str(p), tuple(np.round(b, 3))) for p, b in zip(measured.path, measured.ball, strict=True)}
     out = []
     for where, at in places:
         for name in machine.paths:
+            if (name, tuple(np.round(at, 3))) in done:
+                continue
             try:
-                out.append((f"{name}{where}", generate(machine, [name], ball=at)))
+                out.append(Measurement(f"{name}{where}", name, tuple(float(v) for v in at),
+                                       generate(machine, [name], ball=at)))
             except CompgenError:
                 continue
     return out

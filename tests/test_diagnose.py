@@ -65,7 +65,7 @@ def test_ambiguous_scale_is_reported_with_the_measurement_that_resolves_it(seed_
     found = diagnose(seed_machine, data, identify(seed_machine, data))
     named = [found.significant[0].effect, *found.rivals]
     assert "EXX:p1" in named and len(named) > 1
-    advice = [m for m in found.rivals_separated_by if "half its radius" in m]
+    advice = [m for m in found.rivals_separated_by if "half its radius" in m.label]
     assert advice
     # follow the advice: add K4 with the ball at half its radius, and the tie is broken
     half = generate(seed_machine, ["K4"], ball=np.asarray(seed_machine.ball) * [0.5, 0.5, 1.0])
@@ -94,7 +94,7 @@ def test_invisible_effects_are_never_found_and_their_confounding_is_reported(see
         assert not by_name[name].visible and not by_name[name].significant
         assert by_name[name].confounded_with
     assert by_name["nest_X"].confounded_with[0] == "XOC" and not by_name["nest_X"].separated_by
-    assert any("ball" in m for m in by_name["EZC:h1"].separated_by)
+    assert any("ball" in m.label for m in by_name["EZC:h1"].separated_by)
     # the invisible effects bias the parameters without a trace in the residual
     assert abs(base.parameters["XOC"].value - TABLE4["XOC"]) > 4 * UM
     assert base.residual["rms_um"] < 1.05 * NOISE_UM

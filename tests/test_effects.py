@@ -110,9 +110,82 @@ def test_aliases(text, canon):
 
 
 @pytest.mark.parametrize("name, expected", [("ECC", "needs an order"), ("ECC:p1", "takes hN"),
-                                            ("EAA:h1", "takes pN"), ("XOC:h1", "takes"),
+                                            ("EAA:e5", "takes pN or hN"), ("XOC:h1", "takes"),
+                                                ("ECC:h-2", "takes hN"), ("EXC+EYC:h0", r"N < 0 turns"),
+                                                ("XOC:e0", "τ = N min"), ("EXC+EYC:p1", "takes hN"),
                                             ("QQQ", "unknown effect"), ("ECC:h0", "N ≥ 1"),
                                             ("EYX:p1", "squareness")])
 def test_bad_effect_names_say_what_is_accepted(name, expected):
     with pytest.raises(CompgenError, match=expected):
         resolve(SEED, name)
+
+
+def test_a_compound_is_its_iso_components_turning_together():
+    """The issue's 2/rev radial motion of C turning with C: (EXC, EYC) = r·(cos 2C, sin 2C)
+    is EXC:h2c = r with EYC:h2s = r; against C, (r·cos 2C, −r·sin 2C); a vector at phase
+    90° (s = r) is (−r·sin 2C, r·cos 2C)."""
+    poses = generate(SEED, ["K4"])
+    r = 2e-3
+
+    def dev(values):
+        return Model(SEED, list(values)).deviation(poses, np.array(list(values.values())))
+
+    for k, turn in ((2, 1), (-2, -1)):
+        np.testing.assert_allclose(dev({f"EXC+EYC:h{k}c": r}), dev({"EXC:h2c": r, "EYC:h2s": turn * r}),
+                                   atol=1e-12)
+    np.testing.assert_allclose(dev({"EXC+EYC:h2s": r}), dev({"EXC:h2s": -r, "EYC:h2c": r}), atol=1e-12)
+    np.testing.assert_allclose(dev({"EAC+EBC:h3c": 1e-5}), dev({"EAC:h3c": 1e-5, "EBC:h3s": 1e-5}),
+                               atol=1e-12)
+
+
+def test_tilting_axis_shapes_start_at_zero_and_gravity_turns_with_the_axis():
+    """A sag g turning with A, EYA = g·sin A and EZA = g·(1 − cos A), is the compound
+    EYA+EZA:h1 at phase −90°; every harmonic of a tilting axis is zero at A = 0."""
+    from compgen.kinematics import SLOT_INDEX, relative
+    poses = generate(SEED, ["K1"])
+    A = poses.q[:, SEED.index("A")]
+    g = 3e-3
+    slot = np.zeros((len(A), 6))                       # the component slot of A, written out
+    slot[:, SLOT_INDEX["y"]], slot[:, SLOT_INDEX["z"]] = g * np.sin(A), g * (1 - np.cos(A))
+    truth = relative(SEED, poses, {("A", "comp"): slot}) - relative(SEED, poses, {})
+    sag = Model(SEED, ["EYA+EZA:h1s"]).deviation(poses, np.array([-g]))
+    np.testing.assert_allclose(sag, truth, atol=1e-12)
+    parts = Model(SEED, ["EYA:h1s", "EZA:h1c"]).deviation(poses, np.array([g, -g]))   # × (cos A − 1)
+    np.testing.assert_allclose(parts, truth, atol=1e-12)
+    at_zero = Poses.at(poses.q[np.argmin(np.abs(A))][None], SEED.ball)
+    for e in catalogue(SEED):
+        if e.carrier == "A" and e.basis.kind == "h":
+            x = np.full(len(e.params), 1e-3)
+            assert np.abs(Model(SEED, e.params).deviation(at_zero, x)).max() < 1e-12, e.name
+
+
+def test_diagnose_signatures_are_the_models_first_order_columns():
+    """For every catalogue effect (compounds, tilting harmonics, saturating growth among
+    them), the analytic signatures diagnose ranks by equal the exact model's central
+    differences at zero."""
+    from compgen.diagnose import _columns
+    poses = generate(SEED, ["K4"])
+    poses = Poses(poses.q, poses.ball, np.linspace(0, 3600, len(poses)), poses.path)
+    for e in catalogue(SEED):
+        J = Model(SEED, e.params).jacobian(poses).reshape(-1, len(e.params))
+        np.testing.assert_allclose(_columns(SEED, poses, [e]), J, rtol=0,
+                                   atol=1e-7 * max(np.abs(J).max(), 1.0), err_msg=e.name)
+
+
+@pytest.mark.parametrize("sense", [1, -1])
+def test_a_radial_vector_turning_with_the_table_at_1_per_rev_is_a_ball_offset(sense):
+    """Whatever the sign between C's coordinate and its motion, a radial motion turning with
+    the table once a turn moves the ball as an offset on the table does (XOW, YOW), and the
+    one turning against it does not."""
+    import dataclasses
+    machine = dataclasses.replace(SEED, workpiece=tuple(
+        dataclasses.replace(a, sense=sense) if a.name == "C" else a for a in SEED.workpiece))
+    poses = generate(SEED, ["K4"])
+    ball = Model(machine, ["XOW", "YOW"]).jacobian(poses).reshape(-1, 2)
+
+    def unexplained(name):
+        c = Model(machine, [f"{name}c", f"{name}s"]).jacobian(poses).reshape(-1, 2)
+        return np.linalg.norm(c - ball @ np.linalg.lstsq(ball, c, rcond=None)[0]) / np.linalg.norm(c)
+
+    assert unexplained("EXC+EYC:h1") < 1e-6          # finite differences: ~2e-8
+    assert unexplained("EXC+EYC:h-1") > 0.5

@@ -104,7 +104,8 @@ def test_k2_alone_cannot_separate_and_says_what_would(seed_machine, rng):
     assert f"less than 1/{COND_LIMIT:g} of the best-seen combination" in text and COND_LIMIT == 1000
     J = m.jacobian(data.poses).reshape(-1, len(TABLE4))
     ranked = []
-    for label, extra in alternative_measurements(seed_machine):
+    for extra in alternative_measurements(seed_machine):
+        label, extra = extra.label, extra.poses
         both = np.vstack([J, m.jacobian(extra).reshape(-1, len(TABLE4))])
         c = np.linalg.cond(both / np.linalg.norm(both, axis=0))
         if c < COND_LIMIT:
@@ -262,7 +263,8 @@ def test_a_weak_pair_is_refused_and_only_what_separates_it_is_offered(seed_machi
     text = str(exc.value)
     assert f"(condition number {s[0] / s[1]:.3g})" in text, text
     offered = {}
-    for label, extra in alternative_measurements(k2):
+    for extra in alternative_measurements(k2):
+        label, extra = extra.label, extra.poses
         both = np.vstack([J, m.jacobian(extra).reshape(-1, 2)])
         offered[label] = np.linalg.cond(both / np.linalg.norm(both, axis=0))
     assert offered["K2"] > COND_LIMIT and offered["K2 with the ball 100 mm higher"] > COND_LIMIT

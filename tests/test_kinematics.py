@@ -116,7 +116,7 @@ def test_analytic_slot_gains_equal_central_differences_of_the_exact_model(machin
     either side, squareness among them), against the exact model moved by ±1e-6."""
     machine = request.getfixturevalue(machine_name)
     poses = generate(machine, list(machine.paths))
-    keys = sorted({(e.carrier, e.slot, e.direction) for e in catalogue(machine)})
+    keys = sorted({(e.carrier, e.slot, d) for e in catalogue(machine) for d in e.direction})
     gains = slot_gains(machine, poses, keys)
     for carrier, slot, direction in keys:
         step = np.zeros((len(poses), 6))

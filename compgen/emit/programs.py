@@ -12,6 +12,7 @@ References: ``shared/research/controllers.md`` §2 (Klartext), §3.8 (SINUMERIK)
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 
 import numpy as np
 
@@ -60,6 +61,13 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
         raise CompgenError(f"machine file {machine.source} has no [program] section",
                            hint="add tool, feed, dwell and clearance (see the bundled machines)")
     ctl.check_setup(machine)
+    balls = np.unique(np.round(np.asarray(poses.ball, float), 6), axis=0)
+    if len(balls) > 1:
+        raise CompgenError(f"a program measures one ball position; these poses hold {len(balls)}",
+                           hint="write one program per ball position")
+    if not np.allclose(balls[0], machine.ball, rtol=0, atol=1e-6):
+        # the datum, the safe height and the motion check must see the ball where it is
+        machine = replace(machine, ball=tuple(float(v) for v in balls[0]))
     linear = [machine.index(c) for c in "XYZ"]
     rotary = [machine.index(a.name) for a in machine.rotary_axes]
     # the machine executes the angles as written (0.0001 deg): solve X Y Z at exactly those,
