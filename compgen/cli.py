@@ -28,7 +28,7 @@ from .paths import generate
 from .report import report_html
 from .results import load_fit
 from .rtest import SIGNS, format_rtest, read_poses, read_rtest
-from .session import reload
+from .session import fit_machine, reload
 from .simulate import read_truth, simulate
 
 
@@ -217,7 +217,8 @@ def fit_cmd(machine_file, data, base, model_names, add, remove, fixes, method, s
 @click.option("--candidates", default=None,
               help="Comma-separated effects to try (default: the whole catalogue).")
 @click.option("--plots", "plots_dir", type=click.Path(file_okay=False), default=None,
-              help="Write PNG plots here: measured vs model per path, residual vs axis angle.")
+              help="Write PNG plots here: measured vs model per path, residual vs axis angle per path, "
+                   "and the rivals on the measurement that tells them apart.")
 @click.option("--before", type=FILE, default=None,
               help="An earlier fit.json of the same data, drawn beside this one in the plots.")
 def diagnose_cmd(base, as_json, candidates, plots_dir, before):
@@ -231,10 +232,31 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before):
     if plots_dir:
         from .plots import write_plots  # matplotlib only when asked for
         earlier = load_fit(before) if before else None
-        for path in write_plots(plots_dir, machine, sets, fit, earlier):
+        for path in write_plots(plots_dir, machine, sets, fit, earlier, result):
             click.echo(f"wrote {path}", err=as_json)
     click.echo(json.dumps(result.to_dict(), indent=2, ensure_ascii=False) if as_json
                else result.report(base), nl=as_json)
+
+
+@main.command("predict")
+@click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
+@click.option("--poses", "poses_file", type=FILE, required=True,
+              help="A CSV of poses: rotary axes in deg; path, bx, by, bz (ball, mm) optional.")
+@OUTPUT
+@FORCE
+def predict_cmd(base, poses_file, output, force):
+    """Write what the fitted model predicts an R-test would read at other poses or balls."""
+    fit = load_fit(base)
+    machine = fit_machine(fit)
+    poses = read_poses(poses_file, machine)
+    values = {n: fit.parameters[n].value for n in fit.model}
+    data = simulate(machine, values, poses)
+    comments = (f"compgen predict: {fit.marker} ({base}) on machine {machine.name}",
+                f"poses {poses_file}; dX dY dZ: nest minus ball, µm, as the fitted model predicts them",
+                "the fit's set-up terms (ball offset) belong to its own set-up: compare with a "
+                "constant per set-up aside")
+    write_atomically(output, format_rtest(machine, data, comments), force, inputs=(base, poses_file))
+    click.echo(f"wrote {output}: {len(poses)} poses predicted by {fit.marker}")
 
 
 @main.command("measure-program")

@@ -99,6 +99,7 @@ class Diagnosis:
             "still_significant_after_best": list(self.after_best),
             "rivals_of_best": list(self.rivals),
             "found": self.found,
+            "rivals_equivalent": bool(self.rivals and not self.rivals_separated_by),
             "rivals_separated_by": [m.to_dict() for m in self.rivals_separated_by],
             "outliers": list(self.outliers),
             "noise_ar1_rho": self.noise,
@@ -164,7 +165,13 @@ class Diagnosis:
                                  f"{','.join(f'{v:g}' for v in m.ball)} -o <program>")
                 lines.append("  then fit the new CSV together with these, and diagnose again.")
             else:
-                lines.append("  No path or ball position of the machine file tells them apart.")
+                lines += ["  No path or ball position of the machine file tells them apart: for every "
+                          "set-up compgen can measure they predict the same readings (they differ by "
+                          "what the location errors absorb). Any one of them models the misfit: "
+                          f"{me()} fit --from {fit_path} --add {best} -o {_next_name(fit_path)};",
+                          "  which of them is the physical cause stays open (it needs another "
+                          "reference), and the location errors written to a control depend on the "
+                          "choice."]
         if not self.significant:
             lines += ["", "  No candidate is significant: the model explains these data to the "
                           "noise level."]
@@ -410,6 +417,29 @@ def _rank(machine: Machine, poses: Poses, effects: Sequence[Effect], free: Seque
         out[e.name] = _Row(e, float(vis_cols.max()), drop, drop_w, drop_w / max(rss_w, 1e-300),
                            int(keep.sum()), amp, names, bool(np.all(norms * 1e3 < SILENT_UM)),
                            norms, absorbed)
+    return out
+
+
+def rival_curves(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosis,
+                 extra: Measurement) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """For the best candidate and each rival at its fitted size: the misfit (µm, (n, 3)) the
+    fit's model leaves of it on the measured poses, and the misfit it would leave on
+    ``extra`` once that is measured too (first order): alike on the first, apart on the
+    second when ``extra`` tells them apart."""
+    model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
+    both = Poses.concat([poses, extra.poses])
+    J = _columns(machine, both, model_effects)
+    Q_now = np.linalg.qr(J[:3 * len(poses)])[0]
+    Q_both = np.linalg.qr(J)[0]
+    out = {}
+    for c in found.candidates:
+        if c.effect not in (found.significant[0].effect, *found.rivals):
+            continue
+        e = resolve(machine, c.effect)
+        v = _columns(machine, both, [e]) @ (np.array(c.amplitude) / shown(1.0, e.unit)[0])
+        now = v[:3 * len(poses)] - Q_now @ (Q_now.T @ v[:3 * len(poses)])
+        after = (v - Q_both @ (Q_both.T @ v))[3 * len(poses):]
+        out[c.effect] = (now.reshape(-1, 3) * 1e3, after.reshape(-1, 3) * 1e3)
     return out
 
 

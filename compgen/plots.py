@@ -13,6 +13,7 @@ matplotlib.use("Agg")   # files only: no display on a machine-side laptop or CI
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .diagnose import Diagnosis, rival_curves  # noqa: E402
 from .errors import CompgenError  # noqa: E402
 from .kinematics import Model, Poses  # noqa: E402
 from .machine import Machine  # noqa: E402
@@ -28,10 +29,10 @@ def _predicted(machine: Machine, poses: Poses, fit: FitResult) -> np.ndarray:
 
 
 def write_plots(folder: str | Path, machine: Machine, data: Sequence[RTestData], fit: FitResult,
-                before: FitResult | None = None) -> list[Path]:
+                before: FitResult | None = None, found: Diagnosis | None = None) -> list[Path]:
     """Write the plots into ``folder`` (made if missing); returns the files written."""
     folder = Path(folder)
-    images = figures(machine, data, fit, before)
+    images = figures(machine, data, fit, before, found)
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -47,8 +48,10 @@ def write_plots(folder: str | Path, machine: Machine, data: Sequence[RTestData],
 
 
 def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
-            before: FitResult | None = None) -> dict[str, bytes]:
-    """PNG images by file name: measured vs model per path, residual vs each rotary axis."""
+            before: FitResult | None = None, found: Diagnosis | None = None) -> dict[str, bytes]:
+    """PNG images by file name: measured vs model per path, residual vs each rotary axis per
+    path, and, when ``found`` has rivals, what each would leave on the measurement that
+    tells them apart."""
     if before is not None and [d.sha256 for d in before.data] != [d.sha256 for d in fit.data]:
         raise CompgenError("--before must be a fit of the same data files",
                            hint="compare fits made from the same R-test session")
@@ -73,22 +76,48 @@ def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         axes[0].legend(loc="best", fontsize=8)
         axes[-1].set_xlabel("pose")
         images[f"measured-vs-model-{_safe(path)}.png"] = _png(fig)
+    paths = list(dict.fromkeys(poses.path))
     for axis in machine.rotary_axes:
         angle = np.degrees(poses.q[:, machine.index(axis.name)])
         fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
         for k, ax in enumerate(axes):
             if earlier is not None:
-                ax.plot(angle, measured[:, k] - earlier[:, k], ".", ms=2, color="tab:orange",
+                ax.plot(angle, measured[:, k] - earlier[:, k], ".", ms=2, color="0.7",
                         label=f"before: RMS {before.residual['rms_um']:.2f} µm")
-            ax.plot(angle, measured[:, k] - model[:, k], ".", ms=2, color="tab:blue",
-                    label=f"residual: RMS {fit.residual['rms_um']:.2f} µm")
+            for i, path in enumerate(paths):        # a path that holds the axis still is a column
+                sel = poses.path == path
+                res = measured[sel, k] - model[sel, k]
+                ax.plot(angle[sel], res, ".", ms=2, color=f"C{i % 10}",
+                        label=f"{path or 'data'}: RMS {np.sqrt((res**2).mean()):.2f} µm")
             ax.set_ylabel(f"{DIRECTIONS[k]} (µm)")
             ax.grid(alpha=0.3)
-        axes[0].set_title(f"residual against {axis.name}, {machine.name}")
+        axes[0].set_title(f"residual against {axis.name} per path, {machine.name}")
         axes[0].legend(loc="best", fontsize=8)
         axes[-1].set_xlabel(f"{axis.name} (deg)")
         images[f"residual-vs-{axis.name}.png"] = _png(fig)
+    if found is not None and found.rivals and found.rivals_separated_by:
+        images["rivals.png"] = _rivals(machine, poses, fit, found, measured - model)
     return images
+
+
+def _rivals(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosis, residual: np.ndarray) -> bytes:
+    extra = found.rivals_separated_by[0]
+    curves = rival_curves(machine, poses, fit, found, extra)
+    fig, axes = plt.subplots(3, 2, figsize=(12, 7), sharex="col", gridspec_kw={"width_ratios": [3, 1]})
+    for k in range(3):
+        axes[k, 0].plot(residual[:, k], ".", ms=2, color="0.6", label="residual")
+        for i, (name, (now, after)) in enumerate(curves.items()):
+            axes[k, 0].plot(now[:, k], "-", lw=1, color=f"C{i}", label=name)
+            axes[k, 1].plot(after[:, k], "-", lw=1, color=f"C{i}", label=name)
+        axes[k, 0].set_ylabel(f"{DIRECTIONS[k]} (µm)")
+        for ax in axes[k]:
+            ax.grid(alpha=0.3)
+    axes[0, 0].set_title("measured: the rivals explain the misfit alike", fontsize=10)
+    axes[0, 1].set_title(f"{extra.label}:\nwhat each would leave", fontsize=9)
+    axes[0, 0].legend(loc="best", fontsize=7)
+    axes[-1, 0].set_xlabel("pose (measured)")
+    axes[-1, 1].set_xlabel("pose (to measure)")
+    return _png(fig)
 
 
 def _safe(label: str) -> str:

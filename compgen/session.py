@@ -12,8 +12,8 @@ from .results import FitResult
 from .rtest import RTestData, read_rtest
 
 
-def reload(fit: FitResult, machine_file: str | None = None) -> tuple[Machine, list[RTestData]]:
-    """The machine and data sets of ``fit``, refusing any file that changed since."""
+def fit_machine(fit: FitResult, machine_file: str | None = None) -> Machine:
+    """The machine file of ``fit``, refused if it changed since or does not hold its units."""
     machine = load_machine(machine_file or fit.machine["file"])
     if machine.sha256 != fit.machine["sha256"]:
         raise CompgenError("machine file changed since the fit", where=machine.source,
@@ -22,6 +22,12 @@ def reload(fit: FitResult, machine_file: str | None = None) -> tuple[Machine, li
         if effect_of_param(machine, name).unit != e.unit:
             raise CompgenError(f"{name} is given in a unit of {'length' if e.unit == 'mm' else 'angle'}",
                                where=f"fit file: parameters.{name}", hint="the fit file is damaged: refit")
+    return machine
+
+
+def reload(fit: FitResult, machine_file: str | None = None) -> tuple[Machine, list[RTestData]]:
+    """The machine and data sets of ``fit``, refusing any file that changed since."""
+    machine = fit_machine(fit, machine_file)
     data = []
     for ref in fit.data:
         if not Path(ref.file).exists():

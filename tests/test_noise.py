@@ -1,0 +1,71 @@
+"""Correlated noise and bad readings (noise.py) on series whose answers are known."""
+
+import numpy as np
+import pytest
+
+from compgen.noise import OUTLIER_MIN_UM, ar1, outliers, segments, whiten
+
+
+def test_segments_break_at_a_new_file_or_path():
+    seg = segments([0, 0, 0, 0, 1, 1], ["K4", "K4", "K1", "K1", "K1", "K1"])
+    assert seg.tolist() == [0, 0, 1, 1, 2, 2]
+
+
+def test_prais_winsten_by_hand():
+    """x'[0] = √(1−ρ²)·x[0], x'[i] = x[i] − ρ·x[i−1], started anew in each segment."""
+    x = np.arange(1.0, 16.0).reshape(5, 3)
+    seg = np.array([0, 0, 0, 1, 1])
+    rho = np.tile([0.5, 0.0, 0.9], (5, 1))
+    w = whiten(x, seg, rho)
+    for d, p in enumerate((0.5, 0.0, 0.9)):
+        c = x[:, d]
+        expect = [np.sqrt(1 - p * p) * c[0], c[1] - p * c[0], c[2] - p * c[1],
+                  np.sqrt(1 - p * p) * c[3], c[4] - p * c[3]]
+        np.testing.assert_allclose(w[:, d], expect, rtol=1e-14)
+    cols = whiten(np.stack([x, 2 * x], axis=-1), seg, rho)       # (n, 3, k): each column alike
+    np.testing.assert_allclose(cols[..., 1], 2 * w, rtol=1e-14)
+
+
+def _ar1(n, rho, rng):
+    e = rng.normal(size=(n, 3))
+    out = np.empty((n, 3))
+    out[0] = e[0] / np.sqrt(1 - rho**2)
+    for i in range(1, n):
+        out[i] = rho * out[i - 1] + e[i]
+    return out
+
+
+def test_ar1_is_estimated_and_white_noise_is_left_white():
+    rng = np.random.default_rng(3)
+    r = np.vstack([_ar1(3000, 0.8, rng), rng.normal(size=(3000, 3))])
+    seg = np.repeat([0, 1], 3000)
+    rho = ar1(r, seg)
+    np.testing.assert_allclose(rho[:3000], 0.8, atol=0.03)     # s.e. √((1−ρ²)/n) = 0.011
+    assert not rho[3000:].any()                                  # within 2/√n of zero: taken as 0
+    # whitened with its own ρ̂, the AR(1) series has no lag-1 correlation left
+    w = whiten(r[:3000], seg[:3000], rho[:3000])
+    lag = (w[1:] * w[:-1]).sum(axis=0) / (w**2).sum(axis=0)
+    assert np.abs(lag).max() < 0.05
+
+
+def test_single_bad_readings_are_found_and_a_smooth_error_is_not():
+    rng = np.random.default_rng(4)
+    n = 241
+    angle = np.linspace(0, 2 * np.pi, n)
+    smooth = 20 * np.column_stack([np.cos(2 * angle), np.sin(3 * angle), np.cos(angle)])   # µm
+    r = smooth + rng.normal(0, 0.5, (n, 3))
+    seg = np.zeros(n, int)
+    assert outliers(r, seg)[0].size == 0
+    bad = [17, 120, 240]                       # one at the end of the segment too
+    r[bad] += [[20, 0, 0], [0, -20, 0], [0, 0, 20]]
+    found, size = outliers(r, seg)
+    assert found.tolist() == bad
+    np.testing.assert_allclose(size, 20, atol=2.5)
+
+
+@pytest.mark.parametrize("step", [0.0, 0.5 * OUTLIER_MIN_UM])
+def test_noiseless_data_has_no_outliers(step):
+    """With no noise the robust scale is zero: only a step beyond OUTLIER_MIN_UM counts."""
+    r = np.zeros((50, 3))
+    r[10, 0] = step
+    assert outliers(r, np.zeros(50, int))[0].size == 0
