@@ -267,6 +267,9 @@ def predict_cmd(base, poses_file, output, force):
               help="A CSV of poses (rotary axes in deg; path, bx, by, bz optional) instead of --path.")
 @click.option("--ball", default=None, help="With --path: the ball centre in the table frame, mm, "
                                             "X,Y,Z (default: the machine file's).")
+@click.option("--there-and-back", "back", is_flag=True,
+              help="With --path: run each path there and back, so that every axis reverses "
+                   "(what a reversal error, backlash, needs to be seen).")
 @click.option("--controller", "controller_name", default=None, metavar="NAME",
               help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
 @click.option("--mode", type=click.Choice(MODES), default="tcpm", show_default=True,
@@ -274,19 +277,22 @@ def predict_cmd(base, poses_file, output, force):
 @click.option("-o", "--output", type=FILE, default=None,
               help="Program file; its pose list goes beside it as <name>.poses.csv. Default: stdout.")
 @FORCE
-def measure_program_cmd(machine_file, path_names, poses_file, ball, controller_name, mode, output, force):
+def measure_program_cmd(machine_file, path_names, poses_file, ball, back, controller_name, mode, output,
+                        force):
     """Write an R-test measurement program for the control, checked against travel and feed."""
     machine = load_machine(machine_file)
     if bool(path_names) == bool(poses_file):
         raise CompgenError("give either --path or --poses")
-    if ball and poses_file:
-        raise CompgenError("--ball goes with --path: a pose list gives its ball in bx, by, bz")
+    if (ball or back) and poses_file:
+        raise CompgenError("--ball and --there-and-back go with --path: a pose list gives its own "
+                           "poses and ball")
     if poses_file:
         poses, label = read_poses(poses_file, machine), Path(poses_file).stem
     else:
         names = (list(machine.paths) if path_names.strip().lower() == "all"
                  else [p.strip() for p in path_names.split(",") if p.strip()])
-        poses, label = generate(machine, names, ball=_vec3(ball, "--ball") if ball else None), "+".join(names)
+        poses = generate(machine, names, ball=_vec3(ball, "--ball") if ball else None, back=back)
+        label = "+".join(names) + "_BACK" * back
     ctl = controller(controller_name or machine.controller)
     name = program_name(Path(output).stem if output else f"RTEST_{label}"[:NAME_MAX])
     emitted = measure_program(machine, poses, label, ctl.name, mode, name, __version__,

@@ -86,6 +86,22 @@ class Diagnosis:
         return tuple(c for c in self.candidates if c.significant)
 
     @property
+    def next_measurement(self) -> tuple[Measurement | None, tuple[str, ...]]:
+        """The one measurement that would show the most effects these data cannot see
+        (shortest first among equals), and those effects."""
+        shows: dict[str, list[str]] = {}
+        by_label = {}
+        for c in self.candidates:
+            if not c.visible:
+                for m in c.separated_by:
+                    shows.setdefault(m.label, []).append(c.effect)
+                    by_label[m.label] = m
+        if not shows:
+            return None, ()
+        best = max(shows, key=lambda k: (len(shows[k]), -len(by_label[k].poses)))
+        return by_label[best], tuple(shows[best])
+
+    @property
     def found(self) -> str | None:
         """The effect named as missing: significant, first, and with no rival."""
         return self.significant[0].effect if self.significant and not self.rivals else None
@@ -100,6 +116,8 @@ class Diagnosis:
             "rivals_of_best": list(self.rivals),
             "found": self.found,
             "rivals_equivalent": bool(self.rivals and not self.rivals_separated_by),
+            "next_measurement": None if self.next_measurement[0] is None else {
+                **self.next_measurement[0].to_dict(), "would_show": list(self.next_measurement[1])},
             "rivals_separated_by": [m.to_dict() for m in self.rivals_separated_by],
             "outliers": list(self.outliers),
             "noise_ar1_rho": self.noise,
@@ -161,8 +179,7 @@ class Diagnosis:
             if self.rivals_separated_by:
                 lines.append("  Measuring one of these would tell them apart (shortest first):")
                 for m in self.rivals_separated_by[:3]:
-                    lines.append(f"    {m.label}: {me()} measure-program --path {m.path} --ball "
-                                 f"{','.join(f'{v:g}' for v in m.ball)} -o <program>")
+                    lines.append(f"    {m.label}: {me()} measure-program {m.command()} -o <program>")
                 lines.append("  then fit the new CSV together with these, and diagnose again.")
             else:
                 lines += ["  No path or ball position of the machine file tells them apart: for every "
@@ -181,7 +198,7 @@ class Diagnosis:
                           + (f"still significant: {', '.join(self.after_best)}." if self.after_best
                              else "no other candidate stays significant.")
                           + " Add one effect at a time and diagnose again."]
-        hidden = [c for c in self.candidates if not c.visible and not c.silent]
+        hidden = [c for c in self.candidates if not c.visible and (not c.silent or c.separated_by)]
         if hidden:
             lines += ["", "  not visible in these data (never reported as found; the fit absorbs them):"]
             for c in hidden:
@@ -189,9 +206,14 @@ class Diagnosis:
                          if c.separated_by
                          else "no path or ball position of this machine file separates it: it needs "
                               "an independent reference")
-                lines.append(f"    {c.effect:<12} {c.description}: absorbed by "
-                             f"{', '.join(c.confounded_with)}; {where}")
-        silent = [c.effect for c in self.candidates if c.silent]
+                what = "moves no reading here" if c.silent else f"absorbed by {', '.join(c.confounded_with)}"
+                lines.append(f"    {c.effect:<12} {c.description}: {what}; {where}")
+            m, shows = self.next_measurement
+            if m is not None:
+                lines.append(f"  to look for them, {m.label} would show the most ({len(shows)}: "
+                             f"{', '.join(shows[:6])}{', …' if len(shows) > 6 else ''}): "
+                             f"{me()} measure-program {m.command()} -o <program>")
+        silent = [c.effect for c in self.candidates if c.silent and not c.separated_by]
         if silent:
             lines += ["", "  no effect on any reading here (no lever arm to the nest or ball in this "
                           "machine file): " + ", ".join(silent)]
@@ -303,7 +325,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
             amplitude=tuple(shown(a, e.unit)[0] for a in row.amp), unit=shown(1.0, e.unit)[1],
             silent=row.silent, share=row.share))
     out.sort(key=lambda c: (not c.visible, -c.share))
-    hidden = [c for c in out if not c.visible and not c.silent]
+    hidden = [c for c in out if not c.visible]
     model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
     seen = (_separating(machine, model_effects, poses, [resolve(machine, c.effect) for c in hidden])
             if hidden else {})

@@ -20,6 +20,9 @@ letter O as in the seed report; ``X0C`` and ``E_X0C`` are accepted at input):
                        (so ``EXX:p1`` in µm is a scale error in µm/m)
 ``drift_Z:t1``         thermal drift of the tool relative to the table along machine Z,
                        polynomial in the session time per hour (µm/h for ``t1``)
+``ECC:r1``             reversal of an axis's positioning (backlash): ± the parameter (half
+                       the reversal value) by the direction the axis last moved; seen only
+                       where the axis moves both ways (a path run there and back)
 ``XOC:e15``            a location error (or ``drift_Z``) growing as 1 − exp(−t/τ) with τ =
                        15 min: thermal growth that saturates (the value it tends to)
 ``nest_X``             R-test nest (tool side) set-up offset along the spindle frame X
@@ -62,7 +65,7 @@ class Basis:
     """Shape of an effect in its coordinate: constant, harmonic k, polynomial k, time
     polynomial k, or saturating in time with τ = ``order`` minutes."""
 
-    kind: str            # "const", "h", "p", "t" or "e"
+    kind: str            # "const", "h", "p", "t", "e" or "r"
     order: int = 0       # a compound's harmonic is signed: − turns against the axis
     origin: bool = False  # harmonics of a tilting axis: taken from angle 0 (cos kθ − 1)
 
@@ -85,6 +88,8 @@ class Basis:
             return np.stack([np.cos(self.order * x) - self.origin, np.sin(self.order * x)], axis=-1)
         if self.kind == "e":
             return (1 - np.exp(-x * (60.0 / self.order)))[..., None]
+        if self.kind == "r":              # x is the direction of motion, ±1 (0: never moved)
+            return x[..., None]
         return (x**self.order)[..., None]
 
 
@@ -189,7 +194,8 @@ def _axis_symbols(axis: Axis) -> dict:
                         {"a": "pitch", "b": "roll", "c": "yaw"} if d == "y" else \
                         {"a": "pitch", "b": "yaw", "c": "roll"}
                 words, cause = f"{names[e]} of {L}", "guideway twist or bending"
-        out[f"E{E}{L}"] = (L, "comp", e, kinds, words, cause, 1)
+        positioning = e == (ROT_OF[d] if axis.rotary else d)
+        out[f"E{E}{L}"] = (L, "comp", e, kinds + ("r",) * positioning, words, cause, 1)
     if axis.rotary:
         u, w = _turning_pair(d)
         for pair, kind in (((u, w), "radial"), ((ROT_OF[u], ROT_OF[w]), "tilt")):
@@ -226,6 +232,14 @@ def canonical(name: str) -> str:
     return name
 
 
+def _order_ok(kind: str, order: int, first: int, compound: bool) -> bool:
+    if kind == "e":
+        return 1 <= order <= 999          # τ, minutes
+    if kind == "r":
+        return order == 1
+    return first <= abs(order) <= 99 and (order > 0 or compound)
+
+
 def resolve(machine: Machine, name: str) -> Effect:
     """The effect called ``name`` (canonical or alias) on this machine, or a clear error."""
     text = canonical(name)
@@ -241,11 +255,10 @@ def resolve(machine: Machine, name: str) -> Effect:
                                where=name)
         basis = CONSTANT
     else:
-        m = re.fullmatch(r"([hpte])(-?)(\d{1,3})", order_txt)
+        m = re.fullmatch(r"([hpter])(-?)(\d{1,3})", order_txt)
         kind, order = (m[1], int(m[2] + m[3])) if m else ("", 0)
         compound = len(direction) == 2
-        if not m or kind not in kinds or (kind == "e" and not 1 <= order <= 999) or (
-                kind != "e" and (abs(order) < first or abs(order) > 99 or (order < 0 and not compound))):
+        if not m or kind not in kinds or not _order_ok(kind, order, first, compound):
             turns = " (N < 0 turns against the axis)" if compound else ""
             raise CompgenError(f"{symbol} takes {' or '.join(k + 'N' for k in kinds)} with N ≥ {first}"
                                f"{turns}, not {order_txt!r}" + (" (eN: τ = N min, 1…999)" if "e" in kinds
@@ -262,6 +275,10 @@ def resolve(machine: Machine, name: str) -> Effect:
                                              f"at {abs(order)}/rev")
         if kind == "e":
             words += f", growing as 1 − exp(−t/{order} min)"
+        if kind == "r":
+            words = words.replace("positioning error", "reversal (backlash)") + \
+                ": ± half the reversal value by the direction of motion"
+            cause = "backlash, or friction and stick-slip at reversal"
     sense = machine.axis(carrier).sense if len(direction) == 2 else 1
     return Effect(symbol, carrier, slot, direction, basis, words, cause, sense)
 
@@ -291,6 +308,8 @@ def catalogue(machine: Machine) -> tuple[Effect, ...]:
                 orders: list = [None]
             elif kind == "e":
                 orders = list(TAUS_MIN)
+            elif kind == "r":
+                orders = [1]
             else:
                 top = MAX_ORDER[kind]
                 if kind == "h" and not machine.axis(carrier).full_turn:

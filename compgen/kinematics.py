@@ -151,7 +151,39 @@ def coordinate(machine: Machine, effect: Effect, poses: Poses) -> np.ndarray:
         return np.zeros(len(poses))
     axis = machine.axis(effect.carrier)
     q = poses.q[:, machine.index(axis.name)]
+    if effect.basis.kind == "r":
+        return motion_direction(q, runs(poses))
     return q if axis.rotary else q / POLY_SCALE_MM
+
+
+def runs(poses: Poses) -> np.ndarray:
+    """A number per pose that changes where one continuous run of a path ends: at a new path
+    label, a new ball position, or where the session time goes back (a new file)."""
+    new = np.ones(len(poses), bool)
+    back = np.diff(poses.t) <= 0                # NaN (no time column) compares False
+    new[1:] = (poses.path[1:] != poses.path[:-1]) | np.any(poses.ball[1:] != poses.ball[:-1], axis=1) | back
+    return np.cumsum(new)
+
+
+def motion_direction(q: np.ndarray, run: np.ndarray) -> np.ndarray:
+    """The side of a reversal each pose is on: ±1 by the direction the axis moved to reach
+    it (poses in the order taken; standing still keeps the last direction, the first pose
+    takes its path's first move), less the path's mean. How the axis reached a path's start
+    is not known, so only the change within a path counts: a path in which the axis never
+    turns back is 0 throughout, and its side of the backlash stays with the location errors.
+    """
+    out = np.zeros(len(q))
+    starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+    for a, b in zip(starts, [*starts[1:], len(q)], strict=True):
+        step = np.sign(np.diff(q[a:b]))
+        if not ((step > 0).any() and (step < 0).any()):
+            continue
+        d = np.empty(b - a)
+        d[0] = step[np.flatnonzero(step)[0]]
+        for i, s in enumerate(step, start=1):
+            d[i] = s if s else d[i - 1]
+        out[a:b] = d - d.mean()
+    return out
 
 
 def relative(machine: Machine, poses: Poses, slots: Mapping[tuple[str, str], np.ndarray],

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import CompgenError
-from .kinematics import Poses, inverse
+from .kinematics import Poses, inverse, motion_direction, runs
 from .machine import Machine, PathDef, travel_violations
 
 GAP_S = 20.0   # pause between two paths of one session (re-positioning), s
@@ -46,8 +46,10 @@ def rotary_positions(machine: Machine, path: PathDef) -> np.ndarray:
 
 
 def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | None = None,
-             start_s: float = 0.0) -> Poses:
-    """Poses of the named paths run one after another, with the nest on the ball (TCPM).
+             start_s: float = 0.0, back: bool = False) -> Poses:
+    """Poses of the named paths run one after another, with the nest on the ball (TCPM);
+    with ``back``, each path is run there and back (every axis reverses: what a reversal
+    error needs to be seen).
 
     Every pose is checked against the machine's travel; the first one outside is named.
     """
@@ -55,12 +57,15 @@ def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | Non
     out, t0 = [], start_s
     for name in names:
         path = path_def(machine, name)
-        q = inverse(machine, np.radians(rotary_positions(machine, path)), ball)
-        t = t0 + path.seconds_per_pose * np.arange(path.n)
+        angles = rotary_positions(machine, path)
+        if back:
+            angles = np.vstack([angles, angles[::-1]])
+        n = len(angles)
+        q = inverse(machine, np.radians(angles), ball)
+        t = t0 + path.seconds_per_pose * np.arange(n)
         t0 = t[-1] + GAP_S
         check_travel(machine, q, name)
-        out.append(Poses(q, np.broadcast_to(ball, (path.n, 3)), t,
-                         np.full(path.n, path.name, dtype=object)))
+        out.append(Poses(q, np.broadcast_to(ball, (n, 3)), t, np.full(n, path.name, dtype=object)))
     return Poses.concat(out)
 
 
@@ -83,37 +88,50 @@ SECOND_BALL_DZ_MM = 100.0   # the second ball positions offered to separate what
 @dataclass(frozen=True, eq=False)
 class Measurement:
     """A measurement that could be added: a path of the machine file with the ball at
-    ``ball`` (mm, table frame, as a CSV's bx, by, bz), and its poses."""
+    ``ball`` (mm, table frame, as a CSV's bx, by, bz), run there and back or not, and its
+    poses."""
 
     label: str
     path: str
     ball: tuple[float, float, float]
     poses: Poses
+    back: bool = False
 
     def to_dict(self) -> dict:
-        return {"label": self.label, "path": self.path, "ball": [round(v, 4) for v in self.ball]}
+        return {"label": self.label, "path": self.path, "ball": [round(v, 4) for v in self.ball],
+                "there_and_back": self.back}
+
+    def command(self) -> str:
+        """The options of ``measure-program`` that write it."""
+        return (f"--path {self.path} --ball {','.join(f'{v:g}' for v in self.ball)}"
+                + " --there-and-back" * self.back)
 
 
 def alternative_measurements(machine: Machine, measured: Poses | None = None) -> list[Measurement]:
     """Measurements that could be added: each of the machine's paths at the bundled ball,
-    with the ball higher, and with the ball at half its radius (a tilt of an axis scales
-    with radius and height, an offset or an axial error motion does not). Those that would
-    leave the travel, and those ``measured`` holds already (same path, same ball), are not
-    offered."""
+    run there and back, with the ball higher, and with the ball at half its radius (a tilt
+    of an axis scales with radius and height, an offset or an axial error motion does not;
+    a reversal shows only where an axis turns back). Those that would leave the travel, and
+    those ``measured`` holds already (same path, same ball), are not offered."""
     ball = np.asarray(machine.ball, dtype=float)
-    places = (("", ball),
-              (f" with the ball {SECOND_BALL_DZ_MM:g} mm higher", ball + [0, 0, SECOND_BALL_DZ_MM]),
-              (" with the ball at half its radius", ball * [0.5, 0.5, 1.0]))
-    done = set() if measured is None else {
-        (str(p), tuple(np.round(b, 3))) for p, b in zip(measured.path, measured.ball, strict=True)}
+    places = (("", ball, False), (" there and back", ball, True),
+              (f" with the ball {SECOND_BALL_DZ_MM:g} mm higher", ball + [0, 0, SECOND_BALL_DZ_MM], False),
+              (" with the ball at half its radius", ball * [0.5, 0.5, 1.0], False))
+    done, turned = set(), set()
+    if measured is not None:
+        where_ = [(str(p), tuple(np.round(b, 3))) for p, b in zip(measured.path, measured.ball, strict=True)]
+        done = set(where_)
+        for a in machine.rotary_axes:
+            d = motion_direction(measured.q[:, machine.index(a.name)], runs(measured))
+            turned |= {w for i, w in enumerate(where_) if d[i]}
     out = []
-    for where, at in places:
+    for where, at, back in places:
         for name in machine.paths:
-            if (name, tuple(np.round(at, 3))) in done:
+            if (name, tuple(np.round(at, 3))) in (turned if back else done):
                 continue
             try:
                 out.append(Measurement(f"{name}{where}", name, tuple(float(v) for v in at),
-                                       generate(machine, [name], ball=at)))
+                                       generate(machine, [name], ball=at, back=back), back))
             except CompgenError:
                 continue
     return out

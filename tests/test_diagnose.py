@@ -71,12 +71,13 @@ def test_ambiguous_scale_is_reported_with_the_measurement_that_resolves_it(seed_
     # what the plots draw: alike on the measured poses, apart on the advised measurement
     from compgen.diagnose import rival_curves
     from compgen.plots import figures
-    curves = rival_curves(seed_machine, poses, identify(seed_machine, data), found, found.rivals_separated_by[0])
+    fit = identify(seed_machine, data)
+    curves = rival_curves(seed_machine, poses, fit, found, found.rivals_separated_by[0])
     best, scale = curves[found.significant[0].effect], curves["EXX:p1"]
     assert np.sqrt(((scale[0] - best[0]) ** 2).mean()) < 0.05 * np.sqrt((best[0] ** 2).mean())
     apart = float(((scale[1] - best[1]) ** 2).sum())                  # µm² over the readings
     assert apart >= 25 * NOISE_UM**2, apart                           # TELLS_APART σ²
-    assert "rivals.png" in figures(seed_machine, data, identify(seed_machine, data), None, found)
+    assert "rivals.png" in figures(seed_machine, data, fit, None, found)
     # follow the advice: add K4 with the ball at half its radius, and the tie is broken
     half = generate(seed_machine, ["K4"], ball=np.asarray(seed_machine.ball) * [0.5, 0.5, 1.0])
     data.append(_session(seed_machine, half, hidden, seed=8))
@@ -252,3 +253,21 @@ def test_rivals_no_measurement_separates_are_said_to_be_equivalent(seed_machine,
     assert "No path or ball position of the machine file tells them apart" in found.report()
     fit = identify(seed_machine, data, compose(seed_machine, base.model, [found.significant[0].effect]))
     assert _predicts_unmeasured_balls(seed_machine, truth, fit) < 1.0
+
+
+def test_a_reversal_is_advised_to_be_run_there_and_back_and_then_found(seed_machine, poses):
+    """Backlash of C (±5″ by the direction C turns): on paths that turn C one way only it
+    acts as a location error and cannot be seen; diagnose says which run there and back would
+    show it, and with that run added names it."""
+    truth = {"ECC:r1": 5 * ARCSEC}
+    data = [_session(seed_machine, poses, truth)]
+    found = diagnose(seed_machine, data, identify(seed_machine, data))
+    assert not found.significant
+    backlash = next(c for c in found.candidates if c.effect == "ECC:r1")
+    assert not backlash.visible
+    back = [m for m in backlash.separated_by if m.back]
+    assert back and all(m.label.endswith("there and back") for m in back)
+    assert "ECC:r1 " in found.report() and f"would be seen with {back[0].label}" in found.report()
+    data.append(_session(seed_machine, generate(seed_machine, [back[0].path], back=True), truth, seed=8))
+    found = diagnose(seed_machine, data, identify(seed_machine, data))
+    assert found.found == "ECC:r1", ([c.effect for c in found.significant[:3]], found.rivals)

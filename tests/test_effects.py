@@ -14,14 +14,16 @@ from compgen.paths import generate
 SEED = load_machine(SEED_MACHINE)
 ULPS_AT_100_MM = 1e-13   # mm: a few units in the last place of a 100 mm coordinate
 POSES = generate(SEED, ["K4", "K1", "K2"])
+THERE_AND_BACK = generate(SEED, ["K4", "K1", "K2"], back=True)    # what a reversal needs
 
 
 @pytest.mark.parametrize("effect", catalogue(SEED), ids=lambda e: e.name)
 def test_every_effect_is_well_formed_and_moves_the_readings(effect):
     assert resolve(SEED, effect.name) == effect
-    J = Model(SEED, effect.params).jacobian(POSES)
+    poses = THERE_AND_BACK if effect.basis.kind == "r" else POSES
+    J = Model(SEED, effect.params).jacobian(poses)
     assert np.isfinite(J).all()
-    assert J.shape == (len(POSES), 3, len(effect.params))
+    assert J.shape == (len(poses), 3, len(effect.params))
     assert effect.words and effect.unit in ("mm", "rad")
     # every column moves the readings, except a turn about the tool axis of a carriage that
     # carries the spindle: its axis passes through the nest, which it cannot move

@@ -135,3 +135,22 @@ def test_a_parameter_of_exactly_one_is_not_taken_for_zero(seed_machine):
     poses = generate(seed_machine, ["K4"])
     dev = Model(seed_machine, ["XOW"]).deviation(poses, np.array([1.0]))
     np.testing.assert_allclose(np.linalg.norm(dev, axis=1), 1.0, rtol=1e-9)
+
+
+def test_the_side_of_a_reversal_by_hand():
+    """±1 by the direction moved, standing still keeps it, the first pose takes the first
+    move; less the run's mean; a run that never turns back is 0; runs end at a new label."""
+    from compgen.kinematics import motion_direction
+    q = np.array([0.0, 1, 2, 2, 1, 0, 5, 6, 7])
+    run = np.array([0, 0, 0, 0, 0, 0, 1, 1, 1])
+    d = np.array([1.0, 1, 1, 1, -1, -1])
+    np.testing.assert_allclose(motion_direction(q, run), [*(d - d.mean()), 0, 0, 0])
+
+
+def test_runs_end_at_a_new_file_ball_or_label():
+    from compgen.kinematics import runs
+    p = Poses.concat([Poses(np.zeros((3, 5)), np.zeros((3, 3)), np.arange(3.0),
+                            np.full(3, "K2", dtype=object))] * 2)
+    assert runs(p).tolist() == [1, 1, 1, 2, 2, 2]                     # the time starts again
+    moved = Poses(p.q, p.ball + np.array([[0, 0, 0]] * 3 + [[0, 0, 1]] * 3), np.arange(6.0), p.path)
+    assert runs(moved).tolist() == [1, 1, 1, 2, 2, 2]
