@@ -40,6 +40,7 @@ from compgen.kinematics import Model  # noqa: E402
 from compgen.machine import load_machine  # noqa: E402
 from compgen.paths import generate  # noqa: E402
 from compgen.rtest import RTestData  # noqa: E402
+from compgen.simulate import ar1_noise  # noqa: E402
 
 SIGMA_UM = 0.5
 UNMEASURED_BALLS = ([-150.0, 120.0, 180.0], [120.0, -100.0, 260.0])   # mm, table frame
@@ -62,21 +63,11 @@ CASES = {
 }
 
 
-def ar1(n: int, rho: float, rng) -> np.ndarray:
-    """AR(1) noise of stationary σ = SIGMA_UM along the session, per direction, mm."""
-    e = rng.normal(0, SIGMA_UM * np.sqrt(1 - rho**2), (n, 3))
-    out = np.empty((n, 3))
-    out[0] = rng.normal(0, SIGMA_UM, 3)
-    for i in range(1, n):
-        out[i] = rho * out[i - 1] + e[i]
-    return out * 1e-3
-
-
 def noise(kind: str, n: int, rng) -> np.ndarray:
     if kind == "white":
         return rng.normal(0, SIGMA_UM * 1e-3, (n, 3))
     if kind.startswith("ar"):
-        return ar1(n, float(kind[2:]), rng)
+        return ar1_noise(n, float(kind[2:]), SIGMA_UM, rng)
     if kind == "t3":                       # Student-t, 3 dof, scaled to σ = SIGMA_UM
         return rng.standard_t(3, (n, 3)) / np.sqrt(3) * SIGMA_UM * 1e-3
     if kind == "outliers":

@@ -124,7 +124,10 @@ def main():
 @click.option("--paths", "path_names", default="K4,K1,K2", show_default=True,
               help="Comma-separated path names from the machine file.")
 @click.option("--noise-um", type=float, default=0.0, show_default=True,
-              help="White noise σ per reading, µm.")
+              help="Noise σ per reading, µm (white unless --noise-rho).")
+@click.option("--noise-rho", type=float, default=0.0, show_default=True,
+              help="Correlation of the noise from one reading to the next, AR(1), 0 ≤ ρ < 1: "
+                   "drift of a real set-up.")
 @click.option("--seed", type=int, default=None, help="Random seed, for a repeatable noise draw.")
 @click.option("--ball", default=None, help="Ball centre in the table frame, mm: X,Y,Z "
                                             "(default: the machine file's).")
@@ -135,7 +138,8 @@ def main():
               help="With a $TC_CARR program: the record's values before the edit.")
 @OUTPUT
 @FORCE
-def simulate_cmd(machine_file, truth, path_names, noise_um, seed, ball, edits, current, output, force):
+def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, ball, edits, current, output,
+                 force):
     """Write the R-test CSV that a machine with the TRUTH errors would give."""
     machine = load_machine(machine_file)
     errors = read_truth(truth, machine)
@@ -148,11 +152,12 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, seed, ball, edits, c
         held = read_edits(machine, {e: read_text(e, "edit", ansi_ok=True)[0] for e in edits},
                           read_text(current, "file", ansi_ok=True)[0] if current else None)
         drive = partial(held.drive, machine)
-    data = simulate(machine, errors, poses, noise_um, np.random.default_rng(seed), drive)
+    data = simulate(machine, errors, poses, noise_um, np.random.default_rng(seed), drive, noise_rho)
     comments = (f"compgen simulate: machine {machine.name}", f"truth {truth}: "
                 + ", ".join(errors) if errors else "truth: nominal machine",
                 *(f"after the edit {e}" for e in edits),
-                f"noise {noise_um} µm σ, seed {seed}", "dX dY dZ: nest minus ball, µm")
+                f"noise {noise_um} µm σ{f', AR(1) ρ = {noise_rho:g}' if noise_rho else ''}, seed {seed}",
+                "dX dY dZ: nest minus ball, µm")
     write_atomically(output, format_rtest(machine, data, comments), force,
                      inputs=(machine_file, truth, *edits, current))
     click.echo(f"wrote {output}: {len(poses)} poses ({', '.join(names)})")

@@ -17,9 +17,22 @@ from .rtest import RTestData
 from .units import to_inside
 
 
+def ar1_noise(n: int, rho: float, sigma_um: float, rng: np.random.Generator) -> np.ndarray:
+    """(n, 3) mm of AR(1) noise along the readings, e[i] = ρ·e[i−1] + white, stationary σ."""
+    if rho == 0:
+        return rng.normal(0.0, sigma_um * 1e-3, (n, 3))
+    e = rng.normal(0.0, sigma_um * np.sqrt(1 - rho**2), (n, 3))
+    out = np.empty((n, 3))
+    out[0] = rng.normal(0.0, sigma_um, 3)
+    for i in range(1, n):
+        out[i] = rho * out[i - 1] + e[i]
+    return out * 1e-3
+
+
 def simulate(machine: Machine, truth: Mapping[str, float], poses: Poses, noise_um: float = 0.0,
-             rng: np.random.Generator | None = None, drive=None) -> RTestData:
-    """Readings of the exact model with ``truth`` (name → mm or rad) plus white noise, µm σ.
+             rng: np.random.Generator | None = None, drive=None, rho: float = 0.0) -> RTestData:
+    """Readings of the exact model with ``truth`` (name → mm or rad) plus noise of σ
+    ``noise_um``, white or, with ``rho``, correlated from reading to reading (AR(1)).
 
     ``drive`` (poses → commanded axes, mm and rad) is the control's kinematics after an
     edit: the machine goes where the control sends it, the R-test reads the true machine
@@ -27,6 +40,8 @@ def simulate(machine: Machine, truth: Mapping[str, float], poses: Poses, noise_u
     """
     if not (math.isfinite(noise_um) and noise_um >= 0):
         raise CompgenError(f"noise must be a finite σ ≥ 0 µm, not {noise_um}")
+    if not 0 <= rho < 1:
+        raise CompgenError(f"the noise's correlation ρ must be in [0, 1), not {rho}")
     model = Model(machine, list(truth))
     values = np.array(list(truth.values()), dtype=float)
     if drive is None:
@@ -36,7 +51,7 @@ def simulate(machine: Machine, truth: Mapping[str, float], poses: Poses, noise_u
         dev = model.relative(actual, values) - Model(machine, ()).relative(poses)
     if noise_um:
         rng = rng or np.random.default_rng()
-        dev = dev + rng.normal(0.0, noise_um * 1e-3, dev.shape)
+        dev = dev + ar1_noise(len(dev), rho, noise_um, rng)
     return RTestData(poses, dev)
 
 

@@ -14,10 +14,10 @@ cg fit --machine machines/ac-trunnion-itnc530.toml examples/seed-session.csv -o 
 echo "== 2. where does it fail, and what would explain it?"
 cg diagnose --from "$work/fit.json"
 
-echo "== 3. add the effect diagnose ranks first"
+echo "== 3. add the effect diagnose names as found (significant, first, and with no rival)"
 best=$(cg diagnose --from "$work/fit.json" --json | "${PY:-python3}" -c \
-  'import json,sys; d=json.load(sys.stdin); print(d["candidates"][0]["effect"] if d["candidates"][0]["significant"] else "")')
-[ -n "$best" ] || { echo "nothing significant to add"; exit 0; }
+  'import json,sys; print(json.load(sys.stdin)["found"] or "")')
+[ -n "$best" ] || { echo "nothing named as found: measure what diagnose advises, then fit again"; exit 0; }
 cg fit --from "$work/fit.json" --add "$best" -o "$work/fit2.json" --force
 
 echo "== 4. diagnose again, with before/after plots"

@@ -10,7 +10,7 @@ from compgen.effects import compose
 from compgen.identify import identify
 from compgen.paths import generate
 from compgen.rtest import RTestData
-from compgen.simulate import simulate
+from compgen.simulate import ar1_noise, simulate
 
 NOISE_UM = 0.5
 RMS_AFTER_TOLERANCE = 0.25   # issue 3: after adding the effect, RMS within 25 % of the noise
@@ -151,13 +151,7 @@ def _with_noise(machine, poses, hidden, noise_mm):
 
 
 def _ar1_mm(n, rho, rng):
-    """AR(1) noise of stationary σ = NOISE_UM along the session, per direction."""
-    e = rng.normal(0, NOISE_UM * np.sqrt(1 - rho**2), (n, 3))
-    out = np.empty((n, 3))
-    out[0] = rng.normal(0, NOISE_UM, 3)
-    for i in range(1, n):
-        out[i] = rho * out[i - 1] + e[i]
-    return out * 1e-3
+    return ar1_noise(n, rho, NOISE_UM, rng)
 
 
 def _predicts_unmeasured_balls(machine, truth, fit):

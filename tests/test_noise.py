@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from compgen.noise import OUTLIER_MIN_UM, ar1, outliers, segments, whiten
+from compgen.simulate import ar1_noise
 
 
 def test_segments_break_at_a_new_file_or_path():
@@ -26,18 +27,9 @@ def test_prais_winsten_by_hand():
     np.testing.assert_allclose(cols[..., 1], 2 * w, rtol=1e-14)
 
 
-def _ar1(n, rho, rng):
-    e = rng.normal(size=(n, 3))
-    out = np.empty((n, 3))
-    out[0] = e[0] / np.sqrt(1 - rho**2)
-    for i in range(1, n):
-        out[i] = rho * out[i - 1] + e[i]
-    return out
-
-
 def test_ar1_is_estimated_and_white_noise_is_left_white():
     rng = np.random.default_rng(3)
-    r = np.vstack([_ar1(3000, 0.8, rng), rng.normal(size=(3000, 3))])
+    r = np.vstack([ar1_noise(3000, 0.8, 1e3, rng), rng.normal(size=(3000, 3))])
     seg = np.repeat([0, 1], 3000)
     rho = ar1(r, seg)
     np.testing.assert_allclose(rho[:3000], 0.8, atol=0.03)     # s.e. √((1−ρ²)/n) = 0.011
