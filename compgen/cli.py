@@ -427,7 +427,7 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, outpu
     _progress("2/3 compare")
     comparison = compare(machine, sets, fit, controller_name or machine.controller, post)
     _progress("3/3 plots")
-    images = figures(machine, sets, fit, load_fit(before) if before else None)
+    images = figures(machine, sets, fit, load_fit(before) if before else None, found)
     steps = checklist(machine, folder or Path(base).parent, comparison.to_dict())
     html = report_html(machine, fit, found, images, comparison, emitted, steps, __version__,
                        date.today().isoformat())

@@ -42,7 +42,7 @@ def report_html(machine: Machine, fit: FitResult, diagnosis: Diagnosis, images: 
     return env.get_template("report/report.html.j2").render(
         machine=machine, fit=fit, params=params, corr=corr, names=list(fit.free),
         diagnosis=diagnosis, visible=[c for c in diagnosis.candidates if c.visible][:8],
-        hidden=[c for c in diagnosis.candidates if not c.visible and not c.silent],
+        hidden=[c for c in diagnosis.candidates if not c.visible and (not c.silent or c.separated_by)],
         images={k: base64.b64encode(v).decode("ascii") for k, v in images.items()},
         comparison=comparison, compare_rows=compare_rows, files=files, steps=steps, version=version,
         date=date)

@@ -91,3 +91,26 @@ def test_templates_ship_inside_the_installed_package(tmp_path):
     checkout = (Path(package).parent / "pyproject.toml").exists()
     assert Path(templates) == (Path(package).parent if checkout else Path(package)) / "templates", templates
     assert (np.array([p for p in os.listdir(templates)]) == "unconfirmed.j2").any()
+
+
+def test_report_says_what_diagnose_cannot_decide(tmp_path):
+    """Rivals, correlated noise and an outlier reach the report's words and its plots."""
+    truth = tmp_path / "truth.json"
+    truth.write_text('{"parameters": {"EXX:p1": {"value": 10, "unit": "um"}}}')
+    data = tmp_path / "s.csv"
+    assert run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "--noise-um", 0.5, "--noise-rho",
+               0.5, "--seed", 3, "-o", data)[0] == 0
+    lines = data.read_text().splitlines()
+    head = [i for i, line in enumerate(lines) if line.startswith("path,")][0]
+    cells = lines[head + 100].split(",")
+    dx = lines[head].split(",").index("dX")
+    cells[dx] = f"{float(cells[dx]) + 25:.6f}"
+    lines[head + 100] = ",".join(cells)
+    data.write_text("\n".join(lines) + "\n")
+    assert run("fit", "--machine", SEED_MACHINE, data, "-o", tmp_path / "fit.json")[0] == 0
+    out = tmp_path / "r.html"
+    code, _, err = run("report", "--from", tmp_path / "fit.json", "-o", out)
+    assert code == 0, err
+    html = out.read_text()
+    assert f"s.csv:{head + 101}" in html and "AR(1)" in html and "Not told apart" in html
+    assert 'alt="rivals.png"' in html
