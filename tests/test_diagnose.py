@@ -220,10 +220,11 @@ def test_a_turning_radial_motion_is_named_after_the_follow_ups_it_advises(seed_m
             break
         m = found.rivals_separated_by[0]
         advice = found.to_dict()["rivals_separated_by"][0]
-        assert advice == {"label": m.label, "path": m.path, "ball": [round(v, 4) for v in m.ball]}
+        assert advice == {"label": m.label, "path": m.path, "ball": [round(v, 4) for v in m.ball],
+                          "there_and_back": m.back}
         assert m.label not in followed
         followed.append(m.label)
-        extra = generate(seed_machine, [m.path], ball=m.ball)
+        extra = generate(seed_machine, [m.path], ball=m.ball, back=m.back)
         data.append(_with_noise(seed_machine, extra, truth, rng.normal(0, NOISE_UM * 1e-3, (len(extra), 3))))
         found = diagnose(seed_machine, data, identify(seed_machine, data))
     assert found.found == "EXC+EYC:h2", (followed, found.significant[0].effect, found.rivals)
