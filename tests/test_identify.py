@@ -306,3 +306,21 @@ def test_a_small_part_of_a_combination_is_named(seed_machine):
     share = np.abs(x * np.linalg.norm(J, axis=0))
     assert 0.15 < share[8] / share.max() < 0.3, share
     assert np.linalg.norm(J @ x) < 1e-3 * np.linalg.norm(J[:, 8]) * abs(x[8]) / 0.2
+
+
+@pytest.mark.parametrize("eps, singular", [(3e-12, True), (7e-12, False)])
+def test_singular_is_said_below_1e_12_of_the_largest_singular_value(seed_machine, eps, singular):
+    """Ten nearly parallel columns (one dominant singular value) and BOC = AOC + eps·noise:
+    below 1e-12 of the largest singular value the problem is said to be singular (that
+    is rounding), above it its condition number is given."""
+    from compgen.identify import check_identifiable
+    from compgen.kinematics import Model
+    rng = np.random.default_rng(5)
+    u = rng.normal(size=300)
+    J = np.column_stack([u + 1e-3 * rng.normal(size=300) for _ in range(10)])
+    J = np.column_stack([J, J[:, 9] + eps * rng.normal(size=300)])
+    s = np.linalg.svd(J / np.linalg.norm(J, axis=0), compute_uv=False)
+    assert (s[-1] / s[0] < 1e-12) == singular and s[-1] / s[1] > 1e-9 and s[-1] / s[0] < 2e-12
+    with pytest.raises(CompgenError) as exc:
+        check_identifiable(seed_machine, Model(seed_machine, list(TABLE4)), list(range(11)), J)
+    assert ("(singular)" in str(exc.value)) == singular, str(exc.value)[:120]
