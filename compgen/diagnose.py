@@ -287,13 +287,13 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     r3 = y - model.deviation(poses, x)
     seg = segments(np.repeat(np.arange(len(data)), [len(d) for d in data]), poses.path)
     bad, size = outliers(r3 * 1e3, seg)
-    keep = np.ones(len(poses), bool)
-    keep[bad] = False
-    poses, r3, seg = poses.take(keep), r3[keep], seg[keep]
+    if bad.size:
+        keep = np.ones(len(poses), bool)
+        keep[bad] = False
+        poses, r3, seg = poses.take(keep), r3[keep], seg[keep]
     r = r3.ravel()
-    J = model.jacobian(poses, x)[:, :, free].reshape(r.size, -1)
     # only Q and R of the model's Jacobian are kept: J's column norms are R's
-    Q, R = np.linalg.qr(J)
+    Q, R = np.linalg.qr(model.jacobian(poses, x)[:, :, free].reshape(r.size, -1))
     r = r - Q @ (Q.T @ r)             # the fit's residual without the outliers
     rss, dof = float(r @ r), r.size - len(free)
 
@@ -303,14 +303,14 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     if not effects:
         raise CompgenError("no candidate effect left to try: the model holds them all")
     rho = ar1(r.reshape(-1, 3), seg)
-    ranked = _rank(machine, poses, effects, fit.free, Q, R, r, _Noise(seg, rho, J))
+    ranked = _rank(machine, poses, effects, fit.free, Q, R, r, _Noise(seg, rho, Q, R))
     if rho.any():         # again, with ρ from the residual once the best candidate is added
         best = max(ranked.values(), key=lambda row: (row.vis >= VISIBLE, row.share))
         c = _columns(machine, poses, [best.effect])
         rest = r - c @ np.linalg.lstsq(c - Q @ (Q.T @ c), r, rcond=None)[0]
         rho = ar1((rest - Q @ (Q.T @ rest)).reshape(-1, 3), seg)
-        ranked = _rank(machine, poses, effects, fit.free, Q, R, r, _Noise(seg, rho, J))
-    noise = _Noise(seg, rho, J)
+        ranked = _rank(machine, poses, effects, fit.free, Q, R, r, _Noise(seg, rho, Q, R))
+    noise = _Noise(seg, rho, Q, R)
     rss_w = noise.rss(r)
 
     tested = sum(1 for row in ranked.values() if row.k_eff)
@@ -395,12 +395,12 @@ class _Row:
 
 
 class _Noise:
-    """The whitening of one diagnosis: segments, ρ per reading and direction, and the
-    model's whitened Jacobian's Q. With ρ = 0 everywhere it is the identity."""
+    """The whitening of one diagnosis: segments, ρ per reading and direction, and the Q of
+    the model's whitened Jacobian (QR). With ρ = 0 everywhere it is the identity."""
 
-    def __init__(self, seg: np.ndarray, rho: np.ndarray, J: np.ndarray):
+    def __init__(self, seg: np.ndarray, rho: np.ndarray, Q: np.ndarray, R: np.ndarray):
         self.seg, self.rho = seg, rho
-        self.Q = np.linalg.qr(self.white(J))[0]
+        self.Q = np.linalg.qr(self.white(Q @ R))[0] if rho.any() else Q
 
     def white(self, x: np.ndarray) -> np.ndarray:
         """(3n,) or (3n, k), readings in (n, 3) order, made white."""
