@@ -146,9 +146,12 @@ def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarra
     names = [m.names[i] for i in free]
     dead = [names[k] for k in np.flatnonzero(norm == 0)]
     if dead:
+        reversal = any(m.effects[free[k]].basis.kind == "r" for k in np.flatnonzero(norm == 0))
         raise CompgenError(f"{', '.join(dead)} do{'es' if len(dead) == 1 else ''} not change any "
                            f"reading on these poses", hint="fix it with --fix NAME=0 or measure a "
-                                                           "path that moves its axis")
+                           + ("path there and back (measure-program --there-and-back): a reversal "
+                              "shows only where its axis turns back" if reversal else
+                              "path that moves its axis"))
     _, s, Vt = np.linalg.svd(J / norm, full_matrices=False)
     weak = np.flatnonzero(s < s[0] / COND_LIMIT)
     if not weak.size:

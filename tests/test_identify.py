@@ -324,3 +324,13 @@ def test_singular_is_said_below_1e_12_of_the_largest_singular_value(seed_machine
     with pytest.raises(CompgenError) as exc:
         check_identifiable(seed_machine, Model(seed_machine, list(TABLE4)), list(range(11)), J)
     assert ("(singular)" in str(exc.value)) == singular, str(exc.value)[:120]
+
+
+def test_a_reversal_on_one_way_paths_is_refused_with_what_would_show_it(seed_machine):
+    data = simulate(seed_machine, TABLE4, generate(seed_machine, ["K4", "K1", "K2"]))
+    with pytest.raises(CompgenError, match=r"ECC:r1 does not change any reading.*there-and-back"):
+        identify(seed_machine, [data], [*TABLE4, "ECC:r1"])
+    both_ways = simulate(seed_machine, {**TABLE4, "ECC:r1": 5 * ARCSEC},
+                         generate(seed_machine, ["K4", "K1", "K2"], back=True))
+    fit = identify(seed_machine, [both_ways], [*TABLE4, "ECC:r1"])
+    assert abs(fit.parameters["ECC:r1"].value - 5 * ARCSEC) < 1e-4 * ARCSEC
