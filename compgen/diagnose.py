@@ -302,15 +302,14 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
                            else [resolve(machine, c) for c in candidates]) if e.name not in in_model]
     if not effects:
         raise CompgenError("no candidate effect left to try: the model holds them all")
-    rho = ar1(r.reshape(-1, 3), seg)
-    ranked = _rank(machine, poses, effects, fit.free, Q, R, r, _Noise(seg, rho, Q, R))
-    if rho.any():         # again, with ρ from the residual once the best candidate is added
+    noise = _Noise(seg, ar1(r.reshape(-1, 3), seg), Q, R)
+    ranked = _rank(machine, poses, effects, fit.free, Q, R, r, noise)
+    if noise.rho.any():   # again, with ρ from the residual once the best candidate is added
         best = max(ranked.values(), key=lambda row: (row.vis >= VISIBLE, row.share))
         c = _columns(machine, poses, [best.effect])
         rest = r - c @ np.linalg.lstsq(c - Q @ (Q.T @ c), r, rcond=None)[0]
-        rho = ar1((rest - Q @ (Q.T @ rest)).reshape(-1, 3), seg)
-        ranked = _rank(machine, poses, effects, fit.free, Q, R, r, _Noise(seg, rho, Q, R))
-    noise = _Noise(seg, rho, Q, R)
+        noise = _Noise(seg, ar1((rest - Q @ (Q.T @ rest)).reshape(-1, 3), seg), Q, R)
+        ranked = _rank(machine, poses, effects, fit.free, Q, R, r, noise)
     rss_w = noise.rss(r)
 
     tested = sum(1 for row in ranked.values() if row.k_eff)
@@ -373,7 +372,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         candidates=tuple(out), bias=bias, bias_units=units, signature_um=signature_um,
         tested=tested, alpha=alpha,
         after_best=after_best, rivals=rivals, rivals_separated_by=rivals_separated_by,
-        outliers=_outlier_rows(data, bad, size), noise=_noise_summary(seg, rho, poses.path))
+        outliers=_outlier_rows(data, bad, size), noise=_noise_summary(seg, noise.rho, poses.path))
 
 
 @dataclass(frozen=True)
