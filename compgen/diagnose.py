@@ -363,6 +363,15 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
         rivals_separated_by = tuple(sorted({m.label: m for ms in by_rival.values() for m in ms}.values(),
                                            key=lambda m: len(m.poses)))
+        if rivals and not rivals_separated_by:
+            # equivalent everywhere: put first the one the location errors absorb least, so
+            # that adding it leaves them where an effect without that absorbed part has them
+            group = [c for c in out if c.significant and c.effect in (best.effect.name, *rivals)]
+            first = max(group, key=lambda c: c.visibility)
+            out.remove(first)
+            out.insert(out.index(next(c for c in out if c.effect == best.effect.name)), first)
+            rivals = tuple(c.effect for c in out if c.effect in (best.effect.name, *rivals)
+                           and c is not first)
 
     return Diagnosis(
         machine=machine.name, fit_file=fit_file, model=fit.model,
