@@ -368,10 +368,11 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
             # that adding it leaves them where an effect without that absorbed part has them
             group = [c for c in out if c.significant and c.effect in (best.effect.name, *rivals)]
             first = max(group, key=lambda c: c.visibility)
-            out.remove(first)
-            out.insert(out.index(next(c for c in out if c.effect == best.effect.name)), first)
-            rivals = tuple(c.effect for c in out if c.effect in (best.effect.name, *rivals)
-                           and c is not first)
+            if first.effect != best.effect.name:
+                out.remove(first)
+                out.insert(out.index(next(c for c in out if c.effect == best.effect.name)), first)
+                rivals = tuple(c.effect for c in out if c.effect in (best.effect.name, *rivals)
+                               and c is not first)
 
     return Diagnosis(
         machine=machine.name, fit_file=fit_file, model=fit.model,
