@@ -302,13 +302,16 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
                            else [resolve(machine, c) for c in candidates]) if e.name not in in_model]
     if not effects:
         raise CompgenError("no candidate effect left to try: the model holds them all")
-    noise = _Noise(seg, ar1(r.reshape(-1, 3), seg), Q, R)
+    # ρ̂ from the residual once the best candidate (least squares) is added: the misfit of
+    # a missing effect is not noise; then, if the noise is correlated, rank again whitened
+    noise = _Noise(seg, np.zeros_like(r3), Q, R)
     ranked = _rank(machine, poses, effects, fit.free, Q, R, r, noise)
-    if noise.rho.any():   # again, with ρ from the residual once the best candidate is added
-        best = max(ranked.values(), key=lambda row: (row.vis >= VISIBLE, row.share))
-        c = _columns(machine, poses, [best.effect])
-        rest = r - c @ np.linalg.lstsq(c - Q @ (Q.T @ c), r, rcond=None)[0]
-        noise = _Noise(seg, ar1((rest - Q @ (Q.T @ rest)).reshape(-1, 3), seg), Q, R)
+    best = max(ranked.values(), key=lambda row: (row.vis >= VISIBLE, row.share))
+    c = _columns(machine, poses, [best.effect])
+    rest = r - c @ np.linalg.lstsq(c - Q @ (Q.T @ c), r, rcond=None)[0]
+    rho = ar1((rest - Q @ (Q.T @ rest)).reshape(-1, 3), seg)
+    if rho.any():
+        noise = _Noise(seg, rho, Q, R)
         ranked = _rank(machine, poses, effects, fit.free, Q, R, r, noise)
     rss_w = noise.rss(r)
 
@@ -326,7 +329,8 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     out.sort(key=lambda c: (not c.visible, -c.share))
     hidden = [c for c in out if not c.visible]
     model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
-    seen = (_separating(machine, model_effects, poses, [resolve(machine, c.effect) for c in hidden])
+    extras = alternative_measurements(machine, poses)
+    seen = (_separating(machine, model_effects, poses, [resolve(machine, c.effect) for c in hidden], extras)
             if hidden else {})
     out = [replace(c, separated_by=seen[c.effect]) if c.effect in seen else c for c in out]
 
@@ -358,7 +362,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         rivals = _rivals(best, [ranked[c.effect] for c in out if c.visible and c.effect != best.effect.name],
                          rss_w / dof,
                          alpha, bool(after_best))
-        by_rival = {e: _telling_apart(machine, model_effects, poses, best, ranked[e], rss / dof)
+        by_rival = {e: _telling_apart(machine, model_effects, poses, best, ranked[e], rss / dof, extras)
                     for e in rivals}
         out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
         rivals_separated_by = tuple(sorted({m.label: m for ms in by_rival.values() for m in ms}.values(),
@@ -513,10 +517,10 @@ def _columns(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np.nd
     return np.column_stack([c for _, c in _signatures(machine, poses, effects)])
 
 
-def _separating(machine: Machine, model_effects: Sequence[Effect], poses: Poses,
-                effects: Sequence[Effect]) -> dict[str, tuple[str, ...]]:
-    """For effects these data cannot tell from ``model_effects``: which measurement, added
-    to them, would.
+def _separating(machine: Machine, model_effects: Sequence[Effect], poses: Poses, effects: Sequence[Effect],
+                extras: Sequence[Measurement]) -> dict[str, tuple[Measurement, ...]]:
+    """For effects these data cannot tell from ``model_effects``: which of the ``extras``,
+    added to them, would.
 
     With R the triangular factor of [model columns | effect columns] over all poses, an
     effect column's part that the model cannot absorb has the norm of its column below the
@@ -527,7 +531,7 @@ def _separating(machine: Machine, model_effects: Sequence[Effect], poses: Poses,
     both = [*model_effects, *effects]
     p = sum(len(e.params) for e in model_effects)
     R0 = _r_factor(machine, poses, both)
-    for extra in alternative_measurements(machine, poses):
+    for extra in extras:
         R = _r_factor(machine, extra.poses, both, R0)
         vis = np.linalg.norm(R[p:, p:], axis=0) / np.maximum(np.linalg.norm(R[:, p:], axis=0), 1e-300)
         col = 0
@@ -551,7 +555,7 @@ def _rivals(best: _Row, others: Sequence[_Row], sigma2_w: float, alpha: float,
 
 
 def _telling_apart(machine: Machine, model_effects: Sequence[Effect], poses: Poses, best: _Row,
-                   rival: _Row, sigma2: float) -> tuple[Measurement, ...]:
+                   rival: _Row, sigma2: float, extras: Sequence[Measurement]) -> tuple[Measurement, ...]:
     """The measurements, not made yet, after which the best and a rival at their fitted
     sizes differ by ``TELLS_APART`` σ̂² more than now, shortest first: each hypothesis, were
     it true, would leave that much misfit in a fit of the other (first order)."""
@@ -564,7 +568,7 @@ def _telling_apart(machine: Machine, model_effects: Sequence[Effect], poses: Pos
     R0 = [_r_factor(machine, poses, o) for o in orders]
     now = apart(R0)
     found = []
-    for extra in alternative_measurements(machine, poses):
+    for extra in extras:
         gain = apart([_r_factor(machine, extra.poses, o, R) for o, R in zip(orders, R0, strict=True)]) - now
         if gain >= TELLS_APART * sigma2:
             found.append((len(extra.poses), -gain, extra.label, extra))

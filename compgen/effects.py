@@ -240,11 +240,12 @@ def _order_ok(kind: str, order: int, first: int, compound: bool) -> bool:
     return first <= abs(order) <= 99 and (order > 0 or compound)
 
 
-def resolve(machine: Machine, name: str) -> Effect:
-    """The effect called ``name`` (canonical or alias) on this machine, or a clear error."""
+def resolve(machine: Machine, name: str, table: dict | None = None) -> Effect:
+    """The effect called ``name`` (canonical or alias) on this machine, or a clear error
+    (``table``: the machine's ``_symbols``, when resolving many)."""
     text = canonical(name)
     symbol, _, order_txt = text.partition(":")
-    table = _symbols(machine)
+    table = table or _symbols(machine)
     if symbol not in table:
         raise CompgenError(f"unknown effect {name!r} on machine {machine.name!r}",
                            hint=f"`{me()} effects --machine M` lists them")
@@ -301,8 +302,8 @@ def effect_of_param(machine: Machine, param: str) -> Effect:
 
 def catalogue(machine: Machine) -> tuple[Effect, ...]:
     """Every effect this machine can carry, orders up to ``MAX_ORDER``: the candidate list."""
-    out = []
-    for symbol, (carrier, _, direction, kinds, _, _, first) in _symbols(machine).items():
+    out, table = [], _symbols(machine)
+    for symbol, (carrier, _, direction, kinds, _, _, first) in table.items():
         for kind in kinds:
             if kind == "const":
                 orders: list = [None]
@@ -317,7 +318,8 @@ def catalogue(machine: Machine) -> tuple[Effect, ...]:
                 orders = list(range(first, top + 1))
                 if len(direction) == 2:
                     orders += [-k for k in orders]
-            out.extend(resolve(machine, symbol if k is None else f"{symbol}:{kind}{k}") for k in orders)
+            out.extend(resolve(machine, symbol if k is None else f"{symbol}:{kind}{k}", table)
+                       for k in orders)
     return tuple(out)
 
 
