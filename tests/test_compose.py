@@ -244,6 +244,10 @@ def test_a_modulo_table_wraps_and_a_ball_on_the_axis_has_no_positioning_error(se
     half = CompTable("ECC:h1", "", "C", "C", -180.0, 180.0, shifted, True, "deg")   # the same over ±180
     out = np.degrees(apply_tables(seed_machine, [half], q)[:, c]) - np.degrees(q[:, c])
     np.testing.assert_allclose(out, [-1e-3, -1e-3, 1e-3, 1e-3], atol=1e-9)
+    quarter = CompTable("ECC:h1", "", "C", "C", -90.0, 270.0,            # a start that is not
+                        tuple(np.sin(np.radians(grid - 90)) * 1e-3), True, "deg")   # half a turn
+    out = np.degrees(apply_tables(seed_machine, [quarter], q)[:, c]) - np.degrees(q[:, c])
+    np.testing.assert_allclose(out, [-1e-3, -1e-3, 1e-3, 1e-3], atol=1e-9)
     # a ball on C's axis does not move when C turns: no positioning error can be seen there
     on_axis = replace(seed_machine, ball=(0.0, 0.0, seed_machine.ball[2]))
     c_axis = on_axis.axis("C")
