@@ -38,6 +38,10 @@ TESTS = {
     "compgen/emit/sinumerik.py": [*EDITS, "tests/test_edge.py", *PROGRAMS],
     "compgen/emit/linuxcnc.py": [*EDITS, "tests/test_edge.py", *PROGRAMS],
     "compgen/diagnose.py": ["tests/test_diagnose_stats.py", "tests/test_diagnose.py"],
+    "compgen/noise.py": ["tests/test_noise.py", *(f"tests/test_diagnose.py::test_{t}" for t in (
+        "outliers_are_listed_where_the_user_finds_them_and_flag_nothing",
+        "correlated_noise_flags_nothing_because_it_is_whitened",
+        "under_correlated_noise_a_real_effect_is_still_found"))],
 }
 # functions of diagnose.py that are its statistics (the rest is reporting)
 ONLY_FUNCTIONS = {"compgen/diagnose.py": {"_p_value", "_explained", "_still_significant"}}
