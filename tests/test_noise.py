@@ -55,9 +55,36 @@ def test_single_bad_readings_are_found_and_a_smooth_error_is_not():
     np.testing.assert_allclose(size, 20, atol=2.5)
 
 
-@pytest.mark.parametrize("step", [0.0, 0.5 * OUTLIER_MIN_UM])
+@pytest.mark.parametrize("step", [0.0, 0.5])
 def test_noiseless_data_has_no_outliers(step):
-    """With no noise the robust scale is zero: only a step beyond OUTLIER_MIN_UM counts."""
+    """With no noise the robust scale is zero: only a step beyond OUTLIER_MIN_UM (1 µm)
+    counts."""
+    assert OUTLIER_MIN_UM == 1.0
     r = np.zeros((50, 3))
     r[10, 0] = step
     assert outliers(r, np.zeros(50, int))[0].size == 0
+
+
+@pytest.mark.parametrize("sigma_um", [0.1, 2.0])
+def test_the_outlier_threshold_is_in_robust_standard_deviations_of_the_step(sigma_um):
+    """At any noise level, a step of 12 robust s.d. from the neighbours' median is an outlier
+    and one of 5 is not (OUTLIER_Z = 8); the step's s.d. is estimated from the data."""
+    rng = np.random.default_rng(8)
+    r = rng.normal(0, sigma_um, (600, 3))
+    seg = np.zeros(600, int)
+    d = np.array([r[i, 0] - np.median(np.r_[r[i - 2:i, 0], r[i + 1:i + 3, 0]]) for i in range(2, 598)])
+    s = 1.4826 * np.median(np.abs(d))                      # the step's robust s.d., here
+    r[100, 0] += 12 * s + OUTLIER_MIN_UM
+    r[300, 0] += 5 * s
+    found, _ = outliers(r, seg)
+    assert found.tolist() == [100]
+
+
+def test_single_readings_have_no_neighbours_and_no_outliers():
+    assert outliers(np.full((4, 3), 50.0), np.arange(4))[0].size == 0
+
+
+def test_a_random_walk_is_held_at_rho_max():
+    from compgen.noise import RHO_MAX
+    walk = np.cumsum(np.random.default_rng(9).normal(size=(4000, 3)), axis=0)
+    assert (ar1(walk, np.zeros(4000, int)) == RHO_MAX).all()
