@@ -103,8 +103,8 @@ class Measurement:
 
     def command(self) -> str:
         """The options of ``measure-program`` that write it."""
-        return (f"--path {self.path} --ball {','.join(f'{v:g}' for v in self.ball)}"
-                + " --there-and-back" * self.back)
+        ball = ",".join(f"{v:.4f}".rstrip("0").rstrip(".") for v in self.ball)   # as to_dict's
+        return f"--path {self.path} --ball {ball}" + " --there-and-back" * self.back
 
 
 def alternative_measurements(machine: Machine, measured: Poses | None = None) -> list[Measurement]:

@@ -222,6 +222,8 @@ def test_a_turning_radial_motion_is_named_after_the_follow_ups_it_advises(seed_m
         advice = found.to_dict()["rivals_separated_by"][0]
         assert advice == {"label": m.label, "path": m.path, "ball": [round(v, 4) for v in m.ball],
                           "there_and_back": m.back}
+        command = m.command().split()                  # what the text tells the user to run
+        assert command[command.index("--ball") + 1] == ",".join(f"{v:g}" for v in advice["ball"])
         assert m.label not in followed
         followed.append(m.label)
         extra = generate(seed_machine, [m.path], ball=m.ball, back=m.back)
