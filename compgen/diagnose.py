@@ -20,9 +20,9 @@ import numpy as np
 from . import me
 from .effects import Effect, catalogue, effect_name, effect_of_param, resolve
 from .errors import CompgenError
-from .kinematics import Model, Poses, SlotGains, coordinate
+from .kinematics import Model, Poses, SlotGains, coordinate, runs
 from .machine import Machine
-from .noise import ar1, outliers, segments, whiten
+from .noise import ar1, outliers, whiten
 from .paths import Measurement, alternative_measurements
 from .results import FitResult
 from .rtest import RTestData
@@ -285,7 +285,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     x = np.array([fit.parameters[n].value for n in fit.model])
     free = [model.names.index(n) for n in fit.free]
     r3 = y - model.deviation(poses, x)
-    seg = segments(np.repeat(np.arange(len(data)), [len(d) for d in data]), poses.path)
+    seg = runs(poses, np.repeat(np.arange(len(data)), [len(d) for d in data]))
     bad, size = outliers(r3 * 1e3, seg)
     if bad.size:
         keep = np.ones(len(poses), bool)

@@ -156,12 +156,15 @@ def coordinate(machine: Machine, effect: Effect, poses: Poses) -> np.ndarray:
     return q if axis.rotary else q / POLY_SCALE_MM
 
 
-def runs(poses: Poses) -> np.ndarray:
+def runs(poses: Poses, source: np.ndarray | None = None) -> np.ndarray:
     """A number per pose that changes where one continuous run of a path ends: at a new path
-    label, a new ball position, or where the session time goes back (a new file)."""
+    label, a new ball position, where the session time goes back (a new file), or where
+    ``source`` (the file of each pose, when known) changes."""
     new = np.ones(len(poses), bool)
     back = np.diff(poses.t) <= 0                # NaN (no time column) compares False
     new[1:] = (poses.path[1:] != poses.path[:-1]) | np.any(poses.ball[1:] != poses.ball[:-1], axis=1) | back
+    if source is not None:
+        new[1:] |= source[1:] != source[:-1]
     return np.cumsum(new)
 
 

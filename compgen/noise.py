@@ -1,11 +1,12 @@
 """What R-test noise really is: ordered in time, partly correlated, now and then a bad reading.
 
-Readings come in *segments*: one path of one file, in the order they were taken. Within a
-segment the noise of each direction is taken as AR(1), e[i] = ρ·e[i−1] + white (a drift of
-the set-up between readings does this); its ρ is estimated from the residual, and a linear
-model of the readings is made white (and so an F test honest) by the Prais–Winsten transform
-x'[0] = √(1−ρ²)·x[0], x'[i] = x[i] − ρ·x[i−1] (generalised least squares). A ρ̂ within two
-standard errors of zero (2/√n) is taken as zero: white noise is left as it is.
+Readings come in *segments*: one run of a path (``kinematics.runs``), in the order they
+were taken. Within a segment the noise of each direction is taken as AR(1),
+e[i] = ρ·e[i−1] + white (a drift of the set-up between readings does this); its ρ is
+estimated from the residual, and a linear model of the readings is made white (and so an
+F test honest) by the Prais–Winsten transform x'[0] = √(1−ρ²)·x[0],
+x'[i] = x[i] − ρ·x[i−1] (generalised least squares). A ρ̂ within two standard errors of
+zero (2/√n) is taken as zero: white noise is left as it is.
 
 A reading is an *outlier* when it stands apart from its neighbours in the segment (two each
 side): beyond ``OUTLIER_Z`` robust standard deviations of that difference, and beyond
@@ -14,22 +15,12 @@ side): beyond ``OUTLIER_Z`` robust standard deviations of that difference, and b
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 
 RHO_MAX = 0.99          # beyond this the noise is a random walk: whitening would divide by ~0
 OUTLIER_Z = 8.0         # robust s.d. of the step from the neighbours' median
 OUTLIER_MIN_UM = 1.0    # a step below this is noise on any R-test (0.5–1 µm repeatability)
 NEIGHBOURS = 2          # each side
-
-
-def segments(files: Sequence[int], paths: Sequence[str]) -> np.ndarray:
-    """Segment number of each reading: a new one wherever the file or the path label changes."""
-    files, paths = np.asarray(files), np.asarray(paths, dtype=object)
-    new = np.ones(len(files), bool)
-    new[1:] = (files[1:] != files[:-1]) | (paths[1:] != paths[:-1])
-    return np.cumsum(new) - 1
 
 
 def _previous(x: np.ndarray, seg: np.ndarray) -> np.ndarray:

@@ -3,13 +3,16 @@
 import numpy as np
 import pytest
 
-from compgen.noise import OUTLIER_MIN_UM, ar1, outliers, segments, whiten
+from compgen.noise import OUTLIER_MIN_UM, ar1, outliers, whiten
 from compgen.simulate import ar1_noise
 
 
 def test_segments_break_at_a_new_file_or_path():
-    seg = segments([0, 0, 0, 0, 1, 1], ["K4", "K4", "K1", "K1", "K1", "K1"])
-    assert seg.tolist() == [0, 0, 1, 1, 2, 2]
+    from compgen.kinematics import Poses, runs
+    poses = Poses(np.zeros((6, 5)), np.zeros((6, 3)), np.full(6, np.nan),     # no time column
+                  np.array(["K4", "K4", "K1", "K1", "K1", "K1"], dtype=object))
+    seg = runs(poses, np.array([0, 0, 0, 0, 1, 1]))
+    assert (seg - seg[0]).tolist() == [0, 0, 1, 1, 2, 2]
 
 
 def test_prais_winsten_by_hand():
