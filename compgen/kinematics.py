@@ -181,10 +181,10 @@ def motion_direction(q: np.ndarray, run: np.ndarray) -> np.ndarray:
         step = np.sign(np.diff(q[a:b]))
         if not ((step > 0).any() and (step < 0).any()):
             continue
-        d = np.empty(b - a)
-        d[0] = step[np.flatnonzero(step)[0]]
-        for i, s in enumerate(step, start=1):
-            d[i] = s if s else d[i - 1]
+        # standing still keeps the last move's sign: index of the last move up to each step
+        last = np.maximum.accumulate(np.where(step != 0, np.arange(len(step)), -1))
+        first = step[np.flatnonzero(step)[0]]
+        d = np.r_[first, np.where(last >= 0, step[np.maximum(last, 0)], first)]
         out[a:b] = d - d.mean()
     return out
 
