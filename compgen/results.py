@@ -22,6 +22,9 @@ from .files import read_json
 from .units import LENGTH, shown, three, three_header, to_inside
 
 FORMAT = "compgen.fit/1"
+# The finest step any output of a fit prints (fit.json's repr aside): 1 nm and 1e-9 rad
+# (0.0002″), a thousandth of the finest a control's table holds (0.1 µm, 0.0001°)
+MARKER_QUANTUM = {"mm": 1e-6, "rad": 1e-9}
 
 
 @dataclass(frozen=True)
@@ -71,9 +74,13 @@ class FitResult:
     @property
     def marker(self) -> str:
         """``fit:`` and 6 hex digits naming this fit's numbers and data, wherever its files
-        are: every edit carries it, so that applying the same fit twice can be refused."""
+        are: every edit carries it, so that applying the same fit twice can be refused.
+
+        The values enter as written (``MARKER_QUANTUM``), never by their last bits: those
+        differ with the BLAS kernel numpy picks for the CPU, and the marker must not."""
         import hashlib
-        key = json.dumps([self.model, {n: [e.value, e.unit] for n, e in self.parameters.items()},
+        key = json.dumps([self.model, {n: [round(e.value / MARKER_QUANTUM[e.unit]), e.unit]
+                                       for n, e in self.parameters.items()},
                           [d.sha256 for d in self.data]], sort_keys=True)
         return "fit:" + hashlib.sha256(key.encode()).hexdigest()[:6]
 

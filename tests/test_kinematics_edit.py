@@ -237,3 +237,17 @@ def test_a_linuxcnc_edit_sets_a_netted_pin_through_its_signal(seed_machine, seed
     assert not re.search(r"(?m)^setp \S+z-rot-point", out)
     with pytest.raises(CompgenError, match="refuses to start"):
         read_hal(hal + "setp xyzac-trt-kins.z-rot-point 29.8\n", "xyzac-trt-kins", "h")
+
+
+def test_the_marker_names_the_values_as_written_not_their_last_bits(seed_fit):
+    """Another CPU's BLAS kernel changes a fit's last bits, never its marker; a change any
+    output could print (1 nm, 1e-9 rad) changes it."""
+    from dataclasses import replace
+
+    def moved(by):
+        params = {n: replace(e, value=by(e.value, e.unit)) for n, e in seed_fit.parameters.items()}
+        return replace(seed_fit, parameters=params).marker
+
+    assert moved(lambda v, u: np.nextafter(v, np.inf)) == seed_fit.marker
+    assert moved(lambda v, u: v * (1 + 4e-16)) == seed_fit.marker
+    assert moved(lambda v, u: v + (1e-6 if u == "mm" else 1e-9)) != seed_fit.marker
