@@ -18,7 +18,7 @@ from .compare import compare
 from .diagnose import diagnose, fit_gate, unit_suspicion
 from .effects import catalogue, compose, location_model
 from .emit.kinematics import kinematics_edit
-from .emit.programs import MODES, NAME_MAX, measure_program, program_name
+from .emit.programs import MODES, NAME_MAX, at_ball, measure_program, program_ball, program_name
 from .emit.registry import CONTROLLERS, controller, for_program, read_edits
 from .errors import CONTROL, CompgenError
 from .files import read_text, write_all, write_atomically
@@ -320,20 +320,28 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, contro
 @click.argument("program", type=FILE)
 @click.option("--controller", "controller_name", default=None, metavar="NAME",
               help=f"{CONTROLLER_NAMES}. Default: from the file's suffix.")
-def check_program_cmd(machine_file, program, controller_name):
+@click.option("--ball", default=None,
+              help="The ball centre in the table frame, mm, X,Y,Z (default: the one the program's "
+                   "header names, else the machine file's).")
+def check_program_cmd(machine_file, program, controller_name, ball):
     """Simulate PROGRAM block by block against the R-test set-up, travel and feeds."""
     from .motion import run
 
     machine = load_machine(machine_file)
     ctl = controller(controller_name) if controller_name else for_program(Path(program).suffix, machine)
     text = read_text(program, "program", ansi_ok=True)[0]
-    result = run(machine, ctl.blocks(text))
+    at, source = ((_vec3(ball, "--ball"), "--ball") if ball else
+                  next(((b, "the program's header") for b in [program_ball(text)] if b is not None),
+                       (machine.ball, "the machine file")))
+    result = run(at_ball(machine, at), ctl.blocks(text))
     for finding in result.findings:
         click.echo(finding.text(program))
+    where = f"ball at {', '.join(f'{v:g}' for v in at)} mm (from {source})"
     if result.findings:
+        click.echo(f"{program}: checked with the {where}", err=True)
         raise SystemExit(1)
     click.echo(f"{program}: OK ({ctl.words}): {result.blocks} moves, about {result.seconds / 60:.1f} min; "
-               f"closest approach {result.closest_mm:.1f} mm ({result.closest_at})")
+               f"closest approach {result.closest_mm:.1f} mm ({result.closest_at}); {where}")
 
 
 @main.command("kinematics")

@@ -248,9 +248,7 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
               for k in fields if k in rtest.doc}
     solids.setdefault("table_radius", math.hypot(ball[0], ball[1]) + 50.0)
     setup = Setup(**solids)
-    if ball[2] - setup.ball_diameter / 2 <= setup.table_top:
-        raise CompgenError(f"the ball (z {ball[2]:g} mm, diameter {setup.ball_diameter:g}) does not stand "
-                           f"above the table top (z {setup.table_top:g})", where=rtest.at("ball"))
+    check_ball(setup, ball, rtest.at("ball"))
     machine = Machine(
         name=get.str("name"), controller=controller,
         workpiece=chains["workpiece"], tool=chains["tool"],
@@ -314,6 +312,17 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
         tolerances = {name: _positive(g, name) for name in g.doc}
     return replace(machine, paths=paths, program=program, limits=limits, sinumerik=sinumerik,
                    tolerances=tolerances)
+
+
+def check_ball(setup: Setup, ball, where: str) -> None:
+    """Refuse a ball (mm, table frame) that cannot stand where it is said to: inside or below
+    the table top, or with its stem off the table."""
+    if ball[2] - setup.ball_diameter / 2 <= setup.table_top:
+        raise CompgenError(f"the ball (z {ball[2]:g} mm, diameter {setup.ball_diameter:g}) does not stand "
+                           f"above the table top (z {setup.table_top:g})", where=where)
+    if math.hypot(ball[0], ball[1]) + setup.stem_diameter / 2 > setup.table_radius:
+        raise CompgenError(f"the ball's stem ({math.hypot(ball[0], ball[1]):g} mm from the table's axis) "
+                           f"does not stand on the table (radius {setup.table_radius:g} mm)", where=where)
 
 
 def _positive(g: _Getter, key: str, zero_ok: bool = False) -> float:

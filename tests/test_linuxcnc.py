@@ -8,10 +8,12 @@ respect the configuration's nets. CI installs LinuxCNC and sets COMPGEN_REQUIRE_
 elsewhere the test is skipped when LinuxCNC is not installed.
 """
 
+import contextlib
 import fcntl
 import os
 import re
 import shutil
+import signal
 import subprocess
 import tempfile
 import time
@@ -54,11 +56,15 @@ def machine(request, tmp_path_factory):
     """The seed machine (xyzac-trt) and the B/C table (xyzbc-trt) on LinuxCNC, with a quick
     [program]: short dwell, brisk feed, a numbered tool."""
     source = SEED_MACHINE if request.param == "xyzac" else BC_MACHINE
-    path = tmp_path_factory.mktemp("m") / f"{request.param}.toml"
+    return load_machine(_as_linuxcnc(tmp_path_factory.mktemp("m"), source, request.param))
+
+
+def _as_linuxcnc(folder, source, name="xyzac"):
+    path = folder / f"{name}.toml"
     path.write_text(re.sub(r'controller = "\w+"', 'controller = "linuxcnc"', source.read_text())
                     .replace("dwell = 1.0", "dwell = 0.05").replace("feed = 500.0", "feed = 2000.0")
                     .replace('tool = "RTEST"', 'tool = "7"'))
-    return load_machine(path)
+    return path
 
 
 def current_hal(machine) -> str:
@@ -70,7 +76,44 @@ def current_hal(machine) -> str:
         "@PINS@", "\n".join([*pins, f"sets zrot {nominal['z-rot-point']:.6f}"]))
 
 
-def run_linuxcnc(folder, machine, program: str, edit: str) -> dict[int, np.ndarray]:
+# A run takes 10–40 s on an idle two-core machine; a loaded one may take several times that
+RUN_BUDGET_S = 400
+
+
+def _ours(marker: str) -> list[int]:
+    """Every process of one LinuxCNC run: each carries the run's own COMPGEN_JOINTS in its
+    environment, including linuxcncsvr and rtapi_app, which leave the launcher's session."""
+    pids = []
+    for proc in Path("/proc").iterdir():
+        try:
+            if proc.name.isdigit() and f"COMPGEN_JOINTS={marker}".encode() in (
+                    proc / "environ").read_bytes().split(b"\0"):
+                pids.append(int(proc.name))
+        except OSError:      # gone, or not ours to read
+            continue
+    return pids
+
+
+def end_linuxcnc(marker: str, grace_s: float = 10.0) -> None:
+    """End every process of the run named by ``marker``, whatever state it is in: the
+    launcher's own shutdown first (SIGTERM), then SIGKILL for what is left."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        for pid in _ours(marker):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, sig)
+        end = time.monotonic() + grace_s
+        while _ours(marker) and time.monotonic() < end:
+            time.sleep(0.1)
+        if not _ours(marker):
+            break
+    assert not _ours(marker), f"LinuxCNC processes {_ours(marker)} survived SIGKILL"
+    lock = Path("/tmp/linuxcnc.lock")
+    if lock.exists() and subprocess.run(["pgrep", "-x", "milltask"], capture_output=True).returncode:
+        lock.unlink()
+
+
+def run_linuxcnc(folder, machine, program: str, edit: str, budget_s: float = RUN_BUDGET_S
+                 ) -> dict[int, np.ndarray]:
     """Run ``program`` on a headless LinuxCNC with the configuration's pins and ``edit`` (a
     further HAL file, as a user loads compgen's edit); settled joints by 1-based program
     line, with the nest's tool length taken off Z (G43 adds it to the joint)."""
@@ -100,10 +143,17 @@ def run_linuxcnc(folder, machine, program: str, edit: str) -> dict[int, np.ndarr
         lock = Path("/tmp/linuxcnc.lock")     # left by a run that died: the launcher would ask
         if lock.exists() and subprocess.run(["pgrep", "-x", "milltask"], capture_output=True).returncode:
             lock.unlink()
-        done = subprocess.run(["linuxcnc", str(folder / "sim.ini")], cwd=folder, env=env, timeout=300,
-                              capture_output=True, text=True)
+        launcher = subprocess.Popen(["linuxcnc", str(folder / "sim.ini")], cwd=folder, env=env,
+                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                    start_new_session=True)
+        try:
+            stdout, _ = launcher.communicate(timeout=budget_s)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"LinuxCNC did not finish within {budget_s} s")
+        finally:
+            end_linuxcnc(env["COMPGEN_JOINTS"])
     result = folder / "joints.txt"
-    assert result.exists(), f"LinuxCNC wrote no joints (exit {done.returncode}): {done.stdout[-1500:]}"
+    assert result.exists(), f"LinuxCNC wrote no joints (exit {launcher.returncode}): {stdout[-1500:]}"
     text = result.read_text()
     assert text.rstrip().endswith("done"), text[-500:]
     joints = {int(w[0]): np.array([float(v) for v in w[1:]])
@@ -168,3 +218,12 @@ def test_compgens_edit_loaded_into_linuxcnc_removes_what_it_can_hold(machine, tm
           f"{after.residual['rms_um']:.3f} um")
     assert before.residual["rms_um"] > 10 * NOISE_UM
     assert after.residual["rms_um"] == pytest.approx(NOISE_UM, rel=0.25)
+
+
+def test_a_run_past_its_budget_is_ended_whole(tmp_path):
+    """A program that does not finish in time fails its test and leaves no LinuxCNC process
+    behind (linuxcncsvr and rtapi_app run in sessions of their own)."""
+    machine = load_machine(_as_linuxcnc(tmp_path, SEED_MACHINE))
+    with pytest.raises(pytest.fail.Exception, match="did not finish within"):
+        run_linuxcnc(tmp_path / "run", machine, "G4 P600\nM2\n", "", budget_s=8)
+    assert not _ours(str(tmp_path / "run" / "joints.txt"))

@@ -184,3 +184,26 @@ def test_a_block_the_check_cannot_read_is_named_by_its_line(machines, tmp_path, 
     text = "\n".join([*program[:at], junk, *program[at:]]) + "\n"
     code, out, err = _check(machines["seed"], tmp_path / f"JUNK{controller(ctl).program_ext}", text)
     assert code == 2 and f"line {at + 1}: " in err, err
+
+
+@pytest.mark.parametrize("ctl", ["itnc530", "sinumerik840d", "linuxcnc"])
+@pytest.mark.parametrize("ball", ["-108.752,-0.1395,211.537", "-217.504,-0.279,111.537"])
+def test_a_program_for_a_ball_elsewhere_carries_it_and_passes_the_check(machines, tmp_path, ctl, ball):
+    """measure-program --ball writes the ball into the header; check-program checks the
+    program against that set-up (the machine file's ball would put the nest into it)."""
+    out = tmp_path / f"ELSEWHERE{controller(ctl).program_ext}"
+    code, _, err = run("measure-program", "--machine", machines["seed"], "--path", "K2", "--ball", ball,
+                       "--controller", ctl, "-o", out)
+    assert code == 0, err
+    code, text, err = run("check-program", "--machine", machines["seed"], out)
+    assert code == 0 and "from the program's header" in text, text + err
+    code, text, err = run("check-program", "--machine", machines["seed"], out, "--ball", "-217.504,-0.279,211.537")
+    assert code == 1 and "from --ball" in err, text + err
+
+
+def test_a_program_naming_two_balls_is_refused(machines, tmp_path):
+    program = _write(tmp_path, machines["seed"], "itnc530", "tcpm", "K4").read_text()
+    line = next(ln for ln in program.splitlines() if "ball centre in the table frame" in ln)
+    bad = program.replace(line, line + "\n" + line.replace("X-217.5040", "X-100.0000"))
+    code, out, err = _check(machines["seed"], tmp_path / "TWO.H", bad)
+    assert code == 2 and "2 ball positions" in err, out + err

@@ -8,6 +8,7 @@ unconfirmed items it uses.
 
 from __future__ import annotations
 
+import functools
 import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -74,6 +75,7 @@ def template_dir() -> Path:
     raise CompgenError("compgen's templates are missing", hint="reinstall compgen (pip install .)")
 
 
+@functools.cache     # compiled templates are kept: diagnose checks every advised program
 def environment() -> Environment:
     from jinja2 import Environment, FileSystemLoader, StrictUndefined  # only commands that emit
 

@@ -19,7 +19,7 @@ import numpy as np
 from .. import motion
 from ..errors import CompgenError
 from ..kinematics import Poses, inverse
-from ..machine import Machine
+from ..machine import Machine, check_ball
 from ..motion import safe_height
 from ..paths import check_travel
 from ..rtest import BALL, axis_cells
@@ -32,6 +32,28 @@ ANGLE_DECIMALS = 4        # 0.0001°
 
 
 NAME_MAX = 24      # characters of a program name every control here keeps
+# The header line that carries the program's set-up: check-program reads the ball from it
+BALL_HEADER = "ball centre in the table frame:"
+_BALL_LINE = re.compile(re.escape(BALL_HEADER) + r" X([-+]?\d+(?:\.\d+)?) Y([-+]?\d+(?:\.\d+)?) "
+                        r"Z([-+]?\d+(?:\.\d+)?) mm")
+
+
+def program_ball(text: str) -> tuple[float, float, float] | None:
+    """The ball a compgen program was written for (mm, table frame), from its header; None
+    for a program without that line. Two different balls in one header are refused."""
+    found = {tuple(float(v) for v in m.groups()) for m in _BALL_LINE.finditer(text)}
+    if len(found) > 1:
+        raise CompgenError(f"the program's header names {len(found)} ball positions",
+                           hint="give the one it was written for with --ball X,Y,Z")
+    return found.pop() if found else None
+
+
+def at_ball(machine: Machine, ball) -> Machine:
+    """The machine with its R-test ball at ``ball`` (mm, table frame), for everything that
+    checks a program: the datum, the safe height and the set-up's solids."""
+    ball = tuple(float(v) for v in ball)
+    check_ball(machine.setup, ball, "the ball")
+    return machine if np.allclose(ball, machine.ball, rtol=0, atol=1e-6) else replace(machine, ball=ball)
 
 
 def program_name(text: str, room: int = 0) -> str:
@@ -65,9 +87,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     if len(balls) > 1:
         raise CompgenError(f"a program measures one ball position; these poses hold {len(balls)}",
                            hint="write one program per ball position")
-    if not np.allclose(balls[0], machine.ball, rtol=0, atol=1e-6):
-        # the datum, the safe height and the motion check must see the ball where it is
-        machine = replace(machine, ball=tuple(float(v) for v in balls[0]))
+    machine = at_ball(machine, balls[0])   # datum, safe height and motion check: the ball where it is
     linear = [machine.index(c) for c in "XYZ"]
     rotary = [machine.index(a.name) for a in machine.rotary_axes]
     # the machine executes the angles as written (0.0001 deg): solve X Y Z at exactly those,
@@ -101,8 +121,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
          if mode == "tcpm" else
          "mode AXES: X Y Z from compgen's inverse kinematics (tests compgen's nominal model)"),
         f"path {ascii_text(label)}: {len(poses)} poses; pose list {name}.poses.csv, same order",
-        "ball centre in the table frame: "
-        + " ".join(f"{c}{fmt(v, 3)}" for c, v in zip("XYZ", ball, strict=True))
+        f"{BALL_HEADER} " + " ".join(f"{c}{fmt(v, LINEAR_DECIMALS)}" for c, v in zip("XYZ", ball, strict=True))
         + f" mm; nest on tool {setup.tool}",
         "active preset: the machine file's origin (nominal intersection of the rotary axes)",
         f"feed {setup.feed:g} mm/min; dwell {setup.dwell:g} s per pose; clearance "
