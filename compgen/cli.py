@@ -15,20 +15,22 @@ import numpy as np
 from . import __version__, called_as, me
 from .checklist import checklist, markdown
 from .compare import compare
-from .diagnose import diagnose, fit_gate, unit_suspicion
+from .diagnose import diagnose
+from .diagnose_text import report as diagnosis_text
 from .effects import catalogue, compose, location_model
 from .emit.kinematics import kinematics_edit
 from .emit.programs import MODES, NAME_MAX, at_ball, measure_program, program_ball, program_name
 from .emit.registry import CONTROLLERS, controller, for_program, read_edits
 from .errors import CONTROL, CompgenError
 from .files import read_text, write_all, write_atomically
+from .gate import fit_gate, unit_suspicion
 from .identify import identify, parse_fixed
 from .machine import load_machine
 from .paths import generate
 from .report import report_html
 from .results import load_fit
 from .rtest import SIGNS, format_rtest, read_poses, read_rtest
-from .session import fit_machine, reload
+from .session import fit_machine, machine_ref, reload
 from .simulate import read_truth, simulate
 
 
@@ -169,6 +171,9 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
 @click.argument("data", nargs=-1, type=FILE)
 @click.option("--from", "base", type=FILE, default=None,
               help="Start from this fit.json: its machine, data, model and fixed parameters.")
+@click.option("--data", "more", type=FILE, multiple=True, metavar="CSV",
+              help="With --from: R-test data to add to the fit's own (a follow-up measurement). "
+                   "Repeatable.")
 @click.option("--model", "model_names", default=None,
               help="Comma-separated parameters to fit (default: ball offset and the location "
                    "errors of every rotary axis, the seed's 11 on an A/C machine).")
@@ -184,14 +189,20 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
               help="What the R-test device reports (default nest-minus-ball, or the --from fit's).")
 @OUTPUT
 @FORCE
-def fit_cmd(machine_file, data, base, model_names, add, remove, fixes, method, sign, output, force):
+def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, method, sign, output, force):
     """Identify location errors (and any added effects) from R-test DATA files (CSV v1)."""
+    if more and not base:
+        raise CompgenError("--data adds to a fit's data: give --from FIT.json too",
+                           hint=f"without a fit: {me()} fit --machine M DATA.csv … -o fit.json")
     if base:
+        if data:
+            raise CompgenError("with --from, the fit's own data are used; data to add go with --data",
+                               hint=f"{me()} fit --from {base} --data {data[0]} … -o NEW.json; for "
+                                    "other data alone, fit them with --machine")
         start = load_fit(base)
         machine, sets = reload(start, machine_file)
         sign = sign or start.sign
-        if data:
-            sets = [read_rtest(p, machine, sign) for p in data]
+        sets += [read_rtest(p, machine, sign) for p in more]
         model = start.model
         fixed = {n: e.value for n, e in start.parameters.items() if e.fixed}
     else:
@@ -205,6 +216,7 @@ def fit_cmd(machine_file, data, base, model_names, add, remove, fixes, method, s
         model = [n.strip() for n in model_names.split(",") if n.strip()]
     model = compose(machine, model, add, remove)
     fixed = {n: v for n, v in fixed.items() if n in model} | parse_fixed(machine, fixes)
+    _refuse_twice(sets)
     _progress(f"fitting {len(model)} effects to {sum(len(s) for s in sets)} poses")
     result = identify(machine, sets, model, fixed, method, sign)
     write_atomically(output, result.to_json(Path(output).resolve().parent), force,
@@ -233,14 +245,14 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before):
     names = [c.strip() for c in candidates.split(",") if c.strip()] if candidates else None
     _progress(f"trying {'the catalogue' if names is None else len(names)} effects against "
               f"{sum(len(s) for s in sets)} poses")
-    result = diagnose(machine, sets, fit, names, fit_file=base)
+    result = diagnose(machine, sets, fit, names, fit_file=base, machine_ref=machine_ref(fit))
     if plots_dir:
         from .plots import write_plots  # matplotlib only when asked for
         earlier = load_fit(before) if before else None
         for path in write_plots(plots_dir, machine, sets, fit, earlier, result):
             click.echo(f"wrote {path}", err=as_json)
     click.echo(json.dumps(result.to_dict(), indent=2, ensure_ascii=False) if as_json
-               else result.report(base), nl=as_json)
+               else diagnosis_text(result, base), nl=as_json)
 
 
 @main.command("predict")
@@ -453,6 +465,16 @@ def effects_cmd(machine_file):
         mark = "*" if e.name in default else " "
         click.echo(f"{mark} {e.name:<14}{', '.join(e.params):<28}{e.words}")
     click.echo("\n* in the default model")
+
+
+def _refuse_twice(sets) -> None:
+    """The same readings twice would be fitted as independent: every σ √2 too small."""
+    seen = {}
+    for d in sets:
+        if d.sha256 in seen:
+            raise CompgenError(f"{d.source} holds the same readings as {seen[d.sha256]} (equal checksums)",
+                               hint="give each measurement once")
+        seen[d.sha256] = d.source
 
 
 def _vec3(text: str, option: str) -> list[float]:

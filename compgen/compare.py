@@ -116,7 +116,7 @@ def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, control
 def _warnings(machine: Machine, fit: FitResult, pred: dict) -> list[str]:
     """Where the prediction itself says the edit will not do: the fit leaves more than an
     R-test's noise, or a path stays out of its tolerance even as predicted."""
-    from .diagnose import SIGMA_PLAUSIBLE_UM
+    from .gate import SIGMA_PLAUSIBLE_UM
     out = []
     if not fit.residual["sigma_um"] <= SIGMA_PLAUSIBLE_UM:
         out.append(f"the fit leaves σ̂ = {fit.residual['sigma_um']:.2f} µm, above the "
@@ -158,7 +158,7 @@ def _measured(machine: Machine, fit: FitResult, post: Sequence[RTestData], predi
                             "loaded with the right sign (sign check) and that the set-up did not change.")
         try:
             refit = identify(machine, list(post), fit.model)
-            found = diagnose(machine, list(post), refit)
+            found = diagnose(machine, list(post), refit, advise=False)
             best = found.candidates[0]
             out["diagnose"] = (f"{best.effect} ({best.description}) would leave "
                                f"{best.rms_after_um:.3f} µm of {found.rms_um:.3f} µm"

@@ -17,12 +17,12 @@ from .effects import canonical, effect_of_param, location_model
 from .errors import CompgenError
 from .kinematics import Model, Poses
 from .machine import Machine
-from .paths import alternative_measurements
+from .advice import Advisor
 from .results import DataRef, Estimate, FitResult
 from .rtest import RTestData
+from .significance import COND_LIMIT, condition
 from .units import parse_quantity, shown
 
-COND_LIMIT = 1000.0       # column-normalised; the seed's K4 is 27, K4+K1+K2 is 6
 MAX_ITER = 30
 STEP_TOL_SHOWN = 1e-7     # µm or arcsec: Gauss–Newton has converged below this step
 
@@ -89,7 +89,8 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         k = free.index(i) if i in free else None
         params[n] = Estimate(float(x[i]), 0.0 if k is None else float(std[k]), e.unit, k is None)
     return FitResult(
-        machine={"name": machine.name, "file": _absolute(machine.source), "sha256": machine.sha256},
+        machine={"name": machine.name, "file": machine.bundled or _absolute(machine.source),
+                 "sha256": machine.sha256, **({"bundled": True} if machine.bundled else {})},
         data=tuple(DataRef(_absolute(d.source), d.sha256, len(d), _counts(d.poses.path)) for d in data),
         model=tuple(names), parameters=params, free=tuple(names[i] for i in free),
         correlation=np.clip(corr, -1.0, 1.0), singular_values=sv,
@@ -176,16 +177,17 @@ def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarra
 
 def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.ndarray,
                              measured: Poses | None) -> str:
+    advisor = Advisor(machine, measured)
     options = []
-    for extra in alternative_measurements(machine, measured):
-        Je = m.jacobian(extra.poses)[:, :, free].reshape(-1, len(free))
-        both = np.vstack([J, Je])
-        s = np.linalg.svd(both / np.linalg.norm(both, axis=0), compute_uv=False)
-        if s[-1] > s[0] / COND_LIMIT:
-            options.append((s[0] / s[-1], extra.label))
-    if not options:
+    for i, extra in enumerate(advisor.candidates):    # the ball as it stands first, then moved
+        cond = condition(np.vstack([J, m.jacobian(extra.poses)[:, :, free].reshape(-1, len(free))]))
+        if cond < COND_LIMIT:
+            options.append((round(cond), i, extra.label, extra))
+    runnable = advisor.runnable([o[-1] for o in sorted(options, key=lambda o: o[:2])], most=3)
+    if not runnable:
         return "no single path or ball position of the machine file separates them"
-    best = ", ".join(f"{o} (condition {c:.0f})" for c, o in sorted(options)[:3])
+    cond = {o[2]: o[0] for o in options}
+    best = ", ".join(f"{m.label} (condition {cond[m.label]:.0f})" for m in runnable)
     return f"adding one of these measurements would: {best}"
 
 

@@ -153,6 +153,7 @@ class Machine:
     tolerances: dict[str, float] = field(default_factory=dict)   # path → max range, µm
     source: str = ""
     sha256: str = ""
+    bundled: str = ""    # the name of the bundled machine file it was read from, if it was one
 
     @cached_property
     def axes(self) -> tuple[Axis, ...]:
@@ -215,7 +216,9 @@ def load_machine(path: str | Path) -> Machine:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise CompgenError(f"not valid TOML: {exc}", where=str(path)) from None
-    return _machine_from_dict(doc, str(path), hashlib.sha256(raw).hexdigest())
+    machine = _machine_from_dict(doc, str(path), hashlib.sha256(raw).hexdigest())
+    name = next((n for n, f in bundled_machines().items() if f.resolve() == path.resolve()), "")
+    return replace(machine, bundled=name) if name else machine
 
 
 def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:

@@ -7,12 +7,11 @@ in the machine file. ISO 10791-6:2014's BK1/BK2/BK4 are accepted as aliases of K
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
 from .errors import CompgenError
-from .kinematics import Poses, inverse, motion_direction, runs
+from .kinematics import Poses, inverse
 from .machine import Machine, PathDef, travel_violations
 
 GAP_S = 20.0   # pause between two paths of one session (re-positioning), s
@@ -80,58 +79,3 @@ def check_travel(machine: Machine, q: np.ndarray, label: str) -> None:
             f"pose {i + 1} of {label} puts {axis.name} at {value:.3f} {unit}, outside its travel "
             f"[{axis.travel[0]:g}, {axis.travel[1]:g}] {unit} ({int(bad.any(axis=1).sum())} poses "
             f"outside)", hint="move the ball, shorten the path or correct the machine file's travel")
-
-
-SECOND_BALL_DZ_MM = 100.0   # the second ball positions offered to separate what one cannot
-
-
-@dataclass(frozen=True, eq=False)
-class Measurement:
-    """A measurement that could be added: a path of the machine file with the ball at
-    ``ball`` (mm, table frame, as a CSV's bx, by, bz), run there and back or not, and its
-    poses."""
-
-    label: str
-    path: str
-    ball: tuple[float, float, float]
-    poses: Poses
-    back: bool = False
-
-    def to_dict(self) -> dict:
-        return {"label": self.label, "path": self.path, "ball": [round(v, 4) for v in self.ball],
-                "there_and_back": self.back}
-
-    def command(self) -> str:
-        """The options of ``measure-program`` that write it."""
-        ball = ",".join(f"{v:.4f}".rstrip("0").rstrip(".") for v in self.ball)   # as to_dict's
-        return f"--path {self.path} --ball {ball}" + " --there-and-back" * self.back
-
-
-def alternative_measurements(machine: Machine, measured: Poses | None = None) -> list[Measurement]:
-    """Measurements that could be added: each of the machine's paths at the bundled ball,
-    run there and back, with the ball higher, and with the ball at half its radius (a tilt
-    of an axis scales with radius and height, an offset or an axial error motion does not;
-    a reversal shows only where an axis turns back). Those that would leave the travel, and
-    those ``measured`` holds already (same path, same ball), are not offered."""
-    ball = np.asarray(machine.ball, dtype=float)
-    places = (("", ball, False), (" there and back", ball, True),
-              (f" with the ball {SECOND_BALL_DZ_MM:g} mm higher", ball + [0, 0, SECOND_BALL_DZ_MM], False),
-              (" with the ball at half its radius", ball * [0.5, 0.5, 1.0], False))
-    done, turned = set(), set()
-    if measured is not None:
-        where_ = [(str(p), tuple(np.round(b, 3))) for p, b in zip(measured.path, measured.ball, strict=True)]
-        done = set(where_)
-        for a in machine.rotary_axes:
-            d = motion_direction(measured.q[:, machine.index(a.name)], runs(measured))
-            turned |= {w for i, w in enumerate(where_) if d[i]}
-    out = []
-    for where, at, back in places:
-        for name in machine.paths:
-            if (name, tuple(np.round(at, 3))) in (turned if back else done):
-                continue
-            try:
-                out.append(Measurement(f"{name}{where}", name, tuple(float(v) for v in at),
-                                       generate(machine, [name], ball=at, back=back), back))
-            except CompgenError:
-                continue
-    return out

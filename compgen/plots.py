@@ -13,14 +13,22 @@ matplotlib.use("Agg")   # files only: no display on a machine-side laptop or CI
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .diagnose import Diagnosis, rival_curves  # noqa: E402
+from .advice import Measurement  # noqa: E402
+from .diagnose import Diagnosis  # noqa: E402
+from .effects import effect_of_param, resolve  # noqa: E402
 from .errors import CompgenError  # noqa: E402
 from .kinematics import Model, Poses  # noqa: E402
 from .machine import Machine  # noqa: E402
 from .results import FitResult  # noqa: E402
 from .rtest import RTestData  # noqa: E402
+from .signature import columns  # noqa: E402
+from .units import shown  # noqa: E402
 
 DIRECTIONS = ("dX", "dY", "dZ")
+# rivals may lie on each other: each is drawn in its own colour, line style and marker
+STYLES = ("-", "--", ":", "-.")
+MARKERS = ("o", "s", "^", "v", "D", "x")
+ON_EACH_OTHER_UM = 0.01   # two curves closer than this everywhere are said to coincide
 
 
 def _predicted(machine: Machine, poses: Poses, fit: FitResult) -> np.ndarray:
@@ -103,12 +111,18 @@ def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
 def _rivals(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosis, residual: np.ndarray) -> bytes:
     extra = found.rivals_separated_by[0]
     curves = rival_curves(machine, poses, fit, found, extra)
+    labels = {}
+    for name, (_, after) in curves.items():   # say so where two lie on each other there
+        same = [o for o in labels if np.abs(curves[o][1] - after).max() < ON_EACH_OTHER_UM]
+        labels[name] = name + (f" (= {', '.join(same)} on {extra.label})" if same else "")
     fig, axes = plt.subplots(3, 2, figsize=(12, 7), sharex="col", gridspec_kw={"width_ratios": [3, 1]})
     for k in range(3):
         axes[k, 0].plot(residual[:, k], ".", ms=2, color="0.6", label="residual")
         for i, (name, (now, after)) in enumerate(curves.items()):
-            axes[k, 0].plot(now[:, k], "-", lw=1, color=f"C{i}", label=name)
-            axes[k, 1].plot(after[:, k], "-", lw=1, color=f"C{i}", label=name)
+            for ax, curve in ((axes[k, 0], now), (axes[k, 1], after)):
+                ax.plot(curve[:, k], STYLES[i % len(STYLES)], lw=1.2 + 0.6 * (len(curves) - 1 - i),
+                        color=f"C{i}", marker=MARKERS[i % len(MARKERS)], ms=3,
+                        markevery=(i * 3, 4 + 2 * len(curves)), label=labels[name])
         axes[k, 0].set_ylabel(f"{DIRECTIONS[k]} (µm)")
         for ax in axes[k]:
             ax.grid(alpha=0.3)
@@ -118,6 +132,29 @@ def _rivals(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosis, re
     axes[-1, 0].set_xlabel("pose (measured)")
     axes[-1, 1].set_xlabel("pose (to measure)")
     return _png(fig)
+
+
+def rival_curves(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosis,
+                 extra: Measurement) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """For the best candidate and each rival at its fitted size: the misfit (µm, (n, 3)) the
+    fit's model leaves of it on the measured poses, and the misfit it would leave on
+    ``extra`` once that is measured too (first order): alike on the first, apart on the
+    second when ``extra`` tells them apart."""
+    model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
+    both = Poses.concat([poses, extra.poses])
+    J = columns(machine, both, model_effects)
+    Q_now = np.linalg.qr(J[:3 * len(poses)])[0]
+    Q_both = np.linalg.qr(J)[0]
+    out = {}
+    for c in found.candidates:
+        if c.effect not in (found.significant[0].effect, *found.rivals):
+            continue
+        e = resolve(machine, c.effect)
+        v = columns(machine, both, [e]) @ (np.array(c.amplitude) / shown(1.0, e.unit)[0])
+        now = v[:3 * len(poses)] - Q_now @ (Q_now.T @ v[:3 * len(poses)])
+        after = (v - Q_both @ (Q_both.T @ v))[3 * len(poses):]
+        out[c.effect] = (now.reshape(-1, 3) * 1e3, after.reshape(-1, 3) * 1e3)
+    return out
 
 
 def _safe(label: str) -> str:

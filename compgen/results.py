@@ -98,7 +98,8 @@ class FitResult:
         return {
             "format": FORMAT,
             "compgen_version": self.version,
-            "machine": {**self.machine, "file": rel(self.machine["file"])},
+            "machine": {**self.machine, "file": self.machine["file"] if self.machine.get("bundled")
+                        else rel(self.machine["file"])},
             "data": [{**d.__dict__, "file": rel(d.file)} for d in self.data],
             "sign": self.sign,
             "model": list(self.model),
@@ -133,7 +134,8 @@ class FitResult:
         try:
             params = {n: _estimate(p, f"{where}: parameters.{n}") for n, p in d["parameters"].items()}
             return cls(
-                machine={**d["machine"], "file": file(d["machine"]["file"])},
+                machine={**d["machine"], "file": d["machine"]["file"] if d["machine"].get("bundled") is True
+                         else file(d["machine"]["file"])},
                 data=tuple(DataRef(**{**x, "file": file(x["file"])}) for x in d["data"]),
                 model=tuple(d["model"]), parameters=params,
                 free=tuple(d["correlation"]["names"]),

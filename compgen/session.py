@@ -16,6 +16,10 @@ def fit_machine(fit: FitResult, machine_file: str | None = None) -> Machine:
     """The machine file of ``fit``, refused if it changed since or does not hold its units."""
     machine = load_machine(machine_file or fit.machine["file"])
     if machine.sha256 != fit.machine["sha256"]:
+        if fit.machine.get("bundled") and not machine_file:
+            raise CompgenError(f"the bundled machine {fit.machine['file']!r} of this compgen differs from "
+                               "the one the fit was made with (checksum)", where=machine.source,
+                               hint="give the machine file the fit was made with: --machine FILE, or refit")
         raise CompgenError("machine file changed since the fit", where=machine.source,
                            hint=f"refit with `{me()} fit` on the current machine file")
     for name, e in fit.parameters.items():
@@ -23,6 +27,12 @@ def fit_machine(fit: FitResult, machine_file: str | None = None) -> Machine:
             raise CompgenError(f"{name} is given in a unit of {'length' if e.unit == 'mm' else 'angle'}",
                                where=f"fit file: parameters.{name}", hint="the fit file is damaged: refit")
     return machine
+
+
+def machine_ref(fit: FitResult) -> str:
+    """How a command names the fit's machine file: a bundled machine by its name, any
+    other by its path as the fit file locates it."""
+    return fit.machine["file"]
 
 
 def reload(fit: FitResult, machine_file: str | None = None) -> tuple[Machine, list[RTestData]]:

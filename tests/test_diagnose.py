@@ -6,6 +6,7 @@ import pytest
 from conftest import ARCSEC, TABLE4, UM
 
 from compgen.diagnose import diagnose
+from compgen.diagnose_text import report
 from compgen.effects import compose
 from compgen.identify import identify
 from compgen.paths import generate
@@ -69,7 +70,7 @@ def test_ambiguous_scale_is_reported_with_the_measurement_that_resolves_it(seed_
     advice = [m for m in found.rivals_separated_by if "half its radius" in m.label]
     assert advice
     # what the plots draw: alike on the measured poses, apart on the advised measurement
-    from compgen.diagnose import rival_curves
+    from compgen.plots import rival_curves
     from compgen.plots import figures
     fit = identify(seed_machine, data)
     curves = rival_curves(seed_machine, poses, fit, found, found.rivals_separated_by[0])
@@ -91,7 +92,7 @@ def test_clean_data_flag_nothing(seed_machine, poses):
     found = diagnose(seed_machine, data, identify(seed_machine, data))
     assert not found.significant
     assert found.to_dict()["explained_to_noise"]
-    assert "explains these data to the noise level" in found.report()
+    assert "explains these data to the noise level" in report(found)
 
 
 def test_invisible_effects_are_never_found_and_their_confounding_is_reported(seed_machine, poses):
@@ -180,7 +181,7 @@ def test_outliers_are_listed_where_the_user_finds_them_and_flag_nothing(seed_mac
     assert all(abs(o["size_um"] - 20) < 3 for o in found.outliers)
     assert not found.significant
     assert found.to_dict()["outliers"] == list(found.outliers)
-    assert "s.csv:42  path K4" in found.report()
+    assert "s.csv:42  path K4" in report(found)
 
 
 def test_correlated_noise_flags_nothing_because_it_is_whitened(seed_machine, poses, monkeypatch):
@@ -191,7 +192,7 @@ def test_correlated_noise_flags_nothing_because_it_is_whitened(seed_machine, pos
     found = diagnose(seed_machine, data, fit)
     assert not found.significant, [c.effect for c in found.significant]
     assert all(0.6 < rho < 0.95 for rhos in found.noise.values() for rho in rhos), found.noise
-    assert "AR(1)" in found.report()
+    assert "AR(1)" in report(found)
     import compgen.diagnose as module
     monkeypatch.setattr(module, "ar1", lambda r, seg: np.zeros_like(r))
     assert diagnose(seed_machine, data, fit).significant
@@ -221,8 +222,9 @@ def test_a_turning_radial_motion_is_named_after_the_follow_ups_it_advises(seed_m
         m = found.rivals_separated_by[0]
         advice = found.to_dict()["rivals_separated_by"][0]
         assert advice == {"label": m.label, "path": m.path, "ball": [round(v, 4) for v in m.ball],
-                          "there_and_back": m.back}
-        command = m.command().split()                  # what the text tells the user to run
+                          "there_and_back": m.back, "name": m.name,
+                          "leaves_open": [list(p) for p in found.rivals_open.get(m.label, ())]}
+        command = m.options().split()                  # what the text tells the user to run
         assert command[command.index("--ball") + 1] == ",".join(f"{v:g}" for v in advice["ball"])
         assert m.label not in followed
         followed.append(m.label)
@@ -247,7 +249,7 @@ def test_rivals_no_measurement_separates_are_said_to_be_equivalent(seed_machine,
     named = {found.significant[0].effect, *found.rivals}
     assert found.found is None and {"ECA:h1", "EBA+ECA:h-1"} <= named, named
     assert found.to_dict()["rivals_equivalent"] and not found.rivals_separated_by
-    assert "No path or ball position of the machine file tells them apart" in found.report()
+    assert "No path or ball position of the machine file tells them apart" in report(found)
     fit = identify(seed_machine, data, compose(seed_machine, base.model, [found.significant[0].effect]))
     assert _predicts_unmeasured_balls(seed_machine, truth, fit) < 1.0
 
@@ -264,7 +266,7 @@ def test_a_reversal_is_advised_to_be_run_there_and_back_and_then_found(seed_mach
     assert not backlash.visible
     back = [m for m in backlash.separated_by if m.back]
     assert back and all(m.label.endswith("there and back") for m in back)
-    assert "ECC:r1 " in found.report() and f"would be seen with {back[0].label}" in found.report()
+    assert "ECC:r1 " in report(found) and f"would be seen with {back[0].label}" in report(found)
     data.append(_session(seed_machine, generate(seed_machine, [back[0].path], back=True), truth, seed=8))
     found = diagnose(seed_machine, data, identify(seed_machine, data))
     assert found.found == "ECC:r1", ([c.effect for c in found.significant[:3]], found.rivals)

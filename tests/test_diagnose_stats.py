@@ -3,7 +3,10 @@
 import numpy as np
 import pytest
 
-from compgen.diagnose import VISIBLE, _explained, _p_value, _still_significant
+from compgen.significance import VISIBLE
+from compgen.significance import explained as _explained
+from compgen.significance import p_value as _p_value
+from compgen.significance import still_significant as _still_significant
 
 E = np.eye(6)
 
@@ -60,7 +63,7 @@ def test_still_significant_after_the_best():
 def test_still_significant_tests_against_the_joined_model(monkeypatch):
     """The F test after the best: residual and candidates taken off the model AND the added
     columns (projections done here), with n − model − added degrees of freedom."""
-    import compgen.diagnose as d
+    import compgen.significance as d
     rng = np.random.default_rng(2)
     n = 40
     Q = np.linalg.qr(rng.normal(size=(n, 3)))[0]
@@ -68,11 +71,11 @@ def test_still_significant_tests_against_the_joined_model(monkeypatch):
     cand = rng.normal(size=(n, 1))
     r = rng.normal(size=n)
     seen = []
-    monkeypatch.setattr(d, "_p_value", lambda *args: seen.append(args) or 1.0)
+    monkeypatch.setattr(d, "p_value", lambda *args: seen.append(args) or 1.0)
 
     class Effect:
         name = "cand"
-    d._still_significant(Q, added, r, [(Effect(), cand)], 0.01)
+    d.still_significant(Q, added, r, [(Effect(), cand)], 0.01)
     A = np.column_stack([Q, added])
     P = A @ np.linalg.pinv(A)                    # projector onto the joined model
     r1, c1 = r - P @ r, cand - P @ cand

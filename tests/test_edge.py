@@ -132,20 +132,38 @@ def test_the_unit_of_a_fit_is_honoured(fitted, tmp_path):
 
 
 def test_a_job_folder_can_move(fitted, tmp_path):
-    """fit.json names its machine and data relative to itself."""
+    """fit.json names its data relative to itself, and a bundled machine by its name and
+    checksum (a rebuilt venv moves the installed file, never the name)."""
     doc = json.loads((fitted / "fit.json").read_text())
-    assert not Path(doc["machine"]["file"]).is_absolute()
+    assert doc["machine"]["file"] == "ac-trunnion-itnc530" and doc["machine"]["bundled"] is True
     assert not Path(doc["data"][0]["file"]).is_absolute()
     moved = tmp_path / "a" / "b"
     moved.mkdir(parents=True)
     fit = moved / "fit.json"
-    # machine and data at the same relative places from the moved fit
-    for ref in (doc["machine"]["file"], doc["data"][0]["file"]):
+    # the data at the same relative place from the moved fit
+    for ref in (doc["data"][0]["file"],):
         target = (moved / ref).resolve()
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copy((fitted / ref).resolve(), target)
     fit.write_text((fitted / "fit.json").read_text())
     code, _, err = run("diagnose", "--from", fit, "--json")
+    assert code == 0, err
+
+
+def test_a_fit_with_a_machine_file_of_its_own_names_it_relative_to_itself(tmp_path):
+    job = tmp_path / "job"
+    job.mkdir()
+    machine = job / "m.toml"
+    machine.write_text(SEED_MACHINE.read_text())
+    data = job / "s.csv"
+    assert run("simulate", "--machine", machine, "--truth", ROOT / "examples" / "truth-table4.json",
+               "--noise-um", "0.5", "--seed", "1", "-o", data)[0] == 0
+    assert run("fit", "--machine", machine, data, "-o", job / "fit.json")[0] == 0
+    doc = json.loads((job / "fit.json").read_text())
+    assert doc["machine"]["file"] == "m.toml" and "bundled" not in doc["machine"]
+    moved = tmp_path / "elsewhere"
+    shutil.copytree(job, moved)
+    code, _, err = run("diagnose", "--from", moved / "fit.json", "--json")
     assert code == 0, err
 
 

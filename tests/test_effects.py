@@ -165,7 +165,7 @@ def test_diagnose_signatures_are_the_models_first_order_columns():
     """For every catalogue effect (compounds, tilting harmonics, saturating growth among
     them), the analytic signatures diagnose ranks by equal the exact model's central
     differences at zero."""
-    from compgen.diagnose import _columns
+    from compgen.signature import columns as _columns
     poses = generate(SEED, ["K4"])
     poses = Poses(poses.q, poses.ball, np.linspace(0, 3600, len(poses)), poses.path)
     for e in catalogue(SEED):

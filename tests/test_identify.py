@@ -75,7 +75,7 @@ def test_k2_alone_cannot_separate_and_says_what_would(seed_machine, rng):
     computed here from the stacked, column-normalised Jacobians."""
     from compgen.identify import COND_LIMIT
     from compgen.kinematics import Model
-    from compgen.paths import alternative_measurements
+    from compgen.advice import Advisor
     data = simulate(seed_machine, TABLE4, generate(seed_machine, ["K2"]), NOISE_UM, rng)
     with pytest.raises(CompgenError) as exc:
         identify(seed_machine, [data])
@@ -104,13 +104,13 @@ def test_k2_alone_cannot_separate_and_says_what_would(seed_machine, rng):
     assert f"less than 1/{COND_LIMIT:g} of the best-seen combination" in text and COND_LIMIT == 1000
     J = m.jacobian(data.poses).reshape(-1, len(TABLE4))
     ranked = []
-    for extra in alternative_measurements(seed_machine):
-        label, extra = extra.label, extra.poses
-        both = np.vstack([J, m.jacobian(extra).reshape(-1, len(TABLE4))])
+    advisor = Advisor(seed_machine)
+    for i, extra in enumerate(advisor.candidates):   # in order: the ball as it stands, then moved
+        both = np.vstack([J, m.jacobian(extra.poses).reshape(-1, len(TABLE4))])
         c = np.linalg.cond(both / np.linalg.norm(both, axis=0))
-        if c < COND_LIMIT:
-            ranked.append((c, label))
-    best = ", ".join(f"{o} (condition {c:.0f})" for c, o in sorted(ranked)[:3])
+        if c < COND_LIMIT and advisor.why_not(extra) is None:     # only what the machine can run
+            ranked.append((round(c), i, extra.label))
+    best = ", ".join(f"{o} (condition {c:.0f})" for c, _, o in sorted(ranked)[:3])
     assert f"Adding one of these measurements would: {best}; or hold one parameter" in text, (best, text)
     assert best.startswith("K4 (condition 6)")
 
@@ -252,7 +252,7 @@ def test_a_weak_pair_is_refused_and_only_what_separates_it_is_offered(seed_machi
 
     from compgen.identify import COND_LIMIT, check_identifiable
     from compgen.kinematics import Model
-    from compgen.paths import alternative_measurements
+    from compgen.advice import Advisor
     k2 = dataclasses.replace(seed_machine, paths={"K2": seed_machine.paths["K2"]})
     m = Model(k2, ["YOW", "COA"])
     J = m.jacobian(generate(k2, ["K2"])).reshape(-1, 2)
@@ -263,7 +263,7 @@ def test_a_weak_pair_is_refused_and_only_what_separates_it_is_offered(seed_machi
     text = str(exc.value)
     assert f"(condition number {s[0] / s[1]:.3g})" in text, text
     offered = {}
-    for extra in alternative_measurements(k2):
+    for extra in Advisor(k2).candidates:
         label, extra = extra.label, extra.poses
         both = np.vstack([J, m.jacobian(extra).reshape(-1, 2)])
         offered[label] = np.linalg.cond(both / np.linalg.norm(both, axis=0))

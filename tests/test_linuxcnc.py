@@ -152,6 +152,7 @@ def run_linuxcnc(folder, machine, program: str, edit: str, budget_s: float = RUN
             pytest.fail(f"LinuxCNC did not finish within {budget_s} s")
         finally:
             end_linuxcnc(env["COMPGEN_JOINTS"])
+            launcher.wait(timeout=30)        # reaped: the launcher was one of the run's processes
     result = folder / "joints.txt"
     assert result.exists(), f"LinuxCNC wrote no joints (exit {launcher.returncode}): {stdout[-1500:]}"
     text = result.read_text()

@@ -63,7 +63,7 @@ def test_commands_run_with_one_blas_thread(monkeypatch, tmp_path):
 def test_the_p_value_is_the_f_distributions_tail():
     from scipy import stats
 
-    from compgen.diagnose import _p_value
+    from compgen.significance import p_value as _p_value
     for drop, k, rss, dof in [(3.0, 1, 700.0, 2158), (40.0, 2, 500.0, 2158), (1e-3, 2, 5.0, 100)]:
         F = (drop / k) / ((rss - drop) / (dof - k))
         want = min(1.0, stats.f.sf(F, k, dof - k) * 86)

@@ -1,0 +1,125 @@
+"""The measurements compgen may advise, and only those the machine can make.
+
+A measurement is a path of the machine file with the ball somewhere (as now, higher, lower,
+nearer the table's axis or farther out), run one way or there and back. Before one is
+offered it is checked exactly as ``measure-program`` checks the program it would write:
+travel (with the clearance and the safe height), rotary steps and speeds, and the motion
+check against the set-up with the ball where it would stand. What fails is not offered.
+"""
+
+from __future__ import annotations
+
+import shlex
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import CompgenError
+from .kinematics import Poses, motion_direction, runs
+from .machine import Machine
+from .paths import generate
+
+# Where the ball may go for a further measurement: (label, file-name tag, ball scale in
+# x, y; dz mm; there and back). A tilt of an axis scales with radius and height, an offset
+# or an axial error motion does not; a reversal shows only where an axis turns back.
+PLACES = (
+    ("", "", 1.0, 0.0, False),
+    (" there and back", "BACK", 1.0, 0.0, True),
+    (" with the ball 100 mm higher", "UP100", 1.0, 100.0, False),
+    (" with the ball 100 mm lower", "DOWN100", 1.0, -100.0, False),
+    (" with the ball at half its radius", "HALFR", 0.5, 0.0, False),
+    (" with the ball 50 mm higher", "UP50", 1.0, 50.0, False),
+    (" with the ball 50 mm lower", "DOWN50", 1.0, -50.0, False),
+    (" with the ball at 1.5 times its radius", "R150", 1.5, 0.0, False),
+)
+MODE = "tcpm"      # measure-program's default: the command printed does not name a mode
+
+
+@dataclass(frozen=True, eq=False)
+class Measurement:
+    """A measurement that could be added: a path of the machine file with the ball at
+    ``ball`` (mm, table frame, as a CSV's bx, by, bz), run there and back or not, and its
+    poses. ``name`` is the file stem its program and data are advised under."""
+
+    label: str
+    path: str
+    ball: tuple[float, float, float]
+    poses: Poses
+    back: bool = False
+    name: str = ""
+
+    def to_dict(self) -> dict:
+        return {"label": self.label, "path": self.path, "ball": [round(v, 4) for v in self.ball],
+                "there_and_back": self.back, "name": self.name}
+
+    def options(self) -> str:
+        """The options of ``measure-program`` that write it."""
+        ball = ",".join(f"{v:.4f}".rstrip("0").rstrip(".") for v in self.ball)   # as to_dict's
+        return f"--path {self.path} --ball {ball}" + " --there-and-back" * self.back
+
+    def command(self, me: str, machine_ref: str, program_ext: str) -> str:
+        """The whole ``measure-program`` command, as it runs pasted into bash."""
+        return (f"{me} measure-program --machine {shlex.quote(machine_ref)} {self.options()} "
+                f"-o {self.name}{program_ext}")
+
+
+class Advisor:
+    """The measurements of one machine not yet made in ``measured``, each checked at most
+    once (a check writes the whole program in memory and moves the machine through it)."""
+
+    def __init__(self, machine: Machine, measured: Poses | None = None):
+        self.machine = machine
+        self.candidates = _candidates(machine, measured)
+        self._why: dict[str, str | None] = {}
+
+    def why_not(self, m: Measurement) -> str | None:
+        """Why ``measure-program`` would refuse ``m`` on this machine, or None."""
+        if m.label not in self._why:
+            self._why[m.label] = _refusal(self.machine, m)
+        return self._why[m.label]
+
+    def runnable(self, ms, most: int | None = None) -> tuple[Measurement, ...]:
+        """Those of ``ms`` the machine can make, in their order; at most ``most``."""
+        out = []
+        for m in ms:
+            if most is not None and len(out) >= most:
+                break
+            if self.why_not(m) is None:
+                out.append(m)
+        return tuple(out)
+
+
+def _refusal(machine: Machine, m: Measurement) -> str | None:
+    from .emit.programs import measure_program   # the emitters build on the model, not back
+
+    try:
+        measure_program(machine, m.poses, m.path, machine.controller, MODE, "ADVICE", "", "")
+    except CompgenError as exc:
+        return str(exc)
+    return None
+
+
+def _candidates(machine: Machine, measured: Poses | None) -> list[Measurement]:
+    """Every place for every path, less what would leave the travel and what ``measured``
+    holds already (same path, same ball; there and back where the axes turned back)."""
+    ball = np.asarray(machine.ball, dtype=float)
+    done, turned = set(), set()
+    if measured is not None:
+        where_ = [(str(p), tuple(np.round(b, 3))) for p, b in zip(measured.path, measured.ball, strict=True)]
+        done = set(where_)
+        for a in machine.rotary_axes:
+            d = motion_direction(measured.q[:, machine.index(a.name)], runs(measured))
+            turned |= {w for i, w in enumerate(where_) if d[i]}
+    out = []
+    for where, tag, scale, dz, back in PLACES:
+        at = ball * [scale, scale, 1.0] + [0.0, 0.0, dz]
+        for name in machine.paths:
+            if (name, tuple(np.round(at, 3))) in (turned if back else done):
+                continue
+            try:
+                poses = generate(machine, [name], ball=at, back=back)
+            except CompgenError:
+                continue
+            out.append(Measurement(f"{name}{where}", name, tuple(float(v) for v in at), poses, back,
+                                   f"{name}_{tag}" if tag else name))
+    return out

@@ -1,0 +1,133 @@
+"""diagnose's words: the report a person reads, each command in it as it runs pasted into bash."""
+
+from __future__ import annotations
+
+import shlex
+
+from . import me
+from .advice import Measurement
+from .diagnose import Diagnosis
+from .effects import effect_name
+from .units import three, three_header
+
+
+def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
+    """The diagnosis as text: residual, candidates, rivals, what these data cannot see, and
+    the next command for each."""
+    fit, after = shlex.quote(fit_path), shlex.quote(next_name(fit_path))
+    lines = [f"compgen diagnose: {d.machine}", f"  fit {d.fit_file}: {len(d.model)} "
+             f"parameters; residual RMS {d.rms_um:.3f} µm (σ̂ {d.sigma_um:.3f} µm) over "
+             f"{d.readings} readings", "",
+             f"  {'residual per path (µm)':<24}{three_header(('RMS dX', 'dY', 'dZ'))}"]
+    for name, p in d.per_path.items():
+        lines.append(f"    {name:<22}{three(p['rms_um'])}")
+    if d.outliers:
+        lines += ["", f"  {len(d.outliers)} outlying reading{'s' if len(d.outliers) > 1 else ''} "
+                      "(a step from their neighbours), left out of the tests below; check them, "
+                      "and delete their rows to leave them out of the fit too:"]
+        lines += [f"    {o['file']}:{o['line'] or '?'}  path {o['path'] or '(unlabelled)'}  "
+                  f"{o['size_um']:.1f} µm" for o in d.outliers]
+    if any(any(v) for v in d.noise.values()):
+        lines += ["", "  the noise is correlated from reading to reading: AR(1) ρ̂ per path (dX dY dZ): "
+                  + "; ".join(f"{k} {' '.join(f'{v:.2f}' for v in p)}" for k, p in d.noise.items()),
+                  "  the tests below are made on readings made white with it (generalised least squares)"]
+    lines += ["", "  residual against axis position (µm, amplitude in dX dY dZ)"]
+    for axis, a in d.per_axis.items():
+        for term, amp in a.items():
+            lines.append(f"    {axis:<3}{term:<19}{three(amp)}")
+    visible = [c for c in d.candidates if c.visible]
+    lines += ["", f"  candidate effects, most residual removed first ({d.tested} tried; F test, "
+                  f"Bonferroni-corrected, α = {d.alpha:g}):"]
+    for i, c in enumerate(visible[:top], 1):
+        amp = " ".join(f"{a:+.2f}" for a in c.amplitude)
+        verdict = "SIGNIFICANT" if c.significant else "not significant"
+        p = f"p = {c.p_value:.2g}" if c.p_value > 0 else "p < 1e-300"
+        lines.append(f"  {i:>2}. {c.effect:<12} RMS → {c.rms_after_um:.3f} µm   {p}  {verdict}")
+        lines.append(f"      {c.description} (≈ {amp} {c.unit}); likely cause: {c.cause}")
+        if c.confounded_with:
+            lines.append(f"      partly absorbed by {', '.join(c.confounded_with)}")
+        if d.rivals and (c.effect in d.rivals or c is d.significant[0]):
+            lines.append("      not told apart from the others marked so: see below")
+        elif c.significant and c.separable:
+            lines.append(f"      add it: {me()} fit --from {fit} --add {c.effect} -o {after}")
+        elif c.significant:
+            lines.append(f"      seen, but not separable whole on these data (fit --add would refuse "
+                         f"it: condition {c.condition:.3g}); "
+                         + (f"measure {c.separated_by[0].label} first: {_measure(d, c.separated_by[0])}" if c.separated_by else
+                            "no set-up this machine can measure separates it"))
+    if d.rivals:
+        best = d.significant[0].effect
+        verb = "explains" if len(d.rivals) == 1 else "explain"
+        lines += ["", f"  Not told apart: {', '.join(d.rivals)} {verb} these data as well as "
+                      f"{best}, within their noise; no one of them is named as found."]
+        if d.rivals_separated_by:
+            lines.append("  Measuring one of these would tell them apart (those telling every pair "
+                         "apart first, then the shortest):")
+            for m in d.rivals_separated_by[:3]:
+                open_ = d.rivals_open.get(m.label, ())
+                lines.append(f"    {m.label}" + (f" (leaves {', '.join(' / '.join(p) for p in open_)} "
+                                                "open)" if open_ else " (tells every pair apart)"))
+                lines.append(f"      {_measure(d, m)}")
+            lines += _then(d.rivals_separated_by[0], fit, after)
+        else:
+            lines += ["  No path or ball position of the machine file tells them apart: for every "
+                      "set-up compgen can measure they predict the same readings (they differ by "
+                      "what the location errors absorb). Any one of them models the misfit: "
+                      f"{me()} fit --from {fit} --add {best} -o {after};",
+                      "  which of them is the physical cause stays open (it needs another "
+                      "reference), and the location errors written to a control depend on the "
+                      "choice."]
+    if not d.significant:
+        lines += ["", "  No candidate is significant: the model explains these data to the "
+                      "noise level."]
+    elif len(d.significant) > 1:
+        best = d.significant[0].effect
+        lines += ["", f"  Effects share misfit: once {best} is added, "
+                      + (f"still significant: {', '.join(d.after_best)}." if d.after_best
+                         else "no other candidate stays significant.")
+                      + " Add one effect at a time and diagnose again."]
+    hidden = [c for c in d.candidates if not c.visible and (not c.silent or c.separated_by)]
+    if hidden:
+        lines += ["", "  not visible in these data (never reported as found; the fit absorbs them):"]
+        for c in hidden:
+            where = (f"would be seen with {' or '.join(m.label for m in c.separated_by[:3])}"
+                     if c.separated_by
+                     else "no path or ball position this machine can measure separates it: it "
+                          "needs an independent reference")
+            what = "moves no reading here" if c.silent else f"absorbed by {', '.join(c.confounded_with)}"
+            lines.append(f"    {c.effect:<12} {c.description}: {what}; {where}")
+        m, shows = d.next_measurement
+        if m is not None:
+            lines.append(f"  to look for them, {m.label} would show the most ({len(shows)}: "
+                         f"{', '.join(shows[:6])}{', …' if len(shows) > 6 else ''}):")
+            lines.append(f"    {m.label}: {_measure(d, m)}")
+            lines += _then(m, fit, after)
+    silent = [c.effect for c in d.candidates if c.silent and not c.separated_by]
+    if silent:
+        lines += ["", "  no effect on any reading here (no lever arm to the nest or ball in this "
+                      "machine file): " + ", ".join(silent)]
+    lines += ["", "  fragile parameters: largest shift per µm (RMS over the poses) of an effect "
+                  "not in the model"]
+    for name, row in d.bias.items():
+        per_um = {k: v / d.signature_um[k] for k, v in row.items() if d.signature_um[k] > 0}
+        worst = max(per_um, key=lambda k: abs(per_um[k]), default=None)
+        if worst is not None:
+            lines.append(f"    {name:<6} {per_um[worst]:+6.2f} {d.bias_units[name]} per µm of "
+                         f"{effect_name(worst)}")
+    return "\n".join([*lines, *d.notes]) + "\n"
+
+def next_name(path: str) -> str:
+    """The name of the next fit in the loop: fit.json → fit+1.json."""
+    stem = path[:-5] if path.endswith(".json") else path
+    return f"{stem}+1.json"
+
+
+def _measure(d: Diagnosis, m: Measurement) -> str:
+    return m.command(me(), d.machine_ref, d.program_ext)
+
+
+def _then(m: Measurement, fit: str, after: str) -> list[str]:
+    """What follows a measurement: its readings into a CSV, added to the fit's data."""
+    return [f"  run it; save the R-test's readings as {m.name}.csv (its pose list {m.name}.poses.csv with "
+            "dX dY dZ), then fit it together with these data and diagnose again:",
+            f"    {me()} fit --from {fit} --data {m.name}.csv -o {after}"]

@@ -1,0 +1,49 @@
+"""Whether a fit may reach a controller: what a user must settle first."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from .diagnose import diagnose
+from .machine import Machine
+from .results import FitResult
+from .rtest import RTestData
+
+# An R-test's sphere-centre repeatability is 0.5–1 µm and drift adds a few µm over a run
+# (docs/diagnose.md, "Noise of R-test sensors"): a fit leaving more than this has missed
+# something physical, or the data are not what they claim.
+SIGMA_PLAUSIBLE_UM = 3.0
+# Below this spread the readings cannot be µm of a real machine (mm given as µm, say)
+SPREAD_PLAUSIBLE_UM = 0.5
+
+
+def unit_suspicion(data: Sequence[RTestData]) -> str | None:
+    """Why the readings look like another unit than µm, or None."""
+    y = np.concatenate([d.deviation for d in data]) * 1e3
+    spread = float((y.max(axis=0) - y.min(axis=0)).max()) if y.size else 0.0
+    if spread < SPREAD_PLAUSIBLE_UM:
+        return (f"the readings spread over {spread:.3g} µm at most, far below any R-test's noise "
+                f"(0.5–1 µm): they are likely in mm, not µm")
+    return None
+
+
+def fit_gate(machine: Machine, data: Sequence[RTestData], fit: FitResult) -> list[str]:
+    """Why this fit should not reach a controller: what a user must settle first (empty when
+    the fit explains its data to an R-test's noise with nothing significant missing)."""
+    reasons = []
+    suspicion = unit_suspicion(data)
+    if suspicion:
+        reasons.append(suspicion + "; check the CSV's dX dY dZ unit")
+    sigma = fit.residual["sigma_um"]
+    if not sigma <= SIGMA_PLAUSIBLE_UM:
+        reasons.append(f"the fit leaves σ̂ = {sigma:.2f} µm, above the {SIGMA_PLAUSIBLE_UM:g} µm an R-test's "
+                       "noise allows: the model misses an effect, or the data are wrong (columns "
+                       "swapped, a sign, a mismatched machine file)")
+    found = diagnose(machine, data, fit, advise=False)
+    if found.significant:
+        reasons.append("diagnose finds effects the model misses: "
+                       + ", ".join(c.effect for c in found.significant[:3])
+                       + " (run diagnose, add the effect with fit --add, and refit)")
+    return reasons

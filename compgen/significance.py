@@ -1,0 +1,88 @@
+"""The statistics of diagnose: how much of a residual an effect's columns remove, the F
+test with Bonferroni's correction, which effects stay significant once another is added,
+and which explain the residual as well as the best (rivals).
+
+References: ``docs/diagnose.md`` (visibility, bias, F and score tests).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+ALPHA = 0.01          # family-wise false-alarm rate over all effects tried
+VISIBLE = 0.01        # ‖c⊥‖/‖c‖ below this: the model absorbs the effect entirely
+RIVAL = 0.9           # removing this share of what the best removes makes a rival (misfit left)
+
+
+def explained(c: np.ndarray, cp: np.ndarray, r: np.ndarray, keep: np.ndarray | None = None
+               ) -> tuple[np.ndarray, float, np.ndarray]:
+    """For an effect's columns ``c`` and the part ``cp`` the model cannot absorb: each
+    column's visibility, the residual sum of squares its visible columns (or ``keep``)
+    remove, and their first-order amplitudes (0 for the invisible)."""
+    norms = np.linalg.norm(c, axis=0)
+    vis = np.where(norms > 0, np.linalg.norm(cp, axis=0) / np.where(norms > 0, norms, 1), 0.0)
+    keep = vis >= VISIBLE if keep is None else keep
+    amp = np.zeros(c.shape[1])
+    if not keep.any():
+        return vis, 0.0, amp
+    amp[keep] = np.linalg.lstsq(cp[:, keep], r, rcond=None)[0]
+    return vis, float(np.sum((cp[:, keep] @ amp[keep]) ** 2)), amp
+
+
+def p_value(drop: float, k: int, rss: float, dof: int, tried: int) -> float:
+    """F test of ``k`` added columns removing ``drop`` of ``rss``, Bonferroni over ``tried``."""
+    from scipy.special import fdtrc  # 0.3 s of import: only when a test is made
+
+    F = (drop / k) / max((rss - drop) / (dof - k), 1e-300)
+    return min(1.0, float(fdtrc(k, dof - k, F)) * tried)
+
+
+def still_significant(Q: np.ndarray, added: np.ndarray, r: np.ndarray, signatures,
+                       alpha: float) -> set[str]:
+    """Which effects of ``signatures`` ((effect, columns) pairs) stay significant once the
+    model (orthonormal columns ``Q``) is joined by the columns ``added``, first order;
+    Bonferroni over all of them. Only the added columns are orthogonalised anew."""
+    Qa, _ = np.linalg.qr(added - Q @ (Q.T @ added))
+
+    def off(v):   # what the joined model cannot absorb
+        return v - Q @ (Q.T @ v) - Qa @ (Qa.T @ v)
+
+    r1 = off(r)
+    rss, dof = float(r1 @ r1), r.size - Q.shape[1] - added.shape[1]
+    drops = []
+    for e, c in signatures:
+        vis_cols, drop, _ = explained(c, off(c), r1)
+        drops.append((e.name, drop, int((vis_cols >= VISIBLE).sum())))
+    return {name for name, drop, k in drops if k and p_value(drop, k, rss, dof, len(drops)) < alpha}
+
+
+def rivals(best: tuple[float, int], others: dict[str, tuple[float, int]], sigma2_w: float, alpha: float,
+           misfit_left: bool) -> tuple[str, ...]:
+    """The candidates these data cannot tell from the best: each removes as much of the
+    (whitened) residual within the noise, χ²(k, α)·σ̂², whatever its rank; and while the
+    best leaves misfit (it is not the whole story), also those removing ``RIVAL`` of it.
+    ``best`` and each of ``others`` (by name) are (residual sum of squares removed, columns
+    tested)."""
+    from scipy.special import chdtri
+
+    drop, k = best
+    within = chdtri(max(k, 1), alpha) * sigma2_w
+    return tuple(name for name, (d, k_o) in others.items() if k_o and (
+        drop - d < within or (misfit_left and d >= RIVAL * drop)))
+
+
+# One rule of separability, for fit and diagnose alike: the Jacobian's columns, each scaled
+# to unit norm, must have a condition number below this (the seed's K4 alone is 27,
+# K4+K1+K2 is 6); beyond it fit refuses the model and diagnose names nothing found.
+COND_LIMIT = 1000.0
+
+
+def condition(J: np.ndarray) -> float:
+    """The condition number of ``J`` with its columns scaled to unit norm (inf when a column
+    is zero or the columns are dependent). ``J`` may be any factor with the same Gram
+    matrix, e.g. R of its QR factorisation."""
+    norm = np.linalg.norm(J, axis=0)
+    if not np.all(norm > 0):
+        return np.inf
+    s = np.linalg.svd(J / norm, compute_uv=False)
+    return float(s[0] / s[-1]) if s[-1] > 0 else np.inf
