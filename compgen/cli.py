@@ -22,7 +22,7 @@ from .emit.kinematics import kinematics_edit
 from .emit.programs import MODES, NAME_MAX, at_ball, measure_program, program_ball, program_name
 from .emit.registry import CONTROLLERS, controller, for_program, read_edits
 from .errors import CONTROL, CompgenError
-from .files import read_text, write_all, write_atomically
+from .files import STDOUT, read_text, write_all, write_atomically
 from .gate import fit_gate, unit_suspicion
 from .identify import identify, parse_fixed
 from .machine import load_machine
@@ -97,6 +97,12 @@ class _Group(click.Group):
                             "Run again with COMPGEN_DEBUG=1 for the traceback and report it") from None
 
 
+def _said(output: str, text: str) -> None:
+    """What a command says once it has written ``output``: on stdout, unless the output
+    itself went there (-o -)."""
+    click.echo(text, err=output == STDOUT)
+
+
 def _progress(message: str) -> None:
     """One line on stderr before work that can take seconds, for a person at a terminal
     (a pipe or a script gets nothing)."""
@@ -133,6 +139,7 @@ def main():
 @click.option("--seed", type=int, default=None, help="Random seed, for a repeatable noise draw.")
 @click.option("--ball", default=None, help="Ball centre in the table frame, mm: X,Y,Z "
                                             "(default: the machine file's).")
+@click.option("--there-and-back", "back", is_flag=True, help="Run each path there and back.")
 @click.option("--edit", "edits", type=FILE, multiple=True,
               help="A kinematics edit compgen wrote (table, change list, $TC_CARR program, CEC "
                    "file): simulate the measurement after the control has loaded it. Repeatable.")
@@ -140,15 +147,15 @@ def main():
               help="With a $TC_CARR program: the record's values before the edit.")
 @OUTPUT
 @FORCE
-def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, ball, edits, current, output,
-                 force):
+def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, ball, back, edits, current,
+                 output, force):
     """Write the R-test CSV that a machine with the TRUTH errors would give."""
     machine = load_machine(machine_file)
     errors = read_truth(truth, machine)
     names = [p for p in path_names.split(",") if p.strip()]
     if not names:
         raise CompgenError("--paths names no path")
-    poses = generate(machine, names, ball=_vec3(ball, "--ball") if ball else None)
+    poses = generate(machine, names, ball=_vec3(ball, "--ball") if ball else None, back=back)
     drive = None
     if edits:
         held = read_edits(machine, {e: read_text(e, "edit", ansi_ok=True)[0] for e in edits},
@@ -162,7 +169,7 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
                 "dX dY dZ: nest minus ball, µm")
     write_atomically(output, format_rtest(machine, data, comments), force,
                      inputs=(machine_file, truth, *edits, current))
-    click.echo(f"wrote {output}: {len(poses)} poses ({', '.join(names)})")
+    _said(output, f"wrote {output}: {len(poses)} poses ({', '.join(names)})")
 
 
 @main.command("fit")
@@ -221,8 +228,7 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
     result = identify(machine, sets, model, fixed, method, sign)
     write_atomically(output, result.to_json(Path(output).resolve().parent), force,
                      inputs=(machine.source, base, *(s.source for s in sets)))
-    click.echo(result.report(), nl=False)
-    click.echo(f"\nwrote {output}")
+    _said(output, result.report() + f"\nwrote {output}")
     suspicion = unit_suspicion(sets)
     if suspicion:
         click.echo(f"compgen: warning: {suspicion}; kinematics will refuse this fit", err=True)
@@ -273,7 +279,7 @@ def predict_cmd(base, poses_file, output, force):
                 "the fit's set-up terms (ball offset) belong to its own set-up: compare with a "
                 "constant per set-up aside")
     write_atomically(output, format_rtest(machine, data, comments), force, inputs=(base, poses_file))
-    click.echo(f"wrote {output}: {len(poses)} poses predicted by {fit.marker}")
+    _said(output, f"wrote {output}: {len(poses)} poses predicted by {fit.marker}")
 
 
 @main.command("measure-program")
@@ -292,7 +298,7 @@ def predict_cmd(base, poses_file, output, force):
 @click.option("--mode", type=click.Choice(MODES), default="tcpm", show_default=True,
               help="tcpm: the control's kinematics (FUNCTION TCPM / TRAORI); axes: compgen's.")
 @click.option("-o", "--output", type=FILE, default=None,
-              help="Program file; its pose list goes beside it as <name>.poses.csv. Default: stdout.")
+              help="Program file; its pose list goes beside it as <stem>.poses.csv. Default: stdout.")
 @FORCE
 def measure_program_cmd(machine_file, path_names, poses_file, ball, back, controller_name, mode, output,
                         force):
@@ -313,15 +319,15 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, contro
     ctl = controller(controller_name or machine.controller)
     name = program_name(Path(output).stem if output else f"RTEST_{label}"[:NAME_MAX])
     emitted = measure_program(machine, poses, label, ctl.name, mode, name, __version__,
-                              date.today().isoformat())
+                              date.today().isoformat(), Path(output).stem if output else None)
     program = emitted.files[ctl.program_ext]
-    if not output:
+    if not output or output == STDOUT:
         click.echo(program, nl=False)
         click.echo("compgen: the pose list was not written; give -o FILE to get it beside the "
                    "program", err=True)
         return
     out = Path(output)
-    files = {out: program, out.with_name(f"{name}.poses.csv"): emitted.files[".poses.csv"]}
+    files = {out: program, out.with_name(f"{out.stem}.poses.csv"): emitted.files[".poses.csv"]}
     write_all(files, force, inputs=(machine_file, poses_file))
     click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, {mode} mode, "
                f"{ctl.words}", err=True)
@@ -335,7 +341,8 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, contro
 @click.option("--ball", default=None,
               help="The ball centre in the table frame, mm, X,Y,Z (default: the one the program's "
                    "header names, else the machine file's).")
-def check_program_cmd(machine_file, program, controller_name, ball):
+@click.option("--json", "as_json", is_flag=True, help="Print the check as JSON.")
+def check_program_cmd(machine_file, program, controller_name, ball, as_json):
     """Simulate PROGRAM block by block against the R-test set-up, travel and feeds."""
     from .motion import run
 
@@ -346,6 +353,16 @@ def check_program_cmd(machine_file, program, controller_name, ball):
                   next(((b, "the program's header") for b in [program_ball(text)] if b is not None),
                        (machine.ball, "the machine file")))
     result = run(at_ball(machine, at), ctl.blocks(text))
+    if as_json:
+        click.echo(json.dumps({
+            "format": "compgen.check/1", "program": program, "controller": ctl.name, "ok": not result.findings,
+            "ball_mm": list(at), "ball_from": source, "moves": result.blocks, "seconds": result.seconds,
+            "closest_mm": result.closest_mm, "closest_at": result.closest_at,
+            "findings": [{**f.__dict__, "text": f.text(program)} for f in result.findings]},
+            indent=2, ensure_ascii=False))
+        if result.findings:
+            raise SystemExit(1)
+        return
     for finding in result.findings:
         click.echo(finding.text(program))
     where = f"ball at {', '.join(f'{v:g}' for v in at)} mm (from {source})"
@@ -416,10 +433,16 @@ def compare_cmd(base, controller_name, post_files, as_json):
 @MACHINE
 @click.option("--dir", "folder", type=click.Path(file_okay=False), default=".", show_default=True,
               help="Work folder whose artefacts tick the steps.")
-def checklist_cmd(machine_file, folder):
+@click.option("--json", "as_json", is_flag=True, help="Print the checklist as JSON.")
+def checklist_cmd(machine_file, folder, as_json):
     """The commissioning checklist as Markdown, ticked from the files in --dir."""
     machine = load_machine(machine_file)
-    click.echo(markdown(machine, checklist(machine, folder)), nl=False)
+    steps = checklist(machine, folder)
+    if as_json:
+        click.echo(json.dumps({"format": "compgen.checklist/1", "machine": machine.name,
+                               "steps": [s.__dict__ for s in steps]}, indent=2, ensure_ascii=False))
+        return
+    click.echo(markdown(machine, steps), nl=False)
 
 
 @main.command("report")
@@ -452,15 +475,22 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, outpu
     html = report_html(machine, fit, found, images, comparison, emitted, steps, __version__,
                        date.today().isoformat())
     write_atomically(output, html, force, inputs=(base, before, *post_files, *emitted))
-    click.echo(f"wrote {output}")
+    _said(output, f"wrote {output}")
 
 
 @main.command("effects")
 @MACHINE
-def effects_cmd(machine_file):
+@click.option("--json", "as_json", is_flag=True, help="Print the catalogue as JSON.")
+def effects_cmd(machine_file, as_json):
     """List every effect the machine can carry, with the names `fit --model` accepts."""
     machine = load_machine(machine_file)
     default = set(location_model(machine))
+    if as_json:
+        click.echo(json.dumps({"format": "compgen.effects/1", "machine": machine.name, "effects": [
+            {"effect": e.name, "parameters": list(e.params), "unit": e.unit, "words": e.words,
+             "cause": e.cause, "default": e.name in default} for e in catalogue(machine)]},
+            indent=2, ensure_ascii=False))
+        return
     for e in catalogue(machine):
         mark = "*" if e.name in default else " "
         click.echo(f"{mark} {e.name:<14}{', '.join(e.params):<28}{e.words}")

@@ -437,7 +437,9 @@ def _telling_apart(machine: Machine, model_effects: Sequence[Effect], poses: Pos
 
     Returns, per rival, what tells it from the best (shortest first); the measurements that
     tell any pair apart, those telling every pair apart first; and per measurement the
-    pairs it leaves open."""
+    pairs it leaves open. The measurements come as a plan: each tells apart the most pairs
+    the ones before it leave open, until every pair is told apart or none is left that
+    would."""
     effects = [row.effect for row in group]
     amps = {row.effect.name: row.amp for row in group}
     p = sum(len(e.params) for e in model_effects)
@@ -465,9 +467,20 @@ def _telling_apart(machine: Machine, model_effects: Sequence[Effect], poses: Pos
         told = {pq for pq, g in gains.items() if g >= TELLS_APART * sigma2}
         if told:
             split[extra.label] = (extra, told, sum(gains.values()))
-    ranked = sorted(split.values(), key=lambda s: (len(pairs) - len(s[1]), len(s[0].poses), -s[2]))
-    ordered = advisor.runnable([s[0] for s in ranked], most=ADVISED)
-    open_ = {m.label: tuple(pq for pq in pairs if pq not in split[m.label][1]) for m in ordered}
+    # a plan, greedily: each next measurement tells apart the most pairs still open (the
+    # shortest among equals); more data never bring two hypotheses closer, so what each
+    # tells apart alone, it tells apart in the plan too
+    remaining, plan = set(pairs), []
+    while remaining:
+        ranked = sorted((s for s in split.values() if s[0] not in plan and s[1] & remaining),
+                        key=lambda s: (-len(s[1] & remaining), len(s[0].poses), -s[2]))
+        step = advisor.runnable([s[0] for s in ranked], most=1)
+        if not step:
+            break
+        plan.append(step[0])
+        remaining -= split[step[0].label][1]
+    open_ = {m.label: tuple(pq for pq in pairs if pq not in split[m.label][1]) for m in plan}
+    ordered = tuple(plan)
     best = effects[0].name
     by_rival = {}
     for e in effects[1:]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shlex
+from itertools import combinations
 
 from . import me
 from .advice import Measurement
@@ -61,14 +62,17 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
         lines += ["", f"  Not told apart: {', '.join(d.rivals)} {verb} these data as well as "
                       f"{best}, within their noise; no one of them is named as found."]
         if d.rivals_separated_by:
-            lines.append("  Measuring one of these would tell them apart (those telling every pair "
-                         "apart first, then the shortest):")
-            for m in d.rivals_separated_by[:3]:
-                open_ = d.rivals_open.get(m.label, ())
-                lines.append(f"    {m.label}" + (f" (leaves {', '.join(' / '.join(p) for p in open_)} "
-                                                "open)" if open_ else " (tells every pair apart)"))
+            plan = d.rivals_separated_by
+            told = set().union(*(_told(d, m) for m in plan))
+            left = [p for p in combinations((d.significant[0].effect, *d.rivals), 2) if p not in told]
+            lines.append(f"  To tell them apart, measure {'this' if len(plan) == 1 else 'these'}: "
+                         + ("together they tell every pair apart" if not left else
+                            "together they leave " + ", ".join(" / ".join(p) for p in left) + " open"))
+            for i, m in enumerate(plan, 1):
+                lines.append(f"   {i}. {m.label} (tells apart "
+                             + ", ".join(" / ".join(p) for p in sorted(_told(d, m))) + ")")
                 lines.append(f"      {_measure(d, m)}")
-            lines += _then(d.rivals_separated_by[0], fit, after)
+            lines += _then(plan, fit, after)
         else:
             lines += ["  No path or ball position of the machine file tells them apart: for every "
                       "set-up compgen can measure they predict the same readings (they differ by "
@@ -101,7 +105,7 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
             lines.append(f"  to look for them, {m.label} would show the most ({len(shows)}: "
                          f"{', '.join(shows[:6])}{', …' if len(shows) > 6 else ''}):")
             lines.append(f"    {m.label}: {_measure(d, m)}")
-            lines += _then(m, fit, after)
+            lines += _then([m], fit, after)
     silent = [c.effect for c in d.candidates if c.silent and not c.separated_by]
     if silent:
         lines += ["", "  no effect on any reading here (no lever arm to the nest or ball in this "
@@ -126,8 +130,16 @@ def _measure(d: Diagnosis, m: Measurement) -> str:
     return m.command(me(), d.machine_ref, d.program_ext)
 
 
-def _then(m: Measurement, fit: str, after: str) -> list[str]:
-    """What follows a measurement: its readings into a CSV, added to the fit's data."""
-    return [f"  run it; save the R-test's readings as {m.name}.csv (its pose list {m.name}.poses.csv with "
-            "dX dY dZ), then fit it together with these data and diagnose again:",
-            f"    {me()} fit --from {fit} --data {m.name}.csv -o {after}"]
+def _told(d: Diagnosis, m: Measurement) -> set[tuple[str, str]]:
+    """The pairs of rivals ``m`` tells apart on its own."""
+    group = (d.significant[0].effect, *d.rivals)
+    return set(combinations(group, 2)) - set(map(tuple, d.rivals_open.get(m.label, ())))
+
+
+def _then(ms, fit: str, after: str) -> list[str]:
+    """What follows measurements: their readings into CSV files, added to the fit's data."""
+    names = [m.name for m in ms]
+    csv = ", ".join(f"{n}.csv" for n in names)
+    return [f"  run {'it' if len(ms) == 1 else 'them'}; save the R-test's readings as {csv} (the pose "
+            "list beside each program, with dX dY dZ), then fit together with these data and diagnose again:",
+            f"    {me()} fit --from {fit} " + " ".join(f"--data {n}.csv" for n in names) + f" -o {after}"]

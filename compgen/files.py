@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import os
 import stat
+import sys
 import tempfile
 from pathlib import Path
 
@@ -65,6 +66,9 @@ def read_json(path: str | Path, what: str) -> dict:
     return doc
 
 
+STDOUT = "-"    # an output named so goes to standard output
+
+
 def _target(path: Path, force: bool, inputs: tuple[Path, ...]) -> None:
     """Refuse an output path before anything is written."""
     if CONTROL.search(str(path)):
@@ -97,6 +101,13 @@ def write_all(files: dict[str | Path, str], force: bool = False, inputs: tuple =
     """Write several files as one transaction: every target is checked, then every file is
     written to a temporary beside it, then all are renamed; a failure on the way removes the
     temporaries, so nothing of the set is left behind. Files get the umask's permissions."""
+    if STDOUT in map(str, files):     # -o -: the one file goes to standard output
+        if len(files) > 1:
+            raise CompgenError(f"-o - writes one file to standard output; this command writes {len(files)}",
+                               hint="give a file name")
+        sys.stdout.write(next(iter(files.values())))
+        sys.stdout.flush()
+        return
     paths = {Path(p): text for p, text in files.items()}
     sources = tuple(Path(p) for p in inputs if p)
     for path in paths:

@@ -2,10 +2,11 @@
 output file written. Good input: the commands do what the README says."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import BC_MACHINE, SEED_MACHINE, TABLE4, run
+from conftest import BC_MACHINE, ROOT, SEED_MACHINE, TABLE4, run
 
 GOOD_HEADER = "path,t,X,Y,Z,A,C,dX,dY,dZ"
 GOOD_ROW = "K4,0.000,-217.5040,-0.2790,241.3310,0.0000,0.0000,-7.8617,2.7427,-6.7288"
@@ -285,3 +286,34 @@ def test_measure_program_there_and_back_turns_every_axis_back(tmp_path):
     c = np.array([float(r[rows[0].index("C")]) for r in rows[1:]])
     assert len(c) == 242 and c[0] == c[-1] == 0.0 and c.max() == 360.0
     assert (np.diff(c[:121]) > 0).all() and (np.diff(c[121:]) < 0).all()
+
+
+def test_dash_output_goes_to_stdout_and_multi_file_outputs_refuse_it(hidden_session, tmp_path):
+    folder, data, fit = hidden_session
+    code, out, err = run("fit", "--from", fit, "-o", "-")
+    assert code == 0 and json.loads(out)["format"] == "compgen.fit/1" and "wrote -" in err
+    assert not (tmp_path / "-").exists() and not (folder / "-").exists()
+    code, out, err = run("kinematics", "--from", fit, "-o", "-", "--force")
+    assert code == 2 and "-o - writes one file" in err, err
+
+
+def test_fit_data_adds_to_the_fits_own_and_positional_data_are_refused_with_the_way(hidden_session, tmp_path):
+    folder, data, fit = hidden_session
+    more = tmp_path / "more.csv"
+    assert run("simulate", "--machine", SEED_MACHINE, "--truth", ROOT / "examples" / "truth-table4.json",
+               "--paths", "K2", "--ball", "-108.752,-0.1395,211.537", "--noise-um", "0.5", "--seed", "3",
+               "-o", more)[0] == 0
+    code, _, err = run("fit", "--from", fit, "--data", more, "-o", tmp_path / "f2.json")
+    assert code == 0, err
+    doc = json.loads((tmp_path / "f2.json").read_text())
+    assert len(doc["data"]) == len(json.loads(Path(fit).read_text())["data"]) + 1
+    code, _, err = run("fit", "--from", fit, more, "-o", tmp_path / "f3.json")
+    assert code == 2 and "--data" in err and not (tmp_path / "f3.json").exists()
+    code, _, err = run("fit", "--from", fit, "--data", data, "-o", tmp_path / "f4.json")
+    assert code == 2 and "same readings" in err, err
+
+
+@pytest.mark.parametrize("command", ["effects", "checklist"])
+def test_listing_commands_speak_json(command):
+    code, out, _ = run(command, "--machine", SEED_MACHINE, "--json")
+    assert code == 0 and json.loads(out)["format"] == f"compgen.{command}/1"

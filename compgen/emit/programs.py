@@ -69,8 +69,9 @@ def program_name(text: str, room: int = 0) -> str:
 
 
 def measure_program(machine: Machine, poses: Poses, label: str, controller_name: str, mode: str,
-                    name: str, version: str, date: str) -> Emitted:
+                    name: str, version: str, date: str, list_name: str | None = None) -> Emitted:
     """The program text and its pose list (CSV v1 without readings), checked for safety.
+    ``list_name`` is the pose list's file stem, as the user gave it (default ``name``).
 
     Each path label is a segment with its own approach and retract along machine Z, so a
     program may chain paths whose ends are far apart.
@@ -120,7 +121,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
         (f"mode TCPM: {ctl.tcp_words}, the control's kinematics moves X Y Z (tests the control)"
          if mode == "tcpm" else
          "mode AXES: X Y Z from compgen's inverse kinematics (tests compgen's nominal model)"),
-        f"path {ascii_text(label)}: {len(poses)} poses; pose list {name}.poses.csv, same order",
+        f"path {ascii_text(label)}: {len(poses)} poses; pose list {ascii_text(list_name or name)}.poses.csv, same order",
         f"{BALL_HEADER} " + " ".join(f"{c}{fmt(v, LINEAR_DECIMALS)}" for c, v in zip("XYZ", ball, strict=True))
         + f" mm; nest on tool {setup.tool}",
         "active preset: the machine file's origin (nominal intersection of the rotary axes)",
