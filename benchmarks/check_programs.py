@@ -13,7 +13,7 @@ from pathlib import Path
 
 from compgen.emit.programs import measure_program
 from compgen.emit.registry import controller
-from compgen.machine import load_machine
+from compgen.machine_file import load_machine
 from compgen.motion import run, safe_height
 from compgen.paths import generate
 

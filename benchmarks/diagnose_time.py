@@ -17,7 +17,7 @@ import numpy as np
 from compgen.diagnose import diagnose
 from compgen.effects import catalogue
 from compgen.identify import identify
-from compgen.machine import load_machine
+from compgen.machine_file import load_machine
 from compgen.paths import generate
 from compgen.simulate import read_truth, simulate
 

@@ -37,7 +37,7 @@ from compgen.diagnose import diagnose  # noqa: E402
 from compgen.effects import compose, location_model  # noqa: E402
 from compgen.identify import identify  # noqa: E402
 from compgen.kinematics import Model  # noqa: E402
-from compgen.machine import load_machine  # noqa: E402
+from compgen.machine_file import load_machine  # noqa: E402
 from compgen.paths import generate  # noqa: E402
 from compgen.rtest import RTestData  # noqa: E402
 from compgen.simulate import ar1_noise  # noqa: E402

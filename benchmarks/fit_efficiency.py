@@ -18,7 +18,7 @@ import numpy as np
 
 from compgen.identify import identify
 from compgen.kinematics import Model
-from compgen.machine import load_machine
+from compgen.machine_file import load_machine
 from compgen.paths import generate
 from compgen.simulate import read_truth, simulate
 from compgen.units import shown

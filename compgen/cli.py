@@ -25,7 +25,7 @@ from .errors import CONTROL, CompgenError
 from .files import STDOUT, read_text, write_all, write_atomically
 from .gate import fit_gate, unit_suspicion
 from .identify import identify, parse_fixed
-from .machine import load_machine
+from .machine_file import load_machine
 from .paths import generate
 from .report import report_html
 from .results import load_fit

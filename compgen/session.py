@@ -7,7 +7,8 @@ from pathlib import Path
 from . import me
 from .effects import effect_of_param
 from .errors import CompgenError
-from .machine import Machine, load_machine
+from .machine import Machine
+from .machine_file import load_machine
 from .results import FitResult
 from .rtest import RTestData, read_rtest
 

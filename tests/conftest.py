@@ -6,7 +6,7 @@ import pytest
 from click.testing import CliRunner
 
 from compgen.cli import main
-from compgen.machine import load_machine
+from compgen.machine_file import load_machine
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("COMPGEN_SHARED", ROOT.parent / "shared"))

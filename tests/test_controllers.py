@@ -17,7 +17,7 @@ from compgen.emit.linuxcnc import LinuxCNC
 from compgen.emit.registry import CONTROLLERS, read_edits, register
 from compgen.identify import identify
 from compgen.lines import AxisLine
-from compgen.machine import load_machine
+from compgen.machine_file import load_machine
 from compgen.paths import generate
 from compgen.rtest import RTestData
 from compgen.simulate import simulate

@@ -8,7 +8,7 @@ from conftest import SEED_MACHINE
 from compgen.effects import canonical, catalogue, location_model, resolve
 from compgen.errors import CompgenError
 from compgen.kinematics import Model, Poses
-from compgen.machine import load_machine
+from compgen.machine_file import load_machine
 from compgen.paths import generate
 
 SEED = load_machine(SEED_MACHINE)

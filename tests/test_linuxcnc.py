@@ -30,7 +30,7 @@ from compgen.emit.programs import measure_program
 from compgen.identify import identify
 from compgen.kinematics import Model, Poses
 from compgen.lines import controller_inverse
-from compgen.machine import load_machine
+from compgen.machine_file import load_machine
 from compgen.paths import generate
 from compgen.rtest import RTestData
 from compgen.simulate import simulate

@@ -14,7 +14,7 @@ import pytest
 from conftest import ARCSEC, ROOT, TABLE4, UM
 
 from compgen.effects import effect_name, effect_of_param
-from compgen.machine import load_machine
+from compgen.machine_file import load_machine
 
 NOISE_UM = 0.5
 SIGMA_AT_NOISE = 1.1                   # a final σ̂ within 10 % of the noise: nothing left

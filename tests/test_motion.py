@@ -12,7 +12,7 @@ import pytest
 from conftest import BC_MACHINE, SEED_MACHINE, run
 
 from compgen.emit.registry import controller
-from compgen.machine import load_machine
+from compgen.machine_file import load_machine
 from compgen.motion import safe_height
 
 PROGRAMS = [(m, c, mode, path) for m in ("seed", "bc") for c in ("itnc530", "sinumerik840d", "linuxcnc")

@@ -20,7 +20,7 @@ from compgen.emit.kinematics import kinematics_edit
 from compgen.identify import identify
 from compgen.kinematics import Model, Poses
 from compgen.lines import AxisLine, controller_inverse
-from compgen.machine import load_machine
+from compgen.machine_file import load_machine
 from compgen.paths import generate
 from compgen.rtest import RTestData
 from compgen.simulate import simulate

@@ -48,6 +48,12 @@ class Controller:
     pose_line: re.Pattern     # one measuring pose of a program it wrote
     tcpm_on: re.Pattern       # a program it wrote switches TCP on
     tcp_switchable = True     # a program switches TCP on and off (else: the configuration's)
+    section = ""              # its own table of the machine file, read by ``read_section``
+
+    def read_section(self, get, machine: Machine) -> dict:
+        """This control's table of the machine file, checked (``get`` names file and key in
+        every complaint, as ``machine_file`` reads every table)."""
+        raise NotImplementedError
 
     @staticmethod
     def number(value: float, decimals: int) -> str:

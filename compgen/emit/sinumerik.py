@@ -188,6 +188,35 @@ class Sinumerik840D(Controller):
     pose_line = re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)")
     tcpm_on = re.compile(r"^TRAORI\b", re.MULTILINE)
     tcp_switchable = True
+    section = "sinumerik"
+
+    def read_section(self, get, machine: Machine) -> dict:
+        """[sinumerik]: the $TC_CARR record, the axis vectors as the control holds them, and
+        the machine-axis names of the CEC tables."""
+        get.only({"tcarr", "vectors", "machine_axes"})
+        get.sub("vectors").only({a.name for a in machine.rotary_axes})
+        record = int(get.number("tcarr"))
+        kinds = {a.name: "P" if a.side == "workpiece" else "T" for a in machine.rotary_axes}
+        vectors = {}
+        for a in machine.rotary_axes:
+            v = np.array(get.sub("vectors").vec3(a.name))
+            if abs(np.linalg.norm(v) - 1) > 1e-9 or abs(abs(v["xyz".index(a.direction)]) - 1) > 1e-9:
+                raise CompgenError(f"must be the unit vector ±{a.direction} the control holds for "
+                                   f"{a.name}, got {v.tolist()}", where=get.sub("vectors").at(a.name))
+            vectors[a.name] = v
+        kind = "".join(sorted(set(kinds.values())))
+        names = {}
+        if "machine_axes" in get.doc:     # channel axis -> machine axis, for CEC tables (K3 p.248)
+            m = get.sub("machine_axes")
+            m.only(set(machine.axis_names))
+            for axis in machine.axes:
+                name = m.str(axis.name)
+                if not re.fullmatch(r"[A-Z][A-Z0-9_]{0,15}", name):
+                    raise CompgenError(f"machine-axis name {name!r} is not a SINUMERIK axis name "
+                                       "(letters, digits, _; e.g. X1, AX1)", where=m.at(axis.name))
+                names[axis.name] = name
+        return {"tcarr": record, "kind": {"P": "P", "T": "T"}.get(kind, "M"), "vectors": vectors,
+                "machine_axes": names}
 
     def main_suffix(self, current: str | None) -> str:
         return ".MPF"
