@@ -90,7 +90,7 @@ class Advisor:
 
 
 def _refusal(machine: Machine, m: Measurement) -> str | None:
-    from .emit.programs import measure_program   # the emitters build on the model, not back
+    from .emit.programs import measure_program  # the emitters build on the model, not back
 
     try:
         measure_program(machine, m.poses, m.path, machine.controller, MODE, "ADVICE", "", "")

@@ -355,7 +355,8 @@ def check_program_cmd(machine_file, program, controller_name, ball, as_json):
     result = run(at_ball(machine, at), ctl.blocks(text))
     if as_json:
         click.echo(json.dumps({
-            "format": "compgen.check/1", "program": program, "controller": ctl.name, "ok": not result.findings,
+            "format": "compgen.check/1", "program": program, "controller": ctl.name,
+            "ok": not result.findings,
             "ball_mm": list(at), "ball_from": source, "moves": result.blocks, "seconds": result.seconds,
             "closest_mm": result.closest_mm, "closest_at": result.closest_at,
             "findings": [{**f.__dict__, "text": f.text(program)} for f in result.findings]},

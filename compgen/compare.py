@@ -38,11 +38,13 @@ class Comparison:
     setup: tuple[str, ...]
     measured_post: dict | None = None
     warnings: tuple[str, ...] = ()      # what the prediction says against the edit
+    assumes: tuple[str, ...] = ()       # what the prediction takes as done besides loading files
 
     def to_dict(self) -> dict:
         out = {"format": "compgen.compare/1", "controller": self.controller, "before": self.before,
                "predicted_post": self.predicted_post, "not_compensated": list(self.not_compensated),
-               "setup_left_out": list(self.setup), "warnings": list(self.warnings)}
+               "setup_left_out": list(self.setup), "warnings": list(self.warnings),
+               "assumes": list(self.assumes)}
         if self.measured_post is not None:
             out["measured_post"] = self.measured_post
         return out
@@ -81,6 +83,7 @@ class Comparison:
             lines += ["", f"  stays in the prediction, {ctl} cannot hold it from compgen's files: "
                           + ", ".join(self.not_compensated)]
         lines.append(f"  left out, set-up not machine: {', '.join(self.setup)}")
+        lines += [f"  assumes: {a}" for a in self.assumes]
         lines += [f"  WARNING: {w}" for w in self.warnings]
         if self.measured_post:
             m = self.measured_post
@@ -109,8 +112,11 @@ def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, control
     before = _beyond_setup(machine, poses, y)
     pred = _beyond_setup(machine, after, predicted)
     measured = _measured(machine, fit, post, pred) if post else None
+    by_hand = ctl.tables_by_hand and p.tables
+    assumes = ((f"the compensation values of the edit's .comp.csv ({', '.join(p.tables)}) are entered "
+                f"into the {ctl.words}'s compensation tables by hand",) if by_hand else ())
     return Comparison(ctl.name, before, pred, tuple(not_held), tuple(p.setup), measured,
-                      tuple(_warnings(machine, fit, pred)))
+                      tuple(_warnings(machine, fit, pred)), assumes)
 
 
 def _warnings(machine: Machine, fit: FitResult, pred: dict) -> list[str]:

@@ -29,8 +29,7 @@ from .noise import ar1, outliers, whiten
 from .results import FitResult
 from .rtest import RTestData
 from .signature import columns, r_factor, signatures
-from .significance import (ALPHA, COND_LIMIT, VISIBLE, condition, explained, p_value, rivals,
-                           still_significant)
+from .significance import ALPHA, COND_LIMIT, VISIBLE, condition, explained, p_value, rivals, still_significant
 from .units import shown
 
 SEPARATES = 0.05      # visibility an extra measurement must give to count as separating
@@ -141,7 +140,8 @@ class Diagnosis:
                 "effect": c.effect, "significant": c.significant, "visible": c.visible,
                 "visibility": c.visibility, "rms_after_um": c.rms_after_um,
                 "p_value": c.p_value, "share_explained": c.share, "separable": c.separable,
-                "condition_with_it": c.condition if np.isfinite(c.condition) else None, "confounded_with": list(c.confounded_with),
+                "condition_with_it": c.condition if np.isfinite(c.condition) else None,
+                "confounded_with": list(c.confounded_with),
                 "separated_by": [m.to_dict() for m in c.separated_by], "silent": c.silent,
                 "amplitude": list(c.amplitude),
                 "amplitude_unit": c.unit, "description": c.description, "cause": c.cause}
@@ -278,7 +278,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
 
 
 def _program_ext(machine: Machine) -> str:
-    from .emit.registry import controller   # the emitters build on the model, not back
+    from .emit.registry import controller  # the emitters build on the model, not back
 
     return controller(machine.controller).program_ext
 

@@ -54,7 +54,8 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
         elif c.significant:
             lines.append(f"      seen, but not separable whole on these data (fit --add would refuse "
                          f"it: condition {c.condition:.3g}); "
-                         + (f"measure {c.separated_by[0].label} first: {_measure(d, c.separated_by[0])}" if c.separated_by else
+                         + (f"measure {c.separated_by[0].label} first: {_measure(d, c.separated_by[0])}"
+                            if c.separated_by else
                             "no set-up this machine can measure separates it"))
     if d.rivals:
         best = d.significant[0].effect

@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from .advice import Advisor
 from .effects import canonical, effect_of_param, location_model
 from .errors import CompgenError
 from .kinematics import Model, Poses
 from .machine import Machine
-from .advice import Advisor
 from .results import DataRef, Estimate, FitResult
 from .rtest import RTestData
 from .significance import COND_LIMIT, condition

@@ -5,18 +5,26 @@ from __future__ import annotations
 
 import hashlib
 import math
-import re
 import tomllib
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from .emit.registry import CONTROLLERS
 from .errors import CompgenError
 from .files import read_text
-from .machine import (LINEAR, ROTARY, DIRECTIONS, Axis, Limits, Machine, PathDef, ProgramSetup, Setup,
-                      check_ball, identifier)
+from .machine import (
+    DIRECTIONS,
+    LINEAR,
+    ROTARY,
+    Axis,
+    Limits,
+    Machine,
+    PathDef,
+    ProgramSetup,
+    Setup,
+    check_ball,
+    identifier,
+)
 
 TOP_KEYS = {"name", "controller", "workpiece", "tool", "rtest", "paths", "program", "limits",
             "tolerances"}

@@ -70,8 +70,7 @@ def test_ambiguous_scale_is_reported_with_the_measurement_that_resolves_it(seed_
     advice = [m for m in found.rivals_separated_by if "half its radius" in m.label]
     assert advice
     # what the plots draw: alike on the measured poses, apart on the advised measurement
-    from compgen.plots import rival_curves
-    from compgen.plots import figures
+    from compgen.plots import figures, rival_curves
     fit = identify(seed_machine, data)
     curves = rival_curves(seed_machine, poses, fit, found, found.rivals_separated_by[0])
     best, scale = curves[found.significant[0].effect], curves["EXX:p1"]

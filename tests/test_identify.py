@@ -73,9 +73,9 @@ def test_k2_alone_cannot_separate_and_says_what_would(seed_machine, rng):
     """K2 turns C at A = 0: four combinations are invisible, with coefficients derived here
     from the geometry, and the separating measurements are ranked by the condition number
     computed here from the stacked, column-normalised Jacobians."""
+    from compgen.advice import Advisor
     from compgen.identify import COND_LIMIT
     from compgen.kinematics import Model
-    from compgen.advice import Advisor
     data = simulate(seed_machine, TABLE4, generate(seed_machine, ["K2"]), NOISE_UM, rng)
     with pytest.raises(CompgenError) as exc:
         identify(seed_machine, [data])
@@ -250,9 +250,9 @@ def test_a_weak_pair_is_refused_and_only_what_separates_it_is_offered(seed_machi
     (condition computed here); K2 again, or higher, adds nothing and is not offered."""
     import dataclasses
 
+    from compgen.advice import Advisor
     from compgen.identify import COND_LIMIT, check_identifiable
     from compgen.kinematics import Model
-    from compgen.advice import Advisor
     k2 = dataclasses.replace(seed_machine, paths={"K2": seed_machine.paths["K2"]})
     m = Model(k2, ["YOW", "COA"])
     J = m.jacobian(generate(k2, ["K2"])).reshape(-1, 2)

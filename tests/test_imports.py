@@ -24,7 +24,8 @@ def _graph() -> dict[str, set[str]]:
                 base = package
                 for _ in range(node.level - 1):
                     base = base.rsplit(".", 1)[0]
-                target = (f"{base}.{node.module}" if node.module else base) if node.level else node.module or ""
+                target = ((f"{base}.{node.module}" if node.module else base) if node.level
+                          else node.module or "")
                 for alias in node.names:     # `from . import motion` names a module
                     sub = f"{target}.{alias.name}"
                     graph[name].add(sub if sub in modules else target)

@@ -49,7 +49,8 @@ def _printed(text: str, command: str) -> list[str]:
 def test_the_printed_commands_take_a_k4_session_to_the_noise(tmp_path, case):
     machine_name, hidden = CASES[case]           # a bundled machine: the printed commands name it so
     machine = load_machine(machine_name)
-    truth = {n: {"value": v, "unit": effect_of_param(machine, n).unit} for n, v in {**LOCATION[machine_name], **hidden}.items()}
+    truth = {n: {"value": v, "unit": effect_of_param(machine, n).unit}
+             for n, v in {**LOCATION[machine_name], **hidden}.items()}
     (tmp_path / "truth.json").write_text(json.dumps({"parameters": truth}))
     cg = f"{shlex.quote(sys.executable)} -m compgen"
     seed = iter(range(100, 200))

@@ -197,7 +197,8 @@ def test_a_program_for_a_ball_elsewhere_carries_it_and_passes_the_check(machines
     assert code == 0, err
     code, text, err = run("check-program", "--machine", machines["seed"], out)
     assert code == 0 and "from the program's header" in text, text + err
-    code, text, err = run("check-program", "--machine", machines["seed"], out, "--ball", "-217.504,-0.279,211.537")
+    code, text, err = run("check-program", "--machine", machines["seed"], out,
+                          "--ball", "-217.504,-0.279,211.537")
     assert code == 1 and "from --ball" in err, text + err
 
 

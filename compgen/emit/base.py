@@ -8,7 +8,10 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
-from ..correction import Held, Plan
+import numpy as np
+
+from ..correction import Held, Plan, comp_tables, squareness_tables
+from ..lines import AxisLine
 from ..machine import Machine
 from ..motion import Block
 from . import fmt_plain
@@ -75,13 +78,27 @@ class Controller:
         """The edit's files. ``current`` is the control's state as a text (or None)."""
         raise NotImplementedError
 
+    # What its edit loads, declared: compare, report and simulate --edit predict from these
+    holds_tilts = True        # its axis lines tilt (else: their positions only)
+    squareness_as = "rows"    # "rows" of its kinematics, "tables" (compensation), or "" (none)
+    holds_tables = True       # single-axis compensation tables (input axis → output axis)
+    tables_by_hand = False    # its tables' values are entered by hand (no file compgen writes loads)
+
     def holds(self, machine: Machine, p: Plan) -> Held:
-        """What the control holds once compgen's edit of ``p`` is loaded."""
-        raise NotImplementedError
+        """What the control holds once compgen's edit of ``p`` is loaded: the one function
+        every prediction of every control goes through."""
+        lines = p.lines if self.holds_tilts else {
+            n: AxisLine(n, line.nominal, line.pivot, line.offset, np.zeros(3)) for n, line in p.lines.items()}
+        tables = ((comp_tables(machine, p) if self.holds_tables else [])
+                  + (squareness_tables(machine, p) if self.squareness_as == "tables" else []))
+        return Held(lines, dict(p.squareness) if self.squareness_as == "rows" else {}, tuple(tables))
 
     def not_held(self, p: Plan) -> list[str]:
         """What of ``p`` stays in the machine after the edit, in words."""
-        raise NotImplementedError
+        tilts = [] if self.holds_tilts else [f"{n} tilt" for n, line in p.lines.items() if line.tilt.any()]
+        return [*tilts, *([] if self.squareness_as else p.squareness),
+                *([] if self.holds_tables else p.tables),
+                *p.not_compensable]
 
     def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
         """What the control holds now (``current``) beyond the state the data were measured

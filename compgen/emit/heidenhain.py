@@ -281,6 +281,7 @@ class Heidenhain(Controller):
     pose_line = re.compile(r"^\d+ L X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)R0 F\S+ ; pose (\d+)")
     tcpm_on = re.compile(r"^\d+ FUNCTION TCPM F", re.MULTILINE)
     number = staticmethod(fmt_signed)
+    tables_by_hand = True     # comp.csv: values for its compensation tables (layout unconfirmed, U8)
 
     def main_suffix(self, current: str | None) -> str:
         return ".TAB" if current is not None else ".txt"
@@ -310,12 +311,6 @@ class Heidenhain(Controller):
         if tables:
             files[".comp.csv"] = _comp_csv(tables)
         return EditFiles(files, tuple(notes))
-
-    def holds(self, machine: Machine, p: Plan) -> Held:
-        return Held(p.lines, dict(p.squareness))
-
-    def not_held(self, p: Plan) -> list[str]:
-        return [*p.tables, *p.not_compensable]
 
     def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
         nominal = nominal_lines(machine)

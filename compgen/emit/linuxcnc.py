@@ -153,6 +153,9 @@ class LinuxCNC(Controller):
     pose_line = re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)")
     tcpm_on = re.compile(r"^; mode TCPM", re.MULTILINE)
     tcp_switchable = False
+    holds_tilts = False           # trt kinematics: pivot positions only
+    squareness_as = ""
+    holds_tables = False          # joint COMP_FILE tables are not written (yet)
 
     def main_suffix(self, current: str | None) -> str:
         return ".hal"
@@ -171,14 +174,6 @@ class LinuxCNC(Controller):
             notes.append(f"{module}.tool-offset is not netted: net it to motion.tooloffset.z, or the "
                          "table turns about the spindle nose instead of the nest (G43 lengths)")
         return EditFiles({".hal": text}, tuple(notes))
-
-    def holds(self, machine: Machine, p: Plan) -> Held:
-        return Held({n: AxisLine(n, line.nominal, line.pivot, line.offset, np.zeros(3))
-                     for n, line in p.lines.items()}, {})
-
-    def not_held(self, p: Plan) -> list[str]:
-        tilts = [f"{n} tilt" for n, line in p.lines.items() if line.tilt.any()]
-        return [*tilts, *p.squareness, *p.tables, *p.not_compensable]
 
     def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
         return Held(read_lines(current, machine, measured, nominal_lines(machine)), {})

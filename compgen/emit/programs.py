@@ -121,8 +121,10 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
         (f"mode TCPM: {ctl.tcp_words}, the control's kinematics moves X Y Z (tests the control)"
          if mode == "tcpm" else
          "mode AXES: X Y Z from compgen's inverse kinematics (tests compgen's nominal model)"),
-        f"path {ascii_text(label)}: {len(poses)} poses; pose list {ascii_text(list_name or name)}.poses.csv, same order",
-        f"{BALL_HEADER} " + " ".join(f"{c}{fmt(v, LINEAR_DECIMALS)}" for c, v in zip("XYZ", ball, strict=True))
+        f"path {ascii_text(label)}: {len(poses)} poses; pose list "
+        f"{ascii_text(list_name or name)}.poses.csv, same order",
+        f"{BALL_HEADER} "
+        + " ".join(f"{c}{fmt(v, LINEAR_DECIMALS)}" for c, v in zip("XYZ", ball, strict=True))
         + f" mm; nest on tool {setup.tool}",
         "active preset: the machine file's origin (nominal intersection of the rotary axes)",
         f"feed {setup.feed:g} mm/min; dwell {setup.dwell:g} s per pose; clearance "

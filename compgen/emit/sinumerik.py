@@ -188,6 +188,7 @@ class Sinumerik840D(Controller):
     pose_line = re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)")
     tcpm_on = re.compile(r"^TRAORI\b", re.MULTILINE)
     tcp_switchable = True
+    squareness_as = "tables"      # CEC tables hold squareness and every single-axis table
     section = "sinumerik"
 
     def read_section(self, get, machine: Machine) -> dict:
@@ -255,12 +256,6 @@ class Sinumerik840D(Controller):
         if p.squareness:
             notes.append("squareness goes to linear CEC tables: " + ", ".join(p.squareness))
         return EditFiles(files, tuple(notes))
-
-    def holds(self, machine: Machine, p: Plan) -> Held:
-        return Held(p.lines, {}, tuple(comp_tables(machine, p) + squareness_tables(machine, p)))
-
-    def not_held(self, p: Plan) -> list[str]:
-        return list(p.not_compensable)
 
     def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
         if machine.sinumerik is None:
