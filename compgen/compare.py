@@ -11,7 +11,7 @@ it from every figure here, before and after alike, and it is named as left out.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -39,6 +39,7 @@ class Comparison:
     measured_post: dict | None = None
     warnings: tuple[str, ...] = ()      # what the prediction says against the edit
     assumes: tuple[str, ...] = ()       # what the prediction takes as done besides loading files
+    tolerances: dict = field(default_factory=dict)   # path → largest range allowed, µm
 
     def to_dict(self) -> dict:
         out = {"format": "compgen.compare/1", "controller": self.controller, "before": self.before,
@@ -55,9 +56,12 @@ class Comparison:
         out = []
         for name, pred in self.predicted_post["per_path"].items():
             meas = self.measured_post["per_path"].get(name) if self.measured_post else None
+            tol = self.tolerances.get(name)
             out.append({"path": name, "before": _rms(self.before["per_path"].get(name)),
                         "predicted": _rms(pred), "measured": _rms(meas) if meas else None,
-                        "range": pred["range_um"],
+                        "range": pred["range_um"], "tolerance": tol,
+                        "predicted_verdict": "" if tol is None else (
+                            "within" if max(pred["range_um"]) <= tol else "BEYOND"),
                         "verdict": (self.measured_post["verdicts"].get(name, "(none in machine file)")
                                     if self.measured_post else "")})
         return out
@@ -116,7 +120,7 @@ def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, control
     assumes = ((f"the compensation values of the edit's .comp.csv ({', '.join(p.tables)}) are entered "
                 f"into the {ctl.words}'s compensation tables by hand",) if by_hand else ())
     return Comparison(ctl.name, before, pred, tuple(not_held), tuple(p.setup), measured,
-                      tuple(_warnings(machine, fit, pred)), assumes)
+                      tuple(_warnings(machine, fit, pred)), assumes, dict(machine.tolerances))
 
 
 def _warnings(machine: Machine, fit: FitResult, pred: dict) -> list[str]:

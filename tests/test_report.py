@@ -14,8 +14,6 @@ from conftest import ROOT, SEED_MACHINE, run
 SESSION = ROOT / "examples" / "seed-session.csv"
 
 
-
-
 @pytest.fixture(scope="module")
 def work(tmp_path_factory):
     folder = tmp_path_factory.mktemp("work")
@@ -35,6 +33,19 @@ def test_report_is_self_contained_and_complete(work):
         assert part in html, part
     code, _, err = run("report", "--from", work / "fit2.json", "-o", out)
     assert code == 2 and "--force" in err
+
+
+def test_report_numbers_say_what_they_are(work):
+    """The caption names the RMS it shows; each path has its tolerance and verdict; a
+    p-value below double precision is not printed as 0."""
+    out = work / "captions.html"
+    assert run("report", "--from", work / "fit.json", "-o", out)[0] == 0
+    html = out.read_text()
+    assert "largest RMS" not in html and "RMS over dX, dY and dZ together" in html
+    for path, tol in (("K4", "10"), ("K1", "8"), ("K2", "8")):
+        assert re.search(rf"<td class=\"l\">{path}</td>(<td>[^<]*</td>){{3}}<td>{tol}</td><td class=\"l\">"
+                         r"(within|BEYOND)</td>", html), path
+    assert "&lt; 1e-300" in html and not re.search(r"<td>0</td><td class=\"l\">significant", html)
 
 
 def _chromium():
