@@ -7,7 +7,7 @@ On a pose commanded by TCPM or by compgen's inverse kinematics the nominal vecto
 to the resolution of the recorded X, Y, Z; subtracting it keeps that rounding (0.05 µm at
 four decimals) out of the model.
 
-References: seed report eqs. (1)–(8); ``shared/spec/rtest-format.md`` §2–3.
+References: seed report eqs. (1)–(8); ``docs/rtest-csv.md``.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ machine file's reader is ``machine_file.py``).
 The workpiece chain runs from the machine frame out to the table that carries the ball; the
 tool chain from the machine frame out to the spindle that carries the nest. Machine frame
 origin and orientation are the machine file's: on the seed machine, the nominal A/C
-intersection (``shared/spec/rtest-format.md`` §2).
+intersection (``docs/rtest-csv.md``).
 """
 
 from __future__ import annotations

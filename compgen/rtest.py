@@ -1,4 +1,4 @@
-"""R-test CSV v1 in and out (``shared/spec/rtest-format.md`` §1).
+"""R-test CSV v1 in and out (``docs/rtest-csv.md``).
 
 Reading converts to inside units (mm, rad; deviations in mm) and checks every cell; a
 problem names file, line and column. Writing keeps enough digits to round-trip to 1 pm.
