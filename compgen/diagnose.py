@@ -36,7 +36,7 @@ SEPARATES = 0.05      # visibility an extra measurement must give to count as se
 ABSORBS = 0.25        # share of an effect's signature a parameter must take to be named
 SILENT_UM = 1e-9      # µm per unit over all readings: the effect moves nothing at all
 TELLS_APART = 25.0    # σ̂² of misfit a measurement must add between two rivals (5 σ)
-ADVISED = 3           # measurements named per effect, shortest first
+ADVISED = 3           # measurements named per effect, shortest first (each written and motion-checked)
 
 
 @dataclass(frozen=True)
