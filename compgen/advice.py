@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .emit.programs import measure_program
 from .errors import CompgenError
 from .kinematics import Poses, motion_direction, runs
 from .machine import Machine
@@ -90,7 +91,6 @@ class Advisor:
 
 
 def _refusal(machine: Machine, m: Measurement) -> str | None:
-    from .emit.programs import measure_program  # the emitters build on the model, not back
 
     try:
         measure_program(machine, m.poses, m.path, machine.controller, MODE, "ADVICE", "", "")

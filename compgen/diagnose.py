@@ -22,6 +22,7 @@ import numpy as np
 
 from .advice import Advisor, Measurement
 from .effects import Effect, catalogue, effect_of_param, resolve
+from .emit.registry import controller
 from .errors import CompgenError
 from .kinematics import Model, Poses, runs
 from .machine import Machine
@@ -278,7 +279,6 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
 
 
 def _program_ext(machine: Machine) -> str:
-    from .emit.registry import controller  # the emitters build on the model, not back
 
     return controller(machine.controller).program_ext
 
