@@ -317,11 +317,12 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, contro
         poses = generate(machine, names, ball=_vec3(ball, "--ball") if ball else None, back=back)
         label = "+".join(names) + "_BACK" * back
     ctl = controller(controller_name or machine.controller)
+    output = None if output == STDOUT else output      # -o - is stdout, as no -o
     name = program_name(Path(output).stem if output else f"RTEST_{label}"[:NAME_MAX])
     emitted = measure_program(machine, poses, label, ctl.name, mode, name, __version__,
                               date.today().isoformat(), Path(output).stem if output else None)
     program = emitted.files[ctl.program_ext]
-    if not output or output == STDOUT:
+    if not output:
         click.echo(program, nl=False)
         click.echo("compgen: the pose list was not written; give -o FILE to get it beside the "
                    "program", err=True)

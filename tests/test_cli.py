@@ -317,3 +317,9 @@ def test_fit_data_adds_to_the_fits_own_and_positional_data_are_refused_with_the_
 def test_listing_commands_speak_json(command):
     code, out, _ = run(command, "--machine", SEED_MACHINE, "--json")
     assert code == 0 and json.loads(out)["format"] == f"compgen.{command}/1"
+
+
+def test_measure_program_dash_output_is_stdout_as_without_o(tmp_path):
+    code, out, err = run("measure-program", "--machine", SEED_MACHINE, "--path", "K2", "-o", "-")
+    assert code == 0 and "BEGIN PGM RTEST_K2 MM" in out and "pose list RTEST_K2.poses.csv" in out, out[:300]
+    assert "the pose list was not written" in err
