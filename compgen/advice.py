@@ -91,7 +91,6 @@ class Advisor:
 
 
 def _refusal(machine: Machine, m: Measurement) -> str | None:
-
     try:
         measure_program(machine, m.poses, m.path, machine.controller, MODE, "ADVICE", "", "")
     except CompgenError as exc:
