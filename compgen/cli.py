@@ -350,8 +350,8 @@ def check_program_cmd(machine_file, program, controller_name, ball, as_json):
     machine = load_machine(machine_file)
     ctl = controller(controller_name) if controller_name else for_program(Path(program).suffix, machine)
     text = read_text(program, "program", ansi_ok=True)[0]
-    header = None if ball else program_ball(text)     # --ball overrides the header, even a bad one
-    at, source = ((_vec3(ball, "--ball"), "--ball") if ball else
+    header = None if ball is not None else program_ball(text)   # --ball overrides the header
+    at, source = ((_vec3(ball, "--ball"), "--ball") if ball is not None else
                   (header, "the program's header") if header is not None else
                   (machine.ball, "the machine file"))
     result = run(at_ball(machine, at), ctl.blocks(text))

@@ -208,3 +208,11 @@ def test_a_program_naming_two_balls_is_refused(machines, tmp_path):
     bad = program.replace(line, line + "\n" + line.replace("X-217.5040", "X-100.0000"))
     code, out, err = _check(machines["seed"], tmp_path / "TWO.H", bad)
     assert code == 2 and "2 ball positions" in err, out + err
+
+
+def test_check_program_refuses_an_empty_or_impossible_ball_in_one_line(machines, tmp_path):
+    program = _write(tmp_path, machines["seed"], "itnc530", "tcpm", "K2")
+    for ball, words in (("", "--ball takes three numbers"), ("0,0,-50", "does not stand above the table top"),
+                        ("900,0,200", "does not stand on the table")):
+        code, _, err = run("check-program", "--machine", machines["seed"], program, "--ball", ball)
+        assert code == 2 and words in err and err.count("\n") == 1 and "the ball: the ball" not in err, err

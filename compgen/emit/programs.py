@@ -52,7 +52,7 @@ def at_ball(machine: Machine, ball) -> Machine:
     """The machine with its R-test ball at ``ball`` (mm, table frame), for everything that
     checks a program: the datum, the safe height and the set-up's solids."""
     ball = tuple(float(v) for v in ball)
-    check_ball(machine.setup, ball, "the ball")
+    check_ball(machine.setup, ball, "")
     return machine if np.allclose(ball, machine.ball, rtol=0, atol=1e-6) else replace(machine, ball=ball)
 
 
