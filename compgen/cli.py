@@ -406,7 +406,7 @@ def kinematics_cmd(base, controller_name, current, measured, output, force):
     name = program_name(out.stem, room=len("_SIGN"))
     emitted = kinematics_edit(machine, fit, ctl.name, text, current or "", name, __version__,
                               date.today().isoformat(), force,
-                              read_text(measured, "file", ansi_ok=True)[0] if measured else None)
+                              read_text(measured, "file", ansi_ok=True)[0] if measured else None, out.stem)
     main_key = ctl.main_suffix(text)
     files = {(out if key == main_key else out.with_name(out.stem + key)): body
              for key, body in emitted.files.items()}

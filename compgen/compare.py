@@ -110,7 +110,7 @@ def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, control
     x = np.array([fit.parameters[n].value for n in fit.model])
     residual = y - model.deviation(poses, x)
     p = plan(machine, fit, force=True)   # predict even what the limits would refuse to write
-    not_held = ctl.not_held(p)
+    not_held = ctl.not_held(machine, p)
     after = Poses(ctl.holds(machine, p).drive(machine, poses), poses.ball, poses.t, poses.path)
     predicted = model.relative(after, x) + residual
     before = _beyond_setup(machine, poses, y)

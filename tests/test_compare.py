@@ -8,6 +8,7 @@ from compgen.compare import compare
 from compgen.correction import Held
 from compgen.effects import location_model
 from compgen.emit.kinematics import kinematics_edit
+from compgen.emit.registry import controller as controller_of
 from compgen.emit.registry import read_edits
 from compgen.identify import identify
 from compgen.lines import AxisLine
@@ -56,20 +57,32 @@ TABLE_ONLY = {"ECC:h2c": 3 * ARCSEC, "EYY:p1": 8 * UM}    # a 2/rev angle error 
 @pytest.mark.parametrize("controller", ["itnc530", "tnc640", "sinumerik840d", "linuxcnc"])
 def test_the_prediction_loads_everything_the_edit_loads(bc_machine, controller):
     """Effects only a compensation table corrects: the prediction counts the tables the edit
-    writes (CEC; the values of HEIDENHAIN's comp.csv, entered by hand) and falls to the
-    noise; a control without them keeps the effects and says so."""
-    truth = {"XOB": 15 * UM, "ZOB": -20 * UM, "AOB": 6 * ARCSEC, "XOC": -7 * UM, "YOC": 11 * UM,
-             **TABLE_ONLY}
+    writes (CEC, LinuxCNC's joint tables; the values of HEIDENHAIN's comp.csv, entered by
+    hand) and falls to the noise. Location errors: what each control's kinematics holds
+    (LinuxCNC's trt pins hold no tilt)."""
+    tilts = {"AOB": 6 * ARCSEC} if controller_of(controller).holds_tilts else {}
+    truth = {"XOB": 15 * UM, "ZOB": -20 * UM, **tilts, "XOC": -7 * UM, "YOC": 11 * UM, **TABLE_ONLY}
     poses = generate(bc_machine, ["K4", "K1", "K2"])
     pre = simulate(bc_machine, truth, poses, NOISE_UM, np.random.default_rng(2))
     fit = identify(bc_machine, [pre], [*location_model(bc_machine), *TABLE_ONLY])
     result = compare(bc_machine, [pre], fit, controller)
-    if controller == "linuxcnc":          # trt pins only: the tables' effects stay, and are named
-        assert set(result.not_compensated) >= {"ECC:h2", "EYY:p1"}
-        assert result.predicted_post["rms_um"] > 2 * NOISE_UM
-    else:
-        assert result.not_compensated == ()
-        assert result.predicted_post["rms_um"] == pytest.approx(NOISE_UM, rel=0.05)
+    assert result.before["rms_um"] > 10 * NOISE_UM
+    assert result.not_compensated == (("B tilt", "C tilt") if controller == "linuxcnc" else ())
+    assert result.predicted_post["rms_um"] == pytest.approx(NOISE_UM, rel=0.05)
+
+
+def test_a_cross_table_stays_on_linuxcnc_and_is_named(bc_machine):
+    """A joint's table holds that axis's own error only: X's error as Y moves (a straightness)
+    stays, is named, and keeps the prediction above the noise."""
+    truth = {"XOC": -7 * UM, "YOC": 11 * UM, "EYY:p1": 8 * UM, "EXY:p2": 300 * UM}  # p2: µm at 1 m
+    poses = generate(bc_machine, ["K4", "K1", "K2"])
+    pre = simulate(bc_machine, truth, poses, NOISE_UM, np.random.default_rng(3))
+    fit = identify(bc_machine, [pre], [*location_model(bc_machine), "EYY:p1", "EXY:p2"])
+    result = compare(bc_machine, [pre], fit, "linuxcnc")
+    assert "EXY:p2" in result.not_compensated and "EYY:p1" not in result.not_compensated
+    assert result.predicted_post["rms_um"] > 2 * NOISE_UM
+    assert compare(bc_machine, [pre], fit, "sinumerik840d").predicted_post["rms_um"] == pytest.approx(
+        NOISE_UM, rel=0.05)
 
 
 def test_a_wrongly_signed_edit_is_caught_and_diagnosed(seed_machine, session):

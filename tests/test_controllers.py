@@ -52,11 +52,10 @@ class Toy(Controller):
                  for n, line in p.lines.items()]
         return EditFiles({".toy": "\n".join(body) + "\n"}, ("toy lines written",))
 
-    def holds(self, machine, p: Plan) -> Held:
-        return Held(p.lines, {})
+    squareness_as = ""            # it holds axis lines only: no squareness, no tables
 
-    def not_held(self, p: Plan) -> list[str]:
-        return [*p.squareness, *p.tables, *p.not_compensable]
+    def tables(self, machine, p: Plan) -> list:
+        return []
 
     def reads(self, text):
         return LINE.search(text) is not None

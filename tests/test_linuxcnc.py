@@ -24,9 +24,11 @@ import pytest
 from conftest import BC_MACHINE, ROOT, SEED_MACHINE, UM
 
 from compgen.correction import nominal_lines
+from compgen.effects import location_model
 from compgen.emit import linuxcnc
 from compgen.emit.kinematics import kinematics_edit
 from compgen.emit.programs import measure_program
+from compgen.emit.registry import read_edits
 from compgen.identify import identify
 from compgen.kinematics import Model, Poses
 from compgen.lines import controller_inverse
@@ -38,13 +40,17 @@ from compgen.simulate import simulate
 HERE = ROOT / "tests" / "linuxcnc"
 JOINT_MM = 1e-6     # LinuxCNC's trt inverse vs compgen's, both in double precision
 NOISE_UM = 0.5
-# what LinuxCNC's trt kinematics can hold: axis-line positions (and the ball's set-up)
+ARCSEC = np.pi / 648000
+# what LinuxCNC can hold: axis-line positions in the trt pins (and the ball's set-up), and
+# each axis's error along itself in its joint's compensation table
 TRUTH = {
     "xyzac": {"XOW": 4 * UM, "YOW": -6 * UM, "ZOW": 9 * UM, "YOA": 20 * UM, "ZOA": -15 * UM,
-              "XOC": 12 * UM, "YOC": -8 * UM},
+              "XOC": 12 * UM, "YOC": -8 * UM, "ECC:h2c": 4 * ARCSEC, "EAA:p1": 5 * ARCSEC},
     "xyzbc": {"XOW": -3 * UM, "YOW": 5 * UM, "ZOW": 7 * UM, "XOB": 18 * UM, "ZOB": -12 * UM,
-              "XOC": -9 * UM, "YOC": 14 * UM},
+              "XOC": -9 * UM, "YOC": 14 * UM, "ECC:h2s": -3 * ARCSEC, "EYY:p1": 10 * UM},
 }
+TABLES = {"xyzac": ["ECC:h2c", "ECC:h2s", "EAA:p1"], "xyzbc": ["ECC:h2c", "ECC:h2s", "EYY:p1"]}
+INI_LINE = re.compile(r"^#\s+\[JOINT_(\d)\] COMP_FILE = (\S+), COMP_FILE_TYPE = (\d)$", re.MULTILINE)
 
 pytestmark = pytest.mark.skipif(
     shutil.which("linuxcnc") is None and not os.environ.get("COMPGEN_REQUIRE_LINUXCNC"),
@@ -112,17 +118,23 @@ def end_linuxcnc(marker: str, grace_s: float = 10.0) -> None:
         lock.unlink()
 
 
-def run_linuxcnc(folder, machine, program: str, edit: str, budget_s: float = RUN_BUDGET_S
-                 ) -> dict[int, np.ndarray]:
+def run_linuxcnc(folder, machine, program: str, edit: str, budget_s: float = RUN_BUDGET_S,
+                 tables: dict[str, str] | None = None) -> dict[int, np.ndarray]:
     """Run ``program`` on a headless LinuxCNC with the configuration's pins and ``edit`` (a
-    further HAL file, as a user loads compgen's edit); settled joints by 1-based program
-    line, with the nest's tool length taken off Z (G43 adds it to the joint)."""
+    further HAL file, as a user loads compgen's edit) and the joint compensation ``tables``
+    (file name → text) put in the INI as the edit's header says; settled joints by 1-based
+    program line: the five joint positions then the five motor commands (with the tables'
+    trims), the nest's tool length taken off Z (G43 adds it to the joint)."""
     assert shutil.which("linuxcnc"), "LinuxCNC is required here (COMPGEN_REQUIRE_LINUXCNC)"
     module, tilt, _ = linuxcnc._trt(machine)
     folder.mkdir(exist_ok=True)
-    (folder / "sim.ini").write_text((HERE / "sim.ini.in").read_text()
-                                    .replace("@DRIVER@", str(HERE / "driver.py"))
-                                    .replace("@KINS@", module).replace("@TILT@", tilt.name))
+    ini = (HERE / "sim.ini.in").read_text().replace("@DRIVER@", str(HERE / "driver.py")).replace(
+        "@KINS@", module).replace("@TILT@", tilt.name)
+    for joint, file, kind in INI_LINE.findall(edit):
+        (folder / file).write_text((tables or {})[file])
+        ini = ini.replace(f"[JOINT_{joint}]\n",
+                          f"[JOINT_{joint}]\nCOMP_FILE = {file}\nCOMP_FILE_TYPE = {kind}\n")
+    (folder / "sim.ini").write_text(ini)
     (folder / "sim.hal").write_text(current_hal(machine))
     (folder / "edit.hal").write_text(edit or "# no edit\n")
     tool = machine.program.tool
@@ -159,7 +171,7 @@ def run_linuxcnc(folder, machine, program: str, edit: str, budget_s: float = RUN
     assert text.rstrip().endswith("done"), text[-500:]
     joints = {int(w[0]): np.array([float(v) for v in w[1:]])
               for w in (ln.split() for ln in text.splitlines()) if w[0].isdigit()}
-    return {k: v - [0, 0, machine.probe_length, 0, 0] for k, v in joints.items()}
+    return {k: v - [0, 0, machine.probe_length, 0, 0] * 2 for k, v in joints.items()}
 
 
 def _at_poses(joints: dict[int, np.ndarray], program: str) -> np.ndarray:
@@ -181,7 +193,7 @@ def test_linuxcnc_runs_the_k4_program_where_compgen_puts_it(machine, tmp_path):
     t0 = time.perf_counter()
     joints = run_linuxcnc(tmp_path / "run", machine, program, "")
     seconds = time.perf_counter() - t0
-    got = _at_poses(joints, program)
+    got = _at_poses(joints, program)[:, :5]
     want = np.loadtxt(listed.splitlines()[1:], delimiter=",", usecols=(1, 2, 3, 4, 5))
     np.testing.assert_allclose(got[:, :3], want[:, :3], rtol=0, atol=JOINT_MM)
     np.testing.assert_allclose(got[:, 3:], want[:, 3:], rtol=0, atol=1e-9)
@@ -189,28 +201,39 @@ def test_linuxcnc_runs_the_k4_program_where_compgen_puts_it(machine, tmp_path):
 
 
 def test_compgens_edit_loaded_into_linuxcnc_removes_what_it_can_hold(machine, tmp_path):
-    truth = TRUTH[linuxcnc._trt(machine)[0][:5]]
+    kins = linuxcnc._trt(machine)[0][:5]
+    truth = TRUTH[kins]
     full = generate(machine, ["K4", "K1", "K2"])
     rng = np.random.default_rng(11)
     pre = simulate(machine, truth, full, NOISE_UM, rng)
-    fit = identify(machine, [pre])
+    fit = identify(machine, [pre], [*location_model(machine), *TABLES[kins]])
     current = current_hal(machine)
-    hal = kinematics_edit(machine, fit, "linuxcnc", current, "sim.hal", "KIN", "0", "d").files[".hal"]
+    files = kinematics_edit(machine, fit, "linuxcnc", current, "sim.hal", "KIN", "0", "d").files
+    hal = files[".hal"]
     assert re.search(r"(?m)^sets zrot ", hal) and not re.search(r"(?m)^setp \S+z-rot-point", hal)
+    tables = {f"KIN{k}": v for k, v in files.items() if k.endswith(".comp")}
+    assert len(INI_LINE.findall(hal)) == len(tables) == 2           # C's table and A's or Y's
     subset = np.arange(0, 241, 6)                      # K4 comes first in ``full``
     poses = full.take(subset)
     program = measure_program(machine, poses, "K4", "linuxcnc", "tcpm", "K4", "0", "d").files[".ngc"]
-    joints = run_linuxcnc(tmp_path / "edit", machine, program, hal)
-    q = _at_poses(joints, program)
-    q[:, 3:] = np.radians(q[:, 3:])
-    # LinuxCNC drives exactly as compgen's model of that controller says it will
+    joints = run_linuxcnc(tmp_path / "edit", machine, program, hal, tables=tables)
+    at = _at_poses(joints, program)
+    q, motor = at[:, :5], at[:, 5:]
+    q[:, 3:], motor[:, 3:] = np.radians(q[:, 3:]), np.radians(motor[:, 3:])
+    # LinuxCNC drives exactly as compgen's model of that controller says it will: the pins
+    # move the joints, the tables' trims (as compgen reads its own files) move the motors
+    # (at the angles as the program rounds them)
+    held = read_edits(machine, {"KIN.hal": hal, **tables}, current)
     lines = linuxcnc.read_lines(hal, machine, current, nominal_lines(machine))
-    held = controller_inverse(machine, lines, q[:, 3:], poses.ball)
-    np.testing.assert_allclose(q[:, :3], held[:, :3], rtol=0, atol=JOINT_MM)
-    # the true machine, driven to LinuxCNC's joints, reads set-up and noise only; the
+    np.testing.assert_allclose(q[:, :3], controller_inverse(machine, lines, q[:, 3:], poses.ball)[:, :3],
+                               rtol=0, atol=JOINT_MM)
+    as_run = Poses(q, poses.ball, poses.t, poses.path)
+    np.testing.assert_allclose(motor, held.drive(machine, as_run), rtol=0, atol=JOINT_MM)
+    assert np.abs(motor - q).max() > 10 * JOINT_MM          # the trims did move the motors (mm, rad)
+    # the true machine, driven to LinuxCNC's motor positions, reads set-up and noise only; the
     # session records the nominal poses, as a real one would
     true = Model(machine, list(truth))
-    reading = true.relative(Poses(q, poses.ball, poses.t, poses.path), np.array(list(truth.values())))
+    reading = true.relative(Poses(motor, poses.ball, poses.t, poses.path), np.array(list(truth.values())))
     reading = reading + rng.normal(0, NOISE_UM * 1e-3, reading.shape)
     setup = ["XOW", "YOW", "ZOW"]
     before = identify(machine, [RTestData(poses, pre.deviation[subset])], setup)

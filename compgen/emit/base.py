@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..correction import Held, Plan, comp_tables, squareness_tables
+from ..correction import CompTable, Held, Plan, comp_tables, squareness_tables
 from ..lines import AxisLine
 from ..machine import Machine
 from ..motion import Block
@@ -28,6 +28,7 @@ class EditContext:
     version: str
     date: str
     marker: str = ""          # the fit's marker (``FitResult.marker``)
+    stem: str = ""            # the file stem the edit's files are written under (default: name)
 
 
 @dataclass(frozen=True)
@@ -81,24 +82,27 @@ class Controller:
     # What its edit loads, declared: compare, report and simulate --edit predict from these
     holds_tilts = True        # its axis lines tilt (else: their positions only)
     squareness_as = "rows"    # "rows" of its kinematics, "tables" (compensation), or "" (none)
-    holds_tables = True       # single-axis compensation tables (input axis → output axis)
     tables_by_hand = False    # its tables' values are entered by hand (no file compgen writes loads)
+
+    def tables(self, machine: Machine, p: Plan) -> list[CompTable]:
+        """The compensation tables its edit loads, as the control applies them."""
+        return comp_tables(machine, p) + (squareness_tables(machine, p) if self.squareness_as == "tables"
+                                          else [])
 
     def holds(self, machine: Machine, p: Plan) -> Held:
         """What the control holds once compgen's edit of ``p`` is loaded: the one function
         every prediction of every control goes through."""
         lines = p.lines if self.holds_tilts else {
             n: AxisLine(n, line.nominal, line.pivot, line.offset, np.zeros(3)) for n, line in p.lines.items()}
-        tables = ((comp_tables(machine, p) if self.holds_tables else [])
-                  + (squareness_tables(machine, p) if self.squareness_as == "tables" else []))
-        return Held(lines, dict(p.squareness) if self.squareness_as == "rows" else {}, tuple(tables))
+        return Held(lines, dict(p.squareness) if self.squareness_as == "rows" else {},
+                    tuple(self.tables(machine, p)))
 
-    def not_held(self, p: Plan) -> list[str]:
+    def not_held(self, machine: Machine, p: Plan) -> list[str]:
         """What of ``p`` stays in the machine after the edit, in words."""
         tilts = [] if self.holds_tilts else [f"{n} tilt" for n, line in p.lines.items() if line.tilt.any()]
+        in_tables = {t.effect for t in self.tables(machine, p)}
         return [*tilts, *([] if self.squareness_as else p.squareness),
-                *([] if self.holds_tables else p.tables),
-                *p.not_compensable]
+                *(e for e in p.tables if e not in in_tables), *p.not_compensable]
 
     def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
         """What the control holds now (``current``) beyond the state the data were measured

@@ -52,11 +52,12 @@ def sign_check(machine: Machine, p: Plan, ctl: Controller, name: str, version: s
 
 def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, current: str | None,
                     current_where: str, name: str, version: str, date: str, force: bool = False,
-                    measured: str | None = None) -> Emitted:
+                    measured: str | None = None, stem: str | None = None) -> Emitted:
     """The files of a kinematics edit for one control, with the sign check and notes.
 
     ``measured`` is the control's state while the data were measured, when it differs from
     ``current`` (part of a correction already loaded, say): the edit then writes the rest.
+    ``stem``: the file stem its files are written under, where one file names another.
     """
     ctl = controller(controller_name)
     for text in (current, measured):
@@ -81,7 +82,7 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
               "BACKUP FIRST: " + ctl.backup,
               f"then run the sign check {sign_name}: see its expected changes")
     words = lines_text(p)
-    ctx = EditContext(name, header, tuple(words), tuple(expect), version, date, fit.marker)
+    ctx = EditContext(name, header, tuple(words), tuple(expect), version, date, fit.marker, stem or name)
     edit = ctl.edit(machine, p, current, current_where, ctx)
     notes = [*words]
     if p.setup:

@@ -4,6 +4,15 @@ programs and HAL edits of the kinematics pins, and their reader.
 The pins (``src/emc/kinematics/trtfuncs.c``): C turns about the line through the rot
 point, the tilting axis about the line through the rot point plus the offsets. They hold
 axis-line positions only: angular location errors cannot be expressed.
+
+An axis's error along itself (a linear positioning error, a rotary axis's angle error) goes
+to the joint's compensation table, ``[JOINT_n] COMP_FILE`` with ``COMP_FILE_TYPE = 1``:
+lines "nominal trim-up trim-down" in machine units, ascending, at most 256
+(``EMCMOT_COMP_SIZE``, ``src/emc/motion/motion.h``); the trim, interpolated, is added to the
+joint's command (``src/emc/motion/control.c``); beyond the last line the end trim holds. The
+loader reads triplets up to the first line that is not one (``usrmotintf.cc``), so compgen's
+notes close the file. The tables use the trt modules' joint numbers for their default
+coordinates (X Y Z, the tilting axis, C: joints 0–4), as LinuxCNC prints them at start.
 """
 
 from __future__ import annotations
@@ -12,7 +21,7 @@ import re
 
 import numpy as np
 
-from ..correction import ARCSEC, Held, Plan, nominal_lines, pivot_of
+from ..correction import ARCSEC, CompTable, Held, Plan, comp_tables, nominal_lines, pivot_of
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
@@ -24,6 +33,10 @@ from .base import Controller, EditContext, EditFiles
 SETP = re.compile(r"^\s*setp\s+(\S+?)\.(\S+)\s+(\S+)", re.MULTILINE)
 SETS = re.compile(r"^\s*sets\s+(\S+)\s+(\S+)", re.MULTILINE)
 NET = re.compile(r"^\s*net\s+(\S+)\s+(.*)$", re.MULTILINE)
+COMP_ENTRIES = 256           # EMCMOT_COMP_SIZE: the lines a joint's table may hold
+TURNS_DEG = 1260.0           # a full-turn axis's table repeats its turn over ±this (≤ 256 lines)
+COMP_NOTE = re.compile(r"^# compgen joint compensation for LinuxCNC: joint (\d+) = ([A-Z]) \((mm|deg)\)",
+                       re.MULTILINE)
 
 
 def _trt(machine: Machine) -> tuple[str, object, object]:
@@ -92,7 +105,8 @@ def pins(machine: Machine, p: Plan, current: str | None,
     new = {n: held[n] + (delta_r if n.endswith("rot-point") else delta_d)["xyz".index(n[0])] for n in names}
     other = [f"{n} tilt {line.tilt[i] / ARCSEC:+.2f} arcsec about {'XYZ'[i]}"
              for n, line in p.lines.items() for i in range(3) if line.tilt[i] != 0]
-    other += [*p.squareness, *p.tables, *p.not_compensable]
+    in_joints = {t.effect for t in joint_tables(machine, p)}
+    other += [*p.squareness, *(e for e in p.tables if e not in in_joints), *p.not_compensable]
     rows = [("sets", signal[n], fmt_plain(new[n], 6), fmt_plain(held[n], 6)) if n in signal else
             ("setp", f"{module}.{n}", fmt_plain(new[n], 6), fmt_plain(held[n], 6)) for n in names]
     return module, rows, other
@@ -110,6 +124,84 @@ def read_lines(text: str, machine: Machine, current: str | None,
     zero = np.zeros(3)
     return {**lines, c.name: AxisLine(c.name, c.direction, lines[c.name].pivot, r, zero),
             tilt.name: AxisLine(tilt.name, tilt.direction, lines[tilt.name].pivot, r + d, zero)}
+
+
+def joint_number(machine: Machine, axis: str) -> int:
+    """The joint of ``axis`` in the trt module's default coordinates (XYZAC, XYZBC)."""
+    return _trt(machine)[0][:5].upper().index(axis)
+
+
+def joint_tables(machine: Machine, p: Plan) -> list[CompTable]:
+    """The tables LinuxCNC's joint compensation holds: an axis's error along itself, as the
+    joint's trim. A full-turn axis's turn repeats over ±``TURNS_DEG`` within its travel
+    (LinuxCNC does not wrap a joint's table)."""
+    out = []
+    for t in comp_tables(machine, p):
+        if t.input != t.output:
+            continue                   # a cross table: no joint's own error
+        if t.modulo:
+            travel = machine.axis(t.input).travel
+            first = np.ceil(max(travel[0], -TURNS_DEG) / t.step) * t.step
+            grid = np.arange(first, min(travel[1], TURNS_DEG) + t.step / 2, t.step)
+            values = np.interp(t.start + np.mod(grid - t.start, t.stop - t.start), t.grid, t.values)
+            t = CompTable(t.effect, t.words, t.input, t.output, float(grid[0]), float(grid[-1]),
+                          tuple(float(v) for v in values), False, t.unit)
+        out.append(t)
+    return out
+
+
+def comp_files(machine: Machine, p: Plan, ctx: EditContext) -> dict[str, tuple[int, str]]:
+    """Suffix → (joint, text) of each joint's COMP_FILE: the effects on one joint summed."""
+    by_axis: dict[str, list[CompTable]] = {}
+    for t in joint_tables(machine, p):
+        by_axis.setdefault(t.input, []).append(t)
+    out = {}
+    for axis, tables in by_axis.items():
+        joint, t = joint_number(machine, axis), tables[0]
+        trims = np.sum([tb.values for tb in tables], axis=0)
+        if len(trims) > COMP_ENTRIES:      # a guard: the grids above stay within it
+            raise CompgenError(f"joint {joint}'s table would need {len(trims)} lines; LinuxCNC takes "
+                               f"{COMP_ENTRIES}")
+        digits = 7 if t.unit == "deg" else 6
+        rows = [f"{fmt_plain(x, 6)} {fmt_plain(v, digits)} {fmt_plain(v, digits)}"
+                for x, v in zip(t.grid, trims, strict=True)]
+        notes = [f"compgen joint compensation for LinuxCNC: joint {joint} = {axis} ({t.unit})",
+                 *ctx.header[:3],
+                 "corrects: " + "; ".join(f"{tb.effect} ({tb.words})" for tb in tables),
+                 f"INI: [JOINT_{joint}] COMP_FILE = {ctx.stem}.{axis}.comp and COMP_FILE_TYPE = 1",
+                 "lines: nominal, trim moving up, trim moving down; the trim is added to the command",
+                 f"beyond {t.input} {t.start:g}..{t.stop:g} {t.unit} the end trim holds",
+                 "LinuxCNC reads up to the first line that is not three numbers: these notes"]
+        out[f".{axis}.comp"] = (joint, "\n".join([*rows, *(f"# {n}" for n in notes)]) + "\n")
+    return out
+
+
+def read_comp(text: str, machine: Machine, where: str) -> CompTable:
+    """A joint table compgen wrote, read as LinuxCNC reads it (triplets to the first other
+    line), the joint's axis from compgen's closing notes."""
+    note = COMP_NOTE.search(text)
+    if note is None:
+        raise CompgenError("a joint compensation file without compgen's closing notes: which joint "
+                           "it is for is unknown", where=where, hint="give the .comp file compgen wrote")
+    rows = []
+    for k, line in enumerate(text.splitlines(), start=1):
+        words = line.split()
+        if len(words) != 3 or line.startswith("#"):
+            break
+        rows.append([number(w, f"line {k}", where) for w in words])
+    if not rows or any(r[1] != r[2] for r in rows):
+        raise CompgenError("the joint table is empty or its trims differ by direction (compgen writes "
+                           "equal ones)", where=where, hint="give the .comp file as compgen wrote it")
+    grid, trims = np.array(rows)[:, 0], np.array(rows)[:, 1]
+    if np.any(np.diff(grid) <= 0):
+        raise CompgenError("the joint table's nominal positions do not increase: LinuxCNC refuses it",
+                           where=where)
+    axis = note[2]
+    if joint_number(machine, axis) != int(note[1]):
+        raise CompgenError(f"the table says joint {note[1]} = {axis}; the trt module's joint of {axis} is "
+                           f"{joint_number(machine, axis)}", where=where)
+    # beyond the first and last line LinuxCNC holds the end trims: so does np.interp
+    return CompTable("", "", axis, axis, float(grid[0]), float(grid[-1]), tuple(trims), False, note[3])
 
 
 POSITION = {"5420": "X", "5421": "Y", "5422": "Z", "5423": "A", "5424": "B", "5425": "C"}
@@ -155,7 +247,9 @@ class LinuxCNC(Controller):
     tcp_switchable = False
     holds_tilts = False           # trt kinematics: pivot positions only
     squareness_as = ""
-    holds_tables = False          # joint COMP_FILE tables are not written (yet)
+
+    def tables(self, machine: Machine, p: Plan) -> list[CompTable]:
+        return joint_tables(machine, p)
 
     def main_suffix(self, current: str | None) -> str:
         return ".hal"
@@ -166,20 +260,30 @@ class LinuxCNC(Controller):
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:
         module, rows, other = pins(machine, p, current, where)
+        comps = comp_files(machine, p, ctx)
+        ini = [f"[JOINT_{joint}] COMP_FILE = {ctx.stem}{suffix}, COMP_FILE_TYPE = 1"
+               for suffix, (joint, _) in comps.items()]
         text = render("linuxcnc/kinematics.hal.j2", header=ctx.header, module=module, lines=ctx.lines,
-                      rows=rows, other=other)
+                      rows=rows, other=other, ini=ini)
         notes = [f"{cmd} {target} {v}  (was {w})" for cmd, target, v, w in rows]
-        notes.append("not expressible in the trt kinematics: " + ", ".join(other))
+        if ini:
+            notes += ["joint compensation tables: add to the INI (replacing any COMP_FILE or BACKLASH "
+                      "of these joints)", *(f"  {line}" for line in ini),
+                      "they hold this fit's correction alone: where a joint had a COMP_FILE loaded while "
+                      "measuring, add its trims to the new ones (compgen does not compose tables yet)"]
+        if other:
+            notes.append("not expressible in LinuxCNC's trt kinematics and joint tables: " + ", ".join(other))
         if current is not None and "tool-offset" not in read_hal(current, module, where)[1]:
             notes.append(f"{module}.tool-offset is not netted: net it to motion.tooloffset.z, or the "
                          "table turns about the spindle nose instead of the nest (G43 lengths)")
-        return EditFiles({".hal": text}, tuple(notes))
+        return EditFiles({".hal": text, **{k: body for k, (_, body) in comps.items()}}, tuple(notes))
 
     def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
         return Held(read_lines(current, machine, measured, nominal_lines(machine)), {})
 
     def reads(self, text: str) -> bool:
-        return SETP.search(text) is not None or (SETS.search(text) is not None and "kinematics edit" in text)
+        return (SETP.search(text) is not None or COMP_NOTE.search(text) is not None
+                or (SETS.search(text) is not None and "kinematics edit" in text))
 
     def check_setup(self, machine: Machine) -> None:
         if not re.fullmatch(r"\d{1,5}", machine.program.tool):
@@ -187,4 +291,6 @@ class LinuxCNC(Controller):
                                where=f"{machine.source}: [program] tool", hint='e.g. tool = "99"')
 
     def read(self, machine: Machine, text: str, current: str | None, held: Held, where: str) -> Held:
+        if COMP_NOTE.search(text):
+            return Held(held.lines, held.squareness, (*held.tables, read_comp(text, machine, where)))
         return Held(read_lines(text, machine, current, held.lines), held.squareness, held.tables)

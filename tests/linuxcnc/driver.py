@@ -1,12 +1,16 @@
 #!/usr/bin/python3
 """The 'display' of the test configuration: switch on, home, run $COMPGEN_NGC in AUTO,
-and write the settled joint positions per program line to $COMPGEN_JOINTS."""
+and write the settled joint positions per program line to $COMPGEN_JOINTS: the joints'
+commanded positions, then their motor commands (with the joint compensation tables' trims)."""
 import os
 import time
 
+import hal
 import linuxcnc
 
 s, c = linuxcnc.stat(), linuxcnc.command()
+reader = hal.component("compgen-driver")
+reader.ready()
 
 
 def wait(cond, seconds=30):
@@ -28,19 +32,34 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
         c.teleop_enable(0)
         c.home(-1)
         wait(lambda: all(s.homed[:5]))
+        # every joint out and back, as homing moves it on a real machine: a joint's
+        # compensation table applies once it has moved (control.c keeps the last trim while
+        # a joint stands, and it starts at zero)
+        axes = linuxcnc.ini(os.environ["INI_FILE_NAME"]).find("TRAJ", "COORDINATES")
+        c.mode(linuxcnc.MODE_MDI)
+        wait(lambda: s.task_mode == linuxcnc.MODE_MDI)
+        for value in (1, 0):
+            c.mdi("G90 G0 " + " ".join(f"{a}{value}" for a in axes))
+            c.wait_complete(30)
+            wait(lambda: s.interp_state == linuxcnc.INTERP_IDLE and s.inpos)
         c.mode(linuxcnc.MODE_AUTO)
         wait(lambda: s.task_mode == linuxcnc.MODE_AUTO)
         c.program_open(os.environ["COMPGEN_NGC"])
         c.auto(linuxcnc.AUTO_RUN, 0)
         wait(lambda: s.interp_state != linuxcnc.INTERP_IDLE, 10)
-        settled = {}
+        settled, last = {}, None
         end = time.time() + 600
         while time.time() < end:
             s.poll()
             if s.interp_state == linuxcnc.INTERP_IDLE and s.queue == 0:
                 break
-            if s.current_vel == 0:
-                settled[s.motion_line] = list(s.joint_actual_position[:5])
+            # joint and motor commands read from HAL together; settled when at rest and
+            # unchanged since the last sample (the status buffer lags HAL by a cycle or so)
+            now = [hal.get_value(f"joint.{j}.{pin}")
+                   for pin in ("pos-cmd", "motor-pos-cmd") for j in range(5)]
+            if s.current_vel == 0 and now == last:
+                settled[s.motion_line] = now
+            last = now
             time.sleep(0.002)
         for line in sorted(settled):
             out.write(f"{line} " + " ".join(f"{v:.9f}" for v in settled[line]) + "\n")
