@@ -32,8 +32,8 @@ from .machine import Machine
 from .transforms import apply
 
 STEP_MM, STEP_DEG = 1.0, 0.5
-POINT_MM = 2.0           # spacing of the spheres along the housing and spindle axes
-CHUNK = 2000             # samples checked at once (memory: ~250 spheres each)
+SEARCH_MM = 0.01         # the closest point along housing and spindle axes, found to this
+GOLDEN = (np.sqrt(5.0) - 1) / 2
 ON_BALL_MM = 1e-3        # the nest centre this close to the ball's: a measuring pose
 
 
@@ -157,33 +157,62 @@ def from_world(machine: Machine, xyz: np.ndarray, rot_rad: np.ndarray) -> np.nda
 def clearances(machine: Machine, q: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Per pose: the clearance (mm, negative = inside) of each pair (housing or spindle
     against ball, stem, table), and whether the nest is measuring there (its axis within
-    ``nest_range`` of the ball's centre, the nest on the ball or above it)."""
+    ``nest_range`` of the ball's centre, the nest on the ball or above it).
+
+    Housing and spindle are capsules about the tool axis; ball, stem and table are convex,
+    so the (signed) distance from them is convex along the axis: its least value over the
+    part is found by golden-section search, to ``SEARCH_MM``."""
     s = machine.setup
     _, nest, axis = _frames(machine, q)                                      # table frame
     ball = np.asarray(machine.ball)
     rb = s.ball_diameter / 2
+    stem_top = ball[2] - rb
+    top, bottom = s.table_top, s.table_top - s.table_thickness
+
+    def to_ball(p):
+        return np.linalg.norm(p - ball, axis=-1) - rb
+
+    def to_stem(p):
+        z = np.clip(p[..., 2], s.table_top, stem_top)
+        return np.sqrt((p[..., 0] - ball[0])**2 + (p[..., 1] - ball[1])**2 + (p[..., 2] - z)**2) \
+            - s.stem_diameter / 2
+
+    def to_table(p):
+        radial, z = np.hypot(p[..., 0], p[..., 1]), p[..., 2]
+        dz = np.maximum(np.maximum(z - top, bottom - z), 0.0)
+        dr = np.maximum(radial - s.table_radius, 0.0)
+        depth = np.minimum(np.minimum(top - z, z - bottom), s.table_radius - radial)
+        return np.where((dz == 0) & (dr == 0), -depth, np.hypot(dz, dr))
+
     out = {}
     parts = {"housing": (-s.nest_below, machine.probe_length, s.nest_radius),
              "spindle": (machine.probe_length, machine.probe_length + s.spindle_length, s.spindle_radius)}
     for part, (lo, hi, radius) in parts.items():
-        t = np.arange(lo, hi + POINT_MM / 2, POINT_MM)
-        pts = nest[:, None, :] + t[None, :, None] * axis[:, None, :]            # (n, m, 3)
-        out[f"{part} / ball"] = (np.linalg.norm(pts - ball, axis=2) - rb).min(axis=1) - radius
-        stem_top = ball[2] - rb
-        z = np.clip(pts[..., 2], s.table_top, stem_top)
-        d_stem = np.linalg.norm(pts - np.stack([np.full_like(z, ball[0]), np.full_like(z, ball[1]), z], -1),
-                                axis=2)
-        out[f"{part} / stem"] = (d_stem - s.stem_diameter / 2).min(axis=1) - radius
-        radial, z = np.hypot(pts[..., 0], pts[..., 1]), pts[..., 2]
-        top, bottom = s.table_top, s.table_top - s.table_thickness
-        dz = np.maximum(np.maximum(z - top, bottom - z), 0.0)
-        dr = np.maximum(radial - s.table_radius, 0.0)
-        depth = np.minimum(np.minimum(top - z, z - bottom), s.table_radius - radial)
-        d_table = np.where((dz == 0) & (dr == 0), -depth, np.hypot(dz, dr))
-        out[f"{part} / table"] = d_table.min(axis=1) - radius
+        for thing, dist in (("ball", to_ball), ("stem", to_stem), ("table", to_table)):
+            out[f"{part} / {thing}"] = _least_along(dist, nest, axis, lo, hi) - radius
     off_axis = np.linalg.norm(np.cross(ball - nest, axis), axis=1)
     above = np.einsum("ni,ni->n", nest - ball, axis) > -s.nest_range
     return out, (off_axis <= s.nest_range) & above
+
+
+def _least_along(dist, nest: np.ndarray, axis: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """The least of a convex ``dist`` over the points ``nest + t·axis``, lo ≤ t ≤ hi, per pose
+    (golden-section search, both ends included)."""
+    n = len(nest)
+    a, b = np.full(n, lo), np.full(n, hi)
+
+    def at(t):
+        return dist(nest + t[:, None] * axis)
+    c, d = b - GOLDEN * (b - a), a + GOLDEN * (b - a)
+    fc, fd = at(c), at(d)
+    while (b - a).max() > SEARCH_MM:
+        left = fc < fd
+        b = np.where(left, d, b)
+        a = np.where(left, a, c)
+        c, d = np.where(left, b - GOLDEN * (b - a), d), np.where(left, c, a + GOLDEN * (b - a))
+        new = at(np.where(left, c, d))
+        fc, fd = np.where(left, new, fd), np.where(left, fc, new)
+    return np.minimum.reduce([fc, fd, at(a), at(b)])
 
 
 @dataclass
@@ -274,7 +303,8 @@ def run(machine: Machine, blocks: list[Block]) -> Check:
     _paths(machine, segments, linear, rotary)
     closest = (np.inf, "")
     checkable = []
-    for seg in segments:
+    moved, fastest, outside = _per_segment(machine, segments)
+    for seg, per_axis, top_step, out in zip(segments, moved, fastest, outside, strict=True):
         b, path = seg.block, seg.path
         delta = np.nan_to_num(path[-1] - path[0])
         if seg.tcp:
@@ -282,8 +312,9 @@ def run(machine: Machine, blocks: list[Block]) -> Check:
         else:
             travel_mm = float(np.linalg.norm(delta[linear]))
         turn_deg = float(np.degrees(np.abs(delta[rotary])).max()) if rotary else 0.0
-        seconds += _seconds(machine, b, path, travel_mm, turn_deg, findings)
-        _check_travel(machine, b, path, findings)
+        seconds += _seconds(machine, b, path, per_axis, top_step, travel_mm, turn_deg, findings)
+        if out:
+            _check_travel(machine, b, path, findings)
         # an axis whose start is unknown (the program's first moves) is safe only where
         # nothing can be touched: at the safe height
         if seg.blind or np.isnan(path).any():
@@ -335,13 +366,27 @@ def _axes_text(machine: Machine, q: np.ndarray) -> str:
                     for a, v in zip(machine.axes, q, strict=True))
 
 
-def _seconds(machine: Machine, b: Block, path: np.ndarray, travel_mm: float, turn_deg: float,
-             findings: list) -> float:
+def _per_segment(machine: Machine, segments: list[_Segment]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For every move at once (mm and deg): each axis's distance moved and its largest step
+    between samples, and whether an axis leaves its travel."""
+    k = len(machine.axes)
+    if not segments:
+        return np.zeros((0, k)), np.zeros((0, k)), np.zeros(0, bool)
+    scale = np.array([180 / np.pi if a.rotary else 1.0 for a in machine.axes])
+    paths = np.concatenate([seg.path for seg in segments]) * scale
+    starts = np.cumsum([0] + [len(seg.path) for seg in segments[:-1]])
+    step = np.nan_to_num(np.abs(np.diff(paths, axis=0)))
+    step[starts[1:] - 1] = 0.0                   # from one move's end to the next's start
+    # every path has two samples or more (``_samples``): each move owns one step or more
+    moved, fastest = np.add.reduceat(step, starts, axis=0), np.maximum.reduceat(step, starts, axis=0)
+    lo, hi = np.array([a.travel for a in machine.axes]).T
+    bad = ((paths < lo - 1e-9) | (paths > hi + 1e-9)).any(axis=1)
+    return moved, fastest, np.logical_or.reduceat(bad, starts)
+
+
+def _seconds(machine: Machine, b: Block, path: np.ndarray, per_axis: np.ndarray, top_step: np.ndarray,
+             travel_mm: float, turn_deg: float, findings: list) -> float:
     """Time of a move, and a finding where an axis would exceed its feed_max."""
-    step = np.abs(np.diff(path, axis=0))
-    step = np.where(np.isnan(step), 0.0, step)
-    per_axis = np.array([np.degrees(step[:, i]).sum() if a.rotary else step[:, i].sum()
-                         for i, a in enumerate(machine.axes)])
     limits = np.array([a.feed_max for a in machine.axes])
     if b.rapid or b.feed is None:
         return float((per_axis / limits).max() * 60.0) if per_axis.any() else 0.0
@@ -350,8 +395,7 @@ def _seconds(machine: Machine, b: Block, path: np.ndarray, travel_mm: float, tur
     minutes = (travel_mm if travel_mm > 1e-9 else turn_deg) / b.feed
     if minutes <= 0:
         return 0.0
-    speed = np.array([np.degrees(step[:, i]).max() if a.rotary else step[:, i].max()
-                      for i, a in enumerate(machine.axes)]) * (len(step) / minutes)
+    speed = top_step * ((len(path) - 1) / minutes)
     over = np.flatnonzero(speed > limits * (1 + 1e-9))
     if over.size:
         i = over[int(np.argmax(speed[over] / limits[over]))]
@@ -375,15 +419,13 @@ def _check_travel(machine: Machine, b: Block, path: np.ndarray, findings: list) 
 
 
 def _check_collisions(machine: Machine, segments: list[_Segment], findings: list):
-    """Clearances of all samples at once (in chunks); the first violation of each pair in
+    """Clearances of all samples at once; the first violation of each pair in
     each block is a finding. Returns the closest approach outside the measuring exemption."""
     paths = np.concatenate([seg.path for seg in segments])
     owner = np.concatenate([np.full(len(seg.path), i) for i, seg in enumerate(segments)])
-    chunks = [clearances(machine, paths[i:i + CHUNK]) for i in range(0, len(paths), CHUNK)]
-    measuring = np.concatenate([c[1] for c in chunks])
+    pairs, measuring = clearances(machine, paths)
     closest = (np.inf, "")
-    for pair in chunks[0][0]:
-        c = np.concatenate([ch[0][pair] for ch in chunks])
+    for pair, c in pairs.items():
         if pair in ("housing / ball", "housing / stem"):
             c = np.where(measuring, np.inf, c)
         j = int(np.argmin(c))
