@@ -7,6 +7,8 @@ References: ``docs/diagnose.md`` (visibility, bias, F and score tests).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 ALPHA = 0.01          # family-wise false-alarm rate over all effects tried
@@ -31,10 +33,66 @@ def explained(c: np.ndarray, cp: np.ndarray, r: np.ndarray, keep: np.ndarray | N
 
 def p_value(drop: float, k: int, rss: float, dof: int, tried: int) -> float:
     """F test of ``k`` added columns removing ``drop`` of ``rss``, Bonferroni over ``tried``."""
-    from scipy.special import fdtrc  # 0.3 s of import: only when a test is made
-
     F = (drop / k) / max((rss - drop) / (dof - k), 1e-300)
-    return min(1.0, float(fdtrc(k, dof - k, F)) * tried)
+    return min(1.0, f_sf(F, k, dof - k) * tried)
+
+
+# The two distributions diagnose needs, in the standard library's arithmetic (scipy.special
+# alone costs diagnose more start-up than numpy's import; the tests hold these to scipy's).
+
+def f_sf(F: float, k: int, m: int) -> float:
+    """P(F(k, m) > F): the regularized incomplete beta I_x(m/2, k/2) at x = m/(m + kF)."""
+    return 1.0 if not F > 0 else _betainc(m / 2, k / 2, m / (m + k * F))
+
+
+def _betainc(a: float, b: float, x: float) -> float:
+    """I_x(a, b) by its continued fraction (modified Lentz, Numerical Recipes 6.4), taken on
+    the side where it converges fast; exact in log space down to the smallest doubles."""
+    if x <= 0.0 or x >= 1.0:
+        return 0.0 if x <= 0.0 else 1.0
+    if x > (a + 1) / (a + b + 2):
+        return 1.0 - _betainc(b, a, 1.0 - x)
+    tiny, c, d = 1e-300, 1.0, 1.0 - (a + b) * x / (a + 1)
+    d = 1.0 / (d if abs(d) > tiny else tiny)
+    h = d
+    for n in range(1, 100_000):
+        for num in (n * (b - n) * x / ((a + 2 * n - 1) * (a + 2 * n)),
+                    -(a + n) * (a + b + n) * x / ((a + 2 * n) * (a + 2 * n + 1))):
+            d, c = 1.0 + num * d, 1.0 + num / c
+            d, c = 1.0 / (d if abs(d) > tiny else tiny), (c if abs(c) > tiny else tiny)
+            h *= d * c
+        if abs(d * c - 1.0) < 1e-15:
+            break
+    log_front = (a * math.log(x) + b * math.log1p(-x) - math.log(a)
+                 + math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b))
+    return math.exp(log_front) * h
+
+
+def chi2_sf(x: float, k: int) -> float:
+    """P(χ²(k) > x) for whole ``k``, in closed form (a finite sum, and erfc for odd k)."""
+    y = x / 2
+    if k % 2 == 0:
+        term, total = 1.0, 1.0
+        for j in range(1, k // 2):
+            term *= y / j
+            total += term
+        return math.exp(-y) * total
+    term, total = math.sqrt(y), 0.0
+    for j in range(1, (k + 1) // 2):
+        total += term
+        term *= y / (j + 0.5)
+    return math.erfc(math.sqrt(y)) + math.exp(-y) * total / math.gamma(1.5)
+
+
+def chi2_isf(alpha: float, k: int) -> float:
+    """The x with P(χ²(k) > x) = alpha, by bisection (the tail falls monotonically)."""
+    lo, hi = 0.0, max(1.0, 2.0 * k)
+    while chi2_sf(hi, k) > alpha:
+        lo, hi = hi, 2 * hi
+    for _ in range(200):
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if chi2_sf(mid, k) > alpha else (lo, mid)
+    return (lo + hi) / 2
 
 
 def still_significant(Q: np.ndarray, added: np.ndarray, r: np.ndarray, signatures,
@@ -63,10 +121,8 @@ def rivals(best: tuple[float, int], others: dict[str, tuple[float, int]], sigma2
     best leaves misfit (it is not the whole story), also those removing ``RIVAL`` of it.
     ``best`` and each of ``others`` (by name) are (residual sum of squares removed, columns
     tested)."""
-    from scipy.special import chdtri
-
     drop, k = best
-    within = chdtri(max(k, 1), alpha) * sigma2_w
+    within = chi2_isf(alpha, max(k, 1)) * sigma2_w
     return tuple(name for name, (d, k_o) in others.items() if k_o and (
         drop - d < within or (misfit_left and d >= RIVAL * drop)))
 

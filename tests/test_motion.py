@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 from conftest import BC_MACHINE, SEED_MACHINE, run
 
+from compgen import motion
 from compgen.emit.registry import controller
 from compgen.machine_file import load_machine
-from compgen.motion import safe_height
+from compgen.motion import clearances, safe_height
 
 PROGRAMS = [(m, c, mode, path) for m in ("seed", "bc") for c in ("itnc530", "sinumerik840d", "linuxcnc")
             for mode in ("tcpm", "axes") for path in ("K4", "K1,K2", "all")]
@@ -216,3 +217,40 @@ def test_check_program_refuses_an_empty_or_impossible_ball_in_one_line(machines,
                         ("900,0,200", "does not stand on the table")):
         code, _, err = run("check-program", "--machine", machines["seed"], program, "--ball", ball)
         assert code == 2 and words in err and err.count("\n") == 1 and "the ball: the ball" not in err, err
+
+
+def test_the_searched_clearance_is_the_least_along_housing_and_spindle():
+    """The golden-section search against a brute force: every part sampled every 0.02 mm,
+    at random poses around the set-up (near the ball, the stem and the table's face)."""
+    m = load_machine(SEED_MACHINE)
+    s = m.setup
+    rng = np.random.default_rng(5)
+    n = 400
+    q = np.zeros((n, len(m.axes)))
+    for i, a in enumerate(m.axes):
+        lo, hi = a.travel
+        q[:, i] = np.radians(rng.uniform(max(lo, -100), min(hi, 100))) if a.rotary else rng.uniform(
+            max(lo, -150), min(hi, 150), n)
+    q[:, m.index("Z")] = rng.uniform(m.axis("Z").travel[0], m.axis("Z").travel[0] + 300, n)
+    got, _ = clearances(m, q)
+    _, nest, axis = motion._frames(m, q)
+    ball, rb = np.asarray(m.ball), s.ball_diameter / 2
+    parts = {"housing": (-s.nest_below, m.probe_length, s.nest_radius),
+             "spindle": (m.probe_length, m.probe_length + s.spindle_length, s.spindle_radius)}
+    for part, (lo, hi, radius) in parts.items():
+        t = np.linspace(lo, hi, int((hi - lo) / 0.02) + 1)
+        pts = nest[:, None, :] + t[None, :, None] * axis[:, None, :]
+        brute = (np.linalg.norm(pts - ball, axis=2) - rb).min(axis=1) - radius
+        np.testing.assert_allclose(got[f"{part} / ball"], brute, atol=0.02)
+        z = np.clip(pts[..., 2], s.table_top, ball[2] - rb)
+        stem = np.hypot(np.hypot(pts[..., 0] - ball[0], pts[..., 1] - ball[1]), pts[..., 2] - z)
+        np.testing.assert_allclose(got[f"{part} / stem"], (stem - s.stem_diameter / 2).min(axis=1) - radius,
+                                   atol=0.02)
+        radial, z = np.hypot(pts[..., 0], pts[..., 1]), pts[..., 2]
+        top, bottom = s.table_top, s.table_top - s.table_thickness
+        outside = np.hypot(np.maximum(np.maximum(z - top, bottom - z), 0),
+                           np.maximum(radial - s.table_radius, 0))
+        inside = -np.minimum(np.minimum(top - z, z - bottom), s.table_radius - radial)
+        table = np.where(outside > 0, outside, inside).min(axis=1) - radius
+        np.testing.assert_allclose(got[f"{part} / table"], table, atol=0.02)
+        assert (got[f"{part} / table"] < 0).any() or part == "spindle"     # some poses reach in

@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 import threadpoolctl
 from conftest import ROOT, SEED_MACHINE, run
 
@@ -27,6 +28,18 @@ def _imported_by(statement: str) -> list[str]:
 def test_the_cli_and_the_fit_import_nothing_heavy():
     assert _imported_by("import compgen.cli") == []
     assert _imported_by("import compgen.diagnose, compgen.compare, compgen.report") == []
+
+
+def test_diagnose_needs_no_scipy(tmp_path):
+    """The F and χ² tails are compgen's own: a whole diagnose imports no scipy (its import
+    alone cost diagnose more start-up than numpy's)."""
+    fit = tmp_path / "fit.json"
+    assert run("fit", "--machine", SEED_MACHINE, SESSION, "-o", fit)[0] == 0
+    code = ("import sys; from compgen.cli import main\n"
+            "try:\n    main(['diagnose', '--from', sys.argv[1], '--json'])\nexcept SystemExit:\n    pass\n"
+            "sys.stderr.write('\\nscipy: ' + ' '.join(m for m in sys.modules if m.split('.')[0] == 'scipy'))")
+    out = subprocess.run([sys.executable, "-c", code, str(fit)], capture_output=True, text=True)
+    assert '"found"' in out.stdout and out.stderr.splitlines()[-1] == "scipy: ", out.stderr[-500:]
 
 
 def _evaluations(monkeypatch, machine, method):
@@ -68,3 +81,23 @@ def test_the_p_value_is_the_f_distributions_tail():
         F = (drop / k) / ((rss - drop) / (dof - k))
         want = min(1.0, stats.f.sf(F, k, dof - k) * 86)
         np.testing.assert_allclose(_p_value(drop, k, rss, dof, 86), want, rtol=1e-12)
+
+
+def test_the_distributions_diagnose_uses_are_scipys():
+    """compgen's F and χ² tails (standard library arithmetic, no scipy at run time) against
+    scipy's, from p near 1 to the smallest doubles, for the sizes diagnose meets."""
+    from scipy import special, stats
+
+    from compgen.significance import chi2_isf, chi2_sf, f_sf
+    for k in (1, 2, 3, 4, 6, 9):
+        for m in (3, 10, 50, 300, 2158, 20000, 200000):
+            for F in (0.0, 1e-3, 0.3, 1.0, 2.0, 5.0, 20.0, 100.0, 1e3, 1e5):
+                want = float(special.fdtrc(k, m, F))
+                if want > 1e-290:
+                    assert f_sf(F, k, m) == pytest.approx(want, rel=1e-8, abs=0), (k, m, F)
+                else:
+                    assert f_sf(F, k, m) < 1e-280
+        for x in (0.01, 0.5, 1.0, 3.0, 10.0, 40.0, 200.0, 1000.0):
+            assert chi2_sf(x, k) == pytest.approx(stats.chi2.sf(x, k), rel=1e-12, abs=1e-300)
+        for alpha in (0.5, 0.01, 1e-6):
+            assert chi2_isf(alpha, k) == pytest.approx(stats.chi2.isf(alpha, k), rel=1e-10)
