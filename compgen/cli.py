@@ -244,14 +244,19 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
                    "and the rivals on the measurement that tells them apart.")
 @click.option("--before", type=FILE, default=None,
               help="An earlier fit.json of the same data, drawn beside this one in the plots.")
-def diagnose_cmd(base, as_json, candidates, plots_dir, before):
+@click.option("--noise-um", "noise_um", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="The R-test's own noise, 1σ per reading, µm (default: the machine file's "
+                   "[rtest] noise_um). With it, the residual is tested against it per path and "
+                   "direction, and what no catalogue effect explains is called unexplained.")
+def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um):
     """Where the model fails, and which effects would explain the misfit."""
     fit = load_fit(base)
     machine, sets = reload(fit)
     names = [c.strip() for c in candidates.split(",") if c.strip()] if candidates else None
     _progress(f"trying {'the catalogue' if names is None else len(names)} effects against "
               f"{sum(len(s) for s in sets)} poses")
-    result = diagnose(machine, sets, fit, names, fit_file=base, machine_ref=machine_ref(fit))
+    result = diagnose(machine, sets, fit, names, fit_file=base, machine_ref=machine_ref(fit),
+                      noise_um=noise_um)
     if plots_dir:
         from .plots import write_plots  # matplotlib only when asked for
         earlier = load_fit(before) if before else None

@@ -28,6 +28,7 @@ from .results import FitResult
 
 ARCSEC = np.pi / 648000.0
 TABLE_POINTS = 37        # interpolation points of a generated compensation table
+PER_PITCH = 8            # table points a periodic error needs per pitch
 
 
 @dataclass(frozen=True)
@@ -101,6 +102,8 @@ def _compensable_by_table(machine: Machine, e) -> bool:
     axis = machine.axis(e.carrier)
     if axis.rotary:
         return e.direction == ROT_OF[axis.direction]
+    if e.basis.kind == "w" and np.ptp(_grid(axis)) / (TABLE_POINTS - 1) > e.basis.pitch / PER_PITCH:
+        return False              # a table this coarse would alias the period
     chain = machine.workpiece if axis.side == "workpiece" else machine.tool
     ahead = chain[:chain.index(axis)]
     return e.direction in TRANSLATIONS and not any(a.rotary for a in ahead)

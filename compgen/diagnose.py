@@ -30,7 +30,18 @@ from .noise import ar1, outliers, whiten
 from .results import FitResult
 from .rtest import RTestData
 from .signature import columns, r_factor, signatures
-from .significance import ALPHA, COND_LIMIT, VISIBLE, condition, explained, p_value, rivals, still_significant
+from .significance import (
+    ALPHA,
+    COND_LIMIT,
+    VISIBLE,
+    condition,
+    explained,
+    lack_of_fit,
+    p_value,
+    rivals,
+    still_significant,
+)
+from .spectrum import Line, strongest_lines
 from .units import shown
 
 SEPARATES = 0.05      # visibility an extra measurement must give to count as separating
@@ -38,6 +49,13 @@ ABSORBS = 0.25        # share of an effect's signature a parameter must take to 
 SILENT_UM = 1e-9      # µm per unit over all readings: the effect moves nothing at all
 TELLS_APART = 25.0    # σ̂² of misfit a measurement must add between two rivals (5 σ)
 ADVISED = 3           # measurements named per effect, shortest first (each written and motion-checked)
+# Where the residual exceeds the R-test's own noise, the best candidate must remove this
+# share of the excess to be named: a catalogue curve that fits a little of an effect outside
+# the catalogue by chance (a 5 mm screw period removed ~10 % as EXC:h3) is not its cause
+SHARE_OF_EXCESS = 1 / 3
+# Without the R-test's noise: a periodic line along a linear axis (no catalogue effect has
+# that shape) removing this many times what the best candidate removes is what is missing
+LINE_OVER_BEST = 2.0
 
 
 @dataclass(frozen=True)
@@ -92,6 +110,35 @@ class Diagnosis:
     rivals_open: dict = field(default_factory=dict)   # label → pairs of rivals it leaves apart
     machine_ref: str = ""   # how a command names the machine file (--machine)
     program_ext: str = ""   # the suffix of the machine's control's programs
+    device_noise_um: float | None = None   # the R-test's own noise, when given
+    misfit: tuple[dict, ...] = ()   # (path, direction) whose residual exceeds that noise, worst first
+    lines: tuple[Line, ...] = ()    # the residual's strongest periodic line against each coordinate
+    best_share_of_excess: float | None = None   # of the residual beyond the noise, the best removes
+    best_sum_sq: float = 0.0        # the residual sum of squares the best significant candidate removes, mm²
+
+    @property
+    def unexplained(self) -> bool:
+        """No catalogue effect accounts for the misfit: the residual exceeds the R-test's
+        noise and none is significant, or the best removes less than ``SHARE_OF_EXCESS`` of
+        the excess; or a periodic line along a linear axis removes ``LINE_OVER_BEST`` times
+        what the best does (Bonferroni over the lines)."""
+        by_noise = bool(self.misfit) and (not self.significant or (self.best_share_of_excess or 0.0)
+                                          < SHARE_OF_EXCESS)
+        return by_noise or self.outside_line is not None
+
+    @property
+    def outside_line(self) -> Line | None:
+        """The strongest periodic line along a linear axis that outweighs every candidate
+        (judged only where the residual is not within the R-test's noise, or it is unknown)."""
+        if self.device_noise_um is not None and not self.misfit:
+            return None
+        return next((line for line in self.lines if line.unit == "mm"
+                     and line.p_value < self.alpha / max(len(self.lines), 1)
+                     and line.sum_sq >= LINE_OVER_BEST * self.best_sum_sq), None)
+
+    @property
+    def explained_to_noise(self) -> bool:
+        return not self.significant and not self.misfit and not self.unexplained
 
     @property
     def significant(self) -> tuple[Candidate, ...]:
@@ -115,17 +162,23 @@ class Diagnosis:
 
     @property
     def found(self) -> str | None:
-        """The effect named as missing: significant, first, with no rival, and one that
-        ``fit --add`` accepts on these data."""
+        """The effect named as missing: significant, first, with no rival, one that ``fit
+        --add`` accepts on these data, and not a small part of an unexplained misfit."""
         best = self.significant[0] if self.significant else None
-        return best.effect if best is not None and not self.rivals and best.separable else None
+        named = best is not None and not self.rivals and best.separable and not self.unexplained
+        return best.effect if named else None
 
     def to_dict(self) -> dict:
         return {
             "format": "compgen.diagnose/1", "machine": self.machine, "fit": self.fit_file,
             "model": list(self.model), "rms_um": self.rms_um, "sigma_um": self.sigma_um,
             "readings": self.readings, "tested": self.tested, "alpha": self.alpha,
-            "explained_to_noise": not self.significant,
+            "explained_to_noise": self.explained_to_noise,
+            "device_noise_um": self.device_noise_um,
+            "misfit": list(self.misfit),
+            "unexplained": self.unexplained,
+            "best_share_of_excess": self.best_share_of_excess,
+            "residual_lines": [line.to_dict() for line in self.lines],
             "still_significant_after_best": list(self.after_best),
             "rivals_of_best": list(self.rivals),
             "found": self.found,
@@ -154,7 +207,8 @@ class Diagnosis:
 
 def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
              candidates: Sequence[str] | None = None, alpha: float = ALPHA,
-             fit_file: str = "", advise: bool = True, machine_ref: str = "") -> Diagnosis:
+             fit_file: str = "", advise: bool = True, machine_ref: str = "",
+             noise_um: float | None = None) -> Diagnosis:
     """Rank the effects not in ``fit``'s model by how much of its residual they explain.
 
     Outlying readings are listed and left out; the tests are made on the readings made white
@@ -162,7 +216,10 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     best candidate is added (the misfit of a missing effect is not noise). With ``advise``,
     the measurements that would separate what these data cannot are searched for among
     those the machine can make (``advice.py``); ``machine_ref`` is how the commands printed
-    name the machine file."""
+    name the machine file. ``noise_um`` is the R-test's own noise (default: the machine
+    file's ``[rtest] noise_um``): with it, the residual is tested against it per path and
+    direction, and what no catalogue effect accounts for is called unexplained."""
+    device = noise_um if noise_um is not None else machine.noise_um
     poses = Poses.concat([d.poses for d in data])
     y = np.concatenate([d.deviation for d in data])
     model = Model(machine, fit.model)
@@ -265,6 +322,13 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
                 rival_names = tuple(c.effect for c in out if c.effect in (best.effect.name, *rival_names)
                                     and c is not first)
 
+    misfit, share = (), None
+    if device is not None:
+        misfit = tuple(lack_of_fit(r.reshape(-1, 3), poses.path, device, noise.rho, dof / r.size, alpha))
+        excess = rss - dof * (device * 1e-3) ** 2
+        if significant and excess > 0:
+            share = min(1.0, ranked[significant[0].effect].drop / excess)
+
     return Diagnosis(
         machine=machine.name, fit_file=fit_file, model=fit.model,
         rms_um=float(np.sqrt(rss / r.size)) * 1e3, sigma_um=float(np.sqrt(rss / dof)) * 1e3,
@@ -275,7 +339,9 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         after_best=after_best, rivals=rival_names, rivals_separated_by=rivals_separated_by,
         outliers=_outlier_rows(data, bad, size), noise=_noise_summary(seg, noise.rho, poses.path),
         rivals_open=rivals_open, machine_ref=machine_ref or machine.source,
-        program_ext=_program_ext(machine))
+        program_ext=_program_ext(machine), device_noise_um=device, misfit=misfit,
+        lines=strongest_lines(machine, poses, r.reshape(-1, 3)), best_share_of_excess=share,
+        best_sum_sq=ranked[significant[0].effect].drop if significant else 0.0)
 
 
 def _program_ext(machine: Machine) -> str:

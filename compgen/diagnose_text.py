@@ -49,6 +49,8 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
             lines.append(f"      partly absorbed by {', '.join(c.confounded_with)}")
         if d.rivals and (c.effect in d.rivals or c is d.significant[0]):
             lines.append("      not told apart from the others marked so: see below")
+        elif c.significant and d.unexplained:
+            lines.append("      it fits a part of the unexplained misfit (see below): not advised on its own")
         elif c.significant and c.separable:
             lines.append(f"      add it: {me()} fit --from {fit} --add {c.effect} -o {after}")
         elif c.significant:
@@ -82,9 +84,14 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
                       "  which of them is the physical cause stays open (it needs another "
                       "reference), and the location errors written to a control depend on the "
                       "choice."]
-    if not d.significant:
+    lines += _lines_text(d)
+    if d.unexplained:
+        lines += _unexplained(d, fit, after)
+    elif not d.significant:
         lines += ["", "  No candidate is significant: the model explains these data to the "
-                      "noise level."]
+                  + ("R-test's noise." if d.device_noise_um is not None else
+                     "noise level of these data (σ̂; the R-test's own noise is not given: set [rtest] "
+                     "noise_um in the machine file, or --noise-um, to test the residual against it).")]
     elif len(d.significant) > 1:
         best = d.significant[0].effect
         lines += ["", f"  Effects share misfit: once {best} is added, "
@@ -120,6 +127,47 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
             lines.append(f"    {name:<6} {per_um[worst]:+6.2f} {d.bias_units[name]} per µm of "
                          f"{effect_name(worst)}")
     return "\n".join([*lines, *d.notes]) + "\n"
+
+def _lines_text(d: Diagnosis) -> list[str]:
+    """The residual's strongest periodic line against each coordinate."""
+    if not d.lines:
+        return []
+    return ["", "  strongest periodic line of the residual against each axis and time:",
+            *(f"    {line.text()}" for line in d.lines)]
+
+
+def _unexplained(d: Diagnosis, fit: str, after: str) -> list[str]:
+    """What no catalogue effect accounts for: where, its shape, and how a user who knows the
+    cause declares it."""
+    if d.misfit:
+        out = ["", f"  UNEXPLAINED: the residual exceeds the R-test's noise ({d.device_noise_um:g} µm) and "
+                   "no catalogue effect accounts for it:"]
+        out += [f"    {m['direction']} of {m['path']}: RMS {m['rms_um']:.2f} µm (p = {m['p_value']:.2g})"
+                for m in d.misfit[:6]]
+    else:
+        out = ["", "  UNEXPLAINED: a periodic line along a linear axis, a shape no catalogue effect has, "
+                   "outweighs every candidate"]
+    if d.significant:
+        share = (f"only {d.best_share_of_excess:.0%} of the residual beyond the noise"
+                 if d.best_share_of_excess is not None else "less than that line")
+        out.append(f"  the best candidate, {d.significant[0].effect}, removes {share}: it is not named as "
+                   "found.")
+    worst = {m["direction"] for m in d.misfit}
+    shape = d.outside_line or next((line for line in d.lines if line.direction in worst
+                                    and line.p_value < d.alpha), None)
+    if shape is None:
+        out.append("  no periodic line against an axis or time stands out: look at the residual plots "
+                   "(--plots) per path and axis")
+        return out
+    out.append(f"  its shape: {shape.text()}")
+    if shape.unit == "mm":
+        name = f"E{shape.direction[1]}{shape.against}:w{shape.period:.3f}"
+        out += [f"  if its cause is known (a ball-screw or scale period of {shape.against}, say), declare it "
+                "and fit again:", f"    {me()} fit --from {fit} --add {name} -o {after}",
+                f"  or list it in the machine file (diagnose then tries it): [effects] declared = "
+                f"[\"{name}\"]"]
+    return out
+
 
 def next_name(path: str) -> str:
     """The name of the next fit in the loop: fit.json → fit+1.json."""

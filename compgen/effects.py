@@ -26,6 +26,10 @@ letter O as in the seed report; ``X0C`` and ``E_X0C`` are accepted at input):
 ``XOC:e15``            a location error (or ``drift_Z``) growing as 1 − exp(−t/τ) with τ =
                        15 min: thermal growth that saturates (the value it tends to)
 ``nest_X``             R-test nest (tool side) set-up offset along the spindle frame X
+``EXX:w5``             declared, never in the candidate list unless the machine file's
+                       ``[effects] declared`` names it: a periodic component error of a
+                       linear axis with a pitch in mm (a ball-screw or scale period),
+                       ``EXX:w5c`` × cos(2π·X/5 mm) and ``EXX:w5s`` × sin(2π·X/5 mm)
 =====================  ====================================================================
 
 Order 0 of a component error does not exist here on purpose: a constant error motion *is*
@@ -63,19 +67,23 @@ TAUS_MIN = (5, 15, 45)       # saturating thermal growth offered: time constants
 @dataclass(frozen=True)
 class Basis:
     """Shape of an effect in its coordinate: constant, harmonic k, polynomial k, time
-    polynomial k, or saturating in time with τ = ``order`` minutes."""
+    polynomial k, saturating in time with τ = ``order`` minutes, or periodic along a linear
+    axis with a pitch of ``pitch`` mm."""
 
-    kind: str            # "const", "h", "p", "t", "e" or "r"
+    kind: str            # "const", "h", "p", "t", "e", "r" or "w"
     order: int = 0       # a compound's harmonic is signed: − turns against the axis
     origin: bool = False  # harmonics of a tilting axis: taken from angle 0 (cos kθ − 1)
+    pitch: float = 0.0   # "w": the period along the axis, mm
 
     @property
     def suffix(self) -> str:
+        if self.kind == "w":
+            return f":w{self.pitch:g}"
         return "" if self.kind == "const" else f":{self.kind}{self.order}"
 
     @property
     def terms(self) -> tuple[str, ...]:
-        if self.kind == "h":
+        if self.kind in "hw":
             return (f"{self.suffix}c", f"{self.suffix}s")
         return (self.suffix,)
 
@@ -86,6 +94,9 @@ class Basis:
             return np.ones(x.shape + (1,))
         if self.kind == "h":
             return np.stack([np.cos(self.order * x) - self.origin, np.sin(self.order * x)], axis=-1)
+        if self.kind == "w":              # x: a linear axis's position per POLY_SCALE_MM
+            turn = 2 * np.pi * x * (POLY_SCALE_MM / self.pitch)
+            return np.stack([np.cos(turn), np.sin(turn)], axis=-1)
         if self.kind == "e":
             return (1 - np.exp(-x * (60.0 / self.order)))[..., None]
         if self.kind == "r":              # x is the direction of motion, ±1 (0: never moved)
@@ -255,6 +266,16 @@ def resolve(machine: Machine, name: str, table: dict | None = None) -> Effect:
             raise CompgenError(f"{symbol} needs an order, e.g. {symbol}:{kinds[0]}1",
                                where=name)
         basis = CONSTANT
+    elif (w := re.fullmatch(r"w(\d{1,5}(?:\.\d{1,4})?)", order_txt)) is not None:
+        pitch = float(w[1])
+        if "p" not in kinds or carrier not in machine.axis_names or machine.axis(carrier).rotary \
+                or not 0.5 <= pitch <= 10000:
+            raise CompgenError(f"{symbol}:wP (periodic, pitch P mm) is declared for a component error of a "
+                               "linear axis, 0.5 ≤ P ≤ 10000", where=name,
+                               hint="e.g. EXX:w5 for a 5 mm ball-screw period of X")
+        return Effect(symbol, carrier, slot, direction, Basis("w", 0, pitch=pitch),
+                      f"{words}, periodic with a pitch of {pitch:g} mm",
+                      "a periodic error along the axis: ball-screw pitch or scale interpolation")
     else:
         m = re.fullmatch(r"([hpter])(-?)(\d{1,3})", order_txt)
         kind, order = (m[1], int(m[2] + m[3])) if m else ("", 0)
@@ -287,7 +308,7 @@ def resolve(machine: Machine, name: str, table: dict | None = None) -> Effect:
 def effect_name(param: str) -> str:
     """The name of the effect a parameter belongs to: ``ECC:h2c`` → ``ECC:h2``."""
     param = canonical(param)
-    return param[:-1] if re.search(r":h-?\d+[cs]$", param) else param
+    return param[:-1] if re.search(r":(?:h-?\d+|w[\d.]+)[cs]$", param) else param
 
 
 def effect_of_param(machine: Machine, param: str) -> Effect:
@@ -301,7 +322,8 @@ def effect_of_param(machine: Machine, param: str) -> Effect:
 
 
 def catalogue(machine: Machine) -> tuple[Effect, ...]:
-    """Every effect this machine can carry, orders up to ``MAX_ORDER``: the candidate list."""
+    """Every effect this machine can carry, orders up to ``MAX_ORDER``, and those its machine
+    file declares: the candidate list."""
     out, table = [], _symbols(machine)
     for symbol, (carrier, _, direction, kinds, _, _, first) in table.items():
         for kind in kinds:
@@ -320,7 +342,9 @@ def catalogue(machine: Machine) -> tuple[Effect, ...]:
                     orders += [-k for k in orders]
             out.extend(resolve(machine, symbol if k is None else f"{symbol}:{kind}{k}", table)
                        for k in orders)
-    return tuple(out)
+    known = {e.name for e in out}
+    return tuple(out) + tuple(e for e in (resolve(machine, d, table) for d in machine.declared)
+                              if e.name not in known)
 
 
 def location_model(machine: Machine) -> tuple[str, ...]:

@@ -42,7 +42,12 @@ def fit_gate(machine: Machine, data: Sequence[RTestData], fit: FitResult) -> lis
                        "noise allows: the model misses an effect, or the data are wrong (columns "
                        "swapped, a sign, a mismatched machine file)")
     found = diagnose(machine, data, fit, advise=False)
-    if found.significant:
+    if found.unexplained:
+        worst = found.misfit[0]
+        reasons.append(f"the residual exceeds the R-test's noise ({worst['direction']} of {worst['path']}: "
+                       f"{worst['rms_um']:.2f} µm against {worst['noise_um']:g} µm) and no catalogue "
+                       "effect explains it (run diagnose: it shows where and its shape)")
+    elif found.significant:
         reasons.append("diagnose finds effects the model misses: "
                        + ", ".join(c.effect for c in found.significant[:3])
                        + " (run diagnose, add the effect with fit --add, and refit)")

@@ -146,6 +146,8 @@ class Machine:
     limits: Limits = Limits()
     sinumerik: dict | None = None   # tcarr record and the axis vectors the control holds
     tolerances: dict[str, float] = field(default_factory=dict)   # path → max range, µm
+    noise_um: float | None = None   # the R-test's own noise, 1σ per reading ([rtest] noise_um)
+    declared: tuple[str, ...] = ()  # effects the user declares beyond the catalogue ([effects])
     source: str = ""
     sha256: str = ""
     bundled: str = ""    # the name of the bundled machine file it was read from, if it was one

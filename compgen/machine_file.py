@@ -9,6 +9,7 @@ import tomllib
 from dataclasses import replace
 from pathlib import Path
 
+from .effects import resolve
 from .emit.registry import CONTROLLERS
 from .errors import CompgenError
 from .files import read_text
@@ -27,7 +28,7 @@ from .machine import (
 )
 
 TOP_KEYS = {"name", "controller", "workpiece", "tool", "rtest", "paths", "program", "limits",
-            "tolerances"}
+            "tolerances", "effects"}
 
 
 def bundled_machines() -> dict[str, Path]:
@@ -89,7 +90,7 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
     rtest = get.sub("rtest")
     ball = rtest.vec3("ball")
     fields = set(Setup.__dataclass_fields__)
-    rtest.only(fields | {"ball", "probe_length"})
+    rtest.only(fields | {"ball", "probe_length", "noise_um"})
     solids = {k: rtest.number(k) if k == "table_top" else _positive(rtest, k)
               for k in fields if k in rtest.doc}
     solids.setdefault("table_radius", math.hypot(ball[0], ball[1]) + 50.0)
@@ -100,6 +101,7 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
         workpiece=chains["workpiece"], tool=chains["tool"],
         ball=ball, probe_length=_positive(rtest, "probe_length"), setup=setup,
         source=source, sha256=sha256,
+        noise_um=_positive(rtest, "noise_um") if "noise_um" in rtest.doc else None,
     )
     paths = {}
     for name in get.table("paths", optional=True):
@@ -131,7 +133,18 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
         g = get.sub("tolerances")
         g.only(set(paths))
         tolerances = {name: _positive(g, name) for name in g.doc}
-    return replace(machine, paths=paths, program=program, limits=limits, tolerances=tolerances, **sections)
+    declared = ()
+    if "effects" in doc:
+        g = get.sub("effects")
+        g.only({"declared"})
+        declared = tuple(g.names("declared"))
+        for i, name in enumerate(declared):
+            try:
+                resolve(machine, name)
+            except CompgenError as exc:
+                raise CompgenError(exc.message, where=f"{g.at('declared')}[{i}]", hint=exc.hint) from None
+    return replace(machine, paths=paths, program=program, limits=limits, tolerances=tolerances,
+                   declared=declared, **sections)
 
 
 def _positive(g: _Getter, key: str, zero_ok: bool = False) -> float:
@@ -237,6 +250,12 @@ class _Getter:
 
     def vec3(self, key: str, default=None) -> tuple[float, float, float]:
         return tuple(self.numbers(key, 3, default))
+
+    def names(self, key: str) -> list[str]:
+        v = self._get(key)
+        if not isinstance(v, list) or not all(isinstance(x, str) and x for x in v):
+            raise CompgenError('must be a list of names, e.g. ["EXX:w5"]', where=self.at(key))
+        return v
 
     def list(self, key: str) -> list:
         v = self._get(key)

@@ -69,19 +69,46 @@ def _betainc(a: float, b: float, x: float) -> float:
 
 
 def chi2_sf(x: float, k: int) -> float:
-    """P(χ²(k) > x) for whole ``k``, in closed form (a finite sum, and erfc for odd k)."""
+    """P(χ²(k) > x) for whole ``k``, in closed form: a finite sum (and erfc for odd k), its
+    terms in log space so that thousands of degrees of freedom neither overflow nor vanish."""
     y = x / 2
+    if not y > 0:
+        return 1.0
     if k % 2 == 0:
-        term, total = 1.0, 1.0
-        for j in range(1, k // 2):
-            term *= y / j
-            total += term
-        return math.exp(-y) * total
-    term, total = math.sqrt(y), 0.0
-    for j in range(1, (k + 1) // 2):
-        total += term
-        term *= y / (j + 0.5)
-    return math.erfc(math.sqrt(y)) + math.exp(-y) * total / math.gamma(1.5)
+        logs = [j * math.log(y) - math.lgamma(j + 1) for j in range(k // 2)]
+        head = 0.0
+    else:
+        logs = [(j - 0.5) * math.log(y) - math.lgamma(j + 0.5) for j in range(1, (k + 1) // 2)]
+        head = math.erfc(math.sqrt(y))
+    if not logs:
+        return head
+    top = max(logs)
+    return min(1.0, head + math.exp(top - y) * math.fsum(math.exp(v - top) for v in logs))
+
+
+def lack_of_fit(r: np.ndarray, groups: np.ndarray, noise_um: float, rho: np.ndarray, dof_share: float,
+                alpha: float) -> list[dict]:
+    """Where the residual ``r`` (n, 3; mm) exceeds the R-test's own noise: per group (a path)
+    and direction, a χ² test of its sum of squares against ``noise_um``, with AR(1)
+    correlation ``rho`` (n, 3) shrinking the degrees of freedom (a sum of squares of an
+    AR(1) series varies (1 + ρ²)/(1 − ρ²) times more), ``dof_share`` the share of readings
+    the fit left free, and Bonferroni over the groups tested. Returns the groups that fail,
+    worst first."""
+    out, tests = [], []
+    sigma2 = (noise_um * 1e-3) ** 2
+    for g in dict.fromkeys(groups):
+        at = groups == g
+        for d in range(3):
+            rg, rh = r[at, d], np.clip(rho[at, d], -0.99, 0.99)
+            k = max(1, int(round(len(rg) * dof_share * np.mean((1 - rh**2) / (1 + rh**2)))))
+            ratio = float(np.mean(rg**2) / dof_share / sigma2)
+            tests.append((g, "XYZ"[d], k, ratio, float(np.sqrt(np.mean(rg**2))) * 1e3))
+    for g, d, k, ratio, rms in tests:
+        p = min(1.0, chi2_sf(k * ratio, k) * len(tests))
+        if p < alpha:
+            out.append({"path": str(g), "direction": f"d{d}", "rms_um": rms, "noise_um": noise_um,
+                        "p_value": p})
+    return sorted(out, key=lambda m: -m["rms_um"])
 
 
 def chi2_isf(alpha: float, k: int) -> float:

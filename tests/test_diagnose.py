@@ -287,3 +287,104 @@ def test_of_equivalent_rivals_the_one_leaving_the_location_errors_true_comes_fir
     assert max(abs(v) for v in off.values()) < 4, off
     other = identify(seed_machine, data, compose(seed_machine, base.model, ["EBA:h1"]))
     assert abs(other.parameters["BOA"].value - TABLE4["BOA"]) > 50 * other.parameters["BOA"].std
+
+
+# ------------------------------------------------------------------ beyond the catalogue
+
+UNMEASURED_BALLS = ([-150.0, 120.0, 180.0], [120.0, -100.0, 260.0])   # mm, table frame
+
+
+def _periodic(machine, poses, axis, pitch_mm, amp_um, phase=0.3):
+    """A machine compgen's model does not know: ``axis`` off by a sine of its position (a
+    ball-screw period), made by moving the nominal machine, not through any effect."""
+    from compgen.kinematics import Model, Poses
+    q = poses.q.copy()
+    i = machine.index(axis)
+    q[:, i] += amp_um * 1e-3 * np.sin(2 * np.pi * q[:, i] / pitch_mm + phase)
+    nominal = Model(machine, ())
+    return nominal.relative(Poses(q, poses.ball, poses.t, poses.path)) - nominal.relative(poses)
+
+
+def _outside_session(machine, poses, axis, pitch_mm, seed=3):
+    from compgen.kinematics import Model
+    y = Model(machine, list(TABLE4)).deviation(poses, np.array(list(TABLE4.values())))
+    y = y + _periodic(machine, poses, axis, pitch_mm, 2.0)
+    rng = np.random.default_rng(seed)
+    return RTestData(poses, y + rng.normal(0, NOISE_UM * 1e-3, y.shape), "sim.csv", "",
+                     tuple(range(2, len(poses) + 2)))
+
+
+@pytest.mark.parametrize("axis, pitch", [("X", 5.0), ("Y", 7.3), ("Z", 12.5)])
+def test_an_effect_outside_the_catalogue_is_unexplained_never_found(seed_machine, poses, axis, pitch):
+    """A periodic error of a linear axis (no catalogue effect has its shape): diagnose names
+    no effect found, with or without the R-test's noise; with it, where the residual exceeds
+    the noise; and the shape, a line along the axis at its pitch, with the name to declare."""
+    data = [_outside_session(seed_machine, poses, axis, pitch)]
+    fit = identify(seed_machine, data)
+    for noise in (None, NOISE_UM):
+        found = diagnose(seed_machine, data, fit, advise=False, noise_um=noise)
+        assert found.unexplained and found.found is None, [c.effect for c in found.significant[:3]]
+        assert not found.explained_to_noise and not found.to_dict()["explained_to_noise"]
+        line = found.lines[0]
+        assert (line.against, line.direction, line.unit) == (axis, f"d{axis}", "mm")
+        assert line.period == pytest.approx(pitch, rel=2e-3)          # a fraction of the resolution
+        assert line.amplitude_um == pytest.approx(2.0, rel=0.1)
+        assert (noise is None) == (found.misfit == ())
+    assert {m["direction"] for m in found.misfit} == {f"d{axis}"}
+    text = report(found)
+    assert "UNEXPLAINED" in text and f"--add E{axis}{axis}:w{line.period:.3f}" in text
+    assert "add it:" not in text
+
+
+@pytest.mark.parametrize("axis, pitch", [("X", 5.0), ("Z", 12.5)])
+def test_declaring_the_shape_brings_the_residual_to_the_noise_and_predicts_unmeasured_balls(
+        seed_machine, poses, axis, pitch):
+    from compgen.effects import location_model
+    from compgen.kinematics import Model
+    data = [_outside_session(seed_machine, poses, axis, pitch)]
+    line = diagnose(seed_machine, data, identify(seed_machine, data), advise=False).lines[0]
+    declared = f"E{axis}{axis}:w{line.period:.3f}"            # as diagnose prints it
+    fit = identify(seed_machine, data, compose(seed_machine, location_model(seed_machine), [declared]))
+    assert fit.residual["sigma_um"] == pytest.approx(NOISE_UM, rel=0.05)
+    after = diagnose(seed_machine, data, fit, advise=False, noise_um=NOISE_UM)
+    assert not after.unexplained and after.misfit == () and after.explained_to_noise
+    x = np.array([fit.parameters[n].value for n in fit.model])
+    for ball in UNMEASURED_BALLS:
+        p = generate(seed_machine, ["K4"], ball=ball)
+        truth = (Model(seed_machine, list(TABLE4)).deviation(p, np.array(list(TABLE4.values())))
+                 + _periodic(seed_machine, p, axis, pitch, 2.0))
+        err = Model(seed_machine, fit.model).deviation(p, x) - truth
+        err -= err.mean(axis=0)                         # a constant per set-up aside
+        assert np.sqrt(np.mean(err**2)) * 1e3 < 1.0
+
+
+def test_with_the_rtest_noise_a_catalogue_effect_is_still_found(seed_machine, poses):
+    data = [_session(seed_machine, poses, {"ECC:h2c": 15 * ARCSEC})]
+    found = diagnose(seed_machine, data, identify(seed_machine, data), advise=False, noise_um=NOISE_UM)
+    assert found.found == "ECC:h2" and found.best_share_of_excess > 0.9 and not found.unexplained
+
+
+def test_clean_data_at_the_rtest_noise_are_explained(seed_machine, poses):
+    data = [_session(seed_machine, poses, {})]
+    found = diagnose(seed_machine, data, identify(seed_machine, data), advise=False, noise_um=NOISE_UM)
+    assert found.explained_to_noise and not found.misfit and not found.unexplained
+    # a noise claimed too small is caught: the residual exceeds it everywhere
+    tight = diagnose(seed_machine, data, identify(seed_machine, data), advise=False, noise_um=0.3)
+    assert len(tight.misfit) == 9 and tight.unexplained
+
+
+def test_an_effect_declared_in_the_machine_file_is_tried_and_found(tmp_path, poses):
+    from conftest import SEED_MACHINE
+
+    from compgen.errors import CompgenError
+    from compgen.machine_file import load_machine
+    text = SEED_MACHINE.read_text().replace("[rtest]\n", "[rtest]\nnoise_um = 0.5\n", 1)
+    (tmp_path / "m.toml").write_text(text + '\n[effects]\ndeclared = ["EXX:w5"]\n')
+    machine = load_machine(tmp_path / "m.toml")
+    assert machine.noise_um == 0.5 and machine.declared == ("EXX:w5",)
+    data = [_outside_session(machine, poses, "X", 5.0)]
+    found = diagnose(machine, data, identify(machine, data), advise=False)
+    assert found.found == "EXX:w5" and found.device_noise_um == 0.5 and not found.unexplained
+    (tmp_path / "bad.toml").write_text(text + '\n[effects]\ndeclared = ["ECC:w5"]\n')
+    with pytest.raises(CompgenError, match=r"bad.toml: effects: declared\[0\]: .*linear axis"):
+        load_machine(tmp_path / "bad.toml")

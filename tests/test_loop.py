@@ -98,3 +98,29 @@ def test_the_printed_commands_take_a_k4_session_to_the_noise(tmp_path, case):
     print(case, followed, final["effects"], final["residual"]["sigma_um"])
     assert final["residual"]["sigma_um"] < SIGMA_AT_NOISE * NOISE_UM, (followed, final["model"])
     assert {effect_name(n) for n in hidden} <= set(final["effects"]), (final["effects"], followed)
+
+
+def test_an_unexplained_period_is_declared_with_the_printed_command(tmp_path):
+    """A 5 mm ball-screw period of X (no catalogue effect has that shape): diagnose, told the
+    R-test's noise, says unexplained and prints the declaration; pasted, it takes the fit to
+    the noise, and diagnose then says so against that noise."""
+    machine = load_machine("ac-trunnion-itnc530")
+    hidden = {"EXX:w5c": 1.2 * UM, "EXX:w5s": -1.6 * UM}          # never in the candidate list
+    truth = {n: {"value": v, "unit": effect_of_param(machine, n).unit}
+             for n, v in {**TABLE4, **hidden}.items()}
+    (tmp_path / "truth.json").write_text(json.dumps({"parameters": truth}))
+    cg = f"{shlex.quote(sys.executable)} -m compgen"
+    for line in (f"{cg} simulate --machine ac-trunnion-itnc530 --truth truth.json --noise-um {NOISE_UM} "
+                 "--seed 5 -o session.csv",
+                 f"{cg} fit --machine ac-trunnion-itnc530 session.csv -o fit.json"):
+        assert _bash(line, tmp_path).returncode == 0
+    shown = _bash(f"{cg} diagnose --from fit.json --noise-um {NOISE_UM}", tmp_path)
+    assert shown.returncode == 0 and "UNEXPLAINED" in shown.stdout, shown.stdout
+    assert "dX against X: pitch 5.00" in shown.stdout
+    declare = [c for c in _printed(shown.stdout, "fit") if "--add EXX:w" in c]
+    assert len(declare) == 1, shown.stdout
+    assert _bash(declare[0], tmp_path).returncode == 0                 # as printed
+    final = json.loads((tmp_path / "fit+1.json").read_text())
+    assert final["residual"]["sigma_um"] < SIGMA_AT_NOISE * NOISE_UM
+    again = _bash(f"{cg} diagnose --from fit+1.json --noise-um {NOISE_UM}", tmp_path)
+    assert "explains these data to the R-test's noise" in again.stdout, again.stdout

@@ -101,3 +101,6 @@ def test_the_distributions_diagnose_uses_are_scipys():
             assert chi2_sf(x, k) == pytest.approx(stats.chi2.sf(x, k), rel=1e-12, abs=1e-300)
         for alpha in (0.5, 0.01, 1e-6):
             assert chi2_isf(alpha, k) == pytest.approx(stats.chi2.isf(alpha, k), rel=1e-10)
+    for k in (100, 1001, 5000, 20000):              # the lack-of-fit test's sizes
+        for x in (0.8 * k, k, 1.2 * k, 3 * k):
+            assert chi2_sf(x, k) == pytest.approx(stats.chi2.sf(x, k), rel=1e-9, abs=1e-300)

@@ -1,0 +1,136 @@
+"""The residual's strongest periodic lines: against each linear axis's position (a pitch in
+mm: ball-screw and scale periods), each rotary axis's angle (per revolution) and the
+session's time. Where no catalogue effect explains what is left, this is its shape, and
+the pitch a user declares (``EXX:w5``) comes from here.
+
+Each line is the least-squares sine of one period (two columns and a constant) in one
+reading direction, tried over a grid twice as fine as the data resolve and refined at the
+best; its F test is Bonferroni-corrected over the periods the grid resolves.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .kinematics import Poses
+from .machine import Machine
+from .significance import f_sf
+
+MIN_PITCH_MM = 2.0     # shorter periods: below what R-test paths sample along an axis
+MIN_PERIOD_S = 60.0    # shorter periods in time: an R-test reads settled poses, not vibration
+MAX_ORDER = 36         # per revolution
+OVERSAMPLE = 2         # the grid's frequencies per resolved one (the peak is refined after)
+CHUNK = 200            # frequencies evaluated at once (memory: n × CHUNK per column)
+GOLDEN = (np.sqrt(5.0) - 1) / 2
+
+
+@dataclass(frozen=True)
+class Line:
+    against: str          # an axis name, or "time"
+    direction: str        # "dX", "dY" or "dZ"
+    period: float         # mm (linear axis), an order per revolution (rotary), s (time)
+    unit: str             # "mm", "/rev" or "s"
+    amplitude_um: float
+    share: float          # of that direction's residual sum of squares the line removes
+    p_value: float        # Bonferroni over the periods the grid resolves
+    sum_sq: float = 0.0   # the residual sum of squares it removes, mm²
+
+    def text(self) -> str:
+        per = (f"pitch {self.period:.3f} mm" if self.unit == "mm" else
+               f"{self.period:g}/rev" if self.unit == "/rev" else f"period {self.period:.0f} s")
+        p = f"p = {self.p_value:.2g}" if self.p_value > 0 else "p < 1e-300"
+        return (f"{self.direction} against {self.against}: {per}, amplitude {self.amplitude_um:.2f} µm, "
+                f"{self.share:.0%} of {self.direction}'s residual ({p})")
+
+    def to_dict(self) -> dict:
+        return {"against": self.against, "direction": self.direction, "period": self.period,
+                "unit": self.unit, "amplitude_um": self.amplitude_um, "share": self.share,
+                "p_value": self.p_value, "sum_sq_um2": self.sum_sq * 1e6}
+
+
+def strongest_lines(machine: Machine, poses: Poses, r: np.ndarray) -> tuple[Line, ...]:
+    """The strongest line against every coordinate (its best direction), strongest share
+    first; ``r`` is the residual (n, 3), mm."""
+    out = []
+    for axis in machine.axes:
+        x = poses.q[:, machine.index(axis.name)]
+        if axis.rotary:
+            if np.ptp(x) > 0:
+                out.append(_best(axis.name, x, r, np.arange(1, MAX_ORDER + 1) / (2 * np.pi), "/rev",
+                                 lambda f: f * 2 * np.pi, refine=False))
+        elif np.ptp(x) >= 4 * MIN_PITCH_MM:
+            span = np.ptp(x)
+            out.append(_best(axis.name, x, r, np.arange(2 / span, 1 / MIN_PITCH_MM, 1 / (OVERSAMPLE * span)),
+                             "mm", lambda f: 1 / f))
+    t = poses.t
+    if np.isfinite(t).all() and np.ptp(t) > 0:
+        span = np.ptp(t)
+        grid = np.arange(2 / span, 1 / MIN_PERIOD_S, 1 / (OVERSAMPLE * span))
+        if grid.size:
+            out.append(_best("time", t, r, grid, "s", lambda f: 1 / f))
+    return tuple(sorted((line for line in out if line is not None), key=lambda line: -line.share))
+
+
+def _best(against: str, x: np.ndarray, r: np.ndarray, grid: np.ndarray, unit: str, period,
+          refine: bool = True) -> Line | None:
+    if grid.size == 0:
+        return None
+    y = r - r.mean(axis=0)
+    rss = np.sum(y**2, axis=0)
+    drops = np.concatenate([_drops(x, y, grid[i:i + CHUNK]) for i in range(0, grid.size, CHUNK)])
+    k, d = np.unravel_index(int(np.argmax(drops)), drops.shape)
+    f = grid[k]
+    if refine:           # the grid's neighbours bracket the peak: golden-section between them
+        def drop(v):
+            return _drops(x, y[:, [d]], np.array([v]))[0, 0]
+        lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+        a, b = hi - GOLDEN * (hi - lo), lo + GOLDEN * (hi - lo)
+        fa, fb = drop(a), drop(b)
+        while hi - lo > 1e-6 * f:
+            if fa > fb:
+                hi, b, fb = b, a, fa
+                a = hi - GOLDEN * (hi - lo)
+                fa = drop(a)
+            else:
+                lo, a, fa = a, b, fb
+                b = lo + GOLDEN * (hi - lo)
+                fb = drop(b)
+        f = (lo + hi) / 2
+    drop, amp = _fit(x, y[:, d], f)
+    n = len(x)
+    tried = grid.size / OVERSAMPLE if refine else grid.size
+    F = (drop / 2) / max((rss[d] - drop) / (n - 3), 1e-300)
+    return Line(against, f"d{'XYZ'[d]}", float(period(f)), unit, amp * 1e3,
+                float(drop / rss[d]) if rss[d] > 0 else 0.0, min(1.0, f_sf(F, 2, n - 3) * max(tried, 1)),
+                float(drop))
+
+
+def _drops(x: np.ndarray, y: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """(len(f), y's columns): the sum of squares a centred cos/sin pair of each frequency
+    (an evenly spaced run) removes from each column of ``y`` (centred)."""
+    E = np.empty((len(x), len(f)), complex)
+    E[:, 0] = np.exp(2j * np.pi * f[0] * x)
+    if len(f) > 1:       # the next frequency's phasor is this one's times a fixed step
+        E[:, 1:] = np.exp(2j * np.pi * (f[1] - f[0]) * x)[:, None]
+    E = np.cumprod(E, axis=1)
+    # the centred pair's sums from E's: Σ C² = (n + Re Σ E²)/2, Σ S² = (n − Re Σ E²)/2,
+    # Σ CS = Im Σ E²/2, less n × the means' products; y is centred, so Eᵀy needs no centring
+    n, mean, sq = len(x), E.mean(axis=0), np.einsum("ij,ij->j", E, E)
+    cc = (n + sq.real) / 2 - n * mean.real**2
+    ss = (n - sq.real) / 2 - n * mean.imag**2
+    cs = sq.imag / 2 - n * mean.real * mean.imag
+    ab = E.T @ y
+    a, b = ab.real, ab.imag
+    det = np.maximum(cc * ss - cs**2, 1e-300)[:, None]
+    alpha = (ss[:, None] * a - cs[:, None] * b) / det
+    beta = (cc[:, None] * b - cs[:, None] * a) / det
+    return alpha * a + beta * b
+
+
+def _fit(x: np.ndarray, y: np.ndarray, f: float) -> tuple[float, float]:
+    """The sum of squares a sine of frequency ``f`` removes from ``y``, and its amplitude."""
+    B = np.column_stack([np.cos(2 * np.pi * f * x), np.sin(2 * np.pi * f * x), np.ones_like(x)])
+    coef = np.linalg.lstsq(B, y, rcond=None)[0]
+    return float(np.sum(y**2) - np.sum((y - B @ coef) ** 2)), float(np.hypot(*coef[:2]))
