@@ -56,6 +56,7 @@ SHARE_OF_EXCESS = 1 / 3
 # Without the R-test's noise: a periodic line along a linear axis (no catalogue effect has
 # that shape) removing this many times what the best candidate removes is what is missing
 LINE_OVER_BEST = 2.0
+RESOLVES_UM = 0.1     # an R-test's sensors resolve about this: a smaller line is not a finding
 
 
 @dataclass(frozen=True)
@@ -132,7 +133,7 @@ class Diagnosis:
         (judged only where the residual is not within the R-test's noise, or it is unknown)."""
         if self.device_noise_um is not None and not self.misfit:
             return None
-        return next((line for line in self.lines if line.unit == "mm"
+        return next((line for line in self.lines if line.unit == "mm" and line.amplitude_um >= RESOLVES_UM
                      and line.p_value < self.alpha / max(len(self.lines), 1)
                      and line.sum_sq >= LINE_OVER_BEST * self.best_sum_sq), None)
 

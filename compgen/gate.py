@@ -43,10 +43,12 @@ def fit_gate(machine: Machine, data: Sequence[RTestData], fit: FitResult) -> lis
                        "swapped, a sign, a mismatched machine file)")
     found = diagnose(machine, data, fit, advise=False)
     if found.unexplained:
-        worst = found.misfit[0]
-        reasons.append(f"the residual exceeds the R-test's noise ({worst['direction']} of {worst['path']}: "
-                       f"{worst['rms_um']:.2f} µm against {worst['noise_um']:g} µm) and no catalogue "
-                       "effect explains it (run diagnose: it shows where and its shape)")
+        where = (f"the residual exceeds the R-test's noise ({found.misfit[0]['direction']} of "
+                 f"{found.misfit[0]['path']}: {found.misfit[0]['rms_um']:.2f} µm against "
+                 f"{found.misfit[0]['noise_um']:g} µm)" if found.misfit else
+                 f"the residual holds a periodic line no catalogue effect has ({found.outside_line.text()})")
+        reasons.append(f"{where} and no catalogue effect explains it (run diagnose: it shows where and its "
+                       "shape, and how to declare it)")
     elif found.significant:
         reasons.append("diagnose finds effects the model misses: "
                        + ", ".join(c.effect for c in found.significant[:3])

@@ -388,3 +388,18 @@ def test_an_effect_declared_in_the_machine_file_is_tried_and_found(tmp_path, pos
     (tmp_path / "bad.toml").write_text(text + '\n[effects]\ndeclared = ["ECC:w5"]\n')
     with pytest.raises(CompgenError, match=r"bad.toml: effects: declared\[0\]: .*linear axis"):
         load_machine(tmp_path / "bad.toml")
+
+
+def test_an_unexplained_misfit_does_not_reach_the_control(seed_machine, poses):
+    from compgen.gate import fit_gate
+    data = [_outside_session(seed_machine, poses, "X", 5.0)]
+    reasons = fit_gate(seed_machine, data, identify(seed_machine, data))
+    assert any("periodic line no catalogue effect has (dX against X: pitch 4.99" in r for r in reasons), reasons
+
+
+def test_noiseless_data_are_not_unexplained(seed_machine, poses):
+    """Rounding-level residuals hold 'significant' lines of 1e-10 µm: below what an R-test
+    resolves, they are not a finding."""
+    data = [RTestData(poses, simulate(seed_machine, TABLE4, poses).deviation, "sim.csv", "", ())]
+    found = diagnose(seed_machine, data, identify(seed_machine, data), advise=False)
+    assert not found.unexplained and found.outside_line is None
