@@ -394,7 +394,8 @@ def test_an_unexplained_misfit_does_not_reach_the_control(seed_machine, poses):
     from compgen.gate import fit_gate
     data = [_outside_session(seed_machine, poses, "X", 5.0)]
     reasons = fit_gate(seed_machine, data, identify(seed_machine, data))
-    assert any("periodic line no catalogue effect has (dX against X: pitch 4.99" in r for r in reasons), reasons
+    shape = "periodic line no catalogue effect has (dX against X: pitch 4.99"
+    assert any(shape in r for r in reasons), reasons
 
 
 def test_noiseless_data_are_not_unexplained(seed_machine, poses):
