@@ -119,23 +119,12 @@ class Diagnosis:
 
     @property
     def unexplained(self) -> bool:
-        """No catalogue effect accounts for the misfit: the residual exceeds the R-test's
-        noise and none is significant, or the best removes less than ``SHARE_OF_EXCESS`` of
-        the excess; or a periodic line along a linear axis removes ``LINE_OVER_BEST`` times
-        what the best does (Bonferroni over the lines)."""
-        by_noise = bool(self.misfit) and (not self.significant or (self.best_share_of_excess or 0.0)
-                                          < SHARE_OF_EXCESS)
-        return by_noise or self.outside_line is not None
+        """No catalogue effect accounts for the misfit (``_unexplained``)."""
+        return _unexplained(self.misfit, bool(self.significant), self.best_share_of_excess, self.outside_line)
 
     @property
     def outside_line(self) -> Line | None:
-        """The strongest periodic line along a linear axis that outweighs every candidate
-        (judged only where the residual is not within the R-test's noise, or it is unknown)."""
-        if self.device_noise_um is not None and not self.misfit:
-            return None
-        return next((line for line in self.lines if line.unit == "mm" and line.amplitude_um >= RESOLVES_UM
-                     and line.p_value < self.alpha / max(len(self.lines), 1)
-                     and line.sum_sq >= LINE_OVER_BEST * self.best_sum_sq), None)
+        return _outside_line(self.lines, self.device_noise_um, self.misfit, self.alpha, self.best_sum_sq)
 
     @property
     def explained_to_noise(self) -> bool:
@@ -294,8 +283,22 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
             for i, n in enumerate(fit.free):
                 bias[n][pname] = float(row.absorbed[i, j] * shown(1.0, units_of[n])[0] / per_shown)
 
-    after_best, rival_names, rivals_separated_by, rivals_open = (), (), (), {}
     significant = [c for c in out if c.significant]
+    misfit, share = (), None
+    if device is not None:
+        misfit = tuple(lack_of_fit(r.reshape(-1, 3), poses.path, device, noise.rho, dof / r.size, alpha))
+        excess = rss - dof * (device * 1e-3) ** 2
+        if significant and excess > 0:
+            share = min(1.0, ranked[significant[0].effect].drop / excess)
+    lines = strongest_lines(machine, poses, r.reshape(-1, 3))
+    best_sum_sq = ranked[significant[0].effect].drop if significant else 0.0
+    unexplained = _unexplained(misfit, bool(significant), share,
+                               _outside_line(lines, device, misfit, alpha, best_sum_sq))
+
+    # rivals of a curve that fits a little of an unexplained misfit by chance: not pursued
+    after_best, rival_names, rivals_separated_by, rivals_open = (), (), (), {}
+    if unexplained:
+        significant = []
     if len(significant) > 1:
         first = noise.white(columns(machine, poses, [resolve(machine, significant[0].effect)]))
         others = [resolve(machine, c.effect) for c in significant[1:]]
@@ -323,13 +326,6 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
                 rival_names = tuple(c.effect for c in out if c.effect in (best.effect.name, *rival_names)
                                     and c is not first)
 
-    misfit, share = (), None
-    if device is not None:
-        misfit = tuple(lack_of_fit(r.reshape(-1, 3), poses.path, device, noise.rho, dof / r.size, alpha))
-        excess = rss - dof * (device * 1e-3) ** 2
-        if significant and excess > 0:
-            share = min(1.0, ranked[significant[0].effect].drop / excess)
-
     return Diagnosis(
         machine=machine.name, fit_file=fit_file, model=fit.model,
         rms_um=float(np.sqrt(rss / r.size)) * 1e3, sigma_um=float(np.sqrt(rss / dof)) * 1e3,
@@ -341,8 +337,27 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         outliers=_outlier_rows(data, bad, size), noise=_noise_summary(seg, noise.rho, poses.path),
         rivals_open=rivals_open, machine_ref=machine_ref or machine.source,
         program_ext=_program_ext(machine), device_noise_um=device, misfit=misfit,
-        lines=strongest_lines(machine, poses, r.reshape(-1, 3)), best_share_of_excess=share,
-        best_sum_sq=ranked[significant[0].effect].drop if significant else 0.0)
+        lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq)
+
+
+def _unexplained(misfit, significant: bool, share: float | None, outside: Line | None) -> bool:
+    """No catalogue effect accounts for the misfit: the residual exceeds the R-test's noise
+    and none is significant, or the best removes less than ``SHARE_OF_EXCESS`` of the
+    excess; or a periodic line along a linear axis outweighs every candidate."""
+    by_noise = bool(misfit) and (not significant or (share or 0.0) < SHARE_OF_EXCESS)
+    return by_noise or outside is not None
+
+
+def _outside_line(lines, device: float | None, misfit, alpha: float, best_sum_sq: float) -> Line | None:
+    """The strongest periodic line along a linear axis (no catalogue effect has that shape)
+    that an R-test resolves, significant over all lines, and removing ``LINE_OVER_BEST``
+    times what the best candidate removes; judged only where the residual is not within
+    the R-test's noise, or that noise is not known."""
+    if device is not None and not misfit:
+        return None
+    return next((line for line in lines if line.unit == "mm" and line.amplitude_um >= RESOLVES_UM
+                 and line.p_value < alpha / max(len(lines), 1)
+                 and line.sum_sq >= LINE_OVER_BEST * best_sum_sq), None)
 
 
 def _program_ext(machine: Machine) -> str:
