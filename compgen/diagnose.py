@@ -290,7 +290,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         excess = rss - dof * (device * 1e-3) ** 2
         if significant and excess > 0:
             share = min(1.0, ranked[significant[0].effect].drop / excess)
-    lines = strongest_lines(machine, poses, r.reshape(-1, 3))
+    lines = strongest_lines(machine, poses, r.reshape(-1, 3), Q)
     best_sum_sq = ranked[significant[0].effect].drop if significant else 0.0
     unexplained = _unexplained(misfit, bool(significant), share,
                                _outside_line(lines, device, misfit, alpha, best_sum_sq))

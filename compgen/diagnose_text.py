@@ -89,9 +89,10 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
         lines += _unexplained(d, fit, after)
     elif not d.significant:
         lines += ["", "  No candidate is significant: the model explains these data to the "
-                  + ("R-test's noise." if d.device_noise_um is not None else
-                     "noise level of these data (σ̂; the R-test's own noise is not given: set [rtest] "
-                     "noise_um in the machine file, or --noise-um, to test the residual against it).")]
+                  + (f"R-test's noise ({d.device_noise_um:g} µm)." if d.device_noise_um is not None else
+                     f"noise level (their own scatter, σ̂ {d.sigma_um:.2f} µm). The R-test's noise is not "
+                     "given: set [rtest] noise_um in the machine file, or --noise-um, to test the "
+                     "residual against it.")]
     elif len(d.significant) > 1:
         best = d.significant[0].effect
         lines += ["", f"  Effects share misfit: once {best} is added, "

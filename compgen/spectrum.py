@@ -4,8 +4,10 @@ session's time. Where no catalogue effect explains what is left, this is its sha
 the pitch a user declares (``EXX:w5``) comes from here.
 
 Each line is the least-squares sine of one period (two columns and a constant) in one
-reading direction, tried over a grid twice as fine as the data resolve and refined at the
-best; its F test is Bonferroni-corrected over the periods the grid resolves.
+reading direction, jointly with the model (the part of the sine the model's parameters
+would absorb is taken out of its columns, as diagnose does for every candidate), tried over
+a grid twice as fine as the data resolve and refined at the best; its F test is
+Bonferroni-corrected over the periods the grid resolves.
 """
 
 from __future__ import annotations
@@ -50,41 +52,44 @@ class Line:
                 "p_value": self.p_value, "sum_sq_um2": self.sum_sq * 1e6}
 
 
-def strongest_lines(machine: Machine, poses: Poses, r: np.ndarray) -> tuple[Line, ...]:
+def strongest_lines(machine: Machine, poses: Poses, r: np.ndarray, Q: np.ndarray | None = None
+                    ) -> tuple[Line, ...]:
     """The strongest line against every coordinate (its best direction), strongest share
-    first; ``r`` is the residual (n, 3), mm."""
+    first; ``r`` is the residual (n, 3), mm, and ``Q`` (3n, p) the model's orthonormal
+    columns, readings in (n, 3) order (the residual is orthogonal to them)."""
+    Qd = None if Q is None else Q.reshape(len(r), 3, -1).transpose(1, 0, 2)    # (3, n, p)
     out = []
     for axis in machine.axes:
         x = poses.q[:, machine.index(axis.name)]
         if axis.rotary:
             if np.ptp(x) > 0:
-                out.append(_best(axis.name, x, r, np.arange(1, MAX_ORDER + 1) / (2 * np.pi), "/rev",
+                out.append(_best(axis.name, x, r, Qd, np.arange(1, MAX_ORDER + 1) / (2 * np.pi), "/rev",
                                  lambda f: f * 2 * np.pi, refine=False))
         elif np.ptp(x) >= 4 * MIN_PITCH_MM:
             span = np.ptp(x)
-            out.append(_best(axis.name, x, r, np.arange(2 / span, 1 / MIN_PITCH_MM, 1 / (OVERSAMPLE * span)),
-                             "mm", lambda f: 1 / f))
+            grid = np.arange(2 / span, 1 / MIN_PITCH_MM, 1 / (OVERSAMPLE * span))
+            out.append(_best(axis.name, x, r, Qd, grid, "mm", lambda f: 1 / f))
     t = poses.t
     if np.isfinite(t).all() and np.ptp(t) > 0:
         span = np.ptp(t)
         grid = np.arange(2 / span, 1 / MIN_PERIOD_S, 1 / (OVERSAMPLE * span))
         if grid.size:
-            out.append(_best("time", t, r, grid, "s", lambda f: 1 / f))
+            out.append(_best("time", t, r, Qd, grid, "s", lambda f: 1 / f))
     return tuple(sorted((line for line in out if line is not None), key=lambda line: -line.share))
 
 
-def _best(against: str, x: np.ndarray, r: np.ndarray, grid: np.ndarray, unit: str, period,
-          refine: bool = True) -> Line | None:
+def _best(against: str, x: np.ndarray, r: np.ndarray, Qd: np.ndarray | None, grid: np.ndarray, unit: str,
+          period, refine: bool = True) -> Line | None:
     if grid.size == 0:
         return None
     y = r - r.mean(axis=0)
     rss = np.sum(y**2, axis=0)
-    drops = np.concatenate([_drops(x, y, grid[i:i + CHUNK]) for i in range(0, grid.size, CHUNK)])
+    drops = np.concatenate([_drops(x, y, grid[i:i + CHUNK], Qd) for i in range(0, grid.size, CHUNK)])
     k, d = np.unravel_index(int(np.argmax(drops)), drops.shape)
     f = grid[k]
     if refine:           # the grid's neighbours bracket the peak: golden-section between them
         def drop(v):
-            return _drops(x, y[:, [d]], np.array([v]))[0, 0]
+            return _drops(x, y[:, [d]], np.array([v]), None if Qd is None else Qd[[d]])[0, 0]
         lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
         a, b = hi - GOLDEN * (hi - lo), lo + GOLDEN * (hi - lo)
         fa, fb = drop(a), drop(b)
@@ -98,7 +103,7 @@ def _best(against: str, x: np.ndarray, r: np.ndarray, grid: np.ndarray, unit: st
                 b = lo + GOLDEN * (hi - lo)
                 fb = drop(b)
         f = (lo + hi) / 2
-    drop, amp = _fit(x, y[:, d], f)
+    drop, amp = _fit(x, y[:, d], f, None if Qd is None else Qd[d])
     n = len(x)
     tried = grid.size / OVERSAMPLE if refine else grid.size
     F = (drop / 2) / max((rss[d] - drop) / (n - 3), 1e-300)
@@ -107,9 +112,10 @@ def _best(against: str, x: np.ndarray, r: np.ndarray, grid: np.ndarray, unit: st
                 float(drop))
 
 
-def _drops(x: np.ndarray, y: np.ndarray, f: np.ndarray) -> np.ndarray:
+def _drops(x: np.ndarray, y: np.ndarray, f: np.ndarray, Qd: np.ndarray | None) -> np.ndarray:
     """(len(f), y's columns): the sum of squares a centred cos/sin pair of each frequency
-    (an evenly spaced run) removes from each column of ``y`` (centred)."""
+    (an evenly spaced run) removes from each column of ``y`` (centred), with the part the
+    model's columns ``Qd`` (one (n, p) block per column of y) would absorb taken out."""
     E = np.empty((len(x), len(f)), complex)
     E[:, 0] = np.exp(2j * np.pi * f[0] * x)
     if len(f) > 1:       # the next frequency's phasor is this one's times a fixed step
@@ -121,16 +127,25 @@ def _drops(x: np.ndarray, y: np.ndarray, f: np.ndarray) -> np.ndarray:
     cc = (n + sq.real) / 2 - n * mean.real**2
     ss = (n - sq.real) / 2 - n * mean.imag**2
     cs = sq.imag / 2 - n * mean.real * mean.imag
+    cc, ss, cs = (np.repeat(v[:, None], y.shape[1], axis=1) for v in (cc, ss, cs))
+    for j in range(y.shape[1] if Qd is not None else 0):
+        QE = Qd[j].T @ E - np.outer(Qd[j].sum(axis=0), mean)         # of the centred pair
+        cc[:, j] -= np.sum(QE.real**2, axis=0)
+        ss[:, j] -= np.sum(QE.imag**2, axis=0)
+        cs[:, j] -= np.sum(QE.real * QE.imag, axis=0)
     ab = E.T @ y
     a, b = ab.real, ab.imag
-    det = np.maximum(cc * ss - cs**2, 1e-300)[:, None]
-    alpha = (ss[:, None] * a - cs[:, None] * b) / det
-    beta = (cc[:, None] * b - cs[:, None] * a) / det
+    det = np.maximum(cc * ss - cs**2, 1e-300)
+    alpha = (ss * a - cs * b) / det
+    beta = (cc * b - cs * a) / det
     return alpha * a + beta * b
 
 
-def _fit(x: np.ndarray, y: np.ndarray, f: float) -> tuple[float, float]:
-    """The sum of squares a sine of frequency ``f`` removes from ``y``, and its amplitude."""
+def _fit(x: np.ndarray, y: np.ndarray, f: float, Q: np.ndarray | None) -> tuple[float, float]:
+    """The sum of squares a sine of frequency ``f`` (with a constant) removes from ``y``,
+    jointly with the model's columns ``Q`` (n, p), and its amplitude."""
     B = np.column_stack([np.cos(2 * np.pi * f * x), np.sin(2 * np.pi * f * x), np.ones_like(x)])
-    coef = np.linalg.lstsq(B, y, rcond=None)[0]
-    return float(np.sum(y**2) - np.sum((y - B @ coef) ** 2)), float(np.hypot(*coef[:2]))
+    G = B.T @ B - ((Q.T @ B).T @ (Q.T @ B) if Q is not None else 0.0)
+    rhs = B.T @ y
+    coef = np.linalg.lstsq(G, rhs, rcond=None)[0]
+    return float(coef @ rhs), float(np.hypot(*coef[:2]))
