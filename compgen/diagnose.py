@@ -116,6 +116,8 @@ class Diagnosis:
     lines: tuple[Line, ...] = ()    # the residual's strongest periodic line against each coordinate
     best_share_of_excess: float | None = None   # of the residual beyond the noise, the best removes
     best_sum_sq: float = 0.0        # the residual sum of squares the best significant candidate removes, mm²
+    # for rivals: what adding each puts into the fitted parameters, first order, shown units
+    carries: dict[str, dict[str, float]] = field(default_factory=dict)
 
     @property
     def unexplained(self) -> bool:
@@ -169,6 +171,8 @@ class Diagnosis:
             "unexplained": self.unexplained,
             "best_share_of_excess": self.best_share_of_excess,
             "residual_lines": [line.to_dict() for line in self.lines],
+            "rivals_carry": {"units": {n: self.bias_units[n] for n in self.model if n in self.bias_units},
+                             "shift_by_choice": self.carries},
             "still_significant_after_best": list(self.after_best),
             "rivals_of_best": list(self.rivals),
             "found": self.found,
@@ -326,6 +330,15 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
                 rival_names = tuple(c.effect for c in out if c.effect in (best.effect.name, *rival_names)
                                     and c is not first)
 
+    # what each rival, added, takes back from the fitted parameters (first order: the part
+    # of it they absorbed, J⁺c·a): where rivals are equivalent, the choice moves these
+    carries = {}
+    first = next((c.effect for c in out if c.significant), None)     # after the reordering above
+    for name in ((first, *rival_names) if rival_names else ()):
+        row = ranked[name]
+        shift = -(row.absorbed @ row.amp)
+        carries[name] = {n: float(shift[i] * shown(1.0, units_of[n])[0]) for i, n in enumerate(fit.free)}
+
     return Diagnosis(
         machine=machine.name, fit_file=fit_file, model=fit.model,
         rms_um=float(np.sqrt(rss / r.size)) * 1e3, sigma_um=float(np.sqrt(rss / dof)) * 1e3,
@@ -337,7 +350,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         outliers=_outlier_rows(data, bad, size), noise=_noise_summary(seg, noise.rho, poses.path),
         rivals_open=rivals_open, machine_ref=machine_ref or machine.source,
         program_ext=_program_ext(machine), device_noise_um=device, misfit=misfit,
-        lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq)
+        lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, carries=carries)
 
 
 def _unexplained(misfit, significant: bool, share: float | None, outside: Line | None) -> bool:

@@ -83,7 +83,7 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
                       f"{me()} fit --from {fit} --add {best} -o {after};",
                       "  which of them is the physical cause stays open (it needs another "
                       "reference), and the location errors written to a control depend on the "
-                      "choice."]
+                      "choice:", *_carries(d)]
     lines += _lines_text(d)
     if d.unexplained:
         lines += _unexplained(d, fit, after)
@@ -128,6 +128,23 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
             lines.append(f"    {name:<6} {per_um[worst]:+6.2f} {d.bias_units[name]} per µm of "
                          f"{effect_name(worst)}")
     return "\n".join([*lines, *d.notes]) + "\n"
+
+CARRIES_SHOWN = 0.2     # µm or ″: smaller shifts of a location error are not listed
+
+
+def _carries(d: Diagnosis) -> list[str]:
+    """What each equivalent choice puts into the fitted parameters, against the first."""
+    if not d.carries:
+        return []
+    first = next(iter(d.carries))
+    out = [f"  what each, added, moves in the fitted values (first order; the first, {first}, is the one "
+           "the location errors absorb least):"]
+    for name, shift in d.carries.items():
+        big = [(n, v) for n, v in shift.items() if abs(v) >= CARRIES_SHOWN]
+        out.append(f"    {name:<12} " + (", ".join(f"{n} {v:+.2f} {d.bias_units.get(n, '')}" for n, v in big)
+                                         or "nothing above 0.2 µm or ″"))
+    return out
+
 
 def _lines_text(d: Diagnosis) -> list[str]:
     """The residual's strongest periodic line against each coordinate."""

@@ -187,7 +187,10 @@ def _axis_symbols(axis: Axis) -> dict:
             elif e == d:
                 words, cause = f"axial error motion of {L}", "bearing or face runout"
             elif e in TRANSLATIONS:
-                words, cause = f"radial error motion of {L} in {E}", "bearing runout, eccentric table"
+                words, cause = f"radial error motion of {L} in {E}", (
+                    "bearing runout, eccentric table" if axis.full_turn else
+                    "gravity sag of the trunnion and table as the axis tilts (1/rev: sin and 1 − cos); "
+                    "bearing runout")
             else:
                 about = TRANSLATIONS[ROTATIONS.index(e)].upper()
                 words, cause = f"tilt error motion of {L} about {about}", "wobble of the bearing"
@@ -212,8 +215,10 @@ def _axis_symbols(axis: Axis) -> dict:
         for pair, kind in (((u, w), "radial"), ((ROT_OF[u], ROT_OF[w]), "tilt")):
             out["+".join(f"E{e.upper()}{L}" for e in pair)] = (
                 L, "comp", "".join(pair), ("h",), f"{kind} error motion of {L}, a vector turning",
-                "bearing runout or wobble (1/rev: eccentric, 2/rev: oval)" if kind == "radial" else
-                "bearing wobble; on a tilting axis, gravity turning with it", 1)
+                ("bearing runout or wobble (1/rev: eccentric, 2/rev: oval)" if axis.full_turn else
+                 "gravity sag of the trunnion and table turning with the axis (1/rev), bearing runout")
+                if kind == "radial" else
+                "bearing wobble" if axis.full_turn else "bearing wobble; gravity bending the trunnion", 1)
     else:
         # ISO 230-1 squareness with Y as the reference (the seed's COX, AOZ, BOZ):
         # X is squared to Y about Z, Z to X and Y about X and Y.

@@ -26,6 +26,8 @@ MAX_ORDER = 36         # per revolution
 OVERSAMPLE = 2         # the grid's frequencies per resolved one (the peak is refined after)
 CHUNK = 200            # frequencies evaluated at once (memory: n × CHUNK per column)
 GOLDEN = (np.sqrt(5.0) - 1) / 2
+SEEN = 0.1             # a line whose pair the model absorbs beyond 1 − this (of its sum of squares) is
+                       # not one: its amplitude would be the model's to take
 
 
 @dataclass(frozen=True)
@@ -35,7 +37,7 @@ class Line:
     period: float         # mm (linear axis), an order per revolution (rotary), s (time)
     unit: str             # "mm", "/rev" or "s"
     amplitude_um: float
-    share: float          # of that direction's residual sum of squares the line removes
+    share: float          # of the residual sum of squares (all directions) the line removes
     p_value: float        # Bonferroni over the periods the grid resolves
     sum_sq: float = 0.0   # the residual sum of squares it removes, mm²
 
@@ -44,7 +46,7 @@ class Line:
                f"{self.period:g}/rev" if self.unit == "/rev" else f"period {self.period:.0f} s")
         p = f"p = {self.p_value:.2g}" if self.p_value > 0 else "p < 1e-300"
         return (f"{self.direction} against {self.against}: {per}, amplitude {self.amplitude_um:.2f} µm, "
-                f"{self.share:.0%} of {self.direction}'s residual ({p})")
+                f"removes {self.share:.0%} of the residual ({p})")
 
     def to_dict(self) -> dict:
         return {"against": self.against, "direction": self.direction, "period": self.period,
@@ -83,7 +85,7 @@ def _best(against: str, x: np.ndarray, r: np.ndarray, Qd: np.ndarray | None, gri
     if grid.size == 0:
         return None
     y = r - r.mean(axis=0)
-    rss = np.sum(y**2, axis=0)
+    rss = float(np.sum(r**2))
     drops = np.concatenate([_drops(x, y, grid[i:i + CHUNK], Qd) for i in range(0, grid.size, CHUNK)])
     k, d = np.unravel_index(int(np.argmax(drops)), drops.shape)
     f = grid[k]
@@ -104,11 +106,10 @@ def _best(against: str, x: np.ndarray, r: np.ndarray, Qd: np.ndarray | None, gri
                 fb = drop(b)
         f = (lo + hi) / 2
     drop, amp = _fit(x, y[:, d], f, None if Qd is None else Qd[d])
-    n = len(x)
     tried = grid.size / OVERSAMPLE if refine else grid.size
-    F = (drop / 2) / max((rss[d] - drop) / (n - 3), 1e-300)
+    F = (drop / 2) / max((rss - drop) / (r.size - 3), 1e-300)
     return Line(against, f"d{'XYZ'[d]}", float(period(f)), unit, amp * 1e3,
-                float(drop / rss[d]) if rss[d] > 0 else 0.0, min(1.0, f_sf(F, 2, n - 3) * max(tried, 1)),
+                float(drop / rss) if rss > 0 else 0.0, min(1.0, f_sf(F, 2, r.size - 3) * max(tried, 1)),
                 float(drop))
 
 
@@ -127,6 +128,7 @@ def _drops(x: np.ndarray, y: np.ndarray, f: np.ndarray, Qd: np.ndarray | None) -
     cc = (n + sq.real) / 2 - n * mean.real**2
     ss = (n - sq.real) / 2 - n * mean.imag**2
     cs = sq.imag / 2 - n * mean.real * mean.imag
+    whole = cc + ss
     cc, ss, cs = (np.repeat(v[:, None], y.shape[1], axis=1) for v in (cc, ss, cs))
     for j in range(y.shape[1] if Qd is not None else 0):
         QE = Qd[j].T @ E - np.outer(Qd[j].sum(axis=0), mean)         # of the centred pair
@@ -138,7 +140,7 @@ def _drops(x: np.ndarray, y: np.ndarray, f: np.ndarray, Qd: np.ndarray | None) -
     det = np.maximum(cc * ss - cs**2, 1e-300)
     alpha = (ss * a - cs * b) / det
     beta = (cc * b - cs * a) / det
-    return alpha * a + beta * b
+    return np.where(cc + ss >= SEEN * whole[:, None], alpha * a + beta * b, 0.0)
 
 
 def _fit(x: np.ndarray, y: np.ndarray, f: float, Q: np.ndarray | None) -> tuple[float, float]:

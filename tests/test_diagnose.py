@@ -287,6 +287,15 @@ def test_of_equivalent_rivals_the_one_leaving_the_location_errors_true_comes_fir
     assert max(abs(v) for v in off.values()) < 4, off
     other = identify(seed_machine, data, compose(seed_machine, base.model, ["EBA:h1"]))
     assert abs(other.parameters["BOA"].value - TABLE4["BOA"]) > 50 * other.parameters["BOA"].std
+    # what diagnose says each choice moves is what the refit with it moves (first order)
+    assert set(found.carries) == {"EBA+ECA:h-1", *found.rivals}
+    for choice, refit in (("EBA+ECA:h-1", fit), ("EBA:h1", other)):
+        for n, said in found.carries[choice].items():
+            per = 1e3 if base.parameters[n].unit == "mm" else 1 / ARCSEC       # µm, ″
+            moved = (refit.parameters[n].value - base.parameters[n].value) * per
+            assert said == pytest.approx(moved, abs=0.3), (choice, n, said, moved)
+    assert abs(found.carries["EBA:h1"]["BOA"] - found.carries["EBA+ECA:h-1"]["BOA"]) > 5     # ″
+    assert "what each, added, moves in the fitted values" in report(found)
 
 
 # ------------------------------------------------------------------ beyond the catalogue
@@ -394,7 +403,7 @@ def test_an_unexplained_misfit_does_not_reach_the_control(seed_machine, poses):
     from compgen.gate import fit_gate
     data = [_outside_session(seed_machine, poses, "X", 5.0)]
     reasons = fit_gate(seed_machine, data, identify(seed_machine, data))
-    shape = "periodic line no catalogue effect has (dX against X: pitch 4.99"
+    shape = "periodic line no catalogue effect has (dX against X: pitch 5.00"
     assert any(shape in r for r in reasons), reasons
 
 

@@ -191,3 +191,16 @@ def test_a_radial_vector_turning_with_the_table_at_1_per_rev_is_a_ball_offset(se
 
     assert unexplained("EXC+EYC:h1") < 1e-6          # finite differences: ~2e-8
     assert unexplained("EXC+EYC:h-1") > 0.5
+
+
+def test_words_and_causes_name_the_physics(seed_machine):
+    """What a machine builder would say: a tilting axis's radial motion is gravity sag, a
+    turning table's is its bearing; axial, radial and tilt are not swapped."""
+    from compgen.effects import resolve
+    words = {n: resolve(seed_machine, n) for n in ("EYA+EZA:h1", "EZA:h1", "EXC+EYC:h2", "EZC:h1",
+                                                   "EXC:h2", "EAC:h1", "EXX:p1", "EXX:w5")}
+    assert "gravity sag" in words["EYA+EZA:h1"].cause and "gravity sag" in words["EZA:h1"].cause
+    assert "gravity" not in words["EXC+EYC:h2"].cause and "bearing" in words["EXC+EYC:h2"].cause
+    assert words["EZC:h1"].words.startswith("axial") and words["EXC:h2"].words.startswith("radial")
+    assert words["EAC:h1"].words.startswith("tilt") and "scale" in words["EXX:p1"].cause
+    assert "pitch of 5 mm" in words["EXX:w5"].words and "ball-screw" in words["EXX:w5"].cause
