@@ -413,3 +413,30 @@ def test_noiseless_data_are_not_unexplained(seed_machine, poses):
     data = [RTestData(poses, simulate(seed_machine, TABLE4, poses).deviation, "sim.csv", "", ())]
     found = diagnose(seed_machine, data, identify(seed_machine, data), advise=False)
     assert not found.unexplained and found.outside_line is None
+
+
+def test_one_rule_of_separability_for_diagnose_and_fit(seed_machine):
+    """K4 and K4 at half the ball's radius: for the best candidates and for those the model
+    absorbs, diagnose's 'separable' is exactly whether fit --add accepts the effect on these
+    data (the same condition number, the same limit); what diagnose names found, fit takes."""
+    from compgen.errors import CompgenError
+    half = [seed_machine.ball[0] / 2, seed_machine.ball[1] / 2, seed_machine.ball[2]]
+    poses = [generate(seed_machine, ["K4"]), generate(seed_machine, ["K4"], ball=half)]
+    seen = set()
+    for hidden in ({"EZC:h1c": 3 * UM}, {"EAC+EBC:h2c": 8 * ARCSEC}):
+        data = [_session(seed_machine, p, hidden, seed=s) for s, p in enumerate(poses)]
+        base = identify(seed_machine, data)
+        found = diagnose(seed_machine, data, base, advise=False)
+        visible = [c for c in found.candidates if c.visible][:3]
+        absorbed = [c for c in found.candidates if not c.visible and not c.silent][:3]
+        for c in visible + absorbed:
+            try:
+                identify(seed_machine, data, compose(seed_machine, base.model, [c.effect]), method="linear")
+                accepted = True
+            except CompgenError:
+                accepted = False
+            assert accepted == c.separable, (c.effect, c.condition)
+            seen.add(accepted)
+        if found.found:
+            assert next(c for c in found.candidates if c.effect == found.found).separable
+    assert seen == {True, False}                  # both sides of the rule were tried
