@@ -323,7 +323,7 @@ def run(machine: Machine, blocks: list[Block]) -> Check:
                 findings.append(Finding(b.line, "axes positioned from an unknown place below the safe height",
                                         f"the nest is below Z {safe:g} before every axis has been positioned "
                                         "there", 0.0, b.text.strip()))
-                break
+            # the moves after it start from known places: they are checked all the same
         else:
             checkable.append(seg)
     if checkable:
@@ -419,8 +419,10 @@ def _check_travel(machine: Machine, b: Block, path: np.ndarray, findings: list) 
 
 
 def _check_collisions(machine: Machine, segments: list[_Segment], findings: list):
-    """Clearances of all samples at once; the first violation of each pair in
-    each block is a finding. Returns the closest approach outside the measuring exemption."""
+    """Clearances of all samples at once; the closest approach of each pair in each block
+    that comes nearer than the set-up's ``margin`` (or into it) is a finding. Returns the
+    closest approach outside the measuring exemption."""
+    margin = machine.setup.margin
     paths = np.concatenate([seg.path for seg in segments])
     owner = np.concatenate([np.full(len(seg.path), i) for i, seg in enumerate(segments)])
     pairs, measuring = clearances(machine, paths)
@@ -431,10 +433,13 @@ def _check_collisions(machine: Machine, segments: list[_Segment], findings: list
         j = int(np.argmin(c))
         if c[j] < closest[0]:
             closest = (float(c[j]), f"{pair}, line {segments[owner[j]].block.line}")
-        for i in np.unique(owner[c < 0]):
-            j = int(np.flatnonzero((owner == i) & (c < 0))[np.argmin(c[(owner == i) & (c < 0)])])
+        near = c < margin
+        for i in np.unique(owner[near]):
+            j = int(np.flatnonzero((owner == i) & near)[np.argmin(c[(owner == i) & near])])
             b = segments[i].block
             part, thing = pair.split(" / ")
-            findings.append(Finding(b.line, f"{part} enters the {thing}", b.text.strip(), float(-c[j]),
+            what = (f"{part} enters the {thing}" if c[j] < 0 else
+                    f"{part} within {c[j]:.1f} mm of the {thing} (margin {margin:g} mm)")
+            findings.append(Finding(b.line, what, b.text.strip(), float(-c[j]) if c[j] < 0 else 0.0,
                                     _axes_text(machine, paths[j])))
     return closest

@@ -254,3 +254,31 @@ def test_the_searched_clearance_is_the_least_along_housing_and_spindle():
         table = np.where(outside > 0, outside, inside).min(axis=1) - radius
         np.testing.assert_allclose(got[f"{part} / table"], table, atol=0.02)
         assert (got[f"{part} / table"] < 0).any() or part == "spindle"     # some poses reach in
+
+
+def test_the_motion_check_applies_the_set_ups_margin_to_every_collision_rule():
+    """compgen's K4 program comes within C mm of the set-up at its closest: a margin 1 mm
+    above C is a finding naming the margin, 1 mm below is none. (Before, only entering a
+    solid was refused: the spindle tangent to the table face passed.)"""
+    from dataclasses import replace
+
+    from compgen.emit.programs import measure_program
+    from compgen.paths import generate
+    m = load_machine(SEED_MACHINE)
+    ctl = controller(m.controller)
+    text = measure_program(m, generate(m, ["K4"]), "K4", m.controller, "tcpm", "K4", "0", "d").files[".H"]
+    closest = motion.run(m, ctl.blocks(text)).closest_mm
+    for margin, near in ((closest + 1, True), (closest - 1, False)):
+        found = motion.run(replace(m, setup=replace(m.setup, margin=margin)), ctl.blocks(text)).findings
+        hits = [f for f in found if f"(margin {margin:g} mm)" in f.rule]
+        assert bool(hits) == near, (margin, [f.rule for f in found][:3])
+    found = motion.run(replace(m, setup=replace(m.setup, margin=closest + 1)), ctl.blocks(text)).findings
+    assert any(f"within {closest:.1f} mm of the ball (margin" in f.rule for f in found)
+
+
+def test_a_ball_the_path_cannot_reach_is_the_users_set_up_not_an_internal_error(tmp_path):
+    code, out, err = run("measure-program", "--machine", BC_MACHINE, "--path", "K1", "--ball", "0,0,20",
+                         "-o", tmp_path / "K1.MPF")
+    assert code == 2 and "internal" not in err and err.count("\n") == 1, (code, err)
+    assert "the machine cannot run K1 with the ball at 0, 0, 20 mm" in err and "Put the ball higher" in err
+    assert not (tmp_path / "K1.MPF").exists()
