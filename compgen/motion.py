@@ -51,6 +51,7 @@ class Block:
     machine_coords: bool = False
     seconds: float = 0.0
     on: bool = False             # tcp / length: switched on (True) or off
+    turn: dict = field(default_factory=dict)   # modulo axis letter → "+", "-" or "short"
 
 
 @dataclass(frozen=True)
@@ -225,10 +226,11 @@ class _Segment:
     path: np.ndarray | None = None
 
 
-def run(machine: Machine, blocks: list[Block]) -> Check:
+def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = ()) -> Check:
     """Move the machine model through ``blocks`` and check every sample. The blocks are
     walked once to find each move's ends (TCP moves in TCP coordinates); the samples of
-    all moves are then converted and checked together."""
+    all moves are then converted and checked together. ``modulo``: the rotary axes the
+    control positions modulo 360° (``Controller.modulo_axes``)."""
     k = len(machine.axes)
     linear = [machine.index(c) for c in "XYZ"]
     rotary = [machine.index(a.name) for a in machine.rotary_axes]
@@ -288,7 +290,8 @@ def run(machine: Machine, blocks: list[Block]) -> Check:
                 if i in linear:
                     end[linear.index(i)] = v
                 else:
-                    end[3 + rotary.index(i)] = np.radians(v)
+                    now = w[3 + rotary.index(i)]
+                    end[3 + rotary.index(i)] = np.radians(_turned(modulo, b, letter, v, np.degrees(now)))
             segments.append(_Segment(b, True, w, end, False))
             w = end
             continue
@@ -297,7 +300,7 @@ def run(machine: Machine, blocks: list[Block]) -> Check:
         end = q.copy()
         for letter, v in b.target.items():
             i = letters[letter]
-            end[i] = np.radians(v) if i in rotary else v
+            end[i] = np.radians(_turned(modulo, b, letter, v, np.degrees(q[i]))) if i in rotary else v
         segments.append(_Segment(b, False, q, end, bool((np.isnan(q) & ~np.isnan(end)).any())))
         q = end
     _paths(machine, segments, linear, rotary)
@@ -330,6 +333,38 @@ def run(machine: Machine, blocks: list[Block]) -> Check:
         closest = _check_collisions(machine, checkable, findings)
     findings.sort(key=lambda f: f.line)
     return Check(len(segments), seconds, closest[0], closest[1], tuple(findings))
+
+
+def _turned(modulo: tuple[str, ...], b: Block, letter: str, value: float, now: float) -> float:
+    """Where a rotary axis ends (deg, unwrapped) for the written ``value``. An axis the
+    control positions modulo 360° goes to ``value`` mod 360 the way the block says — "+" and
+    "-" turn that way, "short" the shorter way — from where it is (``now``, NaN: unknown, then
+    to the value itself). A plain word on such an axis turns the way the control's machine
+    data say: not modelled, refused."""
+    if letter not in modulo:
+        if letter in b.turn:
+            raise CompgenError(f"line {b.line}: {b.text.strip()!r} turns {letter} as a modulo axis; the "
+                               f"machine file does not declare {letter} modulo",
+                               hint="declare it in the control's section of the machine file (modulo), "
+                                    "or write a plain position")
+        return value
+    ahead = (value - now) % 360.0
+    if min(ahead, 360.0 - ahead) < 1e-6:    # where it is (to rounding): no turn
+        ahead = 0.0
+    if letter not in b.turn:
+        if ahead == 0.0:                   # where it is: no turn, whichever way the data say
+            return now
+        raise CompgenError(f"line {b.line}: {b.text.strip()!r}: {letter} is a 360° modulo axis, and a plain "
+                           f"position turns it the way the control's machine data say: not checked",
+                           hint="write the direction in the block (e.g. SINUMERIK ACP, ACN or DC)")
+    if np.isnan(now):
+        return value % 360.0
+    how = b.turn[letter]
+    if how == "+":
+        return now + ahead
+    if how == "-":
+        return now - (360.0 - ahead) % 360.0
+    return now + (ahead - 360.0 if ahead > 180.0 else ahead)
 
 
 def _paths(machine: Machine, segments: list[_Segment], linear, rotary) -> None:

@@ -13,6 +13,7 @@ from conftest import BC_MACHINE, SEED_MACHINE, run
 
 from compgen import motion
 from compgen.emit.registry import controller
+from compgen.errors import CompgenError
 from compgen.machine_file import load_machine
 from compgen.motion import clearances, safe_height
 
@@ -282,3 +283,49 @@ def test_a_ball_the_path_cannot_reach_is_the_users_set_up_not_an_internal_error(
     assert code == 2 and "internal" not in err and err.count("\n") == 1, (code, err)
     assert "the machine cannot run K1 with the ball at 0, 0, 20 mm" in err and "Put the ball higher" in err
     assert not (tmp_path / "K1.MPF").exists()
+
+
+@pytest.mark.parametrize("path, back", [("K2", False), ("K4", False), ("K2", True)])
+def test_no_sinumerik_program_turns_a_modulo_axis_the_long_way(path, back):
+    """The B/C table's C is a 360° modulo axis (MD30310): K2 ends at C360, which a plain C360
+    after C357 would reach by turning −357° (MD30455 default). compgen writes each pose's way
+    (ACP/ACN) and turns at the safe height the short way (DC): no block turns C more than
+    half a turn, and the pose blocks turn it as the path goes."""
+    from compgen.emit.programs import measure_program
+    from compgen.paths import generate
+    m = load_machine(BC_MACHINE)
+    ctl = controller("sinumerik840d")
+    assert ctl.modulo_axes(m) == ("C",)
+    poses = generate(m, [path], back=back)
+    text = measure_program(m, poses, path, "sinumerik840d", "tcpm", path, "0", "d").files[".MPF"]
+    assert not re.search(r"(?m)\bC3\d\d\.\d+ .*; pose", text) and "C=ACP(" in text
+    c, turns = np.nan, []
+    for b in ctl.blocks(text):
+        if b.kind == "move" and "C" in b.target:
+            end = motion._turned(("C",), b, "C", b.target["C"], c)
+            turns.append((end - c, "; pose" in b.text))
+            c = end
+    assert max(abs(t) for t, _ in turns if np.isfinite(t)) <= 180
+    at_poses = [t for t, pose in turns if pose and t]
+    planned = np.diff(np.degrees(poses.q[:, m.index("C")]))
+    np.testing.assert_allclose(at_poses, planned[planned != 0], atol=1e-3)
+    assert motion.run(m, ctl.blocks(text), ctl.modulo_axes(m)).findings == ()
+
+
+def test_a_plain_position_on_a_modulo_axis_is_refused_not_guessed():
+    m = load_machine(BC_MACHINE)
+    ctl = controller("sinumerik840d")
+    text = (";\nT=\"RTEST\"\nM6\nD1\nG54\nG0 Z286\nG0 B0 C=DC(357)\nG0 X100 Y40 Z286 B0 C357\n"
+            "G0 X100 Y40 Z286 B0 C360\nM30\n")
+    with pytest.raises(CompgenError, match=r"line 9: .*C is a 360° modulo axis.*ACP, ACN or DC"):
+        motion.run(m, ctl.blocks(text), ctl.modulo_axes(m))
+    seed = load_machine(SEED_MACHINE)           # C with limits: plain positions, as ever
+    assert controller("sinumerik840d").modulo_axes(seed) == ()
+
+
+def test_a_sinumerik_machine_must_say_whether_its_turning_axes_are_modulo(tmp_path):
+    text = BC_MACHINE.read_text()
+    (tmp_path / "m.toml").write_text(re.sub(r"(?m)^modulo = .*$", "", text))
+    code, _, err = run("measure-program", "--machine", tmp_path / "m.toml", "--path", "K2", "-o",
+                       tmp_path / "K2.MPF")
+    assert code == 2 and "[sinumerik] modulo" in err and 'modulo = ["C"]' in err

@@ -63,6 +63,16 @@ class Controller:
     def number(value: float, decimals: int) -> str:
         return fmt_plain(value, decimals)
 
+    def modulo_axes(self, machine: Machine) -> tuple[str, ...]:
+        """The rotary axes this control positions modulo 360° on this machine."""
+        return ()
+
+    def axis_word(self, letter: str, value: float, before: float | None, feed: bool, decimals: int,
+                  machine: Machine) -> str:
+        """An axis's word in a move: ``before`` is its value in the last block that wrote it
+        (None: not yet), ``feed`` whether the block is a feed move (a pose) or a rapid."""
+        return f"{letter}{self.number(value, decimals)}"
+
     def blocks(self, text: str) -> list[Block]:
         """A program as this control executes it, block by block (``motion.Block``)."""
         raise NotImplementedError

@@ -110,9 +110,12 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     check_travel(machine, up[None], f"the safe height Z {safe:g} above the rotary axes")
     steps = _steps(machine, poses, segments, mode, ctl.tcp_switchable, safe, setup.clearance, label)
     fmt = ctl.number
+    before: dict[str, float] = {}
     for step in steps:
-        step["words"] = " ".join(f"{n}{fmt(v, ANGLE_DECIMALS if n in ROT else LINEAR_DECIMALS)}"
+        step["words"] = " ".join(ctl.axis_word(n, v, before.get(n), step["kind"] == "feed",
+                                               ANGLE_DECIMALS if n in ROT else LINEAR_DECIMALS, machine)
                                  for n, v in step.get("axes", {}).items())
+        before.update(step.get("axes", {}))
     span = {c: (poses.q[:, j].min(), poses.q[:, j].max()) for c, j in zip("XYZ", linear, strict=True)}
     ball = poses.ball[0]
     header = [
@@ -140,7 +143,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
                   tool=setup.tool, feed=f"{setup.feed:g}", dwell=f"{setup.dwell:g}" if setup.dwell else "",
                   work_offset=setup.work_offset, max_step=f"{machine.limits.max_step_deg:g}",
                   steps=steps, rotary=[a.name for a in machine.rotary_axes])
-    result = motion.run(machine, ctl.blocks(text))
+    result = motion.run(machine, ctl.blocks(text), ctl.modulo_axes(machine))
     if result.findings:     # compgen's own safety net: nothing unsafe leaves this function
         more = f" (and {len(result.findings) - 1} more)" if len(result.findings) > 1 else ""
         at = ", ".join(f"{v:g}" for v in ball)
@@ -299,7 +302,7 @@ def read_program(text: str, machine: Machine, controller_name: str) -> tuple[str
         m = ctl.pose_line.match(line)
         if not m:
             continue
-        words = dict((w[0], float(w[1:])) for w in m[4].split())
+        words = {w[0]: float(re.sub(r"^=(?:ACP|ACN|DC)\((.*)\)$", r"\1", w[1:])) for w in m[4].split()}
         if sorted(words) != sorted(names):
             raise CompgenError(f"pose {m[5]} names rotary axes {sorted(words)}, the machine {names}")
         xyz.append([float(m[i]) for i in (1, 2, 3)])

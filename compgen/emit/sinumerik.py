@@ -8,6 +8,7 @@ reversed); Function Manual K3 03/2013 §4.4 (CEC, machine-axis names p.248).
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 
 import numpy as np
 
@@ -152,6 +153,14 @@ def _cec_text(t: CompTable, index: int, names: dict[str, str]) -> dict:
             "values": [fmt_plain(v, 6) for v in t.values]}
 
 
+# A 360° modulo rotary axis (MD30310 ROT_IS_MODULO) moves to a plain absolute position the way
+# MD30455 bit 2 says: like AC (the sign of target − current, in 0…360) or like DC (shortest);
+# so K2 ending at C360 from C357 turns −357° by default. compgen writes the way in the block:
+# ACP (+), ACN (−), DC (shortest). Function Manual Axes and Spindles 06/2019, R2 §7.2 p.225.
+MODULO_WORD = re.compile(r"([A-C])=(ACP|ACN|DC)\(([+-]?\d+(?:\.\d+)?)\)")
+TURN = {"ACP": "+", "ACN": "-", "DC": "short"}
+
+
 def program_blocks(text: str) -> list[Block]:
     """A SINUMERIK part program as the control executes it (the blocks compgen writes)."""
     out, modal, feed = [], None, None
@@ -169,8 +178,15 @@ def program_blocks(text: str) -> list[Block]:
         elif (d := re.fullmatch(r"G4 F([\d.]+)", b)) is not None:
             out.append(Block(k, raw, "dwell", seconds=float(d[1])))
         else:
-            tokens = b.split()
+            tokens, turn = [], {}
+            for t in b.split():       # L=ACP(v), ACN, DC: a modulo axis's position and way
+                d = MODULO_WORD.fullmatch(t)
+                if d is not None:
+                    turn[d[1]] = TURN[d[2]]
+                    t = f"{d[1]}{d[3]}"
+                tokens.append(t)
             move, modal, feed = gcode_move(raw, k, tokens, modal, feed, "SUPA", skip=("D0",))
+            move = replace(move, turn=turn)
             if "D0" in tokens:
                 out.append(Block(k, raw, "length", on=False))
             out.append(move)
@@ -194,7 +210,7 @@ class Sinumerik840D(Controller):
     def read_section(self, get, machine: Machine) -> dict:
         """[sinumerik]: the $TC_CARR record, the axis vectors as the control holds them, and
         the machine-axis names of the CEC tables."""
-        get.only({"tcarr", "vectors", "machine_axes"})
+        get.only({"tcarr", "vectors", "machine_axes", "modulo"})
         get.sub("vectors").only({a.name for a in machine.rotary_axes})
         record = int(get.number("tcarr"))
         kinds = {a.name: "P" if a.side == "workpiece" else "T" for a in machine.rotary_axes}
@@ -216,11 +232,42 @@ class Sinumerik840D(Controller):
                     raise CompgenError(f"machine-axis name {name!r} is not a SINUMERIK axis name "
                                        "(letters, digits, _; e.g. X1, AX1)", where=m.at(axis.name))
                 names[axis.name] = name
+        modulo = None
+        if "modulo" in get.doc:    # MD30310 ROT_IS_MODULO of each rotary axis: its programs differ
+            modulo = tuple(get.names("modulo"))
+            for name in modulo:
+                if name not in machine.axis_names or not machine.axis(name).full_turn:
+                    raise CompgenError(f"{name} is not a rotary axis that turns a whole revolution",
+                                       where=get.at("modulo"))
         return {"tcarr": record, "kind": {"P": "P", "T": "T"}.get(kind, "M"), "vectors": vectors,
-                "machine_axes": names}
+                "machine_axes": names, "modulo": modulo}
 
     def main_suffix(self, current: str | None) -> str:
         return ".MPF"
+
+    def check_setup(self, machine: Machine) -> None:
+        turning = [a.name for a in machine.rotary_axes if a.full_turn]
+        if turning and (machine.sinumerik is None or machine.sinumerik.get("modulo") is None):
+            raise CompgenError(f"whether {', '.join(turning)} {'is a' if len(turning) == 1 else 'are'} 360° "
+                               "modulo axis on this control is not in the machine file: a program reads "
+                               "differently on one", where=f"{machine.source}: [sinumerik] modulo",
+                               hint=f'set modulo = ["{turning[0]}"] where MD30310 ROT_IS_MODULO = 1, or '
+                                    "modulo = [] where no axis is")
+
+    def modulo_axes(self, machine: Machine) -> tuple[str, ...]:
+        return tuple((machine.sinumerik or {}).get("modulo") or ())
+
+    def axis_word(self, letter: str, value: float, before: float | None, feed: bool, decimals: int,
+                  machine: Machine) -> str:
+        if letter not in self.modulo_axes(machine):
+            return super().axis_word(letter, value, before, feed, decimals, machine)
+        # a pose's turn the way the path goes (ACP/ACN); a turn at the safe height the short
+        # way; where it stays, a plain position (no turn whatever MD30455 says)
+        at = self.number(value % 360.0, decimals)
+        if before is not None and value == before:
+            return f"{letter}{at}"
+        way = "DC" if before is None or not feed else "ACP" if value > before else "ACN"
+        return f"{letter}={way}({at})"
 
     def blocks(self, text: str) -> list[Block]:
         return program_blocks(text)
