@@ -329,3 +329,18 @@ def test_a_sinumerik_machine_must_say_whether_its_turning_axes_are_modulo(tmp_pa
     code, _, err = run("measure-program", "--machine", tmp_path / "m.toml", "--path", "K2", "-o",
                        tmp_path / "K2.MPF")
     assert code == 2 and "[sinumerik] modulo" in err and 'modulo = ["C"]' in err
+
+
+@pytest.mark.parametrize("form", ["FUNCTION TCPM F TCP AXIS POS PATHCTRL AXIS",
+                                  "FUNCTION TCPM F CONT AXIS SPAT PATHCTRL AXIS"])
+def test_heidenhain_tcpm_forms_the_check_does_not_model_are_refused(tmp_path, form):
+    """compgen writes F CONT AXIS POS: a pose block only turns the table, where F TCP's feed
+    (the tool point's speed relative to the workpiece) is zero; AXIS SPAT reads rotary words
+    as spatial angles. Either, edited in, is refused with its line, never simulated."""
+    program = tmp_path / "K4.H"
+    assert run("measure-program", "--machine", SEED_MACHINE, "--path", "K4", "-o", program)[0] == 0
+    text = program.read_text()
+    assert "FUNCTION TCPM F CONT AXIS POS PATHCTRL AXIS" in text
+    program.write_text(text.replace("FUNCTION TCPM F CONT AXIS POS PATHCTRL AXIS", form))
+    code, out, err = run("check-program", "--machine", SEED_MACHINE, program)
+    assert code == 2 and f"{form!r}: only" in err and "not modelled" not in out, (code, out, err)

@@ -236,6 +236,13 @@ def _comp_csv(tables) -> str:
     return "\n".join(out) + "\n"
 
 
+# TCPM as compgen writes it: F CONT, the programmed feed is the contouring feed of the axes in
+# the block (a pose block turns the table only: F TCP, the tool point's speed relative to the
+# workpiece, is zero there); AXIS POS, rotary words are axis positions; PATHCTRL AXIS.
+# TNC 640 ISO user's manual 5/2013 p. 400; TNC 620 user's manual 2/2015 p. 446.
+TCPM = "FUNCTION TCPM F CONT AXIS POS PATHCTRL AXIS"
+
+
 def program_blocks(text: str) -> list[Block]:
     """A Klartext program as the control executes it (the blocks compgen writes)."""
     out = []
@@ -252,8 +259,15 @@ def program_blocks(text: str) -> list[Block]:
             continue
         if b == "FUNCTION RESET TCPM":
             out.append(Block(k, raw, "tcp", on=False))
-        elif b.startswith("FUNCTION TCPM"):
+        elif b == TCPM:
             out.append(Block(k, raw, "tcp", on=True))
+        elif b.startswith("FUNCTION TCPM"):
+            # F TCP: the feed is the tool point's speed relative to the workpiece, which is
+            # zero where only the table turns (undefined there); AXIS SPAT: rotary words are
+            # spatial angles. Neither is what this check models.
+            raise CompgenError(f"line {k}: {b!r}: only {TCPM!r} is modelled (F CONT: the feed of the "
+                               "axes programmed; AXIS POS: rotary words are axis positions)",
+                               hint="write the program with compgen measure-program")
         elif (d := re.fullmatch(r"CYCL DEF 7\.[123] [XYZ]([+-]?[\d.]+)", b)) is not None:
             if float(d[1]) != 0:
                 raise CompgenError(f"line {k}: a datum shift moves the preset compgen's positions are in")
