@@ -251,3 +251,19 @@ def test_the_marker_names_the_values_as_written_not_their_last_bits(seed_fit):
     assert moved(lambda v, u: np.nextafter(v, np.inf)) == seed_fit.marker
     assert moved(lambda v, u: v * (1 + 4e-16)) == seed_fit.marker
     assert moved(lambda v, u: v + (1e-6 if u == "mm" else 1e-9)) != seed_fit.marker
+
+
+@pytest.mark.parametrize("controller", ["itnc530", "sinumerik840d", "linuxcnc"])
+def test_every_sign_check_pose_expects_a_change_an_rtest_sees(seed_machine, seed_fit, bc_machine, bc_fit,
+                                                              controller):
+    """A pose whose reading the edit does not change (the zero pose, where TCPM holds the
+    nest on the ball whatever the pivots) cannot show a sign: none is in the program."""
+    machine, fit, current = {"itnc530": (seed_machine, seed_fit, CURRENT_TAB),
+                             "sinumerik840d": (bc_machine, bc_fit, CURRENT_CARR),
+                             "linuxcnc": (seed_machine, seed_fit, None)}[controller]
+    notes = kinematics_edit(machine, fit, controller, current, "c", "KIN", "0", DATE).notes
+    expected = [n for n in notes if re.match(r"S\d+_", n)]
+    assert expected, notes
+    for line in expected:
+        values = [abs(float(v)) for v in re.findall(r"d[XYZ] ([+-][\d.]+)", line)]
+        assert max(values) >= 1.0, line

@@ -178,12 +178,25 @@ def test_the_pivot_check_takes_offsets_up_to_the_limit(seed_machine, fit):
         _edit(seed_machine, fit, _table(zc="+29.914"))
 
 
-def test_an_oem_rotation_row_stops_the_pivot_check_and_says_so(seed_machine, fit):
-    """A rotation above 1e-3° (3.6″) in the chain turns the frame: the check stops there."""
-    text = _table(newline="\n").replace("5    Trans      Z     +0                                to A/C",
-                                        "5    Trans      B     +0.0015                           OEM tilt")
-    notes = kinematics_edit(seed_machine, fit, "itnc530", text, "KIN.TAB", "KIN", "0", "d").notes
-    assert any("pivot check stopped at the rotation B +0.0015 deg" in n for n in notes), notes
+def test_rotation_rows_turn_the_frame_and_every_pivot_is_checked(seed_machine, fit):
+    """A rotation row turns the frame the later rows act in; the check goes on through it
+    (before, it stopped at the first one, so on an edited table C was never checked)."""
+    small = _table(newline="\n").replace("5    Trans      Z     +0                                to A/C",
+                                         "5    Trans      B     +0.0015                           OEM tilt")
+    notes = kinematics_edit(seed_machine, fit, "itnc530", small, "KIN.TAB", "KIN", "0", "d").notes
+    assert not any("pivot check" in n for n in notes), notes      # 5.4″ over 30 mm: 0.8 µm
+    # 0.5° left in the chain puts C 0.26 mm off its place in X: refused, as any misplaced axis
+    turned = small.replace("+0.0015 ", "+0.5    ")
+    with pytest.raises(CompgenError, match=r"the table puts the C axis at \(0\.26"):
+        kinematics_edit(seed_machine, fit, "itnc530", turned, "KIN.TAB", "KIN", "0", "d")
+    # an edited table (its tilt rows in pairs about each axis) is checked whole the next round
+    edited = _edit(seed_machine, fit, _table(newline="\n"))
+    assert "Trans      B" in edited or "Trans B" in edited.replace("  ", " ")
+    poses = generate(seed_machine, ["K4", "K1", "K2"])
+    again = identify(seed_machine, [simulate(seed_machine, TRUTH, poses, 0.5, np.random.default_rng(4))])
+    notes = kinematics_edit(seed_machine, again, "itnc530", edited, "KIN.TAB", "KIN", "0", "d",
+                            force=True).notes
+    assert not any("pivot check" in n for n in notes), notes
 
 
 SQUARE = {"COX": 5 * ARCSEC, "BOZ": -4 * ARCSEC}

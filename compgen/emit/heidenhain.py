@@ -19,6 +19,7 @@ from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
 from ..motion import Block, unknown, words
+from ..transforms import rot_axis
 from ..units import number
 from . import fmt_signed, render
 from .base import Controller, EditContext, EditFiles
@@ -151,28 +152,33 @@ def _resolution(table: TabTable) -> list[str]:
 
 def check_pivots(table: TabTable, machine: Machine, where: str) -> str | None:
     """The table-side rotary axes must sit where the machine file puts them: the ``Trans``
-    rows from ``MachBase`` to each ``MachAxis`` add up to its pivot (within [limits]
-    offset_um; same sign convention as the rows compgen writes, U3). Returns why the check
-    could not be made, if so."""
-    linear, rotary = np.zeros(3), {a.name for a in machine.rotary_axes}
-    after_base = False
+    rows from ``MachBase`` to each ``MachAxis`` compose to its pivot (within [limits]
+    offset_um; same sign convention as the rows compgen writes, U3). Rotation rows turn the
+    frame the later rows act in (an edited table's tilt pairs, a 90° mounting rotation), so
+    every axis is checked. Returns why the check could not be made, if so."""
+    rotary = {a.name for a in machine.rotary_axes}
+    frame, after_base, checked = np.eye(4), False, 0
     for r in table.rows:
         if r.get("KEY") == "MachBase":
             after_base = True
-        elif after_base and r.get("KEY") == "Trans" and r.get("AXIS") in "XYZ":
-            linear["XYZ".index(r["AXIS"])] += table.mm(r["COORD"], r["AXIS"])
-        elif after_base and r.get("KEY") == "Trans" and abs(float(r["COORD"])) > 1e-3:
-            return (f"pivot check stopped at the rotation {r['AXIS']} {r['COORD']} deg "
-                    "(the table turns the frame)")
+        elif after_base and r.get("KEY") == "Trans" and r.get("AXIS") in ("X", "Y", "Z"):
+            step = np.eye(4)
+            step["XYZ".index(r["AXIS"]), 3] = table.mm(r["COORD"], r["AXIS"])
+            frame = frame @ step
+        elif after_base and r.get("KEY") == "Trans" and r.get("AXIS") in ("A", "B", "C"):
+            frame = frame @ rot_axis("xyz"["ABC".index(r["AXIS"])], np.radians(float(r["COORD"])))
         elif after_base and r.get("KEY") == "MachAxis" and r.get("AXIS") in rotary:
-            want = pivot_of(machine, r["AXIS"])
-            if np.abs(linear - want).max() * 1e3 > machine.limits.offset_um:
+            at, want = frame[:3, 3], pivot_of(machine, r["AXIS"])
+            checked += 1
+            if np.abs(at - want).max() * 1e3 > machine.limits.offset_um:
                 raise CompgenError(
-                    f"the table puts the {r['AXIS']} axis at ({', '.join(f'{v:.4f}' for v in linear)}) mm "
+                    f"the table puts the {r['AXIS']} axis at ({', '.join(f'{v:.4f}' for v in at)}) mm "
                     f"from MachBase, the machine file at ({', '.join(f'{v:.4f}' for v in want)}) mm",
                     where=where, hint="is this the table of the measured machine? If it is, correct the "
                                       "machine file's offsets")
-    return None if after_base else "pivot check not made: the table has no MachBase row"
+    if not after_base:
+        return "pivot check not made: the table has no MachBase row"
+    return None if checked else "pivot check not made: no MachAxis row of a rotary axis follows MachBase"
 
 
 def _iso_rows(text: str) -> list[tuple[str, str, float]]:
