@@ -267,3 +267,24 @@ def test_every_sign_check_pose_expects_a_change_an_rtest_sees(seed_machine, seed
     for line in expected:
         values = [abs(float(v)) for v in re.findall(r"d[XYZ] ([+-][\d.]+)", line)]
         assert max(values) >= 1.0, line
+
+
+def test_a_sinumerik_edit_needs_the_fine_offsets_switched_on_and_within_their_limit(tmp_path, bc_fit):
+    """compgen writes fine offsets: they act only with SD42974 = 1, within MD20188. The
+    machine file says so, or the edit is refused with the key to set; a limit given is kept."""
+    from conftest import BC_MACHINE
+
+    from compgen.machine_file import load_machine
+    text = BC_MACHINE.read_text()
+    cases = {"unsaid": re.sub(r"(?m)^fine_correction = .*$", "", text),
+             "off": text.replace("fine_correction = true", "fine_correction = false"),
+             "tight": text.replace("fine_correction = true", "fine_correction = true\nfine_limit_mm = 0.001")}
+    expect = {"unsaid": "does not say whether it is", "off": "says it is 0", "tight": "beyond MD20188"}
+    for name, body in cases.items():
+        (tmp_path / f"{name}.toml").write_text(body)
+        machine = load_machine(tmp_path / f"{name}.toml")
+        with pytest.raises(CompgenError, match=expect[name]):
+            kinematics_edit(machine, bc_fit, "sinumerik840d", CURRENT_CARR, "c", "KIN", "0", DATE)
+    from compgen.checklist import checklist
+    steps = checklist(load_machine(BC_MACHINE), tmp_path)
+    assert any("SD42974" in s.note for s in steps)

@@ -53,6 +53,7 @@ class Controller:
     tcpm_on: re.Pattern       # a program it wrote switches TCP on
     tcp_switchable = True     # a program switches TCP on and off (else: the configuration's)
     section = ""              # its own table of the machine file, read by ``read_section``
+    load_note = ""            # what loading its edit takes beyond the files (the checklist says it)
 
     def read_section(self, get, machine: Machine) -> dict:
         """This control's table of the machine file, checked (``get`` names file and key in

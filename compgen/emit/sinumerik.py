@@ -206,11 +206,13 @@ class Sinumerik840D(Controller):
     tcp_switchable = True
     squareness_as = "tables"      # CEC tables hold squareness and every single-axis table
     section = "sinumerik"
+    load_note = ("SD42974 $SC_TOCARR_FINE_CORRECTION = 1, or the fine offsets do nothing; each within "
+                 "MD20188 $MC_TOCARR_FINE_LIM_LIN (W1 function manual 08/2005 p. 2-91)")
 
     def read_section(self, get, machine: Machine) -> dict:
         """[sinumerik]: the $TC_CARR record, the axis vectors as the control holds them, and
         the machine-axis names of the CEC tables."""
-        get.only({"tcarr", "vectors", "machine_axes", "modulo"})
+        get.only({"tcarr", "vectors", "machine_axes", "modulo", "fine_correction", "fine_limit_mm"})
         get.sub("vectors").only({a.name for a in machine.rotary_axes})
         record = int(get.number("tcarr"))
         kinds = {a.name: "P" if a.side == "workpiece" else "T" for a in machine.rotary_axes}
@@ -239,8 +241,15 @@ class Sinumerik840D(Controller):
                 if name not in machine.axis_names or not machine.axis(name).full_turn:
                     raise CompgenError(f"{name} is not a rotary axis that turns a whole revolution",
                                        where=get.at("modulo"))
+        fine = None           # SD42974 $SC_TOCARR_FINE_CORRECTION: the fine offsets count only at 1
+        if "fine_correction" in get.doc:
+            fine = get.doc["fine_correction"]
+            if not isinstance(fine, bool):
+                raise CompgenError("must be true or false (SD42974 $SC_TOCARR_FINE_CORRECTION = 1 or 0)",
+                                   where=get.at("fine_correction"))
+        limit = get.number("fine_limit_mm") if "fine_limit_mm" in get.doc else None    # MD20188
         return {"tcarr": record, "kind": {"P": "P", "T": "T"}.get(kind, "M"), "vectors": vectors,
-                "machine_axes": names, "modulo": modulo}
+                "machine_axes": names, "modulo": modulo, "fine_correction": fine, "fine_limit_mm": limit}
 
     def main_suffix(self, current: str | None) -> str:
         return ".MPF"
@@ -281,9 +290,24 @@ class Sinumerik840D(Controller):
             raise CompgenError("SINUMERIK needs --current: the record's $TC_CARR values as the control "
                                "holds them", hint="copy the $TC_CARR7-12, 44-46, 55-60 lines of the record "
                                                   "from the archive into a file")
+        fine = machine.sinumerik.get("fine_correction")
+        if not fine:
+            raise CompgenError("compgen's edit writes fine offsets ($TC_CARR41-65), which the control adds "
+                               "only with SD42974 $SC_TOCARR_FINE_CORRECTION = 1; "
+                               + ("the machine file says it is 0" if fine is False else
+                                  "the machine file does not say whether it is"),
+                               where=f"{machine.source}: [sinumerik] fine_correction",
+                               hint="set SD42974 = 1 on the control and fine_correction = true here")
         held = read_carr(current, where, machine.sinumerik["tcarr"])
         new, diff = carr_values(machine, p, held)
         rec = machine.sinumerik["tcarr"]
+        largest = max(abs(v) for n, v in new.items() if n > 12)
+        limit = machine.sinumerik.get("fine_limit_mm")
+        if limit is not None and largest > limit:
+            raise CompgenError(f"a fine offset would be {largest:.4f} mm, beyond MD20188 "
+                               f"$MC_TOCARR_FINE_LIM_LIN = {limit:g} mm (the machine file's fine_limit_mm): "
+                               "the control would refuse it",
+                               hint="move the excess into the base offsets with the OEM, then edit again")
         tables = comp_tables(machine, p) + squareness_tables(machine, p)
 
         def carr(values):      # vectors are unitless, offsets mm
@@ -299,7 +323,10 @@ class Sinumerik840D(Controller):
             files["_CEC.INI"] = render("sinumerik/cec.INI.j2", header=ctx.header,
                                        tables=[_cec_text(t, i, _machine_axes(machine))
                                                for i, t in enumerate(tables)])
-        notes = ["$TC_CARR changes:", *diff]
+        notes = ["$TC_CARR changes:", *diff,
+                 f"the fine offsets act with SD42974 = 1 only, each within MD20188 $MC_TOCARR_FINE_LIM_LIN: "
+                 f"the largest here is {largest:.4f} mm"
+                 + ("" if limit is not None else " (give fine_limit_mm in [sinumerik] to have it checked)")]
         if p.squareness:
             notes.append("squareness goes to linear CEC tables: " + ", ".join(p.squareness))
         return EditFiles(files, tuple(notes))
