@@ -288,3 +288,29 @@ def test_a_sinumerik_edit_needs_the_fine_offsets_switched_on_and_within_their_li
     from compgen.checklist import checklist
     steps = checklist(load_machine(BC_MACHINE), tmp_path)
     assert any("SD42974" in s.note for s in steps)
+
+
+def test_an_implausible_current_state_is_refused_with_its_file_and_line(seed_machine, seed_fit, bc_machine,
+                                                                        bc_fit):
+    """Every control's current state as iTNC's is: finite, one assignment per key, pivots and
+    fine offsets within the machine file's [limits] — refused with the file and line."""
+    lines = CURRENT_CARR.splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("$TC_CARR44["))
+    metre = "\n".join(lines[:k] + ["$TC_CARR44[1]=1000"] + lines[k + 1:])
+    with pytest.raises(CompgenError, match=rf"^c:{k + 1}: \$TC_CARR44\[1\] = 1000 mm: a fine offset beyond"):
+        kinematics_edit(bc_machine, bc_fit, "sinumerik840d", metre, "c", "KIN", "0", DATE)
+    twice = CURRENT_CARR + "\n" + lines[k] + "\n"
+    with pytest.raises(CompgenError, match=r"\$TC_CARR44\[1\] is assigned twice"):
+        kinematics_edit(bc_machine, bc_fit, "sinumerik840d", twice, "c", "KIN", "0", DATE)
+    from compgen.emit import linuxcnc
+    module, tilt, c = linuxcnc._trt(seed_machine)
+    nominal = linuxcnc._nominal(seed_machine, tilt, c)
+    hal = "\n".join(f"setp {module}.{n} {v:.6f}" for n, v in nominal.items()) + "\n"
+    off = hal.replace(f"setp {module}.x-rot-point {nominal['x-rot-point']:.6f}",
+                      f"setp {module}.x-rot-point {nominal['x-rot-point'] + 1:.6f}")
+    with pytest.raises(CompgenError, match=r"^h:1: xyzac-trt-kins.x-rot-point = .* \+1\.0000 mm from the"):
+        kinematics_edit(seed_machine, seed_fit, "linuxcnc", off, "h", "KIN", "0", DATE)
+    with pytest.raises(CompgenError, match=r"x-rot-point is set twice \(lines 1 and \d+\)"):
+        kinematics_edit(seed_machine, seed_fit, "linuxcnc", hal + hal.splitlines()[0] + "\n", "h", "KIN", "0",
+                        DATE)
+    assert kinematics_edit(seed_machine, seed_fit, "linuxcnc", hal, "h", "KIN", "0", DATE).files[".hal"]

@@ -65,22 +65,39 @@ def _nominal(machine: Machine, tilt, c) -> dict[str, float]:
 
 def read_hal(text: str, module: str, where: str) -> tuple[dict[str, float], dict[str, str]]:
     """A HAL file's values of the module's pins (``setp``, or ``sets`` on the signal a pin is
-    netted to) and the signal each netted pin is on."""
-    signal = {}
+    netted to) and the signal each netted pin is on. A pin or signal set twice is refused
+    (HAL keeps the last: which was meant?)."""
+    return _read_hal_lines(text, module, where)[:2]
+
+
+def _read_hal_lines(text: str, module: str, where: str, nets: dict[str, str] | None = None
+                    ) -> tuple[dict[str, float], dict[str, str], dict[str, int]]:
+    """read_hal's values and signals, and the line that set each pin's value; ``nets``: the
+    pins netted to signals by files loaded before this one."""
+    signal = dict(nets or {})
     for m in NET.finditer(text):
         for word in m[2].split():
             if word.startswith(f"{module}."):
                 signal[word[len(module) + 1:]] = m[1]
-    on_signal = {m[1]: number(m[2], f"sets {m[1]}", where) for m in SETS.finditer(text)}
-    values = {}
-    for m in SETP.finditer(text):
-        if m[1] == module:
+    on_signal, values, line_of = {}, {}, {}
+    for k, line in enumerate(text.splitlines(), start=1):
+        if (m := SETS.match(line)) is not None:
+            if m[1] in on_signal:
+                raise CompgenError(f"signal {m[1]} is set twice (lines {on_signal[m[1]][1]} and {k})",
+                                   where=f"{where}:{k}", hint="keep the one the configuration means")
+            on_signal[m[1]] = (number(m[2], f"sets {m[1]}", f"{where}:{k}"), k)
+        elif (m := SETP.match(line)) is not None and m[1] == module:
             if m[2] in signal:
                 raise CompgenError(f"{module}.{m[2]} is set by setp and netted to {signal[m[2]]}: LinuxCNC "
-                                   "refuses to start such a configuration", where=where)
-            values[m[2]] = number(m[3], f"setp {module}.{m[2]}", where)
-    values |= {pin: on_signal[sig] for pin, sig in signal.items() if sig in on_signal}
-    return values, signal
+                                   "refuses to start such a configuration", where=f"{where}:{k}")
+            if m[2] in values:
+                raise CompgenError(f"{module}.{m[2]} is set twice (lines {line_of[m[2]]} and {k})",
+                                   where=f"{where}:{k}", hint="keep the one the configuration means")
+            values[m[2]], line_of[m[2]] = number(m[3], f"setp {module}.{m[2]}", f"{where}:{k}"), k
+    for pin, sig in signal.items():
+        if sig in on_signal:
+            values[pin], line_of[pin] = on_signal[sig]
+    return values, signal, line_of
 
 
 def pins(machine: Machine, p: Plan, current: str | None,
@@ -93,13 +110,20 @@ def pins(machine: Machine, p: Plan, current: str | None,
     names = _pin_names(tilt)
     held, signal = _nominal(machine, tilt, c), {}
     if current is not None:
-        held, signal = read_hal(current, module, where)
+        held, signal, line_of = _read_hal_lines(current, module, where)
+        nominal = _nominal(machine, tilt, c)
         for n in names:
             if n not in held:
                 why = (f"is netted to {signal[n]}, which another component drives" if n in signal
                        else "is set neither by setp nor through a signal")
                 raise CompgenError(f"in --current, {module}.{n} {why}", where=where,
                                    hint=f"give the HAL file that sets {', '.join(names)}")
+            if not abs(held[n] - nominal[n]) * 1e3 <= machine.limits.offset_um:
+                raise CompgenError(f"{module}.{n} = {held[n]:g} mm, {held[n] - nominal[n]:+.4f} mm from the "
+                                   f"machine file's {nominal[n]:g}: beyond its [limits] offset_um "
+                                   f"{machine.limits.offset_um:g} µm", where=f"{where}:{line_of[n]}",
+                                   hint="is this the configuration of the measured machine? If it is, "
+                                        "correct the machine file's offsets or raise [limits]")
     delta_r = p.lines[c.name].offset
     delta_d = p.lines[tilt.name].offset - delta_r
     new = {n: held[n] + (delta_r if n.endswith("rot-point") else delta_d)["xyz".index(n[0])] for n in names}
@@ -116,9 +140,9 @@ def read_lines(text: str, machine: Machine, current: str | None,
                lines: dict[str, AxisLine]) -> dict[str, AxisLine]:
     """The axis lines a trt HAL edit sets, relative to ``current`` (default: nominal)."""
     module, tilt, c = _trt(machine)
-    before = read_hal(current, module, "current")[0] if current else _nominal(machine, tilt, c)
-    # the edit is loaded after the configuration's files: its nets are the current file's
-    now = {**before, **read_hal(f"{current or ''}\n{text}", module, "edit")[0]}
+    before, nets = read_hal(current, module, "current") if current else (_nominal(machine, tilt, c), {})
+    # the edit is loaded after the configuration's files: what it sets wins, through their nets
+    now = {**before, **_read_hal_lines(text, module, "edit", nets)[0]}
     r = np.array([now[f"{a}-rot-point"] - before[f"{a}-rot-point"] for a in "xyz"])
     d = np.array([now.get(f"{a}-offset", 0.0) - before.get(f"{a}-offset", 0.0) for a in "xyz"])
     zero = np.zeros(3)

@@ -32,13 +32,40 @@ SAME_AXIS_DEG = 1.0     # a record's vector further than this from the machine f
 
 
 def read_carr(text: str, where: str, record: int) -> dict[int, float]:
-    """``$TC_CARRn[record]=value`` assignments of one record (other lines are ignored)."""
-    out = {}
+    """``$TC_CARRn[record]=value`` assignments of one record (other lines are ignored); a
+    parameter assigned twice is refused (the control would keep the last: which was meant?)."""
+    return {n: v for n, (v, _) in _carr_lines(text, where, record).items()}
+
+
+def _carr_lines(text: str, where: str, record: int) -> dict[int, tuple[float, int]]:
+    out: dict[int, tuple[float, int]] = {}
     for k, line in enumerate(text.splitlines(), start=1):
         m = CARR.match(line)
         if m and int(m[2]) == record and not m[3].startswith('"'):
-            out[int(m[1])] = number(m[3], f"$TC_CARR{m[1]} value", f"{where}:{k}")
+            n = int(m[1])
+            if n in out:
+                raise CompgenError(f"$TC_CARR{n}[{record}] is assigned twice (lines {out[n][1]} and {k})",
+                                   where=f"{where}:{k}", hint="keep the one the control holds")
+            out[n] = (number(m[3], f"$TC_CARR{n} value", f"{where}:{k}"), k)
     return out
+
+
+def check_current(text: str, where: str, machine: Machine) -> None:
+    """The record as read is plausible for this machine: every fine offset within [limits]
+    offset_um of the machine file's geometry (a fine offset is a correction of it), and
+    within MD20188 where the machine file gives it; refused with its file and line."""
+    record = machine.sinumerik["tcarr"]
+    bound_mm = machine.limits.offset_um * 1e-3
+    limit = machine.sinumerik.get("fine_limit_mm")
+    for n, (value, k) in _carr_lines(text, where, record).items():
+        if n in {i for idx in FINE.values() for i in idx} and not abs(value) <= bound_mm:
+            raise CompgenError(f"$TC_CARR{n}[{record}] = {value:g} mm: a fine offset beyond the "
+                               f"{machine.limits.offset_um:g} µm the machine file's [limits] allow",
+                               where=f"{where}:{k}", hint="is this the record of the measured machine? If it "
+                               "is, raise [limits] offset_um in the machine file")
+        if limit is not None and n in {i for idx in FINE.values() for i in idx} and abs(value) > limit:
+            raise CompgenError(f"$TC_CARR{n}[{record}] = {value:g} mm exceeds MD20188 = {limit:g} mm",
+                               where=f"{where}:{k}")
 
 
 def carr_values(machine: Machine, p: Plan, current: dict[int, float]) -> tuple[dict[int, float], list[str]]:
@@ -298,6 +325,7 @@ class Sinumerik840D(Controller):
                                   "the machine file does not say whether it is"),
                                where=f"{machine.source}: [sinumerik] fine_correction",
                                hint="set SD42974 = 1 on the control and fine_correction = true here")
+        check_current(current, where, machine)
         held = read_carr(current, where, machine.sinumerik["tcarr"])
         new, diff = carr_values(machine, p, held)
         rec = machine.sinumerik["tcarr"]
