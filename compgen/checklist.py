@@ -110,6 +110,8 @@ def checklist(machine: Machine, folder: str | Path, comparison: dict | None = No
              note=f"ball where [rtest] says: {machine.ball} mm; nest length gauge line to centre"),
         Step("Measurement programs written", DONE if f.programs else OPEN, _names(f.programs),
              f"{me()} measure-program --machine {m} --path all -o {out('RTEST' + _ext(machine))}"),
+        Step("Preset checked at the program's stop: the ball centred under the nest", BY_HAND,
+             note="every program stops once, the nest at its clearance above the ball, before it goes down"),
         Step("K4, K1, K2 measured (R-test CSV with dX dY dZ)", DONE if pre else OPEN, _names(pre),
              "run the program; export the readings as CSV v1 beside the pose list"),
         Step("Fit", DONE if fit else OPEN, _names([fit[0]] if fit else []),

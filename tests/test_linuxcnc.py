@@ -169,6 +169,8 @@ def run_linuxcnc(folder, machine, program: str, edit: str, budget_s: float = RUN
     assert result.exists(), f"LinuxCNC wrote no joints (exit {launcher.returncode}): {stdout[-1500:]}"
     text = result.read_text()
     assert text.rstrip().endswith("done"), text[-500:]
+    stops = re.search(r"(?m)^stops (\d+)$", text)
+    assert stops and int(stops[1]) == program.count("\nM0"), ("the program's stops", text[-300:])
     joints = {int(w[0]): np.array([float(v) for v in w[1:]])
               for w in (ln.split() for ln in text.splitlines()) if w[0].isdigit()}
     return {k: v - [0, 0, machine.probe_length, 0, 0] * 2 for k, v in joints.items()}

@@ -1,5 +1,6 @@
 """Measurement programs: golden files, round trip, independent checks, refusals."""
 
+import re
 from io import StringIO
 
 import numpy as np
@@ -141,3 +142,19 @@ def test_refusals(tmp_path):
     bare.write_text(SEED_MACHINE.read_text().split("[program]")[0])
     code, _, err = run("measure-program", "--machine", bare, "--path", "K4", "-o", out)
     assert code == 2 and "no [program] section" in err
+
+
+@pytest.mark.parametrize("controller, stop", [("itnc530", r"^\d+ STOP\b"), ("sinumerik840d", r"^M0$"),
+                                              ("linuxcnc", r"^M0$")])
+def test_every_program_stops_once_for_the_preset_check_before_the_nest_goes_down(seed_machine, controller,
+                                                                                 stop):
+    """The programs trust the active preset: once, with the nest at its clearance above the
+    ball, the program stops with a message, before the first move onto the ball."""
+    poses = generate(seed_machine, ["K4", "K2"])
+    ext = {"itnc530": ".H", "sinumerik840d": ".MPF", "linuxcnc": ".ngc"}[controller]
+    text = measure_program(seed_machine, poses, "K4", controller, "tcpm", "K4", "0", DATE).files[ext]
+    lines = text.splitlines()
+    stops = [i for i, ln in enumerate(lines) if re.search(stop, ln)]
+    onto = [i for i, ln in enumerate(lines) if "nest onto the ball" in ln]
+    assert len(stops) == 1 and stops[0] < onto[0], (stops, onto[:2])
+    assert "PRESET CHECK: the nest is 20 mm above the ball centre" in "\n".join(lines[stops[0] - 2:stops[0]])

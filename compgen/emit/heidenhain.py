@@ -263,7 +263,9 @@ def program_blocks(text: str) -> list[Block]:
         if not b or b.startswith(("BEGIN PGM", "END PGM")) or b in (
                 "M30", "M126", "PLANE RESET STAY", "CYCL DEF 7.0 DATUM SHIFT", "CYCL DEF 9.0 DWELL TIME"):
             continue
-        if b == "FUNCTION RESET TCPM":
+        if b == "STOP":                    # the preset check: the operator continues (U11)
+            out.append(Block(k, raw, "stop"))
+        elif b == "FUNCTION RESET TCPM":
             out.append(Block(k, raw, "tcp", on=False))
         elif b == TCPM:
             out.append(Block(k, raw, "tcp", on=True))

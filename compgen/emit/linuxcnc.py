@@ -240,7 +240,9 @@ def program_blocks(text: str, tcp: bool) -> list[Block]:
         if not b or b in ("G21 G90 G94 G17", "M2", "M30", "o100 endif") or re.fullmatch(
                 r"\(abort,[^)]*\)", b):
             continue
-        if (d := re.fullmatch(r"o100 if \[(.*)\]", b)) is not None:
+        if b == "M0" or re.fullmatch(r"\(MSG,[^)]*\)", b):        # the preset check's stop
+            out.append(Block(k, raw, "stop"))
+        elif (d := re.fullmatch(r"o100 if \[(.*)\]", b)) is not None:
             # compgen's guard: stop unless every named axis is at zero
             parts = re.findall(r"\[ABS\[#(\d+)\] GT 0\.0001\]", d[1])
             if not parts or " OR ".join(f"[ABS[#{p}] GT 0.0001]" for p in parts) != d[1]:

@@ -155,6 +155,11 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
 
 
 ROT = set("ABC")
+# The programs trust the active preset; before the nest first goes down, the operator sees
+# that the ball is where the preset puts it (one line, no ";" or parentheses, under the 124
+# characters a SINUMERIK message shows: every control shows it as a message)
+PRESET_CHECK = ("PRESET CHECK: the nest is {clearance} mm above the ball centre and the ball must be "
+                "centred under it. Start to go on")
 TURN_STEP_DEG = 2.0     # rotary steps at the safe height under TCP: the nest keeps within 0.1 mm
 
 
@@ -223,6 +228,8 @@ def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool
             state["q"][rotary] = first[rotary]
         at(lifted(first, safe), note="above the first pose")
         at(lifted(first, first[linear[2]] + clearance))
+        if seg is segments[0]:      # the preset and the ball, seen before the nest goes down
+            steps.append({"kind": "stop", "note": PRESET_CHECK.format(clearance=f"{clearance:g}")})
         at(first, rapid=False, note="nest onto the ball, along its axis")
         if mode == "tcpm" and switchable:
             steps.append({"kind": "tcp_on"})

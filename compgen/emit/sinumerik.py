@@ -196,7 +196,9 @@ def program_blocks(text: str) -> list[Block]:
         if not b or b in ("ORIWKS", "ORIAXES", "M30", "M17", "M6", "G17 G90 G71 G94") or re.fullmatch(
                 r"G5[4-7]|G50[0-9]", b):
             continue
-        if b in ("TRAFOOF", "TRAORI"):
+        if b == "M0" or re.fullmatch(r'MSG\("[^"]*"\)|MSG\(\)', b):   # the preset check's stop
+            out.append(Block(k, raw, "stop"))
+        elif b in ("TRAFOOF", "TRAORI"):
             out.append(Block(k, raw, "tcp", on=b == "TRAORI"))
         elif re.fullmatch(r'T="[^"]*"', b):
             out.append(Block(k, raw, "tool"))

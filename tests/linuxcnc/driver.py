@@ -47,12 +47,17 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
         c.program_open(os.environ["COMPGEN_NGC"])
         c.auto(linuxcnc.AUTO_RUN, 0)
         wait(lambda: s.interp_state != linuxcnc.INTERP_IDLE, 10)
-        settled, last = {}, None
+        settled, last, stops = {}, None, 0
         end = time.time() + 600
         while time.time() < end:
             s.poll()
             if s.interp_state == linuxcnc.INTERP_IDLE and s.queue == 0:
                 break
+            if s.paused:           # the program's preset check (M0): the operator goes on
+                stops += 1
+                c.auto(linuxcnc.AUTO_RESUME)
+                wait(lambda: not s.paused, 10)
+                continue
             # joint and motor commands read from HAL together; settled when at rest and
             # unchanged since the last sample (the status buffer lags HAL by a cycle or so)
             now = [hal.get_value(f"joint.{j}.{pin}")
@@ -63,6 +68,6 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
             time.sleep(0.002)
         for line in sorted(settled):
             out.write(f"{line} " + " ".join(f"{v:.9f}" for v in settled[line]) + "\n")
-        out.write("done\n")
+        out.write(f"stops {stops}\ndone\n")
     except Exception as exc:   # the test reads this line and fails with it
         out.write(f"error {exc!r}\n")
