@@ -359,7 +359,7 @@ def check_program_cmd(machine_file, program, controller_name, ball, as_json):
     at, source = ((_vec3(ball, "--ball"), "--ball") if ball is not None else
                   (header, "the program's header") if header is not None else
                   (machine.ball, "the machine file"))
-    result = run(at_ball(machine, at), ctl.blocks(text), ctl.modulo_axes(machine))
+    result = run(at_ball(machine, at), ctl.blocks(text), ctl.modulo_axes(machine), ctl.angle_sense(machine))
     if as_json:
         click.echo(json.dumps({
             "format": "compgen.check/1", "program": program, "controller": ctl.name,

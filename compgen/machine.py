@@ -145,6 +145,7 @@ class Machine:
     program: ProgramSetup | None = None
     limits: Limits = Limits()
     sinumerik: dict | None = None   # tcarr record and the axis vectors the control holds
+    linuxcnc: dict | None = None    # the trt kinematics' switches ([linuxcnc])
     tolerances: dict[str, float] = field(default_factory=dict)   # path → max range, µm
     noise_um: float | None = None   # the R-test's own noise, 1σ per reading ([rtest] noise_um)
     declared: tuple[str, ...] = ()  # effects the user declares beyond the catalogue ([effects])

@@ -226,11 +226,14 @@ class _Segment:
     path: np.ndarray | None = None
 
 
-def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = ()) -> Check:
+def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
+        sense: dict[str, int] | None = None) -> Check:
     """Move the machine model through ``blocks`` and check every sample. The blocks are
     walked once to find each move's ends (TCP moves in TCP coordinates); the samples of
     all moves are then converted and checked together. ``modulo``: the rotary axes the
-    control positions modulo 360° (``Controller.modulo_axes``)."""
+    control positions modulo 360° (``Controller.modulo_axes``); ``sense``: per rotary axis,
+    ±1, how the control's words turn it against the machine file (``Controller.angle_sense``)."""
+    sense = sense or {}
     k = len(machine.axes)
     linear = [machine.index(c) for c in "XYZ"]
     rotary = [machine.index(a.name) for a in machine.rotary_axes]
@@ -251,7 +254,7 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = ()) -> 
             settle()
             w = None
             for letter, v in b.target.items():
-                q[letters[letter]] = np.radians(v) if letters[letter] in rotary else v
+                q[letters[letter]] = np.radians(v * sense.get(letter, 1)) if letters[letter] in rotary else v
         elif b.kind == "tcp":
             settle()
             w, tcp = None, b.on
@@ -291,7 +294,8 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = ()) -> 
                     end[linear.index(i)] = v
                 else:
                     now = w[3 + rotary.index(i)]
-                    end[3 + rotary.index(i)] = np.radians(_turned(modulo, b, letter, v, np.degrees(now)))
+                    v = _turned(modulo, b, letter, v * sense.get(letter, 1), np.degrees(now))
+                    end[3 + rotary.index(i)] = np.radians(v)
             segments.append(_Segment(b, True, w, end, False))
             w = end
             continue
@@ -300,7 +304,8 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = ()) -> 
         end = q.copy()
         for letter, v in b.target.items():
             i = letters[letter]
-            end[i] = np.radians(_turned(modulo, b, letter, v, np.degrees(q[i]))) if i in rotary else v
+            end[i] = (np.radians(_turned(modulo, b, letter, v * sense.get(letter, 1), np.degrees(q[i])))
+                      if i in rotary else v)
         segments.append(_Segment(b, False, q, end, bool((np.isnan(q) & ~np.isnan(end)).any())))
         q = end
     _paths(machine, segments, linear, rotary)

@@ -64,6 +64,11 @@ class Controller:
     def number(value: float, decimals: int) -> str:
         return fmt_plain(value, decimals)
 
+    def angle_sense(self, machine: Machine) -> dict[str, int]:
+        """Per rotary axis, ±1: the sense in which this control's program words turn it
+        against compgen's (the machine file's) sense."""
+        return {a.name: 1 for a in machine.rotary_axes}
+
     def modulo_axes(self, machine: Machine) -> tuple[str, ...]:
         """The rotary axes this control positions modulo 360° on this machine."""
         return ()
@@ -72,7 +77,7 @@ class Controller:
                   machine: Machine) -> str:
         """An axis's word in a move: ``before`` is its value in the last block that wrote it
         (None: not yet), ``feed`` whether the block is a feed move (a pose) or a rapid."""
-        return f"{letter}{self.number(value, decimals)}"
+        return f"{letter}{self.number(value * self.angle_sense(machine).get(letter, 1), decimals)}"
 
     def blocks(self, text: str) -> list[Block]:
         """A program as this control executes it, block by block (``motion.Block``)."""

@@ -271,6 +271,9 @@ class LinuxCNC(Controller):
     pose_line = re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)")
     tcpm_on = re.compile(r"^; mode TCPM", re.MULTILINE)
     tcp_switchable = False
+    section = "linuxcnc"
+    load_note = ("KIN.hal as a HALFILE after the configuration's own; the COMP_FILE lines its header "
+                 "names into the INI")
     holds_tilts = False           # trt kinematics: pivot positions only
     squareness_as = ""
 
@@ -279,6 +282,22 @@ class LinuxCNC(Controller):
 
     def main_suffix(self, current: str | None) -> str:
         return ".hal"
+
+    def read_section(self, get, machine: Machine) -> dict:
+        """[linuxcnc]: ``conventional_directions``, the trt module's pin of that name. With it
+        true, its kinematics turn A (or B) and C the other way (``trtfuncs.c``: every term
+        with a single sine of an angle is multiplied by ``con`` = +1, else −1; the pin exists
+        from LinuxCNC 2.10, commit bfb687eaa6, and is false by default)."""
+        get.only({"conventional_directions"})
+        flag = get.doc.get("conventional_directions")
+        if not isinstance(flag, bool):
+            raise CompgenError("must be true or false: the trt module's conventional-directions pin",
+                               where=get.at("conventional_directions"))
+        return {"conventional_directions": flag}
+
+    def angle_sense(self, machine: Machine) -> dict[str, int]:
+        flip = -1 if (machine.linuxcnc or {}).get("conventional_directions") else 1
+        return {a.name: flip for a in machine.rotary_axes}
 
     def blocks(self, text: str) -> list[Block]:
         return program_blocks(text, self.tcpm_on.search(text) is not None)
@@ -312,6 +331,12 @@ class LinuxCNC(Controller):
                 or (SETS.search(text) is not None and "kinematics edit" in text))
 
     def check_setup(self, machine: Machine) -> None:
+        if machine.linuxcnc is None:
+            raise CompgenError("whether the trt kinematics turn the rotary axes the conventional way is not "
+                               "in the machine file: the same program turns them the other way if they do",
+                               where=f"{machine.source}: [linuxcnc] conventional_directions",
+                               hint="set conventional_directions = false (before LinuxCNC 2.10, or the "
+                                    "module's conventional-directions pin at its default 0) or true (pin 1)")
         if not re.fullmatch(r"\d{1,5}", machine.program.tool):
             raise CompgenError(f"LinuxCNC calls tools by number; [program] tool is {machine.program.tool!r}",
                                where=f"{machine.source}: [program] tool", hint='e.g. tool = "99"')

@@ -143,7 +143,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
                   tool=setup.tool, feed=f"{setup.feed:g}", dwell=f"{setup.dwell:g}" if setup.dwell else "",
                   work_offset=setup.work_offset, max_step=f"{machine.limits.max_step_deg:g}",
                   steps=steps, rotary=[a.name for a in machine.rotary_axes])
-    result = motion.run(machine, ctl.blocks(text), ctl.modulo_axes(machine))
+    result = motion.run(machine, ctl.blocks(text), ctl.modulo_axes(machine), ctl.angle_sense(machine))
     if result.findings:     # compgen's own safety net: nothing unsafe leaves this function
         more = f" (and {len(result.findings) - 1} more)" if len(result.findings) > 1 else ""
         at = ", ".join(f"{v:g}" for v in ball)
@@ -309,7 +309,9 @@ def read_program(text: str, machine: Machine, controller_name: str) -> tuple[str
         m = ctl.pose_line.match(line)
         if not m:
             continue
-        words = {w[0]: float(re.sub(r"^=(?:ACP|ACN|DC)\((.*)\)$", r"\1", w[1:])) for w in m[4].split()}
+        sense = ctl.angle_sense(machine)
+        words = {w[0]: sense.get(w[0], 1) * float(re.sub(r"^=(?:ACP|ACN|DC)\((.*)\)$", r"\1", w[1:]))
+                 for w in m[4].split()}
         if sorted(words) != sorted(names):
             raise CompgenError(f"pose {m[5]} names rotary axes {sorted(words)}, the machine {names}")
         xyz.append([float(m[i]) for i in (1, 2, 3)])
