@@ -20,7 +20,7 @@ from .diagnose_text import report as diagnosis_text
 from .effects import catalogue, compose, location_model
 from .emit.kinematics import kinematics_edit
 from .emit.programs import MODES, NAME_MAX, at_ball, measure_program, program_ball, program_name
-from .emit.registry import CONTROLLERS, controller, for_program, read_edits
+from .emit.registry import CONTROLLERS, controller, for_program, read_edits, read_state
 from .errors import CONTROL, CompgenError
 from .files import STDOUT, read_text, write_all, write_atomically
 from .gate import fit_gate, unit_suspicion
@@ -159,7 +159,7 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
     drive = None
     if edits:
         held = read_edits(machine, {e: read_text(e, "edit", ansi_ok=True)[0] for e in edits},
-                          read_text(current, "file", ansi_ok=True)[0] if current else None)
+                          read_state(current) if current else None)
         drive = partial(held.drive, machine)
     data = simulate(machine, errors, poses, noise_um, np.random.default_rng(seed), drive, noise_rho)
     comments = (f"compgen simulate: machine {machine.name}", f"truth {truth}: "
@@ -400,7 +400,7 @@ def kinematics_cmd(base, controller_name, current, measured, output, force):
     fit = load_fit(base)
     machine, sets = reload(fit)
     ctl = controller(controller_name or machine.controller)
-    text = read_text(current, "file", ansi_ok=True)[0] if current else None
+    text = read_state(current) if current else None
     _progress("checking that the fit explains its data")
     reasons = fit_gate(machine, sets, fit)
     if reasons and not force:
@@ -411,7 +411,7 @@ def kinematics_cmd(base, controller_name, current, measured, output, force):
     name = program_name(out.stem, room=len("_SIGN"))
     emitted = kinematics_edit(machine, fit, ctl.name, text, current or "", name, __version__,
                               date.today().isoformat(), force,
-                              read_text(measured, "file", ansi_ok=True)[0] if measured else None, out.stem)
+                              read_state(measured) if measured else None, out.stem)
     main_key = ctl.main_suffix(text)
     files = {(out if key == main_key else out.with_name(out.stem + key)): body
              for key, body in emitted.files.items()}

@@ -117,6 +117,44 @@ def test_linuxcnc_second_round_adds_to_the_pins(seed_machine):
             assert one[f"{axis}-rot-point"] + one[f"{axis}-offset"] == pytest.approx(on_a[k], abs=2e-6)
 
 
+def test_linuxcnc_second_round_reads_the_configuration_through_its_ini(seed_machine, tmp_path):
+    """The configuration's own HAL file sets the pins (one through a signal, its value an
+    INI reference); edit A is a further HALFILE in the INI. Given the INI as --current, edit
+    B is written over what LinuxCNC loads — every file, in order — and equals one edit of
+    A + B; over the configuration without A (what giving its HAL file alone amounted to)
+    it would undo A."""
+    from compgen.emit import linuxcnc
+    from compgen.emit.registry import read_state
+    module, tilt, c = linuxcnc._trt(seed_machine)
+    nominal = linuxcnc._nominal(seed_machine, tilt, c)
+    (tmp_path / "machine.hal").write_text("\n".join(
+        [f"net zrot => {module}.z-rot-point", "sets zrot [KINS]ZROT",
+         *(f"setp {module}.{n} {v:.6f}" for n, v in nominal.items() if n != "z-rot-point")]) + "\n")
+    head = (f"[KINS]\nKINEMATICS = {module}\nZROT = {nominal['z-rot-point']:.6f}\n"
+            "[HAL]\nHALFILE = core_sim.hal\n")
+    (tmp_path / "before.ini").write_text(head + "HALFILE = machine.hal\n")
+    (tmp_path / "machine.ini").write_text(head + "HALFILE = machine.hal\nHALFILE = A.hal\n")
+    before = read_state(str(tmp_path / "before.ini"))
+
+    def edit(truth, state, where, name):
+        return kinematics_edit(seed_machine, _fit(seed_machine, truth), "linuxcnc", state, where, name, "0",
+                               "d").files[".hal"]
+    (tmp_path / "A.hal").write_text(edit(SEED_A, before, "before.ini", "A"))
+    state = read_state(str(tmp_path / "machine.ini"))
+    assert "core_sim.hal (not beside the INI" in state and "A.hal" in state
+
+    def pins(text):
+        got = {m[2]: float(m[3]) for m in SETP.finditer(text)}
+        got["z-rot-point"] = float(re.search(r"(?m)^sets zrot (\S+)", text)[1])
+        return got
+    two = pins(edit(SEED_B, state, str(tmp_path / "machine.ini"), "B"))
+    one = pins(edit(_sum(SEED_A, SEED_B), before, "before.ini", "AB"))
+    for name in one:
+        assert two[name] == pytest.approx(one[name], abs=2e-6 + SECOND_ORDER_MM), name
+    undone = pins(edit(SEED_B, before, "before.ini", "B"))
+    assert max(abs(undone[n] - one[n]) for n in one) > 5 * UM
+
+
 @pytest.mark.parametrize("controller", ["itnc530", "sinumerik840d", "linuxcnc"])
 def test_an_edit_against_a_state_that_holds_part_of_it_writes_the_rest(seed_machine, bc_machine, controller):
     """Measured in state S0; meanwhile part of the correction (say, the A line) was loaded:

@@ -310,7 +310,7 @@ def test_an_implausible_current_state_is_refused_with_its_file_and_line(seed_mac
                       f"setp {module}.x-rot-point {nominal['x-rot-point'] + 1:.6f}")
     with pytest.raises(CompgenError, match=r"^h:1: xyzac-trt-kins.x-rot-point = .* \+1\.0000 mm from the"):
         kinematics_edit(seed_machine, seed_fit, "linuxcnc", off, "h", "KIN", "0", DATE)
-    with pytest.raises(CompgenError, match=r"x-rot-point is set twice \(lines 1 and \d+\)"):
+    with pytest.raises(CompgenError, match=r"x-rot-point is set twice in one file \(lines 1 and \d+\)"):
         kinematics_edit(seed_machine, seed_fit, "linuxcnc", hal + hal.splitlines()[0] + "\n", "h", "KIN", "0",
                         DATE)
     assert kinematics_edit(seed_machine, seed_fit, "linuxcnc", hal, "h", "KIN", "0", DATE).files[".hal"]

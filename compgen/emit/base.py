@@ -86,6 +86,12 @@ class Controller:
     def check_setup(self, machine: Machine) -> None:
         """Refuse a [program] set-up this control cannot run (e.g. a tool it cannot call)."""
 
+    def state(self, path: str, text: str) -> str | None:
+        """The control's state from the file ``path`` (its ``text``) when the file is this
+        control's configuration to be resolved (LinuxCNC's INI), else None: the file is the
+        state as it is."""
+        return None
+
     def main_suffix(self, current: str | None) -> str:
         """Suffix of the file ``-o`` names; the others go beside it with the same stem."""
         raise NotImplementedError

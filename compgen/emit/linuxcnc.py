@@ -18,11 +18,13 @@ coordinates (X Y Z, the tilting axis, C: joints 0–4), as LinuxCNC prints them 
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 
 from ..correction import ARCSEC, CompTable, Held, Plan, comp_tables, nominal_lines, pivot_of
 from ..errors import CompgenError
+from ..files import read_text
 from ..lines import AxisLine
 from ..machine import Machine
 from ..motion import Block, gcode_move, unknown
@@ -63,6 +65,57 @@ def _nominal(machine: Machine, tilt, c) -> dict[str, float]:
 
 
 
+# A configuration as LinuxCNC loads it, resolved from its INI: each HAL file after a line
+# "# compgen: HAL file NAME", in the order [HAL] HALFILE lists them, then the [HAL] HALCMD
+# commands (scripts/linuxcnc.in §4.3.7-4.3.8), then POSTGUI_HALFILE, which the GUI runs once
+# it is up (axis.py); a later file's setp overrides an earlier one's, as halcmd executes them.
+FILE_MARK = re.compile(r"^# compgen: HAL file (.+)$")
+INI_SECTION = re.compile(r"^\s*\[([A-Za-z0-9_]+)\]\s*$")
+
+
+def _ini(text: str) -> dict[str, list[tuple[str, str]]]:
+    """An INI's sections: (key, value) pairs in order (a key may repeat, as HALFILE does)."""
+    out: dict[str, list[tuple[str, str]]] = {}
+    section = None
+    for line in text.splitlines():
+        if (m := INI_SECTION.match(line)) is not None:
+            section = out.setdefault(m[1], [])
+        elif section is not None and "=" in line and not line.lstrip().startswith(("#", ";")):
+            key, value = line.split("=", 1)
+            section.append((key.strip(), value.split("#", 1)[0].strip()))
+    return out
+
+
+def resolve_ini(path: str, text: str) -> str:
+    """The HAL the INI at ``path`` loads, each file marked, ``[SECTION]KEY`` references put in
+    from the INI as LinuxCNC does; a HAL file not beside the INI (LinuxCNC's own library)
+    is named and left out: it sets no trt pin."""
+    ini = _ini(text)
+    hal = [v for k, v in ini.get("HAL", []) if k == "HALFILE"]
+    commands = [v for k, v in ini.get("HAL", []) if k == "HALCMD"]
+    post = [v for k, v in ini.get("HAL", []) if k == "POSTGUI_HALFILE"]
+    if not hal:
+        raise CompgenError("the INI's [HAL] section names no HALFILE", where=path)
+    values = {(s, k): v for s, pairs in ini.items() for k, v in pairs}
+    folder, out = Path(path).parent, []
+    for name in [*hal, None, *post]:
+        if name is None:           # the HALCMD lines run between the two
+            out += [f"# compgen: HAL file {path} [HAL] HALCMD", *commands] if commands else []
+            continue
+        if name.endswith(".tcl"):
+            raise CompgenError(f"HALFILE {name} is a Tcl HAL file, which compgen does not evaluate",
+                               where=path, hint="give the HAL file that sets the trt pins as --current")
+        file = folder / name
+        if not file.is_file():
+            out.append(f"# compgen: HAL file {name} (not beside the INI: LinuxCNC's own, not read)")
+            continue
+        body = read_text(file, "HAL file", ansi_ok=True)[0]
+        body = re.sub(r"\[([A-Za-z0-9_]+)\]([A-Za-z0-9_]+)",
+                      lambda m: values.get((m[1], m[2]), m[0]), body)
+        out += [f"# compgen: HAL file {file}", body]
+    return "\n".join(out) + "\n"
+
+
 def read_hal(text: str, module: str, where: str) -> tuple[dict[str, float], dict[str, str]]:
     """A HAL file's values of the module's pins (``setp``, or ``sets`` on the signal a pin is
     netted to) and the signal each netted pin is on. A pin or signal set twice is refused
@@ -79,21 +132,30 @@ def _read_hal_lines(text: str, module: str, where: str, nets: dict[str, str] | N
         for word in m[2].split():
             if word.startswith(f"{module}."):
                 signal[word[len(module) + 1:]] = m[1]
-    on_signal, values, line_of = {}, {}, {}
-    for k, line in enumerate(text.splitlines(), start=1):
+    on_signal, values, line_of, mine = {}, {}, {}, set()
+    k = 0
+    for line in text.splitlines():
+        k += 1
+        if (mark := FILE_MARK.match(line)) is not None:     # the next HAL file of an INI
+            where, k, mine = mark[1], 0, set()
+            continue
+        at = f"{where}:{k}"
         if (m := SETS.match(line)) is not None:
-            if m[1] in on_signal:
-                raise CompgenError(f"signal {m[1]} is set twice (lines {on_signal[m[1]][1]} and {k})",
-                                   where=f"{where}:{k}", hint="keep the one the configuration means")
-            on_signal[m[1]] = (number(m[2], f"sets {m[1]}", f"{where}:{k}"), k)
+            if ("sets", m[1]) in mine:
+                raise CompgenError(f"signal {m[1]} is set twice in one file (lines {on_signal[m[1]][1]} "
+                                   f"and {k})", where=at, hint="keep the one the configuration means")
+            mine.add(("sets", m[1]))
+            on_signal[m[1]] = (number(m[2], f"sets {m[1]}", at), at)
         elif (m := SETP.match(line)) is not None and m[1] == module:
             if m[2] in signal:
                 raise CompgenError(f"{module}.{m[2]} is set by setp and netted to {signal[m[2]]}: LinuxCNC "
-                                   "refuses to start such a configuration", where=f"{where}:{k}")
-            if m[2] in values:
-                raise CompgenError(f"{module}.{m[2]} is set twice (lines {line_of[m[2]]} and {k})",
-                                   where=f"{where}:{k}", hint="keep the one the configuration means")
-            values[m[2]], line_of[m[2]] = number(m[3], f"setp {module}.{m[2]}", f"{where}:{k}"), k
+                                   "refuses to start such a configuration", where=at)
+            if ("setp", m[2]) in mine:
+                raise CompgenError(f"{module}.{m[2]} is set twice in one file (lines "
+                                   f"{line_of[m[2]].rsplit(':', 1)[1]} and {k})",
+                                   where=at, hint="keep the one the configuration means")
+            mine.add(("setp", m[2]))
+            values[m[2]], line_of[m[2]] = number(m[3], f"setp {module}.{m[2]}", at), at
     for pin, sig in signal.items():
         if sig in on_signal:
             values[pin], line_of[pin] = on_signal[sig]
@@ -121,7 +183,7 @@ def pins(machine: Machine, p: Plan, current: str | None,
             if not abs(held[n] - nominal[n]) * 1e3 <= machine.limits.offset_um:
                 raise CompgenError(f"{module}.{n} = {held[n]:g} mm, {held[n] - nominal[n]:+.4f} mm from the "
                                    f"machine file's {nominal[n]:g}: beyond its [limits] offset_um "
-                                   f"{machine.limits.offset_um:g} µm", where=f"{where}:{line_of[n]}",
+                                   f"{machine.limits.offset_um:g} µm", where=line_of[n],
                                    hint="is this the configuration of the measured machine? If it is, "
                                         "correct the machine file's offsets or raise [limits]")
     delta_r = p.lines[c.name].offset
@@ -306,14 +368,17 @@ class LinuxCNC(Controller):
              ctx: EditContext) -> EditFiles:
         module, rows, other = pins(machine, p, current, where)
         comps = comp_files(machine, p, ctx)
-        ini = [f"[JOINT_{joint}] COMP_FILE = {ctx.stem}{suffix}, COMP_FILE_TYPE = 1"
-               for suffix, (joint, _) in comps.items()]
+        ini_lines = [f"[JOINT_{joint}] COMP_FILE = {ctx.stem}{suffix}, COMP_FILE_TYPE = 1"
+                     for suffix, (joint, _) in comps.items()]
         text = render("linuxcnc/kinematics.hal.j2", header=ctx.header, module=module, lines=ctx.lines,
-                      rows=rows, other=other, ini=ini)
+                      rows=rows, other=other, ini=ini_lines)
         notes = [f"{cmd} {target} {v}  (was {w})" for cmd, target, v, w in rows]
-        if ini:
+        ini = where if current is not None and FILE_MARK.search(current) else "the configuration's INI"
+        notes.append(f"load it: HALFILE = {ctx.stem}.hal after the last HALFILE of [HAL] in {ini}; the next "
+                     "round's --current is that INI, so the next edit adds to this one")
+        if ini_lines:
             notes += ["joint compensation tables: add to the INI (replacing any COMP_FILE or BACKLASH "
-                      "of these joints)", *(f"  {line}" for line in ini),
+                      "of these joints)", *(f"  {line}" for line in ini_lines),
                       "they hold this fit's correction alone: where a joint had a COMP_FILE loaded while "
                       "measuring, add its trims to the new ones (compgen does not compose tables yet)"]
         if other:
@@ -325,6 +390,9 @@ class LinuxCNC(Controller):
 
     def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
         return Held(read_lines(current, machine, measured, nominal_lines(machine)), {})
+
+    def state(self, path: str, text: str) -> str | None:
+        return resolve_ini(path, text) if re.search(r"(?m)^\s*\[HAL\]\s*$", text) else None
 
     def reads(self, text: str) -> bool:
         return (SETP.search(text) is not None or COMP_NOTE.search(text) is not None

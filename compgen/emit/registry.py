@@ -42,6 +42,14 @@ def for_program(path_suffix: str, machine: Machine) -> Controller:
     return ctl
 
 
+def read_state(path: str) -> str:
+    """A control's current state (``--current``, ``--measured-with``): the file, or what a
+    control makes of it (LinuxCNC: its INI's HAL files, in the order it loads them)."""
+    from ..files import read_text
+    text = read_text(path, "file", ansi_ok=True)[0]
+    return next((s for c in CONTROLLERS.values() if (s := c.state(path, text)) is not None), text)
+
+
 def comment_marks() -> str:
     """Every controller's comment character, for recognising compgen's files by content."""
     return "".join(sorted({c.comment for c in CONTROLLERS.values()}))
