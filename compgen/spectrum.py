@@ -24,7 +24,7 @@ MIN_PITCH_MM = 2.0     # shorter periods: below what R-test paths sample along a
 MIN_PERIOD_S = 60.0    # shorter periods in time: an R-test reads settled poses, not vibration
 MAX_ORDER = 36         # per revolution
 OVERSAMPLE = 2         # the grid's frequencies per resolved one (the peak is refined after)
-CHUNK = 200            # frequencies evaluated at once (memory: n × CHUNK per column)
+CELLS = 500_000        # poses × frequencies evaluated at once (8 MB of complex phasors)
 GOLDEN = (np.sqrt(5.0) - 1) / 2
 SEEN = 0.1             # a line whose pair the model absorbs beyond 1 − this (of its sum of squares) is
                        # not one: its amplitude would be the model's to take
@@ -86,7 +86,8 @@ def _best(against: str, x: np.ndarray, r: np.ndarray, Qd: np.ndarray | None, gri
         return None
     y = r - r.mean(axis=0)
     rss = float(np.sum(r**2))
-    drops = np.concatenate([_drops(x, y, grid[i:i + CHUNK], Qd) for i in range(0, grid.size, CHUNK)])
+    chunk = max(8, CELLS // len(x))      # memory as fit's, however dense the session
+    drops = np.concatenate([_drops(x, y, grid[i:i + chunk], Qd) for i in range(0, grid.size, chunk)])
     k, d = np.unravel_index(int(np.argmax(drops)), drops.shape)
     f = grid[k]
     if refine:           # the grid's neighbours bracket the peak: golden-section between them
