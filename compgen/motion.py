@@ -29,11 +29,11 @@ import numpy as np
 from .errors import CompgenError
 from .kinematics import Poses, _chain, inverse
 from .machine import Machine
+from .search import golden_least
 from .transforms import apply
 
 STEP_MM, STEP_DEG = 1.0, 0.5
 SEARCH_MM = 0.01         # the closest point along housing and spindle axes, found to this
-GOLDEN = (np.sqrt(5.0) - 1) / 2
 ON_BALL_MM = 1e-3        # the nest centre this close to the ball's: a measuring pose
 
 
@@ -197,23 +197,10 @@ def clearances(machine: Machine, q: np.ndarray) -> tuple[dict[str, np.ndarray], 
 
 
 def _least_along(dist, nest: np.ndarray, axis: np.ndarray, lo: float, hi: float) -> np.ndarray:
-    """The least of a convex ``dist`` over the points ``nest + t·axis``, lo ≤ t ≤ hi, per pose
-    (golden-section search, both ends included)."""
+    """The least of a convex ``dist`` over the points ``nest + t·axis``, lo ≤ t ≤ hi, per pose."""
     n = len(nest)
-    a, b = np.full(n, lo), np.full(n, hi)
-
-    def at(t):
-        return dist(nest + t[:, None] * axis)
-    c, d = b - GOLDEN * (b - a), a + GOLDEN * (b - a)
-    fc, fd = at(c), at(d)
-    while (b - a).max() > SEARCH_MM:
-        left = fc < fd
-        b = np.where(left, d, b)
-        a = np.where(left, a, c)
-        c, d = np.where(left, b - GOLDEN * (b - a), d), np.where(left, c, a + GOLDEN * (b - a))
-        new = at(np.where(left, c, d))
-        fc, fd = np.where(left, new, fd), np.where(left, fc, new)
-    return np.minimum.reduce([fc, fd, at(a), at(b)])
+    return golden_least(lambda t: dist(nest + t[:, None] * axis), np.full(n, lo), np.full(n, hi),
+                        SEARCH_MM)[1]
 
 
 @dataclass

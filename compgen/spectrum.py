@@ -18,6 +18,7 @@ import numpy as np
 
 from .kinematics import Poses
 from .machine import Machine
+from .search import golden_least
 from .significance import f_sf
 
 MIN_PITCH_MM = 2.0     # shorter periods: below what R-test paths sample along an axis
@@ -25,7 +26,6 @@ MIN_PERIOD_S = 60.0    # shorter periods in time: an R-test reads settled poses,
 MAX_ORDER = 36         # per revolution
 OVERSAMPLE = 2         # the grid's frequencies per resolved one (the peak is refined after)
 CELLS = 500_000        # poses × frequencies evaluated at once (8 MB of complex phasors)
-GOLDEN = (np.sqrt(5.0) - 1) / 2
 SEEN = 0.1             # a line whose pair the model absorbs beyond 1 − this (of its sum of squares) is
                        # not one: its amplitude would be the model's to take
 
@@ -91,21 +91,10 @@ def _best(against: str, x: np.ndarray, r: np.ndarray, Qd: np.ndarray | None, gri
     k, d = np.unravel_index(int(np.argmax(drops)), drops.shape)
     f = grid[k]
     if refine:           # the grid's neighbours bracket the peak: golden-section between them
-        def drop(v):
-            return _drops(x, y[:, [d]], np.array([v]), None if Qd is None else Qd[[d]])[0, 0]
+        Qk = None if Qd is None else Qd[[d]]
         lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
-        a, b = hi - GOLDEN * (hi - lo), lo + GOLDEN * (hi - lo)
-        fa, fb = drop(a), drop(b)
-        while hi - lo > 1e-6 * f:
-            if fa > fb:
-                hi, b, fb = b, a, fa
-                a = hi - GOLDEN * (hi - lo)
-                fa = drop(a)
-            else:
-                lo, a, fa = a, b, fb
-                b = lo + GOLDEN * (hi - lo)
-                fb = drop(b)
-        f = (lo + hi) / 2
+        f = golden_least(lambda v: -_drops(x, y[:, [d]], v, Qk)[:, 0], np.array([lo]), np.array([hi]),
+                         1e-6 * f)[0][0]
     drop, amp = _fit(x, y[:, d], f, None if Qd is None else Qd[d])
     tried = grid.size / OVERSAMPLE if refine else grid.size
     F = (drop / 2) / max((rss - drop) / (r.size - 3), 1e-300)
