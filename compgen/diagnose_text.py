@@ -142,7 +142,7 @@ def _carries(d: Diagnosis) -> list[str]:
     for name, shift in d.carries.items():
         big = [(n, v) for n, v in shift.items() if abs(v) >= CARRIES_SHOWN]
         out.append(f"    {name:<12} " + (", ".join(f"{n} {v:+.2f} {d.bias_units.get(n, '')}" for n, v in big)
-                                         or "nothing above 0.2 µm or ″"))
+                                         or f"nothing above {CARRIES_SHOWN:g} µm or ″"))
     return out
 
 

@@ -251,6 +251,12 @@ class _Getter:
     def vec3(self, key: str, default=None) -> tuple[float, float, float]:
         return tuple(self.numbers(key, 3, default))
 
+    def flag(self, key: str, meaning: str) -> bool:
+        v = self._get(key)
+        if not isinstance(v, bool):
+            raise CompgenError(f"must be true or false ({meaning})", where=self.at(key))
+        return v
+
     def names(self, key: str) -> list[str]:
         v = self._get(key)
         if not isinstance(v, list) or not all(isinstance(x, str) and x for x in v):

@@ -124,8 +124,8 @@ def read_hal(text: str, module: str, where: str) -> tuple[dict[str, float], dict
 
 
 def _read_hal_lines(text: str, module: str, where: str, nets: dict[str, str] | None = None
-                    ) -> tuple[dict[str, float], dict[str, str], dict[str, int]]:
-    """read_hal's values and signals, and the line that set each pin's value; ``nets``: the
+                    ) -> tuple[dict[str, float], dict[str, str], dict[str, str]]:
+    """read_hal's values and signals, and where (file:line) each pin's value was set; ``nets``: the
     pins netted to signals by files loaded before this one."""
     signal = dict(nets or {})
     for m in NET.finditer(text):
@@ -170,10 +170,10 @@ def pins(machine: Machine, p: Plan, current: str | None,
     and what the pins cannot express."""
     module, tilt, c = _trt(machine)
     names = _pin_names(tilt)
-    held, signal = _nominal(machine, tilt, c), {}
+    nominal = _nominal(machine, tilt, c)
+    held, signal = nominal, {}
     if current is not None:
         held, signal, line_of = _read_hal_lines(current, module, where)
-        nominal = _nominal(machine, tilt, c)
         for n in names:
             if n not in held:
                 why = (f"is netted to {signal[n]}, which another component drives" if n in signal
@@ -236,8 +236,9 @@ def joint_tables(machine: Machine, p: Plan) -> list[CompTable]:
     return out
 
 
-def comp_files(machine: Machine, p: Plan, ctx: EditContext) -> dict[str, tuple[int, str]]:
-    """Suffix → (joint, text) of each joint's COMP_FILE: the effects on one joint summed."""
+def comp_files(machine: Machine, p: Plan, ctx: EditContext) -> dict[str, tuple[str, str]]:
+    """Suffix → (the INI's lines for it, text) of each joint's COMP_FILE: the effects on one
+    joint summed."""
     by_axis: dict[str, list[CompTable]] = {}
     for t in joint_tables(machine, p):
         by_axis.setdefault(t.input, []).append(t)
@@ -251,14 +252,15 @@ def comp_files(machine: Machine, p: Plan, ctx: EditContext) -> dict[str, tuple[i
         digits = 7 if t.unit == "deg" else 6
         rows = [f"{fmt_plain(x, 6)} {fmt_plain(v, digits)} {fmt_plain(v, digits)}"
                 for x, v in zip(t.grid, trims, strict=True)]
+        ini = f"[JOINT_{joint}] COMP_FILE = {ctx.stem}.{axis}.comp, COMP_FILE_TYPE = 1"
         notes = [f"compgen joint compensation for LinuxCNC: joint {joint} = {axis} ({t.unit})",
                  *ctx.header[:3],
                  "corrects: " + "; ".join(f"{tb.effect} ({tb.words})" for tb in tables),
-                 f"INI: [JOINT_{joint}] COMP_FILE = {ctx.stem}.{axis}.comp and COMP_FILE_TYPE = 1",
+                 f"INI: {ini}",
                  "lines: nominal, trim moving up, trim moving down; the trim is added to the command",
                  f"beyond {t.input} {t.start:g}..{t.stop:g} {t.unit} the end trim holds",
                  "LinuxCNC reads up to the first line that is not three numbers: these notes"]
-        out[f".{axis}.comp"] = (joint, "\n".join([*rows, *(f"# {n}" for n in notes)]) + "\n")
+        out[f".{axis}.comp"] = (ini, "\n".join([*rows, *(f"# {n}" for n in notes)]) + "\n")
     return out
 
 
@@ -351,11 +353,8 @@ class LinuxCNC(Controller):
         with a single sine of an angle is multiplied by ``con`` = +1, else −1; the pin exists
         from LinuxCNC 2.10, commit bfb687eaa6, and is false by default)."""
         get.only({"conventional_directions"})
-        flag = get.doc.get("conventional_directions")
-        if not isinstance(flag, bool):
-            raise CompgenError("must be true or false: the trt module's conventional-directions pin",
-                               where=get.at("conventional_directions"))
-        return {"conventional_directions": flag}
+        return {"conventional_directions": get.flag("conventional_directions",
+                                                    "the trt module's conventional-directions pin")}
 
     def angle_sense(self, machine: Machine) -> dict[str, int]:
         flip = -1 if (machine.linuxcnc or {}).get("conventional_directions") else 1
@@ -368,8 +367,7 @@ class LinuxCNC(Controller):
              ctx: EditContext) -> EditFiles:
         module, rows, other = pins(machine, p, current, where)
         comps = comp_files(machine, p, ctx)
-        ini_lines = [f"[JOINT_{joint}] COMP_FILE = {ctx.stem}{suffix}, COMP_FILE_TYPE = 1"
-                     for suffix, (joint, _) in comps.items()]
+        ini_lines = [ini for ini, _ in comps.values()]
         text = render("linuxcnc/kinematics.hal.j2", header=ctx.header, module=module, lines=ctx.lines,
                       rows=rows, other=other, ini=ini_lines)
         notes = [f"{cmd} {target} {v}  (was {w})" for cmd, target, v, w in rows]

@@ -57,13 +57,16 @@ def check_current(text: str, where: str, machine: Machine) -> None:
     record = machine.sinumerik["tcarr"]
     bound_mm = machine.limits.offset_um * 1e-3
     limit = machine.sinumerik.get("fine_limit_mm")
+    fine = {i for idx in FINE.values() for i in idx}
     for n, (value, k) in _carr_lines(text, where, record).items():
-        if n in {i for idx in FINE.values() for i in idx} and not abs(value) <= bound_mm:
+        if n not in fine:
+            continue
+        if not abs(value) <= bound_mm:
             raise CompgenError(f"$TC_CARR{n}[{record}] = {value:g} mm: a fine offset beyond the "
                                f"{machine.limits.offset_um:g} µm the machine file's [limits] allow",
                                where=f"{where}:{k}", hint="is this the record of the measured machine? If it "
                                "is, raise [limits] offset_um in the machine file")
-        if limit is not None and n in {i for idx in FINE.values() for i in idx} and abs(value) > limit:
+        if limit is not None and abs(value) > limit:
             raise CompgenError(f"$TC_CARR{n}[{record}] = {value:g} mm exceeds MD20188 = {limit:g} mm",
                                where=f"{where}:{k}")
 
@@ -270,12 +273,9 @@ class Sinumerik840D(Controller):
                 if name not in machine.axis_names or not machine.axis(name).full_turn:
                     raise CompgenError(f"{name} is not a rotary axis that turns a whole revolution",
                                        where=get.at("modulo"))
-        fine = None           # SD42974 $SC_TOCARR_FINE_CORRECTION: the fine offsets count only at 1
-        if "fine_correction" in get.doc:
-            fine = get.doc["fine_correction"]
-            if not isinstance(fine, bool):
-                raise CompgenError("must be true or false (SD42974 $SC_TOCARR_FINE_CORRECTION = 1 or 0)",
-                                   where=get.at("fine_correction"))
+        # SD42974 $SC_TOCARR_FINE_CORRECTION: the fine offsets count only at 1
+        fine = (get.flag("fine_correction", "SD42974 $SC_TOCARR_FINE_CORRECTION = 1 or 0")
+                if "fine_correction" in get.doc else None)
         limit = get.number("fine_limit_mm") if "fine_limit_mm" in get.doc else None    # MD20188
         return {"tcarr": record, "kind": {"P": "P", "T": "T"}.get(kind, "M"), "vectors": vectors,
                 "machine_axes": names, "modulo": modulo, "fine_correction": fine, "fine_limit_mm": limit}
