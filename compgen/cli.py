@@ -143,8 +143,9 @@ def main():
 @click.option("--edit", "edits", type=FILE, multiple=True,
               help="A kinematics edit compgen wrote (table, change list, $TC_CARR program, CEC "
                    "file): simulate the measurement after the control has loaded it. Repeatable.")
-@click.option("--current", type=FILE, default=None,
-              help="With a $TC_CARR program: the record's values before the edit.")
+@click.option("--current", type=FILE, multiple=True,
+              help="With a $TC_CARR program: the record's values before the edit (and the CEC tables "
+                   "then loaded, as a further --current).")
 @OUTPUT
 @FORCE
 def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, ball, back, edits, current,
@@ -168,7 +169,7 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
                 f"noise {noise_um} µm σ{f', AR(1) ρ = {noise_rho:g}' if noise_rho else ''}, seed {seed}",
                 "dX dY dZ: nest minus ball, µm")
     write_atomically(output, format_rtest(machine, data, comments), force,
-                     inputs=(machine_file, truth, *edits, current))
+                     inputs=(machine_file, truth, *edits, *current))
     _said(output, f"wrote {output}: {len(poses)} poses ({', '.join(names)})")
 
 
@@ -385,12 +386,13 @@ def check_program_cmd(machine_file, program, controller_name, ball, as_json):
 @click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
 @click.option("--controller", "controller_name", default=None, metavar="NAME",
               help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
-@click.option("--current", type=FILE, default=None,
-              help="The control's current kinematics: iTNC 530 description table (*.TAB), or the "
-                   "SINUMERIK record's $TC_CARR lines.")
-@click.option("--measured-with", "measured", type=FILE, default=None,
-              help="The control's kinematics while the data were measured, if it is not --current "
-                   "(part of a correction already loaded): the edit writes the rest.")
+@click.option("--current", type=FILE, multiple=True,
+              help="The control's current state: the iTNC 530 description table (*.TAB); the SINUMERIK "
+                   "record's $TC_CARR lines, and its CEC tables' file as a second --current; "
+                   "LinuxCNC's INI (its HAL files and joint tables are read from it).")
+@click.option("--measured-with", "measured", type=FILE, multiple=True,
+              help="The control's state while the data were measured, if it is not --current "
+                   "(part of a correction already loaded): the edit writes the rest. Repeatable.")
 @click.option("-o", "--output", type=FILE, required=True,
               help="Main file (the new table, the change list or the .MPF); the sign check and any "
                    "tables go beside it with the same stem.")
@@ -400,6 +402,10 @@ def kinematics_cmd(base, controller_name, current, measured, output, force):
     fit = load_fit(base)
     machine, sets = reload(fit)
     ctl = controller(controller_name or machine.controller)
+    for given in (current, measured):
+        if len(given) > 1 and not ctl.state_files:
+            raise CompgenError(f"{ctl.words} reads its state from one file; {len(given)} were given",
+                               hint=f"give --current (and --measured-with) once: {ctl.backup}")
     text = read_state(current) if current else None
     _progress("checking that the fit explains its data")
     reasons = fit_gate(machine, sets, fit)
@@ -409,13 +415,13 @@ def kinematics_cmd(base, controller_name, current, measured, output, force):
                                 "the edit anyway")
     out = Path(output)
     name = program_name(out.stem, room=len("_SIGN"))
-    emitted = kinematics_edit(machine, fit, ctl.name, text, current or "", name, __version__,
+    emitted = kinematics_edit(machine, fit, ctl.name, text, ", ".join(current), name, __version__,
                               date.today().isoformat(), force,
                               read_state(measured) if measured else None, out.stem)
     main_key = ctl.main_suffix(text)
     files = {(out if key == main_key else out.with_name(out.stem + key)): body
              for key, body in emitted.files.items()}
-    write_all(files, force, inputs=(base, current, measured, machine.source, *(d.file for d in fit.data)))
+    write_all(files, force, inputs=(base, *current, *measured, machine.source, *(d.file for d in fit.data)))
     click.echo("\n".join(emitted.notes))
     click.echo("wrote " + ", ".join(str(p) for p in files))
 

@@ -45,6 +45,7 @@ class CompTable:
     values: tuple[float, ...]
     modulo: bool
     unit: str
+    points: tuple[float, ...] = ()   # the input positions where they are uneven (a LinuxCNC table's)
 
     @property
     def step(self) -> float:
@@ -52,7 +53,52 @@ class CompTable:
 
     @property
     def grid(self) -> np.ndarray:
-        return np.linspace(self.start, self.stop, len(self.values))
+        return np.array(self.points) if self.points else np.linspace(self.start, self.stop, len(self.values))
+
+    def at(self, x: np.ndarray) -> np.ndarray:
+        """Its values at input positions ``x`` as a control interpolates them: linearly, the
+        end values held beyond the ends, a modulo table's input wrapped into its range."""
+        if self.modulo:
+            x = self.start + np.mod(x - self.start, self.stop - self.start)
+        return np.interp(x, self.grid, self.values)
+
+
+def compose_tables(loaded: list[CompTable], new: list[CompTable]) -> list[CompTable]:
+    """The tables a control holds once an edit's ``new`` tables are added to the ``loaded``
+    ones (an earlier round's, the OEM's): the new tables of one input and output axis are
+    summed into the loaded table of those axes, which keeps its place (``effect`` is the
+    control's slot) — on its own grid where the new ones share it, else on the finer step
+    over both ranges, each interpolated as the control does (``CompTable.at``); a loaded
+    table no new one adds to stays as it is; a new pair takes a new place."""
+    out = list(loaded)
+    for t in new:
+        k = next((i for i, o in enumerate(out) if (o.input, o.output) == (t.input, t.output)
+                  and o.effect not in {n.effect for n in new}), None)
+        if k is None:
+            out.append(t)
+            continue
+        old = out[k]
+        if old.modulo != t.modulo or old.unit != t.unit:
+            raise CompgenError(f"the loaded table of {old.input} -> {old.output} ({old.effect}) is "
+                               f"{'modulo' if old.modulo else 'not modulo'} in {old.unit}; the new one "
+                               f"{'is' if t.modulo else 'is not'} modulo in {t.unit}: compgen does not add "
+                               "them",
+                               hint="write this round's table to a free place by hand, or remove the old one")
+        grid = old.grid
+        if len(grid) == len(t.grid) and np.allclose(grid, t.grid, rtol=0, atol=1e-9):
+            values = np.add(old.values, t.values)
+        else:
+            lo, hi = min(old.start, t.start), max(old.stop, t.stop)
+            if old.points or t.points:
+                grid = np.unique(np.concatenate([old.grid, t.grid]))
+            else:
+                grid = np.linspace(lo, hi, int(round((hi - lo) / min(old.step, t.step))) + 1)
+            values = old.at(grid) + t.at(grid)
+        even = not (old.points or t.points)
+        out[k] = CompTable(old.effect, f"{old.words} + {t.effect}".strip(" +"), old.input, old.output,
+                           float(grid[0]), float(grid[-1]), tuple(float(v) for v in values), old.modulo,
+                           old.unit, () if even else tuple(float(x) for x in grid))
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -257,10 +303,7 @@ def apply_tables(machine: Machine, tables, q: np.ndarray) -> np.ndarray:
     q = q.copy()
     for t in tables:
         i, o = machine.index(t.input), machine.index(t.output)
-        x = np.degrees(q[:, i]) if machine.axes[i].rotary else q[:, i]
-        if t.modulo:
-            x = t.start + np.mod(x - t.start, t.stop - t.start)
-        comp = np.interp(x, t.grid, t.values)
+        comp = t.at(np.degrees(q[:, i]) if machine.axes[i].rotary else q[:, i])
         q[:, o] += np.radians(comp) if machine.axes[o].rotary else comp
     return q
 

@@ -57,7 +57,7 @@ def test_heidenhain_and_linuxcnc_outputs_match_golden_files(seed_machine, seed_f
 def test_sinumerik_outputs_match_golden_files(bc_machine, bc_fit, golden):
     emitted = kinematics_edit(bc_machine, bc_fit, "sinumerik840d", CURRENT_CARR, "current", "KIN",
                               "0.1.0", DATE)
-    assert set(emitted.files) == {".MPF", "_RESTORE.MPF", "_CEC.INI", "_SIGN.MPF"}
+    assert set(emitted.files) == {".MPF", "_RESTORE.MPF", "_CEC.INI", "_CEC_RESTORE.INI", "_SIGN.MPF"}
     for suffix, text in emitted.files.items():
         golden(f"bc-table-sinumerik840d/sinumerik840d/kinematics{suffix}", text)
 

@@ -6,6 +6,7 @@ module tests a controller's name."""
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -15,6 +16,29 @@ from ..lines import AxisLine
 from ..machine import Machine
 from ..motion import Block
 from . import fmt_plain
+
+# A control's state read from several files is one text, each file after this line (LinuxCNC's
+# INI resolution writes "HAL file"): every reader names a line by its own file and number.
+FILE_MARK = re.compile(r"^# compgen: (?:HAL )?file (.+?)(?: \(.*\))?$")
+
+
+def state_lines(text: str, where: str) -> Iterator[tuple[str, str]]:
+    """(``file:line``, line) of a state's text, numbered within each of its files."""
+    k = 0
+    for line in text.splitlines():
+        if (mark := FILE_MARK.match(line)) is not None:
+            where, k = mark[1], 0
+            continue
+        k += 1
+        yield f"{where}:{k}", line
+
+
+def joined(files: list[tuple[str, str]]) -> str:
+    """Several files' states as one text (``state_lines`` numbers each by its own file)."""
+    if len(files) == 1:
+        return files[0][1]
+    return "".join(f"# compgen: file {path}\n{text}{'' if text.endswith(chr(10)) else chr(10)}"
+                   for path, text in files)
 
 
 @dataclass(frozen=True)
@@ -54,6 +78,7 @@ class Controller:
     tcp_switchable = True     # a program switches TCP on and off (else: the configuration's)
     section = ""              # its own table of the machine file, read by ``read_section``
     load_note = ""            # what loading its edit takes beyond the files (the checklist says it)
+    state_files = ""          # what its state is read from, where that is more than one file
 
     def read_section(self, get, machine: Machine) -> dict:
         """This control's table of the machine file, checked (``get`` names file and key in
@@ -125,6 +150,11 @@ class Controller:
         in_tables = {t.effect for t in self.tables(machine, p)}
         return [*tilts, *([] if self.squareness_as else p.squareness),
                 *(e for e in p.tables if e not in in_tables), *p.not_compensable]
+
+    def loaded_tables(self, machine: Machine, state: str, where: str) -> list[CompTable]:
+        """The compensation tables the control holds in ``state``, each named (``effect``) by
+        its place in the control, which an edit's table for the same axes takes over."""
+        return []
 
     def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
         """What the control holds now (``current``) beyond the state the data were measured

@@ -81,6 +81,12 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
             raise CompgenError("the state the data were measured in only counts against --current",
                                hint="give --current as well")
         p = rest(machine, p, ctl.since(machine, measured, current, current_where), force)
+        then, now = (ctl.loaded_tables(machine, s, current_where) for s in (measured, current))
+        if then != now:       # the tables are composed over --current: the data must have seen them
+            raise CompgenError("the compensation tables of --current differ from those the data were "
+                               "measured with: compgen adds this round's tables to the ones loaded while "
+                               "measuring", hint="measure again with the tables now loaded, or give the "
+                                                 "same tables in both")
     sign_name = program_name(f"{name}_SIGN")
     signcheck, expect = sign_check(machine, p, ctl, sign_name, version, date)
     header = (f"compgen {version} kinematics edit, {date}",

@@ -30,7 +30,7 @@ from ..machine import Machine
 from ..motion import Block, gcode_move, unknown
 from ..units import number
 from . import fmt_plain, render
-from .base import Controller, EditContext, EditFiles
+from .base import FILE_MARK, Controller, EditContext, EditFiles
 
 SETP = re.compile(r"^\s*setp\s+(\S+?)\.(\S+)\s+(\S+)", re.MULTILINE)
 SETS = re.compile(r"^\s*sets\s+(\S+)\s+(\S+)", re.MULTILINE)
@@ -69,7 +69,7 @@ def _nominal(machine: Machine, tilt, c) -> dict[str, float]:
 # "# compgen: HAL file NAME", in the order [HAL] HALFILE lists them, then the [HAL] HALCMD
 # commands (scripts/linuxcnc.in §4.3.7-4.3.8), then POSTGUI_HALFILE, which the GUI runs once
 # it is up (axis.py); a later file's setp overrides an earlier one's, as halcmd executes them.
-FILE_MARK = re.compile(r"^# compgen: HAL file (.+)$")
+INI_MARK = "# compgen: HAL file"
 INI_SECTION = re.compile(r"^\s*\[([A-Za-z0-9_]+)\]\s*$")
 
 
@@ -100,19 +100,19 @@ def resolve_ini(path: str, text: str) -> str:
     folder, out = Path(path).parent, []
     for name in [*hal, None, *post]:
         if name is None:           # the HALCMD lines run between the two
-            out += [f"# compgen: HAL file {path} [HAL] HALCMD", *commands] if commands else []
+            out += [f"{INI_MARK} {path} [HAL] HALCMD", *commands] if commands else []
             continue
         if name.endswith(".tcl"):
             raise CompgenError(f"HALFILE {name} is a Tcl HAL file, which compgen does not evaluate",
                                where=path, hint="give the HAL file that sets the trt pins as --current")
         file = folder / name
         if not file.is_file():
-            out.append(f"# compgen: HAL file {name} (not beside the INI: LinuxCNC's own, not read)")
+            out.append(f"{INI_MARK} {name} (not beside the INI: LinuxCNC's own, not read)")
             continue
         body = read_text(file, "HAL file", ansi_ok=True)[0]
         body = re.sub(r"\[([A-Za-z0-9_]+)\]([A-Za-z0-9_]+)",
                       lambda m: values.get((m[1], m[2]), m[0]), body)
-        out += [f"# compgen: HAL file {file}", body]
+        out += [f"{INI_MARK} {file}", body]
     return "\n".join(out) + "\n"
 
 
@@ -371,7 +371,7 @@ class LinuxCNC(Controller):
         text = render("linuxcnc/kinematics.hal.j2", header=ctx.header, module=module, lines=ctx.lines,
                       rows=rows, other=other, ini=ini_lines)
         notes = [f"{cmd} {target} {v}  (was {w})" for cmd, target, v, w in rows]
-        ini = where if current is not None and FILE_MARK.search(current) else "the configuration's INI"
+        ini = where if current is not None and INI_MARK in current else "the configuration's INI"
         notes.append(f"load it: HALFILE = {ctx.stem}.hal after the last HALFILE of [HAL] in {ini}; the next "
                      "round's --current is that INI, so the next edit adds to this one")
         if ini_lines:

@@ -9,7 +9,7 @@ from collections.abc import Mapping
 from ..correction import Held, nominal_lines
 from ..errors import CompgenError
 from ..machine import Machine
-from .base import Controller
+from .base import Controller, joined
 from .heidenhain import ITNC530, TNC640
 from .linuxcnc import LinuxCNC
 from .sinumerik import Sinumerik840D
@@ -42,12 +42,17 @@ def for_program(path_suffix: str, machine: Machine) -> Controller:
     return ctl
 
 
-def read_state(path: str) -> str:
-    """A control's current state (``--current``, ``--measured-with``): the file, or what a
-    control makes of it (LinuxCNC: its INI's HAL files, in the order it loads them)."""
+def read_state(paths: str | tuple[str, ...]) -> str:
+    """A control's current state (``--current``, ``--measured-with``) from its files, in the
+    order given: each file, or what a control makes of it (LinuxCNC: its INI's HAL files and
+    joint tables, in the order it loads them)."""
     from ..files import read_text
-    text = read_text(path, "file", ansi_ok=True)[0]
-    return next((s for c in CONTROLLERS.values() if (s := c.state(path, text)) is not None), text)
+    out = []
+    for path in (paths,) if isinstance(paths, str) else paths:
+        text = read_text(path, "file", ansi_ok=True)[0]
+        out.append((path, next((s for c in CONTROLLERS.values() if (s := c.state(path, text)) is not None),
+                               text)))
+    return joined(out)
 
 
 def comment_marks() -> str:

@@ -12,7 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..correction import CompTable, Held, Plan, comp_tables, nominal_lines, squareness_tables
+from ..correction import CompTable, Held, Plan, comp_tables, compose_tables, nominal_lines, squareness_tables
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
@@ -20,7 +20,7 @@ from ..motion import Block, gcode_move
 from ..transforms import rot_exact
 from ..units import number
 from . import ascii_text, fmt_plain, render
-from .base import Controller, EditContext, EditFiles
+from .base import Controller, EditContext, EditFiles, state_lines
 
 MM_DECIMALS = 5
 VECTOR_DECIMALS = 10
@@ -34,19 +34,20 @@ SAME_AXIS_DEG = 1.0     # a record's vector further than this from the machine f
 def read_carr(text: str, where: str, record: int) -> dict[int, float]:
     """``$TC_CARRn[record]=value`` assignments of one record (other lines are ignored); a
     parameter assigned twice is refused (the control would keep the last: which was meant?)."""
-    return {n: v for n, (v, _) in _carr_lines(text, where, record).items()}
+    return {n: v for n, (v, _, _) in _carr_lines(text, where, record).items()}
 
 
-def _carr_lines(text: str, where: str, record: int) -> dict[int, tuple[float, int]]:
-    out: dict[int, tuple[float, int]] = {}
-    for k, line in enumerate(text.splitlines(), start=1):
+def _carr_lines(text: str, where: str, record: int) -> dict[int, tuple[float, str, str]]:
+    """Each parameter's value, its text as written, and its file:line."""
+    out: dict[int, tuple[float, str, str]] = {}
+    for at, line in state_lines(text, where):
         m = CARR.match(line)
         if m and int(m[2]) == record and not m[3].startswith('"'):
             n = int(m[1])
             if n in out:
-                raise CompgenError(f"$TC_CARR{n}[{record}] is assigned twice (lines {out[n][1]} and {k})",
-                                   where=f"{where}:{k}", hint="keep the one the control holds")
-            out[n] = (number(m[3], f"$TC_CARR{n} value", f"{where}:{k}"), k)
+                raise CompgenError(f"$TC_CARR{n}[{record}] is assigned twice ({out[n][2]} and {at})",
+                                   where=at, hint="keep the one the control holds")
+            out[n] = (number(m[3], f"$TC_CARR{n} value", at), m[3], at)
     return out
 
 
@@ -58,17 +59,17 @@ def check_current(text: str, where: str, machine: Machine) -> None:
     bound_mm = machine.limits.offset_um * 1e-3
     limit = machine.sinumerik.get("fine_limit_mm")
     fine = {i for idx in FINE.values() for i in idx}
-    for n, (value, k) in _carr_lines(text, where, record).items():
+    for n, (value, _, at) in _carr_lines(text, where, record).items():
         if n not in fine:
             continue
         if not abs(value) <= bound_mm:
             raise CompgenError(f"$TC_CARR{n}[{record}] = {value:g} mm: a fine offset beyond the "
                                f"{machine.limits.offset_um:g} µm the machine file's [limits] allow",
-                               where=f"{where}:{k}", hint="is this the record of the measured machine? If it "
+                               where=at, hint="is this the record of the measured machine? If it "
                                "is, raise [limits] offset_um in the machine file")
         if limit is not None and abs(value) > limit:
             raise CompgenError(f"$TC_CARR{n}[{record}] = {value:g} mm exceeds MD20188 = {limit:g} mm",
-                               where=f"{where}:{k}")
+                               where=at)
 
 
 def carr_values(machine: Machine, p: Plan, current: dict[int, float]) -> tuple[dict[int, float], list[str]]:
@@ -137,34 +138,58 @@ def _turn(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.zeros(3) if s == 0 else axis / s * np.arctan2(s, a @ b)
 
 
-def read_cec(text: str, machine: Machine) -> list[CompTable]:
-    """Tables of a CEC file, as the control interpolates them: from MIN in steps of STEP."""
+CEC_KEYS = {"input_axis", "output_axis", "step", "min", "max", "is_modulo"}
+
+
+def read_cec(text: str, machine: Machine, where: str = "CEC file") -> list[CompTable]:
+    """Tables of a CEC file as the control interpolates them (from MIN in steps of STEP), each
+    named by its place, ``CEC table k``; an entry assigned twice or a table lacking one the
+    control needs is refused with its file and line."""
     found: dict[int, dict] = {}
-    for line in text.splitlines():
+    seen: dict[str, str] = {}
+    for at, line in state_lines(text, where):
         m = CEC.match(line.strip())
         if not m:
             continue
-        t = found.setdefault(int(m[2]), {"values": {}})
+        key = line.strip().split("=", 1)[0]
+        if key in seen:
+            raise CompgenError(f"{key} is assigned twice ({seen[key]} and {at})", where=at,
+                               hint="keep the one the control holds")
+        seen[key] = at
+        t = found.setdefault(int(m[2]), {"values": {}, "at": at})
         if m[1] is None:
-            t["values"][int(m[3])] = number(m[4], "$AN_CEC value", "CEC file")
+            t["values"][int(m[3])] = number(m[4], "$AN_CEC value", at)
         else:
             t[m[1][1:].lower()] = (m[4] if m[1] in ("_INPUT_AXIS", "_OUTPUT_AXIS")
-                                   else number(m[4], f"$AN_CEC{m[1]}", "CEC file"))
+                                   else number(m[4], f"$AN_CEC{m[1]}", at))
     channel = {m: a for a, m in _machine_axes(machine).items()}
     out = []
     for k in sorted(found):
         t = found[k]
+        missing = sorted(CEC_KEYS - set(t))
         values = tuple(t["values"][i] for i in sorted(t["values"]))
+        if missing or sorted(t["values"]) != list(range(len(values))) or len(values) < 2:
+            raise CompgenError(f"CEC table {k} lacks " + (f"$AN_CEC_{missing[0].upper()}" if missing else
+                                                         "values 0, 1, 2, ... without a gap"),
+                               where=t["at"], hint="give the table as the control holds it")
         unknown = [n for n in (t["input_axis"], t["output_axis"]) if n not in channel]
         if unknown:
             raise CompgenError(f"CEC table {k} names machine axis {unknown[0]!r}, which the machine file's "
-                               "[sinumerik] machine_axes does not name")
+                               "[sinumerik] machine_axes does not name", where=t["at"])
         inp, out_axis = channel[t["input_axis"]], channel[t["output_axis"]]
         output = machine.axis(out_axis)
-        out.append(CompTable("", "", inp, out_axis, t["min"],
+        out.append(CompTable(f"CEC table {k}", "as loaded", inp, out_axis, t["min"],
                              t["min"] + t["step"] * (len(values) - 1), values, bool(t["is_modulo"]),
                              "deg" if output.rotary else "mm"))
     return out
+
+
+def cec_places(tables: list[CompTable]) -> list[tuple[int, CompTable]]:
+    """Each table's place in the control: a loaded one's own, a new one the next free."""
+    taken = {int(t.effect.split()[-1]) for t in tables if t.effect.startswith("CEC table ")}
+    free = (k for k in range(10_000) if k not in taken)
+    return [(int(t.effect.split()[-1]) if t.effect.startswith("CEC table ") else next(free), t)
+            for t in tables]
 
 
 def _machine_axes(machine: Machine) -> dict[str, str]:
@@ -177,6 +202,8 @@ def _machine_axes(machine: Machine) -> dict[str, str]:
 
 
 def _cec_text(t: CompTable, index: int, names: dict[str, str]) -> dict:
+    if t.points:
+        raise CompgenError(f"CEC table {index} would need uneven steps", hint="give tables on even steps")
     return {"index": index, "effect": t.effect, "words": ascii_text(t.words), "input": names[t.input],
             "output": names[t.output], "step": fmt_plain(t.step, 6), "min": fmt_plain(t.start, 4),
             "max": fmt_plain(t.stop, 4), "modulo": int(t.modulo), "unit": t.unit,
@@ -238,6 +265,7 @@ class Sinumerik840D(Controller):
     tcp_switchable = True
     squareness_as = "tables"      # CEC tables hold squareness and every single-axis table
     section = "sinumerik"
+    state_files = "the record's $TC_CARR lines, and the CEC tables' file"
     load_note = ("SD42974 $SC_TOCARR_FINE_CORRECTION = 1, or the fine offsets do nothing; each within "
                  "MD20188 $MC_TOCARR_FINE_LIM_LIN (W1 function manual 08/2005 p. 2-91)")
 
@@ -329,37 +357,60 @@ class Sinumerik840D(Controller):
                                hint="set SD42974 = 1 on the control and fine_correction = true here")
         check_current(current, where, machine)
         held = read_carr(current, where, machine.sinumerik["tcarr"])
-        new, diff = carr_values(machine, p, held)
+        new_carr, diff = carr_values(machine, p, held)
         rec = machine.sinumerik["tcarr"]
-        largest = max(abs(v) for n, v in new.items() if n > 12)
+        largest = max(abs(v) for n, v in new_carr.items() if n > 12)
         limit = machine.sinumerik.get("fine_limit_mm")
         if limit is not None and largest > limit:
             raise CompgenError(f"a fine offset would be {largest:.4f} mm, beyond MD20188 "
                                f"$MC_TOCARR_FINE_LIM_LIN = {limit:g} mm (the machine file's fine_limit_mm): "
                                "the control would refuse it",
                                hint="move the excess into the base offsets with the OEM, then edit again")
-        tables = comp_tables(machine, p) + squareness_tables(machine, p)
+        loaded = self.loaded_tables(machine, current, where)
+        new = comp_tables(machine, p) + squareness_tables(machine, p)
+        tables = compose_tables(loaded, new)
 
         def carr(values):      # vectors are unitless, offsets mm
             return [(n, fmt_plain(v, VECTOR_DECIMALS if n <= 12 else MM_DECIMALS)) for n, v in values.items()]
 
         files = {".MPF": render("sinumerik/kinematics.MPF.j2", name=ctx.name, header=ctx.header, record=rec,
-                                values=carr(new), lines=ctx.lines, expect=ctx.expect)}
+                                values=carr(new_carr), lines=ctx.lines, expect=ctx.expect)}
+        was = _carr_lines(current, where, rec)      # the restore writes each value as it was written
         files["_RESTORE.MPF"] = render(
             "sinumerik/kinematics.MPF.j2", name=f"{ctx.name}_RESTORE", record=rec, lines=[], expect=[],
             header=[f"compgen {ctx.version}: restores record {rec} as it was", *ctx.header[1:3]],
-            values=carr({n: held[n] for n in new}))
-        if tables:
-            files["_CEC.INI"] = render("sinumerik/cec.INI.j2", header=ctx.header,
-                                       tables=[_cec_text(t, i, _machine_axes(machine))
-                                               for i, t in enumerate(tables)])
+            values=[(n, was[n][1]) for n in new_carr])
         notes = ["$TC_CARR changes:", *diff,
                  f"the fine offsets act with SD42974 = 1 only, each within MD20188 $MC_TOCARR_FINE_LIM_LIN: "
                  f"the largest here is {largest:.4f} mm"
                  + ("" if limit is not None else " (give fine_limit_mm in [sinumerik] to have it checked)")]
+        if new:
+            names = _machine_axes(machine)
+            placed = cec_places(tables)
+            files["_CEC.INI"] = render("sinumerik/cec.INI.j2", header=ctx.header, raw=[],
+                                       points=max(len(t.values) for t in tables),
+                                       tables=[_cec_text(t, k, names) for k, t in placed])
+            slots = {t.effect for t in loaded}
+            zero = [_cec_text(replace(t, values=(0.0,) * len(t.values), effect="(none)", words="not loaded"),
+                              k, names) for k, t in placed if t.effect not in slots]
+            raw = [line.strip() for _, line in state_lines(current, where) if CEC.match(line.strip())]
+            files["_CEC_RESTORE.INI"] = render(
+                "sinumerik/cec.INI.j2", raw=raw, tables=zero, points=max(len(t.values) for t in tables),
+                header=[f"compgen {ctx.version}: restores the CEC tables as they were read"
+                        + (" (tables not loaded before: zero)" if zero else ""), *ctx.header[1:3]])
+            notes.append("CEC tables: " + "; ".join(
+                f"table {k} {t.input}->{t.output}: "
+                + (f"{t.words} (the loaded table with this round's added)" if t.effect in slots else t.effect)
+                for k, t in placed if t.effect not in slots or t not in loaded))
+            if not loaded:
+                notes.append("no CEC tables were read from --current: they hold this round's correction "
+                             "alone; if the control holds CEC tables, give their file as a further --current")
         if p.squareness:
             notes.append("squareness goes to linear CEC tables: " + ", ".join(p.squareness))
         return EditFiles(files, tuple(notes))
+
+    def loaded_tables(self, machine: Machine, state: str, where: str) -> list[CompTable]:
+        return read_cec(state, machine, where) if "$AN_CEC" in state else []
 
     def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
         if machine.sinumerik is None:
@@ -371,8 +422,11 @@ class Sinumerik840D(Controller):
         return "$TC_CARR" in text or "$AN_CEC" in text
 
     def read(self, machine: Machine, text: str, current: str | None, held: Held, where: str) -> Held:
-        if "$AN_CEC" in text:
-            return Held(held.lines, held.squareness, (*held.tables, *read_cec(text, machine)))
+        if "$AN_CEC" in text:      # a table loaded into a place replaces the one there
+            tables = read_cec(text, machine, where)
+            places = {t.effect for t in tables}
+            return Held(held.lines, held.squareness,
+                        (*(t for t in held.tables if t.effect not in places), *tables))
         if current is None or machine.sinumerik is None:
             raise CompgenError("a $TC_CARR program needs --current and the machine's [sinumerik]",
                                where=where)

@@ -1,0 +1,173 @@
+"""Compensation tables over correction rounds: the control keeps the tables it holds, so a
+second round's table must be the loaded one plus this round's residual (issue 20: a CEC or
+joint table that held the residual alone put the machine back to uncorrected).
+
+Truth is simulated, not written by the code under test: location errors, C's 2/rev angle
+error (ECC:h2c, ECC:h2s) and Y's scale error (EYY:p1) on the B/C table. Round 1 is fitted
+on data measured in the OEM's state, loaded as the control loads it (``read_edits``: a
+table loaded into a place replaces the one there), measured again, fitted, and round 2
+written over the state read. A third measurement with round 2 loaded must be at the noise.
+"""
+
+import re
+
+import numpy as np
+import pytest
+from conftest import ARCSEC, ROOT, UM
+
+from compgen.correction import CompTable, compose_tables
+from compgen.effects import location_model
+from compgen.emit import sinumerik
+from compgen.emit.base import joined
+from compgen.emit.kinematics import kinematics_edit
+from compgen.emit.registry import read_edits
+from compgen.errors import CompgenError
+from compgen.identify import identify
+from compgen.paths import generate
+from compgen.simulate import simulate
+
+NOISE_UM = 0.5
+OEM_CARR = (ROOT / "examples" / "bc-tcarr-current.txt").read_text()
+TRUTH = {"XOW": 5 * UM, "YOW": -8 * UM, "ZOW": 12 * UM, "XOB": 15 * UM, "ZOB": -20 * UM,
+         "AOB": 6 * ARCSEC, "COB": -9 * ARCSEC, "XOC": -7 * UM, "YOC": 11 * UM,
+         "AOC": 4 * ARCSEC, "BOC": -5 * ARCSEC, "ECC:h2c": 8 * ARCSEC, "ECC:h2s": -4 * ARCSEC,
+         "EYY:p1": 15 * UM}
+TABLES = ["ECC:h2c", "ECC:h2s", "EYY:p1"]
+# between the rounds the machine moves on (a bearing settles, the scale warms): round 2 must
+# add its residual to round 1's tables, not replace them
+LATER = {**TRUTH, "ECC:h2c": 11 * ARCSEC, "EYY:p1": 21 * UM, "YOC": 15 * UM}
+
+
+def _measure(machine, held, rng, state, truth=TRUTH):
+    poses = generate(machine, ["K4", "K1", "K2"])
+    drive = None
+    if held:
+        loaded = read_edits(machine, held, state)
+        def drive(p):
+            return loaded.drive(machine, p)
+    return simulate(machine, truth, poses, NOISE_UM, rng, drive)
+
+
+def _edit(machine, data, current, name, model):
+    fit = identify(machine, [data], model)
+    return fit, kinematics_edit(machine, fit, "sinumerik840d", current, "current", name, "0", "d")
+
+
+def test_compose_adds_on_the_loaded_grid_and_keeps_its_place():
+    grid_old = CompTable("CEC table 3", "as loaded", "C", "C", 0.0, 360.0, tuple(np.linspace(0, 1, 37)), True,
+                         "deg")
+    new = CompTable("ECC", "C angle", "C", "C", 0.0, 360.0, tuple(np.full(37, 0.5)), True, "deg")
+    other = CompTable("EYY", "Y scale", "Y", "Y", -200.0, 200.0, tuple(np.linspace(-1, 1, 5)), False, "mm")
+    out = compose_tables([grid_old], [new, other])
+    assert [t.effect for t in out] == ["CEC table 3", "EYY"]
+    np.testing.assert_allclose(out[0].values, np.linspace(0, 1, 37) + 0.5)
+    # a coarser loaded table: composed on the finer step, both interpolated as the control does
+    coarse = CompTable("CEC table 0", "", "Y", "Y", -100.0, 100.0, (1.0, 2.0, 3.0), False, "mm")
+    (got,) = compose_tables([coarse], [other])
+    assert got.step == pytest.approx(100.0) and (got.start, got.stop) == (-200.0, 200.0)
+    x = np.array([-200.0, -150.0, 0.0, 150.0, 200.0])
+    np.testing.assert_allclose(got.at(x), coarse.at(x) + other.at(x))
+
+
+def test_sinumerik_cec_second_round_holds_the_first_plus_the_residual(bc_machine):
+    rng = np.random.default_rng(7)
+    model = [*location_model(bc_machine), *TABLES]
+    before = _measure(bc_machine, {}, rng, OEM_CARR)
+    fit_a, a = _edit(bc_machine, before, OEM_CARR, "A", model)
+    loaded_a = {"A.MPF": a.files[".MPF"], "A_CEC.INI": a.files["_CEC.INI"]}
+    during = _measure(bc_machine, loaded_a, rng, OEM_CARR, LATER)
+    # the state the control holds after round 1, read from the files a user would give
+    state = joined([("A.MPF", a.files[".MPF"]), ("A_CEC.INI", a.files["_CEC.INI"])])
+    fit_b, b = _edit(bc_machine, during, state, "B", model)
+    after = _measure(bc_machine, {"B.MPF": b.files[".MPF"], "B_CEC.INI": b.files["_CEC.INI"]}, rng,
+                     OEM_CARR, LATER)
+    # loaded over round 1 (as the control does: B's tables take A's places) the same
+    stacked = _measure(bc_machine, {**loaded_a, "B.MPF": b.files[".MPF"], "B_CEC.INI": b.files["_CEC.INI"]},
+                       np.random.default_rng(9), OEM_CARR, LATER)
+    rms = {k: identify(bc_machine, [d], ["XOW", "YOW", "ZOW"]).residual["rms_um"]
+           for k, d in (("before", before), ("during", during), ("after", after), ("stacked", stacked))}
+    assert rms["before"] > 10 * NOISE_UM and rms["during"] > 3 * NOISE_UM, rms
+    assert rms["after"] == pytest.approx(NOISE_UM, rel=0.1), rms
+    assert rms["stacked"] == pytest.approx(NOISE_UM, rel=0.1), rms
+    # the composed tables are round 1's plus round 2's, place by place, to the file's rounding
+    ta, tb = (sinumerik.read_cec(f.files["_CEC.INI"], bc_machine) for f in (a, b))
+    assert [t.effect for t in ta] == [t.effect for t in tb]
+    residual = {t.input: t for t in sinumerik.read_cec(
+        kinematics_edit(bc_machine, fit_b, "sinumerik840d", OEM_CARR, "c", "R", "0", "d").files["_CEC.INI"],
+        bc_machine)}
+    for old, new in zip(ta, tb, strict=True):
+        np.testing.assert_allclose(new.values, np.add(old.values, residual[old.input].values), atol=2e-6)
+    # the old behaviour, the residual alone in A's places, leaves the machine far from corrected
+    undone = _measure(bc_machine, {"B.MPF": b.files[".MPF"], "R_CEC.INI": kinematics_edit(
+        bc_machine, fit_b, "sinumerik840d", OEM_CARR, "c", "R", "0", "d").files["_CEC.INI"]}, rng, OEM_CARR,
+        LATER)
+    assert identify(bc_machine, [undone], ["XOW", "YOW", "ZOW"]).residual["rms_um"] > 3 * NOISE_UM
+
+
+def test_sinumerik_cec_restore_puts_back_the_tables_read(bc_machine):
+    model = [*location_model(bc_machine), *TABLES]
+    rng = np.random.default_rng(3)
+    _, a = _edit(bc_machine, _measure(bc_machine, {}, rng, OEM_CARR), OEM_CARR, "A", model)
+    state = joined([("carr.txt", a.files[".MPF"]), ("cec.ini", a.files["_CEC.INI"])])
+    _, b = _edit(bc_machine, _measure(bc_machine, {}, rng, OEM_CARR), state, "B", model)
+    cec_lines = [ln for ln in a.files["_CEC.INI"].splitlines() if ln.startswith("$AN_CEC")]
+    restore = [ln for ln in b.files["_CEC_RESTORE.INI"].splitlines() if ln.startswith("$AN_CEC")]
+    assert restore == cec_lines
+    # the record's restore writes each value as the state wrote it
+    def carr(text):
+        return [ln for ln in text.splitlines() if ln.startswith("$TC_CARR")]
+    assert carr(b.files["_RESTORE.MPF"]) == carr(a.files[".MPF"]) != carr(b.files[".MPF"])
+
+
+@pytest.mark.parametrize("damage, says", [
+    ("$AN_CEC_STEP[0]=10.000000\n", "assigned twice"),
+    ("", "lacks $AN_CEC_STEP"),
+])
+def test_a_damaged_cec_state_is_refused_with_its_line(bc_machine, damage, says):
+    model = [*location_model(bc_machine), *TABLES]
+    _, a = _edit(bc_machine, _measure(bc_machine, {}, np.random.default_rng(1), OEM_CARR), OEM_CARR, "A",
+                 model)
+    cec = a.files["_CEC.INI"]
+    cec = cec + damage if damage else "\n".join(ln for ln in cec.splitlines()
+                                                 if not ln.startswith("$AN_CEC_STEP[0]"))
+    with pytest.raises(CompgenError, match=re.escape(says)) as e:
+        sinumerik.read_cec(joined([("carr", OEM_CARR), ("cec.ini", cec)]), bc_machine, "x")
+    assert "cec.ini:" in str(e.value.where)
+
+
+def test_the_second_round_on_the_command_line_takes_both_files_as_current(tmp_path, monkeypatch):
+    """The user's loop through the CLI: fit, edit, load (simulate --edit), measure, fit, edit
+    with the record and the CEC file as --current, load, measure: at the noise."""
+    import json
+
+    from conftest import run
+
+    from compgen.effects import effect_of_param
+    from compgen.machine_file import load_machine
+    monkeypatch.chdir(tmp_path)
+    machine = load_machine("bc-table-sinumerik840d")
+    for name, truth in (("t1.json", TRUTH), ("t2.json", LATER)):
+        (tmp_path / name).write_text(json.dumps({"parameters": {
+            n: {"value": v, "unit": effect_of_param(machine, n).unit} for n, v in truth.items()}}))
+    (tmp_path / "carr.txt").write_text(OEM_CARR)
+    m = ["--machine", "bc-table-sinumerik840d"]
+    add = ["--add", "ECC:h2", "--add", "EYY:p1"]
+    steps = [["simulate", *m, "--truth", "t1.json", "--noise-um", NOISE_UM, "-o", "s1.csv"],
+             ["fit", *m, "s1.csv", *add, "-o", "f1.json"],
+             ["kinematics", "--from", "f1.json", "--current", "carr.txt", "-o", "A.MPF"],
+             ["simulate", *m, "--truth", "t2.json", "--noise-um", NOISE_UM, "--seed", "2", "--edit", "A.MPF",
+              "--edit", "A_CEC.INI", "--current", "carr.txt", "-o", "s2.csv"],
+             ["fit", *m, "s2.csv", *add, "-o", "f2.json"],
+             ["kinematics", "--from", "f2.json", "--current", "A.MPF", "--current", "A_CEC.INI",
+              "-o", "B.MPF"],
+             ["simulate", *m, "--truth", "t2.json", "--noise-um", NOISE_UM, "--seed", "3", "--edit", "B.MPF",
+              "--edit", "B_CEC.INI", "--current", "carr.txt", "-o", "s3.csv"],
+             ["fit", *m, "s3.csv", "--model", "XOW,YOW,ZOW", "-o", "f3.json"]]
+    for step in steps:
+        code, out, err = run(*step)
+        assert code == 0, (step, out, err)
+    sigma = [json.loads((tmp_path / f"f{k}.json").read_text())["residual"]["sigma_um"] for k in (2, 3)]
+    assert sigma[1] == pytest.approx(NOISE_UM, rel=0.1), sigma
+    code, _, err = run("kinematics", "--from", "f2.json", "--controller", "itnc530", "--current", "A.MPF",
+                       "--current", "A_CEC.INI", "-o", "X.TAB")
+    assert code == 2 and "reads its state from one file" in err, err
