@@ -85,12 +85,13 @@ def compose_tables(loaded: list[CompTable], new: list[CompTable]) -> list[CompTa
                                "them",
                                hint="write this round's table to a free place by hand, or remove the old one")
         grid = old.grid
-        if len(grid) == len(t.grid) and np.allclose(grid, t.grid, rtol=0, atol=1e-9):
+        if len(grid) == len(t.grid) and np.allclose(grid, t.grid, rtol=0, atol=2e-6):
             values = np.add(old.values, t.values)
         else:
             lo, hi = min(old.start, t.start), max(old.stop, t.stop)
-            if old.points or t.points:
+            if old.points or t.points:     # both tables' points, one where they agree to a file's rounding
                 grid = np.unique(np.concatenate([old.grid, t.grid]))
+                grid = grid[np.concatenate([[True], np.diff(grid) > 2e-6])]
             else:
                 grid = np.linspace(lo, hi, int(round((hi - lo) / min(old.step, t.step))) + 1)
             values = old.at(grid) + t.at(grid)

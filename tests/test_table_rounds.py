@@ -33,6 +33,7 @@ TRUTH = {"XOW": 5 * UM, "YOW": -8 * UM, "ZOW": 12 * UM, "XOB": 15 * UM, "ZOB": -
          "AOC": 4 * ARCSEC, "BOC": -5 * ARCSEC, "ECC:h2c": 8 * ARCSEC, "ECC:h2s": -4 * ARCSEC,
          "EYY:p1": 15 * UM}
 TABLES = ["ECC:h2c", "ECC:h2s", "EYY:p1"]
+SETUP_NAMES = ["XOW", "YOW", "ZOW"]
 # between the rounds the machine moves on (a bearing settles, the scale warms): round 2 must
 # add its residual to round 1's tables, not replace them
 LATER = {**TRUTH, "ECC:h2c": 11 * ARCSEC, "EYY:p1": 21 * UM, "YOC": 15 * UM}
@@ -86,6 +87,7 @@ def test_sinumerik_cec_second_round_holds_the_first_plus_the_residual(bc_machine
                        np.random.default_rng(9), OEM_CARR, LATER)
     rms = {k: identify(bc_machine, [d], ["XOW", "YOW", "ZOW"]).residual["rms_um"]
            for k, d in (("before", before), ("during", during), ("after", after), ("stacked", stacked))}
+    print("CEC rounds, rms µm:", {k: round(v, 3) for k, v in rms.items()})
     assert rms["before"] > 10 * NOISE_UM and rms["during"] > 3 * NOISE_UM, rms
     assert rms["after"] == pytest.approx(NOISE_UM, rel=0.1), rms
     assert rms["stacked"] == pytest.approx(NOISE_UM, rel=0.1), rms
@@ -171,3 +173,88 @@ def test_the_second_round_on_the_command_line_takes_both_files_as_current(tmp_pa
     code, _, err = run("kinematics", "--from", "f2.json", "--controller", "itnc530", "--current", "A.MPF",
                        "--current", "A_CEC.INI", "-o", "X.TAB")
     assert code == 2 and "reads its state from one file" in err, err
+
+
+LINUX_TRUTH = {"XOW": 4 * UM, "YOW": -6 * UM, "ZOW": 9 * UM, "YOA": 18 * UM, "ZOA": -14 * UM,
+               "XOC": 11 * UM, "YOC": -13 * UM, "ECC:h2c": 6 * ARCSEC, "ECC:h2s": -3 * ARCSEC,
+               "EYY:p1": 12 * UM}
+LINUX_LATER = {**LINUX_TRUTH, "ECC:h2c": 9 * ARCSEC, "EYY:p1": 18 * UM, "XOC": 15 * UM}
+
+
+def test_linuxcnc_joint_tables_compose_through_the_ini(seed_machine, tmp_path):
+    """LinuxCNC's second round reads the joints' COMP_FILEs the INI loads and writes each
+    joint's table as the loaded one plus this round's; with round 2's files in the INI the
+    machine is at the noise, and the restore puts back the pins and the INI's lines."""
+    from compgen.emit import linuxcnc
+    from compgen.emit.registry import read_state
+    machine = seed_machine
+    module, tilt, c = linuxcnc._trt(machine)
+    nominal = linuxcnc._nominal(machine, tilt, c)
+    (tmp_path / "machine.hal").write_text("".join(f"setp {module}.{n} {v:.6f}\n" for n, v in nominal.items()))
+    head = f"[KINS]\nKINEMATICS = {module}\n[HAL]\nHALFILE = core_sim.hal\nHALFILE = machine.hal\n"
+    (tmp_path / "machine.ini").write_text(head)
+    model = [*(n for n in location_model(machine) if n[1] == "O" and n[0] in "XYZ"), *TABLES]
+    rng = np.random.default_rng(11)
+    poses = generate(machine, ["K4", "K1", "K2"])
+
+    def measure(files, truth):
+        state = read_state(str(tmp_path / "before.ini")) if files else None
+        drive = None
+        if files:
+            loaded = read_edits(machine, {f: (tmp_path / f).read_text() for f in files}, state)
+            def drive(p):
+                return loaded.drive(machine, p)
+        return simulate(machine, truth, poses, NOISE_UM, rng, drive)
+
+    def edit(data, stem):
+        fit = identify(machine, [data], model)
+        out = kinematics_edit(machine, fit, "linuxcnc", read_state(str(tmp_path / "machine.ini")),
+                              str(tmp_path / "machine.ini"), stem, "0", "d", stem=stem)
+        for suffix, text in out.files.items():
+            (tmp_path / f"{stem}{suffix}").write_text(text)
+        return fit, out
+
+    (tmp_path / "before.ini").write_text(head)
+    fit_a, a = edit(measure([], LINUX_TRUTH), "A")
+    assert set(a.files) >= {".hal", "_RESTORE.hal", ".C.comp", ".Y.comp"}
+    joints = ("[JOINT_1]\nCOMP_FILE = {0}.Y.comp\nCOMP_FILE_TYPE = 1\n"
+              "[JOINT_4]\nCOMP_FILE = {0}.C.comp\nCOMP_FILE_TYPE = 1\n")
+    (tmp_path / "machine.ini").write_text(head + "HALFILE = A.hal\n" + joints.format("A"))
+    during = measure(["A.hal", "A.C.comp", "A.Y.comp"], LINUX_LATER)
+    fit_b, b = edit(during, "B")
+    assert "held one" in "\n".join(b.notes)
+    after = measure(["A.hal", "B.hal", "B.C.comp", "B.Y.comp"], LINUX_LATER)
+    alone = kinematics_edit(machine, fit_b, "linuxcnc", None, "", "R", "0", "d", stem="R").files
+    for suffix in (".C.comp", ".Y.comp"):
+        (tmp_path / f"R{suffix}").write_text(alone[suffix])
+    undone = measure(["A.hal", "B.hal", "R.C.comp", "R.Y.comp"], LINUX_LATER)
+    rms = {k: identify(machine, [d], SETUP_NAMES).residual["rms_um"]
+           for k, d in (("during", during), ("after", after), ("undone", undone))}
+    print("LinuxCNC rounds, rms µm:", {k: round(v, 3) for k, v in rms.items()})
+    assert rms["during"] > 3 * NOISE_UM and rms["undone"] > 3 * NOISE_UM, rms
+    assert rms["after"] == pytest.approx(NOISE_UM, rel=0.1), rms
+    # each joint's table is A's plus the residual's, line for line (the grids are the same)
+    for suffix in (".C.comp", ".Y.comp"):
+        ta, tb, tr = (linuxcnc.read_comp(f[suffix], machine, suffix) for f in (a.files, b.files, alone))
+        np.testing.assert_allclose(tb.values, np.add(ta.values, tr.values), atol=2e-6)
+    # the restore: the pins as the INI's files set them (A's values, as written) and A's tables
+    restore = b.files["_RESTORE.hal"]
+    for line in a.files[".hal"].splitlines():
+        if line.startswith("setp"):
+            assert line.split("#")[0].strip() in restore
+    assert "COMP_FILE = A.C.comp, COMP_FILE_TYPE = 1" in restore
+
+
+def test_linuxcnc_type0_table_is_read_as_nominal_minus_actual(seed_machine, tmp_path):
+    from compgen.emit import linuxcnc
+    from compgen.emit.registry import read_state
+    (tmp_path / "m.ini").write_text("[HAL]\nHALFILE = core_sim.hal\n[JOINT_4]\nCOMP_FILE = c.comp\n")
+    (tmp_path / "c.comp").write_text("0 0.001 -0.001\n180 180.002 179.998\n360 360.001 359.999\nend\n7 7 7\n")
+    (fwd, rev), = linuxcnc.loaded_joint_tables(seed_machine, read_state(str(tmp_path / "m.ini"))).values()
+    np.testing.assert_allclose(fwd.values, [-0.001, -0.002, -0.001])
+    np.testing.assert_allclose(rev.values, [0.001, 0.002, 0.001])
+    assert fwd.input == "C" and fwd.grid.tolist() == [0, 180, 360]
+    (tmp_path / "c.comp").write_text("0 1 1\n-5 1 1\n")
+    with pytest.raises(CompgenError, match="do not increase"):
+        read_state(str(tmp_path / "m.ini")) and linuxcnc.loaded_joint_tables(
+            seed_machine, read_state(str(tmp_path / "m.ini")))

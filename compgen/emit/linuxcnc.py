@@ -18,11 +18,12 @@ coordinates (X Y Z, the tilting axis, C: joints 0–4), as LinuxCNC prints them 
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from ..correction import ARCSEC, CompTable, Held, Plan, comp_tables, nominal_lines, pivot_of
+from ..correction import ARCSEC, CompTable, Held, Plan, comp_tables, compose_tables, nominal_lines, pivot_of
 from ..errors import CompgenError
 from ..files import read_text
 from ..lines import AxisLine
@@ -113,7 +114,90 @@ def resolve_ini(path: str, text: str) -> str:
         body = re.sub(r"\[([A-Za-z0-9_]+)\]([A-Za-z0-9_]+)",
                       lambda m: values.get((m[1], m[2]), m[0]), body)
         out += [f"{INI_MARK} {file}", body]
+    for section, pairs in ini.items():       # the joints' tables (inijoint.cc: type 0 by default)
+        joint = re.fullmatch(r"JOINT_(\d+)", section)
+        keys = dict(pairs)
+        if joint is None or "COMP_FILE" not in keys:
+            continue
+        kind = keys.get("COMP_FILE_TYPE", "0")
+        if kind not in ("0", "1"):
+            raise CompgenError(f"[{section}] COMP_FILE_TYPE = {kind}: LinuxCNC takes 0 or 1", where=path)
+        file = folder / keys["COMP_FILE"]
+        if not file.is_file():
+            raise CompgenError(f"[{section}] COMP_FILE {keys['COMP_FILE']} is not beside the INI",
+                               where=path, hint="LinuxCNC would not load it either: correct the INI or put "
+                                                "the file there")
+        body = read_text(file, "joint compensation file", ansi_ok=True)[0]
+        out += [f"# compgen: file {file} (COMP_FILE of joint {joint[1]}, type {kind}: {keys['COMP_FILE']})",
+                body]
     return "\n".join(out) + "\n"
+
+
+COMP_MARK = re.compile(r"^# compgen: file (.+) \(COMP_FILE of joint (\d+), type ([01]): (.+)\)$")
+TRIPLET = re.compile(r"^\s*(\S+)\s+(\S+)\s+(\S+)")
+
+
+def _triplets(lines, where: str) -> np.ndarray:
+    """A joint table's lines as ``usrmotLoadComp`` (usrmotintf.cc) reads them: three numbers
+    at the start of each line, up to the first line that has not."""
+    rows = []
+    for line in lines:
+        m = TRIPLET.match(line)
+        try:
+            row = [float(m[i]) for i in (1, 2, 3)] if m else None
+        except ValueError:
+            row = None
+        if row is None or not np.all(np.isfinite(row)):
+            break
+        rows.append(row)
+    if not rows:
+        raise CompgenError("the joint table holds no line of three numbers", where=where)
+    out = np.array(rows)
+    if np.any(np.diff(out[:, 0]) <= 0):
+        raise CompgenError("the joint table's nominal positions do not increase: LinuxCNC refuses it",
+                           where=where)
+    return out
+
+
+def loaded_joint_tables(machine: Machine, state: str) -> dict[str, tuple[CompTable, CompTable]]:
+    """Per axis, the trims (forward, reverse) of the joint tables an INI loads, as LinuxCNC
+    holds them (type 0's actual positions converted as nominal − actual)."""
+    out: dict[str, tuple[CompTable, CompTable]] = {}
+    lines = state.splitlines()
+    for i, line in enumerate(lines):
+        if (m := COMP_MARK.match(line)) is None:
+            continue
+        joint = int(m[2])
+        axis = _joint_axis(machine, joint, m[1])
+        body = lines[i + 1:]
+        end = next((k for k, ln in enumerate(body) if FILE_MARK.match(ln)), len(body))
+        rows = _triplets(body[:end], m[1])
+        if len(rows) > COMP_ENTRIES:
+            raise CompgenError(f"the joint table has {len(rows)} lines; LinuxCNC takes {COMP_ENTRIES}",
+                               where=m[1])
+        nominal, fwd, rev = rows.T
+        if m[3] == "0":
+            fwd, rev = nominal - fwd, nominal - rev
+        unit = "deg" if machine.axis(axis).rotary else "mm"
+
+        def table(v, nominal=nominal, joint=joint, axis=axis, unit=unit):
+            return CompTable(f"joint {joint}", "as loaded", axis, axis, float(nominal[0]), float(nominal[-1]),
+                             tuple(float(x) for x in v), False, unit, tuple(float(x) for x in nominal))
+        out[axis] = (table(fwd), table(rev))
+    return out
+
+
+def _comp_line(state: str, axis: str, machine: Machine) -> str:
+    """The INI's COMP_FILE of ``axis``'s joint, as it was (from the resolved ``state``)."""
+    return next(f"COMP_FILE = {m[4]}, COMP_FILE_TYPE = {m[3]}" for line in state.splitlines()
+                if (m := COMP_MARK.match(line)) is not None and _joint_axis(machine, int(m[2]), m[1]) == axis)
+
+
+def _joint_axis(machine: Machine, joint: int, where: str) -> str:
+    coordinates = _trt(machine)[0][:5].upper()
+    if not 0 <= joint < len(coordinates):
+        raise CompgenError(f"joint {joint} has a COMP_FILE, and the trt module has joints 0-4", where=where)
+    return coordinates[joint]
 
 
 def read_hal(text: str, module: str, where: str) -> tuple[dict[str, float], dict[str, str]]:
@@ -124,9 +208,9 @@ def read_hal(text: str, module: str, where: str) -> tuple[dict[str, float], dict
 
 
 def _read_hal_lines(text: str, module: str, where: str, nets: dict[str, str] | None = None
-                    ) -> tuple[dict[str, float], dict[str, str], dict[str, str]]:
-    """read_hal's values and signals, and where (file:line) each pin's value was set; ``nets``: the
-    pins netted to signals by files loaded before this one."""
+                    ) -> tuple[dict[str, float], dict[str, str], dict[str, tuple[str, str]]]:
+    """read_hal's values and signals, and where (file:line) each pin's value was set with its
+    text as written; ``nets``: the pins netted to signals by files loaded before this one."""
     signal = dict(nets or {})
     for m in NET.finditer(text):
         for word in m[2].split():
@@ -145,17 +229,17 @@ def _read_hal_lines(text: str, module: str, where: str, nets: dict[str, str] | N
                 raise CompgenError(f"signal {m[1]} is set twice in one file (lines {on_signal[m[1]][1]} "
                                    f"and {k})", where=at, hint="keep the one the configuration means")
             mine.add(("sets", m[1]))
-            on_signal[m[1]] = (number(m[2], f"sets {m[1]}", at), at)
+            on_signal[m[1]] = (number(m[2], f"sets {m[1]}", at), (at, m[2]))
         elif (m := SETP.match(line)) is not None and m[1] == module:
             if m[2] in signal:
                 raise CompgenError(f"{module}.{m[2]} is set by setp and netted to {signal[m[2]]}: LinuxCNC "
                                    "refuses to start such a configuration", where=at)
             if ("setp", m[2]) in mine:
                 raise CompgenError(f"{module}.{m[2]} is set twice in one file (lines "
-                                   f"{line_of[m[2]].rsplit(':', 1)[1]} and {k})",
+                                   f"{line_of[m[2]][0].rsplit(':', 1)[1]} and {k})",
                                    where=at, hint="keep the one the configuration means")
             mine.add(("setp", m[2]))
-            values[m[2]], line_of[m[2]] = number(m[3], f"setp {module}.{m[2]}", at), at
+            values[m[2]], line_of[m[2]] = number(m[3], f"setp {module}.{m[2]}", at), (at, m[3])
     for pin, sig in signal.items():
         if sig in on_signal:
             values[pin], line_of[pin] = on_signal[sig]
@@ -183,7 +267,7 @@ def pins(machine: Machine, p: Plan, current: str | None,
             if not abs(held[n] - nominal[n]) * 1e3 <= machine.limits.offset_um:
                 raise CompgenError(f"{module}.{n} = {held[n]:g} mm, {held[n] - nominal[n]:+.4f} mm from the "
                                    f"machine file's {nominal[n]:g}: beyond its [limits] offset_um "
-                                   f"{machine.limits.offset_um:g} µm", where=line_of[n],
+                                   f"{machine.limits.offset_um:g} µm", where=line_of[n][0],
                                    hint="is this the configuration of the measured machine? If it is, "
                                         "correct the machine file's offsets or raise [limits]")
     delta_r = p.lines[c.name].offset
@@ -193,8 +277,9 @@ def pins(machine: Machine, p: Plan, current: str | None,
              for n, line in p.lines.items() for i in range(3) if line.tilt[i] != 0]
     in_joints = {t.effect for t in joint_tables(machine, p)}
     other += [*p.squareness, *(e for e in p.tables if e not in in_joints), *p.not_compensable]
-    rows = [("sets", signal[n], fmt_plain(new[n], 6), fmt_plain(held[n], 6)) if n in signal else
-            ("setp", f"{module}.{n}", fmt_plain(new[n], 6), fmt_plain(held[n], 6)) for n in names]
+    was = {n: line_of[n][1] if current is not None else fmt_plain(held[n], 6) for n in names}
+    rows = [("sets", signal[n], fmt_plain(new[n], 6), was[n]) if n in signal else
+            ("setp", f"{module}.{n}", fmt_plain(new[n], 6), was[n]) for n in names]
     return module, rows, other
 
 
@@ -236,26 +321,32 @@ def joint_tables(machine: Machine, p: Plan) -> list[CompTable]:
     return out
 
 
-def comp_files(machine: Machine, p: Plan, ctx: EditContext) -> dict[str, tuple[str, str]]:
+def comp_files(machine: Machine, p: Plan, ctx: EditContext,
+               loaded: dict[str, tuple[CompTable, CompTable]]) -> dict[str, tuple[str, str]]:
     """Suffix → (the INI's lines for it, text) of each joint's COMP_FILE: the effects on one
-    joint summed."""
+    joint summed, added to the table the joint holds (``loaded``: forward and reverse trims)."""
     by_axis: dict[str, list[CompTable]] = {}
     for t in joint_tables(machine, p):
         by_axis.setdefault(t.input, []).append(t)
     out = {}
     for axis, tables in by_axis.items():
         joint, t = joint_number(machine, axis), tables[0]
-        trims = np.sum([tb.values for tb in tables], axis=0)
-        if len(trims) > COMP_ENTRIES:      # a guard: the grids above stay within it
-            raise CompgenError(f"joint {joint}'s table would need {len(trims)} lines; LinuxCNC takes "
-                               f"{COMP_ENTRIES}")
+        new = CompTable("+".join(tb.effect for tb in tables), "", axis, axis, t.start, t.stop,
+                        tuple(np.sum([tb.values for tb in tables], axis=0)), False, t.unit)
+        fwd, rev = ((compose_tables([old], [new])[0] for old in loaded[axis]) if axis in loaded
+                    else (new, new))
+        if len(fwd.values) > COMP_ENTRIES:
+            raise CompgenError(f"joint {joint}'s table would need {len(fwd.values)} lines; LinuxCNC takes "
+                               f"{COMP_ENTRIES}", hint="the loaded table and this round's together: thin the "
+                                                       "loaded one by hand")
         digits = 7 if t.unit == "deg" else 6
-        rows = [f"{fmt_plain(x, 6)} {fmt_plain(v, digits)} {fmt_plain(v, digits)}"
-                for x, v in zip(t.grid, trims, strict=True)]
+        rows = [f"{fmt_plain(x, 6)} {fmt_plain(v, digits)} {fmt_plain(w, digits)}"
+                for x, v, w in zip(fwd.grid, fwd.values, rev.values, strict=True)]
         ini = f"[JOINT_{joint}] COMP_FILE = {ctx.stem}.{axis}.comp, COMP_FILE_TYPE = 1"
         notes = [f"compgen joint compensation for LinuxCNC: joint {joint} = {axis} ({t.unit})",
                  *ctx.header[:3],
-                 "corrects: " + "; ".join(f"{tb.effect} ({tb.words})" for tb in tables),
+                 "corrects: " + "; ".join(f"{tb.effect} ({tb.words})" for tb in tables)
+                 + (f"; added to the table joint {joint} held" if axis in loaded else ""),
                  f"INI: {ini}",
                  "lines: nominal, trim moving up, trim moving down; the trim is added to the command",
                  f"beyond {t.input} {t.start:g}..{t.stop:g} {t.unit} the end trim holds",
@@ -266,30 +357,22 @@ def comp_files(machine: Machine, p: Plan, ctx: EditContext) -> dict[str, tuple[s
 
 def read_comp(text: str, machine: Machine, where: str) -> CompTable:
     """A joint table compgen wrote, read as LinuxCNC reads it (triplets to the first other
-    line), the joint's axis from compgen's closing notes."""
+    line), the joint's axis from compgen's closing notes; named by its joint, whose table it
+    replaces. Where the trims differ by direction (a loaded table's, kept), the mean stands
+    for both: compgen's predictions do not follow the direction of motion."""
     note = COMP_NOTE.search(text)
     if note is None:
         raise CompgenError("a joint compensation file without compgen's closing notes: which joint "
                            "it is for is unknown", where=where, hint="give the .comp file compgen wrote")
-    rows = []
-    for k, line in enumerate(text.splitlines(), start=1):
-        words = line.split()
-        if len(words) != 3 or line.startswith("#"):
-            break
-        rows.append([number(w, f"line {k}", where) for w in words])
-    if not rows or any(r[1] != r[2] for r in rows):
-        raise CompgenError("the joint table is empty or its trims differ by direction (compgen writes "
-                           "equal ones)", where=where, hint="give the .comp file as compgen wrote it")
-    grid, trims = np.array(rows)[:, 0], np.array(rows)[:, 1]
-    if np.any(np.diff(grid) <= 0):
-        raise CompgenError("the joint table's nominal positions do not increase: LinuxCNC refuses it",
-                           where=where)
+    rows = _triplets(text.splitlines(), where)
     axis = note[2]
     if joint_number(machine, axis) != int(note[1]):
         raise CompgenError(f"the table says joint {note[1]} = {axis}; the trt module's joint of {axis} is "
                            f"{joint_number(machine, axis)}", where=where)
+    grid, trims = rows[:, 0], (rows[:, 1] + rows[:, 2]) / 2
     # beyond the first and last line LinuxCNC holds the end trims: so does np.interp
-    return CompTable("", "", axis, axis, float(grid[0]), float(grid[-1]), tuple(trims), False, note[3])
+    return CompTable(f"joint {note[1]}", "", axis, axis, float(grid[0]), float(grid[-1]),
+                     tuple(float(v) for v in trims), False, note[3], tuple(float(x) for x in grid))
 
 
 POSITION = {"5420": "X", "5421": "Y", "5422": "Z", "5423": "A", "5424": "B", "5425": "C"}
@@ -366,25 +449,44 @@ class LinuxCNC(Controller):
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:
         module, rows, other = pins(machine, p, current, where)
-        comps = comp_files(machine, p, ctx)
+        from_ini = current is not None and INI_MARK in current
+        loaded = loaded_joint_tables(machine, current) if current is not None else {}
+        comps = comp_files(machine, p, ctx, loaded)
         ini_lines = [ini for ini, _ in comps.values()]
         text = render("linuxcnc/kinematics.hal.j2", header=ctx.header, module=module, lines=ctx.lines,
-                      rows=rows, other=other, ini=ini_lines)
+                      rows=rows, other=other, ini=ini_lines, restore=False)
         notes = [f"{cmd} {target} {v}  (was {w})" for cmd, target, v, w in rows]
-        ini = where if current is not None and INI_MARK in current else "the configuration's INI"
+        ini = where if from_ini else "the configuration's INI"
         notes.append(f"load it: HALFILE = {ctx.stem}.hal after the last HALFILE of [HAL] in {ini}; the next "
                      "round's --current is that INI, so the next edit adds to this one")
         if ini_lines:
-            notes += ["joint compensation tables: add to the INI (replacing any COMP_FILE or BACKLASH "
-                      "of these joints)", *(f"  {line}" for line in ini_lines),
-                      "they hold this fit's correction alone: where a joint had a COMP_FILE loaded while "
-                      "measuring, add its trims to the new ones (compgen does not compose tables yet)"]
+            notes += ["joint compensation tables: in the INI, set (replacing any COMP_FILE or BACKLASH of "
+                      "these joints)", *(f"  {line}" for line in ini_lines)]
+            notes.append(f"they hold the tables the INI loads plus this round's ({', '.join(sorted(loaded))} "
+                         "held one)" if loaded else "no joint had a table in the INI: they hold this round's "
+                         "correction" if from_ini else "--current is not the INI, so the joints' loaded "
+                         "tables are unknown: these hold this round's correction alone (give the INI to "
+                         "add to them)")
         if other:
             notes.append("not expressible in LinuxCNC's trt kinematics and joint tables: " + ", ".join(other))
         if current is not None and "tool-offset" not in read_hal(current, module, where)[1]:
             notes.append(f"{module}.tool-offset is not netted: net it to motion.tooloffset.z, or the "
                          "table turns about the spindle nose instead of the nest (G43 lengths)")
-        return EditFiles({".hal": text, **{k: body for k, (_, body) in comps.items()}}, tuple(notes))
+        # the restore: each pin back to the value read, as it was written; each joint's table
+        # back to the INI's lines (the files they name are not touched)
+        restore_ini = [f"[JOINT_{joint_number(machine, a)}] " + (
+            _comp_line(current, a, machine) if a in loaded else "no COMP_FILE (remove the line the edit set)")
+            for a in sorted({t.input for t in joint_tables(machine, p)})]
+        restore = render("linuxcnc/kinematics.hal.j2", module=module, lines=[], other=[], ini=restore_ini,
+                         rows=[(cmd, target, w, w) for cmd, target, _, w in rows], restore=True,
+                         header=[f"compgen {ctx.version}: restores the trt pins as they were read",
+                                 *ctx.header[1:3], f"load it in place of {ctx.stem}.hal"])
+        return EditFiles({".hal": text, "_RESTORE.hal": restore,
+                          **{k: body for k, (_, body) in comps.items()}}, tuple(notes))
+
+    def loaded_tables(self, machine: Machine, state: str, where: str) -> list[CompTable]:
+        return [replace(fwd, values=tuple((np.add(fwd.values, rev.values) / 2).tolist()))
+                for fwd, rev in loaded_joint_tables(machine, state).values()]
 
     def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
         return Held(read_lines(current, machine, measured, nominal_lines(machine)), {})
@@ -408,6 +510,8 @@ class LinuxCNC(Controller):
                                where=f"{machine.source}: [program] tool", hint='e.g. tool = "99"')
 
     def read(self, machine: Machine, text: str, current: str | None, held: Held, where: str) -> Held:
-        if COMP_NOTE.search(text):
-            return Held(held.lines, held.squareness, (*held.tables, read_comp(text, machine, where)))
+        if COMP_NOTE.search(text):     # a joint's table replaces the one it held
+            table = read_comp(text, machine, where)
+            return Held(held.lines, held.squareness,
+                        (*(t for t in held.tables if t.effect != table.effect), table))
         return Held(read_lines(text, machine, current, held.lines), held.squareness, held.tables)
