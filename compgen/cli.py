@@ -348,19 +348,26 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, contro
 @click.option("--ball", default=None,
               help="The ball centre in the table frame, mm, X,Y,Z (default: the one the program's "
                    "header names, else the machine file's).")
+@click.option("--mode", type=click.Choice(MODES), default=None,
+              help="LinuxCNC: the kinematics the configuration runs the program under (tcpm: trt "
+                   "kinematics; axes: identity). The other controls' programs switch TCP themselves.")
 @click.option("--json", "as_json", is_flag=True, help="Print the check as JSON.")
-def check_program_cmd(machine_file, program, controller_name, ball, as_json):
+def check_program_cmd(machine_file, program, controller_name, ball, mode, as_json):
     """Simulate PROGRAM block by block against the R-test set-up, travel and feeds."""
     from .motion import run
 
     machine = load_machine(machine_file)
     ctl = controller(controller_name) if controller_name else for_program(Path(program).suffix, machine)
+    if mode is not None and ctl.tcp_switchable:
+        raise CompgenError(f"--mode is for controls whose configuration decides TCP; {ctl.words} programs "
+                           "switch it themselves", hint="leave --mode out")
     text = read_text(program, "program", ansi_ok=True)[0]
     header = None if ball is not None else program_ball(text)   # --ball overrides the header
     at, source = ((_vec3(ball, "--ball"), "--ball") if ball is not None else
                   (header, "the program's header") if header is not None else
                   (machine.ball, "the machine file"))
-    result = run(at_ball(machine, at), ctl.blocks(text), ctl.modulo_axes(machine), ctl.angle_sense(machine))
+    result = run(at_ball(machine, at), ctl.blocks(text, mode), ctl.modulo_axes(machine),
+                 ctl.angle_sense(machine))
     if as_json:
         click.echo(json.dumps({
             "format": "compgen.check/1", "program": program, "controller": ctl.name,

@@ -44,7 +44,7 @@ class Block:
 
     line: int
     text: str
-    kind: str                    # move, dwell, tcp, tool, length, require
+    kind: str                    # move, dwell, tcp, tool, length, require, stop, units, offset, end
     target: dict = field(default_factory=dict)
     rapid: bool = False
     feed: float | None = None    # mm/min (deg/min for a block that only turns)
@@ -52,6 +52,7 @@ class Block:
     seconds: float = 0.0
     on: bool = False             # tcp / length: switched on (True) or off
     turn: dict = field(default_factory=dict)   # modulo axis letter → "+", "-" or "short"
+    name: str = ""               # offset: the work offset the block selects (G54, ...)
 
 
 @dataclass(frozen=True)
@@ -76,19 +77,32 @@ class Check:
     findings: tuple[Finding, ...]
 
 
-WORD = re.compile(r"^([A-Z])([+-]?(?:\d+\.?\d*|\.\d+))$")
+WORD = re.compile(r"^([A-Z])([+-]?(?:\d{1,7}(?:\.\d{0,9})?|\.\d{1,9}))$", re.ASCII)
+SECONDS = re.compile(r"\d{1,5}(?:\.\d{0,6})?", re.ASCII)     # a dwell, as compgen writes it
+MOVE_MAX = 1e6           # mm or deg: beyond any machine's travel, and far within a float
 
 
 def words(tokens: list[str], line: int, allowed: str = "XYZABCF") -> dict[str, float]:
-    """Address words (``X+1.5``, ``A-90``, ``F500``) of a block; anything else is refused."""
+    """Address words (``X+1.5``, ``A-90``, ``F500``) of a block; anything else is refused:
+    a malformed or over-long number, a word twice, a feed that is not positive."""
     out = {}
     for t in tokens:
         m = WORD.match(t)
         if not m or m[1] not in allowed or m[1] in out:
-            raise CompgenError(f"line {line}: {t!r} is not a word this check reads in a move",
+            raise CompgenError(f"line {line}: {_cut(t)!r} is not a word this check reads in a move",
                                hint="check-program reads the blocks compgen writes; edit nothing else in")
         out[m[1]] = float(m[2])
+    if "F" in out and not out["F"] > 0:
+        raise CompgenError(f"line {line}: F{out['F']:g}: a feed must be above zero", hint="write the feed in "
+                           "mm/min (deg/min for a block that only turns)")
     return out
+
+
+def dwell(text: str, line: int, raw: str) -> Block:
+    """A dwell block of ``text`` seconds, as compgen writes it, or a refusal."""
+    if not SECONDS.fullmatch(text):
+        raise unknown(line, raw)
+    return Block(line, raw, "dwell", seconds=float(text))
 
 
 def gcode_move(raw: str, line: int, tokens: list[str], modal: str | None, feed: float | None,
@@ -104,8 +118,13 @@ def gcode_move(raw: str, line: int, tokens: list[str], modal: str | None, feed: 
                   machine_coords=machine_word in tokens), modal, feed)
 
 
+def _cut(text: str, most: int = 60) -> str:
+    """A user's text in a message: no longer than a line can show."""
+    return text if len(text) <= most else text[:most] + "..."
+
+
 def unknown(line: int, text: str) -> CompgenError:
-    return CompgenError(f"line {line}: {text.strip()!r} is not a block this check knows",
+    return CompgenError(f"line {line}: {_cut(text.strip())!r} is not a block this check knows",
                         hint="check-program reads the blocks compgen writes; a program with other "
                              "blocks cannot be shown safe")
 
@@ -236,10 +255,15 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
         if w is not None:
             q = from_world(machine, w[None, :3], w[None, 3:])[0]
 
+    _frame(machine, blocks)
     for b in blocks:
         if b.kind == "require":      # the program stops unless these axes are at these values
             settle()
             w = None
+            missing = sorted(set(b.target) - set(letters))
+            if missing:
+                raise CompgenError(f"line {b.line}: the guard reads {', '.join(missing)}, which this machine "
+                                   "lacks", hint="the program was written for another machine")
             for letter, v in b.target.items():
                 q[letters[letter]] = np.radians(v * sense.get(letter, 1)) if letters[letter] in rotary else v
         elif b.kind == "tcp":
@@ -325,6 +349,36 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
         closest = _check_collisions(machine, checkable, findings)
     findings.sort(key=lambda f: f.line)
     return Check(len(segments), seconds, closest[0], closest[1], tuple(findings))
+
+
+def _frame(machine: Machine, blocks: list[Block]) -> None:
+    """What a program must say for its moves to mean what the check takes them to: its unit
+    (mm) before the first move, the machine file's work offset, an end, nothing after it."""
+    units = ended = moves = False
+    for b in blocks:
+        if ended:
+            raise CompgenError(f"line {b.line}: {b.text.strip()!r} after the program's end", hint="a control "
+                               "does not run it; a program with blocks after its end was edited")
+        if b.kind == "units":
+            units = True
+        elif b.kind == "end":
+            ended = True
+        elif b.kind == "offset" and b.name != machine.program.work_offset:
+            raise CompgenError(f"line {b.line}: {b.text.strip()!r} selects {b.name}; the machine file's work "
+                               f"offset is {machine.program.work_offset}", hint="compgen's positions are in "
+                               "the machine file's work offset ([program] work_offset)")
+        elif b.kind == "move":
+            moves = True
+            if not units:
+                raise CompgenError(f"line {b.line}: a move before the program says its unit (mm)",
+                                   hint="check-program reads programs in millimetres that say so, as compgen "
+                                        "writes them")
+    if not moves:
+        raise CompgenError("the program has no move: there is nothing to check",
+                           hint="give the program compgen wrote")
+    if not ended:
+        raise CompgenError("the program has no end block (END PGM, M30 or M2): it may have been cut short",
+                           hint="give the whole program")
 
 
 def _turned(modulo: tuple[str, ...], b: Block, letter: str, value: float, now: float) -> float:

@@ -40,8 +40,8 @@ class Toy(Controller):
     tcpm_on = LinuxCNC.tcpm_on
     tcp_switchable = False
 
-    def blocks(self, text):
-        return LinuxCNC().blocks(text)
+    def blocks(self, text, mode=None):
+        return LinuxCNC().blocks(text, mode)
 
     def main_suffix(self, current):
         return ".toy"

@@ -41,7 +41,8 @@ def _write(tmp_path, machine_file, ctl, mode, path, name="RT"):
 @pytest.mark.parametrize("m, ctl, mode, path", PROGRAMS)
 def test_every_program_compgen_writes_passes_the_check(machines, tmp_path, m, ctl, mode, path):
     program = _write(tmp_path, machines[m], ctl, mode, path)
-    code, out, err = run("check-program", "--machine", machines[m], program)
+    told = [] if controller(ctl).tcp_switchable else ["--mode", mode]     # LinuxCNC: the configuration's
+    code, out, err = run("check-program", "--machine", machines[m], program, *told)
     assert code == 0, out + err
     closest = float(re.search(r"closest approach (-?[\d.]+) mm", out)[1])
     assert closest > 0, out
@@ -49,7 +50,8 @@ def test_every_program_compgen_writes_passes_the_check(machines, tmp_path, m, ct
 
 def _check(machine_file, path, text):
     path.write_text(text)
-    return run("check-program", "--machine", machine_file, path)
+    mode = ["--mode", "tcpm" if "; mode TCPM" in text else "axes"] if path.suffix == ".ngc" else []
+    return run("check-program", "--machine", machine_file, path, *mode)
 
 
 def test_a_plunge_through_the_ball_is_refused(machines, tmp_path):
@@ -144,7 +146,7 @@ def test_linuxcnc_reads_compgens_program_to_the_simulators_positions(machines, t
     theirs = np.array([[float(v) for v in m[1].split(",")] for m in
                        re.finditer(r"STRAIGHT_(?:TRAVERSE|FEED)\(([^)]*)\)", canon)])[:, [0, 1, 2, 3, 5]]
     # the simulator's reading of the same blocks: each move's end, modal words carried
-    blocks = [b for b in controller("linuxcnc").blocks(program.read_text()) if b.kind == "move"]
+    blocks = [b for b in controller("linuxcnc").blocks(program.read_text(), mode) if b.kind == "move"]
     pos, ours = dict.fromkeys("XYZAC", 0.0), []
     for b in blocks:
         pos.update(b.target)
@@ -197,9 +199,10 @@ def test_a_program_for_a_ball_elsewhere_carries_it_and_passes_the_check(machines
     code, _, err = run("measure-program", "--machine", machines["seed"], "--path", "K2", "--ball", ball,
                        "--controller", ctl, "-o", out)
     assert code == 0, err
-    code, text, err = run("check-program", "--machine", machines["seed"], out)
+    mode = ["--mode", "tcpm"] if ctl == "linuxcnc" else []
+    code, text, err = run("check-program", "--machine", machines["seed"], out, *mode)
     assert code == 0 and "from the program's header" in text, text + err
-    code, text, err = run("check-program", "--machine", machines["seed"], out,
+    code, text, err = run("check-program", "--machine", machines["seed"], out, *mode,
                           "--ball", "-217.504,-0.279,211.537")
     assert code == 1 and "from --ball" in err, text + err
 
@@ -315,7 +318,7 @@ def test_no_sinumerik_program_turns_a_modulo_axis_the_long_way(path, back):
 def test_a_plain_position_on_a_modulo_axis_is_refused_not_guessed():
     m = load_machine(BC_MACHINE)
     ctl = controller("sinumerik840d")
-    text = (";\nT=\"RTEST\"\nM6\nD1\nG54\nG0 Z286\nG0 B0 C=DC(357)\nG0 X100 Y40 Z286 B0 C357\n"
+    text = ("G17 G90 G71 G94\nT=\"RTEST\"\nM6\nD1\nG54\nG0 Z286\nG0 B0 C=DC(357)\nG0 X100 Y40 Z286 B0 C357\n"
             "G0 X100 Y40 Z286 B0 C360\nM30\n")
     with pytest.raises(CompgenError, match=r"line 9: .*C is a 360° modulo axis.*ACP, ACN or DC"):
         motion.run(m, ctl.blocks(text), ctl.modulo_axes(m))

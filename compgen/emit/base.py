@@ -104,8 +104,10 @@ class Controller:
         (None: not yet), ``feed`` whether the block is a feed move (a pose) or a rapid."""
         return f"{letter}{self.number(value * self.angle_sense(machine).get(letter, 1), decimals)}"
 
-    def blocks(self, text: str) -> list[Block]:
-        """A program as this control executes it, block by block (``motion.Block``)."""
+    def blocks(self, text: str, mode: str | None = None) -> list[Block]:
+        """A program as this control executes it, block by block (``motion.Block``);
+        ``mode`` (tcpm, axes): where the configuration, not the program, decides whether
+        TCP is active (``tcp_switchable`` False), the mode it runs under."""
         raise NotImplementedError
 
     def check_setup(self, machine: Machine) -> None:

@@ -18,7 +18,7 @@ from ..effects import ROT_OF, ROTATIONS, TRANSLATIONS
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
-from ..motion import Block, unknown, words
+from ..motion import Block, dwell, unknown, words
 from ..transforms import rot_axis
 from ..units import number
 from . import fmt_signed, render
@@ -251,7 +251,7 @@ TCPM = "FUNCTION TCPM F CONT AXIS POS PATHCTRL AXIS"
 
 def program_blocks(text: str) -> list[Block]:
     """A Klartext program as the control executes it (the blocks compgen writes)."""
-    out = []
+    out, name = [], None
     for k, raw in enumerate(text.splitlines(), start=1):
         body = raw.split(";", 1)[0].strip()
         m = re.fullmatch(r"\d+\s*(.*)", body)
@@ -260,8 +260,20 @@ def program_blocks(text: str) -> list[Block]:
                 raise unknown(k, raw)
             continue
         b = m[1].strip()
-        if not b or b.startswith(("BEGIN PGM", "END PGM")) or b in (
-                "M30", "M126", "PLANE RESET STAY", "CYCL DEF 7.0 DATUM SHIFT", "CYCL DEF 9.0 DWELL TIME"):
+        if (d := re.fullmatch(r"(BEGIN|END) PGM (\S+) (\S+)", b)) is not None:
+            if d[3] != "MM":       # compgen's positions are mm; an INCH program reads them as inches
+                raise CompgenError(f"line {k}: {b!r}: only programs in MM are checked", where=None,
+                                   hint="write the program with compgen measure-program")
+            if d[1] == "BEGIN":
+                name = d[2]
+                out.append(Block(k, raw, "units"))
+            elif d[2] != name:
+                raise CompgenError(f"line {k}: {b!r} ends a program other than {name}")
+            else:
+                out.append(Block(k, raw, "end"))
+            continue
+        if not b or b in ("M30", "M126", "PLANE RESET STAY", "CYCL DEF 7.0 DATUM SHIFT",
+                          "CYCL DEF 9.0 DWELL TIME"):
             continue
         if b == "STOP":                    # the preset check: the operator continues (U11)
             out.append(Block(k, raw, "stop"))
@@ -276,13 +288,13 @@ def program_blocks(text: str) -> list[Block]:
             raise CompgenError(f"line {k}: {b!r}: only {TCPM!r} is modelled (F CONT: the feed of the "
                                "axes programmed; AXIS POS: rotary words are axis positions)",
                                hint="write the program with compgen measure-program")
-        elif (d := re.fullmatch(r"CYCL DEF 7\.[123] [XYZ]([+-]?[\d.]+)", b)) is not None:
+        elif (d := re.fullmatch(r"CYCL DEF 7\.[123] [XYZ]([+-]?\d{1,7}(?:\.\d{0,9})?)", b)) is not None:
             if float(d[1]) != 0:
                 raise CompgenError(f"line {k}: a datum shift moves the preset compgen's positions are in")
         elif re.fullmatch(r"TOOL CALL \S+ Z( S\S*)?", b):
             out += [Block(k, raw, "tool"), Block(k, raw, "length", on=True)]
-        elif (d := re.fullmatch(r"CYCL DEF 9\.1 DWELL ([\d.]+)", b)) is not None:
-            out.append(Block(k, raw, "dwell", seconds=float(d[1])))
+        elif (d := re.fullmatch(r"CYCL DEF 9\.1 DWELL (\S+)", b)) is not None:
+            out.append(dwell(d[1], k, raw))
         elif b.startswith("L "):
             tokens = b.split()[1:]
             rapid, m91 = "FMAX" in tokens, "M91" in tokens
@@ -308,7 +320,7 @@ class Heidenhain(Controller):
     def main_suffix(self, current: str | None) -> str:
         return ".TAB" if current is not None else ".txt"
 
-    def blocks(self, text: str) -> list[Block]:
+    def blocks(self, text: str, mode: str | None = None) -> list[Block]:
         return program_blocks(text)
 
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,

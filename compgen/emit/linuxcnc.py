@@ -28,7 +28,7 @@ from ..errors import CompgenError
 from ..files import read_text
 from ..lines import AxisLine
 from ..machine import Machine
-from ..motion import Block, gcode_move, unknown
+from ..motion import Block, dwell, gcode_move
 from ..units import number
 from . import fmt_plain, render
 from .base import FILE_MARK, Controller, EditContext, EditFiles
@@ -380,27 +380,41 @@ POSITION = {"5420": "X", "5421": "Y", "5422": "Z", "5423": "A", "5424": "B", "54
 
 def program_blocks(text: str, tcp: bool) -> list[Block]:
     """A G-code program as LinuxCNC executes it (the blocks compgen writes); ``tcp``: the
-    trt kinematics are active (the configuration's choice, stated in compgen's header)."""
+    trt kinematics are active (the configuration's choice: the program cannot say it)."""
     out, modal, feed = [Block(0, "kinematics", "tcp", on=tcp)], None, None
-    for k, raw in enumerate(text.splitlines(), start=1):
+    lines = text.splitlines()
+    guard_at = None
+    for k, raw in enumerate(lines, start=1):
         b = raw.split(";", 1)[0].strip()
-        if not b or b in ("G21 G90 G94 G17", "M2", "M30", "o100 endif") or re.fullmatch(
-                r"\(abort,[^)]*\)", b):
+        if guard_at is not None and k in (guard_at + 1, guard_at + 2):
+            continue                        # the guard's abort and endif, read with it
+        if not b:
             continue
-        if b == "M0" or re.fullmatch(r"\(MSG,[^)]*\)", b):        # the preset check's stop
+        if b == "G21 G90 G94 G17":          # G21: millimetres
+            out.append(Block(k, raw, "units"))
+        elif b in ("M2", "M30"):
+            out.append(Block(k, raw, "end"))
+        elif b == "M0" or re.fullmatch(r"\(MSG,[^)]*\)", b):        # the preset check's stop
             out.append(Block(k, raw, "stop"))
         elif (d := re.fullmatch(r"o100 if \[(.*)\]", b)) is not None:
-            # compgen's guard: stop unless every named axis is at zero
+            # compgen's guard: stop unless every named axis is at zero; it stops only if the
+            # abort follows it, then its endif
             parts = re.findall(r"\[ABS\[#(\d+)\] GT 0\.0001\]", d[1])
-            if not parts or " OR ".join(f"[ABS[#{p}] GT 0.0001]" for p in parts) != d[1]:
-                raise unknown(k, raw)
+            after = [ln.split(";", 1)[0].strip() for ln in lines[k:k + 2]]
+            if (not parts or " OR ".join(f"[ABS[#{p}] GT 0.0001]" for p in parts) != d[1]
+                    or any(p not in POSITION for p in parts) or len(after) < 2
+                    or not re.fullmatch(r"\(abort,[^)]*\)", after[0]) or after[1] != "o100 endif"):
+                raise CompgenError(f"line {k}: {raw.strip()!r} is not compgen's guard (the condition, then "
+                                   "an (abort, ...) line and o100 endif)", hint="a guard that does not abort "
+                                   "lets the program run from anywhere: give the program compgen wrote")
+            guard_at = k
             out.append(Block(k, raw, "require", target={POSITION[p]: 0.0 for p in parts}))
         elif re.fullmatch(r"T\d+ M6", b):
             out.append(Block(k, raw, "tool"))
         elif re.fullmatch(r"G43 H\d+", b) or b == "G49":
             out.append(Block(k, raw, "length", on=b != "G49"))
-        elif (d := re.fullmatch(r"G4 P([\d.]+)", b)) is not None:
-            out.append(Block(k, raw, "dwell", seconds=float(d[1])))
+        elif (d := re.fullmatch(r"G4 P(\S+)", b)) is not None:
+            out.append(dwell(d[1], k, raw))
         else:
             move, modal, feed = gcode_move(raw, k, b.split(), modal, feed, "G53")
             out.append(move)
@@ -443,8 +457,18 @@ class LinuxCNC(Controller):
         flip = -1 if (machine.linuxcnc or {}).get("conventional_directions") else 1
         return {a.name: flip for a in machine.rotary_axes}
 
-    def blocks(self, text: str) -> list[Block]:
-        return program_blocks(text, self.tcpm_on.search(text) is not None)
+    def blocks(self, text: str, mode: str | None = None) -> list[Block]:
+        written = ("tcpm" if self.tcpm_on.search(text) else
+                   "axes" if re.search(r"(?m)^; mode AXES", text) else mode)
+        if mode is None:
+            raise CompgenError("a LinuxCNC program's kinematics are the configuration's, not the program's: "
+                               "say which it runs under", hint="give --mode tcpm (trt kinematics active) or "
+                                                               "--mode axes (identity kinematics)")
+        if mode != written:
+            raise CompgenError(f"the program was written for mode {written.upper()} (its header) and is to "
+                               f"run under {mode.upper()}: its positions mean other things there",
+                               hint=f"write it again with compgen measure-program --mode {mode}")
+        return program_blocks(text, mode == "tcpm")
 
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:

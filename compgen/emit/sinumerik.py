@@ -16,7 +16,7 @@ from ..correction import CompTable, Held, Plan, comp_tables, compose_tables, nom
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
-from ..motion import Block, gcode_move
+from ..motion import Block, dwell, gcode_move
 from ..transforms import rot_exact
 from ..units import number
 from . import ascii_text, fmt_plain, render
@@ -223,10 +223,15 @@ def program_blocks(text: str) -> list[Block]:
     out, modal, feed = [], None, None
     for k, raw in enumerate(text.splitlines(), start=1):
         b = raw.split(";", 1)[0].strip()
-        if not b or b in ("ORIWKS", "ORIAXES", "M30", "M17", "M6", "G17 G90 G71 G94") or re.fullmatch(
-                r"G5[4-7]|G50[0-9]", b):
+        if not b or b in ("ORIWKS", "ORIAXES", "M6"):
             continue
-        if b == "M0" or re.fullmatch(r'MSG\("[^"]*"\)|MSG\(\)', b):   # the preset check's stop
+        if b == "G17 G90 G71 G94":          # G71: metric (G70 would read compgen's mm as inches)
+            out.append(Block(k, raw, "units"))
+        elif b in ("M30", "M17"):
+            out.append(Block(k, raw, "end"))
+        elif re.fullmatch(r"G5[4-7]|G50[0-9]", b):
+            out.append(Block(k, raw, "offset", name=b))
+        elif b == "M0" or re.fullmatch(r'MSG\("[^"]*"\)|MSG\(\)', b):   # the preset check's stop
             out.append(Block(k, raw, "stop"))
         elif b in ("TRAFOOF", "TRAORI"):
             out.append(Block(k, raw, "tcp", on=b == "TRAORI"))
@@ -234,8 +239,8 @@ def program_blocks(text: str) -> list[Block]:
             out.append(Block(k, raw, "tool"))
         elif b in ("D0", "D1"):
             out.append(Block(k, raw, "length", on=b == "D1"))
-        elif (d := re.fullmatch(r"G4 F([\d.]+)", b)) is not None:
-            out.append(Block(k, raw, "dwell", seconds=float(d[1])))
+        elif (d := re.fullmatch(r"G4 F(\S+)", b)) is not None:
+            out.append(dwell(d[1], k, raw))
         else:
             tokens, turn = [], {}
             for t in b.split():       # L=ACP(v), ACN, DC: a modulo axis's position and way
@@ -335,7 +340,7 @@ class Sinumerik840D(Controller):
         way = "DC" if before is None or not feed else "ACP" if value > before else "ACN"
         return f"{letter}={way}({at})"
 
-    def blocks(self, text: str) -> list[Block]:
+    def blocks(self, text: str, mode: str | None = None) -> list[Block]:
         return program_blocks(text)
 
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
