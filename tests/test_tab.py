@@ -3,6 +3,7 @@ description block, CRLF line ends, columns compgen does not use, INCH units. An 
 only the cells it must and keeps every other byte."""
 
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -133,6 +134,12 @@ def test_a_new_style_description_block_is_kept_and_its_decimals_honoured(seed_ma
     text = "\n".join([before[0], *NEW_STYLE, "", *before[1 + old_block:]])   # a blank line too
     table = TabTable.parse(text, "t")
     assert table.decimals == {"COORD": 3, "DOC": 0} and table.columns == COLS.split()
+    # 3 decimals (1 µm) lose 0.5 µm of Y0A: beyond this noiseless fit's uncertainty, refused
+    with pytest.raises(CompgenError, match=r"round Y0A to \+0\.030: 0\.5 um of the correction lost"):
+        kinematics_edit(seed_machine, fit, "itnc530", text, "KIN.TAB", "KIN", "0", "d")
+    # with uncertainties of 1 µm and 2″ the same rounding (0.5 µm, 1.8″ at most) is within them
+    fit = replace(fit, parameters={n: replace(e, std=1e-3 if e.unit == "mm" else 2 * ARCSEC)
+                                   for n, e in fit.parameters.items()})
     emitted = kinematics_edit(seed_machine, fit, "itnc530", text, "KIN.TAB", "KIN", "0", "d")
     after = emitted.files[".TAB"].split("\n")
     assert after[:len(NEW_STYLE) + 3] == text.split("\n")[:len(NEW_STYLE) + 3]
@@ -292,3 +299,20 @@ def test_table_rows_without_their_header_read_as_the_table(seed_machine, square_
         np.testing.assert_allclose(part[axis].tilt, whole[axis].tilt, atol=1e-12)
     assert heidenhain.read_squareness(rows, seed_machine) == pytest.approx(
         heidenhain.read_squareness(tab, seed_machine), abs=1e-15)
+
+
+def test_a_table_whose_decimals_round_the_correction_away_is_refused(seed_machine, fit):
+    """COORD declared with 0 decimals: the 16 rows would be written +0 while the sign check
+    expects the change (issue 21)."""
+    text = _table(newline="\n").replace("     DEC = 5", "     DEC = 0")
+    with pytest.raises(CompgenError, match="of the correction lost, beyond its uncertainty"):
+        kinematics_edit(seed_machine, fit, "itnc530", text, "KIN.TAB", "KIN", "0", "d")
+
+
+@pytest.mark.parametrize("line", ["     DEC = abc", "     DEC = -2", "     DEC", "   NAME"])
+def test_a_damaged_column_description_is_refused_with_its_line(line):
+    text = _table(newline="\n").replace("     DEC = 5", line)
+    k = 1 + text.split("\n").index(line)
+    with pytest.raises(CompgenError, match="in the column description") as e:
+        TabTable.parse(text, "t.TAB")
+    assert e.value.where == f"t.TAB:{k}"

@@ -53,6 +53,7 @@ class EditContext:
     date: str
     marker: str = ""          # the fit's marker (``FitResult.marker``)
     stem: str = ""            # the file stem the edit's files are written under (default: name)
+    sigma: tuple = ()         # (parameter, σ in mm or rad) of the fit: what a file's rounding may lose
 
 
 @dataclass(frozen=True)

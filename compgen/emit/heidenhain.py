@@ -27,6 +27,10 @@ from .tab import MM_PER, TabTable
 
 MM_DECIMALS = 5          # 0.01 µm
 DEG_DECIMALS = 7         # 0.0004″
+# a table's rounding may lose up to the correction's uncertainty, and never less than this:
+# half a typical R-test's noise (0.5 µm), which no re-measurement could tell; 0.25″ moves a
+# ball 200 mm from the axis by 0.24 µm
+LOSS_FLOOR_MM, LOSS_FLOOR_DEG = 0.25e-3, 0.25 / 3600.0
 # a Trans row naming its ISO symbol, in a table (``NR KEY AXIS COORD DOC``) or a change list
 ISO = re.compile(r"-?[XYZABC]0[A-Z]")
 ROW = re.compile(r"^\s*(?:\d+\s+)?(?:Trans\s+([XYZABC])\s+(\S+)\s+(-?[XYZABC]0[A-Z])\b"
@@ -65,12 +69,33 @@ def _decimals(axis: str) -> int:
 
 
 def edit_table(table: TabTable, rows: dict[str, tuple[list[Row], list[Row]]], where: str,
-               marker: str = "") -> list[str]:
+               marker: str = "", sigma: dict[str, float] | None = None) -> list[str]:
     """Add the corrections to the table in place: an existing row of the same ISO name (the
     DOC's first word) gets its COORD increased; a missing one is inserted next to its
     ``MachAxis``, the error rows just before it in order, the inverse rows just after it in
     order. Each row written carries ``marker`` after its name where the DOC column holds it
-    (the table has no comments). The changes, in the table's units."""
+    (the table has no comments). A value the table's declared decimals round by more than
+    the fit's uncertainty of it (``sigma``, mm or rad by ISO name; at least compgen's own
+    rounding) is refused: the edit would not hold the correction. The changes, in the
+    table's units."""
+    sigma = sigma or {}
+
+    def written(text: str, want: float, row: Row) -> str:
+        lost = abs(table.mm(text, row.axis) - want)
+        inch = row.axis in "XYZ" and table.unit == "INCH"     # compgen's own rounding, in mm or deg
+        own = 0.5 * 10.0 ** -(_decimals(row.axis) + inch) * (MM_PER[table.unit] if row.axis in "XYZ" else 1.0)
+        std = sigma.get(row.doc.lstrip("-").replace("0", "O"), 0.0)
+        floor = LOSS_FLOOR_MM if row.axis in "XYZ" else LOSS_FLOOR_DEG
+        allowed = max(own, floor, std if row.axis in "XYZ" else np.degrees(std)) * 1.001
+        if lost > allowed:
+            unit = "um" if row.axis in "XYZ" else "arcsec"
+            scale = 1e3 if row.axis in "XYZ" else 3600.0
+            raise CompgenError(f"the table's COORD decimals round {row.doc} to {text}: {lost * scale:.3g} {unit} "
+                               f"of the correction lost, beyond its uncertainty {allowed * scale:.3g} {unit}",
+                               where=where, hint="raise DEC of COORD in the table's description (the control "
+                                                 "holds 5 decimals in mm), or enter the rows by hand from "
+                                                 "the change list")
+        return text
     if "DOC" not in table.columns:
         raise CompgenError("the current table has no DOC column to name the correction rows",
                            hint="add a DOC column (the enhanced kinematics description has one)")
@@ -99,12 +124,13 @@ def edit_table(table: TabTable, rows: dict[str, tuple[list[Row], list[Row]]], wh
                 idx = next((i for i, r in enumerate(table.rows) if _name(r) == row.doc), None)
                 if idx is not None:
                     old = table.rows[idx]["COORD"]
-                    new = table.coord(table.mm(old, row.axis) + row.coord, row.axis, _decimals(row.axis))
+                    want = table.mm(old, row.axis) + row.coord
+                    new = written(table.coord(want, row.axis, _decimals(row.axis)), want, row)
                     table.set(idx, {"COORD": new, "DOC": doc}, where)
                     diff.append(f"{row.doc:<6} Trans {row.axis}  {old} -> {new} {unit}")
                     continue
                 at = machaxis(axis) if side == "before" else machaxis(axis) + 1 + k
-                new = table.coord(row.coord, row.axis, _decimals(row.axis))
+                new = written(table.coord(row.coord, row.axis, _decimals(row.axis)), row.coord, row)
                 table.insert(at, {"NR": str(at), "KEY": "Trans", "AXIS": row.axis, "COORD": new,
                                   "DOC": doc})
                 diff.append(f"{row.doc:<6} Trans {row.axis}  (new row) -> {new} {unit}")
@@ -331,7 +357,7 @@ class Heidenhain(Controller):
         if current is not None:
             table = TabTable.parse(current, where)
             skipped = check_pivots(table, machine, where)
-            diff = edit_table(table, rows, where, ctx.marker)
+            diff = edit_table(table, rows, where, ctx.marker, dict(ctx.sigma))
             files[".TAB"] = table.text()
             notes += ["table changes:", *diff, *([skipped] if skipped else []), *_resolution(table)]
         files[".txt"] = render(

@@ -97,7 +97,8 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
               "BACKUP FIRST: " + ctl.backup,
               f"then run the sign check {sign_name}: see its expected changes")
     words = lines_text(p)
-    ctx = EditContext(name, header, tuple(words), tuple(expect), version, date, fit.marker, stem or name)
+    ctx = EditContext(name, header, tuple(words), tuple(expect), version, date, fit.marker, stem or name,
+                      tuple((n, e.std) for n, e in fit.parameters.items()))
     edit = ctl.edit(machine, p, current, current_where, ctx)
     notes = [*words]
     if p.setup:

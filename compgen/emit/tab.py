@@ -143,10 +143,16 @@ def _description(lines: list[str], i: int, where: str) -> tuple[int, dict[str, i
     for k in range(i, len(lines)):
         s = lines[k].strip()
         if old:
-            if s.startswith("NAME"):
-                name = s.split("=", 1)[1].strip()
-            elif s.startswith("DEC") and name:
-                decimals[name] = int(s.split("=", 1)[1])
+            if s.startswith(("NAME", "DEC")):
+                m = re.fullmatch(r"(NAME|DEC)\s*=\s*(\S+)", s)
+                if m is None or (m[1] == "DEC" and not re.fullmatch(r"\d{1,2}", m[2], re.ASCII)):
+                    raise CompgenError(f"{s!r} in the column description: NAME = a column, DEC = the "
+                                       "decimals (0 to 99)", where=f"{where}:{k + 1}",
+                                       hint="give the table as the control wrote it")
+                if m[1] == "NAME":
+                    name = m[2]
+                elif name:
+                    decimals[name] = int(m[2])
             if s.startswith("#STRUCTEND"):
                 return k + 1, decimals
         else:
