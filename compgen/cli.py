@@ -32,6 +32,7 @@ from .results import load_fit
 from .rtest import SIGNS, format_rtest, read_poses, read_rtest
 from .session import fit_machine, machine_ref, reload
 from .simulate import read_truth, simulate
+from .units import number
 
 
 class _Failed(click.ClickException):
@@ -156,7 +157,7 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
     names = [p for p in path_names.split(",") if p.strip()]
     if not names:
         raise CompgenError("--paths names no path")
-    poses = generate(machine, names, ball=_vec3(ball, "--ball") if ball else None, back=back)
+    poses = generate(machine, names, ball=_vec3(ball, "--ball") if ball is not None else None, back=back)
     drive = None
     if edits:
         held = read_edits(machine, {e: read_text(e, "edit", ansi_ok=True)[0] for e in edits},
@@ -320,7 +321,7 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, contro
     else:
         names = (list(machine.paths) if path_names.strip().lower() == "all"
                  else [p.strip() for p in path_names.split(",") if p.strip()])
-        poses = generate(machine, names, ball=_vec3(ball, "--ball") if ball else None, back=back)
+        poses = generate(machine, names, ball=_vec3(ball, "--ball") if ball is not None else None, back=back)
         label = "+".join(names) + "_BACK" * back
     ctl = controller(controller_name or machine.controller)
     output = None if output == STDOUT else output      # -o - is stdout, as no -o
@@ -424,7 +425,7 @@ def kinematics_cmd(base, controller_name, current, measured, output, force):
     name = program_name(out.stem, room=len("_SIGN"))
     emitted = kinematics_edit(machine, fit, ctl.name, text, ", ".join(current), name, __version__,
                               date.today().isoformat(), force,
-                              read_state(measured) if measured else None, out.stem)
+                              read_state(measured) if measured else None, out.stem, ", ".join(measured))
     main_key = ctl.main_suffix(text)
     files = {(out if key == main_key else out.with_name(out.stem + key)): body
              for key, body in emitted.files.items()}
@@ -529,13 +530,10 @@ def _refuse_twice(sets) -> None:
 
 
 def _vec3(text: str, option: str) -> list[float]:
-    try:
-        v = [float(x) for x in text.split(",")]
-    except ValueError:
-        v = []
-    if len(v) != 3 or not all(np.isfinite(v)):
+    parts = text.split(",")
+    if len(parts) != 3:
         raise CompgenError(f"{option} takes three numbers X,Y,Z in mm, not {text!r}")
-    return v
+    return [number(x, f"{option} {'XYZ'[k]}", "") for k, x in enumerate(parts)]
 
 
 if __name__ == "__main__":

@@ -9,7 +9,6 @@ from __future__ import annotations
 import csv
 import hashlib
 import io
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,12 +17,12 @@ import numpy as np
 from .errors import CompgenError
 from .files import read_text
 from .kinematics import Model, Poses, inverse
-from .machine import Machine, identifier
+from .machine import Machine, check_ball, identifier, travel_violations
+from .units import NUMBER
 
 DEVIATION = ("dX", "dY", "dZ")
 BALL = ("bx", "by", "bz")
 SIGNS = ("nest-minus-ball", "ball-minus-nest")
-NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?", re.ASCII)
 CELL_MAX = 1e6               # mm, deg or µm: beyond any machine's coordinates
 READING_MAX_MM = 5.0          # no R-test nest measures further from the ball's centre
 NOMINAL_TOLERANCE_MM = 0.01   # commanded XYZ vs nominal ball: far above 4-decimal rounding
@@ -82,7 +81,20 @@ def read_poses(path: str | Path, machine: Machine) -> Poses:
     table = _read_table(path, machine, [a.name for a in machine.rotary_axes])
     rotary = np.radians(np.column_stack([table.columns[a.name] for a in machine.rotary_axes]))
     ball = table.ball(machine)
+    # a ball that cannot stand on the table, a pose the machine cannot take: not a prediction
+    for b in np.unique(ball, axis=0):
+        k = int(np.flatnonzero((ball == b).all(axis=1))[0])
+        check_ball(machine.setup, b, f"{table.where}:{table.lines[k]}")
     q = inverse(machine, rotary, ball)
+    bad = travel_violations(machine, q)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        axis = machine.axes[j]
+        value, unit = (np.degrees(q[i, j]), "deg") if axis.rotary else (q[i, j], "mm")
+        raise CompgenError(f"this pose puts {axis.name} at {value:.3f} {unit}, outside its travel "
+                           f"[{axis.travel[0]:g}, {axis.travel[1]:g}] {unit} ({int(bad.any(axis=1).sum())} "
+                           "poses do)", where=f"{table.where}:{table.lines[i]}",
+                           hint="the machine cannot take the pose: give poses within its travel")
     if all(c in table.columns for c in "XYZ"):
         given = np.column_stack([table.columns[c] for c in "XYZ"])
         linear = [machine.index(c) for c in "XYZ"]

@@ -268,8 +268,10 @@ def test_predict_writes_what_a_session_at_another_ball_would_read(hidden_session
 
 def test_measure_program_ball_is_checked(tmp_path):
     out = tmp_path / "p.h"
-    for ball, expected in (("1,2", "three numbers"), ("nan,0,0", "three numbers"),
-                           ("-217.5,0,2000", "outside its travel")):
+    for ball, expected in (("1,2", "three numbers"), ("nan,0,0", "--ball X 'nan' is not a number"),
+                           ("1_0,0,211", "--ball X '1_0' is not a number"),
+                           ("\u0661,0,211", "is not a number (a finite one, in ASCII digits)"),
+                           ("", "three numbers"), ("-217.5,0,2000", "outside its travel")):
         code, _, err = run("measure-program", "--machine", SEED_MACHINE, "--path", "K4", "--ball", ball,
                            "-o", out)
         assert code == 2 and expected in err and err.count("\n") == 1, err

@@ -117,7 +117,7 @@ def _poses_file(tmp_path, rows):
 
 
 @pytest.mark.parametrize("rows, expected", [
-    ([(0, 0), (-130, 0)], "pose 2 of p puts A at -130.000 deg, outside its travel"),
+    ([(0, 0), (-130, 0)], "p.csv:3: this pose puts A at -130.000 deg, outside its travel"),
     ([(0, 0), (0, 45)], "C jumps 45.00 deg between poses 1 and 2"),
 ])
 def test_unsafe_pose_lists_are_refused(tmp_path, rows, expected):

@@ -83,15 +83,16 @@ def edit_table(table: TabTable, rows: dict[str, tuple[list[Row], list[Row]]], wh
     def written(text: str, want: float, row: Row) -> str:
         lost = abs(table.mm(text, row.axis) - want)
         inch = row.axis in "XYZ" and table.unit == "INCH"     # compgen's own rounding, in mm or deg
-        own = 0.5 * 10.0 ** -(_decimals(row.axis) + inch) * (MM_PER[table.unit] if row.axis in "XYZ" else 1.0)
+        own = 0.5 * 10.0 ** -(_decimals(row.axis) + inch) * (MM_PER[table.unit] if inch else 1.0)
         std = sigma.get(row.doc.lstrip("-").replace("0", "O"), 0.0)
         floor = LOSS_FLOOR_MM if row.axis in "XYZ" else LOSS_FLOOR_DEG
         allowed = max(own, floor, std if row.axis in "XYZ" else np.degrees(std)) * 1.001
         if lost > allowed:
             unit = "um" if row.axis in "XYZ" else "arcsec"
             scale = 1e3 if row.axis in "XYZ" else 3600.0
-            raise CompgenError(f"the table's COORD decimals round {row.doc} to {text}: {lost * scale:.3g} {unit} "
-                               f"of the correction lost, beyond its uncertainty {allowed * scale:.3g} {unit}",
+            raise CompgenError(f"the table's COORD decimals round {row.doc} to {text}: {lost * scale:.3g} "
+                               f"{unit} of the correction lost, beyond its uncertainty {allowed * scale:.3g} "
+                               f"{unit}",
                                where=where, hint="raise DEC of COORD in the table's description (the control "
                                                  "holds 5 decimals in mm), or enter the rows by hand from "
                                                  "the change list")

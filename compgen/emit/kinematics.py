@@ -61,7 +61,8 @@ def sign_check(machine: Machine, p: Plan, ctl: Controller, name: str, version: s
 
 def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, current: str | None,
                     current_where: str, name: str, version: str, date: str, force: bool = False,
-                    measured: str | None = None, stem: str | None = None) -> Emitted:
+                    measured: str | None = None, stem: str | None = None,
+                    measured_where: str = "--measured-with") -> Emitted:
     """The files of a kinematics edit for one control, with the sign check and notes.
 
     ``measured`` is the control's state while the data were measured, when it differs from
@@ -80,6 +81,9 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
         if current is None:
             raise CompgenError("the state the data were measured in only counts against --current",
                                hint="give --current as well")
+        # the state measured with passes every check --current does, and is this control's:
+        # an edit over it is written (and dropped) before anything is read from it
+        ctl.edit(machine, p, measured, measured_where, EditContext(name, (), (), (), version, date))
         p = rest(machine, p, ctl.since(machine, measured, current, current_where), force)
         then, now = (ctl.loaded_tables(machine, s, current_where) for s in (measured, current))
         if then != now:       # the tables are composed over --current: the data must have seen them

@@ -29,12 +29,14 @@ from ..files import read_text
 from ..lines import AxisLine
 from ..machine import Machine
 from ..motion import Block, dwell, gcode_move
-from ..units import number
+from ..units import NUMBER, number
 from . import fmt_plain, render
 from .base import FILE_MARK, Controller, EditContext, EditFiles
 
-SETP = re.compile(r"^\s*setp\s+(\S+?)\.(\S+)\s+(\S+)", re.MULTILINE)
-SETS = re.compile(r"^\s*sets\s+(\S+)\s+(\S+)", re.MULTILINE)
+# the value is the rest of the line (a comment aside): halcmd takes one word, so "1.0 junk"
+# is refused as a value rather than read as 1.0
+SETP = re.compile(r"^[ \t]*setp[ \t]+(\S+?)\.(\S+)[ \t]+([^#\n]*?)[ \t]*(?:#.*)?$", re.MULTILINE)
+SETS = re.compile(r"^[ \t]*sets[ \t]+(\S+)[ \t]+([^#\n]*?)[ \t]*(?:#.*)?$", re.MULTILINE)
 NET = re.compile(r"^\s*net\s+(\S+)\s+(.*)$", re.MULTILINE)
 COMP_ENTRIES = 256           # EMCMOT_COMP_SIZE: the lines a joint's table may hold
 TURNS_DEG = 1260.0           # a full-turn axis's table repeats its turn over ±this (≤ 256 lines)
@@ -143,12 +145,11 @@ def _triplets(lines, where: str) -> np.ndarray:
     rows = []
     for line in lines:
         m = TRIPLET.match(line)
-        try:
-            row = [float(m[i]) for i in (1, 2, 3)] if m else None
-        except ValueError:
-            row = None
-        if row is None or not np.all(np.isfinite(row)):
+        if m is None or not all(NUMBER.fullmatch(m[i]) for i in (1, 2, 3)):
             break
+        row = [float(m[i]) for i in (1, 2, 3)]
+        if not np.all(np.isfinite(row)):
+            raise CompgenError(f"{line.strip()!r} is not three finite numbers", where=where)
         rows.append(row)
     if not rows:
         raise CompgenError("the joint table holds no line of three numbers", where=where)

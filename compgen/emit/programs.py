@@ -23,6 +23,7 @@ from ..machine import Machine, check_ball
 from ..motion import safe_height
 from ..paths import check_travel
 from ..rtest import BALL, axis_cells
+from ..units import number
 from . import Emitted, ascii_text, render
 from .registry import controller
 
@@ -310,11 +311,12 @@ def read_program(text: str, machine: Machine, controller_name: str) -> tuple[str
         if not m:
             continue
         sense = ctl.angle_sense(machine)
-        words = {w[0]: sense.get(w[0], 1) * float(re.sub(r"^=(?:ACP|ACN|DC)\((.*)\)$", r"\1", w[1:]))
+        words = {w[0]: sense.get(w[0], 1) * number(re.sub(r"^=(?:ACP|ACN|DC)\((.*)\)$", r"\1", w[1:]),
+                                                   f"pose {m[5]}'s {w[0]}", "program")
                  for w in m[4].split()}
         if sorted(words) != sorted(names):
             raise CompgenError(f"pose {m[5]} names rotary axes {sorted(words)}, the machine {names}")
-        xyz.append([float(m[i]) for i in (1, 2, 3)])
+        xyz.append([number(m[i], f"pose {m[5]}'s {'XYZ'[i - 1]}", "program") for i in (1, 2, 3)])
         rot.append([words[a] for a in names])
         numbers.append(int(m[5]))
     if not xyz:
