@@ -86,9 +86,16 @@ class _Group(click.Group):
         # adds hand-over cost, which is large on a loaded machine (benchmarks/startup.py)
         try:
             with threadpool_limits(limits=1, user_api="blas"):
-                return super().invoke(ctx)
+                done = super().invoke(ctx)
+            sys.stdout.flush()           # a full disk or a closed pipe shows here, not at exit
+            return done
+        except BrokenPipeError:          # `compgen effects | head -1`: ordinary use, quietly done
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            raise SystemExit(0) from None
         except CompgenError as exc:
             raise _Failed(str(exc)) from None
+        except OSError as exc:           # the system's refusal (a full disk, no permission): not a bug
+            raise _Failed(f"{exc.filename or 'standard output'}: {exc.strerror or exc}") from None
         except (click.exceptions.Exit, click.ClickException, click.Abort, SystemExit, KeyboardInterrupt):
             raise
         except Exception as exc:     # a bug of compgen's: one line, and the way to the details

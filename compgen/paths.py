@@ -52,6 +52,9 @@ def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | Non
 
     Every pose is checked against the machine's travel; the first one outside is named.
     """
+    if not names:
+        raise CompgenError("no path is named", hint=f"name one or more of {', '.join(machine.paths)} "
+                                                     "(comma-separated), or all")
     ball = np.asarray(machine.ball if ball is None else ball, dtype=float)
     out, t0 = [], start_s
     for name in names:

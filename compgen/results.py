@@ -131,8 +131,19 @@ class FitResult:
         def file(name: str) -> str:      # relative to the fit file; older fits hold absolute paths
             return str(base / name) if name else name
 
+        model = d.get("model")
+        if not isinstance(model, list) or not model or not all(isinstance(n, str) for n in model):
+            raise CompgenError("model must be a non-empty list of parameter names", where=f"{where}: model",
+                               hint="give the fit.json compgen fit wrote")
         try:
             params = {n: _estimate(p, f"{where}: parameters.{n}") for n, p in d["parameters"].items()}
+            free = d["correlation"]["names"]
+            odd = ([n for n in model if n not in params] or [n for n in params if n not in model]
+                   or [n for n in free if n not in model])
+            if odd or len(set(model)) != len(model):
+                raise CompgenError("model, parameters and correlation names do not agree "
+                                   f"({(odd or model)[0]})", where=where,
+                                   hint="give the fit.json compgen fit wrote")
             return cls(
                 machine={**d["machine"], "file": d["machine"]["file"] if d["machine"].get("bundled") is True
                          else file(d["machine"]["file"])},

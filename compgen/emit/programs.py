@@ -104,7 +104,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     for seg in segments:
         part = poses.take(seg)
         _check_steps(machine, part, str(part.path[0]) or label)
-        _check_feed(machine, part, setup.feed, str(part.path[0]) or label)
+        _check_feed(machine, part, setup.feed, str(part.path[0]) or label, mode)
     safe = safe_height(machine)
     up = np.zeros(len(machine.axes))
     up[linear[2]] = safe
@@ -280,10 +280,19 @@ def _check_steps(machine: Machine, poses: Poses, label: str) -> None:
                                hint="add intermediate poses, or raise [limits] max_step_deg")
 
 
-def _check_feed(machine: Machine, poses: Poses, feed: float, label: str) -> None:
+def _check_feed(machine: Machine, poses: Poses, feed: float, label: str, mode: str) -> None:
+    """The axes' speeds between poses at the program's feed. In TCPM mode a pose block keeps
+    the nest where it is in the workpiece and only turns: F is then deg/min (U9), whatever
+    the linear axes do beneath; in axes mode F is along X Y Z, and a turn rides on it."""
     for a in machine.axes:
         if not a.rotary and feed > a.feed_max:
             raise CompgenError(f"[program] feed {feed:g} mm/min exceeds {a.name}'s feed_max {a.feed_max:g}")
+    if mode == "tcpm":
+        for a in machine.rotary_axes:
+            if feed > a.feed_max:
+                raise CompgenError(f"[program] feed {feed:g} (deg/min where a TCPM pose block only turns) "
+                                   f"exceeds {a.name}'s feed_max {a.feed_max:g}", hint="lower [program] feed")
+        return
     linear = [machine.index(c) for c in "XYZ"]
     seconds = np.linalg.norm(np.diff(poses.q[:, linear], axis=0), axis=1) / feed * 60.0
     for a in machine.rotary_axes:
@@ -294,7 +303,8 @@ def _check_feed(machine: Machine, poses: Poses, feed: float, label: str) -> None
             i = int(speed.argmax())
             raise CompgenError(f"{label}: at feed {feed:g} mm/min, {a.name} would turn at "
                                f"{speed[i]:.0f} deg/min between poses {i + 1} and {i + 2}, above "
-                               f"its feed_max {a.feed_max:g}", hint="lower [program] feed")
+                               f"its feed_max {a.feed_max:g}", hint="lower [program] feed, or measure in "
+                               "tcpm mode (a pose block then only turns, at F deg/min)")
 
 
 def read_program(text: str, machine: Machine, controller_name: str) -> tuple[str, np.ndarray, np.ndarray]:

@@ -1,0 +1,132 @@
+"""Hostile input, second round (issue 21): each case a user's or an accident's input that
+was once an internal error, a silent accept or a wrong refusal. Refusals are one line on
+stderr with exit 2; nothing is written."""
+
+import json
+import shlex
+import subprocess
+import sys
+
+import pytest
+from conftest import BC_MACHINE, ROOT, SEED_MACHINE, run
+
+SESSION = ROOT / "examples" / "seed-session.csv"
+TAB = ROOT / "examples" / "itnc530-current.TAB"
+CARR = ROOT / "examples" / "bc-tcarr-current.txt"
+
+
+@pytest.fixture(scope="module")
+def fit(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("fit")
+    for step in (["fit", "--machine", SEED_MACHINE, SESSION, "-o", folder / "f0.json"],
+                 ["fit", "--from", folder / "f0.json", "--add", "EXC:h2", "-o", folder / "fit.json"]):
+        code, _, err = run(*step)
+        assert code == 0, err
+    return folder / "fit.json"
+
+
+def _refused(args, says, tmp_path, output=None):
+    code, out, err = run(*args)
+    assert code == 2 and says in err and len(err.strip().splitlines()) == 1, (code, out, err)
+    if output is not None:
+        assert not (tmp_path / output).exists()
+
+
+@pytest.mark.parametrize("rows, says", [
+    ("A,C\n500,0\n", "A at 500.000 deg, outside its travel"),
+    ("A,C\n0,99999\n", "C at 99999.000 deg, outside its travel"),
+    ("A,C,bx,by,bz\n0,0,5000,0,100\n", "does not stand on the table"),
+    ("A,C,bx,by,bz\n0,0,0,0,-100\n", "does not stand above the table top"),
+])
+def test_predict_refuses_a_pose_the_machine_cannot_take(fit, tmp_path, rows, says):
+    (tmp_path / "p.csv").write_text(rows)
+    _refused(["predict", "--from", fit, "--poses", tmp_path / "p.csv", "-o", tmp_path / "o.csv"],
+             f"p.csv:2: {'this pose puts ' if 'travel' in says else 'the ball'}", tmp_path, "o.csv")
+    _refused(["predict", "--from", fit, "--poses", tmp_path / "p.csv", "-o", tmp_path / "o.csv"], says,
+             tmp_path, "o.csv")
+
+
+@pytest.mark.parametrize("model, says", [
+    ([], "model must be a non-empty list"), ("XOC", "model must be a non-empty list"),
+    (["XOC", "QQQ"], "do not agree (QQQ)"), (None, "model must be a non-empty list"),
+])
+def test_a_fit_file_with_a_damaged_model_is_refused(fit, tmp_path, model, says):
+    d = json.loads(fit.read_text())
+    d["model"] = model
+    (tmp_path / "bad.json").write_text(json.dumps(d))
+    _refused(["kinematics", "--from", tmp_path / "bad.json", "-o", tmp_path / "K.txt"], says, tmp_path,
+             "K.txt")
+
+
+@pytest.mark.parametrize("measured, says", [
+    (ROOT / "tests" / "golden" / "ac-trunnion-itnc530" / "linuxcnc" / "kinematics.hal",
+     "the first line is not 'BEGIN <name>.TAB MM'"),
+    (CARR, "the first line is not 'BEGIN <name>.TAB MM'"),
+    ("off", "the table puts the C axis at (0.0000, 0.0000, 30.7940) mm"),
+])
+def test_measured_with_passes_every_current_check(fit, tmp_path, measured, says):
+    """A state the data were measured in that is another control's file, or not this
+    machine's table, was once ignored: the edit then applied a loaded correction twice."""
+    if measured == "off":
+        measured = tmp_path / "off.TAB"
+        measured.write_text(TAB.read_text().replace("+29.794", "+30.794"))
+    _refused(["kinematics", "--from", fit, "--current", TAB, "--measured-with", measured,
+              "-o", tmp_path / "K.TAB"], says, tmp_path, "K.TAB")
+
+
+def test_a_path_list_naming_no_path_is_refused(tmp_path):
+    _refused(["measure-program", "--machine", SEED_MACHINE, "--path", ",,", "-o", tmp_path / "x.H"],
+             "no path is named", tmp_path, "x.H")
+
+
+def test_a_ball_on_cs_axis_is_measured_in_tcpm_mode(tmp_path):
+    """The ball on C's axis: in TCPM a pose block only turns (F in deg/min), so nothing turns
+    too fast; once refused with "C would turn at 42997 deg/min"."""
+    out = tmp_path / "X.H"
+    code, _, err = run("measure-program", "--machine", SEED_MACHINE, "--path", "K4", "--ball", "-0,-0,100",
+                       "-o", out)
+    assert code == 0, err
+    assert run("check-program", "--machine", SEED_MACHINE, out)[0] == 0
+
+
+@pytest.mark.parametrize("line, says", [
+    ("setp xyzac-trt-kins.x-rot-point 0.0 junk", "'0.0 junk' is not a number"),
+    ("setp xyzac-trt-kins.x-rot-point 1_0", "'1_0' is not a number"),
+])
+def test_a_hal_value_is_the_whole_rest_of_its_line(fit, tmp_path, line, says):
+    hal = (ROOT / "tests" / "golden" / "ac-trunnion-itnc530" / "linuxcnc" / "kinematics.hal").read_text()
+    bad = "\n".join(line if ln.startswith("setp xyzac-trt-kins.x-rot-point") else ln
+                    for ln in hal.splitlines())
+    (tmp_path / "c.hal").write_text(bad + "\n")
+    _refused(["kinematics", "--from", fit, "--controller", "linuxcnc", "--current", tmp_path / "c.hal",
+              "-o", tmp_path / "K.hal", "--force"], says, tmp_path, "K.hal")
+
+
+def test_a_carr_value_in_another_script_or_with_underscores_is_refused(tmp_path):
+    bc = tmp_path / "bc"
+    bc.mkdir()
+    (bc / "t.json").write_text(json.dumps({"parameters": {"XOC": {"value": 5, "unit": "um"},
+                                                          "XOB": {"value": -4, "unit": "um"}}}))
+    code, _, err = run("simulate", "--machine", BC_MACHINE, "--truth", bc / "t.json", "--noise-um", "0.5",
+                       "-o", bc / "s.csv")
+    assert code == 0, err
+    code, _, err = run("fit", "--machine", BC_MACHINE, bc / "s.csv", "-o", bc / "f.json")
+    assert code == 0, err
+    for value in ("1_5", "\u0661"):
+        (bc / "c.txt").write_text(CARR.read_text().replace("$TC_CARR44[1]=0.0", f"$TC_CARR44[1]={value}"))
+        _refused(["kinematics", "--from", bc / "f.json", "--current", bc / "c.txt", "-o", bc / "K.MPF",
+                  "--force"], "is not a number", bc, "K.MPF")
+
+
+def _bash(line, cwd):
+    return subprocess.run(["bash", "-c", line], capture_output=True, text=True, cwd=cwd, timeout=60)
+
+
+def test_a_closed_pipe_is_ordinary_and_a_full_disk_one_line(tmp_path):
+    cg = f"{shlex.quote(sys.executable)} -m compgen"
+    done = _bash(f"set -o pipefail; {cg} effects --machine {SEED_MACHINE} | head -1", tmp_path)
+    assert done.returncode in (0, 141) and done.stderr == "", done.stderr     # 141: head closed it
+    assert done.stdout.count("\n") == 1
+    done = _bash(f"{cg} effects --machine {SEED_MACHINE} > /dev/full", tmp_path)
+    assert done.returncode == 2 and done.stderr.strip() == \
+        "compgen: error: standard output: No space left on device", done.stderr
