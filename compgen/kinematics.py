@@ -189,10 +189,19 @@ def motion_direction(q: np.ndarray, run: np.ndarray) -> np.ndarray:
     return out
 
 
+BLOCK = 16384            # poses per evaluation of the chain
+
+
 def relative(machine: Machine, poses: Poses, slots: Mapping[tuple[str, str], np.ndarray],
              lines: Mapping[str, tuple] | None = None) -> np.ndarray:
     """Nest minus ball, (n, 3) mm, for errors given as slots: (carrier, "loc" | "comp") →
-    (n, 6) translations (mm) and rotations (rad) in ``TRANSLATIONS + ROTATIONS`` order."""
+    (n, 6) translations (mm) and rotations (rad) in ``TRANSLATIONS + ROTATIONS`` order.
+    Evaluated in blocks of ``BLOCK`` poses: the chain's (n, 4, 4) temporaries of a whole
+    dense session would be fresh memory at every link."""
+    if len(poses) > BLOCK:
+        return np.concatenate([relative(machine, poses.take(slice(a, a + BLOCK)),
+                                        {k: v[a:a + BLOCK] for k, v in slots.items()}, lines)
+                               for a in range(0, len(poses), BLOCK)])
     zero = np.zeros((len(poses), 6))
     table = _chain(machine, machine.workpiece, poses, slots, zero, lines)
     # the tool side's frames sit at the spindle gauge line, probe_length above the nest

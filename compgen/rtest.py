@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import io
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,7 +18,7 @@ import numpy as np
 from .errors import CompgenError
 from .files import read_text
 from .kinematics import Model, Poses, inverse
-from .machine import Machine, check_ball, identifier, travel_violations
+from .machine import IDENTIFIERS, Machine, check_ball, identifier, travel_violations
 from .units import NUMBER
 
 DEVIATION = ("dX", "dY", "dZ")
@@ -160,6 +161,12 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
         raise CompgenError("give all of bx, by, bz or none", where=f"{where}:{header_line}")
     numeric = required + [c for c in ("X", "Y", "Z", "t", *BALL) if c in header and c not in required]
     col = {c: header.index(c) for c in header}
+    digest = hashlib.sha256(raw).hexdigest()
+    fast = _fast_table(lines[1:], header, numeric, col, where)
+    if fast is not None:
+        values, labels = fast
+        return _Table(where, digest, {name: values[:, j] for j, name in enumerate(numeric)}, labels,
+                      [i for i, _ in lines[1:]])
 
     values = np.empty((len(lines) - 1, len(numeric)))
     labels, line_no = [], []
@@ -184,7 +191,35 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
         labels.append(label)
         line_no.append(i)
     columns = {name: values[:, j] for j, name in enumerate(numeric)}
-    return _Table(where, hashlib.sha256(raw).hexdigest(), columns, np.array(labels, dtype=object), line_no)
+    return _Table(where, digest, columns, np.array(labels, dtype=object), line_no)
+
+
+def _fast_table(rows: list[tuple[int, str]], header: list[str], numeric: list[str], col: dict[str, int],
+                where: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """The careful reader's result for a well-formed table, at numpy's speed: plain ASCII, no
+    quotes, every row as many fields as the header, every numeric cell what ``NUMBER`` takes
+    (numpy's parser refuses "1_0", "0x10", "--1" and empty cells; nan, inf and 1e999 fail the
+    size check) and of a sensible size. Anything else returns None: the careful reader then
+    finds and names the first fault."""
+    body = [line for _, line in rows]
+    text = "\n".join(body)
+    if not text.isascii() or '"' in text or any(line.count(",") != len(header) - 1 for line in body):
+        return None
+    try:
+        values = np.loadtxt(io.StringIO(text), delimiter=",", usecols=[col[c] for c in numeric], ndmin=2,
+                            comments=None, dtype=float)
+    except ValueError:
+        return None
+    if values.shape[0] != len(body) or not (np.abs(values) < CELL_MAX).all():
+        return None
+    if "path" not in col:
+        return values, np.full(len(body), "", dtype=object)
+    k = col["path"]
+    labels = np.array([line.split(",", k + 1)[k].strip() for line in body], dtype=object)
+    pattern = IDENTIFIERS["path"][0]              # a label is written into programs' comments
+    if any(not re.fullmatch(pattern, label) for label in set(labels.tolist()) - {""}):
+        return None
+    return values, labels
 
 
 def axis_cells(machine: Machine, q: np.ndarray) -> list[str]:
@@ -204,10 +239,18 @@ def format_rtest(machine: Machine, data: RTestData, comments: tuple[str, ...] = 
         out.write(f"# {c}\n")
     w = csv.writer(out, lineterminator="\n")
     w.writerow(header)
-    for i in range(len(p)):
-        row = [p.path[i], *([f"{p.t[i]:.3f}"] if timed else []), *axis_cells(machine, p.q[i]),
-               *(f"{v * 1e3:.6f}" for v in data.deviation[i])]
-        if not ball_default:
-            row += [f"{v:.6f}" for v in p.ball[i]]
-        w.writerow(row)
+    # one format for a row's numbers (what axis_cells writes, then µm, then the ball); the
+    # labels are identifiers (no comma, no quote), so the row needs no CSV quoting
+    scale = np.array([180.0 / np.pi if a.rotary else 1.0 for a in machine.axes])
+    numbers = [p.q * scale, data.deviation * 1e3, *([] if ball_default else [p.ball])]
+    if timed:
+        numbers.insert(0, p.t[:, None])
+    cells = len(machine.axes) + 3 + 3 * (not ball_default)
+    fmt = ",".join(["%s", *(["%.3f"] if timed else []), *["%.6f"] * cells])
+    values = np.column_stack(numbers).tolist()
+    for label in set(p.path.tolist()):
+        if not re.fullmatch(r"[^,\"\r\n]*", str(label)):
+            raise CompgenError(f"path label {label!r} cannot be written into a CSV cell")
+    out.write("\n".join(fmt % (label, *row) for label, row in zip(p.path.tolist(), values, strict=True)))
+    out.write("\n")
     return out.getvalue()
