@@ -97,3 +97,65 @@ def test_a_turn_alone_faster_than_the_rotary_axis_can_is_refused(programs, tmp_p
     assert code == 1 and "feed above feed_max: C would move at 99999 deg/min" in out, out + err
     path.write_text(bad.replace("C+90.0000 R0 F99999", "C+90.0000 R0 F9999"))
     assert run("check-program", "--machine", SEED_MACHINE, path)[0] == 0
+
+
+# ISO 230-1 / 230-7 names, from the standard's tables, not from compgen: a swapped
+# description or cause (EXC called "axial") once survived every test (mutation sample)
+ISO_WORDS = {"EXX:p1": "positioning error of X", "EYX:p2": "straightness of X in Y", "EAX:p1": "roll of X",
+             "EBX:p1": "pitch of X", "ECX:p1": "yaw of X", "EZC:h1": "axial error motion of C",
+             "EXC:h1": "radial error motion of C in X", "EYC:h1": "radial error motion of C in Y",
+             "EAC:h1": "tilt error motion of C about X", "EBC:h1": "tilt error motion of C about Y",
+             "ECC:h1": "angular positioning error of C"}
+ISO_CAUSES = {"EZC:h1": "face runout", "EXC:h1": "bearing runout", "EAC:h1": "wobble",
+              "ECC:h2": "worm or scale error", "EXX:p1": "scale error"}
+
+
+def test_effects_carry_their_iso_names_and_causes():
+    from compgen.effects import effect_of_param
+    from compgen.machine_file import load_machine
+    m = load_machine(SEED_MACHINE)
+    for name, words in ISO_WORDS.items():
+        e = effect_of_param(m, f"{name}c" if ":h" in name else name)
+        assert e.words.startswith(words), (name, e.words)
+    for name, cause in ISO_CAUSES.items():
+        e = effect_of_param(m, f"{name}c" if ":h" in name else name)
+        assert cause in e.cause, (name, e.cause)
+
+
+def test_the_linuxcnc_guard_reads_linuxcncs_position_parameters():
+    """#5420-#5425 are the current X Y Z A B C (LinuxCNC's numbered parameters)."""
+    from compgen.emit.linuxcnc import program_blocks
+    text = ("G21 G90 G94 G17\no100 if [[ABS[#5420] GT 0.0001] OR [ABS[#5421] GT 0.0001] OR "
+            "[ABS[#5422] GT 0.0001] OR [ABS[#5423] GT 0.0001] OR [ABS[#5424] GT 0.0001] OR "
+            "[ABS[#5425] GT 0.0001]]\n(abort, no)\no100 endif\nM2\n")
+    (guard,) = [b for b in program_blocks(text, True) if b.kind == "require"]
+    assert list(guard.target) == ["X", "Y", "Z", "A", "B", "C"]
+
+
+def _machine_with(tmp_path, before, after):
+    text = SEED_MACHINE.read_text()
+    assert before in text
+    path = tmp_path / "m.toml"
+    path.write_text(text.replace(before, after, 1))
+    return path
+
+
+def test_measure_program_refuses_a_tcpm_feed_a_rotary_axis_cannot_turn(tmp_path):
+    """In TCPM a pose block only turns, at F deg/min: C with feed_max 400 cannot take F500.
+    Said by measure-program in the user's terms, before the motion check would find it."""
+    m = _machine_with(tmp_path, "feed_max = 10800.0", "feed_max = 400.0")
+    code, _, err = run("measure-program", "--machine", m, "--path", "K4", "-o", tmp_path / "X.H")
+    assert code == 2 and "[program] feed 500 (deg/min where a TCPM pose block only turns) exceeds C's " \
+        "feed_max 400" in err, err
+
+
+def test_measure_program_checks_the_clearance_above_the_poses_along_z(tmp_path):
+    """Z's travel ends 10 mm above the highest pose: the poses fit, the 20 mm clearance
+    above them does not."""
+    from compgen.machine_file import load_machine
+    from compgen.paths import generate
+    machine = load_machine(SEED_MACHINE)
+    top = generate(machine, ["K4"]).q[:, machine.index("Z")].max()
+    m = _machine_with(tmp_path, "travel = [-300.0, 400.0]", f"travel = [-300.0, {top + 10:.3f}]")
+    code, _, err = run("measure-program", "--machine", m, "--path", "K4", "-o", tmp_path / "X.H")
+    assert code == 2 and "(clearance 20 mm above)" in err and "puts Z at" in err, err
