@@ -361,7 +361,8 @@ class Sinumerik840D(Controller):
                                where=f"{machine.source}: [sinumerik] fine_correction",
                                hint="set SD42974 = 1 on the control and fine_correction = true here")
         check_current(current, where, machine)
-        held = read_carr(current, where, machine.sinumerik["tcarr"])
+        was = _carr_lines(current, where, machine.sinumerik["tcarr"])   # value, text as written, line
+        held = {n: v for n, (v, _, _) in was.items()}
         new_carr, diff = carr_values(machine, p, held)
         rec = machine.sinumerik["tcarr"]
         largest = max(abs(v) for n, v in new_carr.items() if n > 12)
@@ -380,11 +381,10 @@ class Sinumerik840D(Controller):
 
         files = {".MPF": render("sinumerik/kinematics.MPF.j2", name=ctx.name, header=ctx.header, record=rec,
                                 values=carr(new_carr), lines=ctx.lines, expect=ctx.expect)}
-        was = _carr_lines(current, where, rec)      # the restore writes each value as it was written
         files["_RESTORE.MPF"] = render(
             "sinumerik/kinematics.MPF.j2", name=f"{ctx.name}_RESTORE", record=rec, lines=[], expect=[],
             header=[f"compgen {ctx.version}: restores record {rec} as it was", *ctx.header[1:3]],
-            values=[(n, was[n][1]) for n in new_carr])
+            values=[(n, was[n][1]) for n in new_carr])          # each value as it was written
         notes = ["$TC_CARR changes:", *diff,
                  f"the fine offsets act with SD42974 = 1 only, each within MD20188 $MC_TOCARR_FINE_LIM_LIN: "
                  f"the largest here is {largest:.4f} mm"
