@@ -70,10 +70,10 @@ def compose_tables(loaded: list[CompTable], new: list[CompTable]) -> list[CompTa
     control's slot) — on its own grid where the new ones share it, else on the finer step
     over both ranges, each interpolated as the control does (``CompTable.at``); a loaded
     table no new one adds to stays as it is; a new pair takes a new place."""
-    out = list(loaded)
+    out, fresh = list(loaded), {n.effect for n in new}
     for t in new:
         k = next((i for i, o in enumerate(out) if (o.input, o.output) == (t.input, t.output)
-                  and o.effect not in {n.effect for n in new}), None)
+                  and o.effect not in fresh), None)
         if k is None:
             out.append(t)
             continue

@@ -199,3 +199,21 @@ def travel_violations(machine: Machine, q: np.ndarray) -> np.ndarray:
     lo = np.array([a.travel[0] if not a.rotary else math.radians(a.travel[0]) for a in machine.axes])
     hi = np.array([a.travel[1] if not a.rotary else math.radians(a.travel[1]) for a in machine.axes])
     return (q < lo - 1e-9) | (q > hi + 1e-9)
+
+
+def check_travel(machine: Machine, q: np.ndarray, label: str, lines: list[str] | None = None) -> None:
+    """Refuse poses (mm, rad) that leave the travel, naming the first: as pose k of ``label``,
+    or, for poses read from a file, by its ``file:line`` in ``lines``."""
+    bad = travel_violations(machine, q)
+    if not bad.any():
+        return
+    i, j = np.argwhere(bad)[0]
+    axis = machine.axes[j]
+    value, unit = (math.degrees(q[i, j]), "deg") if axis.rotary else (q[i, j], "mm")
+    span = f"[{axis.travel[0]:g}, {axis.travel[1]:g}] {unit} ({int(bad.any(axis=1).sum())} poses"
+    at = f"puts {axis.name} at {value:.3f} {unit}, outside its travel {span}"
+    if lines is not None:
+        raise CompgenError(f"this pose {at} do)", where=lines[i],
+                           hint="the machine cannot take the pose: give poses within its travel")
+    raise CompgenError(f"pose {i + 1} of {label} {at} outside)",
+                       hint="move the ball, shorten the path or correct the machine file's travel")

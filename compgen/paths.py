@@ -12,7 +12,7 @@ import numpy as np
 
 from .errors import CompgenError
 from .kinematics import Poses, inverse
-from .machine import Machine, PathDef, travel_violations
+from .machine import Machine, PathDef, check_travel
 
 GAP_S = 20.0   # pause between two paths of one session (re-positioning), s
 
@@ -69,16 +69,3 @@ def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | Non
         check_travel(machine, q, name)
         out.append(Poses(q, np.broadcast_to(ball, (n, 3)), t, np.full(n, path.name, dtype=object)))
     return Poses.concat(out)
-
-
-def check_travel(machine: Machine, q: np.ndarray, label: str) -> None:
-    bad = travel_violations(machine, q)
-    if bad.any():
-        i, j = np.argwhere(bad)[0]
-        axis = machine.axes[j]
-        value = np.degrees(q[i, j]) if axis.rotary else q[i, j]
-        unit = "deg" if axis.rotary else "mm"
-        raise CompgenError(
-            f"pose {i + 1} of {label} puts {axis.name} at {value:.3f} {unit}, outside its travel "
-            f"[{axis.travel[0]:g}, {axis.travel[1]:g}] {unit} ({int(bad.any(axis=1).sum())} poses "
-            f"outside)", hint="move the ball, shorten the path or correct the machine file's travel")

@@ -18,7 +18,7 @@ import numpy as np
 from .errors import CompgenError
 from .files import read_text
 from .kinematics import Model, Poses, inverse
-from .machine import IDENTIFIERS, Machine, check_ball, identifier, travel_violations
+from .machine import IDENTIFIERS, Machine, check_ball, check_travel, identifier
 from .units import NUMBER
 
 DEVIATION = ("dX", "dY", "dZ")
@@ -87,15 +87,7 @@ def read_poses(path: str | Path, machine: Machine) -> Poses:
         k = int(np.flatnonzero((ball == b).all(axis=1))[0])
         check_ball(machine.setup, b, f"{table.where}:{table.lines[k]}")
     q = inverse(machine, rotary, ball)
-    bad = travel_violations(machine, q)
-    if bad.any():
-        i, j = np.argwhere(bad)[0]
-        axis = machine.axes[j]
-        value, unit = (np.degrees(q[i, j]), "deg") if axis.rotary else (q[i, j], "mm")
-        raise CompgenError(f"this pose puts {axis.name} at {value:.3f} {unit}, outside its travel "
-                           f"[{axis.travel[0]:g}, {axis.travel[1]:g}] {unit} ({int(bad.any(axis=1).sum())} "
-                           "poses do)", where=f"{table.where}:{table.lines[i]}",
-                           hint="the machine cannot take the pose: give poses within its travel")
+    check_travel(machine, q, table.where, [f"{table.where}:{k}" for k in table.lines])
     if all(c in table.columns for c in "XYZ"):
         given = np.column_stack([table.columns[c] for c in "XYZ"])
         linear = [machine.index(c) for c in "XYZ"]
@@ -162,7 +154,7 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
     numeric = required + [c for c in ("X", "Y", "Z", "t", *BALL) if c in header and c not in required]
     col = {c: header.index(c) for c in header}
     digest = hashlib.sha256(raw).hexdigest()
-    fast = _fast_table(lines[1:], header, numeric, col, where)
+    fast = _fast_table(lines[1:], header, numeric, col)
     if fast is not None:
         values, labels = fast
         return _Table(where, digest, {name: values[:, j] for j, name in enumerate(numeric)}, labels,
@@ -194,8 +186,8 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
     return _Table(where, digest, columns, np.array(labels, dtype=object), line_no)
 
 
-def _fast_table(rows: list[tuple[int, str]], header: list[str], numeric: list[str], col: dict[str, int],
-                where: str) -> tuple[np.ndarray, np.ndarray] | None:
+def _fast_table(rows: list[tuple[int, str]], header: list[str], numeric: list[str],
+                col: dict[str, int]) -> tuple[np.ndarray, np.ndarray] | None:
     """The careful reader's result for a well-formed table, at numpy's speed: plain ASCII, no
     quotes, every row as many fields as the header, every numeric cell what ``NUMBER`` takes
     (numpy's parser refuses "1_0", "0x10", "--1" and empty cells; nan, inf and 1e999 fail the

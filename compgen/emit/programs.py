@@ -19,9 +19,8 @@ import numpy as np
 from .. import motion
 from ..errors import CompgenError
 from ..kinematics import Poses, inverse
-from ..machine import Machine, check_ball
+from ..machine import Machine, check_ball, check_travel
 from ..motion import safe_height
-from ..paths import check_travel
 from ..rtest import BALL, axis_cells
 from ..units import number
 from . import Emitted, ascii_text, render
