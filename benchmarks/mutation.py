@@ -27,6 +27,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 EDITS = ["tests/test_kinematics_edit.py", "tests/test_compose.py", "tests/test_signs.py"]
 PROGRAMS = ["tests/test_motion.py", "tests/test_programs.py"]     # the controllers' program readers
+HOSTILE = [*PROGRAMS, "tests/test_hostile_programs.py"]            # what check-program must refuse
 TESTS = {
     "compgen/lines.py": ["tests/test_lines.py", *EDITS],
     "compgen/identify.py": ["tests/test_identify.py", "tests/test_startup.py"],
@@ -37,6 +38,9 @@ TESTS = {
     "compgen/emit/tab.py": ["tests/test_tab.py", "tests/test_kinematics_edit.py"],
     "compgen/emit/sinumerik.py": [*EDITS, "tests/test_edge.py", *PROGRAMS],
     "compgen/emit/linuxcnc.py": [*EDITS, "tests/test_edge.py", *PROGRAMS],
+    "compgen/motion.py": HOSTILE,
+    "compgen/emit/programs.py": HOSTILE,
+    "compgen/effects.py": ["tests/test_effects.py", "tests/test_kinematics.py"],
     "compgen/diagnose.py": ["tests/test_diagnose_stats.py", "tests/test_diagnose.py"],
     "compgen/noise.py": ["tests/test_noise.py", *(f"tests/test_diagnose.py::test_{t}" for t in (
         "outliers_are_listed_where_the_user_finds_them_and_flag_nothing",

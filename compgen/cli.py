@@ -18,7 +18,7 @@ from .compare import compare
 from .diagnose import diagnose
 from .diagnose_text import report as diagnosis_text
 from .effects import catalogue, compose, location_model
-from .emit.kinematics import kinematics_edit
+from .emit.kinematics import corrected_by, kinematics_edit
 from .emit.programs import MODES, NAME_MAX, at_ball, measure_program, program_ball, program_name
 from .emit.registry import CONTROLLERS, controller, for_program, read_edits, read_state
 from .errors import CONTROL, CompgenError
@@ -125,6 +125,14 @@ MACHINE = click.option("--machine", "machine_file", type=FILE, required=True,
                             "bc-table-sinumerik840d.")
 OUTPUT = click.option("-o", "--output", type=FILE, required=True, help="File to write.")
 FORCE = click.option("--force", is_flag=True, help="Overwrite an existing output file.")
+DB = click.option("--db", default=None, metavar="STORE",
+                  help="The history store: an SQLite file (default: $COMPGEN_DB, else "
+                       "compgen-history.sqlite here) or postgresql://user@host/db.")
+SERIAL = click.option("--serial", default=None, help="The machine's serial (default: the machine file's).")
+RECORD = click.option("--record", is_flag=True, help="Also record it in the machine's history (--db).")
+DATE = click.option("--date", "taken", default=None,
+                    help="With --record: when the data were measured or the edit written (ISO 8601; "
+                         "default now).")
 
 
 @click.group(cls=_Group)
@@ -205,7 +213,11 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
               help="What the R-test device reports (default nest-minus-ball, or the --from fit's).")
 @OUTPUT
 @FORCE
-def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, method, sign, output, force):
+@RECORD
+@DATE
+@DB
+def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, method, sign, output, force,
+            record, taken, db):
     """Identify location errors (and any added effects) from R-test DATA files (CSV v1)."""
     if more and not base:
         raise CompgenError("--data adds to a fit's data: give --from FIT.json too",
@@ -241,6 +253,9 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
     suspicion = unit_suspicion(sets)
     if suspicion:
         click.echo(f"compgen: warning: {suspicion}; kinematics will refuse this fit", err=True)
+    if record and output != STDOUT:
+        _, _, fid, reasons = _record_fit(db, output, None, None, taken, "rtest", "", ())
+        click.echo(f"recorded as calibration #{fid}" + (": NOT accepted as a reference" if reasons else ""))
 
 
 @main.command("diagnose")
@@ -412,7 +427,10 @@ def check_program_cmd(machine_file, program, controller_name, ball, mode, as_jso
               help="Main file (the new table, the change list or the .MPF); the sign check and any "
                    "tables go beside it with the same stem.")
 @FORCE
-def kinematics_cmd(base, controller_name, current, measured, output, force):
+@RECORD
+@DATE
+@DB
+def kinematics_cmd(base, controller_name, current, measured, output, force, record, taken, db):
     """Write the controller's kinematics edit for a fit, with a sign check and a backup step."""
     fit = load_fit(base)
     machine, sets = reload(fit)
@@ -439,6 +457,15 @@ def kinematics_cmd(base, controller_name, current, measured, output, force):
     write_all(files, force, inputs=(base, *current, *measured, machine.source, *(d.file for d in fit.data)))
     click.echo("\n".join(emitted.notes))
     click.echo("wrote " + ", ".join(str(p) for p in files))
+    if record:
+        from .history import record_edit, record_fit
+        store = _store(db)
+        record_fit(store, fit, machine, taken=taken, verdict=reasons, exist_ok=True)
+        eid = record_edit(store, fit, machine, ctl.name, corrected_by(machine, fit, ctl),
+                          {str(p): _sha256(body) for p, body in files.items()},
+                          {p: _sha256(read_text(p, "state file", ansi_ok=True)[1]) for p in current},
+                          taken=taken)
+        click.echo(f"recorded the edit as #{eid} in {store.where}")
 
 
 @main.command("compare")
@@ -524,6 +551,204 @@ def effects_cmd(machine_file, as_json):
         mark = "*" if e.name in default else " "
         click.echo(f"{mark} {e.name:<14}{', '.join(e.params):<28}{e.words}")
     click.echo("\n* in the default model")
+
+
+def _store(db: str | None, create: bool = True):
+    from .store import open_store  # the store only for the commands that use it
+    return open_store(db, create)
+
+
+@main.group("history")
+def history_cmd():
+    """A machine's calibrations over time: record, list, trend, export, fleet."""
+
+
+@history_cmd.command("init")
+@DB
+@click.option("--grant", multiple=True, metavar="ROLE",
+              help="PostgreSQL: let ROLE read and append (never update or delete). Repeatable.")
+def history_init_cmd(db, grant):
+    """Create or migrate the store (PostgreSQL: run as the schema's owner)."""
+    from .store import VERSION, init
+    store, applied = init(db, tuple(grant))
+    store.close()
+    click.echo(f"{store.where}: schema {VERSION}"
+               + (f" (applied {', '.join(map(str, applied))})" if applied else " (up to date)")
+               + (f"; {', '.join(grant)} may read and append" if grant else ""))
+
+
+def _record_fit(db, fit_file, machine_file, serial, taken, device, operator, temperatures):
+    from .history import record_fit
+    fit = load_fit(fit_file)
+    machine, sets = reload(fit, machine_file)
+    _progress("checking that the fit explains its data")
+    reasons = fit_gate(machine, sets, fit)
+    temps = {}
+    for item in temperatures:
+        key, _, value = item.partition("=")
+        if not key.strip() or not value:
+            raise CompgenError(f"--temperature takes NAME=°C, not {item!r}",
+                               hint="e.g. --temperature spindle=23.5")
+        temps[key.strip()] = number(value, f"--temperature {key.strip()}", "")
+    store = _store(db)
+    fid = record_fit(store, fit, machine, serial=serial, taken=taken, device=device, operator=operator,
+                     temperatures=temps, verdict=reasons)
+    return store, fit, fid, reasons
+
+
+@history_cmd.command("add")
+@click.argument("fit_file", type=FILE)
+@click.option("--machine", "machine_file", type=FILE, default=None,
+              help="The fit's machine file (default: its own).")
+@SERIAL
+@click.option("--date", "taken", default=None, help="When the data were measured (ISO 8601; default now).")
+@click.option("--device", type=click.Choice(["rtest", "probe"]), default="rtest", show_default=True)
+@click.option("--operator", default="", help="Who measured.")
+@click.option("--temperature", "temperatures", multiple=True, metavar="NAME=°C",
+              help="A temperature during the measurement, e.g. --temperature hall=21.5. Repeatable.")
+@DB
+def history_add_cmd(fit_file, machine_file, serial, taken, device, operator, temperatures, db):
+    """Record a calibration (a fit.json) in the machine's history."""
+    store, fit, fid, reasons = _record_fit(db, fit_file, machine_file, serial, taken, device, operator,
+                                           temperatures)
+    click.echo(f"recorded {fit.marker} as calibration #{fid} in {store.where}: "
+               + ("accepted" if not reasons else "NOT accepted as a reference: " + "; ".join(reasons)))
+
+
+@history_cmd.command("list")
+@DB
+def history_list_cmd(db):
+    """Every machine in the store, with its number of fits and its last one."""
+    store = _store(db, create=False)
+    rows = store.rows("SELECT m.name, m.serial, COUNT(f.id) AS fits, MAX(s.taken) AS last FROM machines m "
+                      "LEFT JOIN sessions s ON s.machine_id = m.id LEFT JOIN fits f ON f.session_id = s.id "
+                      "GROUP BY m.id, m.name, m.serial ORDER BY m.name, m.serial")
+    for r in rows:
+        serial = f" ({r['serial']})" if r["serial"] else ""
+        click.echo(f"{r['name']}{serial}: {r['fits']} fit(s), last {str(r['last'])[:16]}")
+    if not rows:
+        click.echo(f"{store.where}: no machine recorded yet")
+
+
+def _machine_of(machine_file):
+    return load_machine(machine_file)
+
+
+@history_cmd.command("show")
+@MACHINE
+@SERIAL
+@DB
+def history_show_cmd(machine_file, serial, db):
+    """The machine's fits and edits, in time order."""
+    from .history import trend
+    t = trend(_store(db, create=False), _machine_of(machine_file), serial)
+    click.echo(f"{t.machine}{f' ({t.serial})' if t.serial else ''}")
+    events = [(e.taken, f"  {e.taken[:16]}  {e.kind:<12}{e.marker}  {e.device:<6}σ̂ {e.sigma_um:.3f} µm  "
+                         f"{e.verdict}") for e in t.entries]
+    events += [(e["taken"], f"  {e['taken'][:16]}  edit        from {e['marker']} for {e['controller']}: "
+                            "corrects "
+                            + (", ".join(e["corrects"]) or "nothing")) for e in t.edits]
+    click.echo("\n".join(text for _, text in sorted(events, key=lambda x: x[0])))
+
+
+@history_cmd.command("trend")
+@MACHINE
+@SERIAL
+@click.option("--param", "params", default=None, help="Comma-separated location errors (default: all).")
+@click.option("--plot", type=FILE, default=None, help="Also draw the trend into this PNG.")
+@click.option("--json", "as_json", is_flag=True, help="Print the trend as JSON.")
+@FORCE
+@DB
+def history_trend_cmd(machine_file, serial, params, plot, as_json, force, db):
+    """Every location error over time (machine values: corrections written are counted),
+    with its σ, the edits, and the steps and drifts flagged against [drift]."""
+    from .history import trend, trend_dict, trend_text
+    names = [n.strip() for n in params.split(",") if n.strip()] if params else None
+    t = trend(_store(db, create=False), _machine_of(machine_file), serial, names)
+    if plot:
+        from .plots import trend_png
+        write_atomically(plot, trend_png(t), force)
+    click.echo(json.dumps(trend_dict(t), indent=2, ensure_ascii=False) if as_json else trend_text(t),
+               nl=as_json)
+
+
+@history_cmd.command("export")
+@click.option("--machine", "machine_name", default=None, help="Only this machine (its name).")
+@OUTPUT
+@FORCE
+@DB
+def history_export_cmd(machine_name, output, force, db):
+    """Every fit's parameters, one row each, as CSV (or JSON for a .json file)."""
+    from .history import export_rows
+    rows = export_rows(_store(db, create=False), machine_name)
+    if output.endswith(".json"):
+        text = json.dumps({"format": "compgen.history-export/1", "rows": rows}, indent=2,
+                          ensure_ascii=False) + "\n"
+    else:
+        import csv
+        import io
+        out = io.StringIO()
+        fields = ["name", "serial", "taken", "device", "operator", "marker", "kind", "verdict", "sigma_um",
+                  "parameter", "value", "std", "unit"]
+        w = csv.DictWriter(out, fields, lineterminator="\n")
+        w.writeheader()
+        w.writerows({k: r[k] for k in fields} for r in rows)
+        text = out.getvalue()
+    write_atomically(output, text, force)
+    _said(output, f"wrote {len(rows)} rows to {output}")
+
+
+@history_cmd.command("fleet")
+@click.option("--every-days", type=click.FloatRange(min=0, min_open=True), default=90.0, show_default=True,
+              help="A check is due this long after a machine's last measurement.")
+@click.option("--json", "as_json", is_flag=True)
+@DB
+def history_fleet_cmd(every_days, as_json, db):
+    """Every machine's last calibration, check and edit, and when its next check is due."""
+    from .history import fleet
+    rows = fleet(_store(db, create=False), every_days)
+    if as_json:
+        click.echo(json.dumps({"format": "compgen.fleet/1", "machines": rows}, indent=2, ensure_ascii=False))
+        return
+    click.echo(f"{'machine':<40}{'serial':<14}{'calibrated':<12}{'checked':<12}{'check':<7}{'due':<12}")
+    for r in rows:
+        check = "-" if r["last_check_passed"] is None else ("pass" if r["last_check_passed"] else "FAIL")
+        click.echo(f"{r['machine'][:39]:<40}{r['serial'][:13]:<14}{(r['last_calibration'] or '-')[:10]:<12}"
+                   f"{(r['last_check'] or '-')[:10]:<12}{check:<7}{(r['due'] or '-'):<12}"
+                   + ("OVERDUE" if r["overdue"] else ""))
+
+
+@main.command("check")
+@MACHINE
+@click.argument("data", nargs=-1, type=FILE, required=True)
+@SERIAL
+@click.option("--date", "taken", default=None, help="When the data were measured (ISO 8601; default now).")
+@click.option("--operator", default="", help="Who measured.")
+@click.option("--json", "as_json", is_flag=True, help="Print the check as JSON.")
+@DB
+def check_cmd(machine_file, data, serial, taken, operator, as_json, db):
+    """Check a short measurement (e.g. K4 only) against the machine's last accepted
+    calibration: each location error's change with its σ, pass or fail, what to do next.
+    The check is recorded in the history."""
+    from .history import check, last_calibration, record_check, taken_at
+    machine = load_machine(machine_file)
+    sets = [read_rtest(p, machine) for p in data]
+    _refuse_twice(sets)
+    store = _store(db, create=False)
+    when = taken_at(taken)
+    calibration, entries, edits = last_calibration(store, machine, serial, before=when)
+    fit = identify(machine, sets, location_model(machine))
+    result = check(machine, fit, sets, calibration, entries, edits, when, serial)
+    record_check(store, result, fit, machine, serial=serial, operator=operator)
+    click.echo(json.dumps(result.summary(), indent=2, ensure_ascii=False) if as_json else result.text(),
+               nl=as_json)
+    if not result.passed:
+        sys.exit(1)
+
+
+def _sha256(body: str | bytes) -> str:
+    import hashlib
+    return hashlib.sha256(body.encode() if isinstance(body, str) else body).hexdigest()
 
 
 def _refuse_twice(sets) -> None:

@@ -113,8 +113,8 @@ def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, control
     not_held = ctl.not_held(machine, p)
     after = Poses(ctl.holds(machine, p).drive(machine, poses), poses.ball, poses.t, poses.path)
     predicted = model.relative(after, x) + residual
-    before = _beyond_setup(machine, poses, y)
-    pred = _beyond_setup(machine, after, predicted)
+    before = beyond_setup(machine, poses, y)
+    pred = beyond_setup(machine, after, predicted)
     measured = _measured(machine, fit, post, pred) if post else None
     by_hand = ctl.tables_by_hand and p.tables
     assumes = ((f"the compensation values of the edit's .comp.csv ({', '.join(p.tables)}) are entered "
@@ -140,7 +140,7 @@ def _warnings(machine: Machine, fit: FitResult, pred: dict) -> list[str]:
     return out
 
 
-def _beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
+def beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
     fit = identify(machine, [RTestData(poses, reading)], list(SETUP))
     return {"rms_um": fit.residual["rms_um"], "per_path": fit.residual["per_path"]}
 
@@ -148,7 +148,7 @@ def _beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
 def _measured(machine: Machine, fit: FitResult, post: Sequence[RTestData], predicted: dict) -> dict:
     poses = Poses.concat([d.poses for d in post])
     y = np.concatenate([d.deviation for d in post])
-    got = _beyond_setup(machine, poses, y)
+    got = beyond_setup(machine, poses, y)
     tolerances = machine.tolerances
     verdicts = {}
     for name, stats in got["per_path"].items():

@@ -90,13 +90,13 @@ def _target(path: Path, force: bool, inputs: tuple[Path, ...]) -> None:
         raise CompgenError("output folder is not writable", where=str(folder))
 
 
-def write_atomically(path: str | Path, text: str, force: bool = False, newline: str = "\n",
+def write_atomically(path: str | Path, text: str | bytes, force: bool = False, newline: str = "\n",
                      inputs: tuple = ()) -> None:
     """Write ``text`` to ``path`` via a temporary file and ``os.replace``: nothing half-written."""
     write_all({path: text}, force, inputs, newline)
 
 
-def write_all(files: dict[str | Path, str], force: bool = False, inputs: tuple = (),
+def write_all(files: dict[str | Path, str | bytes], force: bool = False, inputs: tuple = (),
               newline: str = "\n") -> None:
     """Write several files as one transaction: every target is checked, then every file is
     written to a temporary beside it, then all are renamed; a failure on the way removes the
@@ -105,7 +105,8 @@ def write_all(files: dict[str | Path, str], force: bool = False, inputs: tuple =
         if len(files) > 1:
             raise CompgenError(f"-o - writes one file to standard output; this command writes {len(files)}",
                                hint="give a file name")
-        sys.stdout.write(next(iter(files.values())))
+        body = next(iter(files.values()))
+        sys.stdout.buffer.write(body) if isinstance(body, bytes) else sys.stdout.write(body)
         sys.stdout.flush()
         return
     paths = {Path(p): text for p, text in files.items()}
@@ -122,7 +123,8 @@ def write_all(files: dict[str | Path, str], force: bool = False, inputs: tuple =
             fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent if str(path.parent) else ".")
             temps[path] = tmp
             os.fchmod(fd, 0o666 & ~umask)
-            with os.fdopen(fd, "w", encoding="utf-8", newline=newline) as f:
+            with (os.fdopen(fd, "wb") if isinstance(text, bytes) else
+                  os.fdopen(fd, "w", encoding="utf-8", newline=newline)) as f:
                 f.write(text)
         for path, tmp in temps.items():
             if path.exists():

@@ -27,6 +27,7 @@ IDENTIFIERS = {
     "tool": (r"\d{1,5}|[A-Za-z][A-Za-z0-9_.]{0,31}", "a tool number or a name of letters, digits, _ and ."),
     "work_offset": (r"G5[4-7]|G50[5-9]|G5[1-9]\d", "a settable frame G54…G57 or G505…G599"),
     "path": (r"[A-Za-z][A-Za-z0-9_]{0,15}", "a letter, then up to 15 letters, digits or _"),
+    "serial": (r"[A-Za-z0-9][A-Za-z0-9_./-]{0,39}", "up to 40 letters, digits and _ . / -"),
 }
 
 
@@ -133,6 +134,21 @@ class Limits:
 
 
 @dataclass(frozen=True)
+class Drift:
+    """How far the machine's location errors may move between calibrations (``[drift]``):
+    ``compgen check`` fails a change beyond these (and beyond ``k_sigma`` of its σ), the
+    history flags a step or a steady drift. The defaults are a starting point for a
+    mid-size machine, not a standard's: set your own acceptance."""
+
+    offset_um: float = 5.0
+    tilt_arcsec: float = 10.0
+    per_month_um: float = 1.0      # a steady drift of an offset beyond this per 30 days
+    per_month_arcsec: float = 2.0
+    k_sigma: float = 3.0
+    every_days: float = 90.0       # a check is due this long after the last measurement
+
+
+@dataclass(frozen=True)
 class Machine:
     name: str
     controller: str
@@ -144,6 +160,8 @@ class Machine:
     paths: dict[str, PathDef] = field(default_factory=dict)
     program: ProgramSetup | None = None
     limits: Limits = Limits()
+    drift: Drift = Drift()
+    serial: str = ""                # the machine's serial number: one history per machine
     sinumerik: dict | None = None   # tcarr record and the axis vectors the control holds
     linuxcnc: dict | None = None    # the trt kinematics' switches ([linuxcnc])
     tolerances: dict[str, float] = field(default_factory=dict)   # path → max range, µm

@@ -18,6 +18,7 @@ from .machine import (
     LINEAR,
     ROTARY,
     Axis,
+    Drift,
     Limits,
     Machine,
     PathDef,
@@ -27,7 +28,8 @@ from .machine import (
     identifier,
 )
 
-TOP_KEYS = {"name", "controller", "workpiece", "tool", "rtest", "paths", "program", "limits",
+TOP_KEYS = {"name", "serial", "drift", "controller", "workpiece", "tool", "rtest", "paths", "program",
+            "limits",
             "tolerances", "effects"}
 
 
@@ -126,6 +128,11 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
         g = get.sub("limits")
         g.only(set(Limits.__dataclass_fields__))
         limits = Limits(**{k: _positive(g, k) for k in Limits.__dataclass_fields__ if k in g.doc})
+    drift = Drift()
+    if "drift" in doc:
+        g = get.sub("drift")
+        g.only(set(Drift.__dataclass_fields__))
+        drift = Drift(**{k: _positive(g, k) for k in Drift.__dataclass_fields__ if k in g.doc})
     sections = {ctl.section: ctl.read_section(get.sub(ctl.section), machine)   # each control its own
                 for ctl in CONTROLLERS.values() if ctl.section and ctl.section in doc}
     tolerances = {}
@@ -143,8 +150,9 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
                 resolve(machine, name)
             except CompgenError as exc:
                 raise CompgenError(exc.message, where=f"{g.at('declared')}[{i}]", hint=exc.hint) from None
+    serial = identifier("serial", doc["serial"], get.at("serial")) if "serial" in doc else ""
     return replace(machine, paths=paths, program=program, limits=limits, tolerances=tolerances,
-                   declared=declared, **sections)
+                   declared=declared, drift=drift, serial=serial, **sections)
 
 
 def _positive(g: _Getter, key: str, zero_ok: bool = False) -> float:

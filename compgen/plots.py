@@ -167,3 +167,29 @@ def _png(fig) -> bytes:
     fig.savefig(buffer, format="png", dpi=110)
     plt.close(fig)
     return buffer.getvalue()
+
+
+def trend_png(t) -> bytes:
+    """A machine's history (``history.Trend``): each location error's machine value over
+    time with its ±2σ band; edits as vertical lines, flagged fits circled in red."""
+    from datetime import datetime
+
+    n = len(t.params)
+    fig, axes = plt.subplots(n, 1, figsize=(8, 1.8 * n + 0.6), sharex=True, squeeze=False)
+    for ax, name in zip(axes[:, 0], t.params, strict=True):
+        rows = [e for e in t.entries if name in e.values]
+        when = [datetime.fromisoformat(e.taken) for e in rows]
+        v = np.array([shown(e.machine_value(name), e.units[name])[0] for e in rows])
+        s = np.array([shown(e.std[name], e.units[name])[0] for e in rows])
+        unit = shown(1.0, rows[0].units[name])[1] if rows else ""
+        ax.fill_between(when, v - 2 * s, v + 2 * s, alpha=0.25, step=None, label="±2σ")
+        ax.plot(when, v, "o-", ms=3)
+        for e in t.edits:
+            ax.axvline(datetime.fromisoformat(e["taken"]), color="k", ls="--", lw=0.8)
+        bad = [i for i, e in enumerate(rows) if any(f.param == name and f.taken == e.taken for f in t.flags)]
+        if bad:
+            ax.plot([when[i] for i in bad], v[bad], "o", ms=10, mfc="none", mec="red")
+        ax.set_ylabel(f"{name} ({unit})")
+    axes[0, 0].set_title(f"{t.machine}: machine values over time (dashed: edits; red: flagged)")
+    fig.autofmt_xdate()
+    return _png(fig)

@@ -90,3 +90,70 @@ def vector(name: str) -> Path:
             pytest.fail(f"shared vector {path} is missing")
         pytest.skip(f"shared vectors not found at {VECTORS}")
     return path
+
+
+@pytest.fixture(scope="session")
+def postgres():
+    """A real PostgreSQL server for the history tests: ``initdb`` in a temporary folder, a
+    loopback port, trust authentication for the local owner role, stopped at the end. CI
+    sets COMPGEN_REQUIRE_POSTGRES: there it must start (Debian's postgresql package)."""
+    import glob
+    import pwd
+    import shutil
+    import socket
+    import subprocess
+    import tempfile
+
+    found = sorted(glob.glob("/usr/lib/postgresql/*/bin/initdb"), key=lambda p: int(p.split("/")[4]))
+    initdb = found[-1] if found else shutil.which("initdb")
+    try:
+        import psycopg  # noqa: F401
+    except ImportError:
+        initdb = None
+    if not initdb:
+        if os.environ.get("COMPGEN_REQUIRE_POSTGRES"):
+            pytest.fail("PostgreSQL (initdb) or psycopg is missing: install Debian's postgresql")
+        pytest.skip("PostgreSQL (initdb) or psycopg not installed here")
+    bin_dir = Path(initdb).resolve().parent
+    folder = Path(tempfile.mkdtemp(prefix="compgen-pg-"))
+    as_user = []
+    if os.geteuid() == 0:              # the server refuses to run as root
+        user = pwd.getpwnam("postgres")
+        os.chown(folder, user.pw_uid, user.pw_gid)
+        as_user = ["runuser", "-u", "postgres", "--"]
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    data = folder / "data"
+    ctl = [*as_user, str(bin_dir / "pg_ctl"), "-D", str(data)]
+    try:
+        subprocess.run([*as_user, str(bin_dir / "initdb"), "-D", str(data), "-U", "compgen_owner",
+                        "-A", "trust",
+                        "-E", "UTF8", "--no-sync"], check=True, capture_output=True, timeout=120)
+        subprocess.run([*ctl, "-l", str(folder / "log"), "-w", "-t", "60", "-o",
+                        f"-p {port} -c listen_addresses=127.0.0.1 -k {folder} -c fsync=off", "start"],
+                       check=True, capture_output=True, timeout=90)
+    except (subprocess.CalledProcessError, subprocess.TimeoutExpired) as exc:
+        log = (folder / "log").read_text() if (folder / "log").exists() else ""
+        message = f"PostgreSQL did not start: {exc} {getattr(exc, 'stderr', b'')!r} {log[-500:]}"
+        if os.environ.get("COMPGEN_REQUIRE_POSTGRES"):
+            pytest.fail(message)
+        pytest.skip(message)
+    try:
+        yield f"postgresql://compgen_owner@127.0.0.1:{port}"
+    finally:
+        subprocess.run([*ctl, "-m", "immediate", "stop"], capture_output=True, timeout=60)
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture
+def pg_db(postgres, request):
+    """A fresh database on the test server for one test: its owner's URL."""
+    import re
+
+    import psycopg
+    name = "t_" + re.sub(r"\W", "_", request.node.name.lower())[:50]
+    with psycopg.connect(f"{postgres}/postgres", autocommit=True) as db:
+        db.execute(f"DROP DATABASE IF EXISTS {name}")
+        db.execute(f"CREATE DATABASE {name}")
+    return f"{postgres}/{name}"

@@ -16,7 +16,8 @@ from compgen.identify import identify
 from compgen.rtest import read_rtest
 
 SESSION = ROOT / "examples" / "seed-session.csv"
-HEAVY = ("scipy", "jinja2", "matplotlib")   # each only in the commands that use it
+HEAVY = ("scipy", "jinja2", "matplotlib",       # each only in the commands that use it
+         "psycopg", "compgen.store", "compgen.history")
 
 
 def _imported_by(statement: str) -> list[str]:

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..correction import Plan, lines_text, plan, rest
+from ..effects import effect_of_param
 from ..errors import CompgenError
 from ..kinematics import Model, Poses, inverse
 from ..lines import controller_inverse
@@ -57,6 +58,23 @@ def sign_check(machine: Machine, p: Plan, ctl: Controller, name: str, version: s
     program = measure_program(machine, at_poses.take(np.flatnonzero(keep)), "sign check", ctl.name, "tcpm",
                               name, version, date)
     return program.files[ctl.program_ext], expect
+
+
+def corrected_by(machine: Machine, fit: FitResult, ctl: Controller) -> dict[str, float]:
+    """The location errors an edit of ``fit`` corrects on ``ctl`` (name → mm or rad): after
+    it is loaded the control should measure each of them less by as much. Offsets of the
+    rotary axes always; their tilts where the control holds tilts; squareness where it
+    holds it; never the ball's or the nest's set-up."""
+    out = {}
+    for n in fit.model:
+        e = effect_of_param(machine, n)
+        if e.basis.kind != "const" or e.carrier in ("ball", "nest"):
+            continue
+        rotary = machine.axis(e.carrier).rotary
+        held = (fit.parameters[n].unit == "mm" or ctl.holds_tilts) if rotary else bool(ctl.squareness_as)
+        if held:
+            out[n] = fit.parameters[n].value
+    return out
 
 
 def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, current: str | None,

@@ -1,0 +1,536 @@
+"""A machine's calibrations over time: what the store holds, read as a trend, a step or a
+drift, and a short check against the last accepted calibration.
+
+Values compare across an edit: an edit written from a fit corrects that fit's location
+errors, so after it the control should measure them less by as much. Each fit's *machine
+value* is what it measured plus every correction written before it; a step or a drift is
+judged on machine values, so an edit is never mistaken for a crash, and a crash after an
+edit is still one.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+
+import numpy as np
+
+from . import me
+from .effects import effect_of_param
+from .errors import CompgenError
+from .machine import Machine
+from .results import FitResult
+from .store import Store, now
+from .units import shown
+
+DAYS_PER_MONTH = 30.0
+DEVICES = ("rtest", "probe")
+
+
+def taken_at(text: str | None) -> str:
+    """A session's date as given (ISO 8601, a date or a date and time; UTC if no zone), or now."""
+    if not text:
+        return now()
+    try:
+        t = datetime.fromisoformat(text)
+    except ValueError:
+        raise CompgenError(f"{text!r} is not a date",
+                           hint="give it as 2026-07-15 or 2026-07-15T09:30") from None
+    return (t if t.tzinfo else t.replace(tzinfo=UTC)).isoformat(timespec="seconds")
+
+
+def _days(a: str, b: str) -> float:
+    return (datetime.fromisoformat(b) - datetime.fromisoformat(a)).total_seconds() / 86400.0
+
+
+def machine_key(machine: Machine, serial: str | None = None) -> tuple[str, str]:
+    return machine.name, serial if serial is not None else machine.serial
+
+
+def _machine_id(store: Store, name: str, serial: str, create: bool) -> int | None:
+    if create:     # two writers may meet here: the one that loses the race reads the winner's row
+        store.rows("INSERT INTO machines (name, serial, recorded) VALUES (?, ?, ?) "
+                   "ON CONFLICT (name, serial) DO NOTHING RETURNING id", (name, serial, now()))
+    rows = store.rows("SELECT id FROM machines WHERE name = ? AND serial = ?", (name, serial))
+    return int(rows[0]["id"]) if rows else None
+
+
+def machine_id(store: Store, machine: Machine, serial: str | None = None) -> int:
+    name, serial = machine_key(machine, serial)
+    found = _machine_id(store, name, serial, create=False)
+    if found is None:
+        known = store.rows("SELECT name, serial FROM machines ORDER BY name, serial")
+        raise CompgenError(f"no calibration of {name!r}{f' serial {serial}' if serial else ''} is recorded",
+                           where=store.where,
+                           hint=(f"record one: {me()} history add FIT.json" if not known else
+                                 "recorded: " + "; ".join(f"{r['name']}" + (f" ({r['serial']})" if r["serial"]
+                                                                            else "") for r in known[:5])))
+    return found
+
+
+def record_fit(store: Store, fit: FitResult, machine: Machine, *, serial: str | None = None,
+               taken: str | None = None, device: str = "rtest", operator: str = "",
+               temperatures: Mapping[str, float] | None = None, kind: str = "calibration",
+               verdict: Sequence[str] = (), exist_ok: bool = False) -> int:
+    """One session and its fit, in one transaction; returns the fit's id. ``verdict``: why
+    the fit should not reach a control (``gate.fit_gate``), empty for an accepted fit. The
+    same fit twice is refused, or with ``exist_ok`` its first record's id returned."""
+    if device not in DEVICES:
+        raise CompgenError(f"device must be one of {', '.join(DEVICES)}, not {device!r}")
+    name, serial = machine_key(machine, serial)
+    if fit.machine.get("sha256") and fit.machine["sha256"] != machine.sha256:
+        raise CompgenError("the fit was made with another machine file than the one given",
+                           hint="give the machine file the fit names, or refit")
+    when = taken_at(taken)
+    with store.writing():
+        same = store.rows("SELECT f.id FROM fits f JOIN sessions s ON s.id = f.session_id JOIN machines m "
+                          "ON m.id = s.machine_id WHERE f.marker = ? AND m.name = ? AND m.serial = ?",
+                          (fit.marker, name, serial))
+        if same and exist_ok:
+            return int(same[0]["id"])
+        if same:
+            raise CompgenError(f"this fit ({fit.marker}) is already in the history", where=store.where,
+                               hint=f"{me()} history show --machine … lists it")
+        mid = _machine_id(store, name, serial, create=True)
+        sid = store.insert("sessions", {
+            "machine_id": mid, "taken": when, "device": device, "operator": operator,
+            "temperatures": dict(temperatures or {}), "machine_sha256": machine.sha256,
+            "data": [{"file": d.file, "sha256": d.sha256, "rows": d.rows} for d in fit.data],
+            "recorded": now()})
+        return store.insert("fits", {
+            "session_id": sid, "marker": fit.marker, "kind": kind, "model": list(fit.model),
+            "parameters": {n: {"value": e.value, "std": e.std, "unit": e.unit}
+                           for n, e in fit.parameters.items()},
+            "sigma_um": fit.residual["sigma_um"], "rms_um": fit.residual["rms_um"],
+            "verdict": "; ".join(verdict) or "accepted", "fit_json": fit.to_dict(), "recorded": now()})
+
+
+def record_edit(store: Store, fit: FitResult, machine: Machine, controller: str,
+                corrects: Mapping[str, float],
+                written: Mapping[str, str], loaded: Mapping[str, str], *, serial: str | None = None,
+                taken: str | None = None) -> int:
+    """An edit written from ``fit`` (recorded before it): the location errors it corrects
+    (name → value, mm or rad), the files written and those loaded on the control (name →
+    SHA-256)."""
+    name, serial = machine_key(machine, serial)
+    with store.writing():
+        rows = store.rows("SELECT f.id, s.taken FROM fits f JOIN sessions s ON s.id = f.session_id "
+                          "JOIN machines m ON m.id = s.machine_id WHERE f.marker = ? AND m.name = ? "
+                          "AND m.serial = ?", (fit.marker, name, serial))
+        if not rows:
+            raise CompgenError(f"the edit's fit ({fit.marker}) is not in the history", where=store.where,
+                               hint=f"record it first: {me()} history add FIT.json")
+        when = taken_at(taken)
+        if when < rows[0]["taken"]:
+            raise CompgenError("an edit cannot come before the fit it was written from",
+                               hint=f"the fit was measured {rows[0]['taken']}")
+        return store.insert("edits", {
+            "machine_id": _machine_id(store, name, serial, create=False), "fit_id": rows[0]["id"],
+            "controller": controller, "corrects": dict(corrects), "written": dict(written),
+            "loaded": dict(loaded), "taken": when, "recorded": now()})
+
+
+# -- reading it back
+
+@dataclass
+class Entry:
+    """One fit of a machine's history with the corrections written before it."""
+
+    id: int
+    taken: str
+    marker: str
+    kind: str
+    device: str
+    verdict: str
+    sigma_um: float
+    values: dict[str, float]          # as measured (mm, rad)
+    std: dict[str, float]
+    units: dict[str, str]
+    corrected: dict[str, float]       # sum of the corrections written before it (mm, rad)
+
+    def machine_value(self, name: str) -> float:
+        return self.values[name] + self.corrected.get(name, 0.0)
+
+
+@dataclass
+class Flag:
+    kind: str             # "step" or "drift"
+    param: str
+    taken: str            # the fit at which it shows
+    change: float         # step: mm or rad; drift: per month
+    std: float
+    unit: str
+    since: str = ""
+
+    def text(self) -> str:
+        v, u = shown(self.change, self.unit)
+        s, _ = shown(self.std, self.unit)
+        if self.kind == "step":
+            return f"{self.taken[:10]}  {self.param} moved {v:+.2f} ± {s:.2f} {u} since the fit before"
+        return (f"{self.taken[:10]}  {self.param} drifts {v:+.2f} ± {s:.2f} {u}/month "
+                f"(since {self.since[:10]})")
+
+
+@dataclass
+class Trend:
+    machine: str
+    serial: str
+    params: tuple[str, ...]
+    entries: list[Entry]
+    edits: list[dict]
+    flags: list[Flag] = field(default_factory=list)
+
+
+def _entries(store: Store, mid: int) -> tuple[list[Entry], list[dict]]:
+    fits = store.rows("SELECT f.id, f.marker, f.kind, f.parameters, f.sigma_um, f.verdict, s.taken, s.device "
+                      "FROM fits f JOIN sessions s ON s.id = f.session_id WHERE s.machine_id = ? "
+                      "ORDER BY s.taken, f.id", (mid,))
+    edits = store.rows("SELECT e.id, e.taken, e.controller, e.corrects, e.written, e.loaded, f.marker "
+                       "FROM edits e JOIN fits f ON f.id = e.fit_id WHERE e.machine_id = ? "
+                       "ORDER BY e.taken, e.id", (mid,))
+    for e in edits:
+        e["corrects"] = json.loads(e["corrects"])
+        e["written"], e["loaded"] = json.loads(e["written"]), json.loads(e["loaded"])
+    out = []
+    for f in fits:
+        p = json.loads(f["parameters"])
+        corrected: dict[str, float] = {}
+        for e in edits:
+            if e["taken"] <= f["taken"]:
+                for n, v in e["corrects"].items():
+                    corrected[n] = corrected.get(n, 0.0) + v
+        out.append(Entry(f["id"], f["taken"], f["marker"], f["kind"], f["device"], f["verdict"],
+                         f["sigma_um"],
+                         {n: q["value"] for n, q in p.items()}, {n: q["std"] for n, q in p.items()},
+                         {n: q["unit"] for n, q in p.items()}, corrected))
+    return out, edits
+
+
+def machine_params(machine: Machine, names: Sequence[str]) -> tuple[str, ...]:
+    """The location errors of the machine among ``names``: the ball's and the nest's
+    set-up terms change with every set-up and are no history of the machine."""
+    return tuple(n for n in names if effect_of_param(machine, n).carrier not in ("ball", "nest")
+                 and effect_of_param(machine, n).basis.kind == "const")
+
+
+def _limit(machine: Machine, unit: str, per_month: bool = False) -> float:
+    d = machine.drift
+    if unit == "mm":
+        return (d.per_month_um if per_month else d.offset_um) * 1e-3
+    return math.radians((d.per_month_arcsec if per_month else d.tilt_arcsec) / 3600.0)
+
+
+def trend(store: Store, machine: Machine, serial: str | None = None,
+          params: Sequence[str] | None = None) -> Trend:
+    """Every fit of the machine in time order, and the steps and drifts in its machine values."""
+    name, serial = machine_key(machine, serial)
+    entries, edits = _entries(store, machine_id(store, machine, serial))
+    seen = list(dict.fromkeys(n for e in entries for n in e.values))
+    names = tuple(params) if params else machine_params(machine, seen)
+    missing = [n for n in names if n not in seen]
+    if missing:
+        raise CompgenError(f"no recorded fit holds {', '.join(missing)}",
+                           hint="recorded: " + ", ".join(seen))
+    return Trend(name, serial, names, entries, edits, flags(machine, entries, names))
+
+
+def flags(machine: Machine, entries: Sequence[Entry], names: Sequence[str]) -> list[Flag]:
+    """Steps: a machine value moving from one fit to the next beyond ``[drift]``'s limit and
+    beyond k σ of the change. Drifts: the slope of the machine values since the last step
+    (three fits at least), beyond the monthly limit and k σ of the slope."""
+    k = machine.drift.k_sigma
+    out = []
+    for n in names:
+        run = [e for e in entries if n in e.values and e.std.get(n, 0.0) > 0]
+        start, drifting = 0, False
+        for i in range(1, len(run)):
+            a, b = run[i - 1], run[i]
+            change = b.machine_value(n) - a.machine_value(n)
+            std = math.hypot(a.std[n], b.std[n])
+            if abs(change) > _limit(machine, b.units[n]) and abs(change) > k * std:
+                out.append(Flag("step", n, b.taken, change, std, b.units[n]))
+                start, drifting = i, False
+                continue
+            seg = run[start:i + 1]
+            if len(seg) < 3 or drifting:
+                continue
+            rate, rate_std = _slope(seg, n)
+            if abs(rate) > _limit(machine, b.units[n], per_month=True) and abs(rate) > k * rate_std:
+                out.append(Flag("drift", n, b.taken, rate, rate_std, b.units[n], seg[0].taken))
+                drifting = True          # flagged once per run: the trend table shows the rest
+    return sorted(out, key=lambda f: (f.taken, f.param))
+
+
+def _slope(seg: Sequence[Entry], n: str) -> tuple[float, float]:
+    """Weighted least-squares slope per month of the machine values, and its σ (scaled by
+    the scatter when that exceeds the fits' own σ: a slope is not surer than its points)."""
+    t = np.array([_days(seg[0].taken, e.taken) / DAYS_PER_MONTH for e in seg])
+    y = np.array([e.machine_value(n) for e in seg])
+    w = 1.0 / np.array([e.std[n] for e in seg]) ** 2
+    A = np.column_stack([np.ones_like(t), t]) * np.sqrt(w)[:, None]
+    coef, *_ = np.linalg.lstsq(A, y * np.sqrt(w), rcond=None)
+    cov = np.linalg.inv(A.T @ A)
+    chi2 = float(np.sum(w * (y - coef[0] - coef[1] * t) ** 2)) / max(len(seg) - 2, 1)
+    return float(coef[1]), float(np.sqrt(cov[1, 1] * max(chi2, 1.0)))
+
+
+def last_calibration(store: Store, machine: Machine, serial: str | None = None,
+                     before: str | None = None) -> tuple[Entry, list[Entry], list[dict]]:
+    """The last accepted calibration measured before ``before`` (default: any), and every fit
+    and edit of the machine up to then."""
+    entries, edits = _entries(store, machine_id(store, machine, serial))
+    if before:
+        entries = [e for e in entries if e.taken <= before]
+        edits = [e for e in edits if e["taken"] <= before]
+    accepted = [e for e in entries if e.kind == "calibration" and e.verdict == "accepted"]
+    if not accepted:
+        raise CompgenError("no accepted calibration of this machine is recorded (each recorded fit "
+                           "has a reason it should not reach the control)", where=store.where,
+                           hint=f"{me()} history show --machine … lists them")
+    return accepted[-1], entries, edits
+
+
+def fleet(store: Store, every_days: float, today: str | None = None) -> list[dict]:
+    """Every machine: its last calibration and check, the last edit, and when a check is due."""
+    out = []
+    today = taken_at(today)
+    for m in store.rows("SELECT id, name, serial FROM machines ORDER BY name, serial"):
+        fits = store.rows("SELECT f.kind, f.verdict, s.taken FROM fits f "
+                          "JOIN sessions s ON s.id = f.session_id "
+                          "WHERE s.machine_id = ? ORDER BY s.taken, f.id", (m["id"],))
+        checks = store.rows("SELECT c.passed, s.taken FROM checks c JOIN fits f ON f.id = c.fit_id "
+                            "JOIN sessions s ON s.id = f.session_id WHERE c.machine_id = ? "
+                            "ORDER BY s.taken, c.id",
+                            (m["id"],))
+        edits = store.rows("SELECT taken FROM edits WHERE machine_id = ? ORDER BY taken", (m["id"],))
+        calib = [f for f in fits if f["kind"] == "calibration" and f["verdict"] == "accepted"]
+        last = max([f["taken"] for f in fits] or [""])
+        due = (datetime.fromisoformat(last).timestamp() + every_days * 86400) if last else None
+        out.append({"machine": m["name"], "serial": m["serial"], "fits": len(fits),
+                    "last_calibration": calib[-1]["taken"] if calib else None,
+                    "last_check": checks[-1]["taken"] if checks else None,
+                    "last_check_passed": bool(checks[-1]["passed"]) if checks else None,
+                    "last_edit": edits[-1]["taken"] if edits else None,
+                    "due": datetime.fromtimestamp(due, UTC).date().isoformat() if due else None,
+                    "overdue": bool(due and due < datetime.fromisoformat(today).timestamp())})
+    return out
+
+
+def export_rows(store: Store, machine_name: str | None = None) -> list[dict]:
+    """One row per fit and parameter: the flat table a spreadsheet or a plant's database takes."""
+    sql = ("SELECT m.name, m.serial, s.taken, s.device, s.operator, f.marker, f.kind, f.verdict, f.sigma_um, "
+           "f.parameters FROM fits f JOIN sessions s ON s.id = f.session_id "
+           "JOIN machines m ON m.id = s.machine_id"
+           + (" WHERE m.name = ?" if machine_name else "") + " ORDER BY m.name, m.serial, s.taken, f.id")
+    out = []
+    for r in store.rows(sql, (machine_name,) if machine_name else ()):
+        for n, p in json.loads(r.pop("parameters")).items():
+            out.append({**r, "parameter": n, "value": p["value"], "std": p["std"], "unit": p["unit"]})
+    return out
+
+
+# -- a check against the last calibration
+
+@dataclass
+class Change:
+    param: str
+    change: float          # machine value now minus at the calibration (mm, rad)
+    std: float
+    unit: str
+    limit: float
+    status: str            # "pass", "fail", or "unsure" (beyond the limit, but not beyond k σ)
+    words: str
+
+    def text(self) -> str:
+        v, u = shown(self.change, self.unit)
+        s, _ = shown(self.std, self.unit)
+        lim, _ = shown(self.limit, self.unit)
+        return (f"  {self.param:<6}{v:>+9.2f} ± {s:.2f} {u:<7}limit {lim:g} {u:<7}"
+                f"{self.status.upper():<7}{self.words}")
+
+
+@dataclass
+class CheckResult:
+    machine: str
+    serial: str
+    against: Entry
+    marker: str
+    taken: str
+    changes: list[Change]
+    sigma_um: float
+    paths: dict[str, str]          # path → PASS/FAIL against [tolerances]
+    flags: list[Flag]
+    advice: list[str]
+
+    @property
+    def passed(self) -> bool:
+        """Every location error within its limit and every path within its tolerance; a
+        change too uncertain to judge does not pass (a drift within limits does, with advice)."""
+        return (all(c.status == "pass" for c in self.changes)
+                and not any(v.startswith("FAIL") for v in self.paths.values()))
+
+    def summary(self) -> dict:
+        return {"format": "compgen.check/1", "machine": self.machine, "serial": self.serial,
+                "passed": self.passed, "taken": self.taken, "fit": self.marker,
+                "against": {"fit": self.against.marker, "taken": self.against.taken},
+                "sigma_um": self.sigma_um, "paths": self.paths,
+                "changes": [{"parameter": c.param, "change": c.change, "std": c.std, "unit": c.unit,
+                             "limit": c.limit, "status": c.status} for c in self.changes],
+                "flags": [f.text() for f in self.flags], "advice": self.advice}
+
+    def text(self) -> str:
+        lines = [f"compgen check: {self.machine}{f' ({self.serial})' if self.serial else ''}, measured "
+                 f"{self.taken[:16]}",
+                 f"  against the calibration of {self.against.taken[:16]} ({self.against.marker}), "
+                 "corrections written since counted",
+                 "", f"  {'param':<6}{'change':>9}   {'σ':<12}{'':<16}{'status':<7}"]
+        lines += [c.text() for c in self.changes]
+        lines.append(f"\n  residual σ̂ {self.sigma_um:.3f} µm (the calibration's "
+                     f"{self.against.sigma_um:.3f} µm)")
+        lines += [f"  {p}: {v} µm range beyond the set-up" for p, v in self.paths.items()]
+        lines += [f"  flagged: {f.text()}" for f in self.flags]
+        lines += ["", "PASS: the machine is where its last calibration left it" if self.passed else "FAIL"]
+        lines += [f"  next: {a}" for a in self.advice]
+        return "\n".join(lines) + "\n"
+
+
+def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: Sequence[Entry],
+          edits: Sequence[dict], taken: str, serial: str | None = None) -> CheckResult:
+    """A short measurement's fit against the last accepted calibration: each location
+    error's change (machine values: the corrections written since are counted) with its σ,
+    the paths against ``[tolerances]``, and a drift or step it completes."""
+    from .compare import beyond_setup
+    from .kinematics import Poses
+
+    name, serial = machine_key(machine, serial)
+    k = machine.drift.k_sigma
+    corrected: dict[str, float] = {}
+    for e in edits:
+        if e["taken"] <= taken:
+            for n, v in e["corrects"].items():
+                corrected[n] = corrected.get(n, 0.0) + v
+    now_entry = Entry(0, taken, fit.marker, "check", "rtest", "", fit.residual["sigma_um"],
+                      {n: e.value for n, e in fit.parameters.items()},
+                      {n: e.std for n, e in fit.parameters.items()},
+                      {n: e.unit for n, e in fit.parameters.items()}, corrected)
+    names = [n for n in machine_params(machine, fit.model) if n in calibration.values]
+    changes = []
+    for n in names:
+        change = now_entry.machine_value(n) - calibration.machine_value(n)
+        std = math.hypot(now_entry.std[n], calibration.std[n])
+        limit = _limit(machine, now_entry.units[n])
+        status = "pass" if abs(change) <= limit else ("fail" if abs(change) > k * std else "unsure")
+        changes.append(Change(n, change, std, now_entry.units[n], limit, status,
+                              effect_of_param(machine, n).words))
+    got = beyond_setup(machine, Poses.concat([d.poses for d in data]),
+                       np.concatenate([d.deviation for d in data]))
+    paths = {}
+    for p, stats in got["per_path"].items():
+        if p in machine.tolerances:
+            worst = max(stats["range_um"])
+            tol = machine.tolerances[p]
+            paths[p] = f"PASS {worst:.2f} <= {tol:g}" if worst <= tol else f"FAIL {worst:.2f} > {tol:g}"
+    series = [e for e in entries if e.taken <= taken] + [now_entry]
+    new_flags = [f for f in flags(machine, series, names) if f.taken == taken]
+    advice = []
+    failed = [c for c in changes if c.status == "fail"]
+    if failed:
+        worst = max(failed, key=lambda c: abs(c.change) / c.limit)
+        advice.append(f"re-calibrate: {', '.join(c.param for c in failed)} moved beyond its limit "
+                      f"({worst.param}, {worst.words}, most); measure all paths ({me()} measure-program "
+                      f"--machine … --path all), fit, and write the edit with kinematics")
+        axes = {c.param[-1] for c in failed}      # ISO 230 symbols end with the axis they locate
+        if len(axes) == 1:
+            axis = axes.pop()
+            advice.append(f"look at axis {axis} first: a location error of one axis moving alone points "
+                          "to a collision, a loosened clamp or a bearing, not to temperature")
+    if any(c.status == "unsure" for c in changes):
+        advice.append("measure more (all paths, or the check path twice): "
+                      + ", ".join(c.param for c in changes if c.status == "unsure")
+                      + " may have moved beyond its limit, but its σ is too large to say")
+    if fit.residual["sigma_um"] > 2.0 * calibration.sigma_um and fit.residual["sigma_um"] > 1.0:
+        advice.append(f"check the set-up: the residual σ̂ is {fit.residual['sigma_um']:.2f} µm against the "
+                      f"calibration's {calibration.sigma_um:.2f} µm (ball stem, nest, temperature, a loose "
+                      "magnet base)")
+    if any(v.startswith("FAIL") for v in paths.values()):
+        advice.append("a path is beyond its tolerance: re-calibrate, then compare the predicted residual"
+                      if failed else
+                      "the location errors are where the last calibration found them, but a path is beyond "
+                      "its tolerance: that calibration is not corrected on the control; write its edit "
+                      f"({me()} kinematics --from FIT.json …) and load it")
+    for f in new_flags:
+        if f.kind == "drift":
+            advice.append(f"{f.param} drifts steadily ({f.text().split('  ', 1)[1]}): plan the next "
+                          "calibration before it reaches its limit, and look for its cause (warm-up, season)")
+    return CheckResult(name, serial, calibration, fit.marker, taken, changes, fit.residual["sigma_um"],
+                       paths, new_flags, advice)
+
+
+def record_check(store: Store, result: CheckResult, fit: FitResult, machine: Machine, *,
+                 serial: str | None = None, operator: str = "") -> int:
+    """The check's session, its fit and its verdict, in one transaction."""
+    name, serial = machine_key(machine, serial)
+    with store.writing():
+        mid = _machine_id(store, name, serial, create=False)
+        sid = store.insert("sessions", {
+            "machine_id": mid, "taken": result.taken, "device": "rtest", "operator": operator,
+            "temperatures": {}, "machine_sha256": machine.sha256,
+            "data": [{"file": d.file, "sha256": d.sha256, "rows": d.rows} for d in fit.data],
+            "recorded": now()})
+        fid = store.insert("fits", {
+            "session_id": sid, "marker": fit.marker, "kind": "check", "model": list(fit.model),
+            "parameters": {n: {"value": e.value, "std": e.std, "unit": e.unit}
+                           for n, e in fit.parameters.items()},
+            "sigma_um": fit.residual["sigma_um"], "rms_um": fit.residual["rms_um"],
+            "verdict": "check passed" if result.passed else "check failed", "fit_json": fit.to_dict(),
+            "recorded": now()})
+        return store.insert("checks", {"machine_id": mid, "fit_id": fid, "against_fit_id": result.against.id,
+                                       "passed": int(result.passed), "summary": result.summary(),
+                                       "recorded": now()})
+
+
+# -- the trend as text and JSON
+
+def trend_dict(t: Trend) -> dict:
+    return {"format": "compgen.trend/1", "machine": t.machine, "serial": t.serial,
+            "parameters": list(t.params),
+            "fits": [{"taken": e.taken, "fit": e.marker, "kind": e.kind, "device": e.device,
+                      "verdict": e.verdict, "sigma_um": e.sigma_um,
+                      "values": {n: {"measured": e.values[n], "machine": e.machine_value(n), "std": e.std[n],
+                                     "unit": e.units[n]} for n in t.params if n in e.values}}
+                     for e in t.entries],
+            "edits": [{"taken": e["taken"], "fit": e["marker"], "controller": e["controller"],
+                       "corrects": e["corrects"], "written": e["written"], "loaded": e["loaded"]}
+                      for e in t.edits],
+            "flags": [{"kind": f.kind, "parameter": f.param, "taken": f.taken, "change": f.change,
+                       "std": f.std, "unit": f.unit, "since": f.since, "text": f.text()} for f in t.flags]}
+
+
+def trend_text(t: Trend) -> str:
+    """One row per fit: each location error's machine value ± σ (µm, ″); edits between."""
+    units = {n: shown(1.0, next(e.units[n] for e in t.entries if n in e.units))[1] for n in t.params}
+    head = "".join(f"{n + ' ' + units[n]:>18}" for n in t.params)
+    lines = [f"{t.machine}{f' ({t.serial})' if t.serial else ''}: machine values (measured + corrections "
+             "written before), ± σ", f"{'date':<12}{'fit':<11}{'kind':<12}{head}"]
+    events = [(e.taken, 1, e) for e in t.entries] + [(d["taken"], 0, d) for d in t.edits]
+    for _, is_fit, e in sorted(events, key=lambda x: (x[0], x[1])):
+        if not is_fit:
+            lines.append(f"{e['taken'][:10]:<12}{'edit':<11}{e['controller'][:11]:<12}corrects "
+                         + ", ".join(e["corrects"]) + f" (from {e['marker']})")
+            continue
+        cells = []
+        for n in t.params:
+            if n not in e.values:
+                cells.append(f"{'-':>18}")
+                continue
+            v, _ = shown(e.machine_value(n), e.units[n])
+            s, _ = shown(e.std[n], e.units[n])
+            mark = "*" if any(f.param == n and f.taken == e.taken for f in t.flags) else " "
+            cells.append(f"{v:>10.2f} ± {s:<4.2f}{mark}")
+        lines.append(f"{e.taken[:10]:<12}{e.marker:<11}{e.kind:<12}{''.join(cells)}")
+    lines.append("")
+    lines += [f"flagged: {f.text()}" for f in t.flags] or ["nothing flagged against [drift]"]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,308 @@
+"""The calibration history on both stores: a scripted year of one machine (a slow drift of
+YOC, a crash that moves BOA in month 7, an edit after it), checks against the last
+calibration, a plant's concurrent writers, a killed writer, and a database that refuses
+what compgen's role may not do. The PostgreSQL server is real, started by the tests."""
+
+import json
+import math
+import os
+import sqlite3
+import subprocess
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from conftest import ROOT, UM, run
+
+from compgen import history as H
+from compgen.effects import location_model
+from compgen.emit.kinematics import corrected_by
+from compgen.emit.registry import controller
+from compgen.gate import fit_gate
+from compgen.identify import identify
+from compgen.machine_file import load_machine
+from compgen.paths import generate
+from compgen.results import load_fit
+from compgen.rtest import format_rtest
+from compgen.simulate import read_truth, simulate
+from compgen.store import init, open_store
+
+ARCSEC = math.pi / 648000
+YOC_PER_MONTH = 1.5 * UM          # the slow drift (the [drift] limit is 1 µm/month)
+CRASH = ("2026-06-15", 30 * ARCSEC)   # BOA moves 30″ (limit 10″)
+EDIT_DATE = "2026-07-02T09:00:00+00:00"
+
+
+def _truth(machine, base, when: str, corrected: dict) -> dict:
+    """The machine on ``when``: the seed's errors, YOC drifting since 1 January, BOA after
+    the crash; minus what the control corrects (an edit loaded)."""
+    months = H._days("2026-01-01T00:00:00+00:00", H.taken_at(when)) / H.DAYS_PER_MONTH
+    t = dict(base)
+    t["YOC"] += YOC_PER_MONTH * months
+    if when >= CRASH[0]:
+        t["BOA"] += CRASH[1]
+    return {n: v - corrected.get(n, 0.0) for n, v in t.items()}
+
+
+def _session(machine, truth, paths, seed, name):
+    d = simulate(machine, truth, generate(machine, paths), 0.5, np.random.default_rng(seed))
+    return replace(d, source=name, sha256=f"{seed:064x}")
+
+
+@pytest.fixture(scope="module")
+def year():
+    """Twelve monthly calibrations (K4, K1, K2; 0.5 µm noise), each fitted and judged by the
+    gate; the edit written from month 7's fit corrects what an iTNC 530 holds."""
+    machine = load_machine("ac-trunnion-itnc530")
+    base = read_truth(ROOT / "examples" / "truth-table4.json", machine)
+    fits, corrected, edit = [], {}, None
+    for month in range(1, 13):
+        when = f"2026-{month:02d}-01T09:00:00+00:00"
+        truth = _truth(machine, base, when, corrected)
+        d = _session(machine, truth, ["K4", "K1", "K2"], month, f"m{month}.csv")
+        fit = identify(machine, [d], location_model(machine))
+        fits.append((when, fit, fit_gate(machine, [d], fit)))
+        if month == 7:
+            edit = (fit, corrected_by(machine, fit, controller("itnc530")))
+            corrected = dict(edit[1])
+    return machine, base, fits, edit
+
+
+def _record(url, year):
+    machine, _, fits, (efit, corrects) = year
+    store = init(url)[0]             # a PostgreSQL store is made by its owner; a file on first use
+    for when, fit, verdict in fits:
+        H.record_fit(store, fit, machine, taken=when, verdict=verdict)
+        if fit is efit:
+            H.record_edit(store, fit, machine, "itnc530", corrects, {"EDIT.TAB": "0" * 64}, {},
+                          taken=EDIT_DATE)
+    return store
+
+
+def _check(store, year, when, seed):
+    """A K4-only check measured on ``when`` against the last calibration before it."""
+    machine, base, _, (_, corrects) = year
+    corrected = corrects if when >= EDIT_DATE else {}
+    d = _session(machine, _truth(machine, base, when, corrected), ["K4"], seed, f"check{seed}.csv")
+    fit = identify(machine, [d], location_model(machine))
+    calibration, entries, edits = H.last_calibration(store, machine, before=H.taken_at(when))
+    return H.check(machine, fit, [d], calibration, entries, edits, H.taken_at(when))
+
+
+def _year_checks(store, year):
+    t = H.trend(store, year[0])
+    flags = [(f.kind, f.param, f.taken[:10]) for f in t.flags]
+    # the crash month and the drift, and nothing else: an edit is not a step
+    assert flags == [("drift", "YOC", "2026-03-01"), ("step", "BOA", "2026-07-01")], flags
+    step = next(f for f in t.flags if f.kind == "step")
+    assert step.change / ARCSEC == pytest.approx(30.0, abs=0.3)
+    drift = next(f for f in t.flags if f.kind == "drift")
+    assert drift.change / UM == pytest.approx(1.5 * 30 / 30.4, abs=0.15)   # 1.5 µm per 30.4 days
+    # after the edit the control measures BOA near its old value less 42″; the machine value goes on
+    after = [e for e in t.entries if e.taken > EDIT_DATE]
+    assert all(abs(e.values["BOA"]) < 0.3 * ARCSEC for e in after)
+    assert all(e.machine_value("BOA") / ARCSEC == pytest.approx(42.3, abs=0.3) for e in after)
+    for when, seed in (("2026-07-20T10:00", 101), ("2026-08-10T10:00", 103)):   # corrected and healthy
+        healthy = _check(store, year, when, seed)
+        assert healthy.passed, healthy.text()
+    crashed = _check(store, year, "2026-06-20T10:00", 102)
+    assert not crashed.passed
+    assert [c.param for c in crashed.changes if c.status == "fail"] == ["BOA"], crashed.text()
+    assert any("axis A" in a for a in crashed.advice) and any("re-calibrate" in a for a in crashed.advice)
+    # before the crash nothing moved, but the calibration was never corrected: K4 is out of tolerance
+    uncorrected = _check(store, year, "2026-05-10T10:00", 104)
+    assert all(c.status == "pass" for c in uncorrected.changes) and not uncorrected.passed
+    assert uncorrected.paths["K4"].startswith("FAIL") and "not corrected" in uncorrected.advice[0]
+    return H.trend_text(t)
+
+
+def test_a_year_in_sqlite_and_in_postgresql_gives_one_trend(year, tmp_path, pg_db):
+    with _record(tmp_path / "h.sqlite", year) as store:
+        sqlite_text = _year_checks(store, year)
+    with _record(pg_db, year) as store:
+        pg_text = _year_checks(store, year)
+    assert sqlite_text == pg_text
+    assert "BOA moved +29.9" in sqlite_text or "BOA moved +30.0" in sqlite_text
+
+
+def test_the_check_command_passes_a_healthy_machine_and_fails_the_crashed_one(year, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _record(tmp_path / "compgen-history.sqlite", year).close()      # the default store, here
+    machine, base = year[0], year[1]
+    for when, seed, code in (("2026-08-05T10:00", 201, 0), ("2026-06-20T10:00", 202, 1)):
+        corrected = year[3][1] if when >= EDIT_DATE else {}
+        d = _session(machine, _truth(machine, base, when, corrected), ["K4"], seed, "x")
+        (tmp_path / f"{seed}.csv").write_text(format_rtest(machine, d))
+        rc, out, err = run("check", "--machine", "ac-trunnion-itnc530", f"{seed}.csv", "--date", when)
+        assert rc == code, out + err
+        assert ("PASS" if code == 0 else "FAIL") in out
+        if code:
+            assert "BOA" in out and "re-calibrate" in out
+    rc, out, err = run("history", "fleet")
+    # the last check measured (not the last recorded) is the healthy one; the next is due 90 days
+    # after the last measurement, the calibration of 1 December
+    assert rc == 0 and "2026-08-05  pass   2027-03-01" in out, out
+    with open_store(tmp_path / "compgen-history.sqlite") as store:
+        checks = store.rows("SELECT passed FROM checks ORDER BY id")
+    assert [r["passed"] for r in checks] == [1, 0]
+
+
+def test_history_commands_on_a_real_fit(tmp_path, monkeypatch):
+    """add, list, show, trend (with its plot), export: each as a user types it."""
+    monkeypatch.chdir(tmp_path)
+    machine = load_machine("ac-trunnion-itnc530")
+    truth = read_truth(ROOT / "examples" / "truth-table4.json", machine)
+    d = simulate(machine, truth, generate(machine, ["K4"]), 0.5, np.random.default_rng(5))
+    (tmp_path / "a.csv").write_text(format_rtest(machine, d))
+    assert run("fit", "--machine", "ac-trunnion-itnc530", "a.csv", "-o", "fit.json")[0] == 0
+    rc, out, err = run("history", "add", "fit.json", "--date", "2026-03-01", "--operator", "J. Doe",
+                       "--temperature", "hall=21.5")
+    assert rc == 0 and "accepted" in out, out + err
+    rc, out, err = run("history", "add", "fit.json")
+    assert rc == 2 and "already in the history" in err
+    rc, out, _ = run("history", "list")
+    assert "1 fit(s)" in out
+    rc, out, _ = run("history", "show", "--machine", "ac-trunnion-itnc530")
+    assert "2026-03-01" in out and "calibration" in out
+    rc, out, err = run("history", "trend", "--machine", "ac-trunnion-itnc530", "--param", "YOC,BOA",
+                       "--plot", "trend.png")
+    assert rc == 0 and "YOC µm" in out and "nothing flagged" in out, out + err
+    assert (tmp_path / "trend.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    rc, out, err = run("history", "trend", "--machine", "ac-trunnion-itnc530", "--param", "XYZ")
+    assert rc == 2 and "no recorded fit holds XYZ" in err
+    assert run("history", "export", "-o", "h.csv")[0] == 0
+    rows = (tmp_path / "h.csv").read_text().splitlines()
+    assert rows[0].startswith("name,serial,taken") and len(rows) == 1 + 11
+    assert run("history", "export", "-o", "h.csv")[0] == 2            # never overwritten without --force
+    rc, out, _ = run("history", "export", "-o", "h.json")
+    assert json.loads((tmp_path / "h.json").read_text())["rows"][0]["operator"] == "J. Doe"
+
+
+def test_the_database_refuses_updates_and_compgen_refuses_foreign_and_newer_stores(tmp_path, year):
+    with _record(tmp_path / "h.sqlite", year) as store:
+        for sql in ("UPDATE fits SET verdict = 'x'", "DELETE FROM edits", "UPDATE machines SET serial = 'y'"):
+            with pytest.raises(sqlite3.IntegrityError, match="append-only"):
+                store.db.execute(sql)
+    foreign = tmp_path / "other.sqlite"
+    sqlite3.connect(foreign).execute("CREATE TABLE orders (id INTEGER)").connection.commit()
+    rc, _, err = run("history", "list", "--db", foreign)
+    assert rc == 2 and "not a compgen history" in err
+    newer = tmp_path / "newer.sqlite"
+    with open_store(newer) as store:
+        store.db.execute("INSERT INTO compgen_schema VALUES ('compgen.history', 99, 'x', 'now')")
+    rc, _, err = run("history", "list", "--db", newer)
+    assert rc == 2 and "schema 99, newer than" in err
+    (tmp_path / "text.sqlite").write_text("name,value\n")
+    rc, _, err = run("history", "list", "--db", tmp_path / "text.sqlite")
+    assert rc == 2 and "not an SQLite history store" in err
+
+
+WRITER = """
+import sys
+from dataclasses import replace
+from compgen import history as H
+from compgen.machine_file import load_machine
+from compgen.results import load_fit
+from compgen.store import init, open_store
+url, fit_file, worker = sys.argv[1], sys.argv[2], int(sys.argv[3])
+machine = load_machine("ac-trunnion-itnc530")
+base = load_fit(fit_file)
+store = open_store(url)
+for m in range(20):           # every worker writes every machine: they meet on each machine's row
+    k = worker * 100 + m
+    values = {n: replace(e, value=e.value + k * 1e-6) for n, e in base.parameters.items()}
+    fit = replace(base, parameters=values)
+    H.record_fit(store, fit, replace(machine, serial=f"M{m:02d}"), taken=f"2026-01-{1 + worker:02d}")
+"""
+
+KILLED = """
+import os, signal, sys
+from compgen import history as H
+from compgen.machine_file import load_machine
+from compgen.results import load_fit
+from compgen.store import Store, open_store
+url, fit_file = sys.argv[1], sys.argv[2]
+insert = Store.insert
+def dying(self, table, row):
+    if table == "fits":                          # the session row is in, the fit not yet
+        os.kill(os.getpid(), signal.SIGKILL)
+    return insert(self, table, row)
+Store.insert = dying
+H.record_fit(open_store(url), load_fit(fit_file), load_machine("ac-trunnion-itnc530"), taken="2026-02-01")
+"""
+
+
+def _python(code, *args):
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, "-c", code, *map(str, args)], env=env, capture_output=True,
+                          text=True, timeout=120)
+
+
+@pytest.fixture(scope="module")
+def fit_file(year, tmp_path_factory):
+    path = tmp_path_factory.mktemp("fit") / "fit.json"
+    path.write_text(year[2][0][1].to_json())
+    return path
+
+
+def _counts(store):
+    return {t: store.rows(f"SELECT COUNT(*) AS n FROM {t}")[0]["n"] for t in ("machines", "sessions", "fits")}
+
+
+def test_four_writers_twenty_machines_in_postgresql_lose_nothing(pg_db, fit_file):
+    assert run("history", "init", "--db", pg_db)[0] == 0
+    procs = [subprocess.Popen([sys.executable, "-c", WRITER, pg_db, str(fit_file), str(w)],
+                              env={**os.environ, "PYTHONPATH": str(ROOT)}, stderr=subprocess.PIPE, text=True)
+             for w in range(4)]
+    errors = [p.communicate(timeout=240)[1] for p in procs]
+    assert [p.returncode for p in procs] == [0] * 4, errors
+    with open_store(pg_db) as store:
+        assert _counts(store) == {"machines": 20, "sessions": 80, "fits": 80}
+
+
+@pytest.mark.parametrize("kind", ["sqlite", "postgresql"])
+def test_a_writer_killed_mid_transaction_leaves_the_store_consistent(kind, tmp_path, request, fit_file):
+    url = tmp_path / "h.sqlite" if kind == "sqlite" else request.getfixturevalue("pg_db")
+    if kind == "postgresql":
+        run("history", "init", "--db", url)
+    done = _python(KILLED, url, fit_file)
+    assert done.returncode == -9, done.stderr
+    with open_store(url) as store:
+        assert _counts(store) == {"machines": 0, "sessions": 0, "fits": 0}
+        machine = load_machine("ac-trunnion-itnc530")
+        H.record_fit(store, load_fit(fit_file), machine, taken="2026-02-01")
+        assert _counts(store) == {"machines": 1, "sessions": 1, "fits": 1}
+
+
+def test_postgresql_refuses_an_update_through_compgens_role_and_never_shows_the_password(pg_db, fit_file):
+    import psycopg
+    with psycopg.connect(pg_db, autocommit=True) as owner:
+        owner.execute("CREATE ROLE compgen_writer LOGIN")
+    rc, out, err = run("history", "init", "--db", pg_db, "--grant", "compgen_writer")
+    assert rc == 0 and "compgen_writer may read and append" in out, out + err
+    writer = pg_db.replace("compgen_owner@", "compgen_writer:s3cret-pw@")
+    with open_store(writer) as store:          # the role appends
+        H.record_fit(store, load_fit(fit_file), load_machine("ac-trunnion-itnc530"), taken="2026-02-01")
+    rc, out, err = run("history", "init", "--db", writer)     # up to date: nothing to migrate
+    assert rc == 0 and "up to date" in out, out + err
+    assert "s3cret" not in out + err and "compgen_writer:***@" in out
+    with psycopg.connect(writer, autocommit=True) as db:
+        for sql in ("UPDATE compgen.fits SET verdict = 'x'", "DELETE FROM compgen.sessions",
+                    "TRUNCATE compgen.checks", "DROP TABLE compgen.edits"):
+            with pytest.raises(psycopg.errors.InsufficientPrivilege):
+                db.execute(sql)
+        assert db.execute("SELECT COUNT(*) FROM compgen.fits").fetchone()[0] == 1
+    with psycopg.connect(pg_db, autocommit=True) as owner, \
+            pytest.raises(psycopg.errors.RaiseException, match="append-only"):   # nor may the owner
+        owner.execute("UPDATE compgen.fits SET verdict = 'x'")
+    # a refused connection names the store without its password
+    rc, _, err = run("history", "list", "--db", writer.replace(writer.split("@")[1].split("/")[0],
+                                                                "127.0.0.1:1"))
+    assert rc == 2 and "s3cret" not in err and "***" in err
+    # a writer cannot migrate: an empty database is the owner's to make
+    with psycopg.connect(pg_db.rsplit("/", 1)[0] + "/postgres", autocommit=True) as db:
+        db.execute("DROP DATABASE IF EXISTS t_empty")
+        db.execute("CREATE DATABASE t_empty")
+    rc, _, err = run("history", "list", "--db", writer.rsplit("/", 1)[0] + "/t_empty")
+    assert rc == 2 and "history init" in err and "s3cret" not in err
