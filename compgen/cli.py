@@ -511,9 +511,12 @@ def checklist_cmd(machine_file, folder, as_json):
               help="Files sent to the control, listed with their checksums. Repeatable.")
 @click.option("--dir", "folder", type=click.Path(file_okay=False), default=None,
               help="Work folder for the checklist (default: the fit file's folder).")
+@click.option("--history", "with_history", is_flag=True,
+              help="Add the machine's history from the store (--db): trend plots and the last edits.")
+@DB
 @OUTPUT
 @FORCE
-def report_cmd(base, controller_name, post_files, before, emitted, folder, output, force):
+def report_cmd(base, controller_name, post_files, before, emitted, folder, with_history, db, output, force):
     """One self-contained HTML report: fit, diagnose, plots, comparison, files, checklist."""
     from .plots import figures  # matplotlib only when asked for
     fit = load_fit(base)
@@ -528,8 +531,14 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, outpu
     _progress("3/3 plots")
     images = figures(machine, sets, fit, load_fit(before) if before else None, found)
     steps = checklist(machine, folder or Path(base).parent, comparison.to_dict())
+    past = png = None
+    if with_history:
+        from .history import trend
+        from .plots import trend_png
+        past = trend(_store(db, create=False), machine)
+        png = trend_png(past)
     html = report_html(machine, fit, found, images, comparison, emitted, steps, __version__,
-                       date.today().isoformat())
+                       date.today().isoformat(), past, png)
     write_atomically(output, html, force, inputs=(base, before, *post_files, *emitted))
     _said(output, f"wrote {output}")
 

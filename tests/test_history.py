@@ -3,6 +3,7 @@ YOC, a crash that moves BOA in month 7, an edit after it), checks against the la
 calibration, a plant's concurrent writers, a killed writer, and a database that refuses
 what compgen's role may not do. The PostgreSQL server is real, started by the tests."""
 
+import hashlib
 import json
 import math
 import os
@@ -171,6 +172,26 @@ def test_history_commands_on_a_real_fit(tmp_path, monkeypatch):
     assert (tmp_path / "trend.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     rc, out, err = run("history", "trend", "--machine", "ac-trunnion-itnc530", "--param", "XYZ")
     assert rc == 2 and "no recorded fit holds XYZ" in err
+    # the edit written from it, recorded: what it corrects, the files written and the state loaded
+    rc, out, err = run("kinematics", "--from", "fit.json", "--current",
+                       ROOT / "examples" / "itnc530-current.TAB",
+                       "-o", "EDIT.TAB", "--record", "--date", "2026-03-02")
+    assert rc == 0 and "recorded the edit" in out, out + err
+    with open_store(tmp_path / "compgen-history.sqlite") as store:
+        edit = store.rows("SELECT corrects, written, loaded FROM edits")[0]
+    corrects = json.loads(edit["corrects"])
+    assert sorted(corrects) == sorted(["YOA", "ZOA", "BOA", "COA", "XOC", "YOC", "AOC", "BOC"])
+    fit = load_fit(tmp_path / "fit.json")
+    assert all(corrects[n] == fit.parameters[n].value for n in corrects)
+    assert set(json.loads(edit["written"])) == {"EDIT.TAB", "EDIT.txt", "EDIT_SIGN.H"}
+    assert list(json.loads(edit["loaded"]).values())[0] == hashlib.sha256(
+        (ROOT / "examples" / "itnc530-current.TAB").read_bytes()).hexdigest()
+    rc, out, _ = run("history", "show", "--machine", "ac-trunnion-itnc530")
+    assert "edit        from " + fit.marker in out
+    rc, out, err = run("report", "--from", "fit.json", "--history", "-o", "report.html")
+    html = (tmp_path / "report.html").read_text()
+    assert rc == 0 and "History of this machine" in html and 'alt="history trend"' in html, out + err
+    assert "2026-03-02" in html and fit.marker in html     # the edit, listed
     assert run("history", "export", "-o", "h.csv")[0] == 0
     rows = (tmp_path / "h.csv").read_text().splitlines()
     assert rows[0].startswith("name,serial,taken") and len(rows) == 1 + 11
