@@ -327,3 +327,24 @@ def test_postgresql_refuses_an_update_through_compgens_role_and_never_shows_the_
         db.execute("CREATE DATABASE t_empty")
     rc, _, err = run("history", "list", "--db", writer.rsplit("/", 1)[0] + "/t_empty")
     assert rc == 2 and "history init" in err and "s3cret" not in err
+
+
+def test_the_machine_files_serial_and_drift_limits_are_checked(tmp_path):
+    text = (ROOT / "machines" / "ac-trunnion-itnc530.toml").read_text()
+    good = tmp_path / "m.toml"
+    good.write_text('serial = "DMU-50/1234"\n' + text + "\n[drift]\noffset_um = 2.0\nk_sigma = 4.0\n")
+    m = load_machine(good)
+    assert m.serial == "DMU-50/1234" and m.drift.offset_um == 2.0 and m.drift.k_sigma == 4.0
+    assert m.drift.tilt_arcsec == 10.0                       # the default where not given
+    for extra, words in (('serial = "two words"\n', "not a valid serial"),
+                         ("serial = 7\n", "not a valid serial")):
+        bad = tmp_path / "bad.toml"
+        bad.write_text(extra + text)
+        rc, _, err = run("effects", "--machine", bad)
+        assert rc == 2 and words in err, err
+    bad.write_text(text + "\n[drift]\nofset_um = 2.0\n")
+    rc, _, err = run("effects", "--machine", bad)
+    assert rc == 2 and "ofset_um" in err, err
+    bad.write_text(text + "\n[drift]\noffset_um = -2.0\n")
+    rc, _, err = run("effects", "--machine", bad)
+    assert rc == 2 and "offset_um" in err, err
