@@ -454,6 +454,8 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, reco
     main_key = ctl.main_suffix(text)
     files = {(out if key == main_key else out.with_name(out.stem + key)): body
              for key, body in emitted.files.items()}
+    if len(current) == 1 and main_key in emitted.files:   # the edited state keeps its encoding
+        files[out] = _encoded_like(current[0], files[out])
     write_all(files, force, inputs=(base, *current, *measured, machine.source, *(d.file for d in fit.data)))
     click.echo("\n".join(emitted.notes))
     click.echo("wrote " + ", ".join(str(p) for p in files))
@@ -753,6 +755,21 @@ def check_cmd(machine_file, data, serial, taken, operator, as_json, db):
                nl=as_json)
     if not result.passed:
         sys.exit(1)
+
+
+def _encoded_like(source: str, body: str) -> str | bytes:
+    """A file edited from a user's ANSI (Latin-1) file goes back in Latin-1: a control's
+    export stays what the control reads. UTF-8 (and ASCII) files stay UTF-8."""
+    raw = read_text(source, "state file", ansi_ok=True)[1]
+    try:
+        raw.decode("utf-8")
+        return body
+    except UnicodeDecodeError:
+        try:
+            return body.encode("latin-1")
+        except UnicodeEncodeError as exc:
+            raise CompgenError(f"the edit holds {body[exc.start]!r}, which the Latin-1 file {source} "
+                               "cannot hold", hint="report this: compgen writes ASCII into tables") from None
 
 
 def _sha256(body: str | bytes) -> str:

@@ -316,3 +316,26 @@ def test_a_damaged_column_description_is_refused_with_its_line(line):
     with pytest.raises(CompgenError, match="in the column description") as e:
         TabTable.parse(text, "t.TAB")
     assert e.value.where == f"t.TAB:{k}"
+
+
+def test_a_table_with_cr_line_ends_is_edited_and_keeps_them(seed_machine, fit):
+    after = _edit(seed_machine, fit, _table(newline="\r"))
+    assert "\n" not in after and after.count("\r") > 20
+    assert TabTable.parse(after, "new").rows
+
+
+def test_a_latin1_table_is_written_back_in_latin1(seed_machine, fit, tmp_path):
+    from conftest import run
+
+    from compgen.rtest import format_rtest
+    data = simulate(seed_machine, TRUTH, generate(seed_machine, ["K4"]), 0.3, np.random.default_rng(3))
+    (tmp_path / "k4.csv").write_text(format_rtest(seed_machine, data))
+    assert run("fit", "--machine", "ac-trunnion-itnc530", tmp_path / "k4.csv", "-o", tmp_path / "fit.json")[0] == 0
+    text = _table().replace("spindle gauge line", "Spindel Meßlinie 0°")
+    (tmp_path / "KIN.TAB").write_bytes(text.encode("latin-1"))
+    rc, out, err = run("kinematics", "--from", tmp_path / "fit.json", "--current", tmp_path / "KIN.TAB",
+                       "-o", tmp_path / "NEW.TAB", "--force")
+    raw = (tmp_path / "NEW.TAB").read_bytes()
+    assert rc == 0, out + err
+    assert "Spindel Meßlinie 0°".encode("latin-1") in raw and "ß".encode() not in raw
+    assert raw.decode("latin-1").count("\r\n") > 20

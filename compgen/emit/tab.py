@@ -39,7 +39,8 @@ class TabTable:
 
     @staticmethod
     def parse(text: str, where: str) -> TabTable:
-        newline = "\r\n" if "\r\n" in text else "\n"
+        # CRLF (the control's own), LF, or CR alone (an old Mac editor): kept as found
+        newline = "\r\n" if "\r\n" in text else ("\r" if "\r" in text and "\n" not in text else "\n")
         lines = text.split(newline)
         m = BEGIN.match(lines[0]) if lines else None
         if m is None:
