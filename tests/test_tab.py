@@ -330,7 +330,9 @@ def test_a_latin1_table_is_written_back_in_latin1(seed_machine, fit, tmp_path):
     from compgen.rtest import format_rtest
     data = simulate(seed_machine, TRUTH, generate(seed_machine, ["K4"]), 0.3, np.random.default_rng(3))
     (tmp_path / "k4.csv").write_text(format_rtest(seed_machine, data))
-    assert run("fit", "--machine", "ac-trunnion-itnc530", tmp_path / "k4.csv", "-o", tmp_path / "fit.json")[0] == 0
+    rc, _, err = run("fit", "--machine", "ac-trunnion-itnc530", tmp_path / "k4.csv",
+                     "-o", tmp_path / "fit.json")
+    assert rc == 0, err
     text = _table().replace("spindle gauge line", "Spindel Meßlinie 0°")
     (tmp_path / "KIN.TAB").write_bytes(text.encode("latin-1"))
     rc, out, err = run("kinematics", "--from", tmp_path / "fit.json", "--current", tmp_path / "KIN.TAB",
