@@ -565,8 +565,11 @@ def effects_cmd(machine_file, as_json):
 
 
 def _store(db: str | None, create: bool = True):
+    """The history store, closed with the command (whether it succeeds or refuses)."""
     from .store import open_store  # the store only for the commands that use it
-    return open_store(db, create)
+    store = open_store(db, create)
+    click.get_current_context().call_on_close(store.close)
+    return store
 
 
 @main.group("history")
@@ -689,13 +692,16 @@ def history_trend_cmd(machine_file, serial, params, plot, as_json, force, db):
 @FORCE
 @DB
 def history_export_cmd(machine_name, output, force, db):
-    """Every fit's parameters, one row each, as CSV (or JSON for a .json file)."""
-    from .history import export_rows
-    rows = export_rows(_store(db, create=False), machine_name)
-    if output.endswith(".json"):
-        text = json.dumps({"format": "compgen.history-export/1", "rows": rows}, indent=2,
-                          ensure_ascii=False) + "\n"
+    """Every fit's parameters, one row each, as CSV; a .json file holds the whole history
+    too (sessions, fits, edits, checks), which `history import` reads into another store."""
+    from .history import export_all, export_rows
+    store = _store(db, create=False)
+    if output.endswith(".json"):        # whole: what history import reads, and the flat rows
+        doc = export_all(store, machine_name)
+        rows = doc["rows"]
+        text = json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
     else:
+        rows = export_rows(store, machine_name)
         import csv
         import io
         out = io.StringIO()
@@ -707,6 +713,23 @@ def history_export_cmd(machine_name, output, force, db):
         text = out.getvalue()
     write_atomically(output, text, force)
     _said(output, f"wrote {len(rows)} rows to {output}")
+
+
+@history_cmd.command("import")
+@click.argument("export_file", type=FILE)
+@DB
+def history_import_cmd(export_file, db):
+    """Append another store's history (a `history export -o H.json`) to this one, its origin
+    recorded; refused if it is this store's own, was imported before, or shares a fit."""
+    import hashlib
+
+    from .files import read_json
+    from .history import import_history
+    raw = read_text(export_file, "history export")[1]
+    store = _store(db)
+    counts = import_history(store, read_json(export_file, "history export"), hashlib.sha256(raw).hexdigest(),
+                            export_file)
+    click.echo(f"imported into {store.where}: " + ", ".join(f"{n} {k}" for k, n in counts.items()))
 
 
 @history_cmd.command("fleet")

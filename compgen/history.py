@@ -534,3 +534,87 @@ def trend_text(t: Trend) -> str:
     lines.append("")
     lines += [f"flagged: {f.text()}" for f in t.flags] or ["nothing flagged against [drift]"]
     return "\n".join(lines) + "\n"
+
+
+# -- moving a history between stores: exported whole, imported only when asked
+
+EXPORT_FORMAT = "compgen.history-export/1"
+_COLUMNS = {
+    "machines": ("id", "name", "serial", "recorded"),
+    "sessions": ("id", "machine_id", "taken", "device", "operator", "temperatures", "machine_sha256", "data",
+                 "recorded"),
+    "fits": ("id", "session_id", "marker", "kind", "model", "parameters", "sigma_um", "rms_um", "verdict",
+             "fit_json", "recorded"),
+    "edits": ("id", "machine_id", "fit_id", "controller", "corrects", "written", "loaded", "taken",
+              "recorded"),
+    "checks": ("id", "machine_id", "fit_id", "against_fit_id", "passed", "summary", "recorded"),
+}
+
+
+def export_all(store: Store, machine_name: str | None = None) -> dict:
+    """The store's rows (of one machine, or all), with the store's id: what ``import_history``
+    takes, and the flat rows a spreadsheet takes."""
+    mids = [r["id"] for r in store.rows("SELECT id, name FROM machines ORDER BY id")
+            if machine_name is None or r["name"] == machine_name]
+    keep = ",".join(str(int(m)) for m in mids) or "NULL"
+    where = {"machines": f"id IN ({keep})", "sessions": f"machine_id IN ({keep})",
+             "fits": f"session_id IN (SELECT id FROM sessions WHERE machine_id IN ({keep}))",
+             "edits": f"machine_id IN ({keep})", "checks": f"machine_id IN ({keep})"}
+    tables = {t: store.rows(f"SELECT {', '.join(c)} FROM {t} WHERE {where[t]} ORDER BY id")
+              for t, c in _COLUMNS.items()}
+    return {"format": EXPORT_FORMAT, "store_id": store.store_id(), "exported": now(), "tables": tables,
+            "rows": export_rows(store, machine_name)}
+
+
+def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str, int]:
+    """Another store's export, appended in one transaction with its origin recorded. Refused:
+    this store's own rows, an export already imported, or a fit this store already holds
+    (for the same machine): nothing is merged silently, and nothing twice."""
+    if (not isinstance(doc, dict) or doc.get("format") != EXPORT_FORMAT
+            or not isinstance(doc.get("tables"), dict)):
+        raise CompgenError("not a compgen history export", where=where,
+                           hint=f"make one with {me()} history export -o H.json on the other store")
+    if doc.get("store_id") == store.store_id():
+        raise CompgenError("this export is this store's own history", where=where,
+                           hint="nothing to import")
+    if store.rows("SELECT id FROM imports WHERE file_sha256 = ?", (sha256,)):
+        raise CompgenError("this export has been imported here already", where=where,
+                           hint="nothing to import")
+    try:
+        t = {name: list(doc["tables"][name]) for name in _COLUMNS}
+        machines = {m["id"]: (m["name"], m["serial"]) for m in t["machines"]}
+        session_machine = {s["id"]: machines[s["machine_id"]] for s in t["sessions"]}
+        held = {(session_machine[f["session_id"]], f["marker"]) for f in t["fits"]}
+    except (KeyError, TypeError) as exc:
+        raise CompgenError(f"the export is incomplete or damaged ({exc!r})", where=where) from None
+    mine = {((r["name"], r["serial"]), r["marker"]) for r in store.rows(
+        "SELECT m.name, m.serial, f.marker FROM fits f JOIN sessions s ON s.id = f.session_id "
+        "JOIN machines m ON m.id = s.machine_id")}
+    twice = sorted(held & mine)
+    if twice:
+        raise CompgenError(f"{len(twice)} fit(s) of the export are already here (first: {twice[0][1]} of "
+                           f"{twice[0][0][0]!r})", where=where,
+                           hint="the two stores share history: import into a fresh store, or keep them apart")
+    ids: dict[str, dict] = {name: {} for name in _COLUMNS}
+    with store.writing():
+        imp = store.insert("imports", {"origin_store": str(doc["store_id"]), "file_sha256": sha256,
+                                       "recorded": now()})
+        for m in t["machines"]:
+            ids["machines"][m["id"]] = _machine_id(store, m["name"], m["serial"], create=True)
+        for s in t["sessions"]:
+            ids["sessions"][s["id"]] = store.insert("sessions", {
+                **{k: s[k] for k in _COLUMNS["sessions"][2:]}, "machine_id": ids["machines"][s["machine_id"]],
+                "import_id": imp})
+        for f in t["fits"]:
+            ids["fits"][f["id"]] = store.insert("fits", {
+                **{k: f[k] for k in _COLUMNS["fits"][2:]}, "session_id": ids["sessions"][f["session_id"]]})
+        for e in t["edits"]:
+            store.insert("edits", {**{k: e[k] for k in _COLUMNS["edits"][3:]},
+                                   "machine_id": ids["machines"][e["machine_id"]],
+                                   "fit_id": ids["fits"][e["fit_id"]]})
+        for c in t["checks"]:
+            store.insert("checks", {**{k: c[k] for k in _COLUMNS["checks"][4:]},
+                                    "machine_id": ids["machines"][c["machine_id"]],
+                                    "fit_id": ids["fits"][c["fit_id"]],
+                                    "against_fit_id": ids["fits"][c["against_fit_id"]]})
+    return {name: len(t[name]) for name in _COLUMNS}

@@ -29,7 +29,7 @@ APP = "compgen.history"
 DEFAULT_FILE = "compgen-history.sqlite"
 ENV = "COMPGEN_DB"
 PG_SCHEMA = "compgen"
-TABLES = ("machines", "sessions", "fits", "edits", "checks")
+TABLES = ("machines", "sessions", "fits", "edits", "checks", "imports")
 
 # Each migration: (version, DDL with {id} for the key column, {json} for JSON text). A new
 # version appends; nothing earlier changes once released.
@@ -53,6 +53,12 @@ MIGRATIONS: tuple[tuple[int, tuple[str, ...]], ...] = (
         """CREATE TABLE checks (id {id}, machine_id BIGINT NOT NULL REFERENCES machines(id),
                fit_id BIGINT NOT NULL REFERENCES fits(id), against_fit_id BIGINT NOT NULL REFERENCES fits(id),
                passed INTEGER NOT NULL, summary {json} NOT NULL, recorded TEXT NOT NULL)""",
+    )),
+    # another store's history, imported explicitly: its rows carry where they came from
+    (2, (
+        """CREATE TABLE imports (id {id}, origin_store TEXT NOT NULL, file_sha256 TEXT NOT NULL,
+               recorded TEXT NOT NULL)""",
+        "ALTER TABLE sessions ADD COLUMN import_id BIGINT REFERENCES imports(id)",
     )),
 )
 VERSION = MIGRATIONS[-1][0]

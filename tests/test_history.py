@@ -348,3 +348,38 @@ def test_the_machine_files_serial_and_drift_limits_are_checked(tmp_path):
     bad.write_text(text + "\n[drift]\noffset_um = -2.0\n")
     rc, _, err = run("effects", "--machine", bad)
     assert rc == 2 and "offset_um" in err, err
+
+
+def test_another_stores_history_is_imported_only_when_asked_and_only_once(year, tmp_path, pg_db, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with _record(tmp_path / "a.sqlite", year) as a:
+        want = H.trend_text(H.trend(a, year[0]))
+    assert run("history", "export", "--db", "a.sqlite", "-o", "a.json")[0] == 0
+    assert run("history", "init", "--db", pg_db)[0] == 0
+    rc, out, err = run("history", "import", "a.json", "--db", pg_db)
+    assert rc == 0 and "12 fits" in out and "1 edits" in out, out + err
+    with open_store(pg_db) as plant:
+        assert H.trend_text(H.trend(plant, year[0])) == want          # the same history, the same flags
+        origin = plant.rows("SELECT COUNT(*) AS n FROM sessions WHERE import_id IS NOT NULL")[0]["n"]
+    assert origin == 12
+    rc, _, err = run("history", "import", "a.json", "--db", pg_db)
+    assert rc == 2 and "imported here already" in err
+    rc, _, err = run("history", "import", "a.json", "--db", "a.sqlite")
+    assert rc == 2 and "this store's own" in err
+    _record(tmp_path / "b.sqlite", year).close()                      # the same fits, recorded again
+    rc, _, err = run("history", "import", "a.json", "--db", "b.sqlite")
+    assert rc == 2 and "12 fit(s) of the export are already here" in err
+
+
+def test_a_store_of_the_first_schema_is_migrated_and_keeps_its_rows(tmp_path, fit_file, monkeypatch):
+    import compgen.store as S
+    with monkeypatch.context() as m:
+        m.setattr(S, "MIGRATIONS", S.MIGRATIONS[:1])
+        m.setattr(S, "VERSION", 1)
+        with open_store(tmp_path / "old.sqlite") as old:
+            H.record_fit(old, load_fit(fit_file), load_machine("ac-trunnion-itnc530"), taken="2026-01-05")
+            assert old.version() == 1
+    with open_store(tmp_path / "old.sqlite") as new:
+        assert new.version() == 2
+        assert new.rows("SELECT import_id FROM sessions") == [{"import_id": None}]
+        assert _counts(new) == {"machines": 1, "sessions": 1, "fits": 1}
