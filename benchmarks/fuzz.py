@@ -1,6 +1,6 @@
 """Hostile inputs against the command line: does anything wrong reach a controller file?
 
-    python benchmarks/fuzz.py [--jobs 2] [--seed 1] [--show]
+    python benchmarks/fuzz.py [--jobs 2] [--seed 1] [--generated 60] [--show]
 
 Each case is a file or option a user (or an accident) could give: R-test CSVs, machine
 files, fit.json files, the control's current state, text meant to be injected, and output
@@ -8,7 +8,14 @@ paths. Each runs the real command in a fresh process (so a hang is seen: 60 s) a
 judged against what it must do:
 
 * ``refuse``: exit 2, one line on stderr, no traceback, no output file;
-* ``accept``: exit 0, and no emitted file holds a line that starts with the injected text.
+* ``accept``: exit 0, and no emitted file holds a line that starts with the injected text;
+* ``either`` (a generated variant that may still be good input: a line deleted, duplicated
+  or swapped, a number in another format): a refusal as above, or an acceptance.
+
+Besides the written cases, every valid input (the R-test CSV, the machine file, a pose
+list, the three controls' states, the three controls' programs) gets ``--generated``
+variants each: a line deleted, duplicated or swapped, a number written another way, a
+control character inside a number (which must be refused).
 
 Counted: tracebacks (or exit 3, an internal error), silent accepts (exit 0 where a refusal
 was due), injected lines, hangs, and wrong refusals of good input. Outside CI: a benchmark.
@@ -178,7 +185,8 @@ FIT = Path()      # set in main: a good fit.json of the example session with EXC
 
 def _absolute(doc: dict) -> dict:
     """The fit with absolute file names, so that a case's copy elsewhere still finds them."""
-    doc["machine"]["file"] = str((FIT.parent / doc["machine"]["file"]).resolve())
+    if not doc["machine"].get("bundled"):          # a bundled machine is named, not located
+        doc["machine"]["file"] = str((FIT.parent / doc["machine"]["file"]).resolve())
     for d in doc["data"]:
         d["file"] = str((FIT.parent / d["file"]).resolve())
     return doc
@@ -295,6 +303,92 @@ def output_cases() -> list[Case]:
     ]
 
 
+# -- hostile variants derived from valid inputs: each valid file, each edit a slip makes
+
+CONTROL_CHARS = ("\x07", "\x1b", "\x0b", "\x0c", "\x85", "\u2028", "\r", "\x00")
+NUMBER = re.compile(r"(?<![\w.])[-+]?\d+\.\d+(?:[eE][-+]?\d+)?(?![\w.])")
+NUMBER_FORMATS = (lambda v: v.replace(".", ","), lambda v: v + ".", lambda v: v.replace(".", ".."),
+                  lambda v: v.replace(".", "_"), lambda v: "".join(chr(0xFF10 + int(c)) if c.isdigit() else c
+                                                                  for c in v),
+                  lambda v: v + "e999", lambda v: "0x" + v, lambda v: v.replace(".", " . "),
+                  lambda v: "1" * 400, lambda v: "nan", lambda v: "--" + v.lstrip("+-"))
+
+
+def _variants(text: str, rng: random.Random, n: int) -> list[tuple[str, str, str]]:
+    """``n`` hostile variants of ``text``: (what was done, the new text, what is expected).
+    A line deleted, duplicated or swapped may still be good input ("either": refused in one
+    clear line, or accepted); a number spoilt or a control character inside a number must
+    be refused."""
+    lines = text.split("\n")
+    body = [i for i, ln in enumerate(lines) if ln.strip()]
+    numbered = [i for i in body if NUMBER.search(lines[i])]
+    out = []
+    while len(out) < n:
+        op = rng.choice(("delete", "duplicate", "swap", "number", "control"))
+        new = list(lines)
+        i = rng.choice(body)
+        if op == "delete":
+            del new[i]
+            what, expect = f"line {i + 1} deleted", "either"
+        elif op == "duplicate":
+            new.insert(i, lines[i])
+            what, expect = f"line {i + 1} twice", "either"
+        elif op == "swap":
+            j = rng.choice(body)
+            new[i], new[j] = new[j], new[i]
+            what, expect = f"lines {i + 1} and {j + 1} swapped", "either"
+        elif op == "number" and numbered:
+            i = rng.choice(numbered)
+            m = rng.choice(list(NUMBER.finditer(lines[i])))
+            k = rng.randrange(len(NUMBER_FORMATS))
+            new[i] = lines[i][:m.start()] + NUMBER_FORMATS[k](m[0]) + lines[i][m.end():]
+            what, expect = f"line {i + 1}: {m[0]} written as format {k}", "either"
+        elif op == "control" and numbered:
+            i = rng.choice(numbered)
+            m = rng.choice(list(NUMBER.finditer(lines[i])))
+            at = rng.randrange(m.start() + 1, m.end())
+            ch = rng.choice(CONTROL_CHARS)
+            new[i] = lines[i][:at] + ch + lines[i][at:]
+            what, expect = f"line {i + 1}: {ch!r} inside {m[0]}", "refuse"
+        else:
+            continue
+        variant = "\n".join(new)
+        if variant != text:
+            out.append((what, variant, expect))
+    return out
+
+
+def derived_cases(rng: random.Random, programs: dict[str, Path], per_surface: int) -> list[Case]:
+    """Hostile variants of every valid input, run through the command that reads it."""
+    out = []
+    vectors = {7: -1.0, 8: 0.0, 9: 0.0, 10: 0.0, 11: 0.0, 12: -1.0}
+    carr = "".join(f"$TC_CARR{k}[1]={vectors.get(k, 0.0)}\n" for k in (*vectors, 44, 45, 46, *range(55, 61)))
+    kin = ["kinematics", "--from", "{dir}/fit.json", "--current", "{dir}/state.txt", "-o", "{dir}/K.out"]
+    surfaces = [
+        ("csv", "data.csv", SESSION.read_text(),
+         ["fit", "--machine", str(SEED), "{dir}/data.csv", "-o", "{dir}/out.json"], ["out.json"]),
+        ("machine", "m.toml", SEED.read_text(),
+         ["measure-program", "--machine", "{dir}/m.toml", "--path", "K2", "-o", "{dir}/P.H"], ["P.H"]),
+        ("poses", "poses.csv", "path,A,C\n" + "".join(
+            f"P,{a:.1f},{c:.1f}\n" for a, c in zip(range(-60, 61, 15), range(0, 361, 45), strict=True)),
+         ["predict", "--from", "{dir}/fit.json", "--poses", "{dir}/poses.csv", "-o", "{dir}/pred.csv"],
+         ["pred.csv"]),
+        ("state", "state.txt", TAB.read_text(), [*kin[:3], "--controller", "itnc530", *kin[3:]], ["K.out"]),
+        ("state", "state.txt", carr, [*kin[:3], "--controller", "sinumerik840d", *kin[3:]], ["K.out"]),
+        ("state", "state.txt", hal_good(), [*kin[:3], "--controller", "linuxcnc", *kin[3:]], ["K.out"]),
+    ]
+    for ctl, path in programs.items():
+        mode = ["--mode", "tcpm"] if ctl == "linuxcnc" else []
+        surfaces.append(("program", path.name, path.read_text(),
+                         ["check-program", "--machine", str(SEED), "--controller", ctl, *mode,
+                          "{dir}/" + path.name], []))
+    for kind, name, text, args, outputs in surfaces:
+        for what, variant, expect in _variants(text, rng, per_surface):
+            out.append(Case(f"gen-{kind}", f"{name} [{args[0]}]: {what}", {name: variant}, args, expect,
+                            outputs))
+    return out
+
+
 def run_case(case: Case, work: Path, compgen: list[str]) -> tuple[Case, str, str]:
     folder = Path(tempfile.mkdtemp(dir=work))
     (folder / "fit.json").write_text(json.dumps(_absolute(json.loads(FIT.read_text()))))
@@ -329,9 +423,9 @@ def run_case(case: Case, work: Path, compgen: list[str]) -> tuple[Case, str, str
     injected = [p.name for p in written if block.search(p.read_text("latin-1"))]
     if injected:
         return case, "injected", ", ".join(injected)
-    if case.expect == "refuse":
-        if code == 0:
-            return case, "silent accept", ""
+    if code == 1 and case.args[0] in ("check-program", "check") and done.stdout.strip():
+        return case, "ok", done.stdout.strip().splitlines()[0][:160]     # the check's own verdict: found
+    if case.expect in ("refuse", "either") and code != 0:
         lines = [ln for ln in err.splitlines() if ln.strip() and "warning" not in ln]
         if len(lines) != 1 or not lines[0].startswith("compgen: error:"):
             return case, "unclear refusal", err.strip()[:200]
@@ -339,7 +433,9 @@ def run_case(case: Case, work: Path, compgen: list[str]) -> tuple[Case, str, str
         if left:
             return case, "half-written", ", ".join(left)
         return case, "ok", lines[0][:160]
-    if code != 0:
+    if case.expect == "refuse":
+        return case, "silent accept", ""
+    if code != 0 and case.expect != "either":
         return case, "wrong refusal", err.strip()[:200]
     return case, "ok", ""
 
@@ -350,6 +446,7 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--show", action="store_true", help="print every case's outcome")
+    ap.add_argument("--generated", type=int, default=60, help="hostile variants per valid input (9 inputs)")
     args = ap.parse_args()
     compgen = [sys.executable, "-m", "compgen"]
     work = Path(tempfile.mkdtemp(prefix="compgen-fuzz-"))
@@ -357,8 +454,15 @@ def main() -> None:
     for step in (["fit", "--machine", str(SEED), str(SESSION), "-o", str(work / "fit0.json")],
                  ["fit", "--from", str(work / "fit0.json"), "--add", "EXC:h2", "-o", str(FIT)]):
         subprocess.run([*compgen, *step], check=True, capture_output=True, cwd=ROOT)
+    programs = {}
+    for ctl, ext in (("itnc530", "H"), ("sinumerik840d", "MPF"), ("linuxcnc", "ngc")):
+        programs[ctl] = work / f"P{ctl[:3]}.{ext}"     # each its own pose list beside it
+        subprocess.run([*compgen, "measure-program", "--machine", str(SEED), "--path", "K2",
+                        "--controller", ctl, "-o", str(programs[ctl])],
+                       check=True, capture_output=True, cwd=ROOT)
     rng = random.Random(args.seed)
-    cases = [*csv_cases(rng), *machine_cases(), *fit_cases(), *current_cases(), *output_cases()]
+    cases = [*csv_cases(rng), *machine_cases(), *fit_cases(), *current_cases(), *output_cases(),
+             *derived_cases(rng, programs, args.generated)]
     t0 = time.perf_counter()
     with ThreadPoolExecutor(args.jobs) as pool:
         results = list(pool.map(lambda c: run_case(c, work, compgen), cases))

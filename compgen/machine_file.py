@@ -243,16 +243,14 @@ class _Getter:
 
     def number(self, key: str, default: float | None = None) -> float:
         v = self._get(key, default)
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise CompgenError(f"must be a finite number, got {v!r}", where=self.at(key))
+        if not _finite(v):
+            raise CompgenError(f"must be a finite number, got {_shown(v)}", where=self.at(key))
         return float(v)
 
     def numbers(self, key: str, count: int, default=None) -> list[float]:
         v = self._get(key, default)
-        if (not isinstance(v, list | tuple) or len(v) != count
-                or not all(isinstance(x, int | float) and not isinstance(x, bool) for x in v)
-                or not all(math.isfinite(x) for x in v)):
-            raise CompgenError(f"must be a list of {count} finite numbers, got {v!r}",
+        if not isinstance(v, list | tuple) or len(v) != count or not all(_finite(x) for x in v):
+            raise CompgenError(f"must be a list of {count} finite numbers, got {_shown(v)}",
                                where=self.at(key))
         return [float(x) for x in v]
 
@@ -289,3 +287,16 @@ class _Getter:
         return _Getter(self.list(key)[index], f"{self.at(key)}[{index}]")
 
 
+def _finite(v) -> bool:
+    """A TOML number a float can hold: not a bool, not NaN or ±inf, not a 400-digit integer."""
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        return False
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:
+        return False
+
+
+def _shown(v) -> str:
+    text = repr(v)
+    return text if len(text) <= 40 else text[:37] + "..."

@@ -130,3 +130,11 @@ def test_a_closed_pipe_is_ordinary_and_a_full_disk_one_line(tmp_path):
     done = _bash(f"{cg} effects --machine {SEED_MACHINE} > /dev/full", tmp_path)
     assert done.returncode == 2 and done.stderr.strip() == \
         "compgen: error: standard output: No space left on device", done.stderr
+
+
+def test_a_machine_file_number_no_float_holds_is_refused_in_one_line(tmp_path):
+    """Found by the generated fuzz: a 400-digit integer in a machine file was an internal error."""
+    text = SEED_MACHINE.read_text().replace("table_top = 0.0", "table_top = " + "1" * 400)
+    (tmp_path / "m.toml").write_text(text)
+    rc, _, err = run("effects", "--machine", tmp_path / "m.toml")
+    assert rc == 2 and "table_top: must be a finite number" in err and len(err.splitlines()) == 1, err
