@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import stat
 import sys
 import tempfile
@@ -41,11 +42,30 @@ def read_text(path: str | Path, what: str, ansi_ok: bool = False) -> tuple[str, 
     if b"\x00" in raw:
         raise CompgenError(f"binary file, not a text {what}", where=str(path))
     try:
-        return raw.decode("utf-8-sig"), raw
+        text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        if ansi_ok:
-            return raw.decode("latin-1"), raw
-        raise CompgenError(f"{what} is not UTF-8 text (byte {exc.start})", where=str(path)) from None
+        if not ansi_ok:
+            raise CompgenError(f"{what} is not UTF-8 text (byte {exc.start})", where=str(path)) from None
+        text = raw.decode("latin-1")
+    if ansi_ok:
+        _no_odd_characters(text, what, path)
+    return text, raw
+
+
+# In a control's file (a state, a program, an edit: the files read with ``ansi_ok``) these
+# are damage: Python's splitlines() would end a line at \v \f \x1c-\x1e \x85 \u2028 \u2029,
+# where the control reads one line with a stray character in it; so are the other control
+# characters, and a CR alone in a file whose lines end in LF. Tabs are kept.
+ODD = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f\x85\u2028\u2029]")
+
+
+def _no_odd_characters(text: str, what: str, path: Path) -> None:
+    m = ODD.search(text) or (re.search(r"\r(?!\n)", text) if "\n" in text else None)
+    if m:
+        line = text.count("\n", 0, m.start()) + 1 if "\n" in text else text.count("\r", 0, m.start()) + 1
+        raise CompgenError(f"{what} holds the control character {m[0]!r}: a control reads it as part of "
+                           "the line, compgen would not", where=f"{path}:{line}",
+                           hint="remove it, or export the file from the control again")
 
 
 def _no_constant(name: str):

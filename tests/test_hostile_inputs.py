@@ -138,3 +138,18 @@ def test_a_machine_file_number_no_float_holds_is_refused_in_one_line(tmp_path):
     (tmp_path / "m.toml").write_text(text)
     rc, _, err = run("effects", "--machine", tmp_path / "m.toml")
     assert rc == 2 and "table_top: must be a finite number" in err and len(err.splitlines()) == 1, err
+
+
+@pytest.mark.parametrize("odd", ["\u2028", "\x0c", "\x0b", "\x85", "\r", "\x07"])
+def test_a_control_character_inside_a_state_value_is_refused_with_its_line(tmp_path, odd):
+    """Found by the generated fuzz: splitlines() ended a HAL line inside its value, so
+    `setp …x-rot-point 0.00<U+2028>3175` was read as 0.00 and the edit written over it."""
+    from compgen.files import read_text
+    hal = (ROOT / "tests" / "golden" / "ac-trunnion-itnc530" / "linuxcnc" / "kinematics.hal").read_text()
+    bad = tmp_path / "k.hal"
+    bad.write_text(hal.replace("x-rot-point 0.003175", f"x-rot-point 0.00{odd}3175"), newline="")
+    with pytest.raises(Exception, match=r"k.hal:14: .*control character"):
+        read_text(bad, "state", ansi_ok=True)
+    good = tmp_path / "cr.TAB"                 # a CR alone is a line end where no line ends in LF
+    good.write_text((ROOT / "examples" / "itnc530-current.TAB").read_text().replace("\n", "\r"), newline="")
+    assert read_text(good, "state", ansi_ok=True)[0].count("\r") == 12
