@@ -644,10 +644,6 @@ def history_list_cmd(db):
         click.echo(f"{store.where}: no machine recorded yet")
 
 
-def _machine_of(machine_file):
-    return load_machine(machine_file)
-
-
 @history_cmd.command("show")
 @MACHINE
 @SERIAL
@@ -655,7 +651,7 @@ def _machine_of(machine_file):
 def history_show_cmd(machine_file, serial, db):
     """The machine's fits and edits, in time order."""
     from .history import trend
-    t = trend(_store(db, create=False), _machine_of(machine_file), serial)
+    t = trend(_store(db, create=False), load_machine(machine_file), serial)
     click.echo(f"{t.machine}{f' ({t.serial})' if t.serial else ''}")
     events = [(e.taken, f"  {e.taken[:16]}  {e.kind:<12}{e.marker}  {e.device:<6}σ̂ {e.sigma_um:.3f} µm  "
                          f"{e.verdict}") for e in t.entries]
@@ -678,7 +674,7 @@ def history_trend_cmd(machine_file, serial, params, plot, as_json, force, db):
     with its σ, the edits, and the steps and drifts flagged against [drift]."""
     from .history import trend, trend_dict, trend_text
     names = [n.strip() for n in params.split(",") if n.strip()] if params else None
-    t = trend(_store(db, create=False), _machine_of(machine_file), serial, names)
+    t = trend(_store(db, create=False), load_machine(machine_file), serial, names)
     if plot:
         from .plots import trend_png
         write_atomically(plot, trend_png(t), force)

@@ -95,17 +95,24 @@ def record_fit(store: Store, fit: FitResult, machine: Machine, *, serial: str | 
             raise CompgenError(f"this fit ({fit.marker}) is already in the history", where=store.where,
                                hint=f"{me()} history show --machine … lists it")
         mid = _machine_id(store, name, serial, create=True)
-        sid = store.insert("sessions", {
-            "machine_id": mid, "taken": when, "device": device, "operator": operator,
-            "temperatures": dict(temperatures or {}), "machine_sha256": machine.sha256,
-            "data": [{"file": d.file, "sha256": d.sha256, "rows": d.rows} for d in fit.data],
-            "recorded": now()})
-        return store.insert("fits", {
-            "session_id": sid, "marker": fit.marker, "kind": kind, "model": list(fit.model),
-            "parameters": {n: {"value": e.value, "std": e.std, "unit": e.unit}
-                           for n, e in fit.parameters.items()},
-            "sigma_um": fit.residual["sigma_um"], "rms_um": fit.residual["rms_um"],
-            "verdict": "; ".join(verdict) or "accepted", "fit_json": fit.to_dict(), "recorded": now()})
+        return _session_and_fit(store, mid, fit, machine, when, device, operator, temperatures or {}, kind,
+                                "; ".join(verdict) or "accepted")
+
+
+def _session_and_fit(store: Store, mid: int, fit: FitResult, machine: Machine, taken: str, device: str,
+                     operator: str, temperatures: Mapping[str, float], kind: str, verdict: str) -> int:
+    """The two rows every measurement adds (inside the caller's transaction); the fit's id."""
+    sid = store.insert("sessions", {
+        "machine_id": mid, "taken": taken, "device": device, "operator": operator,
+        "temperatures": dict(temperatures), "machine_sha256": machine.sha256,
+        "data": [{"file": d.file, "sha256": d.sha256, "rows": d.rows} for d in fit.data],
+        "recorded": now()})
+    return store.insert("fits", {
+        "session_id": sid, "marker": fit.marker, "kind": kind, "model": list(fit.model),
+        "parameters": {n: {"value": e.value, "std": e.std, "unit": e.unit}
+                       for n, e in fit.parameters.items()},
+        "sigma_um": fit.residual["sigma_um"], "rms_um": fit.residual["rms_um"], "verdict": verdict,
+        "fit_json": fit.to_dict(), "recorded": now()})
 
 
 def record_edit(store: Store, fit: FitResult, machine: Machine, controller: str,
@@ -475,18 +482,8 @@ def record_check(store: Store, result: CheckResult, fit: FitResult, machine: Mac
     name, serial = machine_key(machine, serial)
     with store.writing():
         mid = _machine_id(store, name, serial, create=False)
-        sid = store.insert("sessions", {
-            "machine_id": mid, "taken": result.taken, "device": "rtest", "operator": operator,
-            "temperatures": {}, "machine_sha256": machine.sha256,
-            "data": [{"file": d.file, "sha256": d.sha256, "rows": d.rows} for d in fit.data],
-            "recorded": now()})
-        fid = store.insert("fits", {
-            "session_id": sid, "marker": fit.marker, "kind": "check", "model": list(fit.model),
-            "parameters": {n: {"value": e.value, "std": e.std, "unit": e.unit}
-                           for n, e in fit.parameters.items()},
-            "sigma_um": fit.residual["sigma_um"], "rms_um": fit.residual["rms_um"],
-            "verdict": "check passed" if result.passed else "check failed", "fit_json": fit.to_dict(),
-            "recorded": now()})
+        fid = _session_and_fit(store, mid, fit, machine, result.taken, "rtest", operator, {}, "check",
+                               "check passed" if result.passed else "check failed")
         return store.insert("checks", {"machine_id": mid, "fit_id": fid, "against_fit_id": result.against.id,
                                        "passed": int(result.passed), "summary": result.summary(),
                                        "recorded": now()})
