@@ -201,12 +201,13 @@ class Store:
         return [v for v, _ in todo]
 
     def _append_only(self, tables: list[str]) -> None:
+        if self.postgres:
+            self.db.execute(f"""CREATE OR REPLACE FUNCTION {PG_SCHEMA}.append_only() RETURNS trigger
+                LANGUAGE plpgsql AS $$ BEGIN
+                RAISE EXCEPTION 'compgen history is append-only: % on % refused', TG_OP, TG_TABLE_NAME;
+                END $$""")
         for t in tables:
             if self.postgres:
-                self.db.execute(f"""CREATE OR REPLACE FUNCTION {PG_SCHEMA}.append_only() RETURNS trigger
-                    LANGUAGE plpgsql AS $$ BEGIN
-                    RAISE EXCEPTION 'compgen history is append-only: % on % refused', TG_OP, TG_TABLE_NAME;
-                    END $$""")
                 self.db.execute(f"CREATE TRIGGER {t}_append_only BEFORE UPDATE OR DELETE ON {t} "
                                 f"FOR EACH ROW EXECUTE FUNCTION {PG_SCHEMA}.append_only()")
                 self.db.execute(f"CREATE TRIGGER {t}_no_truncate BEFORE TRUNCATE ON {t} "
