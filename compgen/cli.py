@@ -720,11 +720,12 @@ def history_import_cmd(export_file, db):
     import hashlib
 
     from .files import read_json
-    from .history import import_history
+    from .history import check_export, import_history
     raw = read_text(export_file, "history export")[1]
+    doc = read_json(export_file, "history export")
+    check_export(doc, export_file)          # before a store is made for it
     store = _store(db)
-    counts = import_history(store, read_json(export_file, "history export"), hashlib.sha256(raw).hexdigest(),
-                            export_file)
+    counts = import_history(store, doc, hashlib.sha256(raw).hexdigest(), export_file)
     click.echo(f"imported into {store.where}: " + ", ".join(f"{n} {k}" for k, n in counts.items()))
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import shlex
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -20,6 +21,7 @@ import numpy as np
 
 from . import me
 from .effects import effect_of_param
+from .emit.registry import controller
 from .errors import CompgenError
 from .machine import Machine
 from .results import FitResult
@@ -44,6 +46,11 @@ def taken_at(text: str | None) -> str:
 
 def _days(a: str, b: str) -> float:
     return (datetime.fromisoformat(b) - datetime.fromisoformat(a)).total_seconds() / 86400.0
+
+
+def _ref(machine: Machine) -> str:
+    """The machine as a command names it, pasted into a shell: a bundled name or its file."""
+    return shlex.quote(machine.bundled or machine.source)
 
 
 def machine_key(machine: Machine, serial: str | None = None) -> tuple[str, str]:
@@ -93,7 +100,7 @@ def record_fit(store: Store, fit: FitResult, machine: Machine, *, serial: str | 
             return int(same[0]["id"])
         if same:
             raise CompgenError(f"this fit ({fit.marker}) is already in the history", where=store.where,
-                               hint=f"{me()} history show --machine … lists it")
+                               hint=f"{me()} history show --machine {_ref(machine)} lists it")
         mid = _machine_id(store, name, serial, create=True)
         return _session_and_fit(store, mid, fit, machine, when, device, operator, temperatures or {}, kind,
                                 "; ".join(verdict) or "accepted")
@@ -296,7 +303,7 @@ def last_calibration(store: Store, machine: Machine, serial: str | None = None,
     if not accepted:
         raise CompgenError("no accepted calibration of this machine is recorded (each recorded fit "
                            "has a reason it should not reach the control)", where=store.where,
-                           hint=f"{me()} history show --machine … lists them")
+                           hint=f"{me()} history show --machine {_ref(machine)} lists them")
     return accepted[-1], entries, edits
 
 
@@ -448,7 +455,9 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
         worst = max(failed, key=lambda c: abs(c.change) / c.limit)
         advice.append(f"re-calibrate: {', '.join(c.param for c in failed)} moved beyond its limit "
                       f"({worst.param}, {worst.words}, most); measure all paths ({me()} measure-program "
-                      f"--machine … --path all), fit, and write the edit with kinematics")
+                      f"--machine {_ref(machine)} --path all -o calibration"
+                      f"{controller(machine.controller).program_ext}), fit, and write the edit with "
+                      "kinematics")
         axes = {c.param[-1] for c in failed}      # ISO 230 symbols end with the axis they locate
         if len(axes) == 1:
             axis = axes.pop()
@@ -466,8 +475,9 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
         advice.append("a path is beyond its tolerance: re-calibrate, then compare the predicted residual"
                       if failed else
                       "the location errors are where the last calibration found them, but a path is beyond "
-                      "its tolerance: that calibration is not corrected on the control; write its edit "
-                      f"({me()} kinematics --from FIT.json …) and load it")
+                      f"its tolerance: that calibration ({calibration.marker}, {calibration.taken[:10]}) "
+                      "is not corrected on the control; write the edit from its fit.json with kinematics, "
+                      "and load it")
     for f in new_flags:
         if f.kind == "drift":
             advice.append(f"{f.param} drifts steadily ({f.text().split('  ', 1)[1]}): plan the next "
@@ -563,14 +573,19 @@ def export_all(store: Store, machine_name: str | None = None) -> dict:
             "rows": export_rows(store, machine_name)}
 
 
-def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str, int]:
-    """Another store's export, appended in one transaction with its origin recorded. Refused:
-    this store's own rows, an export already imported, or a fit this store already holds
-    (for the same machine): nothing is merged silently, and nothing twice."""
+def check_export(doc, where: str) -> None:
+    """Refuse what is not a history export before any store is opened (or made) for it."""
     if (not isinstance(doc, dict) or doc.get("format") != EXPORT_FORMAT
             or not isinstance(doc.get("tables"), dict)):
         raise CompgenError("not a compgen history export", where=where,
                            hint=f"make one with {me()} history export -o H.json on the other store")
+
+
+def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str, int]:
+    """Another store's export, appended in one transaction with its origin recorded. Refused:
+    this store's own rows, an export already imported, or a fit this store already holds
+    (for the same machine): nothing is merged silently, and nothing twice."""
+    check_export(doc, where)
     if doc.get("store_id") == store.store_id():
         raise CompgenError("this export is this store's own history", where=where,
                            hint="nothing to import")

@@ -366,6 +366,8 @@ def test_another_stores_history_is_imported_only_when_asked_and_only_once(year, 
     assert rc == 2 and "imported here already" in err
     rc, _, err = run("history", "import", "a.json", "--db", "a.sqlite")
     assert rc == 2 and "this store's own" in err
+    rc, _, err = run("history", "import", ROOT / "examples" / "truth-table4.json", "--db", "new.sqlite")
+    assert rc == 2 and "not a compgen history export" in err and not (tmp_path / "new.sqlite").exists()
     _record(tmp_path / "b.sqlite", year).close()                      # the same fits, recorded again
     rc, _, err = run("history", "import", "a.json", "--db", "b.sqlite")
     assert rc == 2 and "12 fit(s) of the export are already here" in err
@@ -383,3 +385,17 @@ def test_a_store_of_the_first_schema_is_migrated_and_keeps_its_rows(tmp_path, fi
         assert new.version() == 2
         assert new.rows("SELECT import_id FROM sessions") == [{"import_id": None}]
         assert _counts(new) == {"machines": 1, "sessions": 1, "fits": 1}
+
+
+def test_the_measurement_a_failed_check_advises_runs_as_printed(year, tmp_path):
+    """The re-calibration command in a failed check's advice, pasted into bash, writes a
+    program that passes compgen's own motion check."""
+    import re
+    with _record(tmp_path / "h.sqlite", year) as store:
+        crashed = _check(store, year, "2026-06-20T10:00", 102)
+    advice = next(a for a in crashed.advice if a.startswith("re-calibrate"))
+    command = re.search(r"\((\S+(?: -m compgen)? measure-program [^)]*)\)", advice)[1]
+    done = subprocess.run(["bash", "-c", command], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and (tmp_path / "calibration.H").exists(), (command, done.stderr)
+    rc, out, err = run("check-program", "--machine", "ac-trunnion-itnc530", tmp_path / "calibration.H")
+    assert rc == 0, out + err
