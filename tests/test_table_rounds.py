@@ -154,7 +154,9 @@ def test_the_second_round_on_the_command_line_takes_both_files_as_current(tmp_pa
     (tmp_path / "carr.txt").write_text(OEM_CARR)
     m = ["--machine", "bc-table-sinumerik840d"]
     add = ["--add", "ECC:h2", "--add", "EYY:p1"]
-    steps = [["simulate", *m, "--truth", "t1.json", "--noise-um", NOISE_UM, "-o", "s1.csv"],
+    # every draw seeded: unseeded, the gate refused f1 in about 1 run of 13 (a chance periodic line
+    # of 0.15 µm in the residual, see the note on issue 22) and the test failed at random
+    steps = [["simulate", *m, "--truth", "t1.json", "--noise-um", NOISE_UM, "--seed", "1", "-o", "s1.csv"],
              ["fit", *m, "s1.csv", *add, "-o", "f1.json"],
              ["kinematics", "--from", "f1.json", "--current", "carr.txt", "-o", "A.MPF"],
              ["simulate", *m, "--truth", "t2.json", "--noise-um", NOISE_UM, "--seed", "2", "--edit", "A.MPF",
