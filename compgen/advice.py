@@ -5,6 +5,8 @@ nearer the table's axis or farther out), run one way or there and back. Before o
 offered it is checked exactly as ``measure-program`` checks the program it would write:
 travel (with the clearance and the safe height), rotary steps and speeds, and the motion
 check against the set-up with the ball where it would stand. What fails is not offered.
+Data from a touch probe get probing programs (``probe-program``: a probe cannot run a path
+there and back, and probes a path at ``[probe] poses`` of its poses).
 """
 
 from __future__ import annotations
@@ -14,11 +16,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .emit.probing import probe_program
 from .emit.programs import measure_program
 from .errors import CompgenError
 from .kinematics import Poses, motion_direction, runs
 from .machine import Machine
 from .paths import generate
+from .probe import probe_poses
 
 # Where the ball may go for a further measurement: (label, file-name tag, ball scale in
 # x, y; dz mm; there and back). A tilt of an axis scales with radius and height, an offset
@@ -48,6 +52,7 @@ class Measurement:
     poses: Poses
     back: bool = False
     name: str = ""
+    device: str = "rtest"        # "probe": made with a touch probe (probe-program)
 
     def to_dict(self) -> dict:
         return {"label": self.label, "path": self.path, "ball": [round(v, 4) for v in self.ball],
@@ -59,8 +64,10 @@ class Measurement:
         return f"--path {self.path} --ball {ball}" + " --there-and-back" * self.back
 
     def command(self, me: str, machine_ref: str, program_ext: str) -> str:
-        """The whole ``measure-program`` command, as it runs pasted into bash."""
-        return (f"{me} measure-program --machine {shlex.quote(machine_ref)} {self.options()} "
+        """The whole ``measure-program`` (or ``probe-program``) command, as it runs pasted
+        into bash."""
+        verb = "probe-program" if self.device == "probe" else "measure-program"
+        return (f"{me} {verb} --machine {shlex.quote(machine_ref)} {self.options()} "
                 f"-o {self.name}{program_ext}")
 
 
@@ -68,9 +75,9 @@ class Advisor:
     """The measurements of one machine not yet made in ``measured``, each checked at most
     once (a check writes the whole program in memory and moves the machine through it)."""
 
-    def __init__(self, machine: Machine, measured: Poses | None = None):
+    def __init__(self, machine: Machine, measured: Poses | None = None, device: str = "rtest"):
         self.machine = machine
-        self.candidates = _candidates(machine, measured)
+        self.candidates = _candidates(machine, measured, device)
         self._why: dict[str, str | None] = {}
 
     def why_not(self, m: Measurement) -> str | None:
@@ -92,13 +99,16 @@ class Advisor:
 
 def _refusal(machine: Machine, m: Measurement) -> str | None:
     try:
-        measure_program(machine, m.poses, m.path, machine.controller, MODE, "ADVICE", "", "")
+        if m.device == "probe":
+            probe_program(machine, m.poses, m.path, machine.controller, "ADVICE", "", "")
+        else:
+            measure_program(machine, m.poses, m.path, machine.controller, MODE, "ADVICE", "", "")
     except CompgenError as exc:
         return str(exc)
     return None
 
 
-def _candidates(machine: Machine, measured: Poses | None) -> list[Measurement]:
+def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest") -> list[Measurement]:
     """Every place for every path, less what would leave the travel and what ``measured``
     holds already (same path, same ball; there and back where the axes turned back)."""
     ball = np.asarray(machine.ball, dtype=float)
@@ -111,14 +121,17 @@ def _candidates(machine: Machine, measured: Poses | None) -> list[Measurement]:
             turned |= {w for i, w in enumerate(where_) if d[i]}
     out = []
     for where, tag, scale, dz, back in PLACES:
+        if back and device == "probe":
+            continue
         at = ball * [scale, scale, 1.0] + [0.0, 0.0, dz]
         for name in machine.paths:
             if (name, tuple(np.round(at, 3))) in (turned if back else done):
                 continue
             try:
-                poses = generate(machine, [name], ball=at, back=back)
+                poses = (probe_poses(machine, [name], at) if device == "probe" else
+                         generate(machine, [name], ball=at, back=back))
             except CompgenError:
                 continue
             out.append(Measurement(f"{name}{where}", name, tuple(float(v) for v in at), poses, back,
-                                   f"{name}_{tag}" if tag else name))
+                                   f"{name}_{tag}" if tag else name, device))
     return out

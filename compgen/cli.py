@@ -27,10 +27,11 @@ from .gate import fit_gate, unit_suspicion
 from .identify import identify, parse_fixed
 from .machine_file import load_machine
 from .paths import generate
+from .probe import format_probe_log, need_probe, probe_poses, simulate_touches
 from .report import report_html
 from .results import load_fit
-from .rtest import SIGNS, format_rtest, read_poses, read_rtest
-from .session import fit_machine, machine_ref, reload
+from .rtest import SIGNS, format_rtest, read_poses
+from .session import fit_machine, machine_ref, read_data, reload
 from .simulate import read_truth, simulate
 from .units import number
 
@@ -111,6 +112,10 @@ def _said(output: str, text: str) -> None:
     click.echo(text, err=output == STDOUT)
 
 
+def _warn(message: str) -> None:
+    click.echo(f"compgen: warning: {message}", err=True)
+
+
 def _progress(message: str) -> None:
     """One line on stderr before work that can take seconds, for a person at a terminal
     (a pipe or a script gets nothing)."""
@@ -162,31 +167,55 @@ def main():
 @click.option("--current", type=FILE, multiple=True,
               help="With a $TC_CARR program: the record's values before the edit (and the CEC tables "
                    "then loaded, as a further --current).")
+@click.option("--device", type=click.Choice(["rtest", "probe"]), default="rtest", show_default=True,
+              help="probe: a touch-probe log v1 of the machine file's [probe] (its poses per path, "
+                   "its touches); --noise-um is then the trigger noise per touch.")
+@click.option("--stylus-error-um", type=float, default=0.0, show_default=True,
+              help="With --device probe: the stylus's real diameter minus the one the log states, µm.")
 @OUTPUT
 @FORCE
 def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, ball, back, edits, current,
-                 output, force):
-    """Write the R-test CSV that a machine with the TRUTH errors would give."""
+                 device, stylus_error_um, output, force):
+    """Write the R-test CSV (or, with --device probe, the probe log) that a machine with the
+    TRUTH errors would give."""
     machine = load_machine(machine_file)
     errors = read_truth(truth, machine)
     names = [p for p in path_names.split(",") if p.strip()]
     if not names:
         raise CompgenError("--paths names no path")
-    poses = generate(machine, names, ball=_vec3(ball, "--ball") if ball is not None else None, back=back)
+    at = _vec3(ball, "--ball") if ball is not None else None
+    if device == "probe":
+        if back or noise_rho:
+            raise CompgenError("--there-and-back and --noise-rho are for R-test sessions",
+                               hint="a probe touches each pose standing still")
+        poses = probe_poses(machine, names, at)
+    else:
+        poses = generate(machine, names, ball=at, back=back)
     drive = None
     if edits:
         held = read_edits(machine, {e: read_text(e, "edit", ansi_ok=True)[0] for e in edits},
                           read_state(current) if current else None)
         drive = partial(held.drive, machine)
-    data = simulate(machine, errors, poses, noise_um, np.random.default_rng(seed), drive, noise_rho)
-    comments = (f"compgen simulate: machine {machine.name}", f"truth {truth}: "
-                + ", ".join(errors) if errors else "truth: nominal machine",
-                *(f"after the edit {e}" for e in edits),
-                f"noise {noise_um} µm σ{f', AR(1) ρ = {noise_rho:g}' if noise_rho else ''}, seed {seed}",
-                "dX dY dZ: nest minus ball, µm")
-    write_atomically(output, format_rtest(machine, data, comments), force,
-                     inputs=(machine_file, truth, *edits, *current))
-    _said(output, f"wrote {output}: {len(poses)} poses ({', '.join(names)})")
+    rng = np.random.default_rng(seed)
+    if device == "probe":
+        data = simulate(machine, errors, poses, 0.0, rng, drive)
+        tips, directions = simulate_touches(machine, poses, data.deviation, noise_um, rng, stylus_error_um)
+        comments = (f"compgen simulate --device probe: truth {truth}: " + (", ".join(errors) or "nominal"),
+                    *(f"after the edit {e}" for e in edits),
+                    f"trigger noise {noise_um} µm σ, stylus {stylus_error_um:+g} µm off its diameter, "
+                    f"seed {seed}")
+        text = format_probe_log(machine, machine.probe, poses, tips, directions, comments)
+    else:
+        data = simulate(machine, errors, poses, noise_um, rng, drive, noise_rho)
+        comments = (f"compgen simulate: machine {machine.name}", f"truth {truth}: "
+                    + ", ".join(errors) if errors else "truth: nominal machine",
+                    *(f"after the edit {e}" for e in edits),
+                    f"noise {noise_um} µm σ{f', AR(1) ρ = {noise_rho:g}' if noise_rho else ''}, seed {seed}",
+                    "dX dY dZ: nest minus ball, µm")
+        text = format_rtest(machine, data, comments)
+    write_atomically(output, text, force, inputs=(machine_file, truth, *edits, *current))
+    touches = f", {machine.probe.touches} touches each" if device == "probe" else ""
+    _said(output, f"wrote {output}: {len(poses)} poses{touches} ({', '.join(names)})")
 
 
 @main.command("fit")
@@ -230,7 +259,7 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
         start = load_fit(base)
         machine, sets = reload(start, machine_file)
         sign = sign or start.sign
-        sets += [read_rtest(p, machine, sign) for p in more]
+        sets += [read_data(p, machine, sign, _warn) for p in more]
         model = start.model
         fixed = {n: e.value for n, e in start.parameters.items() if e.fixed}
     else:
@@ -238,7 +267,7 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
             raise CompgenError("give --machine and DATA files, or --from a fit.json")
         machine = load_machine(machine_file)
         sign = sign or SIGNS[0]
-        sets = [read_rtest(p, machine, sign) for p in data]
+        sets = [read_data(p, machine, sign, _warn) for p in data]
         model, fixed = location_model(machine), {}
     if model_names:
         model = [n.strip() for n in model_names.split(",") if n.strip()]
@@ -254,7 +283,8 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
     if suspicion:
         click.echo(f"compgen: warning: {suspicion}; kinematics will refuse this fit", err=True)
     if record and output != STDOUT:
-        _, _, fid, reasons = _record_fit(db, output, None, None, taken, "rtest", "", ())
+        device = "probe" if all(d.device == "probe" for d in sets) else "rtest"
+        _, _, fid, reasons = _record_fit(db, output, None, None, taken, device, "", ())
         click.echo(f"recorded as calibration #{fid}" + (": NOT accepted as a reference" if reasons else ""))
 
 
@@ -363,6 +393,41 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, contro
                f"{ctl.words}", err=True)
 
 
+@main.command("probe-program")
+@MACHINE
+@click.option("--path", "path_names", required=True,
+              help="K1, K2, K4, a comma list, or 'all': paths of the machine file, each probed at "
+                   "[probe] poses of its poses.")
+@click.option("--ball", default=None, help="The sphere's centre in the table frame, mm, X,Y,Z (default: "
+                                            "the machine file's [rtest] ball).")
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
+@click.option("-o", "--output", type=FILE, required=True,
+              help="Program file; its pose list goes beside it as <stem>.poses.csv (HEIDENHAIN: and the "
+                   "F-PRINT format files <stem>_<path>.A).")
+@FORCE
+def probe_program_cmd(machine_file, path_names, ball, controller_name, output, force):
+    """Write a probing program: a touch probe on the calibration sphere at each pose, every
+    touch logged on the control as a probe log v1; checked with the probe in the set-up."""
+    from .emit.probing import probe_program
+
+    machine = load_machine(machine_file)
+    names = (list(machine.paths) if path_names.strip().lower() == "all"
+             else [p.strip() for p in path_names.split(",") if p.strip()])
+    poses = probe_poses(machine, names, _vec3(ball, "--ball") if ball is not None else None)
+    ctl = controller(controller_name or machine.controller)
+    out = Path(output)
+    emitted = probe_program(machine, poses, "+".join(names), ctl.name, program_name(out.stem, room=4),
+                            __version__, date.today().isoformat())
+    files = {out if suffix == ctl.program_ext else out.with_name(out.stem + suffix): body
+             for suffix, body in emitted.files.items()}
+    write_all(files, force, inputs=(machine_file,))
+    click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, "
+               f"{machine.probe.touches} touches "
+               f"each, {ctl.words}; check it: {me()} check-program --machine {machine_file} {out}"
+               + (" --mode axes" if not ctl.tcp_switchable else ""), err=True)
+
+
 @main.command("check-program")
 @MACHINE
 @click.argument("program", type=FILE)
@@ -389,8 +454,14 @@ def check_program_cmd(machine_file, program, controller_name, ball, mode, as_jso
     at, source = ((_vec3(ball, "--ball"), "--ball") if ball is not None else
                   (header, "the program's header") if header is not None else
                   (machine.ball, "the machine file"))
-    result = run(at_ball(machine, at), ctl.blocks(text, mode), ctl.modulo_axes(machine),
-                 ctl.angle_sense(machine))
+    blocks = ctl.blocks(text, mode)
+    probing = any(b.probe for b in blocks)     # a probing program: the probe and its sphere
+    if probing:
+        need_probe(machine)
+        from .emit.probing import with_sphere
+        machine = with_sphere(machine)
+    result = run(at_ball(machine, at), blocks, ctl.modulo_axes(machine), ctl.angle_sense(machine),
+                 probe=machine.probe if probing else None)
     if as_json:
         click.echo(json.dumps({
             "format": "compgen.check/1", "program": program, "controller": ctl.name,
@@ -481,7 +552,7 @@ def compare_cmd(base, controller_name, post_files, as_json):
     """What the kinematics edit will achieve, and, with --post data, whether it did."""
     fit = load_fit(base)
     machine, sets = reload(fit)
-    post = [read_rtest(p, machine, fit.sign) for p in post_files]
+    post = [read_data(p, machine, fit.sign, _warn) for p in post_files]
     result = compare(machine, sets, fit, controller_name or machine.controller, post)
     click.echo(json.dumps(result.to_dict(), indent=2, ensure_ascii=False) if as_json
                else result.report(), nl=as_json)
@@ -525,7 +596,7 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
     machine, sets = reload(fit)
     for path in emitted:
         read_text(path, "file", ansi_ok=True)   # a missing file fails before anything is drawn
-    post = [read_rtest(p, machine, fit.sign) for p in post_files]
+    post = [read_data(p, machine, fit.sign, _warn) for p in post_files]
     _progress("1/3 diagnose")
     found = diagnose(machine, sets, fit, fit_file=base)
     _progress("2/3 compare")
@@ -763,7 +834,7 @@ def check_cmd(machine_file, data, serial, taken, operator, as_json, db):
     The check is recorded in the history."""
     from .history import check, last_calibration, record_check, taken_at
     machine = load_machine(machine_file)
-    sets = [read_rtest(p, machine) for p in data]
+    sets = [read_data(p, machine, warn=_warn) for p in data]
     _refuse_twice(sets)
     store = _store(db, create=False)
     when = taken_at(taken)

@@ -111,7 +111,8 @@ class Diagnosis:
     rivals_open: dict = field(default_factory=dict)   # label → pairs of rivals it leaves apart
     machine_ref: str = ""   # how a command names the machine file (--machine)
     program_ext: str = ""   # the suffix of the machine's control's programs
-    device_noise_um: float | None = None   # the R-test's own noise, when given
+    device_noise_um: float | None = None   # the R-test's own noise, when given; a probe's, from its touches
+    data_device: str = "rtest"             # "probe": the data are sphere centres from probe logs
     misfit: tuple[dict, ...] = ()   # (path, direction) whose residual exceeds that noise, worst first
     lines: tuple[Line, ...] = ()    # the residual's strongest periodic line against each coordinate
     best_share_of_excess: float | None = None   # of the residual beyond the noise, the best removes
@@ -213,7 +214,11 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     name the machine file. ``noise_um`` is the R-test's own noise (default: the machine
     file's ``[rtest] noise_um``): with it, the residual is tested against it per path and
     direction, and what no catalogue effect accounts for is called unexplained."""
+    kind = "probe" if all(d.device == "probe" for d in data) else "rtest"
     device = noise_um if noise_um is not None else machine.noise_um
+    if kind == "probe" and noise_um is None:   # a probe's centres carry their noise from the touches
+        cov = np.concatenate([d.cov for d in data])
+        device = float(np.sqrt(np.einsum("nii->", cov) / (3 * len(cov)))) * 1e3
     poses = Poses.concat([d.poses for d in data])
     y = np.concatenate([d.deviation for d in data])
     model = Model(machine, fit.model)
@@ -235,6 +240,13 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     in_model = {effect_of_param(machine, n).name for n in fit.model}
     effects = [e for e in (catalogue(machine) if candidates is None
                            else [resolve(machine, c) for c in candidates]) if e.name not in in_model]
+    notes = ()
+    if candidates is None and np.isnan(poses.t).any():   # a drift needs the time of every reading
+        timed = [e.name for e in effects if e.carrier == "time" or e.basis.kind == "e"]
+        effects = [e for e in effects if e.name not in timed]
+        if timed:
+            notes = (f"  not tried: {', '.join(timed)} (they need the time t of every reading; "
+                     "these data do not give it)",)
     if not effects:
         raise CompgenError("no candidate effect left to try: the model holds them all")
     # ρ̂ from the residual once the best candidate (least squares) is added: the misfit of
@@ -263,7 +275,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
             silent=row.silent, share=row.share, condition=row.cond))
     out.sort(key=lambda c: (not c.visible, -c.share))
     model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
-    advisor = Advisor(machine, poses) if advise else None
+    advisor = Advisor(machine, poses, kind) if advise else None
     # seen, but not to be added as a whole: a part of it the model absorbs (fit --add
     # refuses it), so the measurement that shows that part is what to advise
     unseen = [c for c in out if not c.visible or (c.significant and not c.separable)]
@@ -350,7 +362,8 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         outliers=_outlier_rows(data, bad, size), noise=_noise_summary(seg, noise.rho, poses.path),
         rivals_open=rivals_open, machine_ref=machine_ref or machine.source,
         program_ext=_program_ext(machine), device_noise_um=device, misfit=misfit,
-        lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, carries=carries)
+        lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, carries=carries, notes=notes,
+        data_device=kind)
 
 
 def _unexplained(misfit, significant: bool, share: float | None, outside: Line | None) -> bool:

@@ -78,8 +78,10 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
             lines += _then(plan, fit, after)
         else:
             lines += ["  No path or ball position of the machine file tells them apart: for every "
-                      "set-up compgen can measure they predict the same readings (they differ by "
-                      "what the location errors absorb). Any one of them models the misfit: "
+                      "set-up compgen can measure, at its size here"
+                      + (" (a probe's [probe] poses per path)" if d.data_device == "probe" else "")
+                      + ", they predict readings closer than the noise tells apart (or the same: they "
+                      "differ by what the location errors absorb). Any one of them models the misfit: "
                       f"{me()} fit --from {fit} --add {best} -o {after};",
                       "  which of them is the physical cause stays open (it needs another "
                       "reference), and the location errors written to a control depend on the "
@@ -89,7 +91,7 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
         lines += _unexplained(d, fit, after)
     elif not d.significant:
         lines += ["", "  No candidate is significant: the model explains these data to the "
-                  + (f"R-test's noise ({d.device_noise_um:g} µm)." if d.device_noise_um is not None else
+                  + (f"{_device(d)} noise ({d.device_noise_um:.3g} µm)." if d.device_noise_um is not None else
                      f"noise level (their own scatter, σ̂ {d.sigma_um:.2f} µm). The R-test's noise is not "
                      "given: set [rtest] noise_um in the machine file, or --noise-um, to test the "
                      "residual against it.")]
@@ -158,7 +160,8 @@ def _unexplained(d: Diagnosis, fit: str, after: str) -> list[str]:
     """What no catalogue effect accounts for: where, its shape, and how a user who knows the
     cause declares it."""
     if d.misfit:
-        out = ["", f"  UNEXPLAINED: the residual exceeds the R-test's noise ({d.device_noise_um:g} µm) and "
+        out = ["", f"  UNEXPLAINED: the residual exceeds the {_device(d)} noise ({d.device_noise_um:.3g} µm) "
+                   "and "
                    "no catalogue effect accounts for it:"]
         out += [f"    {m['direction']} of {m['path']}: RMS {m['rms_um']:.2f} µm (p = {m['p_value']:.2g})"
                 for m in d.misfit[:6]]
@@ -203,9 +206,18 @@ def _told(d: Diagnosis, m: Measurement) -> set[tuple[str, str]]:
     return set(combinations(group, 2)) - set(map(tuple, d.rivals_open.get(m.label, ())))
 
 
+def _device(d: Diagnosis) -> str:
+    return "probe's (from its touches)" if d.data_device == "probe" else "R-test's"
+
+
 def _then(ms, fit: str, after: str) -> list[str]:
     """What follows measurements: their readings into CSV files, added to the fit's data."""
     names = [m.name for m in ms]
+    if ms and ms[0].device == "probe":
+        logs = ", ".join(f"{n}.log" for n in names)
+        return [f"  run {'it' if len(ms) == 1 else 'them'}; copy the probe log each writes on the control "
+                f"(<program>_LOG) off as {logs}, then fit together with these data and diagnose again:",
+                f"    {me()} fit --from {fit} " + " ".join(f"--data {n}.log" for n in names) + f" -o {after}"]
     csv = ", ".join(f"{n}.csv" for n in names)
     return [f"  run {'it' if len(ms) == 1 else 'them'}; save the R-test's readings as {csv} (the pose "
             "list beside each program, with dX dY dZ), then fit together with these data and diagnose again:",

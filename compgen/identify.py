@@ -58,22 +58,33 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
                            hint="measure more poses: a K4 path has 241")
 
     x = np.array([fixed.get(n, 0.0) for n in names])
+    weights = Weights(data)
 
     def residual(x):
-        return (y - m.deviation(poses, x)).ravel()
+        return weights.apply(y - m.deviation(poses, x)).ravel()
 
     def jac(x):
-        return m.jacobian(poses, x)[:, :, free].reshape(readings, p)
+        return weights.apply(m.jacobian(poses, x)[:, :, free]).reshape(readings, p)
+
+    def solve(x, J):
+        # first order about here (seed eq. 26): y − dev(x) ≈ J Δa
+        x = x.copy()
+        x[free] += np.linalg.lstsq(J, residual(x), rcond=None)[0]
+        iterations = 0
+        if method == "exact":
+            x, J, iterations = _gauss_newton(residual, jac, x, J, free, m)
+        return x, J, iterations
 
     J = jac(x)
     check_identifiable(machine, m, free, J, poses)
-    # first order about zero (seed eq. 26): y − dev(fixed) ≈ J a
-    x[free] += np.linalg.lstsq(J, residual(x), rcond=None)[0]
-    iterations = 0
-    if method == "exact":
-        x, J, iterations = _gauss_newton(residual, jac, x, J, free, m)
+    x, J, iterations = solve(x, J)
+    # devices of unknown relative noise: their variances are estimated with the fit
+    while weights.estimated and weights.rescale(residual(x), J):
+        x, J, more = solve(x, jac(x))
+        iterations += more
 
-    r = residual(x)
+    raw = y - m.deviation(poses, x)
+    r = weights.apply(raw).ravel()
     dof = readings - p
     sigma2 = float(r @ r) / dof
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
@@ -91,12 +102,69 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
     return FitResult(
         machine={"name": machine.name, "file": machine.bundled or _absolute(machine.source),
                  "sha256": machine.sha256, **({"bundled": True} if machine.bundled else {})},
-        data=tuple(DataRef(_absolute(d.source), d.sha256, len(d), _counts(d.poses.path)) for d in data),
+        data=tuple(DataRef(_absolute(d.source), d.sha256, len(d), _counts(d.poses.path), d.device)
+                   for d in data),
         model=tuple(names), parameters=params, free=tuple(names[i] for i in free),
         correlation=np.clip(corr, -1.0, 1.0), singular_values=sv,
-        residual=residual_stats(poses, r.reshape(-1, 3), dof),
+        residual=residual_stats(poses, raw, dof),
         method=method, iterations=iterations, sign=sign, version=__version__,
         descriptions={n: e.words for n, e in zip(names, m.effects, strict=True)})
+
+
+class Weights:
+    """How each reading counts. R-test readings alone: equally (ordinary least squares, the
+    seed's). Sphere centres from a probe log carry their own covariance, so every reading
+    is whitened by it; R-test readings fitted beside them get a variance of their own,
+    estimated with the fit from each device's share of the residual (variance component
+    estimation), since neither device's noise is known against the other's beforehand."""
+
+    ROUNDS = 10
+    PRIOR_UM = 1.0      # an R-test reading's σ before it is estimated
+
+    def __init__(self, data: Sequence[RTestData]):
+        self.active = any(d.cov is not None for d in data)
+        self.estimated = False
+        if not self.active:
+            return
+        prior = np.eye(3) * (self.PRIOR_UM * 1e-3) ** 2
+        self.base = np.concatenate([d.cov if d.cov is not None else np.broadcast_to(prior, (len(d), 3, 3))
+                                    for d in data])
+        self.group = np.concatenate([np.full(len(d), d.cov is not None) for d in data])
+        self.factor = {g: 1.0 for g in np.unique(self.group).tolist()}
+        self.estimated = len(self.factor) > 1      # two devices: each one's variance is estimated
+        self.rounds = 0
+        self._whiten()
+
+    def _whiten(self) -> None:
+        scale = np.array([self.factor[g] for g in self.group.tolist()])
+        self.L = np.linalg.inv(np.linalg.cholesky(self.base * scale[:, None, None]))
+
+    def apply(self, a: np.ndarray) -> np.ndarray:
+        """Readings (n, 3) or their Jacobian (n, 3, p), whitened."""
+        if not self.active:
+            return a
+        return np.einsum("nij,nj...->ni...", self.L, a)
+
+    def rescale(self, r: np.ndarray, J: np.ndarray) -> bool:
+        """New variance factors from the residual (whitened, flat) and Jacobian; True if
+        they moved by more than 1 % and the fit should be redone."""
+        if not self.estimated or self.rounds >= self.ROUNDS:
+            return False
+        self.rounds += 1
+        Q, _ = np.linalg.qr(J)
+        leverage = (Q**2).sum(axis=1).reshape(-1, 3).sum(axis=1)
+        rr = (r.reshape(-1, 3) ** 2).sum(axis=1)
+        moved = False
+        for g in self.factor:
+            at = self.group == g
+            redundancy = 3 * at.sum() - leverage[at].sum()
+            if redundancy <= 0:
+                return False
+            f = self.factor[g] * rr[at].sum() / redundancy
+            moved |= abs(f / self.factor[g] - 1) > 0.01
+            self.factor[g] = f
+        self._whiten()
+        return moved
 
 
 def _gauss_newton(residual, jac, x, J, free, m):

@@ -85,6 +85,35 @@ class PathDef:
 
 
 @dataclass(frozen=True)
+class ProbeSetup:
+    """A touch probe and calibration sphere (``[probe]`` in the machine file), mm, mm/min
+    and deg: what ``probe-program`` writes and ``check-program`` checks. The sphere stands
+    where ``[rtest] ball`` says, on a stem of ``[rtest] stem_diameter``.
+
+    ``length`` runs from the spindle gauge line to the stylus tip's centre (the tool length
+    the control holds); ``stylus_length`` from the tip's centre up to the probe body. Each
+    pose is touched once from above and ``touches − 1`` times around at ``elevation`` above
+    the horizontal; each touch starts ``approach`` from the surface and fails ``overtravel``
+    beyond it. A path is probed at ``poses`` of its poses, evenly spread."""
+
+    sphere_diameter: float
+    stylus_diameter: float
+    length: float
+    tool: str = "1"
+    stylus_length: float = 40.0
+    shaft_diameter: float = 2.0
+    body_diameter: float = 40.0
+    touches: int = 5
+    elevation: float = 30.0
+    poses: int = 12
+    approach: float = 5.0
+    overtravel: float = 2.0
+    feed: float = 2000.0
+    probe_feed: float = 100.0
+    margin: float = 1.0
+
+
+@dataclass(frozen=True)
 class ProgramSetup:
     """How a measurement program runs on this machine (``[program]`` in the machine file).
 
@@ -159,6 +188,7 @@ class Machine:
     setup: Setup = Setup()
     paths: dict[str, PathDef] = field(default_factory=dict)
     program: ProgramSetup | None = None
+    probe: ProbeSetup | None = None
     limits: Limits = Limits()
     drift: Drift = Drift()
     serial: str = ""                # the machine's serial number: one history per machine

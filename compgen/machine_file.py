@@ -22,6 +22,7 @@ from .machine import (
     Limits,
     Machine,
     PathDef,
+    ProbeSetup,
     ProgramSetup,
     Setup,
     check_ball,
@@ -29,7 +30,7 @@ from .machine import (
 )
 
 TOP_KEYS = {"name", "serial", "drift", "controller", "workpiece", "tool", "rtest", "paths", "program",
-            "limits",
+            "probe", "limits",
             "tolerances", "effects"}
 
 
@@ -123,6 +124,7 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
                                clearance=_positive(g, "clearance"),
                                work_offset=identifier("work_offset", g.doc.get("work_offset", "G54"),
                                                       g.at("work_offset")))
+    probe = _probe(get.sub("probe")) if "probe" in doc else None
     limits = Limits()
     if "limits" in doc:
         g = get.sub("limits")
@@ -151,8 +153,33 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
             except CompgenError as exc:
                 raise CompgenError(exc.message, where=f"{g.at('declared')}[{i}]", hint=exc.hint) from None
     serial = identifier("serial", doc["serial"], get.at("serial")) if "serial" in doc else ""
-    return replace(machine, paths=paths, program=program, limits=limits, tolerances=tolerances,
+    return replace(machine, paths=paths, program=program, probe=probe, limits=limits, tolerances=tolerances,
                    declared=declared, drift=drift, serial=serial, **sections)
+
+
+def _probe(g: _Getter) -> ProbeSetup:
+    fields = ProbeSetup.__dataclass_fields__
+    g.only(set(fields))
+    values = {k: _positive(g, k) for k in fields if k in g.doc and k != "tool"}
+    for k in ("sphere_diameter", "stylus_diameter", "length"):
+        if k not in values:
+            raise CompgenError(f"[probe] needs {k} (mm)", where=g.at(k))
+    for k in ("touches", "poses"):
+        if k in values:
+            if values[k] != int(values[k]):
+                raise CompgenError("must be a whole number", where=g.at(k))
+            values[k] = int(values[k])
+    if values.get("touches", 5) < 5:
+        raise CompgenError("a pose needs 5 touches or more (4 fix a centre; the fifth finds a bad one)",
+                           where=g.at("touches"))
+    if values.get("poses", 12) < 4:
+        raise CompgenError("a path needs 4 poses or more", where=g.at("poses"))
+    if not 10 <= values.get("elevation", 30.0) <= 60:
+        raise CompgenError("the side touches' elevation must be 10° to 60° above the horizontal",
+                           where=g.at("elevation"))
+    tool = g.doc.get("tool", "1")
+    tool = identifier("tool", str(tool) if isinstance(tool, int) else tool, g.at("tool"))
+    return ProbeSetup(tool=tool, **values)
 
 
 def _positive(g: _Getter, key: str, zero_ok: bool = False) -> float:

@@ -28,13 +28,14 @@ import numpy as np
 
 from .errors import CompgenError
 from .kinematics import Poses, _chain, inverse
-from .machine import Machine
+from .machine import Machine, ProbeSetup
 from .search import golden_least
 from .transforms import apply
 
 STEP_MM, STEP_DEG = 1.0, 0.5
 SEARCH_MM = 0.01         # the closest point along housing and spindle axes, found to this
 ON_BALL_MM = 1e-3        # the nest centre this close to the ball's: a measuring pose
+TOUCH_MM = 1e-3          # a probing stylus tip this far into the sphere: rounding, not a crash
 
 
 @dataclass(frozen=True)
@@ -53,6 +54,7 @@ class Block:
     on: bool = False             # tcp / length: switched on (True) or off
     turn: dict = field(default_factory=dict)   # modulo axis letter → "+", "-" or "short"
     name: str = ""               # offset: the work offset the block selects (G54, ...)
+    probe: bool = False          # a probing move: it stops where the stylus touches the sphere
 
 
 @dataclass(frozen=True)
@@ -154,6 +156,12 @@ def _frames(machine: Machine, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
             np.einsum("nji,nj->ni", R, tool[:, :3, 2]))
 
 
+def table_axis_down(machine: Machine, q: np.ndarray) -> np.ndarray:
+    """(n, 3): the table frame's −z in the machine frame at poses ``q``: where a stem
+    standing on the table points from the ball."""
+    return -_frames(machine, q)[0][:, :3, 2]
+
+
 def table_point(machine: Machine, q: np.ndarray) -> np.ndarray:
     """The table-frame point under the nest centre at poses ``q`` (n, k), mm."""
     return _frames(machine, q)[1]
@@ -174,7 +182,25 @@ def from_world(machine: Machine, xyz: np.ndarray, rot_rad: np.ndarray) -> np.nda
     return inverse(machine, rot_rad, table_point(machine, q0))
 
 
-def clearances(machine: Machine, q: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+def tooling(machine: Machine,
+            probe: ProbeSetup | None = None) -> dict[str, tuple[float, float, float, float]]:
+    """The parts of what the spindle holds, along the tool axis from the tool point (nest or
+    stylus tip centre), mm: part → (from, to, radius, margin kept to the set-up). A probe's
+    stylus comes within a few mm of the sphere by design: its parts keep ``[probe] margin``."""
+    s = machine.setup
+    if probe is None:
+        return {"housing": (-s.nest_below, machine.probe_length, s.nest_radius, s.margin),
+                "spindle": (machine.probe_length, machine.probe_length + s.spindle_length, s.spindle_radius,
+                            s.margin)}
+    tip = probe.stylus_diameter / 2
+    return {"stylus tip": (0.0, 0.0, tip, probe.margin),
+            "stylus": (tip, probe.stylus_length, probe.shaft_diameter / 2, probe.margin),
+            "probe body": (probe.stylus_length, probe.length, probe.body_diameter / 2, s.margin),
+            "spindle": (probe.length, probe.length + s.spindle_length, s.spindle_radius, s.margin)}
+
+
+def clearances(machine: Machine, q: np.ndarray,
+               probe: ProbeSetup | None = None) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Per pose: the clearance (mm, negative = inside) of each pair (housing or spindle
     against ball, stem, table), and whether the nest is measuring there (its axis within
     ``nest_range`` of the ball's centre, the nest on the ball or above it).
@@ -205,9 +231,7 @@ def clearances(machine: Machine, q: np.ndarray) -> tuple[dict[str, np.ndarray], 
         return np.where((dz == 0) & (dr == 0), -depth, np.hypot(dz, dr))
 
     out = {}
-    parts = {"housing": (-s.nest_below, machine.probe_length, s.nest_radius),
-             "spindle": (machine.probe_length, machine.probe_length + s.spindle_length, s.spindle_radius)}
-    for part, (lo, hi, radius) in parts.items():
+    for part, (lo, hi, radius, _) in tooling(machine, probe).items():
         for thing, dist in (("ball", to_ball), ("stem", to_stem), ("table", to_table)):
             out[f"{part} / {thing}"] = _least_along(dist, nest, axis, lo, hi) - radius
     off_axis = np.linalg.norm(np.cross(ball - nest, axis), axis=1)
@@ -229,16 +253,19 @@ class _Segment:
     start: np.ndarray        # machine pose (axes mode) or TCP xyz + rotary (rad)
     end: np.ndarray
     blind: bool              # some axis came from an unknown place
+    probing: bool = False    # a probing move, or the retract from its touch
     path: np.ndarray | None = None
 
 
 def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
-        sense: dict[str, int] | None = None) -> Check:
+        sense: dict[str, int] | None = None, probe: ProbeSetup | None = None) -> Check:
     """Move the machine model through ``blocks`` and check every sample. The blocks are
     walked once to find each move's ends (TCP moves in TCP coordinates); the samples of
     all moves are then converted and checked together. ``modulo``: the rotary axes the
     control positions modulo 360° (``Controller.modulo_axes``); ``sense``: per rotary axis,
-    ±1, how the control's words turn it against the machine file (``Controller.angle_sense``)."""
+    ±1, how the control's words turn it against the machine file (``Controller.angle_sense``).
+    ``probe``: the program holds probing moves made with this probe (the machine's set-up
+    ball is its sphere); each stops where the stylus tip meets the sphere."""
     sense = sense or {}
     k = len(machine.axes)
     linear = [machine.index(c) for c in "XYZ"]
@@ -292,6 +319,9 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
         # with the rotary axes at zero, TCP coordinates are machine coordinates
         zero_turn = w is None and not np.isnan(q[rotary]).any() and not q[rotary].any()
         if tcp and not (zero_turn and np.isnan(q[linear]).any()):
+            if b.probe:
+                raise CompgenError(f"line {b.line}: a probing move under TCP is not checked",
+                                   hint="probing programs run in machine axes (compgen probe-program)")
             if w is None:
                 if np.isnan(q).any():
                     findings.append(Finding(b.line, "TCP before positioning", "TCP is on before every axis "
@@ -317,7 +347,13 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
             i = letters[letter]
             end[i] = (np.radians(_turned(modulo, b, letter, v * sense.get(letter, 1), np.degrees(q[i])))
                       if i in rotary else v)
-        segments.append(_Segment(b, False, q, end, bool((np.isnan(q) & ~np.isnan(end)).any())))
+        if b.probe:
+            end = _touch(machine, probe, b, q, end, findings)
+            if end is None:
+                break
+        after_touch = bool(segments) and segments[-1].block.probe
+        segments.append(_Segment(b, False, q, end, bool((np.isnan(q) & ~np.isnan(end)).any()),
+                                 probing=b.probe or after_touch))
         q = end
     _paths(machine, segments, linear, rotary)
     closest = (np.inf, "")
@@ -346,9 +382,39 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
         else:
             checkable.append(seg)
     if checkable:
-        closest = _check_collisions(machine, checkable, findings)
+        closest = _check_collisions(machine, checkable, findings, probe)
     findings.sort(key=lambda f: f.line)
     return Check(len(segments), seconds, closest[0], closest[1], tuple(findings))
+
+
+def _touch(machine: Machine, probe: ProbeSetup | None, b: Block, q: np.ndarray, end: np.ndarray,
+           findings: list) -> np.ndarray | None:
+    """Where a probing move stops: the first point where the stylus tip meets the sphere
+    (the set-up's ball) on the way from ``q`` to ``end``; None, with a finding, if it never
+    does (the control stops the program with an error) or starts inside it."""
+    if probe is None:
+        raise CompgenError(f"line {b.line}: a probing move, and the machine file has no [probe]",
+                           hint="describe the probe in [probe] (see the bundled machines)")
+    if np.isnan(q).any():
+        findings.append(Finding(b.line, "probing from an unknown place", "an axis has not been positioned "
+                                "before the probing move", 0.0, b.text.strip()))
+        return None
+    _, ends, _ = _frames(machine, np.array([q, end]))
+    ball = np.asarray(machine.ball)
+    rho = (machine.setup.ball_diameter + probe.stylus_diameter) / 2
+    p0, d = ends[0] - ball, ends[1] - ends[0]
+    a, half_b, c = d @ d, p0 @ d, p0 @ p0 - rho**2
+    disc = half_b**2 - a * c
+    t = (-half_b - np.sqrt(disc)) / a if a > 0 and disc >= 0 else np.inf
+    if c < 0 or not 0 <= t <= 1:
+        what = ("starts inside the sphere" if c < 0 else
+                f"ends {np.sqrt(max(c + 2 * half_b + a, 0.0) + rho**2) - rho:.2f} mm short of it" if t > 1
+                else "misses it")
+        findings.append(Finding(b.line, "probing move does not touch the sphere",
+                                f"the stylus tip {what}; the "
+                                "control stops the program with an error", 0.0, b.text.strip()))
+        return None
+    return q + t * (end - q)
 
 
 def _frame(machine: Machine, blocks: list[Block]) -> None:
@@ -499,18 +565,25 @@ def _check_travel(machine: Machine, b: Block, path: np.ndarray, findings: list) 
             return
 
 
-def _check_collisions(machine: Machine, segments: list[_Segment], findings: list):
+def _check_collisions(machine: Machine, segments: list[_Segment], findings: list,
+                      probe: ProbeSetup | None = None):
     """Clearances of all samples at once; the closest approach of each pair in each block
-    that comes nearer than the set-up's ``margin`` (or into it) is a finding. Returns the
-    closest approach outside the measuring exemption."""
-    margin = machine.setup.margin
+    that comes nearer than its part's margin (or into it) is a finding. Returns the closest
+    approach outside the exemptions: the nest where it measures; the stylus tip on the
+    sphere while it probes and retracts (there it may touch, not enter)."""
+    parts = tooling(machine, probe)
     paths = np.concatenate([seg.path for seg in segments])
     owner = np.concatenate([np.full(len(seg.path), i) for i, seg in enumerate(segments)])
-    pairs, measuring = clearances(machine, paths)
+    probing = np.concatenate([np.full(len(seg.path), seg.probing) for seg in segments])
+    pairs, measuring = clearances(machine, paths, probe)
     closest = (np.inf, "")
     for pair, c in pairs.items():
-        if pair in ("housing / ball", "housing / stem"):
+        margin = np.full(len(c), parts[pair.split(" / ")[0]][3])
+        if probe is None and pair in ("housing / ball", "housing / stem"):
             c = np.where(measuring, np.inf, c)
+        if pair == "stylus tip / ball":
+            margin = np.where(probing, -TOUCH_MM, margin)
+            c = np.where(probing & (c >= -TOUCH_MM), np.inf, c) if probing.any() else c
         j = int(np.argmin(c))
         if c[j] < closest[0]:
             closest = (float(c[j]), f"{pair}, line {segments[owner[j]].block.line}")
@@ -520,7 +593,7 @@ def _check_collisions(machine: Machine, segments: list[_Segment], findings: list
             b = segments[i].block
             part, thing = pair.split(" / ")
             what = (f"{part} enters the {thing}" if c[j] < 0 else
-                    f"{part} within {c[j]:.1f} mm of the {thing} (margin {margin:g} mm)")
+                    f"{part} within {c[j]:.1f} mm of the {thing} (margin {margin[j]:g} mm)")
             findings.append(Finding(b.line, what, b.text.strip(), float(-c[j]) if c[j] < 0 else 0.0,
                                     _axes_text(machine, paths[j])))
     return closest

@@ -43,6 +43,7 @@ class DataRef:
     sha256: str
     rows: int
     paths: dict[str, int] = field(default_factory=dict)
+    device: str = "rtest"        # "probe": sphere centres from a touch-probe log
 
 
 @dataclass(frozen=True, eq=False)   # eq=False: ndarray fields make the default __eq__ raise
@@ -166,7 +167,8 @@ class FitResult:
         lines = [f"compgen fit: {self.machine['name']}"]
         for d in self.data:
             counts = ", ".join(f"{k} {v}" for k, v in d.paths.items())
-            lines.append(f"  data  {d.file}: {d.rows} poses ({counts})")
+            device = " by touch probe" if d.device == "probe" else ""
+            lines.append(f"  data  {d.file}: {d.rows} poses{device} ({counts})")
         lines.append(f"  model {len(self.model)} parameters ({len(self.free)} fitted), method "
                      f"{self.method}, {self.iterations} iteration(s)")
         lines += ["", f"  {'parameter':<12}{'value':>9}    {'std. unc.':<13}meaning"]

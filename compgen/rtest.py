@@ -38,6 +38,8 @@ class RTestData:
     source: str = ""
     sha256: str = ""
     lines: tuple[int, ...] = ()     # the CSV line of each reading (header = 1), when read from one
+    device: str = "rtest"           # "probe": readings are sphere centres from a probe log
+    cov: np.ndarray | None = None   # (n, 3, 3) mm², each reading's covariance when it is known
 
     def __len__(self) -> int:
         return len(self.poses)

@@ -9,8 +9,29 @@ from .effects import effect_of_param
 from .errors import CompgenError
 from .machine import Machine
 from .machine_file import load_machine
+from .probe import MAGIC, is_probe_log, read_probe_log, sphere_centres
 from .results import FitResult
 from .rtest import RTestData, read_rtest
+
+
+def read_data(path: str | Path, machine: Machine, sign: str = "nest-minus-ball", warn=None) -> RTestData:
+    """A measurement file: an R-test CSV, or a touch-probe log (its first line says so),
+    as readings for ``identify``. A probe has no sign to choose: its readings are the
+    centres it found. ``warn`` receives what a probe log's checks flag without refusing."""
+    head = ""            # not a regular file, unreadable: the reader says what is wrong with it
+    if Path(path).is_file():     # a FIFO would block the open
+        try:
+            with open(path, "rb") as f:
+                head = f.read(len(MAGIC) + 3).decode("utf-8", "replace")
+        except OSError:
+            pass
+    if not is_probe_log(head):
+        return read_rtest(path, machine, sign)
+    centres = sphere_centres(read_probe_log(path, machine), machine)
+    for w in centres.warnings:
+        if warn:
+            warn(w)
+    return centres.data
 
 
 def fit_machine(fit: FitResult, machine_file: str | None = None) -> Machine:
@@ -44,7 +65,7 @@ def reload(fit: FitResult, machine_file: str | None = None) -> tuple[Machine, li
         if not Path(ref.file).exists():
             raise CompgenError("data file of the fit is gone", where=ref.file,
                                hint="put it back, or refit with the data where it is now")
-        d = read_rtest(ref.file, machine, fit.sign)
+        d = read_data(ref.file, machine, fit.sign)
         if d.sha256 != ref.sha256:
             raise CompgenError("data file changed since the fit", where=ref.file,
                                hint=f"refit with `{me()} fit`")

@@ -27,3 +27,12 @@ def test_discovery_example_finds_the_hidden_effect_and_reaches_the_noise(tmp_pat
     assert "residual RMS 0.770 µm" in done.stdout               # before: 11 parameters
     assert "residual RMS 0.501 µm" in done.stdout               # after: at the 0.5 µm noise
     assert "explains these data to the noise level" in done.stdout
+
+
+def test_probe_example_runs_from_program_to_edit(tmp_path):
+    done = _run("probe.sh", tmp_path / "work")
+    assert done.returncode == 0, done.stderr
+    assert "PROBE.H: OK (HEIDENHAIN iTNC 530)" in done.stdout                   # the program, checked
+    assert "36 poses by touch probe (K4 12, K1 12, K2 12)" in done.stdout        # the log, fitted
+    assert "1. EXC:h2" in done.stdout                                           # the hidden effect first
+    assert (tmp_path / "work" / "KIN.TAB").exists()                             # the edit written

@@ -276,9 +276,19 @@ def _comp_csv(tables) -> str:
 TCPM = "FUNCTION TCPM F CONT AXIS POS PATHCTRL AXIS"
 
 
+PROBE_DIRECTION = re.compile(r"TCH PROBE 4\.2 IX([+-]\d{1,3}\.\d{1,9}) IY([+-]\d{1,3}\.\d{1,9}) "
+                             r"IZ([+-]\d{1,3}\.\d{1,9})")
+PROBE_RUN = re.compile(r"TCH PROBE 4\.3 ABST\+?(\d{1,4}(?:\.\d{1,6})?) F(\d{1,6}(?:\.\d{1,6})?) MB0 "
+                       r"REFERENCE SYSTEM:0")
+
+
 def program_blocks(text: str) -> list[Block]:
-    """A Klartext program as the control executes it (the blocks compgen writes)."""
+    """A Klartext program as the control executes it (the blocks compgen writes). A
+    touch-probe cycle 4 (U12) probes from where the last L block left the stylus, along its
+    direction, at most ABST: a probing move to that point."""
     out, name = [], None
+    at: dict[str, float] = {}          # the linear axes' last written values
+    direction = None
     for k, raw in enumerate(text.splitlines(), start=1):
         body = raw.split(";", 1)[0].strip()
         m = re.fullmatch(r"\d+\s*(.*)", body)
@@ -328,6 +338,23 @@ def program_blocks(text: str) -> list[Block]:
             w = words([t for t in tokens if t not in ("FMAX", "M91", "R0")], k)
             feed = w.pop("F", None)
             out.append(Block(k, raw, "move", target=w, rapid=rapid, feed=feed, machine_coords=m91))
+            at.update({c: v for c, v in w.items() if c in "XYZ"})
+        elif b in ("TCH PROBE 4.0 MEASURING IN 3-D", "TCH PROBE 4.1 Q1"):
+            continue
+        elif (d := PROBE_DIRECTION.fullmatch(b)) is not None:
+            direction = np.array([float(v) for v in d.groups()])
+            if not 0.999 < np.linalg.norm(direction) < 1.001:
+                raise CompgenError(f"line {k}: the probing direction is not a unit vector")
+        elif (d := PROBE_RUN.fullmatch(b)) is not None:
+            if direction is None or len(at) < 3:
+                raise CompgenError(f"line {k}: a probing cycle without its direction (TCH PROBE 4.2) or "
+                                   "from a place no block gave", hint="give the program compgen wrote")
+            target = {c: at[c] + float(d[1]) * v for c, v in zip("XYZ", direction, strict=True)}
+            out.append(Block(k, raw, "move", target=target, feed=float(d[2]), probe=True))
+            at, direction = {}, None            # where it stopped is the touch's: unknown here
+        elif re.fullmatch(r"FN 0: Q1[0-5] = [+-]\d{1,6}(?:\.\d{1,9})?", b) or re.fullmatch(
+                r"FN 16: F-PRINT TNC:\\[\w.]+ / TNC:\\[\w.]+", b):
+            out.append(Block(k, raw, "log"))
         else:
             raise unknown(k, raw)
     return out

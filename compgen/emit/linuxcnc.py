@@ -416,6 +416,12 @@ def program_blocks(text: str, tcp: bool) -> list[Block]:
             out.append(Block(k, raw, "length", on=b != "G49"))
         elif (d := re.fullmatch(r"G4 P(\S+)", b)) is not None:
             out.append(dwell(d[1], k, raw))
+        elif re.fullmatch(r"\((LOGOPEN,[\w.-]+|LOG,[^()]*|LOGCLOSE)\)", b):    # the probe log: no motion
+            out.append(Block(k, raw, "log"))
+        elif b.startswith("G38.2 "):      # probe towards the target, stop at the touch (error if none)
+            move, _, feed = gcode_move(raw, k, ["G1", *b.split()[1:]], None, feed, "G53")
+            out.append(replace(move, probe=True))
+            modal = None                  # G38.2 stays modal: a bare position would probe again
         else:
             move, modal, feed = gcode_move(raw, k, b.split(), modal, feed, "G53")
             out.append(move)

@@ -223,7 +223,14 @@ def program_blocks(text: str) -> list[Block]:
     out, modal, feed = [], None, None
     for k, raw in enumerate(text.splitlines(), start=1):
         b = raw.split(";", 1)[0].strip()
-        if not b or b in ("ORIWKS", "ORIAXES", "M6"):
+        if not b or b in ("ORIWKS", "ORIAXES", "M6", "DEF INT ERR", "STOPRE"):
+            continue
+        if re.fullmatch(r'WRITE\(ERR,"\w+","[^"]*"(?:<<\$AA_MW\[[XYZ]\]<<"[^"]*")*\)', b):
+            out.append(Block(k, raw, "log"))        # a line of the probe log (U15)
+            continue
+        if b.startswith("MEAS=1 G1 "):            # probe towards the target, stop at the touch (U14)
+            move, _, feed = gcode_move(raw, k, b.split()[1:], None, feed, "SUPA")
+            out.append(replace(move, probe=True))
             continue
         if b == "G17 G90 G71 G94":          # G71: metric (G70 would read compgen's mm as inches)
             out.append(Block(k, raw, "units"))

@@ -1,0 +1,197 @@
+"""Touch-probe logs: the truth comes from the shared simulator's R-test vectors (the ball's
+true centre at each pose is the commanded position minus the reading), the touches from
+a generator written here, not compgen's: one from above, four at 30° elevation, radial,
+with Gaussian trigger noise along the radius."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+from conftest import SEED_MACHINE, TABLE4, run, vector
+
+from compgen.identify import identify
+from compgen.machine_file import load_machine
+from compgen.probe import read_probe_log, sphere_centres
+from compgen.rtest import read_rtest
+
+SEED_NAME = "A/C trunnion, iTNC 530 (seed report)"
+SEED_BALL = np.array([-217.504, -0.279, 211.537])
+EL = np.radians(30)
+DIRS = [np.array([0.0, 0.0, 1.0])] + [np.array([np.cos(EL) * np.cos(a), np.cos(EL) * np.sin(a), np.sin(EL)])
+                                      for a in np.radians([45, 135, 225, 315])]
+
+
+def _rows(every=5, hidden_ecc_arcsec=0.0):
+    with open(vector("seed-table4-noiseless.csv")) as f:
+        rows = list(csv.DictReader(f))[::every]
+    out = []
+    for r in rows:
+        reading = np.array([float(r[d]) for d in ("dX", "dY", "dZ")])
+        centre = np.array([float(r[a]) for a in "XYZ"]) - 1e-3 * reading
+        if hidden_ecc_arcsec:        # a C positioning error δ = a·sin 2C, by the contract's formula
+            A, C = np.radians(float(r["A"])), np.radians(float(r["C"]))
+            d = np.radians(hidden_ecc_arcsec / 3600) * np.sin(2 * C)
+            rx = np.array([[1, 0, 0], [0, np.cos(A), -np.sin(A)], [0, np.sin(A), np.cos(A)]])
+
+            def rz(t):
+                return np.array([[np.cos(t), -np.sin(t), 0], [np.sin(t), np.cos(t), 0], [0, 0, 1]])
+            centre = centre + rx @ rz(C) @ (rz(d) - np.eye(3)) @ SEED_BALL
+        out.append((r["path"], r["A"], r["C"], centre))
+    return out
+
+
+def write_log(path, noise_um=1.0, seed=0, stylus=3.0, true_stylus=None, every=5, hidden_ecc_arcsec=0.0,
+              damage=None):
+    """A probe log v1 of the seed machine with the Table 4 errors; ``damage`` edits the
+    touch rows (a list of [path, pose, A, C, x, y, z, nx, ny, nz] cells) before writing."""
+    rng = np.random.default_rng(seed)
+    rho = (25.4 + (true_stylus or stylus)) / 2
+    touches = []
+    for k, (label, a, c, centre) in enumerate(_rows(every, hidden_ecc_arcsec), 1):
+        for u in DIRS:
+            tip = centre + (rho + rng.normal(0, noise_um * 1e-3)) * u
+            touches.append([label, str(k), a, c, *(f"{v:.5f}" for v in tip), *(f"{-v:.6f}" for v in u)])
+    if damage:
+        damage(touches)
+    head = ["# compgen probe log v1", "# sphere_diameter = 25.4", f"# stylus_diameter = {stylus}",
+            f"# machine = {SEED_NAME}", "path,pose,A,C,X,Y,Z,nx,ny,nz"]
+    path.write_text("\n".join(head + [",".join(t) for t in touches]) + "\n")
+    return path
+
+
+def line_of(touches_index):
+    return 6 + touches_index           # five head lines, then one line per touch
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_eleven_from_a_probe_log_within_five_sigma(tmp_path, seed):
+    machine = load_machine(SEED_MACHINE)
+    data = sphere_centres(read_probe_log(write_log(tmp_path / "k.log", seed=seed), machine), machine).data
+    fit = identify(machine, [data])
+    z = {n: (fit.parameters[n].value - v) / fit.parameters[n].std for n, v in TABLE4.items()}
+    assert max(abs(v) for v in z.values()) < 5, z
+
+
+def test_trigger_noise_is_pooled_and_the_centres_carry_it(tmp_path):
+    machine = load_machine(SEED_MACHINE)
+    c = sphere_centres(read_probe_log(write_log(tmp_path / "k.log", noise_um=1.0, seed=4), machine), machine)
+    assert 0.9 < c.sigma_um < 1.1            # the touches' noise, 1 µm, from 145 poses × 2 dof
+    assert abs(c.radius_offset_um) < 4 * c.radius_sigma_um
+    # a centre's covariance is s²(JᵀJ)⁻¹: from above and four at 30° elevation and 45° azimuths,
+    # JᵀJ = diag(4·cos²30·½, same, 1 + 4·sin²30) = diag(1.5, 1.5, 2)
+    sd = np.sqrt(np.einsum("nii->ni", c.data.cov)) * 1e3
+    assert np.allclose(sd / c.sigma_um, [1 / np.sqrt(1.5), 1 / np.sqrt(1.5), 1 / np.sqrt(2)], rtol=1e-3)
+    assert c.data.device == "probe"
+
+
+def test_the_spread_of_centres_matches_their_covariance(tmp_path):
+    """Honest σ: over 40 noise draws the centres scatter as their covariance says."""
+    machine = load_machine(SEED_MACHINE)
+    draws, covs = [], []
+    for seed in range(40):
+        log = write_log(tmp_path / "k.log", seed=seed, every=60)
+        c = sphere_centres(read_probe_log(log, machine), machine)
+        draws.append(c.centre)
+        covs.append(c.data.cov)
+    spread = np.std(np.array(draws), axis=0) * 1e3
+    claimed = np.sqrt(np.mean([np.einsum("nii->ni", cv) for cv in covs], axis=0)) * 1e3
+    ratio = spread / claimed
+    assert 0.7 < np.median(ratio) < 1.3, ratio
+
+
+def test_a_hidden_c_positioning_error_is_named(tmp_path):
+    log = write_log(tmp_path / "ecc.log", hidden_ecc_arcsec=8.0, seed=3)
+    assert run("fit", "--machine", SEED_MACHINE, log, "-o", tmp_path / "fit.json")[0] == 0
+    code, out, err = run("diagnose", "--from", tmp_path / "fit.json", "--json")
+    assert code == 0, err
+    d = json.loads(out)
+    best = d["candidates"][0]
+    assert best["effect"] == "ECC:h2" and best["significant"], best
+    assert d["found"] == "ECC:h2" or d["found"] is None, d["found"]
+    code, out, _ = run("fit", "--from", tmp_path / "fit.json", "--add", "ECC:h2", "-o",
+                       tmp_path / "fit2.json")
+    assert code == 0
+    fit2 = json.loads((tmp_path / "fit2.json").read_text())
+    before = json.loads((tmp_path / "fit.json").read_text())["residual"]["rms_um"]
+    assert fit2["residual"]["rms_um"] < 1.0 < before
+    assert fit2["data"][0]["device"] == "probe"
+
+
+def test_probe_and_rtest_fit_together(tmp_path):
+    """A mixed session: each device's variance is estimated with the fit."""
+    machine = load_machine(SEED_MACHINE)
+    rng = np.random.default_rng(7)
+    with open(vector("seed-table4-noiseless.csv")) as f:
+        rows = list(csv.DictReader(f))
+    for r in rows:
+        for d in ("dX", "dY", "dZ"):
+            r[d] = f"{float(r[d]) + rng.normal(0, 0.3):.4f}"
+    with open(tmp_path / "r.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, rows[0].keys())
+        w.writeheader()
+        w.writerows(rows)
+    log = write_log(tmp_path / "k.log", noise_um=2.0, seed=5)
+    probe = sphere_centres(read_probe_log(log, machine), machine)
+    rtest = read_rtest(tmp_path / "r.csv", machine)
+    fit = identify(machine, [rtest, probe.data])
+    z = {n: (fit.parameters[n].value - v) / fit.parameters[n].std for n, v in TABLE4.items()}
+    assert max(abs(v) for v in z.values()) < 5, z
+    alone = identify(machine, [rtest])
+    # the probe adds information: no parameter is less certain than from the R-test alone
+    assert all(fit.parameters[n].std <= alone.parameters[n].std * 1.02 for n in TABLE4)
+
+
+def _refused(tmp_path, log, *words):
+    code, out, err = run("fit", "--machine", SEED_MACHINE, log, "-o", tmp_path / "refused.json")
+    assert code != 0 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "refused.json").exists()
+    for w in words:
+        assert w in err, err
+    return err
+
+
+def test_a_bad_trigger_is_refused_with_its_line(tmp_path):
+    def chip(t):                                   # pose 7's third touch 25 µm short of the sphere
+        t[32][4] = f"{float(t[32][4]) + 0.025 * 0.612:.5f}"
+    err = _refused(tmp_path, write_log(tmp_path / "k.log", damage=chip), "pose 7", "bad trigger")
+    assert f"k.log:{line_of(32)}:" in err
+
+
+def test_a_wrong_stylus_diameter_is_refused(tmp_path):
+    log = write_log(tmp_path / "k.log", stylus=3.0, true_stylus=3.02)     # 10 µm on the radius
+    err = _refused(tmp_path, log, "stylus diameter", "+10.")
+    assert "k.log:3:" in err
+
+
+def test_a_missing_touch_is_flagged_and_too_few_refused(tmp_path):
+    def drop_one(t):
+        del t[11]                                  # pose 3 keeps four touches
+    code, out, err = run("fit", "--machine", SEED_MACHINE, write_log(tmp_path / "k.log", damage=drop_one),
+                         "-o", tmp_path / "fit.json")
+    assert code == 0 and f"k.log:{line_of(10)}: K4 pose 3 has 4 touches where the others have 5" in err, err
+
+    def drop_two(t):
+        del t[10:12]
+    _refused(tmp_path, write_log(tmp_path / "k2.log", damage=drop_two), "pose 3 has 3 touches",
+             f"k2.log:{line_of(10)}:")
+
+
+def test_a_coplanar_pose_is_refused(tmp_path):
+    def no_top(t):                                 # pose 2 probed around only: one plane
+        del t[5]
+    _refused(tmp_path, write_log(tmp_path / "k.log", damage=no_top), "pose 2", "one plane",
+             f"k.log:{line_of(5)}:")
+
+
+def test_a_touch_that_moved_away_is_refused(tmp_path):
+    def reverse(t):
+        t[8][7:10] = [f"{-float(v):.6f}" for v in t[8][7:10]]
+    _refused(tmp_path, write_log(tmp_path / "k.log", damage=reverse), "pose 2", "not a radial touch",
+             f"k.log:{line_of(8)}:")
+
+
+def test_another_machines_log_is_refused(tmp_path):
+    log = write_log(tmp_path / "k.log")
+    log.write_text(log.read_text().replace(SEED_NAME, "another machine"))
+    _refused(tmp_path, log, "written for machine 'another machine'", "k.log:4:")
