@@ -7,7 +7,7 @@ from conftest import ARCSEC, TABLE4, UM
 
 from compgen.diagnose import diagnose
 from compgen.diagnose_text import report
-from compgen.effects import compose
+from compgen.effects import compose, location_model
 from compgen.identify import identify
 from compgen.paths import generate
 from compgen.rtest import RTestData
@@ -405,6 +405,27 @@ def test_an_unexplained_misfit_does_not_reach_the_control(seed_machine, poses):
     reasons = fit_gate(seed_machine, data, identify(seed_machine, data))
     shape = "periodic line no catalogue effect has (dX against X: pitch 5.00"
     assert any(shape in r for r in reasons), reasons
+
+
+@pytest.mark.parametrize("seed", [6, 8, 23])
+def test_a_faint_line_in_clean_data_does_not_stop_the_fit(seed):
+    """The B/C machine (no declared noise), its model with ECC:h2 and EYY:p1, clean data at
+    0.5 µm white noise: the line scan finds lines of 0.14-0.19 µm removing 1 % of the
+    residual (these seeds, found by a 40-seed loop); they are not 'unexplained' (0 of 100
+    seeds are, with the share rule; 3 of 40 were without it)."""
+    from conftest import BC_MACHINE
+
+    from compgen.gate import fit_gate
+    from compgen.kinematics import Model
+    from compgen.machine_file import load_machine
+    machine = load_machine(BC_MACHINE)
+    model = compose(machine, location_model(machine), ["ECC:h2", "EYY:p1"])
+    truth = {n: 4e-6 if n.startswith("ECC") else 3e-3 if n.startswith("EYY") else 0.0
+             for n in Model(machine, model).names}
+    poses = generate(machine, ["K4", "K1", "K2"])
+    d = simulate(machine, truth, poses, 0.5, np.random.default_rng(seed))
+    data = [RTestData(d.poses, d.deviation, f"s{seed}.csv", "0" * 64, ())]
+    assert fit_gate(machine, data, identify(machine, data, model)) == []
 
 
 def test_noiseless_data_are_not_unexplained(seed_machine, poses):
