@@ -492,7 +492,8 @@ def record_check(store: Store, result: CheckResult, fit: FitResult, machine: Mac
     name, serial = machine_key(machine, serial)
     with store.writing():
         mid = _machine_id(store, name, serial, create=False)
-        fid = _session_and_fit(store, mid, fit, machine, result.taken, "rtest", operator, {}, "check",
+        device = "probe" if all(d.device == "probe" for d in fit.data) else "rtest"
+        fid = _session_and_fit(store, mid, fit, machine, result.taken, device, operator, {}, "check",
                                "check passed" if result.passed else "check failed")
         return store.insert("checks", {"machine_id": mid, "fit_id": fid, "against_fit_id": result.against.id,
                                        "passed": int(result.passed), "summary": result.summary(),

@@ -195,3 +195,16 @@ def test_another_machines_log_is_refused(tmp_path):
     log = write_log(tmp_path / "k.log")
     log.write_text(log.read_text().replace(SEED_NAME, "another machine"))
     _refused(tmp_path, log, "written for machine 'another machine'", "k.log:4:")
+
+
+def test_a_probe_calibration_and_check_are_kept_as_probe_sessions(tmp_path):
+    db = tmp_path / "h.sqlite"
+    assert run("history", "init", "--db", db)[0] == 0
+    code, _, err = run("fit", "--machine", SEED_MACHINE, write_log(tmp_path / "a.log", seed=1), "-o",
+                       tmp_path / "a.json", "--record", "--date", "2026-11-01", "--db", db)
+    assert code == 0, err
+    code, out, err = run("check", "--machine", SEED_MACHINE, write_log(tmp_path / "b.log", seed=2),
+                         "--date", "2026-12-01", "--db", db)
+    assert code in (0, 1) and ("PASS" in out or "FAIL" in out), out + err
+    code, out, err = run("history", "show", "--machine", SEED_MACHINE, "--db", db)
+    assert code == 0 and out.count(" probe ") == 2 and " rtest " not in out, out
