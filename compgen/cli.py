@@ -283,8 +283,7 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
     if suspicion:
         click.echo(f"compgen: warning: {suspicion}; kinematics will refuse this fit", err=True)
     if record and output != STDOUT:
-        device = "probe" if all(d.device == "probe" for d in sets) else "rtest"
-        _, _, fid, reasons = _record_fit(db, output, None, None, taken, device, "", ())
+        _, _, fid, reasons = _record_fit(db, output, None, None, taken, None, "", ())
         click.echo(f"recorded as calibration #{fid}" + (": NOT accepted as a reference" if reasons else ""))
 
 
@@ -675,8 +674,13 @@ def _record_fit(db, fit_file, machine_file, serial, taken, device, operator, tem
             raise CompgenError(f"--temperature takes NAME=°C, not {item!r}",
                                hint="e.g. --temperature spindle=23.5")
         temps[key.strip()] = number(value, f"--temperature {key.strip()}", "")
+    from .history import measured_by
+    measured = measured_by(fit)
+    if device is not None and device != measured:
+        raise CompgenError(f"--device {device}, but the fit's data are {measured} data",
+                           hint="leave --device out: the fit file says which device measured")
     store = _store(db)
-    fid = record_fit(store, fit, machine, serial=serial, taken=taken, device=device, operator=operator,
+    fid = record_fit(store, fit, machine, serial=serial, taken=taken, device=measured, operator=operator,
                      temperatures=temps, verdict=reasons)
     return store, fit, fid, reasons
 
@@ -687,7 +691,8 @@ def _record_fit(db, fit_file, machine_file, serial, taken, device, operator, tem
               help="The fit's machine file (default: its own).")
 @SERIAL
 @click.option("--date", "taken", default=None, help="When the data were measured (ISO 8601; default now).")
-@click.option("--device", type=click.Choice(["rtest", "probe"]), default="rtest", show_default=True)
+@click.option("--device", type=click.Choice(["rtest", "probe"]), default=None,
+              help="The device that measured (default: what the fit file says; a contradiction is refused).")
 @click.option("--operator", default="", help="Who measured.")
 @click.option("--temperature", "temperatures", multiple=True, metavar="NAME=°C",
               help="A temperature during the measurement, e.g. --temperature hall=21.5. Repeatable.")

@@ -208,3 +208,5 @@ def test_a_probe_calibration_and_check_are_kept_as_probe_sessions(tmp_path):
     assert code in (0, 1) and ("PASS" in out or "FAIL" in out), out + err
     code, out, err = run("history", "show", "--machine", SEED_MACHINE, "--db", db)
     assert code == 0 and out.count(" probe ") == 2 and " rtest " not in out, out
+    code, _, err = run("history", "add", tmp_path / "a.json", "--device", "rtest", "--db", db)
+    assert code == 2 and "--device rtest, but the fit's data are probe data" in err, err
