@@ -228,11 +228,6 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
                    tuple(warnings))
 
 
-def read_probe(path, machine: Machine) -> RTestData:
-    """A probe log as the sphere centres' readings, ready for ``identify``."""
-    return sphere_centres(read_probe_log(path, machine), machine).data
-
-
 def _poses(log: ProbeLog) -> list[np.ndarray]:
     """The touch indices of each (path, pose), in order of first appearance; a pose whose
     touches are not together in the log is refused (two poses numbered alike)."""
@@ -334,15 +329,13 @@ def touch_directions(machine: Machine, poses: Poses, setup: ProbeSetup) -> np.nd
 
 
 def format_probe_log(machine: Machine, setup: ProbeSetup, poses: Poses, tips: np.ndarray,
-                     directions: np.ndarray,
-                     comments: tuple[str, ...] = (), stylus_diameter: float | None = None,
-                     sphere_diameter: float | None = None) -> str:
+                     directions: np.ndarray, comments: tuple[str, ...] = ()) -> str:
     """A probe log v1: ``tips`` and ``directions`` (n, m, 3) per pose and touch."""
     rotary = [machine.index(a.name) for a in machine.rotary_axes]
     names = [a.name for a in machine.rotary_axes]
     out = [MAGIC, *(f"# {c}" for c in comments),
-           f"# sphere_diameter = {sphere_diameter or setup.sphere_diameter:.4f}",
-           f"# stylus_diameter = {stylus_diameter or setup.stylus_diameter:.4f}",
+           f"# sphere_diameter = {setup.sphere_diameter:.4f}",
+           f"# stylus_diameter = {setup.stylus_diameter:.4f}",
            f"# machine = {machine.name}",
            ",".join(["path", "pose", "t", *names, "X", "Y", "Z", *DIRECTION])]
     timed = not np.isnan(poses.t).any()
