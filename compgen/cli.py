@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import sys
 from datetime import date
 from functools import partial
@@ -19,6 +20,7 @@ from .diagnose import diagnose
 from .diagnose_text import report as diagnosis_text
 from .effects import catalogue, compose, location_model
 from .emit.kinematics import corrected_by, kinematics_edit
+from .emit.probing import probe_program, with_sphere
 from .emit.programs import MODES, NAME_MAX, at_ball, measure_program, program_ball, program_name
 from .emit.registry import CONTROLLERS, controller, for_program, read_edits, read_state
 from .errors import CONTROL, CompgenError
@@ -27,10 +29,10 @@ from .gate import fit_gate, unit_suspicion
 from .identify import identify, parse_fixed
 from .machine_file import load_machine
 from .paths import generate
-from .probe import format_probe_log, need_probe, probe_poses, simulate_touches
+from .probe import format_probe_log, probe_poses, simulate_touches
 from .report import report_html
 from .results import load_fit
-from .rtest import SIGNS, format_rtest, read_poses
+from .rtest import SIGNS, device_of, format_rtest, read_poses
 from .session import fit_machine, machine_ref, read_data, reload
 from .simulate import read_truth, simulate
 from .units import number
@@ -370,8 +372,7 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, contro
     if poses_file:
         poses, label = read_poses(poses_file, machine), Path(poses_file).stem
     else:
-        names = (list(machine.paths) if path_names.strip().lower() == "all"
-                 else [p.strip() for p in path_names.split(",") if p.strip()])
+        names = _path_names(machine, path_names)
         poses = generate(machine, names, ball=_vec3(ball, "--ball") if ball is not None else None, back=back)
         label = "+".join(names) + "_BACK" * back
     ctl = controller(controller_name or machine.controller)
@@ -408,11 +409,8 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, contro
 def probe_program_cmd(machine_file, path_names, ball, controller_name, output, force):
     """Write a probing program: a touch probe on the calibration sphere at each pose, every
     touch logged on the control as a probe log v1; checked with the probe in the set-up."""
-    from .emit.probing import probe_program
-
     machine = load_machine(machine_file)
-    names = (list(machine.paths) if path_names.strip().lower() == "all"
-             else [p.strip() for p in path_names.split(",") if p.strip()])
+    names = _path_names(machine, path_names)
     poses = probe_poses(machine, names, _vec3(ball, "--ball") if ball is not None else None)
     ctl = controller(controller_name or machine.controller)
     out = Path(output)
@@ -423,7 +421,8 @@ def probe_program_cmd(machine_file, path_names, ball, controller_name, output, f
     write_all(files, force, inputs=(machine_file,))
     click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, "
                f"{machine.probe.touches} touches "
-               f"each, {ctl.words}; check it: {me()} check-program --machine {machine_file} {out}"
+               f"each, {ctl.words}; check it: {me()} check-program --machine {shlex.quote(machine_file)} "
+               f"{shlex.quote(str(out))}"
                + (" --mode axes" if not ctl.tcp_switchable else ""), err=True)
 
 
@@ -456,8 +455,6 @@ def check_program_cmd(machine_file, program, controller_name, ball, mode, as_jso
     blocks = ctl.blocks(text, mode)
     probing = any(b.probe for b in blocks)     # a probing program: the probe and its sphere
     if probing:
-        need_probe(machine)
-        from .emit.probing import with_sphere
         machine = with_sphere(machine)
     result = run(at_ball(machine, at), blocks, ctl.modulo_axes(machine), ctl.angle_sense(machine),
                  probe=machine.probe if probing else None)
@@ -674,8 +671,7 @@ def _record_fit(db, fit_file, machine_file, serial, taken, device, operator, tem
             raise CompgenError(f"--temperature takes NAME=°C, not {item!r}",
                                hint="e.g. --temperature spindle=23.5")
         temps[key.strip()] = number(value, f"--temperature {key.strip()}", "")
-    from .history import measured_by
-    measured = measured_by(fit)
+    measured = device_of(fit.data)
     if device is not None and device != measured:
         raise CompgenError(f"--device {device}, but the fit's data are {measured} data",
                            hint="leave --device out: the fit file says which device measured")
@@ -881,6 +877,13 @@ def _refuse_twice(sets) -> None:
             raise CompgenError(f"{d.source} holds the same readings as {seen[d.sha256]} (equal checksums)",
                                hint="give each measurement once")
         seen[d.sha256] = d.source
+
+
+def _path_names(machine, text: str) -> list[str]:
+    """--path: a comma list of the machine file's paths, or 'all'."""
+    if text.strip().lower() == "all":
+        return list(machine.paths)
+    return [p.strip() for p in text.split(",") if p.strip()]
 
 
 def _vec3(text: str, option: str) -> list[float]:

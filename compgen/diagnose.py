@@ -28,7 +28,7 @@ from .kinematics import Model, Poses, runs
 from .machine import Machine
 from .noise import ar1, outliers, whiten
 from .results import FitResult
-from .rtest import RTestData
+from .rtest import RTestData, device_of
 from .signature import columns, r_factor, signatures
 from .significance import (
     ALPHA,
@@ -218,7 +218,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     name the machine file. ``noise_um`` is the R-test's own noise (default: the machine
     file's ``[rtest] noise_um``): with it, the residual is tested against it per path and
     direction, and what no catalogue effect accounts for is called unexplained."""
-    kind = "probe" if all(d.device == "probe" for d in data) else "rtest"
+    kind = device_of(data)
     device = noise_um if noise_um is not None else machine.noise_um
     if kind == "probe" and noise_um is None:   # a probe's centres carry their noise from the touches
         cov = np.concatenate([d.cov for d in data])

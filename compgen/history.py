@@ -25,6 +25,7 @@ from .emit.registry import controller
 from .errors import CompgenError
 from .machine import Machine
 from .results import FitResult
+from .rtest import device_of
 from .store import Store, now
 from .units import shown
 
@@ -78,11 +79,6 @@ def machine_id(store: Store, machine: Machine, serial: str | None = None) -> int
     return found
 
 
-def measured_by(fit: FitResult) -> str:
-    """The device of a fit's data: "probe" when every file is a probe log."""
-    return "probe" if all(d.device == "probe" for d in fit.data) else "rtest"
-
-
 def record_fit(store: Store, fit: FitResult, machine: Machine, *, serial: str | None = None,
                taken: str | None = None, device: str | None = None, operator: str = "",
                temperatures: Mapping[str, float] | None = None, kind: str = "calibration",
@@ -91,7 +87,7 @@ def record_fit(store: Store, fit: FitResult, machine: Machine, *, serial: str | 
     the fit should not reach a control (``gate.fit_gate``), empty for an accepted fit. The
     same fit twice is refused, or with ``exist_ok`` its first record's id returned.
     ``device``: default, the one the fit's data came from."""
-    device = device or measured_by(fit)
+    device = device or device_of(fit.data)
     if device not in DEVICES:
         raise CompgenError(f"device must be one of {', '.join(DEVICES)}, not {device!r}")
     name, serial = machine_key(machine, serial)
@@ -499,7 +495,7 @@ def record_check(store: Store, result: CheckResult, fit: FitResult, machine: Mac
     name, serial = machine_key(machine, serial)
     with store.writing():
         mid = _machine_id(store, name, serial, create=False)
-        fid = _session_and_fit(store, mid, fit, machine, result.taken, measured_by(fit), operator, {},
+        fid = _session_and_fit(store, mid, fit, machine, result.taken, device_of(fit.data), operator, {},
                                "check",
                                "check passed" if result.passed else "check failed")
         return store.insert("checks", {"machine_id": mid, "fit_id": fid, "against_fit_id": result.against.id,

@@ -175,8 +175,9 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
     # a bad trigger would inflate the pooled σ it is judged by: judge by a robust scale
     robust = 1.4826 * float(np.median(np.abs(r_all))) * math.sqrt(counts.sum() / dof)
     scale = max(robust, 1e-7)
-    for g, u, r in zip(groups, normals, residuals, strict=True):
-        h = np.einsum("ij,jk,ik->i", u, np.linalg.inv(u.T @ u), u)
+    inverse_info = [np.linalg.inv(u.T @ u) for u in normals]     # (JᵀJ)⁻¹ of each pose
+    for g, u, r, G in zip(groups, normals, residuals, inverse_info, strict=True):
+        h = np.einsum("ij,jk,ik->i", u, G, u)
         room = 1 - h
         deleted = np.where(room > 1e-6, r / np.maximum(room, 1e-6), 0.0)
         z = np.where(room > 1e-6, np.abs(r) / (scale * np.sqrt(np.maximum(room, 1e-6))), 0.0)
@@ -189,9 +190,9 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
                                hint="clean the sphere and re-probe the pose, or delete the line")
     # one stylus for the whole log: its radius error is common to every pose
     num = den = 0.0
-    for u, r in zip(normals, residuals, strict=True):
+    for u, r, G in zip(normals, residuals, inverse_info, strict=True):
         ones = np.ones(len(u))
-        perp = ones - u @ np.linalg.solve(u.T @ u, u.T @ ones)
+        perp = ones - u @ (G @ (u.T @ ones))
         num, den = num + perp @ r, den + perp @ perp
     radius_offset = num / den
     radius_sigma = math.sqrt(s2 / den)
@@ -205,7 +206,7 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
                                 "what "
                                 "the probe has: calibrate the stylus on the control and probe again")
     centre = np.array(centres)
-    cov = np.array([s2 * np.linalg.inv(u.T @ u) for u in normals])
+    cov = s2 * np.array(inverse_info)
     first = np.array([g[0] for g in groups])
     rotary = log.rotary[first]
     ball = log.ball[first]

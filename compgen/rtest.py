@@ -45,6 +45,12 @@ class RTestData:
         return len(self.poses)
 
 
+def device_of(data) -> str:
+    """The device of measurements (``RTestData`` or a fit's data entries): "probe" when
+    every one is from a probe log, else "rtest"."""
+    return "probe" if all(d.device == "probe" for d in data) else "rtest"
+
+
 def read_rtest(path: str | Path, machine: Machine, sign: str = "nest-minus-ball") -> RTestData:
     """Read an R-test CSV v1 file for ``machine``.
 

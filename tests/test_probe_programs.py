@@ -3,6 +3,7 @@ LinuxCNC's run through its own interpreter (rs274), and the log it writes read b
 
 import os
 import re
+import shlex
 import shutil
 import subprocess
 
@@ -19,7 +20,8 @@ MACHINES = {"seed": SEED_MACHINE, "bc": BC_MACHINE}
 
 
 def _program(tmp_path, machine, ctl, path="all"):
-    out = tmp_path / f"PROBE{EXT[ctl]}"
+    out = tmp_path / "my programs" / f"PROBE{EXT[ctl]}"      # a space: the printed command quotes it
+    out.parent.mkdir(exist_ok=True)
     code, _, err = run("probe-program", "--machine", machine, "--path", path, "--controller", ctl, "-o", out)
     assert code == 0, err
     return out, err
@@ -35,7 +37,7 @@ def test_every_probing_program_passes_the_check_with_the_probe_in_the_set_up(tmp
         assert not (tmp_path / "P.ngc").exists()
         return
     out, said = _program(tmp_path, MACHINES[machine], ctl)
-    printed = re.search(r"check it: (.*)$", said.strip()).group(1).split()     # the command as printed
+    printed = shlex.split(re.search(r"check it: (.*)$", said.strip()).group(1))   # as bash reads it
     code, stdout, err = run(*printed[printed.index("check-program"):])
     assert code == 0 and "OK" in stdout, stdout + err
     closest = float(re.search(r"closest approach ([\d.]+) mm", stdout).group(1))
@@ -74,14 +76,14 @@ def test_linuxcnc_runs_the_probing_program_and_its_log_is_a_probe_log(tmp_path):
             pytest.fail("rs274 (LinuxCNC's interpreter) is required here")
         pytest.skip("rs274 is not installed (apt-get install linuxcnc-uspace)")
     out, _ = _program(tmp_path, SEED_MACHINE, "linuxcnc")
-    (tmp_path / "t.tbl").write_text("T98 P1 Z120 ;probe\n")
-    (tmp_path / "v.var").write_text("")
-    (tmp_path / "rs.ini").write_text("[RS274NGC]\nPARAMETER_FILE = v.var\n[TRAJ]\nLINEAR_UNITS = mm\n"
+    (out.parent / "t.tbl").write_text("T98 P1 Z120 ;probe\n")
+    (out.parent / "v.var").write_text("")
+    (out.parent / "rs.ini").write_text("[RS274NGC]\nPARAMETER_FILE = v.var\n[TRAJ]\nLINEAR_UNITS = mm\n"
                                      "ANGULAR_UNITS = degree\nCOORDINATES = XYZAC\n")
     done = subprocess.run(["rs274", "-i", "rs.ini", "-t", "t.tbl", "-v", "v.var", "-g", out.name,
                            "canon.txt"],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=120)
-    canon = (tmp_path / "canon.txt").read_text()
+                          cwd=out.parent, capture_output=True, text=True, timeout=120)
+    canon = (out.parent / "canon.txt").read_text()
     probes = np.array([[float(v) for v in m[1].split(",")][:3]
                        for m in re.finditer(r"STRAIGHT_PROBE\(([^)]*)\)", canon)])
     assert len(probes) == 36 * 5, done.stdout + done.stderr
