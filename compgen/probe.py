@@ -276,6 +276,9 @@ def probe_poses(machine: Machine, names, ball=None) -> Poses:
     from .paths import generate
 
     setup = need_probe(machine)
+    if not names:
+        raise CompgenError("no path is named", hint=f"name one or more of {', '.join(machine.paths)} "
+                                                     "(comma-separated), or all")
     out = []
     for name in names:
         p = generate(machine, [name], ball=ball)

@@ -128,3 +128,15 @@ def test_simulate_a_probe_log_then_fit_it(tmp_path):
     assert code == 0, err
     code, _, err = run("fit", "--machine", SEED_MACHINE, tmp_path / "worn.log", "-o", tmp_path / "w.json")
     assert code == 2 and "+10.0" in err and "stylus diameter" in err, err
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["--path", ""], "no path is named"),
+    (["--path", "K9"], "defines no path 'K9'"),
+    (["--path", "K4", "--ball", "1,2"], "--ball takes three numbers"),
+    (["--path", "K4", "--ball", "0,0,-50"], "does not stand above the table top"),
+])
+def test_bad_probe_program_options_get_one_line(tmp_path, args, expected):
+    code, _, err = run("probe-program", "--machine", SEED_MACHINE, *args, "-o", tmp_path / "P.H")
+    assert code == 2 and expected in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "P.H").exists()
