@@ -163,6 +163,12 @@ def main():
 @click.option("--ball", default=None, help="Ball centre in the table frame, mm: X,Y,Z "
                                             "(default: the machine file's).")
 @click.option("--there-and-back", "back", is_flag=True, help="Run each path there and back.")
+@click.option("--rate-hz", type=float, default=None,
+              help="A continuous session: a reading every 1/RATE s while each path runs (an R-test "
+                   "sampling on the fly), instead of the path's n poses.")
+@click.option("--feed", type=float, default=None,
+              help="With --rate-hz: each path's pace, deg/min of its most-travelled rotary axis "
+                   "(default the path's own: n poses of seconds_per_pose).")
 @click.option("--edit", "edits", type=FILE, multiple=True,
               help="A kinematics edit compgen wrote (table, change list, $TC_CARR program, CEC "
                    "file): simulate the measurement after the control has loaded it. Repeatable.")
@@ -176,8 +182,8 @@ def main():
               help="With --device probe: the stylus's real diameter minus the one the log states, µm.")
 @OUTPUT
 @FORCE
-def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, ball, back, edits, current,
-                 device, stylus_error_um, output, force):
+def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, ball, back, rate_hz, feed,
+                 edits, current, device, stylus_error_um, output, force):
     """Write the R-test CSV (or, with --device probe, the probe log) that a machine with the
     TRUTH errors would give."""
     machine = load_machine(machine_file)
@@ -187,12 +193,14 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
         raise CompgenError("--paths names no path")
     at = _vec3(ball, "--ball") if ball is not None else None
     if device == "probe":
-        if back or noise_rho:
-            raise CompgenError("--there-and-back and --noise-rho are for R-test sessions",
+        if back or noise_rho or rate_hz is not None or feed is not None:
+            raise CompgenError("--there-and-back, --noise-rho, --rate-hz and --feed are for R-test sessions",
                                hint="a probe touches each pose standing still")
         poses = probe_poses(machine, names, at)
     else:
-        poses = generate(machine, names, ball=at, back=back)
+        if feed is not None and rate_hz is None:
+            raise CompgenError("--feed sets the pace of a continuous session", hint="give --rate-hz too")
+        poses = generate(machine, names, ball=at, back=back, rate_hz=rate_hz, feed=feed)
     drive = None
     if edits:
         held = read_edits(machine, {e: read_text(e, "edit", ansi_ok=True)[0] for e in edits},

@@ -14,27 +14,30 @@ from pathlib import Path
 
 from .errors import CONTROL, CompgenError
 
-MAX_BYTES = 64 * 2**20      # an R-test session is a few MB; more is not one of compgen's files
+MAX_BYTES = 64 * 2**20      # a state, a program, a machine file: more is not one of compgen's files
+# R-test data sampled on the fly: two hours at 100 Hz is ~70 MB; this admits ~7 hours
+MAX_DATA_BYTES = 256 * 2**20
 
 
-def _regular(path: Path, what: str) -> None:
+def _regular(path: Path, what: str, limit: int = MAX_BYTES) -> None:
     try:
         st = path.stat()
     except OSError as exc:
         raise CompgenError(f"cannot read {what}: {exc.strerror}", where=str(path)) from None
     if not stat.S_ISREG(st.st_mode):     # a FIFO would hang, a device would never end
         raise CompgenError(f"not a regular file, cannot be a {what}", where=str(path))
-    if st.st_size > MAX_BYTES:
+    if st.st_size > limit:
         raise CompgenError(f"{st.st_size / 2**20:.0f} MB is too large for a {what}", where=str(path))
 
 
-def read_text(path: str | Path, what: str, ansi_ok: bool = False) -> tuple[str, bytes]:
+def read_text(path: str | Path, what: str, ansi_ok: bool = False,
+              limit: int = MAX_BYTES) -> tuple[str, bytes]:
     """A user's text file: its text and raw bytes (for checksums), or one clear line.
 
     ``ansi_ok`` accepts Latin-1 where UTF-8 fails: controller exports are often ANSI.
     """
     path = Path(path)
-    _regular(path, what)
+    _regular(path, what, limit)
     try:
         raw = path.read_bytes()
     except OSError as exc:

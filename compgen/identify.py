@@ -60,39 +60,41 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
     x = np.array([fixed.get(n, 0.0) for n in names])
     weights = Weights(data)
 
-    def residual(x):
-        return weights.apply(y - m.deviation(poses, x)).ravel()
+    buffer = np.empty((len(names), len(poses), 3))
 
-    def jac(x):
-        return weights.apply(m.jacobian(poses, x)[:, :, free]).reshape(readings, p)
+    def linearise(x):
+        """The raw residual (n, 3) mm, and the whitened residual and Jacobian of the free
+        parameters (flat), from one walk of the model's chains. The Jacobian lives in
+        ``buffer``: each call overwrites the last one's, which is never used again."""
+        dev, J = m.linearise(poses, x, out=buffer)
+        raw = y - dev
+        J = weights.apply(J if len(free) == len(names) else J[:, :, free])
+        return raw, weights.apply(raw).ravel(), Normal(np.moveaxis(J, 2, 0).reshape(p, readings).T)
 
-    def solve(x, J):
+    def solve(x, at):
         # first order about here (seed eq. 26): y − dev(x) ≈ J Δa
         x = x.copy()
-        x[free] += np.linalg.lstsq(J, residual(x), rcond=None)[0]
-        iterations = 0
+        x[free] += at[2].solve(at[1])
+        at, iterations = linearise(x), 0
         if method == "exact":
-            x, J, iterations = _gauss_newton(residual, jac, x, J, free, m)
-        return x, J, iterations
+            x, at, iterations = _gauss_newton(linearise, x, at, free, m)
+        return x, at, iterations
 
-    J = jac(x)
-    check_identifiable(machine, m, free, J, poses)
-    x, J, iterations = solve(x, J)
+    at = linearise(x)
+    check_identifiable(machine, m, free, at[2], poses)
+    x, at, iterations = solve(x, at)
     # devices of unknown relative noise: their variances are estimated with the fit
-    while weights.estimated and weights.rescale(residual(x), J):
-        x, J, more = solve(x, jac(x))
+    while weights.estimated and weights.rescale(at[1], at[2]):
+        x, at, more = solve(x, linearise(x))
         iterations += more
 
-    raw = y - m.deviation(poses, x)
-    r = weights.apply(raw).ravel()
+    raw, r, normal = at
     dof = readings - p
     sigma2 = float(r @ r) / dof
-    U, s, Vt = np.linalg.svd(J, full_matrices=False)
-    cov = (Vt.T / s**2) @ Vt * sigma2
+    cov = normal.inverse() * sigma2
     std = np.sqrt(np.diag(cov))
     corr = cov / np.outer(std, std) if np.all(std > 0) else np.eye(p)
-    norm = np.linalg.norm(J, axis=0)
-    sv = np.linalg.svd(J / norm, compute_uv=False)
+    sv = normal.singular_values()
 
     params = {}
     for i, n in enumerate(names):
@@ -145,14 +147,14 @@ class Weights:
             return a
         return np.einsum("nij,nj...->ni...", self.L, a)
 
-    def rescale(self, r: np.ndarray, J: np.ndarray) -> bool:
-        """New variance factors from the residual (whitened, flat) and Jacobian; True if
-        they moved by more than 1 % and the fit should be redone."""
+    def rescale(self, r: np.ndarray, normal: Normal) -> bool:
+        """New variance factors from the residual (whitened, flat) and the Jacobian's normal
+        equations; True if they moved by more than 1 % and the fit should be redone."""
         if not self.estimated or self.rounds >= self.ROUNDS:
             return False
         self.rounds += 1
-        Q, _ = np.linalg.qr(J)
-        leverage = (Q**2).sum(axis=1).reshape(-1, 3).sum(axis=1)
+        # each reading's leverage: the diagonal of J (JᵀJ)⁻¹ Jᵀ
+        leverage = np.einsum("ij,ij->i", normal.J @ normal.inverse(), normal.J).reshape(-1, 3).sum(axis=1)
         rr = (r.reshape(-1, 3) ** 2).sum(axis=1)
         moved = False
         for g in self.factor:
@@ -167,51 +169,74 @@ class Weights:
         return moved
 
 
-def _gauss_newton(residual, jac, x, J, free, m):
-    """Gauss–Newton with step halving, renewing the Jacobian only when it must.
+class Normal:
+    """A Jacobian J (readings, p), best column-major, and its normal equations, formed once: a tall J is 10⁶
+    rows of a few columns, where an SVD or QR costs seconds and JᵀJ milliseconds. Columns
+    are scaled to unit norm first, so the Gram matrix's condition is that of the scaled
+    J squared — at most COND_LIMIT² where a fit goes on (a solve exact to ~1e-12) — and
+    a Gauss–Newton step corrects what little a solve leaves. Below COND_LIMIT the exact
+    singular values come from J itself (only on the way to a refusal)."""
 
-    R-test errors are µm and µrad, so J changes by about 1e-5 of itself over a step and the
-    first-order J still gains about five digits an iteration (the chord method): each
-    iteration costs one model evaluation instead of 2p. J is renewed when the steps stop
-    shrinking tenfold and once they stop; the steps then go on with the renewed J until
-    they stop again, so the result satisfies the exact model's normal equations
-    (J*ᵀr = 0, not only J₀ᵀr = 0) and the covariance uses J*. (A Levenberg–Marquardt
-    safeguard was never needed: the problem is mildly non-linear and well started by the
-    first-order solution.)
+    def __init__(self, J: np.ndarray):
+        self.J = J
+        self.norm = np.sqrt(np.einsum("ij,ij->j", J, J))
+        scale = np.where(self.norm > 0, self.norm, 1.0)
+        self.G = (J.T @ J) / np.outer(scale, scale)
+
+    def solve(self, r: np.ndarray) -> np.ndarray:
+        """The least-squares step: argmin |J dx − r|."""
+        scale = np.where(self.norm > 0, self.norm, 1.0)
+        return np.linalg.solve(self.G, (self.J.T @ r) / scale) / scale
+
+    def inverse(self) -> np.ndarray:
+        """(JᵀJ)⁻¹."""
+        return np.linalg.inv(self.G) / np.outer(self.norm, self.norm)
+
+    def singular_values(self) -> np.ndarray:
+        """Singular values of J with unit-norm columns, largest first, from JᵀJ: exact to
+        ~1e-8 of the largest (an SVD of J itself, for a refusal, in ``check_identifiable``)."""
+        return np.sqrt(np.clip(np.linalg.eigvalsh(self.G), 0.0, None))[::-1]
+
+
+def _gauss_newton(linearise, x, at, free, m):
+    """Gauss–Newton on the exact model, with step halving.
+
+    Each iteration walks the model's chains once (``Model.linearise``: the exact residual
+    and the exact analytic Jacobian together), so it converges quadratically: R-test errors
+    are µm and µrad, the first-order start is within ~1e-5 of the answer and two steps
+    later the step is below STEP_TOL_SHOWN. The result satisfies the exact model's normal
+    equations (J*ᵀr = 0) to that step, and the covariance uses J* there. (A
+    Levenberg–Marquardt safeguard was never needed: the problem is mildly non-linear and
+    well started by the first-order solution.)
     """
-    r = residual(x)
+    r = at[1]
     cost = float(r @ r)
-    converged_once, previous = False, np.inf
     for it in range(1, MAX_ITER + 1):
-        dx = np.linalg.lstsq(J, r, rcond=None)[0]
+        dx = at[2].solve(at[1])
+        step = max(abs(shown(v, m.effects[i].unit)[0]) for i, v in zip(free, dx, strict=True))
+        if step < STEP_TOL_SHOWN:
+            return x, at, it - 1
         for _ in range(30):
             trial = x.copy()
             trial[free] += dx
-            r_trial = residual(trial)
-            new = float(r_trial @ r_trial)
+            at_trial = linearise(trial)
+            new = float(at_trial[1] @ at_trial[1])
             if new <= cost * (1 + 1e-12):
                 break
             dx /= 2
-        x, r, cost = trial, r_trial, new
-        step = max(abs(shown(v, m.effects[i].unit)[0]) for i, v in zip(free, dx, strict=True))
-        if step < STEP_TOL_SHOWN:
-            if converged_once:    # J was computed within a few steps below 1e-5 µm of here
-                return x, J, it
-            J, converged_once, step = jac(x), True, np.inf
-        elif step > 0.1 * previous:   # the held J no longer converges fast: renew it
-            J, step = jac(x), np.inf
-        previous = step
+        x, at, cost = trial, at_trial, new
     raise CompgenError(f"the exact fit did not converge in {MAX_ITER} iterations",
                        hint="the errors may be too large for this model; try --method linear "
                             "to see the first-order estimate")
 
 
-def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarray,
+def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarray | Normal,
                        measured: Poses | None = None) -> None:
     """Refuse a rank-deficient or badly conditioned problem, naming what cannot be separated
     and which of the machine's paths, or a second ball position, not ``measured`` already,
     would separate it."""
-    norm = np.linalg.norm(J, axis=0)
+    normal = J if isinstance(J, Normal) else Normal(J)
+    J, norm = normal.J, normal.norm
     names = [m.names[i] for i in free]
     dead = [names[k] for k in np.flatnonzero(norm == 0)]
     if dead:
@@ -221,15 +246,17 @@ def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarra
                            + ("path there and back (measure-program --there-and-back): a reversal "
                               "shows only where its axis turns back" if reversal else
                               "path that moves its axis"))
+    s = normal.singular_values()
+    if s[-1] >= 1.01 * s[0] / COND_LIMIT:     # clear of the limit: JᵀJ's rounding cannot matter
+        return
     _, s, Vt = np.linalg.svd(J / norm, full_matrices=False)
     weak = np.flatnonzero(s < s[0] / COND_LIMIT)
     if not weak.size:
         return
     combos = []
-    for k in weak:
-        v = Vt[k] / norm                  # a physical direction the readings do not see
+    for v in _sparse_basis(Vt[weak]) / norm:   # physical directions the readings do not see
         big = np.flatnonzero(np.abs(v * norm) >= 0.15 * np.abs(v * norm).max())
-        scale = 1.0 / abs(shown(v[big[0]], m.effects[free[big[0]]].unit)[0])
+        scale = 1.0 / shown(v[big[0]], m.effects[free[big[0]]].unit)[0]    # the first named: +1
         combos.append(" together with ".join(
             f"{names[j]} by {shown(v[j] * scale, m.effects[free[j]].unit)[0]:+.2f} "
             f"{shown(1, m.effects[free[j]].unit)[1]}" for j in big))
@@ -241,6 +268,24 @@ def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarra
         + f"{COND_LIMIT:g} of the best-seen combination",
         hint=_separating_measurements(machine, m, free, J, measured) +
              "; or hold one parameter of each combination with --fix NAME=VALUE")
+
+
+def _sparse_basis(V: np.ndarray) -> np.ndarray:
+    """Rows spanning the same space as the orthonormal rows ``V``, each with as few
+    parameters as elimination allows (reduced row echelon form, largest pivot first): a
+    space of several unseen combinations has no preferred orthonormal basis (an exactly
+    singular one is rotated by rounding), while the pairs a machine builder recognises —
+    YOW with COA, BOA with BOC — are each one row here."""
+    V = V.copy()
+    for row in range(len(V)):
+        col = int(np.argmax(np.abs(V[row:]).max(axis=0)))
+        pivot = row + int(np.argmax(np.abs(V[row:, col])))
+        V[[row, pivot]] = V[[pivot, row]]
+        V[row] /= V[row, col]
+        others = np.arange(len(V)) != row
+        V[others] -= np.outer(V[others, col], V[row])
+    V[np.abs(V) < 1e-9] = 0.0
+    return V
 
 
 def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.ndarray,

@@ -29,10 +29,9 @@ from .effects import (
 )
 from .errors import CompgenError
 from .machine import Axis, Machine
-from .transforms import UNIT, apply, rot_axis, rot_exact, trans
+from .transforms import UNIT, apply, rodrigues, rot_axis, rot_exact, trans
 
 SLOT_INDEX = {d: i for i, d in enumerate(TRANSLATIONS + ROTATIONS)}
-FD_STEP = 1e-6   # mm or rad: central differences exact to ~1e-9 relative at these levers
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,13 +89,14 @@ class Model:
         self.effects: tuple[Effect, ...] = tuple(effect_of_param(machine, n) for n in self.names)
         self._nominal: tuple[Poses | None, np.ndarray | None] = (None, None)
 
-    def _slots(self, poses: Poses, values: np.ndarray) -> dict[tuple[str, str], np.ndarray]:
+    def _slots(self, poses: Poses, values: np.ndarray,
+               coordinates: Sequence[np.ndarray] | None = None) -> dict[tuple[str, str], np.ndarray]:
         n, slots = len(poses), {}
-        for name, effect, value in zip(self.names, self.effects, values, strict=True):
+        for i, (name, effect, value) in enumerate(zip(self.names, self.effects, values, strict=True)):
             if value == 0.0:
                 continue
             term = effect.params.index(name)
-            x = coordinate(self.machine, effect, poses)
+            x = coordinate(self.machine, effect, poses) if coordinates is None else coordinates[i]
             slot = slots.setdefault((effect.carrier, effect.slot), np.zeros((n, 6)))
             for direction, b in effect.parts(x):
                 slot[:, SLOT_INDEX[direction]] += value * b[:, term]
@@ -122,23 +122,53 @@ class Model:
 
     def deviation(self, poses: Poses, values: np.ndarray) -> np.ndarray:
         """Predicted R-test reading minus its nominal value, (n, 3) mm."""
+        return self.relative(poses, values) - self._nominal_of(poses)
+
+    def _nominal_of(self, poses: Poses) -> np.ndarray:
         if self._nominal[0] is not poses:   # poses are frozen: the nominal vector is too
             self._nominal = (poses, self.relative(poses))
-        return self.relative(poses, values) - self._nominal[1]
+        return self._nominal[1]
 
     def jacobian(self, poses: Poses, values: np.ndarray | None = None) -> np.ndarray:
         """∂ deviation / ∂ parameters at ``values``, (n, 3, p), mm per mm or per rad.
 
         At ``values = 0`` these are the first-order error gains (seed Table 2).
         """
+        return self.linearise(poses, values)[1]
+
+    def linearise(self, poses: Poses, values: np.ndarray | None = None,
+                  out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The deviation (n, 3) and its Jacobian (n, 3, p) at ``values``, from one walk of
+        the chains per block of poses: analytic (``SlotGains`` on the machine with these
+        errors), so a Gauss–Newton step costs one evaluation of the model.
+
+        The Jacobian is a view of a (p, n, 3) array — ``out`` if given, overwritten (a
+        dense session's is 200 MB: fresh memory at every step costs a third of a fit in
+        page faults) — so each column is written in one piece and ``np.moveaxis(J, 2, 0)``
+        is contiguous: a tall fit forms JᵀJ from it without a copy."""
         values = np.zeros(len(self.names)) if values is None else np.asarray(values, float)
-        J = np.empty((len(poses), 3, len(self.names)))
-        for i in range(len(self.names)):
-            step = np.zeros_like(values)
-            step[i] = FD_STEP
-            J[:, :, i] = (self.relative(poses, values + step)
-                          - self.relative(poses, values - step)) / (2 * FD_STEP)
-        return J
+        # coordinates on the whole session (a reversal's side depends on the run it is
+        # in); the slots a block at a time, as the chains are walked
+        x = [coordinate(self.machine, e, poses) for e in self.effects]
+        nominal = self._nominal_of(poses)
+        dev = np.empty((len(poses), 3))
+        shape = (len(self.names), len(poses), 3)
+        columns = out if out is not None and out.shape == shape else np.empty(shape)
+        for a in range(0, len(poses), BLOCK):
+            at = slice(a, a + BLOCK)
+            block = poses.take(at)
+            gains = SlotGains(self.machine, block, self._slots(block, values, [c[at] for c in x]))
+            np.subtract(gains.relative, nominal[at], out=dev[at])
+            made = {}
+            for i, (name, effect) in enumerate(zip(self.names, self.effects, strict=True)):
+                term = effect.params.index(name)
+                columns[i, at] = 0.0
+                for d, b in effect.parts(x[i][at]):
+                    key = (effect.carrier, effect.slot, d)
+                    if key not in made:
+                        made[key] = gains(key)
+                    columns[i, at] += made[key] * b[:, term, None]
+        return dev, np.moveaxis(columns, 0, 2)
 
 
 def coordinate(machine: Machine, effect: Effect, poses: Poses) -> np.ndarray:
@@ -198,58 +228,65 @@ def relative(machine: Machine, poses: Poses, slots: Mapping[tuple[str, str], np.
     (n, 6) translations (mm) and rotations (rad) in ``TRANSLATIONS + ROTATIONS`` order.
     Evaluated in blocks of ``BLOCK`` poses: the chain's (n, 4, 4) temporaries of a whole
     dense session would be fresh memory at every link."""
-    if len(poses) > BLOCK:
-        return np.concatenate([relative(machine, poses.take(slice(a, a + BLOCK)),
-                                        {k: v[a:a + BLOCK] for k, v in slots.items()}, lines)
-                               for a in range(0, len(poses), BLOCK)])
-    zero = np.zeros((len(poses), 6))
-    table = _chain(machine, machine.workpiece, poses, slots, zero, lines)
+    return np.concatenate([_walk(machine, poses.take(slice(a, a + BLOCK)),
+                                 {k: v[a:a + BLOCK] for k, v in slots.items()}, lines)[0]
+                           for a in range(0, len(poses), BLOCK)]) if len(poses) else np.zeros((0, 3))
+
+
+def _walk(machine: Machine, poses: Poses, slots: Mapping, lines: Mapping[str, tuple] | None = None,
+          record: bool = False) -> tuple[np.ndarray, dict]:
+    """Nest minus ball, (n, 3) mm, by walking both chains factor by factor; with ``record``,
+    also each chain's frames before every factor: carrier → [(sign, marks, R, o, P)], the
+    frame's rotation and origin and the chain's end point, all in the machine frame."""
+    n = len(poses)
+    zero = np.zeros((n, 6))
     # the tool side's frames sit at the spindle gauge line, probe_length above the nest
     # centre (q is the nest centre: the tool length compensated), so an angular error of a
     # tool-side carriage turns the nest with the tool length as its lever
     gauge = np.array([0.0, 0.0, machine.probe_length])
-    spindle = trans(gauge) @ _chain(machine, machine.tool, poses, slots, zero, lines)
-    ball = apply(table, poses.ball + slots.get(("ball", "loc"), zero)[:, :3])
-    nest = apply(spindle, -gauge + slots.get(("nest", "loc"), zero)[:, :3])
-    return nest - ball + slots.get(("time", "loc"), zero)[:, :3]
+    ends, frames = {}, {}
+    for chain, start, sign, carrier, point in ((machine.workpiece, np.zeros(3), -1.0, "ball", poses.ball),
+                                               (machine.tool, gauge, 1.0, "nest", -gauge)):
+        R, o = np.broadcast_to(np.eye(3), (n, 3, 3)), np.broadcast_to(start, (n, 3))
+        held = []
+        for axis in chain:
+            q = poses.q[:, machine.index(axis.name)]
+            for op, marks in _factors(axis, q, slots.get((axis.name, "loc"), zero),
+                                      slots.get((axis.name, "comp"), zero),
+                                      line=(lines or {}).get(axis.name)):
+                if record:
+                    held.append((axis.name, marks, R, o))
+                if op is not None:
+                    R, o = _compose(R, o, op)
+        P = o + _rotate(R, point + slots.get((carrier, "loc"), zero)[:, :3])
+        ends[carrier] = P
+        for name, marks, R_at, o_at in held:
+            frames.setdefault(name, []).append((sign, marks, R_at, o_at, P))
+        frames[carrier] = [(sign, [("t", "loc")], R, None, P)]
+    return ends["nest"] - ends["ball"] + slots.get(("time", "loc"), zero)[:, :3], frames
 
 
 class SlotGains:
-    """First-order gains at zero of a unit error in a slot (carrier, slot, direction):
-    ``gains(key)`` is (n, 3) mm per mm or per rad. Any effect's Jacobian column at zero is
-    its basis values times the gain of its slot.
+    """First-order gains of a unit error in a slot (carrier, slot, direction), on a machine
+    that already carries the errors ``slots`` (none: the nominal machine): ``gains(key)`` is
+    (n, 3) mm per mm or per rad, exact (the derivative of ``relative``, not a difference);
+    ``gains.relative`` is the reading there, from the same walk of the chains. A model's
+    Jacobian column is its basis values times the gain of its slot.
 
-    Analytic, from one nominal evaluation of each chain: a unit translation e in a frame F
-    moves the chain's end point P by R_F e, a unit rotation by R_F e × (P − o_F); the ball
-    is the workpiece chain's end (its motion counts negatively: nest minus ball), the nest
-    the tool chain's. A squareness turns the line of motion, moving P by q·(e × line).
-    Only the frames are held, (n, 3, 3) and two (n, 3) an axis; a gain is made when asked.
-    (``tests/test_kinematics.py`` checks every slot against central differences.)
+    Analytic, from one evaluation of each chain that keeps the frame before every factor of
+    every link: a unit translation e in a frame F moves the chain's end point P by R_F e, a
+    unit rotation by R_F ω × (P − o_F), where ω = J(w)e for a factor that already turns by
+    the rotation vector w (J the left Jacobian of the rotation group: d exp(w) = [J dw]×
+    exp(w); at w = 0, ω = e). The ball is the workpiece chain's end (its motion counts
+    negatively: nest minus ball), the nest the tool chain's. A squareness turns the line of
+    motion, moving P by q·(R_F J e × line). Only the frames are held; a gain is made when
+    asked. (``tests/test_kinematics.py`` checks every slot against central differences, on
+    the nominal machine and on one with large errors.)
     """
 
-    def __init__(self, machine: Machine, poses: Poses):
-        n = len(poses)
-        zero = np.zeros((n, 6))
-        self.n, self.frames = n, {}
-        # the tool side's end is the nest, probe_length below its frames (see ``relative``)
-        for chain, end, sign in ((machine.workpiece, poses.ball, -1.0),
-                                 (machine.tool, np.broadcast_to([0.0, 0.0, -machine.probe_length], (n, 3)),
-                                  1.0)):
-            T = np.broadcast_to(np.eye(4), (n, 4, 4))
-            before = []
-            for axis in chain:
-                q = poses.q[:, machine.index(axis.name)]
-                # where a slot acts: the axis's reference point; a linear axis's carriage
-                # (its component rotations) sits where its motion took it
-                at = np.broadcast_to(np.asarray(axis.offset, float), (n, 3))
-                if not axis.rotary:
-                    at = at + (axis.sense * q)[:, None] * UNIT[axis.direction]
-                before.append((axis, q, T[:, :3, :3].copy(), apply(T, at)))
-                T = T @ _link(axis, q, zero, zero)
-            P = apply(T, end)
-            for axis, q, R, origin in before:
-                self.frames[axis.name] = (sign, R, P - origin, axis, q)
-            self.frames["ball" if chain is machine.workpiece else "nest"] = (sign, T[:, :3, :3].copy())
+    def __init__(self, machine: Machine, poses: Poses, slots: Mapping | None = None):
+        self.n = len(poses)
+        self.relative, self.frames = _walk(machine, poses, slots or {}, record=True)
 
     def __call__(self, key: tuple[str, str, str]) -> np.ndarray:
         carrier, slot, direction = key
@@ -257,56 +294,133 @@ class SlotGains:
         e = UNIT["xyz"[k % 3]]
         if carrier == "time":
             return np.broadcast_to(e * (k < 3), (self.n, 3)).copy()
-        if carrier in ("ball", "nest"):
-            sign, R = self.frames[carrier]
-            return sign * (R @ e) * (k < 3)
-        sign, R, lever, axis, q = self.frames[carrier]
-        if k < 3:
-            return sign * (R @ e)
-        if not axis.rotary and slot == "loc":   # squareness: the line of motion turns
-            return sign * (axis.sense * q)[:, None] * (R @ np.cross(e, UNIT[axis.direction]))
-        return sign * np.cross(R @ e, lever)
+        for sign, marks, R, o, P in self.frames[carrier]:
+            for mark in marks:
+                kind, at = mark[:2]
+                if at != slot:
+                    continue
+                if kind == "t" and k < 3:
+                    return sign * R[:, :, k]
+                if kind == "r" and k >= 3 and k != mark[3]:
+                    w = mark[2]
+                    axis = _rotate(R, _left_jacobian(w, e)) if w.any() else R[:, :, k - 3]
+                    return sign * _cross(axis, P - o)
+                if kind == "turn" and k == mark[2]:
+                    return sign * _cross(R[:, :, k - 3], P - o)
+                if kind == "line" and k >= 3:
+                    _, _, w, run, line = mark
+                    return sign * run[:, None] * _rotate(R, _cross(_left_jacobian(w, e), line))
+        return np.zeros((self.n, 3))       # a slot this carrier does not have (a ball's tilt)
 
 
 def slot_gains(machine: Machine, poses: Poses, keys) -> dict[tuple[str, str, str], np.ndarray]:
-    """``SlotGains`` of each key, as a dict."""
+    """``SlotGains`` of each key on the nominal machine, as a dict."""
     gains = SlotGains(machine, poses)
     return {key: gains(key) for key in keys}
 
 
-def _link(axis: Axis, q: np.ndarray, loc: np.ndarray, comp: np.ndarray, motion: bool = True,
-          line: tuple | None = None) -> np.ndarray:
-    """Transform of one axis frame in its parent, (n, 4, 4) (seed eqs. 1 and 2).
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a × b for stacks (n, 3): numpy's cross costs several times this at these sizes."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
 
-    Factors that are exactly zero are skipped: the model is evaluated ~2p times per
-    Jacobian, and most parameters are zero in most slots. ``motion=False`` stops before the
-    axis's own motion. ``line`` (offset, tilt) turns a rotary axis about that line instead:
-    ``Trans(t)·Rot(r)·R(θ)·Rot(r)⁻¹·Trans(−t)``, the form a controller's kinematics holds.
+
+def _rotate(R: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """R v for stacks: (n, 3, 3) and (n, 3) or (3,) → (n, 3)."""
+    v = np.broadcast_to(v, R.shape[:-1])
+    return R[:, :, 0] * v[:, 0, None] + R[:, :, 1] * v[:, 1, None] + R[:, :, 2] * v[:, 2, None]
+
+
+def _left_jacobian(w: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """J(w) e, (n, 3): the axis a rotation by w turns about when w moves along e.
+    J = I + (1 − cos θ)/θ² K + (θ − sin θ)/θ³ K², K = [w]×; series below θ = 1e-3."""
+    theta = np.linalg.norm(w, axis=-1)[:, None]
+    safe = np.where(theta < 1e-3, 1.0, theta)
+    b = np.where(theta < 1e-3, 0.5 - theta**2 / 24, (1 - np.cos(safe)) / safe**2)
+    c = np.where(theta < 1e-3, 1 / 6 - theta**2 / 120, (safe - np.sin(safe)) / safe**3)
+    we = _cross(w, e)
+    return e + b * we + c * _cross(w, we)
+
+
+def _factors(axis: Axis, q: np.ndarray, loc: np.ndarray, comp: np.ndarray, motion: bool = True,
+             line: tuple | None = None) -> list[tuple[tuple | None, list]]:
+    """One axis frame in its parent (seed eqs. 1 and 2) as its factors in order, each an
+    operation — ("t", v) a translation, ("w", w) a rotation by the rotation vector w,
+    ("q", direction, angle) a turn about a unit axis, ("m", M) any (n, 4, 4) — or None
+    where it is exactly the identity, with marks that say which slots act there: ("t",
+    slot) translations, ("r", slot, w, own) rotations by w (all components but ``own``),
+    ("turn", slot, own) the axis's own angle, ("line", slot, w, run, line) a squareness
+    turning the line of motion.
+
+    Factors that are exactly zero are None: most parameters are zero in most slots.
+    ``motion=False`` stops before the axis's own motion. ``line`` (offset, tilt) turns a
+    rotary axis about that line instead: ``Trans(t)·Rot(r)·R(θ)·Rot(r)⁻¹·Trans(−t)``, the
+    form a controller's kinematics holds.
     """
     offset = np.asarray(axis.offset)
     if axis.rotary:
         own = SLOT_INDEX[ROT_OF[axis.direction]]
         tilt = comp[:, 3:].copy()
         tilt[:, own - 3] = 0.0
-        T = trans(offset + loc[:, :3])
-        for factor, build in ((loc[:, 3:], rot_exact), (comp[:, :3], trans), (tilt, rot_exact)):
-            if factor.any():
-                T = T @ build(factor)
-        if not motion:
-            return T
-        turn = rot_axis(axis.direction, axis.sense * q + comp[:, own])
-        if line is not None:
-            t, r = (np.asarray(v, float) for v in line)
-            place = trans(t) @ rot_exact(r)
-            turn = place @ turn @ np.linalg.inv(place)
-        return T @ turn
+        out = [(("t", offset + loc[:, :3]), [("t", "loc")]),
+               (("w", loc[:, 3:]) if loc[:, 3:].any() else None, [("r", "loc", loc[:, 3:], -1)]),
+               (("t", comp[:, :3]) if comp[:, :3].any() else None, [("t", "comp")]),
+               (("w", tilt) if tilt.any() else None, [("r", "comp", tilt, own)])]
+        if motion:
+            turn = ("q", axis.direction, axis.sense * q + comp[:, own])
+            if line is not None:
+                t, r = (np.asarray(v, float) for v in line)
+                place = trans(t) @ rot_exact(r)
+                turn = ("m", place @ _matrix(turn) @ np.linalg.inv(place))
+            out.append((turn, [("turn", "comp", own)]))
+        return out
     # squareness tilts the line of motion; the carriage itself turns only by its own
     # angular error motions
-    line_dir = np.broadcast_to(UNIT[axis.direction], loc[:, :3].shape)
-    if loc[:, 3:].any():
-        line_dir = apply(rot_exact(loc[:, 3:]), line_dir)
-    T = trans(offset + loc[:, :3] + comp[:, :3] + (axis.sense * q * motion)[:, None] * line_dir)
-    return T @ rot_exact(comp[:, 3:]) if comp[:, 3:].any() else T
+    unit = np.broadcast_to(UNIT[axis.direction], loc[:, :3].shape)
+    line_dir = apply(rot_exact(loc[:, 3:]), unit) if loc[:, 3:].any() else unit
+    run = axis.sense * q * motion
+    return [(("t", offset + loc[:, :3] + comp[:, :3] + run[:, None] * line_dir),
+             [("t", "loc"), ("t", "comp"), ("line", "loc", loc[:, 3:], run, line_dir)]),
+            (("w", comp[:, 3:]) if comp[:, 3:].any() else None, [("r", "comp", comp[:, 3:], -1)])]
+
+
+def _matrix(op: tuple) -> np.ndarray:
+    """A factor as (n, 4, 4)."""
+    kind, *a = op
+    return {"t": trans, "w": rot_exact, "q": rot_axis, "m": lambda m: m}[kind](*a)
+
+
+def _compose(R: np.ndarray, o: np.ndarray, op: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """The frame (R (n, 3, 3), origin o (n, 3)) followed by one factor, as new arrays (the
+    inputs are never written: views of them stay true). Translations and turns about a
+    unit axis act on columns: no 4 × 4 products where most entries are 0 or 1."""
+    kind, *a = op
+    if kind == "t":
+        return R, o + _rotate(R, a[0])
+    if kind == "w":
+        return R @ rodrigues(a[0]), o
+    if kind == "q":
+        i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[a[0]]
+        c, s = np.cos(a[1])[:, None], np.sin(a[1])[:, None]
+        out = R.copy()
+        out[:, :, i] = c * R[:, :, i] + s * R[:, :, j]
+        out[:, :, j] = c * R[:, :, j] - s * R[:, :, i]
+        return out, o
+    M = a[0]
+    return R @ M[:, :3, :3], o + _rotate(R, M[:, :3, 3])
+
+
+def _link(axis: Axis, q: np.ndarray, loc: np.ndarray, comp: np.ndarray, motion: bool = True,
+          line: tuple | None = None) -> np.ndarray:
+    """Transform of one axis frame in its parent, (n, 4, 4): the product of its factors."""
+    T = None
+    for op, _ in _factors(axis, q, loc, comp, motion, line):
+        if op is not None:
+            T = _matrix(op) if T is None else T @ _matrix(op)
+    return T
 
 
 def _chain(machine: Machine, axes: Sequence[Axis], poses: Poses, slots: Mapping,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -249,9 +250,9 @@ def travel_violations(machine: Machine, q: np.ndarray) -> np.ndarray:
     return (q < lo - 1e-9) | (q > hi + 1e-9)
 
 
-def check_travel(machine: Machine, q: np.ndarray, label: str, lines: list[str] | None = None) -> None:
+def check_travel(machine: Machine, q: np.ndarray, label: str, lines: Sequence[int] | None = None) -> None:
     """Refuse poses (mm, rad) that leave the travel, naming the first: as pose k of ``label``,
-    or, for poses read from a file, by its ``file:line`` in ``lines``."""
+    or, for poses read from the file ``label``, by its line in ``lines``."""
     bad = travel_violations(machine, q)
     if not bad.any():
         return
@@ -261,7 +262,7 @@ def check_travel(machine: Machine, q: np.ndarray, label: str, lines: list[str] |
     span = f"[{axis.travel[0]:g}, {axis.travel[1]:g}] {unit} ({int(bad.any(axis=1).sum())} poses"
     at = f"puts {axis.name} at {value:.3f} {unit}, outside its travel {span}"
     if lines is not None:
-        raise CompgenError(f"this pose {at} do)", where=lines[i],
+        raise CompgenError(f"this pose {at} do)", where=f"{label}:{lines[i]}",
                            hint="the machine cannot take the pose: give poses within its travel")
     raise CompgenError(f"pose {i + 1} of {label} {at} outside)",
                        hint="move the ball, shorten the path or correct the machine file's travel")

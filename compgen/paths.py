@@ -6,6 +6,7 @@ in the machine file. ISO 10791-6:2014's BK1/BK2/BK4 are accepted as aliases of K
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -29,9 +30,10 @@ def path_def(machine: Machine, name: str) -> PathDef:
     return machine.paths[key]
 
 
-def rotary_positions(machine: Machine, path: PathDef) -> np.ndarray:
-    """(n, r) rotary axis positions of a path, deg, in ``machine.rotary_axes`` order."""
-    s = np.linspace(0.0, 1.0, path.n)
+def rotary_positions(machine: Machine, path: PathDef, n: int | None = None) -> np.ndarray:
+    """(n, r) rotary axis positions of a path, deg, in ``machine.rotary_axes`` order, at its
+    own ``n`` poses or at ``n`` evenly spread."""
+    s = np.linspace(0.0, 1.0, path.n if n is None else n)
     cols = []
     for axis in machine.rotary_axes:
         kind, *a = path.rotary[axis.name]
@@ -45,27 +47,58 @@ def rotary_positions(machine: Machine, path: PathDef) -> np.ndarray:
 
 
 def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | None = None,
-             start_s: float = 0.0, back: bool = False) -> Poses:
+             start_s: float = 0.0, back: bool = False, rate_hz: float | None = None,
+             feed: float | None = None) -> Poses:
     """Poses of the named paths run one after another, with the nest on the ball (TCPM);
     with ``back``, each path is run there and back (every axis reverses: what a reversal
     error needs to be seen).
 
-    Every pose is checked against the machine's travel; the first one outside is named.
+    With ``rate_hz`` the session is continuous, as an R-test sampling on the fly records
+    it: a reading every 1/rate_hz s while each path runs at ``feed`` (deg/min, the mean
+    speed of its most-travelled rotary axis; default the path's own pace, n poses of
+    seconds_per_pose). Every pose is checked against the machine's travel; the first one
+    outside is named.
     """
     if not names:
         raise CompgenError("no path is named", hint=f"name one or more of {', '.join(machine.paths)} "
                                                      "(comma-separated), or all")
+    if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0):
+        raise CompgenError(f"the sampling rate must be a finite number > 0 Hz, not {rate_hz}")
+    if feed is not None and not (math.isfinite(feed) and feed > 0):
+        raise CompgenError(f"the feed must be a finite number > 0 deg/min, not {feed}")
     ball = np.asarray(machine.ball if ball is None else ball, dtype=float)
     out, t0 = [], start_s
     for name in names:
         path = path_def(machine, name)
-        angles = rotary_positions(machine, path)
+        if rate_hz is None:
+            angles, step = rotary_positions(machine, path), path.seconds_per_pose
+        else:
+            seconds = path.n * path.seconds_per_pose if feed is None else 60 * arc(machine, path) / feed
+            _check_speed(machine, path, seconds)
+            n = max(2, round(seconds * rate_hz) + 1)
+            angles, step = rotary_positions(machine, path, n), 1.0 / rate_hz
         if back:
             angles = np.vstack([angles, angles[::-1]])
         n = len(angles)
         q = inverse(machine, np.radians(angles), ball)
-        t = t0 + path.seconds_per_pose * np.arange(n)
+        t = t0 + step * np.arange(n)
         t0 = t[-1] + GAP_S
         check_travel(machine, q, name)
         out.append(Poses(q, np.broadcast_to(ball, (n, 3)), t, np.full(n, path.name, dtype=object)))
     return Poses.concat(out)
+
+
+def arc(machine: Machine, path: PathDef) -> float:
+    """Degrees travelled by the path's most-travelled rotary axis, there only."""
+    return float(np.abs(np.diff(rotary_positions(machine, path, 10_001), axis=0)).sum(axis=0).max())
+
+
+def _check_speed(machine: Machine, path: PathDef, seconds: float) -> None:
+    """Refuse a pace at which a rotary axis would pass its ``feed_max`` somewhere."""
+    fine = rotary_positions(machine, path, 10_001)
+    peak = np.abs(np.diff(fine, axis=0)).max(axis=0) * 10_000 / seconds * 60
+    for axis, speed in zip(machine.rotary_axes, peak, strict=True):
+        if speed > axis.feed_max:
+            raise CompgenError(f"path {path.name} in {seconds:.4g} s would turn {axis.name} at up to "
+                               f"{speed:.0f} deg/min, above its feed_max {axis.feed_max:g} deg/min",
+                               hint="give a lower --feed")

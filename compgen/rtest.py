@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CompgenError
-from .files import read_text
+from .files import MAX_DATA_BYTES, read_text
 from .kinematics import Model, Poses, inverse
 from .machine import IDENTIFIERS, Machine, check_ball, check_travel, identifier
 from .units import NUMBER
@@ -95,7 +95,7 @@ def read_poses(path: str | Path, machine: Machine) -> Poses:
         k = int(np.flatnonzero((ball == b).all(axis=1))[0])
         check_ball(machine.setup, b, f"{table.where}:{table.lines[k]}")
     q = inverse(machine, rotary, ball)
-    check_travel(machine, q, table.where, [f"{table.where}:{k}" for k in table.lines])
+    check_travel(machine, q, table.where, table.lines)
     if all(c in table.columns for c in "XYZ"):
         given = np.column_stack([table.columns[c] for c in "XYZ"])
         linear = [machine.index(c) for c in "XYZ"]
@@ -137,13 +137,10 @@ def _cells(line: str, where: str) -> list[str]:
 def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Table:
     """A CSV v1 table with every cell checked: numbers finite, rows whole, columns present."""
     where = str(path)
-    text, raw = read_text(path, "data file")
-
-    lines = [(i, line) for i, line in enumerate(text.splitlines(), start=1)
-             if line.strip() and not line.lstrip().startswith("#")]
-    if not lines:
+    text, raw = read_text(path, "data file", limit=MAX_DATA_BYTES)
+    header_line, header_text, body = _header(text)
+    if header_text is None:
         raise CompgenError("empty file: no header and no data", where=where)
-    header_line, header_text = lines[0]
     header = [h.strip() for h in _cells(header_text, f"{where}:{header_line}")]
     dup = sorted({h for h in header if header.count(h) > 1})
     if dup:
@@ -154,23 +151,25 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
                            where=f"{where}:{header_line}",
                            hint=f"machine {machine.name!r} needs {', '.join(required)}; found "
                                 f"{', '.join(header)}")
-    if len(lines) == 1:
-        raise CompgenError("header only: no data rows", where=where)
     has_ball = [c in header for c in BALL]
     if any(has_ball) and not all(has_ball):
         raise CompgenError("give all of bx, by, bz or none", where=f"{where}:{header_line}")
     numeric = required + [c for c in ("X", "Y", "Z", "t", *BALL) if c in header and c not in required]
     col = {c: header.index(c) for c in header}
     digest = hashlib.sha256(raw).hexdigest()
-    fast = _fast_table(lines[1:], header, numeric, col)
+    fast = _fast_table(body, header, numeric, col)
     if fast is not None:
         values, labels = fast
         return _Table(where, digest, {name: values[:, j] for j, name in enumerate(numeric)}, labels,
-                      [i for i, _ in lines[1:]])
+                      range(header_line + 1, header_line + 1 + len(labels)))
 
-    values = np.empty((len(lines) - 1, len(numeric)))
+    lines = [(i, line) for i, line in enumerate(body.splitlines(), start=header_line + 1)
+             if line.strip() and not line.lstrip().startswith("#")]
+    if not lines:
+        raise CompgenError("header only: no data rows", where=where)
+    values = np.empty((len(lines), len(numeric)))
     labels, line_no = [], []
-    for r, (i, line) in enumerate(lines[1:]):
+    for r, (i, line) in enumerate(lines):
         cells = _cells(line, f"{where}:{i}")
         if len(cells) != len(header):
             raise CompgenError(f"{len(cells)} fields where the header has {len(header)}",
@@ -194,32 +193,65 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
     return _Table(where, digest, columns, np.array(labels, dtype=object), line_no)
 
 
-def _fast_table(rows: list[tuple[int, str]], header: list[str], numeric: list[str],
+def _header(text: str) -> tuple[int, str | None, str]:
+    """The first line that is neither blank nor a comment (its number and text) and the
+    text after it; a large file's rest is not split into lines here (line ends as
+    ``str.splitlines`` takes them)."""
+    for limit in (1 << 16, len(text)):
+        lines = text[:limit].splitlines(keepends=True)
+        if limit < len(text):
+            lines = lines[:-1]                 # the last may be cut short
+        offset = 0
+        for number, line in enumerate(lines, start=1):
+            offset += len(line)
+            content = line.splitlines()[0] if line.splitlines() else ""
+            if content.strip() and not content.lstrip().startswith("#"):
+                return number, content, text[offset:]
+    return 0, None, ""
+
+
+def _fast_table(body: str, header: list[str], numeric: list[str],
                 col: dict[str, int]) -> tuple[np.ndarray, np.ndarray] | None:
     """The careful reader's result for a well-formed table, at numpy's speed: plain ASCII, no
-    quotes, every row as many fields as the header, every numeric cell what ``NUMBER`` takes
-    (numpy's parser refuses "1_0", "0x10", "--1" and empty cells; nan, inf and 1e999 fail the
-    size check) and of a sensible size. Anything else returns None: the careful reader then
-    finds and names the first fault."""
-    body = [line for _, line in rows]
-    text = "\n".join(body)
-    if not text.isascii() or '"' in text or any(line.count(",") != len(header) - 1 for line in body):
+    quotes, no comment or blank line, every row as many fields as the header, every numeric
+    cell what ``NUMBER`` takes (numpy's parser refuses "1_0", "0x10", "--1" and empty cells;
+    nan, inf and 1e999 fail the size check) and of a sensible size. Anything else returns
+    None: the careful reader then finds and names the first fault."""
+    if "\r" in body:
+        body = body.replace("\r\n", "\n")
+    if (not body.strip() or not body.isascii() or any(c in body for c in '"#\r')
+            or "\n\n" in body.rstrip("\n") or body.startswith("\n")):
+        return None
+    raw = np.frombuffer(body.rstrip("\n").encode("ascii"), np.uint8)
+    starts = np.r_[0, np.flatnonzero(raw == 10) + 1]
+    ends = np.r_[starts[1:] - 1, len(raw)]
+    # every row as many fields as the header: the commas of each line, counted by numpy;
+    # then comma j of row i is commas[i·(fields − 1) + j]
+    commas, per_row = np.flatnonzero(raw == 44), len(header) - 1
+    if not (np.diff(np.searchsorted(commas, np.r_[starts, len(raw)])) == per_row).all():
         return None
     try:
-        values = np.loadtxt(io.StringIO(text), delimiter=",", usecols=[col[c] for c in numeric], ndmin=2,
+        values = np.loadtxt(io.StringIO(body), delimiter=",", usecols=[col[c] for c in numeric], ndmin=2,
                             comments=None, dtype=float)
     except ValueError:
         return None
-    if values.shape[0] != len(body) or not (np.abs(values) < CELL_MAX).all():
+    if values.shape[0] != len(starts) or not (np.abs(values) < CELL_MAX).all():
         return None
     if "path" not in col:
-        return values, np.full(len(body), "", dtype=object)
-    k = col["path"]
-    labels = np.array([line.split(",", k + 1)[k].strip() for line in body], dtype=object)
+        return values, np.full(len(starts), "", dtype=object)
+    # the label cells, as fixed-width byte strings, decoded once per distinct label
+    k, row = col["path"], np.arange(len(starts)) * per_row
+    first = starts if k == 0 else commas[row + k - 1] + 1
+    last = ends if k == per_row else commas[row + k]
+    width = int((last - first).max()) if len(first) else 0
+    at = first[:, None] + np.arange(max(width, 1))
+    cells = np.where(at < last[:, None], raw[np.minimum(at, len(raw) - 1)], 0).astype(np.uint8)
+    distinct, which = np.unique(cells.view(f"S{max(width, 1)}").ravel(), return_inverse=True)
+    names = [b.decode("ascii").strip() for b in distinct.tolist()]
     pattern = IDENTIFIERS["path"][0]              # a label is written into programs' comments
-    if any(not re.fullmatch(pattern, label) for label in set(labels.tolist()) - {""}):
+    if any(name and not re.fullmatch(pattern, name) for name in names):
         return None
-    return values, labels
+    return values, np.array(names, dtype=object)[which.ravel()]
 
 
 def axis_cells(machine: Machine, q: np.ndarray) -> list[str]:

@@ -21,11 +21,21 @@ def trans(v: np.ndarray) -> np.ndarray:
 
 
 def rot_exact(w: np.ndarray) -> np.ndarray:
-    """Rotation by the rotation vector ``w`` (..., 3) rad, built exactly (Rodrigues).
+    """Rotation by the rotation vector ``w`` (..., 3) rad, built exactly (Rodrigues), as
+    a transform (..., 4, 4).
 
     Small location errors are rotation vectors, not first-order matrices: the contract's
     reference simulator builds them this way, and it stays valid at 30× realistic errors.
     """
+    w = np.asarray(w, dtype=float)
+    T = np.zeros(w.shape[:-1] + (4, 4))
+    T[..., :3, :3] = rodrigues(w)
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def rodrigues(w: np.ndarray) -> np.ndarray:
+    """The rotation matrix (..., 3, 3) of the rotation vector ``w`` (..., 3) rad."""
     w = np.asarray(w, dtype=float)
     theta = np.linalg.norm(w, axis=-1)[..., None, None]
     K = np.zeros(w.shape[:-1] + (3, 3))
@@ -35,11 +45,7 @@ def rot_exact(w: np.ndarray) -> np.ndarray:
     # sin θ/θ and (1 − cos θ)/θ² = ½(sin(θ/2)/(θ/2))², without branches or cancellation
     a = np.sinc(theta / np.pi)
     b = 0.5 * np.sinc(theta / (2 * np.pi)) ** 2
-    R = np.eye(3) + a * K + b * (K @ K)
-    T = np.zeros(w.shape[:-1] + (4, 4))
-    T[..., :3, :3] = R
-    T[..., 3, 3] = 1.0
-    return T
+    return np.eye(3) + a * K + b * (K @ K)
 
 
 def rot_axis(direction: str, angle: np.ndarray) -> np.ndarray:

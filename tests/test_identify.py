@@ -82,11 +82,12 @@ def test_k2_alone_cannot_separate_and_says_what_would(seed_machine, rng):
     text = str(exc.value)
     assert "cannot separate the parameters (singular)" in text      # exactly, up to rounding
     # at A = 0 a tilt θ of A's line about Z moves the ball (x = -217.504 mm) by θ·x in Y:
-    # -1 µm of YOW is undone by COA = -1e-3/217.504 rad = -0.948″
-    coa = -1e-3 / abs(seed_machine.ball[0]) / ARCSEC
+    # +1 µm of YOW is undone by COA = +1e-3/217.504 rad = +0.948″ (each combination is
+    # named with its first parameter at +1)
+    coa = 1e-3 / abs(seed_machine.ball[0]) / ARCSEC
     combos = text.split(": moving ")[1].split(" changes the readings")[0].split("; or ")
-    assert f"YOW by -1.00 µm together with COA by {coa:+.2f} ″" in combos, combos
-    assert "BOA by -1.00 ″ together with BOC by +1.00 ″" in combos, combos   # both tilt about Y at A = 0
+    assert f"YOW by +1.00 µm together with COA by {coa:+.2f} ″" in combos, combos
+    assert "BOA by +1.00 ″ together with BOC by -1.00 ″" in combos, combos   # both tilt about Y at A = 0
     # the others span {ZOW−ZOA, YOA−YOC} (any basis of that plane): each, applied to the
     # model, must leave every reading unchanged
     m = Model(seed_machine, list(TABLE4))
@@ -171,11 +172,12 @@ def test_fixed_parameters_report_no_uncertainty_and_linear_no_iterations(seed_ma
     assert fit.parameters["BOC"].fixed and fit.parameters["BOC"].std == 0.0
     assert fit.iterations == 0 and "BOC" not in fit.free
     exact = identify(seed_machine, [data])
-    # Gauss–Newton from the first-order start: chord steps until the step is below 1e-7 µm
-    # or ″, the Jacobian renewed there, one more step to confirm; the README shows the count
-    assert exact.iterations == 4, exact.iterations
+    # Gauss–Newton from the first-order start with the exact Jacobian at every step
+    # converges quadratically: the first-order answer is ~1e-5 off, one step leaves ~1e-10,
+    # below 1e-7 µm or ″; the README shows the count
+    assert exact.iterations == 1, exact.iterations
     x30 = identify(seed_machine, [read_rtest(vector("seed-table4x30-noiseless.csv"), seed_machine)])
-    assert x30.iterations == 5, x30.iterations          # thirty times the errors: one more
+    assert x30.iterations == 2, x30.iterations          # thirty times the errors: one more
 
 
 def test_fixing_what_cannot_be_separated_makes_it_fit(seed_machine, rng):

@@ -8,7 +8,7 @@ import pytest
 from conftest import ARCSEC, TABLE4, UM, vector
 
 from compgen.effects import catalogue
-from compgen.kinematics import FD_STEP, SLOT_INDEX, Model, Poses, inverse, relative, slot_gains
+from compgen.kinematics import SLOT_INDEX, Model, Poses, SlotGains, inverse, relative, slot_gains
 from compgen.paths import generate
 from compgen.rtest import read_rtest
 from compgen.transforms import rot_exact
@@ -16,6 +16,8 @@ from compgen.transforms import rot_exact
 ATOL_VECTORS_UM = 1e-4   # contract: shared vectors (issue 2)
 ATOL_GAIN = 1e-6         # central differences vs Table 2 formulas, µm per µm (or per rad·1e-3)
 ATOL_FD_REL = 1e-7       # analytic gains vs central differences, relative to the largest gain
+# mm or rad: central differences; rounding ~1e-8 of ~1000 mm positions, truncation h²·lever/6 ~ 5e-9
+FD_STEP = 1e-5
 
 
 def _rows(name):
@@ -111,22 +113,38 @@ def test_rot_exact_matches_scipy(rng):
 
 
 @pytest.mark.parametrize("machine_name", ["seed_machine", "bc_machine"])
-def test_analytic_slot_gains_equal_central_differences_of_the_exact_model(machine_name, request):
+@pytest.mark.parametrize("loaded", [False, True], ids=["nominal", "loaded"])
+def test_analytic_slot_gains_equal_central_differences_of_the_exact_model(machine_name, loaded, request):
     """Every slot of the catalogue, on both machines (both chain layouts, linear axes on
-    either side, squareness among them), against the exact model moved by ±1e-6."""
+    either side, squareness among them), against the exact model moved by ±1e-6: on the
+    nominal machine, and on one carrying errors in every slot at once (up to 0.05 mm and
+    3 mrad, 100× a real machine's: far enough from zero that gains taken at zero would
+    miss by ~1e-3 and fail)."""
     machine = request.getfixturevalue(machine_name)
     poses = generate(machine, list(machine.paths))
     keys = sorted({(e.carrier, e.slot, d) for e in catalogue(machine) for d in e.direction})
-    gains = slot_gains(machine, poses, keys)
+    rng = np.random.default_rng(3)
+    base = {}
+    if loaded:
+        for carrier, slot, _ in keys:
+            base[(carrier, slot)] = np.concatenate([rng.uniform(-0.05, 0.05, 3), rng.uniform(-3e-3, 3e-3, 3)]
+                                                   ) * np.ones((len(poses), 1))
+    gains, moved = SlotGains(machine, poses, base), []
     for carrier, slot, direction in keys:
         step = np.zeros((len(poses), 6))
         step[:, SLOT_INDEX[direction]] = FD_STEP
-        numeric = (relative(machine, poses, {(carrier, slot): step})
-                   - relative(machine, poses, {(carrier, slot): -step})) / (2 * FD_STEP)
+        held = base.get((carrier, slot), np.zeros((len(poses), 6)))
+        numeric = (relative(machine, poses, {**base, (carrier, slot): held + step})
+                   - relative(machine, poses, {**base, (carrier, slot): held - step})) / (2 * FD_STEP)
         scale = max(np.abs(numeric).max(), 1.0)   # mm per mm, or mm per rad (levers ~300 mm)
-        # central differences of 1e-6 on ~300 mm carry ~1e-8 of rounding
-        np.testing.assert_allclose(gains[(carrier, slot, direction)], numeric, rtol=0,
+        # central differences of 1e-5 on ~1000 mm carry ~1e-8 of rounding
+        np.testing.assert_allclose(gains((carrier, slot, direction)), numeric, rtol=0,
                                    atol=ATOL_FD_REL * scale, err_msg=f"{carrier} {slot} {direction}")
+        nominal = slot_gains(machine, poses, [(carrier, slot, direction)])[(carrier, slot, direction)]
+        moved.append(np.abs(nominal - numeric).max() > 100 * ATOL_FD_REL * scale)
+    # loaded, the errors matter: most gains taken at zero would miss (a translation at the
+    # chain's start does not move with the errors after it)
+    assert (np.mean(moved) > 0.5) == loaded, np.mean(moved)
 
 
 def test_a_parameter_of_exactly_one_is_not_taken_for_zero(seed_machine):

@@ -43,22 +43,23 @@ def test_diagnose_needs_no_scipy(tmp_path):
     assert '"found"' in out.stdout and out.stderr.splitlines()[-1] == "scipy: ", out.stderr[-500:]
 
 
-def _evaluations(monkeypatch, machine, method):
-    calls = []
-    original = kinematics.Model.relative
-    monkeypatch.setattr(kinematics.Model, "relative",
-                        lambda self, *a, **k: calls.append(1) or original(self, *a, **k))
-    result = identify(machine, [read_rtest(SESSION, machine)], method=method)
-    return len(calls), len(result.free)
+def _walks(monkeypatch, machine, method):
+    calls, data = [], read_rtest(SESSION, machine)
+    original = kinematics._walk
+    monkeypatch.setattr(kinematics, "_walk", lambda *a, **k: calls.append(1) or original(*a, **k))
+    result = identify(machine, [data], method=method)
+    return len(calls), result.iterations
 
 
-def test_an_exact_fit_computes_two_jacobians(monkeypatch, seed_machine):
-    """One at the start (first order, identifiability), one at the solution (covariance);
-    between them one evaluation an iteration. Three or more Jacobians fail this."""
-    n, p = _evaluations(monkeypatch, seed_machine, "exact")
-    assert 2 * (2 * p) < n <= 2 * (2 * p) + 12, n
-    n, p = _evaluations(monkeypatch, seed_machine, "linear")
-    assert 2 * p < n <= 2 * p + 4, n   # one Jacobian, at the first-order point
+def test_a_fit_walks_the_chains_once_a_step(monkeypatch, seed_machine):
+    """The exact residual and the analytic Jacobian come from one walk of the chains (723
+    poses: one block): the nominal readings, the start, the first-order point, one walk
+    per Gauss–Newton step — no finite differences (2p walks a Jacobian) and no separate
+    residual evaluations."""
+    n, iterations = _walks(monkeypatch, seed_machine, "exact")
+    assert iterations >= 1 and n == 3 + iterations, (n, iterations)
+    n, iterations = _walks(monkeypatch, seed_machine, "linear")
+    assert iterations == 0 and n == 3, n
 
 
 def test_commands_run_with_one_blas_thread(monkeypatch, tmp_path):

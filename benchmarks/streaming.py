@@ -1,0 +1,108 @@
+"""Streaming-size sessions: fit, diagnose, predict and report of a continuous R-test session
+(100 Hz, sampled while the paths run) from 723 to 723 000 poses. A benchmark, not a test.
+
+    python benchmarks/streaming.py [--sizes 723,7230,72300,723000] [--rate-hz 100]
+
+Each session is written by ``compgen simulate --rate-hz R --feed F`` (the feed chosen so
+the three paths K4, K1, K2 give the size asked for; 723 000 poses at 100 Hz are two hours
+at 7.5 deg/min) on the seed machine with seed Table 4's errors and 0.5 µm white noise.
+Every command runs as its own process, as a user runs it; CPU is its user + system time,
+memory its peak resident set. The floor is start-up, reading the CSV and one evaluation
+of the model: what no fit can avoid. Printed: the table, fit's ratio to the floor, and
+each of issue 25's limits with whether it holds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+MACHINE = ROOT / "machines" / "ac-trunnion-itnc530.toml"
+TRUTH = ROOT / "examples" / "truth-table4.json"
+PATHS = ["K4", "K1", "K2"]
+FLOOR = """
+import sys
+import numpy as np
+from compgen.effects import location_model
+from compgen.kinematics import Model
+from compgen.machine_file import load_machine
+from compgen.session import read_data
+machine = load_machine(sys.argv[1])
+data = read_data(sys.argv[2], machine)
+Model(machine, location_model(machine)).relative(data.poses, np.full(11, 1e-5))
+"""
+LIMITS = {"fit": 20.0, "diagnose": 60.0, "report": 60.0}   # s at 723 000 poses (issue 25)
+PEAK_MIB = 2048.0
+FLOOR_RATIO = 3.0
+
+
+def run(args: list[str], cwd: Path) -> tuple[float, float]:
+    """CPU seconds (user + sys) and peak RSS (MiB) of one child process."""
+    proc = subprocess.Popen([sys.executable, *args], cwd=cwd, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    err = proc.stderr.read().decode()
+    proc.stderr.close()
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise SystemExit(f"{' '.join(map(str, args))} failed:\n{err}")
+    return usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024
+
+
+def feed_for(size: int, rate_hz: float) -> float:
+    """deg/min at which K4, K1, K2 sampled at ``rate_hz`` give about ``size`` poses."""
+    from compgen.machine_file import load_machine
+    from compgen.paths import arc, path_def
+
+    machine = load_machine(MACHINE)
+    degrees = sum(arc(machine, path_def(machine, p)) for p in PATHS)
+    return 60 * rate_hz * degrees / (size - len(PATHS))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="723,7230,72300,723000")
+    ap.add_argument("--rate-hz", type=float, default=100.0)
+    args = ap.parse_args()
+    sizes = [int(s) for s in args.sizes.split(",")]
+    work = Path(tempfile.mkdtemp(prefix="compgen-streaming-"))
+    stages = ["floor", "fit", "diagnose", "predict", "report"]
+    table: dict[str, list[tuple[float, float]]] = {s: [] for s in stages}
+    counts = []
+    for size in sizes:
+        csv = work / f"s{size}.csv"
+        fit = work / f"fit{size}.json"
+        subprocess.run([sys.executable, "-m", "compgen", "simulate", "--machine", str(MACHINE),
+                        "--truth", str(TRUTH), "--paths", ",".join(PATHS), "--rate-hz", str(args.rate_hz),
+                        "--feed", f"{feed_for(size, args.rate_hz):.6f}", "--noise-um", "0.5",
+                        "--seed", "1", "-o", str(csv), "--force"], check=True, capture_output=True)
+        counts.append(sum(1 for line in csv.open() if line[:1] == "K"))
+        table["floor"].append(run(["-c", FLOOR, str(MACHINE), str(csv)], work))
+        table["fit"].append(run(["-m", "compgen", "fit", "--machine", str(MACHINE), str(csv),
+                                 "-o", str(fit), "--force"], work))
+        table["diagnose"].append(run(["-m", "compgen", "diagnose", "--from", str(fit), "--json"], work))
+        table["predict"].append(run(["-m", "compgen", "predict", "--from", str(fit), "--poses", str(csv),
+                                     "-o", str(work / f"pred{size}.csv"), "--force"], work))
+        table["report"].append(run(["-m", "compgen", "report", "--from", str(fit),
+                                    "-o", str(work / f"report{size}.html"), "--force"], work))
+    print(f"CPU seconds (peak MiB) by stage and poses; {args.rate_hz:g} Hz, seed Table 4, 0.5 µm white noise")
+    print(f"| stage | {' | '.join(f'{n:,}'.replace(',', ' ') for n in counts)} |")
+    print(f"|---|{'---|' * len(counts)}")
+    for stage in stages:
+        print(f"| {stage} | " + " | ".join(f"{s:.2f} ({m:.0f})" for s, m in table[stage]) + " |")
+    ratios = [f[0] / fl[0] for f, fl in zip(table["fit"], table["floor"], strict=True)]
+    print("fit / floor: " + ", ".join(f"{r:.2f}" for r in ratios)
+          + f"  (limit {FLOOR_RATIO:g}: {'holds' if max(ratios) <= FLOOR_RATIO else 'FAILS'})")
+    last = {stage: table[stage][-1] for stage in stages}
+    for stage, limit in LIMITS.items():
+        s, m = last[stage]
+        print(f"{stage} at {counts[-1]} poses: {s:.1f} s (limit {limit:g} s), peak {m:.0f} MiB "
+              f"(limit {PEAK_MIB:.0f}): {'holds' if s < limit and m < PEAK_MIB else 'FAILS'}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,105 @@
+"""The R-test CSV's two readers: numpy's path for a well-formed file and the careful reader
+that names the first fault. They must give the same table wherever the fast one answers,
+and the fast one must step aside (None) wherever a file is not plainly well formed."""
+
+import numpy as np
+import pytest
+from conftest import SEED_MACHINE
+
+from compgen import rtest
+from compgen.errors import CompgenError
+from compgen.machine_file import load_machine
+from compgen.paths import generate
+from compgen.rtest import RTestData, format_rtest, read_rtest
+
+MACHINE = load_machine(SEED_MACHINE)
+
+
+def _session(labels=("K4", "K1", "K2")) -> str:
+    poses = generate(MACHINE, list(labels))
+    dev = np.random.default_rng(1).normal(0, 1e-3, (len(poses), 3))
+    return format_rtest(MACHINE, RTestData(poses, dev), ("a comment",))
+
+
+def _both(tmp_path, text: str, monkeypatch):
+    f = tmp_path / "s.csv"
+    f.write_bytes(text.encode())
+    used = []
+    original = rtest._fast_table
+    monkeypatch.setattr(rtest, "_fast_table", lambda *a: used.append(original(*a)) or used[-1])
+    fast = read_rtest(f, MACHINE)
+    monkeypatch.setattr(rtest, "_fast_table", lambda *a: None)
+    careful = read_rtest(f, MACHINE)
+    return fast, careful, used[-1] is not None
+
+
+def _move_column(text: str, name: str, to: int) -> str:
+    out = []
+    for line in text.splitlines():
+        if line.startswith("#"):
+            out.append(line)
+            continue
+        cells = line.split(",")
+        i = text.splitlines()[1].split(",").index(name)
+        cell = cells.pop(i)
+        cells.insert(to if to >= 0 else len(cells) + 1 + to, cell)
+        out.append(",".join(cells))
+    return "\n".join(out) + "\n"
+
+
+@pytest.mark.parametrize("variant", ["as written", "path in the middle", "path last", "CRLF",
+                                     "labels of several widths", "no trailing newline"])
+def test_the_fast_reader_gives_the_careful_readers_table(tmp_path, monkeypatch, variant):
+    text = _session()
+    if variant == "path in the middle":
+        text = _move_column(text, "path", 4)
+    elif variant == "path last":
+        text = _move_column(text, "path", -1)
+    elif variant == "CRLF":
+        text = text.replace("\n", "\r\n")
+    elif variant == "labels of several widths":
+        text = text.replace("\nK1,", "\nK1long,").replace("\nK2,", "\n  K,")
+    elif variant == "no trailing newline":
+        text = text.rstrip("\n")
+    fast, careful, answered = _both(tmp_path, text, monkeypatch)
+    assert answered, "the fast reader stepped aside on a well-formed file"
+    np.testing.assert_array_equal(fast.deviation, careful.deviation)
+    np.testing.assert_array_equal(fast.poses.q, careful.poses.q)
+    np.testing.assert_array_equal(fast.poses.t, careful.poses.t)
+    assert fast.poses.path.tolist() == careful.poses.path.tolist()
+    assert list(fast.lines) == list(careful.lines)
+    assert fast.sha256 == careful.sha256
+
+
+@pytest.mark.parametrize("fault, line", [
+    ("two rows swap a field (same number of commas in all)", 4),
+    ("a quoted cell", 3),
+    ("a blank line inside", 5),
+    ("a comment inside", 5),
+])
+def test_the_fast_reader_steps_aside_and_the_careful_one_names_the_line(tmp_path, monkeypatch, fault, line):
+    lines = _session().splitlines()
+    first = next(i for i, x in enumerate(lines) if not x.startswith("#")) + 1   # 0-based first data row
+    if fault.startswith("two rows"):
+        a, b = lines[first + 1].split(","), lines[first + 2].split(",")
+        lines[first + 1] = ",".join(a + ["1"])        # one field too many here ...
+        lines[first + 2] = ",".join(b[:-1])           # ... and one too few here
+    elif fault == "a quoted cell":
+        lines[first] = '"' + lines[first].replace(",", '",', 1)
+    elif fault == "a blank line inside":
+        lines.insert(first + 2, "")
+    else:
+        lines.insert(first + 2, "# a note")
+    f = tmp_path / "s.csv"
+    f.write_text("\n".join(lines) + "\n")
+    used = []
+    original = rtest._fast_table
+    monkeypatch.setattr(rtest, "_fast_table", lambda *a: used.append(original(*a)) or used[-1])
+    if fault.startswith("two rows"):
+        with pytest.raises(CompgenError) as exc:
+            read_rtest(f, MACHINE)
+        assert f"s.csv:{line}" in str(exc.value) and "fields" in str(exc.value), exc.value
+    else:
+        data = read_rtest(f, MACHINE)
+        assert len(data) == len(generate(MACHINE, ["K4", "K1", "K2"]))
+    assert used == [None]
