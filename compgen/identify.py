@@ -16,8 +16,9 @@ from . import __version__
 from .advice import Advisor
 from .effects import canonical, effect_of_param, location_model
 from .errors import CompgenError
-from .kinematics import Model, Poses
+from .kinematics import Model, Poses, runs
 from .machine import Machine
+from .noise import ar1, ar1_covariance
 from .results import DataRef, Estimate, FitResult
 from .rtest import RTestData
 from .significance import COND_LIMIT, condition
@@ -91,7 +92,16 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
     raw, r, normal = at
     dof = readings - p
     sigma2 = float(r @ r) / dof
-    cov = normal.inverse() * sigma2
+    # readings taken close together (an R-test sampling at 100 Hz, or a set-up drifting
+    # between poses) are not independent: the noise's AR(1) ρ of each run and direction
+    # from the residual (``noise.ar1``: zero unless significant), and where it is not zero
+    # the estimates' covariance under that noise; white noise keeps σ²(JᵀJ)⁻¹
+    seg = runs(poses, np.concatenate([np.full(len(d), k) for k, d in enumerate(data)]))
+    rho = ar1(r.reshape(-1, 3), seg)
+    if rho.any():
+        cov = ar1_covariance(normal.J.T.reshape(p, len(poses), 3), r.reshape(-1, 3), seg, rho, dof)
+    else:
+        cov = normal.inverse() * sigma2
     std = np.sqrt(np.diag(cov))
     corr = cov / np.outer(std, std) if np.all(std > 0) else np.eye(p)
     sv = normal.singular_values()
@@ -108,7 +118,7 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
                    for d in data),
         model=tuple(names), parameters=params, free=tuple(names[i] for i in free),
         correlation=np.clip(corr, -1.0, 1.0), singular_values=sv,
-        residual=residual_stats(poses, raw, dof),
+        residual=residual_stats(poses, raw, dof, rho),
         method=method, iterations=iterations, sign=sign, version=__version__,
         descriptions={n: e.words for n, e in zip(names, m.effects, strict=True)})
 
@@ -304,17 +314,22 @@ def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.
     return f"adding one of these measurements would: {best}"
 
 
-def residual_stats(poses: Poses, r: np.ndarray, dof: int) -> dict:
-    """RMS and ISO 10791-6 style range per path and per direction, µm; r (n, 3) mm."""
+def residual_stats(poses: Poses, r: np.ndarray, dof: int, rho: np.ndarray | None = None) -> dict:
+    """RMS and ISO 10791-6 style range per path and per direction, µm; r (n, 3) mm. With
+    the noise's AR(1) ρ of each reading (n, 3), the largest of each path's runs too, and
+    which noise the uncertainties assume."""
     r_um = r * 1e3
     per_path = {}
     for label in dict.fromkeys(poses.path):
-        rp = r_um[poses.path == label]
+        at = poses.path == label
+        rp = r_um[at]
         per_path[label or "(unlabelled)"] = {
             "n": int(len(rp)), "rms_um": np.sqrt((rp**2).mean(axis=0)).tolist(),
             "range_um": (rp.max(axis=0) - rp.min(axis=0)).tolist(),
-            "max_abs_um": np.abs(rp).max(axis=0).tolist()}
-    return {"rms_um": float(np.sqrt((r_um**2).mean())),
+            "max_abs_um": np.abs(rp).max(axis=0).tolist(),
+            **({"ar1_rho": rho[at].max(axis=0).round(3).tolist()} if rho is not None else {})}
+    return {**({"noise": "ar1" if rho.any() else "white"} if rho is not None else {}),
+            "rms_um": float(np.sqrt((r_um**2).mean())),
             "sigma_um": float(np.sqrt((r_um**2).sum() / dof)),
             "readings": int(r.size), "dof": int(dof),
             "per_direction_rms_um": dict(zip(("dX", "dY", "dZ"),

@@ -12,6 +12,7 @@ References: seed report eqs. (1)–(8); ``docs/rtest-csv.md``.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -70,6 +71,8 @@ class Poses:
 
     @staticmethod
     def concat(items: Sequence[Poses]) -> Poses:
+        if len(items) == 1:      # the same poses: what is known of them (their nominal) holds
+            return items[0]
         return Poses(*(np.concatenate([getattr(p, f) for p in items])
                        for f in ("q", "ball", "t", "path")))
 
@@ -87,7 +90,6 @@ class Model:
         if len(set(self.names)) != len(self.names):
             raise CompgenError(f"a parameter is named twice in the model {list(self.names)}")
         self.effects: tuple[Effect, ...] = tuple(effect_of_param(machine, n) for n in self.names)
-        self._nominal: tuple[Poses | None, np.ndarray | None] = (None, None)
 
     def _slots(self, poses: Poses, values: np.ndarray,
                coordinates: Sequence[np.ndarray] | None = None) -> dict[tuple[str, str], np.ndarray]:
@@ -122,12 +124,7 @@ class Model:
 
     def deviation(self, poses: Poses, values: np.ndarray) -> np.ndarray:
         """Predicted R-test reading minus its nominal value, (n, 3) mm."""
-        return self.relative(poses, values) - self._nominal_of(poses)
-
-    def _nominal_of(self, poses: Poses) -> np.ndarray:
-        if self._nominal[0] is not poses:   # poses are frozen: the nominal vector is too
-            self._nominal = (poses, self.relative(poses))
-        return self._nominal[1]
+        return self.relative(poses, values) - nominal(self.machine, poses)
 
     def jacobian(self, poses: Poses, values: np.ndarray | None = None) -> np.ndarray:
         """∂ deviation / ∂ parameters at ``values``, (n, 3, p), mm per mm or per rad.
@@ -150,7 +147,9 @@ class Model:
         # coordinates on the whole session (a reversal's side depends on the run it is
         # in); the slots a block at a time, as the chains are walked
         x = [coordinate(self.machine, e, poses) for e in self.effects]
-        nominal = self._nominal_of(poses)
+        # at zero the walk is the nominal machine's: it gives the nominal readings too
+        known = None if not values.any() and _known_nominal(self.machine, poses) is None \
+            else nominal(self.machine, poses)
         dev = np.empty((len(poses), 3))
         shape = (len(self.names), len(poses), 3)
         columns = out if out is not None and out.shape == shape else np.empty(shape)
@@ -158,7 +157,10 @@ class Model:
             at = slice(a, a + BLOCK)
             block = poses.take(at)
             gains = SlotGains(self.machine, block, self._slots(block, values, [c[at] for c in x]))
-            np.subtract(gains.relative, nominal[at], out=dev[at])
+            if known is None:
+                dev[at] = gains.relative     # the nominal readings, for now
+            else:
+                np.subtract(gains.relative, known[at], out=dev[at])
             made = {}
             for i, (name, effect) in enumerate(zip(self.names, self.effects, strict=True)):
                 term = effect.params.index(name)
@@ -168,7 +170,30 @@ class Model:
                     if key not in made:
                         made[key] = gains(key)
                     columns[i, at] += made[key] * b[:, term, None]
+        if known is None:
+            _NOMINALS[poses] = (self.machine, dev)
+            dev = np.zeros_like(dev)
         return dev, np.moveaxis(columns, 0, 2)
+
+
+# the nominal machine's readings at poses already evaluated (poses are frozen: so are
+# these), held as long as the poses are: reading a session checks them, a fit needs them
+_NOMINALS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _known_nominal(machine: Machine, poses: Poses) -> np.ndarray | None:
+    held = _NOMINALS.get(poses)
+    return held[1] if held is not None and held[0] is machine else None
+
+
+def nominal(machine: Machine, poses: Poses) -> np.ndarray:
+    """Nest minus ball on the nominal machine, (n, 3) mm: zero where the poses are exactly
+    TCPM's, otherwise the recorded X, Y, Z's rounding or offset."""
+    known = _known_nominal(machine, poses)
+    if known is None:
+        known = relative(machine, poses, {})
+        _NOMINALS[poses] = (machine, known)
+    return known
 
 
 def coordinate(machine: Machine, effect: Effect, poses: Poses) -> np.ndarray:

@@ -55,6 +55,51 @@ def whiten(x: np.ndarray, seg: np.ndarray, rho: np.ndarray) -> np.ndarray:
     return out
 
 
+def ar1_covariance(J: np.ndarray, r: np.ndarray, seg: np.ndarray, rho: np.ndarray, dof: int) -> np.ndarray:
+    """The covariance of least-squares estimates when the noise is AR(1) within each run and
+    direction (ρ (n, 3) per reading, as ``ar1`` gives): (JᵀJ)⁻¹ JᵀΣJ (JᵀJ)⁻¹, Σ block by
+    block σ²·ρ^|i−j|, σ² each run and direction's own residual variance (scaled to ``dof``).
+    With ρ = 0 throughout this is the white-noise covariance σ²(JᵀJ)⁻¹ up to each group's
+    own σ². J is (p, n, 3) (a parameter's column as a block), r (n, 3).
+
+    Exact, not the large-sample factor (1 + ρ)/(1 − ρ): with the correlation matrix P,
+    JᵀPJ = (1 − ρ²)·ZᵀZ, Z = W⁻ᵀJ, W the Prais–Winsten transform (``whiten``)."""
+    p, n = J.shape[:2]
+    A = np.einsum("pnd,qnd->pq", J, J)
+    B = np.zeros((p, p))
+    scale = n * 3 / dof
+    for s in np.unique(seg):
+        at = np.flatnonzero(seg == s)
+        for d in range(3):
+            X = J[:, at, d].T
+            sigma2 = float(r[at, d] @ r[at, d]) / len(at) * scale
+            q = float(rho[at[0], d])
+            if q:
+                X = _inverse_transpose(X, q)
+                sigma2 *= 1 - q * q
+            B += sigma2 * (X.T @ X)
+    Ainv = np.linalg.inv(A)
+    return Ainv @ B @ Ainv
+
+
+def _inverse_transpose(x: np.ndarray, rho: float) -> np.ndarray:
+    """W⁻ᵀx along axis 0 for the Prais–Winsten W of one run: z_i = Σ_{k≥i} ρ^(k−i) x_k,
+    z_0 divided by √(1 − ρ²). A backward recursion, done as scaled suffix sums in blocks
+    short enough that ρ^length stays a normal double, the blocks joined by their carry."""
+    length = len(x)
+    block = max(1, int(250 / max(-np.log10(rho), 1e-12)))
+    z = np.empty_like(x, dtype=float)
+    carry = np.zeros(x.shape[1:])
+    for b in range(length, 0, -block):
+        a = max(0, b - block)
+        w = rho ** np.arange(b - a, dtype=float)[:, None]      # ρ^(k−a)
+        suffix = np.cumsum((w * x[a:b])[::-1], axis=0)[::-1]
+        z[a:b] = suffix / w + rho ** (b - a - np.arange(b - a))[:, None] * carry
+        carry = z[a]
+    z[0] /= np.sqrt(1 - rho * rho)
+    return z
+
+
 def outliers(r_um: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Readings that stand apart from their neighbours: their indices and how far, µm."""
     n = len(r_um)

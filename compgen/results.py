@@ -183,6 +183,11 @@ class FitResult:
                   f"{three_header(('range dX', 'dY', 'dZ'))}   (µm)"]
         for name, p in r["per_path"].items():
             lines.append(f"  {name:<8}{p['n']:>6} {three(p['rms_um'])}  {three(p['range_um'])}")
+        if r.get("noise") == "ar1":
+            rho, where = max((max(p["ar1_rho"]), name) for name, p in r["per_path"].items() if "ar1_rho" in p)
+            lines += [f"  the residual follows from reading to reading (AR(1) ρ̂ up to {rho:.2f}, in "
+                      f"{where}): a drift of the set-up,", "  or an effect the model lacks (diagnose "
+                      "tells); the uncertainties are least squares' under that noise"]
         lines += ["", f"  condition number {self.condition_number:.1f} (columns scaled to unit "
                       f"norm; above 100 the estimates are fragile)"]
         pairs = [(abs(self.correlation[i, j]), self.free[i], self.free[j], self.correlation[i, j])

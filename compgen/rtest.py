@@ -17,7 +17,7 @@ import numpy as np
 
 from .errors import CompgenError
 from .files import MAX_DATA_BYTES, read_text
-from .kinematics import Model, Poses, inverse
+from .kinematics import Poses, inverse, nominal
 from .machine import IDENTIFIERS, Machine, check_ball, check_travel, identifier
 from .units import NUMBER
 
@@ -72,7 +72,7 @@ def read_rtest(path: str | Path, machine: Machine, sign: str = "nest-minus-ball"
                            "column's unit and the row")
     if sign == "ball-minus-nest":
         deviation = -deviation
-    off = np.linalg.norm(Model(machine, ()).relative(poses), axis=1)
+    off = np.linalg.norm(nominal(machine, poses), axis=1)
     bad = np.flatnonzero(off > NOMINAL_TOLERANCE_MM)
     if bad.size:
         k = bad[0]

@@ -218,11 +218,13 @@ def test_fit_json_round_trips_exactly(seed_machine):
 
 
 def test_uncertainty_correlation_and_condition_equal_their_definitions(seed_machine):
-    """σ̂²(JᵀJ)⁻¹ at the solution, its correlation, and the singular values of J with unit
-    columns, computed here from the model's Jacobian."""
+    """White noise: σ̂²(JᵀJ)⁻¹ at the solution, its correlation, and the singular values of J
+    with unit columns, computed here from the model's Jacobian."""
     from compgen.kinematics import Model
-    data = read_rtest(ROOT / "examples" / "seed-session.csv", seed_machine)
+    data = simulate(seed_machine, TABLE4, generate(seed_machine, ["K4", "K1", "K2"]), NOISE_UM,
+                    np.random.default_rng(11))
     fit = identify(seed_machine, [data])
+    assert fit.residual["noise"] == "white"
     m = Model(seed_machine, fit.model)
     x = np.array([fit.parameters[n].value for n in fit.model])
     J = m.jacobian(data.poses, x).reshape(-1, len(x))
@@ -235,6 +237,37 @@ def test_uncertainty_correlation_and_condition_equal_their_definitions(seed_mach
     s = np.linalg.svd(J / np.linalg.norm(J, axis=0), compute_uv=False)
     np.testing.assert_allclose(fit.singular_values, s, rtol=1e-6)
     assert s[0] / s[-1] == pytest.approx(6.0, abs=0.1)          # the README's K4+K1+K2 figure
+
+
+def test_a_correlated_residual_gets_the_covariance_of_least_squares_under_ar1_noise(seed_machine):
+    """The bundled session, fitted without the EXC:h2 it holds, leaves a residual that
+    follows from reading to reading: fit says so, and each σ is the square root of
+    (JᵀJ)⁻¹JᵀΣJ(JᵀJ)⁻¹ with Σ written out here entry by entry (σ² ρ^|i−j| within a run and
+    direction, each one's own σ² and compgen's ρ̂) — larger than σ̂²(JᵀJ)⁻¹'s."""
+    from compgen.kinematics import Model, runs
+    from compgen.noise import ar1
+    data = read_rtest(ROOT / "examples" / "seed-session.csv", seed_machine)
+    fit = identify(seed_machine, [data])
+    assert fit.residual["noise"] == "ar1"
+    assert max(max(p["ar1_rho"]) for p in fit.residual["per_path"].values()) > 0.8
+    m = Model(seed_machine, fit.model)
+    x = np.array([fit.parameters[n].value for n in fit.model])
+    J = m.jacobian(data.poses, x).reshape(-1, len(x))
+    r = data.deviation - m.deviation(data.poses, x)
+    seg = runs(data.poses, np.zeros(len(data)))
+    rho = ar1(r, seg)
+    n, dof = len(r), r.size - len(x)
+    sigma = np.zeros((3 * n, 3 * n))
+    for s in np.unique(seg):
+        at = np.flatnonzero(seg == s)
+        for d in range(3):
+            s2 = r[at, d] @ r[at, d] / len(at) * r.size / dof
+            sigma[np.ix_(3 * at + d, 3 * at + d)] = s2 * rho[at[0], d] ** np.abs(at[:, None] - at[None, :])
+    inv = np.linalg.inv(J.T @ J)
+    std = np.sqrt(np.diag(inv @ J.T @ sigma @ J @ inv))
+    np.testing.assert_allclose([fit.parameters[n].std for n in fit.model], std, rtol=1e-6)
+    white = np.sqrt((r.ravel() @ r.ravel()) / dof * np.diag(inv))
+    assert (std > 1.5 * white).sum() >= 6, std / white
 
 
 def test_the_seed_first_order_method_recovers_table4(seed_machine):

@@ -91,3 +91,30 @@ def test_a_random_walk_is_held_at_rho_max():
     from compgen.noise import RHO_MAX
     walk = np.cumsum(np.random.default_rng(9).normal(size=(4000, 3)), axis=0)
     assert (ar1(walk, np.zeros(4000, int)) == RHO_MAX).all()
+
+
+def test_the_ar1_covariance_is_the_sandwich_with_the_correlation_matrix_written_out():
+    """(JᵀJ)⁻¹ JᵀΣJ (JᵀJ)⁻¹ with Σ built entry by entry, σ²·ρ^|i−j| within a run and
+    direction, 0 across: two runs of different ρ in each direction, one direction white,
+    runs long enough (900) that the recursion is taken in several blocks (ρ = 0.2)."""
+    from compgen.noise import ar1_covariance
+    rng = np.random.default_rng(4)
+    n, p = 1500, 4
+    seg = np.repeat([0, 1], [900, 600])
+    rho = np.zeros((n, 3))
+    rho[seg == 0] = [0.9, 0.2, 0.0]
+    rho[seg == 1] = [0.5, 0.0, 0.97]
+    J = rng.normal(size=(p, n, 3)) + np.linspace(0, 3, n)[None, :, None]
+    r = rng.normal(size=(n, 3))
+    dof = 3 * n - p
+    flat = J.reshape(p, -1).T                       # reading k = 3·i + d
+    sigma = np.zeros((3 * n, 3 * n))
+    for s in (0, 1):
+        at = np.flatnonzero(seg == s)
+        lag = np.abs(at[:, None] - at[None, :])
+        for d in range(3):
+            s2 = r[at, d] @ r[at, d] / len(at) * 3 * n / dof
+            sigma[np.ix_(3 * at + d, 3 * at + d)] = s2 * rho[at[0], d] ** lag
+    inv = np.linalg.inv(flat.T @ flat)
+    want = inv @ flat.T @ sigma @ flat @ inv
+    np.testing.assert_allclose(ar1_covariance(J, r, seg, rho, dof), want, rtol=1e-9, atol=0)

@@ -1,0 +1,40 @@
+"""Continuous sessions: a reading every 1/rate s while the paths run (issue 25)."""
+
+import numpy as np
+from conftest import SEED_MACHINE, run
+
+from compgen.paths import generate
+from compgen.rtest import read_rtest
+
+TRUTH = SEED_MACHINE.parents[1] / "examples" / "truth-table4.json"
+
+
+def test_a_continuous_path_takes_its_arc_at_the_feed_sampled_at_the_rate(seed_machine):
+    """K2 turns C 360° at A = 0: at 720 deg/min that is 30 s, at 50 Hz 1501 readings 20 ms
+    apart, C evenly from 0 to 360°."""
+    poses = generate(seed_machine, ["K2"], rate_hz=50, feed=720)
+    assert len(poses) == 1501
+    np.testing.assert_allclose(np.diff(poses.t), 0.02, rtol=1e-12)
+    c = np.degrees(poses.q[:, seed_machine.index("C")])
+    np.testing.assert_allclose(c, np.linspace(0, 360, 1501), atol=1e-9)
+
+
+def test_simulate_writes_a_continuous_session_that_reads_back(tmp_path, seed_machine):
+    out = tmp_path / "s.csv"
+    code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", TRUTH, "--paths", "K2",
+                       "--rate-hz", "100", "--feed", "3600", "--noise-um", "0.5", "--noise-rho", "0.9",
+                       "--seed", "1", "-o", out)
+    assert code == 0, err
+    data = read_rtest(out, seed_machine)
+    assert len(data) == 601 and data.poses.t[1] == 0.01
+
+
+def test_a_feed_the_axis_cannot_reach_is_refused_and_nothing_written(tmp_path):
+    """K1 sweeps A 180°: at 6000 deg/min A would pass its feed_max of 5400."""
+    out = tmp_path / "s.csv"
+    code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", TRUTH, "--paths", "K1",
+                       "--rate-hz", "100", "--feed", "6000", "-o", out)
+    assert code == 2 and "A at up to 6000 deg/min, above its feed_max 5400" in err, err
+    assert len(err.strip().splitlines()) <= 2 and not out.exists()
+    code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", TRUTH, "--feed", "600", "-o", out)
+    assert code == 2 and "--rate-hz" in err and not out.exists(), err
