@@ -114,11 +114,14 @@ def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest")
     ball = np.asarray(machine.ball, dtype=float)
     done, turned = set(), set()
     if measured is not None:
-        where_ = [(str(p), tuple(np.round(b, 3))) for p, b in zip(measured.path, measured.ball, strict=True)]
+        # path and ball hold within a run: one look per run, not per pose
+        run = runs(measured)
+        first = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+        where_ = [(str(measured.path[i]), tuple(np.round(measured.ball[i], 3))) for i in first]
         done = set(where_)
         for a in machine.rotary_axes:
-            d = motion_direction(measured.q[:, machine.index(a.name)], runs(measured))
-            turned |= {w for i, w in enumerate(where_) if d[i]}
+            d = motion_direction(measured.q[:, machine.index(a.name)], run)
+            turned |= {w for w, moved in zip(where_, np.add.reduceat(d != 0, first), strict=True) if moved}
     out = []
     for where, tag, scale, dz, back in PLACES:
         if back and device == "probe":

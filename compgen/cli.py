@@ -143,7 +143,7 @@ DATE = click.option("--date", "taken", default=None,
 
 
 @click.group(cls=_Group)
-@click.version_option(package_name="compgen")
+@click.version_option(__version__, prog_name="compgen")
 def main():
     """compgen: find where a five-axis machine's rotary axes really are, from R-test data."""
 

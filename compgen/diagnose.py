@@ -29,13 +29,14 @@ from .machine import Machine
 from .noise import ar1, outliers, whiten
 from .results import FitResult
 from .rtest import RTestData, device_of
-from .signature import columns, r_factor, signatures
+from .signature import columns, products, r_factor, signatures
 from .significance import (
     ALPHA,
     COND_LIMIT,
     VISIBLE,
     condition,
     explained,
+    gram_factor,
     lack_of_fit,
     p_value,
     rivals,
@@ -256,14 +257,16 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     # ρ̂ from the residual once the best candidate (least squares) is added: the misfit of
     # a missing effect is not noise; then, if the noise is correlated, rank again whitened
     noise = _Noise(seg, np.zeros_like(r3), Q, R)
-    ranked = _rank(machine, poses, effects, fit.free, Q, R, r, noise)
+    plain = products(machine, poses, effects, Q, r)
+    ranked = _rank(effects, fit.free, R, r, noise, plain)
     best = max(ranked.values(), key=lambda row: (row.vis >= VISIBLE, row.share))
     c = columns(machine, poses, [best.effect])
     rest = r - c @ np.linalg.lstsq(c - Q @ (Q.T @ c), r, rcond=None)[0]
     rho = ar1((rest - Q @ (Q.T @ rest)).reshape(-1, 3), seg)
     if rho.any():
         noise = _Noise(seg, rho, Q, R)
-        ranked = _rank(machine, poses, effects, fit.free, Q, R, r, noise)
+        white = products(machine, poses, effects, noise.Q, noise.off(noise.white(r)), (seg, rho))
+        ranked = _rank(effects, fit.free, R, r, noise, plain, white)
     rss_w = noise.rss(r)
 
     tested = sum(1 for row in ranked.values() if row.k_eff)
@@ -437,28 +440,29 @@ class _Noise:
         return float(rw @ rw)
 
 
-def _rank(machine: Machine, poses: Poses, effects: Sequence[Effect], free: Sequence[str],
-          Q: np.ndarray, R: np.ndarray, r: np.ndarray, noise: _Noise) -> dict[str, _Row]:
-    """Every candidate's numbers, one effect at a time (memory as fit's)."""
+def _rank(effects: Sequence[Effect], free: Sequence[str], R: np.ndarray, r: np.ndarray, noise: _Noise,
+          plain: dict, white: dict | None = None) -> dict[str, _Row]:
+    """Every candidate's numbers from its columns' products (``signature.products``):
+    ``plain`` with the model's Q and the residual, ``white`` the same made white (with
+    the whitened model's Q and residual) when the noise is correlated."""
     J_norm = np.linalg.norm(R, axis=0)
     rw = noise.off(noise.white(r))
     rss_w = float(rw @ rw)
     out = {}
-    for e, c in signatures(machine, poses, effects):
-        norms = np.linalg.norm(c, axis=0)
-        qc = Q.T @ c
-        cp = c - Q @ qc                                # what the model cannot absorb
-        vis_cols, drop, amp = explained(c, cp, r)
+    for e in effects:
+        cc, qc, cr = plain[e.name]
+        norms = np.sqrt(np.diag(cc))
+        vis_cols, drop, amp = explained(cc, qc, cr)
         keep = vis_cols >= VISIBLE
         drop_w = drop
-        if noise.rho.any() and keep.any():
-            cw = noise.white(c)
-            _, drop_w, _ = explained(cw, noise.off(cw), rw, keep)
+        if white is not None and keep.any():
+            _, drop_w, _ = explained(*white[e.name], keep)
         absorbed = np.linalg.solve(R, qc)             # J⁺c: what each parameter takes
-        share = np.sqrt(np.sum((absorbed * J_norm[:, None]) ** 2, axis=1)) / max(np.linalg.norm(c), 1e-300)
+        size = max(float(np.linalg.norm(norms)), 1e-300)
+        share = np.sqrt(np.sum((absorbed * J_norm[:, None]) ** 2, axis=1)) / size
         names = tuple(free[i] for i in np.argsort(-share) if share[i] >= ABSORBS)
         # R of [J | c] is [[R, Qᵀc], [0, R of c⊥]]: fit --add's condition number, cheaply
-        joined = np.block([[R, qc], [np.zeros((c.shape[1], R.shape[1])), np.linalg.qr(cp, mode="r")]])
+        joined = np.block([[R, qc], [np.zeros((len(cr), R.shape[1])), gram_factor(cc - qc.T @ qc)]])
         out[e.name] = _Row(e, float(vis_cols.max()), drop, drop_w, drop_w / max(rss_w, 1e-300),
                            int(keep.sum()), amp, names, bool(np.all(norms * 1e3 < SILENT_UM)),
                            norms, absorbed, condition(joined))

@@ -45,12 +45,16 @@ def ar1(r: np.ndarray, seg: np.ndarray) -> np.ndarray:
     return rho
 
 
-def whiten(x: np.ndarray, seg: np.ndarray, rho: np.ndarray) -> np.ndarray:
-    """The Prais–Winsten transform of x, (n, 3) or (n, 3, k), with ρ (n, 3) per reading."""
+def whiten(x: np.ndarray, seg: np.ndarray, rho: np.ndarray, before: tuple | None = None) -> np.ndarray:
+    """The Prais–Winsten transform of x, (n, 3) or (n, 3, k), with ρ (n, 3) per reading.
+    ``before`` = (x's row before these, its segment): x continues a series taken in parts."""
     r = rho if x.ndim == 2 else rho[:, :, None]
     first = np.ones(len(seg), bool)
     first[1:] = seg[1:] != seg[:-1]
-    out = x - r * _previous(x, seg)
+    prev = _previous(x, seg)
+    if before is not None and len(seg) and before[1] == seg[0]:
+        prev[0], first[0] = before[0], False
+    out = x - r * prev
     out[first] = np.sqrt(1 - r[first] ** 2) * x[first]
     return out
 

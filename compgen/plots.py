@@ -29,6 +29,18 @@ DIRECTIONS = ("dX", "dY", "dZ")
 STYLES = ("-", "--", ":", "-.")
 MARKERS = ("o", "s", "^", "v", "D", "x")
 ON_EACH_OTHER_UM = 0.01   # two curves closer than this everywhere are said to coincide
+DRAWN = 4000              # points a series draws at most: a dense session's are thinned evenly (the
+                          # figures' numbers, RMS and fits, always use every reading)
+
+
+def _drawn(index: np.ndarray) -> np.ndarray:
+    """The poses of ``index`` a series draws: all, or every k-th where there are more than
+    ``DRAWN`` (a plot of 289 000 dots shows what one of 4000 shows, 70 times slower)."""
+    return index[::-(-len(index) // DRAWN)] if len(index) > DRAWN else index
+
+
+def _thinned(n: int) -> str:
+    return f" (every {-(-n // DRAWN)}th of {n} readings drawn)" if n > DRAWN else ""
 
 
 def _predicted(machine: Machine, poses: Poses, fit: FitResult) -> np.ndarray:
@@ -70,17 +82,20 @@ def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     label = f"model ({len(fit.model)} parameters)"
     images = {}
     for path in dict.fromkeys(poses.path):
-        sel = poses.path == path
+        sel = np.flatnonzero(poses.path == path)
+        shown_at = _drawn(np.arange(len(sel)))
+        at = sel[shown_at]
         fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
         for k, ax in enumerate(axes):
-            ax.plot(measured[sel, k], ".", ms=3, color="0.25", label="measured")
+            ax.plot(shown_at, measured[at, k], ".", ms=3, color="0.25", label="measured")
             if earlier is not None:
-                ax.plot(earlier[sel, k], "--", color="tab:orange",
+                ax.plot(shown_at, earlier[at, k], "--", color="tab:orange",
                         label=f"before ({len(before.model)} parameters)")
-            ax.plot(model[sel, k], "-", color="tab:blue", label=label)
+            ax.plot(shown_at, model[at, k], "-", color="tab:blue", label=label)
             ax.set_ylabel(f"{DIRECTIONS[k]} (µm)")
             ax.grid(alpha=0.3)
-        axes[0].set_title(f"{path or 'data'}: measured vs model, {machine.name}")
+        axes[0].set_title(f"{path or 'data'}: measured vs model, {machine.name}{_thinned(len(sel))}",
+                          fontsize=10)
         axes[0].legend(loc="best", fontsize=8)
         axes[-1].set_xlabel("pose")
         images[f"measured-vs-model-{_safe(path)}.png"] = _png(fig)
@@ -88,18 +103,21 @@ def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     for axis in machine.rotary_axes:
         angle = np.degrees(poses.q[:, machine.index(axis.name)])
         fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
+        everywhere = _drawn(np.arange(len(poses)))
         for k, ax in enumerate(axes):
             if earlier is not None:
-                ax.plot(angle, measured[:, k] - earlier[:, k], ".", ms=2, color="0.7",
-                        label=f"before: RMS {before.residual['rms_um']:.2f} µm")
+                ax.plot(angle[everywhere], measured[everywhere, k] - earlier[everywhere, k], ".", ms=2,
+                        color="0.7", label=f"before: RMS {before.residual['rms_um']:.2f} µm")
             for i, path in enumerate(paths):        # a path that holds the axis still is a column
-                sel = poses.path == path
+                sel = np.flatnonzero(poses.path == path)
                 res = measured[sel, k] - model[sel, k]
-                ax.plot(angle[sel], res, ".", ms=2, color=f"C{i % 10}",
+                at = _drawn(np.arange(len(sel)))
+                ax.plot(angle[sel[at]], res[at], ".", ms=2, color=f"C{i % 10}",
                         label=f"{path or 'data'}: RMS {np.sqrt((res**2).mean()):.2f} µm")
             ax.set_ylabel(f"{DIRECTIONS[k]} (µm)")
             ax.grid(alpha=0.3)
-        axes[0].set_title(f"residual against {axis.name} per path, {machine.name}")
+        axes[0].set_title(f"residual against {axis.name} per path, {machine.name}"
+                          f"{_thinned(max(np.sum(poses.path == p) for p in paths))}", fontsize=10)
         axes[0].legend(loc="best", fontsize=8)
         axes[-1].set_xlabel(f"{axis.name} (deg)")
         images[f"residual-vs-{axis.name}.png"] = _png(fig)
@@ -117,10 +135,12 @@ def _rivals(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosis, re
         labels[name] = name + (f" (= {', '.join(same)} on {extra.label})" if same else "")
     fig, axes = plt.subplots(3, 2, figsize=(12, 7), sharex="col", gridspec_kw={"width_ratios": [3, 1]})
     for k in range(3):
-        axes[k, 0].plot(residual[:, k], ".", ms=2, color="0.6", label="residual")
+        at = _drawn(np.arange(len(residual)))
+        axes[k, 0].plot(at, residual[at, k], ".", ms=2, color="0.6", label="residual")
         for i, (name, (now, after)) in enumerate(curves.items()):
             for ax, curve in ((axes[k, 0], now), (axes[k, 1], after)):
-                ax.plot(curve[:, k], STYLES[i % len(STYLES)], lw=1.2 + 0.6 * (len(curves) - 1 - i),
+                at = _drawn(np.arange(len(curve)))
+                ax.plot(at, curve[at, k], STYLES[i % len(STYLES)], lw=1.2 + 0.6 * (len(curves) - 1 - i),
                         color=f"C{i}", marker=MARKERS[i % len(MARKERS)], ms=3,
                         markevery=(i * 3, 4 + 2 * len(curves)), label=labels[name])
         axes[k, 0].set_ylabel(f"{DIRECTIONS[k]} (µm)")

@@ -9,8 +9,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from .effects import Effect
-from .kinematics import Poses, SlotGains, coordinate
+from .kinematics import BLOCK, Poses, SlotGains, coordinate
 from .machine import Machine
+from .noise import whiten
 
 
 def signatures(machine: Machine, poses: Poses, effects: Sequence[Effect]):
@@ -38,3 +39,46 @@ def r_factor(machine: Machine, poses: Poses, effects: Sequence[Effect],
         block = columns(machine, poses.take(slice(i, i + chunk)), effects)
         R = np.linalg.qr(block if R is None else np.vstack([R, block]), mode="r")
     return R
+
+
+def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.ndarray, r: np.ndarray,
+             noise: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, tuple]:
+    """Each effect's first-order signature c, reduced to what diagnose needs of it: cᵀc
+    (k × k), Qᵀc (p × k) and cᵀr (k), over blocks of poses: a dense session's columns are
+    millions of rows, made a block at a time (the chain walked once a block, for every
+    effect) and never held whole. ``Q`` (3n, p) and ``r`` (3n,) are in (n, 3) reading
+    order. With ``noise`` = (segments, ρ (n, 3)), the columns are made white first
+    (Prais–Winsten, carried from one block to the next), as Q and r must already be."""
+    coords: dict = {}
+    for e in effects:        # on the whole session: a reversal's side depends on its run
+        key = (e.carrier, e.basis.kind) if e.basis.kind != "e" else ("time", "e")
+        if key not in coords:
+            coords[key] = coordinate(machine, e, poses)
+    out = {e.name: [0.0, 0.0, 0.0] for e in effects}
+    carry: dict = {}
+    n = len(poses)
+    for a in range(0, n, BLOCK):
+        at = slice(a, min(a + BLOCK, n))
+        gains, made = SlotGains(machine, poses.take(at)), {}
+        rows = slice(3 * at.start, 3 * at.stop)
+        Qb, rb = Q[rows], r[rows]
+        for e in effects:
+            x = coords[(e.carrier, e.basis.kind) if e.basis.kind != "e" else ("time", "e")][at]
+            c = 0.0
+            for d, b in e.parts(x):
+                key = (e.carrier, e.slot, d)
+                if key not in made:
+                    made[key] = gains(key)
+                c = c + made[key][:, :, None] * b[:, None, :]
+            c = np.broadcast_to(c, (at.stop - at.start, 3, len(e.params)))
+            if noise is not None:
+                seg, rho = noise
+                before = carry.get(e.name)
+                carry[e.name] = (c[-1].copy(), seg[at.stop - 1])
+                c = whiten(c, seg[at], rho[at], before)
+            c = c.reshape(-1, len(e.params))
+            acc = out[e.name]
+            acc[0] = acc[0] + c.T @ c
+            acc[1] = acc[1] + Qb.T @ c
+            acc[2] = acc[2] + c.T @ rb
+    return {name: tuple(np.asarray(v) for v in acc) for name, acc in out.items()}

@@ -16,19 +16,31 @@ VISIBLE = 0.01        # ‖c⊥‖/‖c‖ below this: the model absorbs the eff
 RIVAL = 0.9           # removing this share of what the best removes makes a rival (misfit left)
 
 
-def explained(c: np.ndarray, cp: np.ndarray, r: np.ndarray, keep: np.ndarray | None = None
-               ) -> tuple[np.ndarray, float, np.ndarray]:
-    """For an effect's columns ``c`` and the part ``cp`` the model cannot absorb: each
-    column's visibility, the residual sum of squares its visible columns (or ``keep``)
-    remove, and their first-order amplitudes (0 for the invisible)."""
-    norms = np.linalg.norm(c, axis=0)
-    vis = np.where(norms > 0, np.linalg.norm(cp, axis=0) / np.where(norms > 0, norms, 1), 0.0)
+def explained(cc: np.ndarray, qc: np.ndarray, cr: np.ndarray, keep: np.ndarray | None = None
+              ) -> tuple[np.ndarray, float, np.ndarray]:
+    """For an effect's columns c, from their products alone — cc = cᵀc, qc = Qᵀc (Q the
+    model's orthonormal columns), cr = cᵀr (r the residual, orthogonal to Q): each column's
+    visibility ‖c⊥‖/‖c‖ (c⊥ = c − QQᵀc, the part the model cannot absorb), the residual
+    sum of squares its visible columns (or ``keep``) remove, and their first-order
+    amplitudes (0 for the invisible). Products, not the columns: a dense session's columns
+    are millions of rows, their products k × k."""
+    norms = np.sqrt(np.diag(cc))
+    cpcp = cc - qc.T @ qc                           # c⊥ᵀc⊥; c⊥ᵀr = cᵀr, r being orthogonal to Q
+    vis = np.where(norms > 0, np.sqrt(np.clip(np.diag(cpcp), 0, None)) / np.where(norms > 0, norms, 1), 0.0)
     keep = vis >= VISIBLE if keep is None else keep
-    amp = np.zeros(c.shape[1])
+    amp = np.zeros(len(cr))
     if not keep.any():
         return vis, 0.0, amp
-    amp[keep] = np.linalg.lstsq(cp[:, keep], r, rcond=None)[0]
-    return vis, float(np.sum((cp[:, keep] @ amp[keep]) ** 2)), amp
+    G = cpcp[np.ix_(keep, keep)]
+    amp[keep] = np.linalg.lstsq(G, cr[keep], rcond=None)[0]
+    return vis, float(amp[keep] @ G @ amp[keep]), amp
+
+
+def gram_factor(G: np.ndarray) -> np.ndarray:
+    """A square F with FᵀF = G (G symmetric, positive semi-definite): what ``condition``
+    needs of columns whose products alone are known."""
+    w, V = np.linalg.eigh(G)
+    return np.sqrt(np.clip(w, 0, None))[:, None] * V.T
 
 
 def p_value(drop: float, k: int, rss: float, dof: int, tried: int) -> float:
@@ -128,15 +140,11 @@ def still_significant(Q: np.ndarray, added: np.ndarray, r: np.ndarray, signature
     model (orthonormal columns ``Q``) is joined by the columns ``added``, first order;
     Bonferroni over all of them. Only the added columns are orthogonalised anew."""
     Qa, _ = np.linalg.qr(added - Q @ (Q.T @ added))
-
-    def off(v):   # what the joined model cannot absorb
-        return v - Q @ (Q.T @ v) - Qa @ (Qa.T @ v)
-
-    r1 = off(r)
+    r1 = r - Q @ (Q.T @ r) - Qa @ (Qa.T @ r)       # what the joined model cannot absorb of r
     rss, dof = float(r1 @ r1), r.size - Q.shape[1] - added.shape[1]
     drops = []
     for e, c in signatures:
-        vis_cols, drop, _ = explained(c, off(c), r1)
+        vis_cols, drop, _ = explained(c.T @ c, np.vstack([Q.T @ c, Qa.T @ c]), c.T @ r1)
         drops.append((e.name, drop, int((vis_cols >= VISIBLE).sum())))
     return {name for name, drop, k in drops if k and p_value(drop, k, rss, dof, len(drops)) < alpha}
 

@@ -28,6 +28,8 @@ OVERSAMPLE = 2         # the grid's frequencies per resolved one (the peak is re
 CELLS = 500_000        # poses × frequencies evaluated at once (8 MB of complex phasors)
 SEEN = 0.1             # a line whose pair the model absorbs beyond 1 − this (of its sum of squares) is
                        # not one: its amplitude would be the model's to take
+SCAN_POSES = 12_000    # a denser session is scanned and its peak refined at this many poses, evenly
+                       # spread in the order taken; every figure of the line is computed on all
 
 
 @dataclass(frozen=True)
@@ -60,40 +62,60 @@ def strongest_lines(machine: Machine, poses: Poses, r: np.ndarray, Q: np.ndarray
     first; ``r`` is the residual (n, 3), mm, and ``Q`` (3n, p) the model's orthonormal
     columns, readings in (n, 3) order (the residual is orthogonal to them)."""
     Qd = None if Q is None else Q.reshape(len(r), 3, -1).transpose(1, 0, 2)    # (3, n, p)
+    scan = _Scan(r, Qd)
     out = []
     for axis in machine.axes:
         x = poses.q[:, machine.index(axis.name)]
         if axis.rotary:
             if np.ptp(x) > 0:
                 out.append(_best(axis.name, x, r, Qd, np.arange(1, MAX_ORDER + 1) / (2 * np.pi), "/rev",
-                                 lambda f: f * 2 * np.pi, refine=False))
+                                 lambda f: f * 2 * np.pi, scan, refine=False))
         elif np.ptp(x) >= 4 * MIN_PITCH_MM:
             span = np.ptp(x)
             grid = np.arange(2 / span, 1 / MIN_PITCH_MM, 1 / (OVERSAMPLE * span))
-            out.append(_best(axis.name, x, r, Qd, grid, "mm", lambda f: 1 / f))
+            out.append(_best(axis.name, x, r, Qd, grid, "mm", lambda f: 1 / f, scan))
     t = poses.t
     if np.isfinite(t).all() and np.ptp(t) > 0:
         span = np.ptp(t)
         grid = np.arange(2 / span, 1 / MIN_PERIOD_S, 1 / (OVERSAMPLE * span))
         if grid.size:
-            out.append(_best("time", t, r, Qd, grid, "s", lambda f: 1 / f))
+            out.append(_best("time", t, r, Qd, grid, "s", lambda f: 1 / f, scan))
     return tuple(sorted((line for line in out if line is not None), key=lambda line: -line.share))
 
 
+class _Scan:
+    """The poses the grid is scanned at: all of them, or for a dense session ``SCAN_POSES``
+    evenly spread, with the model's columns made orthonormal again on them. The scan only
+    finds the period; the line's sum of squares, amplitude and p-value use all the poses."""
+
+    def __init__(self, r: np.ndarray, Qd: np.ndarray | None):
+        n = len(r)
+        self.at = slice(None) if n <= SCAN_POSES else np.unique(np.linspace(0, n - 1, SCAN_POSES).astype(int))
+        y = r[self.at]
+        self.y = y - y.mean(axis=0)
+        self.Qd = None if Qd is None else (
+            Qd if n <= SCAN_POSES else np.stack([np.linalg.qr(Qd[d][self.at])[0] for d in range(3)]))
+        if Qd is not None and n > SCAN_POSES:    # the residual as the model on these poses leaves it
+            y = np.column_stack([self.y[:, d] - self.Qd[d] @ (self.Qd[d].T @ self.y[:, d]) for d in range(3)])
+            self.y = y - y.mean(axis=0)
+
+
 def _best(against: str, x: np.ndarray, r: np.ndarray, Qd: np.ndarray | None, grid: np.ndarray, unit: str,
-          period, refine: bool = True) -> Line | None:
+          period, scan: _Scan, refine: bool = True) -> Line | None:
     if grid.size == 0:
         return None
     y = r - r.mean(axis=0)
     rss = float(np.sum(r**2))
-    chunk = max(8, CELLS // len(x))      # memory as fit's, however dense the session
-    drops = np.concatenate([_drops(x, y, grid[i:i + chunk], Qd) for i in range(0, grid.size, chunk)])
+    xs = x[scan.at]
+    chunk = max(8, CELLS // len(xs))      # memory as fit's, however dense the session
+    drops = np.concatenate([_drops(xs, scan.y, grid[i:i + chunk], scan.Qd)
+                            for i in range(0, grid.size, chunk)])
     k, d = np.unravel_index(int(np.argmax(drops)), drops.shape)
     f = grid[k]
     if refine:           # the grid's neighbours bracket the peak: golden-section between them
-        Qk = None if Qd is None else Qd[[d]]
+        Qk = None if scan.Qd is None else scan.Qd[[d]]
         lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
-        f = golden_least(lambda v: -_drops(x, y[:, [d]], v, Qk)[:, 0], np.array([lo]), np.array([hi]),
+        f = golden_least(lambda v: -_drops(xs, scan.y[:, [d]], v, Qk)[:, 0], np.array([lo]), np.array([hi]),
                          1e-6 * f)[0][0]
     drop, amp = _fit(x, y[:, d], f, None if Qd is None else Qd[d])
     tried = grid.size / OVERSAMPLE if refine else grid.size

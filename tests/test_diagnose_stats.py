@@ -11,24 +11,30 @@ from compgen.significance import still_significant as _still_significant
 E = np.eye(6)
 
 
+def _by_products(c, Q, r):
+    """``explained`` takes the columns' products: cᵀc, Qᵀc (Q the model's orthonormal
+    columns) and cᵀr (r orthogonal to Q)."""
+    return _explained(c.T @ c, Q.T @ c, c.T @ r)
+
+
 def test_explained_by_hand():
-    """Columns e1 (fully visible) and 0.5·e2 + ~e3 (the model absorbs e3): residual 3·e1 + 2·e2."""
+    """Columns e1 (fully visible) and 0.5·e2 + 1e-4·e3 where the model is e3 (it absorbs
+    the e3 part): residual 3·e1 + 2·e2 + e4."""
     c = np.column_stack([E[0], 0.5 * E[1] + 1e-4 * E[2]])
-    cp = np.column_stack([E[0], 0.5 * E[1]])            # what the model cannot absorb
     r = 3 * E[0] + 2 * E[1] + 1.0 * E[3]
-    vis, drop, amp = _explained(c, cp, r)
+    vis, drop, amp = _by_products(c, E[2][:, None], r)
     np.testing.assert_allclose(vis, [1.0, 0.5 / np.hypot(0.5, 1e-4)], rtol=1e-12)
     np.testing.assert_allclose(amp, [3.0, 4.0], rtol=1e-12)           # 0.5·4 = 2
     assert drop == pytest.approx(9.0 + 4.0, rel=1e-12)
 
 
 def test_an_invisible_column_explains_nothing():
-    c = np.column_stack([E[0], E[1]])
-    cp = np.column_stack([E[0], 0.5 * VISIBLE * E[1]])   # below the visibility threshold
-    vis, drop, amp = _explained(c, cp, 2 * E[0] + 5 * E[1])
+    """The second column is e3 but for 0.5·VISIBLE·e2: the model (e3) absorbs all but that."""
+    c = np.column_stack([E[0], 0.5 * VISIBLE * E[1] + E[2]])
+    vis, drop, amp = _by_products(c, E[2][:, None], 2 * E[0] + 5 * E[1])
     assert vis[1] < VISIBLE and amp[1] == 0.0 and amp[0] == pytest.approx(2.0)
     assert drop == pytest.approx(4.0)
-    vis, drop, amp = _explained(c, 0 * cp, E[0])
+    vis, drop, amp = _by_products(c[:, :1], E[0][:, None], E[3])   # the model absorbs it whole
     assert drop == 0.0 and not amp.any()
 
 
@@ -88,5 +94,33 @@ def test_still_significant_tests_against_the_joined_model(monkeypatch):
 
 def test_a_column_that_moves_nothing_is_invisible():
     c = np.column_stack([E[0], np.zeros(6)])
-    vis, drop, amp = _explained(c, c, E[0] + E[1])
+    vis, drop, amp = _by_products(c, E[5][:, None], E[0] + E[1])
     assert vis.tolist() == [1.0, 0.0] and amp[1] == 0.0 and drop == pytest.approx(1.0)
+
+
+def test_products_a_block_at_a_time_equal_those_of_the_whole_columns(seed_machine, monkeypatch):
+    """``signature.products`` (blocks of poses, whitening carried across them) against cᵀc,
+    Qᵀc and cᵀr of each effect's whole columns, plain and made white with AR(1) ρ."""
+    from compgen import signature
+    from compgen.effects import catalogue
+    from compgen.kinematics import Model, runs
+    from compgen.noise import whiten
+    from compgen.paths import generate
+    poses = generate(seed_machine, ["K4", "K1", "K2"])
+    effects = [e for e in catalogue(seed_machine) if e.carrier != "time" and e.basis.kind != "e"][::7]
+    J = Model(seed_machine, ["XOC", "YOC", "BOA"]).jacobian(poses).reshape(-1, 3)
+    Q = np.linalg.qr(J)[0]
+    r = np.random.default_rng(2).normal(size=J.shape[0])
+    seg = runs(poses)
+    rho = np.where(seg[:, None] == seg[0], 0.9, 0.4) * np.ones((len(poses), 3))
+    monkeypatch.setattr(signature, "BLOCK", 100)          # several blocks, edges inside runs
+    for noise in (None, (seg, rho)):
+        got = signature.products(seed_machine, poses, effects, Q, r, noise)
+        for e, c in signature.signatures(seed_machine, poses, effects):
+            if noise is not None:
+                c = whiten(c.reshape(len(poses), 3, -1), seg, rho).reshape(c.shape)
+            cc, qc, cr = got[e.name]
+            scale = max(np.abs(c).max() ** 2 * len(c), 1e-300)
+            np.testing.assert_allclose(cc, c.T @ c, rtol=0, atol=1e-12 * scale, err_msg=e.name)
+            np.testing.assert_allclose(qc, Q.T @ c, rtol=0, atol=1e-12 * np.sqrt(scale), err_msg=e.name)
+            np.testing.assert_allclose(cr, c.T @ r, rtol=0, atol=1e-12 * np.sqrt(scale) * 50, err_msg=e.name)

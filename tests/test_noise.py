@@ -118,3 +118,20 @@ def test_the_ar1_covariance_is_the_sandwich_with_the_correlation_matrix_written_
     inv = np.linalg.inv(flat.T @ flat)
     want = inv @ flat.T @ sigma @ flat @ inv
     np.testing.assert_allclose(ar1_covariance(J, r, seg, rho, dof), want, rtol=1e-9, atol=0)
+
+
+def test_whitening_in_parts_equals_whitening_whole():
+    """A series whitened block by block, each block carrying the row before it, is the
+    series whitened at once: across a block's edge inside a run, and where a run starts
+    at a block's edge."""
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(40, 3, 2))
+    seg = np.repeat([0, 1, 2], [17, 10, 13])
+    rho = np.where(seg[:, None] == 1, 0.3, 0.8) * np.ones((40, 3))
+    whole = whiten(x, seg, rho)
+    for edges in ([0, 9, 27, 40], [0, 17, 40], [0, 5, 6, 30, 40]):
+        parts, before = [], None
+        for a, b in zip(edges[:-1], edges[1:], strict=True):
+            parts.append(whiten(x[a:b], seg[a:b], rho[a:b], before))
+            before = (x[b - 1], seg[b - 1])
+        np.testing.assert_allclose(np.concatenate(parts), whole, rtol=0, atol=1e-15)

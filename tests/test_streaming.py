@@ -38,3 +38,34 @@ def test_a_feed_the_axis_cannot_reach_is_refused_and_nothing_written(tmp_path):
     assert len(err.strip().splitlines()) <= 2 and not out.exists()
     code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", TRUTH, "--feed", "600", "-o", out)
     assert code == 2 and "--rate-hz" in err and not out.exists(), err
+
+
+def test_a_dense_sessions_plots_draw_thinned_series_and_count_every_reading(seed_machine, monkeypatch):
+    """A 12 001-pose continuous K2: no series draws more than DRAWN points, the titles say
+    so, and the RMS in each legend is that of all the readings (2 µm added in dX to the
+    readings that are not drawn makes the two differ)."""
+    import matplotlib.axes
+
+    from compgen import plots
+    from compgen.identify import identify
+    from compgen.simulate import simulate
+    poses = generate(seed_machine, ["K2"], rate_hz=100, feed=180)
+    data = simulate(seed_machine, {"XOC": 2e-3}, poses, 0.5, np.random.default_rng(3))
+    hidden = np.ones(len(poses), bool)
+    hidden[::4] = False
+    data.deviation[hidden, 0] += 2e-3
+    fit = identify(seed_machine, [data], model=["XOC", "YOC"])
+    drawn, labels, titles = [], [], []
+    plot, title = matplotlib.axes.Axes.plot, matplotlib.axes.Axes.set_title
+    monkeypatch.setattr(matplotlib.axes.Axes, "plot", lambda self, *a, **k: (
+        drawn.append(len(a[0])), labels.append(k.get("label", "")), plot(self, *a, **k))[-1])
+    monkeypatch.setattr(matplotlib.axes.Axes, "set_title", lambda self, t, **k: (
+        titles.append(t), title(self, t, **k))[-1])
+    plots.figures(seed_machine, [data], fit)
+    assert len(poses) == 12001 and max(drawn) <= plots.DRAWN, max(drawn)
+    assert all("every 4th of 12001 readings drawn" in t for t in titles), titles
+    res = data.deviation * 1e3 - plots._predicted(seed_machine, poses, fit)
+    rms = np.sqrt((res**2).mean(axis=0))
+    assert abs(rms[0] - np.sqrt((res[::4, 0] ** 2).mean())) > 0.2
+    legends = [f"K2: RMS {v:.2f} µm" for v in rms] * len(seed_machine.rotary_axes)   # one figure an axis
+    assert legends == [x for x in labels if x.startswith("K2: RMS")]
