@@ -6,7 +6,7 @@ e[i] = ρ·e[i−1] + white (a drift of the set-up between readings does this); 
 estimated from the residual, and a linear model of the readings is made white (and so an
 F test honest) by the Prais–Winsten transform x'[0] = √(1−ρ²)·x[0],
 x'[i] = x[i] − ρ·x[i−1] (generalised least squares). A ρ̂ within two standard errors of
-zero (2/√n) is taken as zero: white noise is left as it is.
+zero (2/√n), or below ``RHO_FLOOR``, is taken as zero: white noise is left as it is.
 
 A reading is an *outlier* when it stands apart from its neighbours in the segment (two each
 side): beyond ``OUTLIER_Z`` robust standard deviations of that difference, and beyond
@@ -18,6 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 RHO_MAX = 0.99          # beyond this the noise is a random walk: whitening would divide by ~0
+RHO_FLOOR = 0.02        # below this a variance changes by < 4 % ((1 + ρ)/(1 − ρ)): at 10⁵ readings a run,
+                        # where 2/√n is 0.006, chance would otherwise whiten one session in five
 OUTLIER_Z = 8.0         # robust s.d. of the step from the neighbours' median
 OUTLIER_MIN_UM = 1.0    # a step below this is noise on any R-test (0.5–1 µm repeatability)
 NEIGHBOURS = 2          # each side
@@ -41,7 +43,7 @@ def ar1(r: np.ndarray, seg: np.ndarray) -> np.ndarray:
         energy = (r[at] ** 2).sum(axis=0)
         est = np.divide(lag[at].sum(axis=0), energy, out=np.zeros(3), where=energy > 0)
         est = est + (1 + 3 * est) / n     # the lag-1 estimate's bias (Kendall, 1954)
-        rho[at] = np.where(est > 2 / np.sqrt(max(n, 1)), np.minimum(est, RHO_MAX), 0.0)
+        rho[at] = np.where(est > max(2 / np.sqrt(max(n, 1)), RHO_FLOOR), np.minimum(est, RHO_MAX), 0.0)
     return rho
 
 
