@@ -472,10 +472,12 @@ def inverse(machine: Machine, rotary_rad: np.ndarray, ball: np.ndarray,
     -------
     q : (n, k) full commanded poses (mm, rad) that put the nest centre on the ball centre.
 
-    For fixed rotary angles the nest-minus-ball vector is affine in the linear axes, so
-    three unit steps give its matrix exactly, whatever the chain. ``lines`` gives the
-    rotary axis lines a controller holds (``lines.py``), ``params`` (name → mm, rad) any
-    constant errors it holds too, such as squareness: its TCPM solution.
+    For fixed rotary angles the nest-minus-ball vector is affine in the linear axes: its
+    value and its matrix (each linear axis's line of motion, turned by the frames before
+    it, from the same walk of the chains) give the solution exactly, whatever the chain.
+    ``lines`` gives the rotary axis lines a controller holds (``lines.py``), ``params``
+    (name → mm, rad) any constant errors it holds too, such as squareness: its TCPM
+    solution.
     """
     rotary_rad = np.atleast_2d(np.asarray(rotary_rad, float))
     n = len(rotary_rad)
@@ -484,16 +486,16 @@ def inverse(machine: Machine, rotary_rad: np.ndarray, ball: np.ndarray,
     linear = [i for i, a in enumerate(machine.axes) if not a.rotary]
     q[:, [i for i, a in enumerate(machine.axes) if a.rotary]] = rotary_rad
     held = Model(machine, list(params or {}))
-    values = np.array(list((params or {}).values()))
-
-    def rel(qq):
-        return held.relative(Poses.at(qq, ball), values, lines=lines)
-
-    r0 = rel(q)
-    M = np.empty((n, 3, 3))
-    for j, i in enumerate(linear):
-        qi = q.copy()
-        qi[:, i] += 1.0
-        M[:, :, j] = rel(qi) - r0
+    poses = Poses.at(q, ball)
+    slots = held._slots(poses, np.array(list((params or {}).values())))
+    r0, M = np.empty((n, 3)), np.empty((n, 3, 3))
+    for a in range(0, n, BLOCK):
+        at = slice(a, a + BLOCK)
+        block = {k: v[at] for k, v in slots.items()}
+        r0[at], frames = _walk(machine, poses.take(at), block, lines, record=True)
+        for j, i in enumerate(linear):
+            axis = machine.axes[i]
+            sign, marks, R, _, _ = next(f for f in frames[axis.name] if f[1][-1][0] == "line")
+            M[at, :, j] = sign * axis.sense * _rotate(R, marks[-1][4])
     q[:, linear] = np.linalg.solve(M, -r0[..., None])[..., 0]
     return q

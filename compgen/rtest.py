@@ -91,9 +91,11 @@ def read_poses(path: str | Path, machine: Machine) -> Poses:
     rotary = np.radians(np.column_stack([table.columns[a.name] for a in machine.rotary_axes]))
     ball = table.ball(machine)
     # a ball that cannot stand on the table, a pose the machine cannot take: not a prediction
-    for b in np.unique(ball, axis=0):
-        k = int(np.flatnonzero((ball == b).all(axis=1))[0])
-        check_ball(machine.setup, b, f"{table.where}:{table.lines[k]}")
+    # each place the ball stood, at its first row (sorting only the rows where it moved)
+    moved = np.flatnonzero(np.r_[True, (ball[1:] != ball[:-1]).any(axis=1)])
+    _, first = np.unique(ball[moved], axis=0, return_index=True)
+    for k in moved[np.sort(first)]:
+        check_ball(machine.setup, ball[k], f"{table.where}:{table.lines[k]}")
     q = inverse(machine, rotary, ball)
     check_travel(machine, q, table.where, table.lines)
     if all(c in table.columns for c in "XYZ"):
