@@ -1,5 +1,7 @@
 """PNG plots of a fit: measured vs model along each path (as the seed's figures 7–9), and
-residual against each rotary axis angle; an earlier fit of the same data drawn beside."""
+residual against each axis's position (rotary: angle; linear: where a scale or screw error
+shows its pitch), with the residual's strongest line against it; an earlier fit of the same
+data drawn beside."""
 
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ from .machine import Machine  # noqa: E402
 from .results import FitResult  # noqa: E402
 from .rtest import RTestData  # noqa: E402
 from .signature import columns  # noqa: E402
+from .spectrum import MIN_PITCH_MM  # noqa: E402
 from .units import shown  # noqa: E402
 
 DIRECTIONS = ("dX", "dY", "dZ")
@@ -69,9 +72,10 @@ def write_plots(folder: str | Path, machine: Machine, data: Sequence[RTestData],
 
 def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
             before: FitResult | None = None, found: Diagnosis | None = None) -> dict[str, bytes]:
-    """PNG images by file name: measured vs model per path, residual vs each rotary axis per
-    path, and, when ``found`` has rivals, what each would leave on the measurement that
-    tells them apart."""
+    """PNG images by file name: measured vs model per path, residual vs each axis per path
+    (a linear axis where the data move it ``MIN_PITCH_MM`` or more; the title names the
+    strongest line ``found`` saw against it), and, when ``found`` has rivals, what each
+    would leave on the measurement that tells them apart."""
     if before is not None and [d.sha256 for d in before.data] != [d.sha256 for d in fit.data]:
         raise CompgenError("--before must be a fit of the same data files",
                            hint="compare fits made from the same R-test session")
@@ -100,26 +104,31 @@ def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         axes[-1].set_xlabel("pose")
         images[f"measured-vs-model-{_safe(path)}.png"] = _png(fig)
     paths = list(dict.fromkeys(poses.path))
-    for axis in machine.rotary_axes:
-        angle = np.degrees(poses.q[:, machine.index(axis.name)])
+    for axis in machine.axes:     # rotary: per revolution; linear: scale and screw periods
+        where = poses.q[:, machine.index(axis.name)]
+        where = np.degrees(where) if axis.rotary else where
+        if not axis.rotary and np.ptp(where) < MIN_PITCH_MM:
+            continue
         fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
         everywhere = _drawn(np.arange(len(poses)))
         for k, ax in enumerate(axes):
             if earlier is not None:
-                ax.plot(angle[everywhere], measured[everywhere, k] - earlier[everywhere, k], ".", ms=2,
+                ax.plot(where[everywhere], measured[everywhere, k] - earlier[everywhere, k], ".", ms=2,
                         color="0.7", label=f"before: RMS {before.residual['rms_um']:.2f} µm")
             for i, path in enumerate(paths):        # a path that holds the axis still is a column
                 sel = np.flatnonzero(poses.path == path)
                 res = measured[sel, k] - model[sel, k]
                 at = _drawn(np.arange(len(sel)))
-                ax.plot(angle[sel[at]], res[at], ".", ms=2, color=f"C{i % 10}",
+                ax.plot(where[sel[at]], res[at], ".", ms=2, color=f"C{i % 10}",
                         label=f"{path or 'data'}: RMS {np.sqrt((res**2).mean()):.2f} µm")
             ax.set_ylabel(f"{DIRECTIONS[k]} (µm)")
             ax.grid(alpha=0.3)
+        line = next((x for x in (found.lines if found is not None else ()) if x.against == axis.name), None)
         axes[0].set_title(f"residual against {axis.name} per path, {machine.name}"
-                          f"{_thinned(max(np.sum(poses.path == p) for p in paths))}", fontsize=10)
+                          f"{_thinned(max(np.sum(poses.path == p) for p in paths))}"
+                          + (f"\nstrongest line: {line.text()}" if line is not None else ""), fontsize=9)
         axes[0].legend(loc="best", fontsize=8)
-        axes[-1].set_xlabel(f"{axis.name} (deg)")
+        axes[-1].set_xlabel(f"{axis.name} ({'deg' if axis.rotary else 'mm'})")
         images[f"residual-vs-{axis.name}.png"] = _png(fig)
     if found is not None and found.rivals and found.rivals_separated_by:
         images["rivals.png"] = _rivals(machine, poses, fit, found, measured - model)

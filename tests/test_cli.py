@@ -206,8 +206,9 @@ def test_discovery_loop_on_the_command_line(hidden_session):
     assert code == 0, err
     assert "noise level" in out
     pngs = sorted(p.name for p in (folder / "plots").iterdir())
-    assert pngs == ["measured-vs-model-K1.png", "measured-vs-model-K2.png",
-                    "measured-vs-model-K4.png", "residual-vs-A.png", "residual-vs-C.png"]
+    assert pngs == ["measured-vs-model-K1.png", "measured-vs-model-K2.png", "measured-vs-model-K4.png",
+                    "residual-vs-A.png", "residual-vs-C.png", "residual-vs-X.png", "residual-vs-Y.png",
+                    "residual-vs-Z.png"]
     assert all((folder / "plots" / p).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in pngs)
     fit3 = folder / "fit3.json"
     assert run("fit", "--from", fit2, "--remove", "ECC:h2", "-o", fit3)[0] == 0

@@ -382,6 +382,27 @@ def test_clean_data_at_the_rtest_noise_are_explained(seed_machine, poses):
     assert len(tight.misfit) == 9 and tight.unexplained
 
 
+def test_the_residual_is_drawn_against_each_linear_axis_with_its_strongest_line(seed_machine, poses,
+                                                                                 monkeypatch):
+    """A 5 mm periodic error of X: the plot of the residual against X exists and its title
+    names the line diagnose found there (pitch 5.00… mm), as the text and JSON do."""
+    import matplotlib.axes
+
+    from compgen.plots import figures
+    data = [_outside_session(seed_machine, poses, "X", 5.0)]
+    fit = identify(seed_machine, data)
+    found = diagnose(seed_machine, data, fit, advise=False)
+    line = next(x for x in found.lines if x.against == "X")
+    assert line.unit == "mm" and abs(line.period - 5.0) < 0.01
+    titles, title = [], matplotlib.axes.Axes.set_title
+    monkeypatch.setattr(matplotlib.axes.Axes, "set_title",
+                        lambda self, t, **k: (titles.append(t), title(self, t, **k))[-1])
+    images = figures(seed_machine, data, fit, found=found)
+    assert {"residual-vs-X.png", "residual-vs-Y.png", "residual-vs-Z.png"} <= set(images)
+    against_x = next(t for t in titles if t.startswith("residual against X"))
+    assert f"strongest line: {line.text()}" in against_x, against_x
+
+
 def test_an_effect_declared_in_the_machine_file_is_tried_and_found(tmp_path, poses):
     from conftest import SEED_MACHINE
 

@@ -27,7 +27,8 @@ def test_report_is_self_contained_and_complete(work):
     code, _, err = run("report", "--from", work / "fit2.json", "--before", work / "fit.json", "-o", out)
     assert code == 0, err
     html = out.read_text()
-    assert html.count("data:image/png;base64,") == 5 and "http" not in html.replace("https://", "")
+    # measured vs model on K4, K1, K2; the residual against A, C, X, Y, Z
+    assert html.count("data:image/png;base64,") == 8 and "http" not in html.replace("https://", "")
     for part in ("Identified parameters", "Correlations", "Diagnose", "After the kinematics edit",
                  "Commissioning checklist", "EXC:h2c", "predicted"):
         assert part in html, part
