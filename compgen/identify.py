@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -70,22 +71,22 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         dev, J = m.linearise(poses, x, out=buffer)
         raw = y - dev
         J = weights.apply(J if len(free) == len(names) else J[:, :, free])
-        return raw, weights.apply(raw).ravel(), Normal(np.moveaxis(J, 2, 0).reshape(p, readings).T)
+        return Step(raw, weights.apply(raw).ravel(), Normal(np.moveaxis(J, 2, 0).reshape(p, readings).T))
 
     def solve(x, at):
         # first order about here (seed eq. 26): y − dev(x) ≈ J Δa
         x = x.copy()
-        x[free] += at[2].solve(at[1])
+        x[free] += at.normal.solve(at.r)
         at, iterations = linearise(x), 0
         if method == "exact":
             x, at, iterations = _gauss_newton(linearise, x, at, free, m)
         return x, at, iterations
 
     at = linearise(x)
-    check_identifiable(machine, m, free, at[2], poses)
+    check_identifiable(machine, m, free, at.normal, poses)
     x, at, iterations = solve(x, at)
     # devices of unknown relative noise: their variances are estimated with the fit
-    while weights.estimated and weights.rescale(at[1], at[2]):
+    while weights.estimated and weights.rescale(at.r, at.normal):
         x, at, more = solve(x, linearise(x))
         iterations += more
 
@@ -180,32 +181,40 @@ class Weights:
 
 
 class Normal:
-    """A Jacobian J (readings, p), best column-major, and its normal equations, formed once: a tall J is 10⁶
-    rows of a few columns, where an SVD or QR costs seconds and JᵀJ milliseconds. Columns
-    are scaled to unit norm first, so the Gram matrix's condition is that of the scaled
-    J squared — at most COND_LIMIT² where a fit goes on (a solve exact to ~1e-12) — and
-    a Gauss–Newton step corrects what little a solve leaves. Below COND_LIMIT the exact
-    singular values come from J itself (only on the way to a refusal)."""
+    """A Jacobian J (readings, p; best column-major) and its normal equations, formed once:
+    a dense session's J is 10⁶ rows of a few columns, where an SVD or QR costs seconds and
+    JᵀJ milliseconds. Columns are scaled to unit norm first, so the Gram matrix's condition
+    is that of the scaled J squared — at most COND_LIMIT² where a fit goes on (a solve
+    exact to ~1e-12) — and a Gauss–Newton step corrects what little a solve leaves. The
+    exact singular values come from J itself only on the way to a refusal."""
 
     def __init__(self, J: np.ndarray):
         self.J = J
         self.norm = np.sqrt(np.einsum("ij,ij->j", J, J))
-        scale = np.where(self.norm > 0, self.norm, 1.0)
-        self.G = (J.T @ J) / np.outer(scale, scale)
+        self.scale = np.where(self.norm > 0, self.norm, 1.0)      # a dead column stays 0
+        self.G = (J.T @ J) / np.outer(self.scale, self.scale)
 
     def solve(self, r: np.ndarray) -> np.ndarray:
         """The least-squares step: argmin |J dx − r|."""
-        scale = np.where(self.norm > 0, self.norm, 1.0)
-        return np.linalg.solve(self.G, (self.J.T @ r) / scale) / scale
+        return np.linalg.solve(self.G, (self.J.T @ r) / self.scale) / self.scale
 
     def inverse(self) -> np.ndarray:
         """(JᵀJ)⁻¹."""
-        return np.linalg.inv(self.G) / np.outer(self.norm, self.norm)
+        return np.linalg.inv(self.G) / np.outer(self.scale, self.scale)
 
     def singular_values(self) -> np.ndarray:
         """Singular values of J with unit-norm columns, largest first, from JᵀJ: exact to
         ~1e-8 of the largest (an SVD of J itself, for a refusal, in ``check_identifiable``)."""
         return np.sqrt(np.clip(np.linalg.eigvalsh(self.G), 0.0, None))[::-1]
+
+
+class Step(NamedTuple):
+    """The fit at one point: the raw residual (n, 3) mm, the whitened residual (flat) and
+    the normal equations of the whitened Jacobian of the free parameters."""
+
+    raw: np.ndarray
+    r: np.ndarray
+    normal: Normal
 
 
 def _gauss_newton(linearise, x, at, free, m):
@@ -219,10 +228,9 @@ def _gauss_newton(linearise, x, at, free, m):
     Levenberg–Marquardt safeguard was never needed: the problem is mildly non-linear and
     well started by the first-order solution.)
     """
-    r = at[1]
-    cost = float(r @ r)
+    cost = float(at.r @ at.r)
     for it in range(1, MAX_ITER + 1):
-        dx = at[2].solve(at[1])
+        dx = at.normal.solve(at.r)
         step = max(abs(shown(v, m.effects[i].unit)[0]) for i, v in zip(free, dx, strict=True))
         if step < STEP_TOL_SHOWN:
             return x, at, it - 1
@@ -230,7 +238,7 @@ def _gauss_newton(linearise, x, at, free, m):
             trial = x.copy()
             trial[free] += dx
             at_trial = linearise(trial)
-            new = float(at_trial[1] @ at_trial[1])
+            new = float(at_trial.r @ at_trial.r)
             if new <= cost * (1 + 1e-12):
                 break
             dx /= 2

@@ -163,13 +163,7 @@ class Model:
                 np.subtract(gains.relative, known[at], out=dev[at])
             made = {}
             for i, (name, effect) in enumerate(zip(self.names, self.effects, strict=True)):
-                term = effect.params.index(name)
-                columns[i, at] = 0.0
-                for d, b in effect.parts(x[i][at]):
-                    key = (effect.carrier, effect.slot, d)
-                    if key not in made:
-                        made[key] = gains(key)
-                    columns[i, at] += made[key] * b[:, term, None]
+                columns[i, at] = effect_gains(gains, effect, x[i][at], made)[:, :, effect.params.index(name)]
         if known is None:
             _NOMINALS[poses] = (self.machine, dev)
             dev = np.zeros_like(dev)
@@ -336,6 +330,20 @@ class SlotGains:
                     _, _, w, run, line = mark
                     return sign * run[:, None] * _rotate(R, _cross(_left_jacobian(w, e), line))
         return np.zeros((self.n, 3))       # a slot this carrier does not have (a ball's tilt)
+
+
+def effect_gains(gains: SlotGains, effect: Effect, x: np.ndarray, made: dict | None = None) -> np.ndarray:
+    """What a unit of each of ``effect``'s parameters does to every reading, first order:
+    (n, 3, len(params)) mm per unit, its basis values at the coordinate ``x`` times the
+    gain of its slot. ``made`` keeps the gains of slots already asked for."""
+    made = {} if made is None else made
+    c = 0.0
+    for d, b in effect.parts(x):
+        key = (effect.carrier, effect.slot, d)
+        if key not in made:
+            made[key] = gains(key)
+        c = c + made[key][:, :, None] * b[:, None, :]
+    return np.broadcast_to(c, (len(x), 3, len(effect.params)))
 
 
 def slot_gains(machine: Machine, poses: Poses, keys) -> dict[tuple[str, str, str], np.ndarray]:

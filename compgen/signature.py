@@ -9,7 +9,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from .effects import Effect
-from .kinematics import BLOCK, Poses, SlotGains, coordinate
+from .kinematics import BLOCK, Poses, SlotGains, coordinate, effect_gains
 from .machine import Machine
 from .noise import whiten
 
@@ -17,12 +17,9 @@ from .noise import whiten
 def signatures(machine: Machine, poses: Poses, effects: Sequence[Effect]):
     """Each effect with its first-order signature, (3n, its params) mm per unit, one at a
     time, so that only the chain's frames and one effect's columns are held."""
-    gains = SlotGains(machine, poses)
+    gains, made = SlotGains(machine, poses), {}
     for e in effects:
-        c = 0.0
-        for direction, b in e.parts(coordinate(machine, e, poses)):
-            c = c + gains((e.carrier, e.slot, direction))[:, :, None] * b[:, None, :]
-        yield e, c.reshape(-1, len(e.params))
+        yield e, effect_gains(gains, e, coordinate(machine, e, poses), made).reshape(-1, len(e.params))
 
 
 def columns(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np.ndarray:
@@ -49,11 +46,13 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
     effect) and never held whole. ``Q`` (3n, p) and ``r`` (3n,) are in (n, 3) reading
     order. With ``noise`` = (segments, ρ (n, 3)), the columns are made white first
     (Prais–Winsten, carried from one block to the next), as Q and r must already be."""
+    def where(e):            # what an effect's coordinate depends on
+        return (e.carrier, e.basis.kind) if e.basis.kind != "e" else ("time", "e")
+
     coords: dict = {}
     for e in effects:        # on the whole session: a reversal's side depends on its run
-        key = (e.carrier, e.basis.kind) if e.basis.kind != "e" else ("time", "e")
-        if key not in coords:
-            coords[key] = coordinate(machine, e, poses)
+        if where(e) not in coords:
+            coords[where(e)] = coordinate(machine, e, poses)
     out = {e.name: [0.0, 0.0, 0.0] for e in effects}
     carry: dict = {}
     n = len(poses)
@@ -63,14 +62,7 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
         rows = slice(3 * at.start, 3 * at.stop)
         Qb, rb = Q[rows], r[rows]
         for e in effects:
-            x = coords[(e.carrier, e.basis.kind) if e.basis.kind != "e" else ("time", "e")][at]
-            c = 0.0
-            for d, b in e.parts(x):
-                key = (e.carrier, e.slot, d)
-                if key not in made:
-                    made[key] = gains(key)
-                c = c + made[key][:, :, None] * b[:, None, :]
-            c = np.broadcast_to(c, (at.stop - at.start, 3, len(e.params)))
+            c = effect_gains(gains, e, coords[where(e)][at], made)
             if noise is not None:
                 seg, rho = noise
                 before = carry.get(e.name)
