@@ -16,11 +16,12 @@ each of issue 25's limits with whether it holds.
 from __future__ import annotations
 
 import argparse
-import os
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+from startup import run as child  # this folder's: one way to measure a child process
 
 ROOT = Path(__file__).resolve().parents[1]
 MACHINE = ROOT / "machines" / "ac-trunnion-itnc530.toml"
@@ -44,15 +45,8 @@ FLOOR_RATIO = 3.0
 
 
 def run(args: list[str], cwd: Path) -> tuple[float, float]:
-    """CPU seconds (user + sys) and peak RSS (MiB) of one child process."""
-    proc = subprocess.Popen([sys.executable, *args], cwd=cwd, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(proc.pid, 0)
-    err = proc.stderr.read().decode()
-    proc.stderr.close()
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise SystemExit(f"{' '.join(map(str, args))} failed:\n{err}")
-    return usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024
+    """CPU seconds and peak RSS (MiB) of ``python ARGS`` in its own process."""
+    return child([sys.executable, *args], cwd)
 
 
 def pace(size: int, rate_hz: float) -> tuple[float, float]:

@@ -73,8 +73,9 @@ def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | Non
         if rate_hz is None:
             angles, step = rotary_positions(machine, path), path.seconds_per_pose
         else:
-            seconds = path.n * path.seconds_per_pose if feed is None else 60 * arc(machine, path) / feed
-            _check_speed(machine, path, seconds)
+            steps = _fine_steps(machine, path)
+            seconds = path.n * path.seconds_per_pose if feed is None else 60 * steps.sum(axis=0).max() / feed
+            _check_speed(machine, path, steps, seconds)
             n = max(2, round(seconds * rate_hz) + 1)
             angles, step = rotary_positions(machine, path, n), 1.0 / rate_hz
         if back:
@@ -88,15 +89,23 @@ def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | Non
     return Poses.concat(out)
 
 
+FINE = 10_000      # steps a path is cut into to measure its arc and its axes' peak speed
+
+
+def _fine_steps(machine: Machine, path: PathDef) -> np.ndarray:
+    """(FINE, r) each rotary axis's |step|, deg, over the path cut into FINE equal steps of s."""
+    return np.abs(np.diff(rotary_positions(machine, path, FINE + 1), axis=0))
+
+
 def arc(machine: Machine, path: PathDef) -> float:
     """Degrees travelled by the path's most-travelled rotary axis, there only."""
-    return float(np.abs(np.diff(rotary_positions(machine, path, 10_001), axis=0)).sum(axis=0).max())
+    return float(_fine_steps(machine, path).sum(axis=0).max())
 
 
-def _check_speed(machine: Machine, path: PathDef, seconds: float) -> None:
-    """Refuse a pace at which a rotary axis would pass its ``feed_max`` somewhere."""
-    fine = rotary_positions(machine, path, 10_001)
-    peak = np.abs(np.diff(fine, axis=0)).max(axis=0) * 10_000 / seconds * 60
+def _check_speed(machine: Machine, path: PathDef, steps: np.ndarray, seconds: float) -> None:
+    """Refuse a pace at which a rotary axis would pass its ``feed_max`` somewhere (``steps``
+    as ``_fine_steps`` gives them)."""
+    peak = steps.max(axis=0) * FINE / seconds * 60
     for axis, speed in zip(machine.rotary_axes, peak, strict=True):
         if speed > axis.feed_max:
             raise CompgenError(f"path {path.name} in {seconds:.4g} s would turn {axis.name} at up to "

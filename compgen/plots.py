@@ -104,13 +104,14 @@ def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         axes[-1].set_xlabel("pose")
         images[f"measured-vs-model-{_safe(path)}.png"] = _png(fig)
     paths = list(dict.fromkeys(poses.path))
+    everywhere = _drawn(np.arange(len(poses)))
+    thinned = _thinned(max(np.sum(poses.path == p) for p in paths))
     for axis in machine.axes:     # rotary: per revolution; linear: scale and screw periods
         where = poses.q[:, machine.index(axis.name)]
         where = np.degrees(where) if axis.rotary else where
         if not axis.rotary and np.ptp(where) < MIN_PITCH_MM:
             continue
         fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
-        everywhere = _drawn(np.arange(len(poses)))
         for k, ax in enumerate(axes):
             if earlier is not None:
                 ax.plot(where[everywhere], measured[everywhere, k] - earlier[everywhere, k], ".", ms=2,
@@ -124,8 +125,7 @@ def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
             ax.set_ylabel(f"{DIRECTIONS[k]} (µm)")
             ax.grid(alpha=0.3)
         line = next((x for x in (found.lines if found is not None else ()) if x.against == axis.name), None)
-        axes[0].set_title(f"residual against {axis.name} per path, {machine.name}"
-                          f"{_thinned(max(np.sum(poses.path == p) for p in paths))}"
+        axes[0].set_title(f"residual against {axis.name} per path, {machine.name}{thinned}"
                           + (f"\nstrongest line: {line.text()}" if line is not None else ""), fontsize=9)
         axes[0].legend(loc="best", fontsize=8)
         axes[-1].set_xlabel(f"{axis.name} ({'deg' if axis.rotary else 'mm'})")

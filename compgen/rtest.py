@@ -206,7 +206,7 @@ def _header(text: str) -> tuple[int, str | None, str]:
         offset = 0
         for number, line in enumerate(lines, start=1):
             offset += len(line)
-            content = line.splitlines()[0] if line.splitlines() else ""
+            content = (line.splitlines() or [""])[0]
             if content.strip() and not content.lstrip().startswith("#"):
                 return number, content, text[offset:]
     return 0, None, ""
