@@ -12,10 +12,12 @@ from collections.abc import Sequence
 import numpy as np
 
 from .errors import CompgenError
+from .files import MAX_DATA_BYTES
 from .kinematics import Poses, inverse
 from .machine import Machine, PathDef, check_travel
 
 GAP_S = 20.0   # pause between two paths of one session (re-positioning), s
+MAX_POSES = MAX_DATA_BYTES // 96   # a CSV v1 row of five axes is ~96 bytes: ~2.8 million readings
 
 
 def path_def(machine: Machine, name: str) -> PathDef:
@@ -76,7 +78,15 @@ def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | Non
             steps = _fine_steps(machine, path)
             seconds = path.n * path.seconds_per_pose if feed is None else 60 * steps.sum(axis=0).max() / feed
             _check_speed(machine, path, steps, seconds)
-            n = max(2, round(seconds * rate_hz) + 1)
+            n = round(seconds * rate_hz) + 1
+            if n < 2:
+                raise CompgenError(f"path {path.name} takes {seconds:.4g} s: at {rate_hz:g} Hz that is "
+                                   "fewer than two readings",
+                                   hint="give a higher --rate-hz or a lower --feed")
+            if n + sum(len(o) for o in out) > MAX_POSES:
+                raise CompgenError(f"{rate_hz:g} Hz over these paths makes more than {MAX_POSES} readings: "
+                                   f"its data file would pass the {MAX_DATA_BYTES >> 20} MB compgen reads",
+                                   hint="give a lower --rate-hz or a higher --feed")
             angles, step = rotary_positions(machine, path, n), 1.0 / rate_hz
         if back:
             angles = np.vstack([angles, angles[::-1]])

@@ -1,6 +1,7 @@
 """Continuous sessions: a reading every 1/rate s while the paths run (issue 25)."""
 
 import numpy as np
+import pytest
 from conftest import SEED_MACHINE, run
 
 from compgen.paths import generate
@@ -38,6 +39,19 @@ def test_a_feed_the_axis_cannot_reach_is_refused_and_nothing_written(tmp_path):
     assert len(err.strip().splitlines()) <= 2 and not out.exists()
     code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", TRUTH, "--feed", "600", "-o", out)
     assert code == 2 and "--rate-hz" in err and not out.exists(), err
+
+
+@pytest.mark.parametrize("rate, feed, said", [
+    ("0", "600", "finite number > 0 Hz"), ("nan", "600", "finite number > 0 Hz"),
+    ("inf", "600", "finite number > 0 Hz"), ("100", "0", "finite number > 0 deg/min"),
+    ("1e-9", "600", "fewer than two readings"),               # a rate no path can be sampled at
+    ("1e9", "3000", "more than 2796202 readings"),            # a session no data file could hold
+])
+def test_a_rate_or_feed_that_makes_no_session_is_refused_in_one_line(tmp_path, rate, feed, said):
+    out = tmp_path / "s.csv"
+    code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", TRUTH, "--rate-hz", rate,
+                       "--feed", feed, "-o", out)
+    assert code == 2 and said in err and len(err.strip().splitlines()) == 1 and not out.exists(), err
 
 
 def test_a_dense_sessions_plots_draw_thinned_series_and_count_every_reading(seed_machine, monkeypatch):
