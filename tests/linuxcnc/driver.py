@@ -48,6 +48,7 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
         c.auto(linuxcnc.AUTO_RUN, 0)
         wait(lambda: s.interp_state != linuxcnc.INTERP_IDLE, 10)
         settled, last, stops = {}, None, 0
+        still, longest = 0, {}     # polls the joints have held; each line's longest such run
         end = time.time() + 600
         while time.time() < end:
             s.poll()
@@ -59,11 +60,15 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
                 wait(lambda: not s.paused, 10)
                 continue
             # joint and motor commands read from HAL together; settled when at rest and
-            # unchanged since the last sample (the status buffer lags HAL by a cycle or so)
+            # unchanged since the last sample. The status buffer's line and velocity lag HAL
+            # by a cycle or so, and a starved real-time thread can hold HAL's values for a
+            # poll mid-move: so each line keeps the sample of its longest run at rest (the
+            # 1 s dwell after a pose, hundreds of polls), never a brief one at its edges
             now = [hal.get_value(f"joint.{j}.{pin}")
                    for pin in ("pos-cmd", "motor-pos-cmd") for j in range(5)]
-            if s.current_vel == 0 and now == last:
-                settled[s.motion_line] = now
+            still = still + 1 if now == last else 0
+            if s.current_vel == 0 and still and still >= longest.get(s.motion_line, 0):
+                settled[s.motion_line], longest[s.motion_line] = now, still
             last = now
             time.sleep(0.002)
         for line in sorted(settled):
