@@ -83,13 +83,8 @@ class _Group(click.Group):
             sys.exit(1)
 
     def invoke(self, ctx):
-        from threadpoolctl import threadpool_limits
-
-        # compgen's matrices are tall and skinny (3n × p, p ≤ ~130): a second BLAS thread only
-        # adds hand-over cost, which is large on a loaded machine (benchmarks/startup.py)
         try:
-            with threadpool_limits(limits=1, user_api="blas"):
-                done = super().invoke(ctx)
+            done = super().invoke(ctx)
             sys.stdout.flush()           # a full disk or a closed pipe shows here, not at exit
             return done
         except BrokenPipeError:          # `compgen effects | head -1`: ordinary use, quietly done
@@ -899,7 +894,3 @@ def _vec3(text: str, option: str) -> list[float]:
     if len(parts) != 3:
         raise CompgenError(f"{option} takes three numbers X,Y,Z in mm, not {text!r}")
     return [number(x, f"{option} {'XYZ'[k]}", "") for k, x in enumerate(parts)]
-
-
-if __name__ == "__main__":
-    sys.exit(main())

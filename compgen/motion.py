@@ -205,23 +205,16 @@ def clearances(machine: Machine, q: np.ndarray,
     against ball, stem, table), and whether the nest is measuring there (its axis within
     ``nest_range`` of the ball's centre, the nest on the ball or above it).
 
-    Housing and spindle are capsules about the tool axis; ball, stem and table are convex,
-    so the (signed) distance from them is convex along the axis: its least value over the
-    part is found by golden-section search, to ``SEARCH_MM``."""
+    Housing and spindle are capsules about the tool axis. Ball and stem (a point and a
+    segment, each with a radius) are at the least distance of two segments, in closed form;
+    the table is a convex solid, so the signed distance from it is convex along the axis:
+    its least value over the part is found by golden-section search, to ``SEARCH_MM``."""
     s = machine.setup
     _, nest, axis = _frames(machine, q)                                      # table frame
     ball = np.asarray(machine.ball)
     rb = s.ball_diameter / 2
     stem_top = ball[2] - rb
     top, bottom = s.table_top, s.table_top - s.table_thickness
-
-    def to_ball(p):
-        return np.linalg.norm(p - ball, axis=-1) - rb
-
-    def to_stem(p):
-        z = np.clip(p[..., 2], s.table_top, stem_top)
-        return np.sqrt((p[..., 0] - ball[0])**2 + (p[..., 1] - ball[1])**2 + (p[..., 2] - z)**2) \
-            - s.stem_diameter / 2
 
     def to_table(p):
         radial, z = np.hypot(p[..., 0], p[..., 1]), p[..., 2]
@@ -230,13 +223,36 @@ def clearances(machine: Machine, q: np.ndarray,
         depth = np.minimum(np.minimum(top - z, z - bottom), s.table_radius - radial)
         return np.where((dz == 0) & (dr == 0), -depth, np.hypot(dz, dr))
 
+    stem = (np.array([ball[0], ball[1], top]), np.array([ball[0], ball[1], stem_top]))
     out = {}
     for part, (lo, hi, radius, _) in tooling(machine, probe).items():
-        for thing, dist in (("ball", to_ball), ("stem", to_stem), ("table", to_table)):
-            out[f"{part} / {thing}"] = _least_along(dist, nest, axis, lo, hi) - radius
+        start, end = nest + lo * axis, nest + hi * axis
+        out[f"{part} / ball"] = _to_segment(start, end, ball, ball) - rb - radius
+        out[f"{part} / stem"] = _to_segment(start, end, *stem) - s.stem_diameter / 2 - radius
+        out[f"{part} / table"] = _least_along(to_table, nest, axis, lo, hi) - radius
     off_axis = np.linalg.norm(np.cross(ball - nest, axis), axis=1)
     above = np.einsum("ni,ni->n", nest - ball, axis) > -s.nest_range
     return out, (off_axis <= s.nest_range) & above
+
+
+def _to_segment(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """Per row, the distance between the segments p0–p1 (n, 3) and q0–q1 (3,; a point if
+    q0 = q1), in closed form (Ericson, Real-Time Collision Detection, 5.1.9): the closest
+    pair's parameters, each clamped to its segment in turn."""
+    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+    a, e = np.einsum("ni,ni->n", d1, d1), float(d2 @ d2)
+    b, c, f = d1 @ d2, np.einsum("ni,ni->n", d1, r), r @ d2
+    denom = a * e - b * b
+    if e == 0:                                               # q is a point
+        u, t = np.clip(-c / a, 0, 1), np.zeros_like(a)
+    else:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # parallel (denom 0): any point of p's segment will do before t is clamped
+            u = np.where(denom > 1e-12 * a * e, np.clip((b * f - c * e) / denom, 0, 1), 0.0)
+        t = (b * u + f) / e
+        u = np.where(t < 0, np.clip(-c / a, 0, 1), np.where(t > 1, np.clip((b - c) / a, 0, 1), u))
+        t = np.clip(t, 0, 1)
+    return np.linalg.norm(r + u[:, None] * d1 - t[:, None] * d2, axis=1)
 
 
 def _least_along(dist, nest: np.ndarray, axis: np.ndarray, lo: float, hi: float) -> np.ndarray:

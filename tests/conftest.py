@@ -1,7 +1,12 @@
 import os
 from pathlib import Path
 
-import numpy as np
+from compgen.__main__ import BLAS_THREADS
+
+# the in-process commands run as the real ones do: one BLAS thread, set before numpy loads
+os.environ.update(dict.fromkeys(BLAS_THREADS, "1"))
+
+import numpy as np  # noqa: E402
 import pytest
 from click.testing import CliRunner
 

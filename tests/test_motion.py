@@ -224,8 +224,9 @@ def test_check_program_refuses_an_empty_or_impossible_ball_in_one_line(machines,
 
 
 def test_the_searched_clearance_is_the_least_along_housing_and_spindle():
-    """The golden-section search against a brute force: every part sampled every 0.02 mm,
-    at random poses around the set-up (near the ball, the stem and the table's face)."""
+    """The closed forms (ball, stem) and the golden-section search (table) against a brute
+    force: every part sampled every 0.02 mm, at random poses around the set-up (near the
+    ball, the stem and the table's face), some with the tool axis parallel to the stem."""
     m = load_machine(SEED_MACHINE)
     s = m.setup
     rng = np.random.default_rng(5)
@@ -236,6 +237,7 @@ def test_the_searched_clearance_is_the_least_along_housing_and_spindle():
         q[:, i] = np.radians(rng.uniform(max(lo, -100), min(hi, 100))) if a.rotary else rng.uniform(
             max(lo, -150), min(hi, 150), n)
     q[:, m.index("Z")] = rng.uniform(m.axis("Z").travel[0], m.axis("Z").travel[0] + 300, n)
+    q[:40, [m.index(a.name) for a in m.rotary_axes]] = 0.0     # the tool axis parallel to the stem
     got, _ = clearances(m, q)
     _, nest, axis = motion._frames(m, q)
     ball, rb = np.asarray(m.ball), s.ball_diameter / 2
