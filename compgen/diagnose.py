@@ -24,7 +24,7 @@ from .advice import Advisor, Measurement
 from .effects import Effect, catalogue, effect_of_param, resolve
 from .emit.registry import controller
 from .errors import CompgenError
-from .kinematics import Model, Poses, runs
+from .kinematics import Model, Poses, both_sides, runs
 from .machine import Machine
 from .noise import ar1, outliers, whiten
 from .results import FitResult
@@ -535,6 +535,9 @@ def _separating(machine: Machine, model_effects: Sequence[Effect], poses: Poses,
         col = p
         for e in effects:
             k = len(e.params)
+            if e.basis.kind == "r" and not both_sides(machine, e.carrier, poses, extra.poses):
+                col += k    # one side throughout is the axis's zero offset, not its backlash
+                continue
             Re = np.linalg.qr(R[:, [*range(p), *range(col, col + k)]], mode="r")
             vis = np.linalg.norm(Re[p:, p:], axis=0) / np.maximum(np.linalg.norm(Re[:, p:], axis=0), 1e-300)
             if vis.min() >= SEPARATES and condition(Re) < COND_LIMIT:

@@ -17,7 +17,7 @@ from . import __version__
 from .advice import Advisor
 from .effects import canonical, effect_of_param, location_model
 from .errors import CompgenError
-from .kinematics import Model, Poses, runs
+from .kinematics import Model, Poses, both_sides, runs
 from .machine import Machine
 from .noise import ar1, ar1_covariance
 from .results import DataRef, Estimate, FitResult
@@ -310,7 +310,11 @@ def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.
                              measured: Poses | None) -> str:
     advisor = Advisor(machine, measured)
     options = []
+    # a reversal seen from one side only is its axis's zero offset, not its backlash
+    reversals = {m.effects[j].carrier for j in free if m.effects[j].basis.kind == "r"}
     for i, extra in enumerate(advisor.candidates):    # the ball as it stands first, then moved
+        if measured is not None and not all(both_sides(machine, a, measured, extra.poses) for a in reversals):
+            continue
         cond = condition(np.vstack([J, m.jacobian(extra.poses)[:, :, free].reshape(-1, len(free))]))
         if cond < COND_LIMIT:
             options.append((round(cond), i, extra.label, extra))

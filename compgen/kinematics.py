@@ -43,15 +43,20 @@ class Poses:
     ball : (n, 3) nominal ball centre in the table frame, mm
     t : (n,) time since the start of the session, s (NaN where not recorded)
     path : (n,) path label of each pose
+    side : (n, k) per axis, the direction it last moved before the pose was taken (+1, −1):
+        the side of its backlash; NaN where the data do not say (default: nowhere)
     """
 
     q: np.ndarray
     ball: np.ndarray
     t: np.ndarray
     path: np.ndarray
+    side: np.ndarray | None = None
 
     def __post_init__(self):
-        for field in ("q", "ball", "t", "path"):
+        if self.side is None:
+            object.__setattr__(self, "side", np.full(np.shape(self.q), np.nan))
+        for field in ("q", "ball", "t", "path", "side"):
             a = np.array(getattr(self, field))   # a copy: freezing must not touch the caller's
             a.setflags(write=False)
             object.__setattr__(self, field, a)
@@ -60,7 +65,7 @@ class Poses:
         return len(self.q)
 
     def take(self, index) -> Poses:
-        return Poses(self.q[index], self.ball[index], self.t[index], self.path[index])
+        return Poses(self.q[index], self.ball[index], self.t[index], self.path[index], self.side[index])
 
     @staticmethod
     def at(q: np.ndarray, ball) -> Poses:
@@ -74,7 +79,7 @@ class Poses:
         if len(items) == 1:      # the same poses: what is known of them (their nominal) holds
             return items[0]
         return Poses(*(np.concatenate([getattr(p, f) for p in items])
-                       for f in ("q", "ball", "t", "path")))
+                       for f in ("q", "ball", "t", "path", "side")))
 
 
 class Model:
@@ -201,7 +206,11 @@ def coordinate(machine: Machine, effect: Effect, poses: Poses) -> np.ndarray:
     axis = machine.axis(effect.carrier)
     q = poses.q[:, machine.index(axis.name)]
     if effect.basis.kind == "r":
-        return motion_direction(q, runs(poses))
+        side = poses.side[:, machine.index(axis.name)]
+        known = ~np.isnan(side)
+        if known.all():
+            return side.copy()
+        return np.where(known, side, motion_direction(q, runs(poses)))
     return q if axis.rotary else q / POLY_SCALE_MM
 
 
@@ -238,6 +247,61 @@ def motion_direction(q: np.ndarray, run: np.ndarray) -> np.ndarray:
     return out
 
 
+def program_sides(machine: Machine, q: np.ndarray, run: np.ndarray) -> np.ndarray:
+    """(n, k): the side of each rotary axis's backlash at each pose as compgen's programs
+    take the poses (NaN for linear axes): a path's first pose is approached in the direction
+    the axis first moves in the path (+ where it never moves; the other way where that
+    approach would leave the travel), every later pose by the move that reached it
+    (standing still keeps the side)."""
+    out = np.full(q.shape, np.nan)
+    starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+    for a in machine.rotary_axes:
+        j = machine.index(a.name)
+        lo, hi = np.radians(a.travel)
+        for s, e in zip(starts, [*starts[1:], len(q)], strict=True):
+            step = np.sign(np.diff(q[s:e, j]))
+            moved = np.flatnonzero(step)
+            first = step[moved[0]] if moved.size else 1.0
+            if not lo <= q[s, j] - first * np.radians(APPROACH_DEG) <= hi:
+                first = -first
+            last = np.maximum.accumulate(np.where(step != 0, np.arange(len(step)), -1))
+            out[s:e, j] = np.r_[first, np.where(last >= 0, step[np.maximum(last, 0)], first)]
+    return out
+
+
+def unknown_sides(machine: Machine, poses: Poses, names: Iterable[str]) -> str | None:
+    """What a reversal (backlash) effect among the parameters ``names`` cannot use in these
+    poses, said once: the axes whose side the data do not give at some pose (no
+    ``A_side`` column), or None."""
+    effects = (effect_of_param(machine, n) for n in names)
+    axes = sorted({e.carrier for e in effects if e.basis.kind == "r"
+                   and np.isnan(poses.side[:, machine.index(e.carrier)]).any()})
+    if not axes:
+        return None
+    cols = ", ".join(f"{a}_side" for a in axes)
+    return (f"the data do not say from which side {' and '.join(axes)} reached each pose (no {cols} "
+            "column): a reversal counts only where it turns back within a path, and the side a path "
+            "starts on (all of it, where the axis never turns back) stays in the residual, where it "
+            "looks like drift. Measure with compgen's programs (their pose lists carry "
+            f"{cols}), or add the column")
+
+
+def both_sides(machine: Machine, axis: str, *poses: Poses) -> bool:
+    """Whether ``axis`` reaches poses from both directions in these poses together (where
+    the data do not say, a path that turns the axis back within it shows both)."""
+    j = machine.index(axis)
+    seen = set()
+    for p in poses:
+        side = p.side[:, j]
+        seen |= set(np.unique(side[~np.isnan(side)]).tolist())
+        unknown = np.isnan(side)
+        if unknown.any():
+            d = motion_direction(p.q[unknown, j], runs(p.take(unknown)))
+            seen |= {1.0, -1.0} if (d != 0).any() else set()
+    return {1.0, -1.0} <= seen
+
+
+APPROACH_DEG = 1.0       # a program's approach to a path's first pose: far beyond any backlash
 BLOCK = 16384            # poses per evaluation of the chain
 
 

@@ -243,14 +243,15 @@ def _to_segment(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) 
     a, e = np.einsum("ni,ni->n", d1, d1), float(d2 @ d2)
     b, c, f = d1 @ d2, np.einsum("ni,ni->n", d1, r), r @ d2
     denom = a * e - b * b
+    a_ = np.where(a > 0, a, 1.0)          # p a point (a stylus tip): u = 0 wherever it is divided
     if e == 0:                                               # q is a point
-        u, t = np.clip(-c / a, 0, 1), np.zeros_like(a)
+        u, t = np.clip(-c / a_, 0, 1), np.zeros_like(a)
     else:
         with np.errstate(divide="ignore", invalid="ignore"):
             # parallel (denom 0): any point of p's segment will do before t is clamped
             u = np.where(denom > 1e-12 * a * e, np.clip((b * f - c * e) / denom, 0, 1), 0.0)
         t = (b * u + f) / e
-        u = np.where(t < 0, np.clip(-c / a, 0, 1), np.where(t > 1, np.clip((b - c) / a, 0, 1), u))
+        u = np.where(t < 0, np.clip(-c / a_, 0, 1), np.where(t > 1, np.clip((b - c) / a_, 0, 1), u))
         t = np.clip(t, 0, 1)
     return np.linalg.norm(r + u[:, None] * d1 - t[:, None] * d2, axis=1)
 

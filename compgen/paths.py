@@ -13,7 +13,7 @@ import numpy as np
 
 from .errors import CompgenError
 from .files import MAX_DATA_BYTES
-from .kinematics import Poses, inverse
+from .kinematics import Poses, inverse, program_sides
 from .machine import Machine, PathDef, check_travel
 
 GAP_S = 20.0   # pause between two paths of one session (re-positioning), s
@@ -95,7 +95,8 @@ def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | Non
         t = t0 + step * np.arange(n)
         t0 = t[-1] + GAP_S
         check_travel(machine, q, name)
-        out.append(Poses(q, np.broadcast_to(ball, (n, 3)), t, np.full(n, path.name, dtype=object)))
+        out.append(Poses(q, np.broadcast_to(ball, (n, 3)), t, np.full(n, path.name, dtype=object),
+                         program_sides(machine, q, np.zeros(n))))   # as compgen's programs run it
     return Poses.concat(out)
 
 

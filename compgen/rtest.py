@@ -107,7 +107,7 @@ def read_poses(path: str | Path, machine: Machine) -> Poses:
             raise CompgenError(f"X, Y, Z are {off[bad[0]]:.3f} mm from where the nest meets the ball",
                                where=f"{table.where}:{table.lines[bad[0]]}",
                                hint="drop the X, Y, Z columns (compgen computes them) or fix the ball")
-    return Poses(q, ball, table.columns.get("t", np.full(len(q), np.nan)), table.labels)
+    return Poses(q, ball, table.columns.get("t", np.full(len(q), np.nan)), table.labels, table.side(machine))
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,10 +123,36 @@ class _Table:
             return np.column_stack([self.columns[c] for c in BALL])
         return np.broadcast_to(machine.ball, (len(self.labels), 3)).copy()
 
+    def side(self, machine: Machine) -> np.ndarray:
+        out = np.full((len(self.labels), len(machine.axes)), np.nan)
+        for name, axis in side_columns(machine).items():
+            if name in self.columns:
+                out[:, machine.index(axis)] = self.columns[name]
+        return out
+
     def poses(self, machine: Machine) -> Poses:
         q = np.column_stack([self.columns[a.name] if not a.rotary else np.radians(self.columns[a.name])
                              for a in machine.axes])
-        return Poses(q, self.ball(machine), self.columns.get("t", np.full(len(q), np.nan)), self.labels)
+        return Poses(q, self.ball(machine), self.columns.get("t", np.full(len(q), np.nan)), self.labels,
+                     self.side(machine))
+
+
+def side_columns(machine: Machine) -> dict[str, str]:
+    """The optional column of each rotary axis that says the direction it last moved before
+    the row's pose (+1 or -1: the side of its backlash), as compgen's pose lists carry it."""
+    return {f"{a.name}_side": a.name for a in machine.rotary_axes}
+
+
+def _checked_sides(table: _Table) -> _Table:
+    for name, v in table.columns.items():
+        if name.endswith("_side"):
+            bad = np.flatnonzero(np.abs(v) != 1)
+            if bad.size:
+                raise CompgenError(f"column {name}: {v[bad[0]]:g} is neither +1 nor -1 (the direction "
+                                   f"{name[:-5]} last moved before the pose)",
+                                   where=f"{table.where}:{table.lines[bad[0]]}",
+                                   hint="write +1 or -1, or drop the column if the history is not known")
+    return table
 
 
 def _cells(line: str, where: str) -> list[str]:
@@ -156,14 +182,15 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
     has_ball = [c in header for c in BALL]
     if any(has_ball) and not all(has_ball):
         raise CompgenError("give all of bx, by, bz or none", where=f"{where}:{header_line}")
-    numeric = required + [c for c in ("X", "Y", "Z", "t", *BALL) if c in header and c not in required]
+    numeric = required + [c for c in ("X", "Y", "Z", "t", *BALL, *side_columns(machine))
+                          if c in header and c not in required]
     col = {c: header.index(c) for c in header}
     digest = hashlib.sha256(raw).hexdigest()
     fast = _fast_table(body, header, numeric, col)
     if fast is not None:
         values, labels = fast
-        return _Table(where, digest, {name: values[:, j] for j, name in enumerate(numeric)}, labels,
-                      range(header_line + 1, header_line + 1 + len(labels)))
+        return _checked_sides(_Table(where, digest, {name: values[:, j] for j, name in enumerate(numeric)},
+                                     labels, range(header_line + 1, header_line + 1 + len(labels))))
 
     lines = [(i, line) for i, line in enumerate(body.splitlines(), start=header_line + 1)
              if line.strip() and not line.lstrip().startswith("#")]
@@ -192,7 +219,7 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
         labels.append(label)
         line_no.append(i)
     columns = {name: values[:, j] for j, name in enumerate(numeric)}
-    return _Table(where, digest, columns, np.array(labels, dtype=object), line_no)
+    return _checked_sides(_Table(where, digest, columns, np.array(labels, dtype=object), line_no))
 
 
 def _header(text: str) -> tuple[int, str | None, str]:
@@ -262,12 +289,15 @@ def axis_cells(machine: Machine, q: np.ndarray) -> list[str]:
 
 
 def format_rtest(machine: Machine, data: RTestData, comments: tuple[str, ...] = ()) -> str:
-    """CSV v1 text: path, t, linear axes, rotary axes (deg), dX dY dZ (µm), ball if not default."""
+    """CSV v1 text: path, t, linear axes, rotary axes (deg), dX dY dZ (µm), ball if not
+    default, and each rotary axis's side where every pose's is known."""
     p = data.poses
     ball_default = np.allclose(p.ball, machine.ball, rtol=0, atol=1e-12)
     timed = not np.isnan(p.t).any()
+    sides = {name: machine.index(axis) for name, axis in side_columns(machine).items()
+             if not np.isnan(p.side[:, machine.index(axis)]).any()}
     header = ["path", *(["t"] if timed else []), *machine.axis_names, *DEVIATION] + (
-        [] if ball_default else list(BALL))
+        [] if ball_default else list(BALL)) + list(sides)
     out = io.StringIO()
     for c in comments:
         out.write(f"# {c}\n")
@@ -276,11 +306,12 @@ def format_rtest(machine: Machine, data: RTestData, comments: tuple[str, ...] = 
     # one format for a row's numbers (what axis_cells writes, then µm, then the ball); the
     # labels are identifiers (no comma, no quote), so the row needs no CSV quoting
     scale = np.array([180.0 / np.pi if a.rotary else 1.0 for a in machine.axes])
-    numbers = [p.q * scale, data.deviation * 1e3, *([] if ball_default else [p.ball])]
+    numbers = [p.q * scale, data.deviation * 1e3, *([] if ball_default else [p.ball]),
+               p.side[:, list(sides.values())]]
     if timed:
         numbers.insert(0, p.t[:, None])
     cells = len(machine.axes) + 3 + 3 * (not ball_default)
-    fmt = ",".join(["%s", *(["%.3f"] if timed else []), *["%.6f"] * cells])
+    fmt = ",".join(["%s", *(["%.3f"] if timed else []), *["%.6f"] * cells, *["%+.0f"] * len(sides)])
     values = np.column_stack(numbers).tolist()
     for label in set(p.path.tolist()):
         if not re.fullmatch(r"[^,\"\r\n]*", str(label)):

@@ -103,3 +103,24 @@ def test_the_fast_reader_steps_aside_and_the_careful_one_names_the_line(tmp_path
         data = read_rtest(f, MACHINE)
         assert len(data) == len(generate(MACHINE, ["K4", "K1", "K2"]))
     assert used == [None]
+
+
+def test_each_axis_side_is_read_as_written_and_nothing_else_is_taken(tmp_path):
+    """A_side / C_side round trip through the file (both readers), and a value that is not
+    +1 or -1 is refused with its line, on the fast path and the careful one."""
+    poses = generate(MACHINE, ["K4", "K1"], back=True)
+    text = format_rtest(MACHINE, RTestData(poses, np.zeros((len(poses), 3))))
+    f = tmp_path / "s.csv"
+    for body in (text, text.replace("\n", "\r\n")):          # fast path, then the careful reader
+        f.write_bytes(body.encode())
+        np.testing.assert_array_equal(read_rtest(f, MACHINE).poses.side, poses.side)
+    assert {-1.0, 1.0} <= set(np.unique(poses.side[:, 3]))
+    lines = text.splitlines()
+    at = len(lines) - 3
+    for bad in ("0", "2", "0.5"):
+        for careful in (False, True):
+            edited = [*lines[:at], lines[at].rsplit(",", 1)[0] + "," + bad, *lines[at + 1:]]
+            f.write_bytes(("\r\n" if careful else "\n").join(edited).encode() + b"\n")
+            with pytest.raises(CompgenError, match=rf"column C_side: {bad} is neither \+1 nor -1") as e:
+                read_rtest(f, MACHINE)
+            assert e.value.where == f"{f}:{at + 1}", e.value.where

@@ -107,7 +107,7 @@ def test_cli_writes_program_and_pose_list(tmp_path):
     assert code == 0, err
     assert out.read_text().startswith("0 BEGIN PGM K4 MM")
     poses = (tmp_path / "K4.poses.csv").read_text().splitlines()
-    assert poses[0] == "path,X,Y,Z,A,C,bx,by,bz" and len(poses) == 242
+    assert poses[0] == "path,X,Y,Z,A,C,bx,by,bz,A_side,C_side" and len(poses) == 242
 
 
 def _poses_file(tmp_path, rows):
@@ -158,3 +158,53 @@ def test_every_program_stops_once_for_the_preset_check_before_the_nest_goes_down
     onto = [i for i, ln in enumerate(lines) if "nest onto the ball" in ln]
     assert len(stops) == 1 and stops[0] < onto[0], (stops, onto[:2])
     assert "PRESET CHECK: the nest is 20 mm above the ball centre" in "\n".join(lines[stops[0] - 2:stops[0]])
+
+
+def _sides_as_run(machine, controller, text, mode):
+    """Each rotary axis's direction of its last turn at every pose (a dwell follows each),
+    from the program as the control reads it: its blocks, its modulo rule and its sense."""
+    from compgen import motion
+
+    ctl = CONTROLLERS[controller]
+    modulo, sense = ctl.modulo_axes(machine), ctl.angle_sense(machine)
+    names = [a.name for a in machine.rotary_axes]
+    now, last, out = dict.fromkeys(names, np.nan), dict.fromkeys(names, 0.0), []
+    for b in ctl.blocks(text, mode):
+        if b.kind == "dwell":
+            out.append([last[n] for n in names])
+        if b.kind != "move":
+            continue
+        for n in names:
+            if n in b.target:
+                end = motion._turned(modulo, b, n, b.target[n] * sense.get(n, 1), now[n])
+                if not np.isnan(now[n]) and abs(end - now[n]) > 1e-9:
+                    last[n] = float(np.sign(end - now[n]))
+                now[n] = end
+    return np.array(out)
+
+
+@pytest.mark.parametrize("controller", CONTROLLERS)
+@pytest.mark.parametrize("mode", ["tcpm", "axes"])
+@pytest.mark.parametrize("which", ["seed", "bc"])
+def test_the_pose_list_says_from_which_side_the_program_reaches_every_pose(controller, mode, which):
+    """Backlash as the program runs it: each path's first pose approached from a declared
+    side, each later one by the move that reached it. The pose list's A_side/C_side (B_side)
+    are what the program's blocks do, read as the control executes them — paths that turn
+    an axis one way, hold it, or run there and back."""
+    from conftest import BC_MACHINE
+
+    from compgen.machine_file import load_machine
+
+    machine = load_machine(SEED_MACHINE if which == "seed" else BC_MACHINE)
+    if which == "bc" and controller != machine.controller:
+        pytest.skip("the B/C machine's file sets up SINUMERIK only (its tool is a name)")
+    names = list(machine.paths)
+    poses = Poses.concat([generate(machine, names[:1], back=True), generate(machine, names)])
+    emitted = measure_program(machine, poses, "all", controller, mode, "RT", "0.1.0", DATE)
+    text = emitted.files[CONTROLLERS[controller].program_ext]
+    ran = _sides_as_run(machine, controller, text, mode)
+    listed = np.loadtxt(StringIO(emitted.files[".poses.csv"]), delimiter=",", skiprows=1,
+                        usecols=range(1 + len(machine.axes) + 3, 1 + len(machine.axes) + 3 + len(ran[0])))
+    assert ran.shape == listed.shape == (len(poses), len(machine.rotary_axes))
+    np.testing.assert_array_equal(ran, listed)
+    assert {-1.0, 1.0} <= set(np.unique(listed[:, 0]))       # the there-and-back run shows both sides

@@ -18,10 +18,10 @@ import numpy as np
 
 from .. import motion
 from ..errors import CompgenError
-from ..kinematics import Poses, inverse
+from ..kinematics import APPROACH_DEG, Poses, inverse, program_sides
 from ..machine import Machine, check_ball, check_travel
 from ..motion import safe_height
-from ..rtest import BALL, axis_cells
+from ..rtest import BALL, axis_cells, side_columns
 from ..units import number
 from . import Emitted, ascii_text, render
 from .registry import controller
@@ -94,12 +94,18 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     # the machine executes the angles as written (0.0001 deg): solve X Y Z at exactly those,
     # or a 300 mm lever would put the nest up to 0.3 µm off the ball
     angles = np.radians(np.round(np.degrees(poses.q[:, rotary]), ANGLE_DECIMALS))
-    poses = Poses(inverse(machine, angles, poses.ball), poses.ball, poses.t, poses.path)
+    q = inverse(machine, angles, poses.ball)
+    # the program runs each path label's poses as one segment, in their order
+    segments = [np.flatnonzero(poses.path == p) for p in dict.fromkeys(poses.path)]
+    order = np.concatenate(segments)
+    side = np.empty_like(q)
+    run = np.repeat(np.arange(len(segments)), list(map(len, segments)))
+    side[order] = program_sides(machine, q[order], run)
+    poses = Poses(q, poses.ball, poses.t, poses.path, side)
     lift = np.zeros(len(machine.axes))
     lift[linear[2]] = setup.clearance
     check_travel(machine, poses.q, label)
     check_travel(machine, poses.q + lift, f"{label} (clearance {setup.clearance:g} mm above)")
-    segments = [np.flatnonzero(poses.path == p) for p in dict.fromkeys(poses.path)]
     for seg in segments:
         part = poses.take(seg)
         _check_steps(machine, part, str(part.path[0]) or label)
@@ -218,14 +224,19 @@ def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool
         first, last = poses.q[seg[0]], poses.q[seg[-1]]
         steps.append({"kind": "comment", "note": f"---- {ascii_text(str(poses.path[seg[0]]) or label)}: "
                                                  f"poses {seg[0] + 1} to {seg[-1] + 1}"})
-        if not np.isnan(state["q"][linear[:2]]).any():
-            turn_to(first)
-        else:                            # XY not yet known: turn in place at the safe height
-            steps.append({"kind": "rapid", "axes": {n: np.degrees(first[i]) for n, i in
-                                                    zip(names, rotary, strict=True)},
-                          "note": "turn at the safe height"})
-            state["q"] = state["q"].copy()
-            state["q"][rotary] = first[rotary]
+        # every rotary axis reaches the first pose from the side the pose list declares
+        # (kinematics.program_sides): where each axis's backlash is at every pose is known
+        before = first.copy()
+        before[rotary] -= poses.side[seg[0], rotary] * np.radians(APPROACH_DEG)
+        for target, note in ((before, f"approach from {APPROACH_DEG:g} deg before"), (first, "")):
+            if not np.isnan(state["q"][linear[:2]]).any():
+                turn_to(target)
+            else:                        # XY not yet known: turn in place at the safe height
+                steps.append({"kind": "rapid", "axes": {n: np.degrees(target[i]) for n, i in
+                                                        zip(names, rotary, strict=True)},
+                              "note": note or "turn at the safe height"})
+                state["q"] = state["q"].copy()
+                state["q"][rotary] = target[rotary]
         at(lifted(first, safe), note="above the first pose")
         at(lifted(first, first[linear[2]] + clearance))
         if seg is segments[0]:      # the preset and the ball, seen before the nest goes down
@@ -259,12 +270,16 @@ def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool
 
 
 def pose_list(machine: Machine, poses: Poses) -> str:
-    """CSV v1 columns without readings: add dX dY dZ from the R-test and it is fit input."""
-    head = ["path", *machine.axis_names, *BALL]
+    """CSV v1 columns without readings: add dX dY dZ from the R-test and it is fit input.
+    Each rotary axis's side at each pose (``A_side``: the direction it last moved, as the
+    program runs the poses) tells fit where its backlash was."""
+    sides = {name: machine.index(axis) for name, axis in side_columns(machine).items()}
+    head = ["path", *machine.axis_names, *BALL, *sides]
     lines = [",".join(head)]
     for i in range(len(poses)):
         lines.append(",".join([ascii_text(str(poses.path[i])), *axis_cells(machine, poses.q[i]),
-                               *(f"{v:.6f}" for v in poses.ball[i])]))
+                               *(f"{v:.6f}" for v in poses.ball[i]),
+                               *(f"{poses.side[i, j]:+.0f}" for j in sides.values())]))
     return "\n".join(lines) + "\n"
 
 
