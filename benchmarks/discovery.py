@@ -60,6 +60,8 @@ CASES = {
     "A sag in Z only, EZA = 4 µm·(1 − cos A)": ({"EZA:h1c": -4 * UM}, "EZA:h1"),
     "A wobble turning against A, 10″": ({"EBA+ECA:h-1c": 10 * ARCSEC}, "EBA+ECA:h-1"),
     "C reversal (backlash) 10″: ±5″ by the direction C turns": ({"ECC:r1": 5 * ARCSEC}, "ECC:r1"),
+    # K4 turns A back, K1 turns it one way, K2 holds it: each path's side from the pose list
+    "A reversal (backlash) 10″: ±5″ by the direction A turns": ({"EAA:r1": 5 * ARCSEC}, "EAA:r1"),
     "XOC thermal growth 6 µm, τ = 15 min": ({"XOC:e15": 6 * UM}, "XOC:e15"),
     "drift in X saturating, 5 µm, τ = 5 min": ({"drift_X:e5": 5 * UM}, "drift_X:e5"),
     "C 2/rev angular 15″ under AR(1) ρ = 0.9": ({"ECC:h2c": 15 * ARCSEC}, "ECC:h2"),
