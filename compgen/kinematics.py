@@ -239,12 +239,16 @@ def motion_direction(q: np.ndarray, run: np.ndarray) -> np.ndarray:
         step = np.sign(np.diff(q[a:b]))
         if not ((step > 0).any() and (step < 0).any()):
             continue
-        # standing still keeps the last move's sign: index of the last move up to each step
-        last = np.maximum.accumulate(np.where(step != 0, np.arange(len(step)), -1))
-        first = step[np.flatnonzero(step)[0]]
-        d = np.r_[first, np.where(last >= 0, step[np.maximum(last, 0)], first)]
+        d = _last_moves(step, step[np.flatnonzero(step)[0]])
         out[a:b] = d - d.mean()
     return out
+
+
+def _last_moves(step: np.ndarray, first: float) -> np.ndarray:
+    """Per pose of a run, the sign of the last move that reached it (``step``: the signs of
+    its n − 1 moves); ``first`` before any move. Standing still keeps the last move's sign."""
+    last = np.maximum.accumulate(np.where(step != 0, np.arange(len(step)), -1))
+    return np.r_[first, np.where(last >= 0, step[np.maximum(last, 0)], first)]
 
 
 def program_sides(machine: Machine, q: np.ndarray, run: np.ndarray) -> np.ndarray:
@@ -264,8 +268,7 @@ def program_sides(machine: Machine, q: np.ndarray, run: np.ndarray) -> np.ndarra
             first = step[moved[0]] if moved.size else 1.0
             if not lo <= q[s, j] - first * np.radians(APPROACH_DEG) <= hi:
                 first = -first
-            last = np.maximum.accumulate(np.where(step != 0, np.arange(len(step)), -1))
-            out[s:e, j] = np.r_[first, np.where(last >= 0, step[np.maximum(last, 0)], first)]
+            out[s:e, j] = _last_moves(step, first)
     return out
 
 
