@@ -27,7 +27,7 @@ from .errors import CONTROL, CompgenError
 from .files import STDOUT, read_text, write_all, write_atomically
 from .gate import fit_gate, unit_suspicion
 from .identify import identify, parse_fixed
-from .kinematics import Poses, unknown_sides
+from .kinematics import unknown_sides
 from .machine_file import load_machine
 from .paths import generate
 from .probe import format_probe_log, probe_poses, simulate_touches
@@ -285,7 +285,7 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
     write_atomically(output, result.to_json(Path(output).resolve().parent), force,
                      inputs=(machine.source, base, *(s.source for s in sets)))
     _said(output, result.report() + f"\nwrote {output}")
-    sides = unknown_sides(machine, Poses.concat([s.poses for s in sets]), result.model)
+    sides = unknown_sides(machine, result.model, *(s.poses for s in sets))
     if sides:
         _warn(sides)
     suspicion = unit_suspicion(sets)
@@ -320,7 +320,7 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um):
     result = diagnose(machine, sets, fit, names, fit_file=base, machine_ref=machine_ref(fit),
                       noise_um=noise_um)
     named = compose(machine, fit.model, [c.effect for c in result.candidates if c.significant])
-    sides = unknown_sides(machine, Poses.concat([s.poses for s in sets]), named)
+    sides = unknown_sides(machine, named, *(s.poses for s in sets))
     if sides:
         _warn(sides)
     if plots_dir:

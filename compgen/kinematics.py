@@ -272,13 +272,13 @@ def program_sides(machine: Machine, q: np.ndarray, run: np.ndarray) -> np.ndarra
     return out
 
 
-def unknown_sides(machine: Machine, poses: Poses, names: Iterable[str]) -> str | None:
+def unknown_sides(machine: Machine, names: Iterable[str], *poses: Poses) -> str | None:
     """What a reversal (backlash) effect among the parameters ``names`` cannot use in these
-    poses, said once: the axes whose side the data do not give at some pose (no
-    ``A_side`` column), or None."""
+    poses (each data set's, looked at where it is), said once: the axes whose side the data
+    do not give at some pose (no ``A_side`` column), or None."""
     effects = (effect_of_param(machine, n) for n in names)
     axes = sorted({e.carrier for e in effects if e.basis.kind == "r"
-                   and np.isnan(poses.side[:, machine.index(e.carrier)]).any()})
+                   and any(np.isnan(p.side[:, machine.index(e.carrier)]).any() for p in poses)})
     if not axes:
         return None
     cols = ", ".join(f"{a}_side" for a in axes)

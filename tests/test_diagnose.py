@@ -518,9 +518,9 @@ def test_backlash_of_a_tilting_axis_is_found_from_the_side_each_pose_was_reached
     blind = [RTestData(Poses(p.q, p.ball, p.t, p.path), data[0].deviation)]
     stays = identify(seed_machine, blind, compose(seed_machine, base.model, ["EAA:r1"]))
     assert stays.residual["sigma_um"] > 2 * NOISE_UM          # each path's side, unmodelled
-    assert unknown_sides(seed_machine, blind[0].poses, stays.model).startswith(
+    assert unknown_sides(seed_machine, stays.model, blind[0].poses).startswith(
         "the data do not say from which side A reached each pose (no A_side column)")
-    assert unknown_sides(seed_machine, p, stays.model) is None
+    assert unknown_sides(seed_machine, stays.model, p) is None
     csv = tmp_path / "blind.csv"
     csv.write_text(format_rtest(seed_machine, blind[0]))
     assert "A_side" not in csv.read_text()
