@@ -15,7 +15,7 @@ References: ``docs/diagnose.md`` (visibility, bias, F and score tests).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from itertools import combinations
 
 import numpy as np
@@ -24,9 +24,9 @@ from .advice import Advisor, Measurement
 from .effects import Effect, catalogue, effect_of_param, resolve
 from .emit.registry import controller
 from .errors import CompgenError
-from .kinematics import Model, Poses, both_sides, runs
+from .kinematics import Model, Poses, both_sides, runs, same_pose
 from .machine import Machine
-from .noise import ar1, outliers, whiten
+from .noise import Repeats, ar1, outliers, repeats, whiten
 from .results import FitResult
 from .rtest import RTestData, device_of
 from .signature import columns, products, r_factor, signatures
@@ -117,6 +117,7 @@ class Diagnosis:
     machine_ref: str = ""   # how a command names the machine file (--machine)
     program_ext: str = ""   # the suffix of the machine's control's programs
     device_noise_um: float | None = None   # the R-test's own noise, when given; a probe's, from its touches
+    repeats: Repeats | None = None         # device_noise_um estimated from readings that repeat a pose
     data_device: str = "rtest"             # "probe": the data are sphere centres from probe logs
     misfit: tuple[dict, ...] = ()   # (path, direction) whose residual exceeds that noise, worst first
     lines: tuple[Line, ...] = ()    # the residual's strongest periodic line against each coordinate
@@ -133,6 +134,14 @@ class Diagnosis:
     @property
     def outside_line(self) -> Line | None:
         return _outside_line(self.lines, self.device_noise_um, self.misfit, self.alpha, self.best_sum_sq)
+
+    @property
+    def noise_from(self) -> str | None:
+        """Where ``device_noise_um`` comes from: "given" (machine file or --noise-um), the
+        probe's "touches", or "repeats" of poses in the data."""
+        if self.device_noise_um is None:
+            return None
+        return "touches" if self.data_device == "probe" else "repeats" if self.repeats else "given"
 
     @property
     def explained_to_noise(self) -> bool:
@@ -173,6 +182,8 @@ class Diagnosis:
             "readings": self.readings, "tested": self.tested, "alpha": self.alpha,
             "explained_to_noise": self.explained_to_noise,
             "device_noise_um": self.device_noise_um,
+            "device_noise_from": self.noise_from,
+            "repeats": self.repeats and {**asdict(self.repeats), "words": self.repeats.words()},
             "misfit": list(self.misfit),
             "unexplained": self.unexplained,
             "best_share_of_excess": self.best_share_of_excess,
@@ -236,6 +247,9 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         keep = np.ones(len(poses), bool)
         keep[bad] = False
         poses, r3, seg = poses.take(keep), r3[keep], seg[keep]
+    # no noise given: what the data repeat says it, where they repeat enough
+    said = repeats(same_pose(machine, poses, seg), r3, seg) if device is None else None
+    device = said.sigma_um if said is not None else device
     r = r3.ravel()
     # only Q and R of the model's Jacobian are kept: J's column norms are R's
     Q, R = np.linalg.qr(model.jacobian(poses, x)[:, :, free].reshape(r.size, -1))
@@ -368,7 +382,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         after_best=after_best, rivals=rival_names, rivals_separated_by=rivals_separated_by,
         outliers=_outlier_rows(data, bad, size), noise=_noise_summary(seg, noise.rho, poses.path),
         rivals_open=rivals_open, machine_ref=machine_ref or machine.source,
-        program_ext=_program_ext(machine), device_noise_um=device, misfit=misfit,
+        program_ext=_program_ext(machine), device_noise_um=device, repeats=said, misfit=misfit,
         lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, carries=carries, notes=notes,
         data_device=kind)
 

@@ -207,7 +207,9 @@ def _told(d: Diagnosis, m: Measurement) -> set[tuple[str, str]]:
 
 
 def _device(d: Diagnosis) -> str:
-    return "probe's (from its touches)" if d.data_device == "probe" else "R-test's"
+    if d.data_device == "probe":
+        return "probe's (from its touches)"
+    return f"repeats' ({d.repeats.words()})" if d.repeats else "R-test's"
 
 
 def _then(ms, fit: str, after: str) -> list[str]:

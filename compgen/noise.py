@@ -15,6 +15,8 @@ side): beyond ``OUTLIER_Z`` robust standard deviations of that difference, and b
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 RHO_MAX = 0.99          # beyond this the noise is a random walk: whitening would divide by ~0
@@ -23,6 +25,7 @@ RHO_FLOOR = 0.02        # below this a variance changes by < 4 % ((1 + ρ)/(1 �
 OUTLIER_Z = 8.0         # robust s.d. of the step from the neighbours' median
 OUTLIER_MIN_UM = 1.0    # a step below this is noise on any R-test (0.5–1 µm repeatability)
 NEIGHBOURS = 2          # each side
+REPEATS_MIN = 30        # readings beyond the first of each repeated pose, before they say what the noise is
 
 
 def _previous(x: np.ndarray, seg: np.ndarray) -> np.ndarray:
@@ -123,3 +126,47 @@ def outliers(r_um: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     size = np.linalg.norm(step, axis=1)
     bad = np.flatnonzero((z > OUTLIER_Z).any(axis=1) & (size > OUTLIER_MIN_UM))
     return bad, size[bad]
+
+
+@dataclass(frozen=True)
+class Repeats:
+    """The noise as the data repeat it: the scatter of readings of one pose, reached the same
+    way (``kinematics.same_pose``), pooled over every pose read more than once."""
+
+    sigma_um: float     # per reading and direction
+    readings: int       # readings of repeated poses
+    poses: int          # poses read more than once
+    dwell: int          # of those, read only one reading after another (a dwell's samples)
+
+    def words(self) -> str:
+        told = f"{self.readings} readings of {self.poses} poses read more than once"
+        if self.dwell == self.poses:
+            return (f"{told}, each read one reading after another: correlated noise makes this low, "
+                    "and it holds nothing of how the machine returns to a pose")
+        return told + (f" ({self.dwell} of them in a dwell)" if self.dwell else "")
+
+
+def repeats(group: np.ndarray, r: np.ndarray, seg: np.ndarray) -> Repeats | None:
+    """The noise from readings that repeat a pose (``group``: equal for repeats), residuals r
+    (n, 3) mm: the pooled within-pose σ, or None with fewer than ``REPEATS_MIN`` readings
+    beyond the first of each pose. What changes between the repeats (a drift of the set-up)
+    counts as noise here: the candidates' tests, not this, decide whether it is an effect."""
+    counts = np.bincount(group)
+    rep = counts[group] > 1
+    poses = int((counts > 1).sum())
+    dof = int(rep.sum()) - poses
+    if dof < REPEATS_MIN:
+        return None
+    g = group[rep]
+    sums = np.column_stack([np.bincount(g, r[rep, d], len(counts)) for d in range(3)])
+    mean = sums / np.maximum(counts, 1)[:, None]
+    sigma = float(np.sqrt(((r[rep] - mean[g]) ** 2).sum() / (3 * dof))) * 1e3
+    index = np.flatnonzero(rep)
+    first = np.full(len(counts), len(group))
+    last = np.zeros(len(counts), int)
+    np.minimum.at(first, g, index)
+    np.maximum.at(last, g, index)
+    held = counts > 1
+    # one reading after another within one run (runs are numbered in order)
+    dwell = int(((last - first + 1 == counts)[held] & (seg[first[held]] == seg[last[held]])).sum())
+    return Repeats(sigma, int(rep.sum()), poses, dwell)

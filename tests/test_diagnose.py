@@ -367,6 +367,69 @@ def test_declaring_the_shape_brings_the_residual_to_the_noise_and_predicts_unmea
         assert np.sqrt(np.mean(err**2)) * 1e3 < 1.0
 
 
+def _repeated(machine, periodic=None, seed=3, noise=NOISE_UM):
+    """K4, K1, K2 and K4 again (a repeated run): seed Table 4, white noise, and a periodic
+    error of a linear axis (axis, pitch mm) the catalogue does not have."""
+    from compgen.kinematics import Model
+    p = generate(machine, ["K4", "K1", "K2", "K4"])
+    y = Model(machine, list(TABLE4)).deviation(p, np.array(list(TABLE4.values())))
+    if periodic:
+        y = y + _periodic(machine, p, *periodic, 2.0)
+    y = y + np.random.default_rng(seed).normal(0, noise * 1e-3, y.shape)
+    return [RTestData(p, y, "sim.csv", "", tuple(range(2, len(p) + 2)))]
+
+
+def test_without_a_given_noise_a_repeated_run_says_it_and_an_outside_effect_is_unexplained(seed_machine):
+    """No noise in the machine file nor on the command line: the second run of K4 repeats
+    every pose of the first, reached the same way, and their scatter is the noise (the
+    periodic error repeats with the pose: it is not scatter). Against it, dX fails."""
+    data = _repeated(seed_machine, ("X", 5.0))
+    found = diagnose(seed_machine, data, identify(seed_machine, data), advise=False)
+    assert found.repeats is not None and found.noise_from == "repeats"
+    assert found.device_noise_um == pytest.approx(NOISE_UM, rel=0.1)
+    assert found.repeats.poses == 240 and found.repeats.dwell == 0      # K4's first pose: side unknown
+    assert found.unexplained and found.found is None and not found.explained_to_noise
+    assert {m["direction"] for m in found.misfit} == {"dX"}
+    said = found.to_dict()
+    assert said["device_noise_from"] == "repeats" and said["repeats"]["readings"] == 480
+    assert "the residual exceeds the repeats' (480 readings of 240 poses read more than once)" \
+        in report(found)
+    clean = _repeated(seed_machine)
+    found = diagnose(seed_machine, clean, identify(seed_machine, clean), advise=False)
+    assert found.explained_to_noise and found.misfit == () and found.noise_from == "repeats"
+    # a given noise is used as given: repeats are not looked at
+    given = diagnose(seed_machine, clean, identify(seed_machine, clean), advise=False, noise_um=0.7)
+    assert given.repeats is None and given.noise_from == "given" and given.device_noise_um == 0.7
+
+
+def test_repeats_are_poses_reached_the_same_way(seed_machine):
+    """A backlash is not scatter: a pose counts as a repeat of another only reached from the
+    same side on every axis; a dwell's samples are told as such; too few say nothing."""
+    from compgen.kinematics import Poses, runs, same_pose
+    from compgen.noise import repeats
+    q = np.radians([[0, 0, 0, -10, 0], [0, 0, 0, -20, 0], [0, 0, 0, -10, 0], [0, 0, 0, -20, 0],
+                    [0, 0, 0, -10, 0]])
+    p = Poses(q, np.zeros((5, 3)), np.arange(5.0), np.array(["P"] * 5))
+    group = same_pose(seed_machine, p, runs(p))
+    # A reaches the 2nd and 4th pose going down, the 3rd and 5th going up; the 1st: not moved yet
+    assert len(set(group)) == 3 and group[1] == group[3] and group[2] == group[4] != group[0]
+    sides = np.full((5, 5), np.nan)
+    sides[:, 3] = [1, 1, 1, -1, -1]            # as recorded: these win over the moves
+    p = Poses(q, np.zeros((5, 3)), np.arange(5.0), np.array(["P"] * 5), sides)
+    group = same_pose(seed_machine, p, runs(p))
+    assert group[0] == group[2] and group[1] != group[3] and group[4] not in group[:4]
+    # a dwell: 40 samples of one pose, one after another; then too few repeats
+    q = np.zeros((41, 5))
+    q[0, 3] = np.radians(-1)
+    p = Poses(q, np.zeros((41, 3)), np.arange(41.0), np.array(["D"] * 41))
+    seg = runs(p)
+    r = np.random.default_rng(1).normal(0, 1e-3, (41, 3))
+    said = repeats(same_pose(seed_machine, p, seg), r, seg)
+    assert (said.poses, said.readings, said.dwell) == (1, 40, 1) and "makes this low" in said.words()
+    assert said.sigma_um == pytest.approx(np.sqrt(((r[1:] - r[1:].mean(axis=0)) ** 2).sum() / (3 * 39)) * 1e3)
+    assert repeats(same_pose(seed_machine, p.take(slice(0, 30)), seg[:30]), r[:30], seg[:30]) is None
+
+
 def test_with_the_rtest_noise_a_catalogue_effect_is_still_found(seed_machine, poses):
     data = [_session(seed_machine, poses, {"ECC:h2c": 15 * ARCSEC})]
     found = diagnose(seed_machine, data, identify(seed_machine, data), advise=False, noise_um=NOISE_UM)
