@@ -1,7 +1,7 @@
 """Mutation testing of the sign-critical modules: does the suite notice a wrong sign, unit
 or axis index? A benchmark, run outside CI (it takes minutes).
 
-    python benchmarks/mutation.py [--jobs 2] [--only compgen/units.py] [--list]
+    python benchmarks/mutation.py [--jobs 2] [--only compgen/units.py] [--lines 140-150] [--list]
 
 Each mutant is one small change (the issue's kinds): ``+`` ↔ ``-``, ``*`` ↔ ``/``, a unary
 minus dropped or added, an integer index 0/1/2 shifted, a numeric constant changed (0 → 1,
@@ -151,10 +151,16 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--only", action="append", default=None, help="a module path (repeatable)")
     ap.add_argument("--list", action="store_true", help="count the mutants, run nothing")
+    ap.add_argument("--lines", default=None, metavar="A-B",
+                    help="only the mutants on these lines (with one --only): to see a new test kill them")
+    ap.add_argument("--tests", action="append", default=None,
+                    help="run these tests instead of the module's selection (repeatable): a quick look, "
+                         "not the measurement")
     args = ap.parse_args()
     modules = args.only or list(TESTS)
+    lo, hi = map(int, args.lines.split("-")) if args.lines else (0, 10**9)
     plan = [(m, i, line, kind, text) for m in modules
-            for i, line, kind, text in mutants(ROOT / m, ONLY_FUNCTIONS.get(m))]
+            for i, line, kind, text in mutants(ROOT / m, ONLY_FUNCTIONS.get(m)) if lo <= line <= hi]
     print(f"{len(plan)} mutants in {len(modules)} modules")
     lines = {m: (ROOT / m).read_text().splitlines() for m in modules}    # as mutated, not as edited since
     if args.list:
@@ -178,7 +184,7 @@ def main() -> None:
         with lock:
             j = free.pop()
         try:
-            return p, run_mutant(works[j], p[0], p[4], TESTS[p[0]])
+            return p, run_mutant(works[j], p[0], p[4], args.tests or TESTS[p[0]])
         finally:
             with lock:
                 free.append(j)

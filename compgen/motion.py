@@ -137,11 +137,14 @@ def safe_height(machine: Machine) -> float:
     intersection, and the housing reaches ``nest_below`` and its radius below the centre."""
     s = machine.setup
     table = _frames(machine, np.zeros((1, len(machine.axes))))[0][0]
-    ball = np.asarray(machine.ball)
-    rim = [[s.table_radius * np.cos(t), s.table_radius * np.sin(t), z]
-           for t in np.linspace(0, 2 * np.pi, 73) for z in (s.table_top, s.table_top - s.table_thickness)]
-    points = apply(table, np.array([*rim, ball]))
-    reach = max(np.linalg.norm(points[:-1], axis=1).max(), np.linalg.norm(points[-1]) + s.ball_diameter / 2)
+    normal = table[:3, 2]
+    reach = np.linalg.norm(apply(table, np.asarray(machine.ball))) + s.ball_diameter / 2
+    for z in (s.table_top, s.table_top - s.table_thickness):
+        # the rim's farthest point: |c + R·u|² = |c|² + R² + 2R c·u, greatest for the unit u
+        # in the table's plane along c's part in that plane
+        c = table[:3, 3] + z * normal
+        across = np.linalg.norm(c - (c @ normal) * normal)
+        reach = max(reach, np.sqrt(c @ c + s.table_radius**2 + 2 * s.table_radius * across))
     return float(np.ceil(reach + s.nest_below + s.nest_radius + s.margin))
 
 

@@ -128,6 +128,46 @@ def test_the_safe_height_clears_the_set_up_at_every_orientation(machines):
     assert safe_height(bc) < bc.axis("Z").travel[1]
 
 
+@pytest.mark.parametrize("dx, dy", [(0.0, 0.0), (40.0, -25.0), (-60.0, 10.0)])
+def test_the_safe_height_is_the_farthest_point_of_the_set_up(machines, dx, dy):
+    """Against a brute force over the table's rims (3600 points each) and the ball, on the
+    seed machine with its table carried off the A/C intersection (a C axis offset in X, Y):
+    the farthest rim point then lies at one angle only."""
+    from dataclasses import replace
+
+    from compgen.motion import _frames
+    from compgen.transforms import apply
+    seed = load_machine(machines["seed"])
+    m = replace(seed, workpiece=tuple(replace(a, offset=(a.offset[0] + dx, a.offset[1] + dy, a.offset[2]))
+                                      if a.name == "C" else a for a in seed.workpiece))
+    s = m.setup
+    table = _frames(m, np.zeros((1, len(m.axes))))[0][0]
+    t = np.linspace(0, 2 * np.pi, 3600, endpoint=False)
+    rims = [np.column_stack([s.table_radius * np.cos(t), s.table_radius * np.sin(t), np.full_like(t, z)])
+            for z in (s.table_top, s.table_top - s.table_thickness)]
+    reach = max(np.linalg.norm(apply(table, np.concatenate(rims)), axis=1).max(),
+                np.linalg.norm(apply(table, np.asarray(m.ball))) + s.ball_diameter / 2)
+    assert safe_height(m) == np.ceil(reach + s.nest_below + s.nest_radius + s.margin)
+
+
+def test_the_stem_points_down_the_table_at_every_pose(machines):
+    """table_axis_down (where a probe's stem stands from its sphere) against the walk of the
+    chains: a table point 1 mm lower on the stem moves the reading by minus that vector."""
+    from compgen.kinematics import Model, Poses
+    from compgen.motion import table_axis_down
+    for key in ("seed", "bc"):
+        m = load_machine(machines[key])
+        rng = np.random.default_rng(2)
+        q = np.column_stack([rng.uniform(-50, 50, (20, 3)),
+                             np.radians(rng.uniform(-90, 90, (20, len(m.rotary_axes))))])
+        ball = np.asarray(m.ball)
+        nominal = Model(m, ())
+        walked = nominal.relative(Poses.at(q, ball)) - nominal.relative(Poses.at(q, ball - [0, 0, 1]))
+        down = table_axis_down(m, q)
+        assert down.shape == (20, 3) and abs(down[:, 2]).min() < 0.5     # the table turned
+        np.testing.assert_allclose(down, walked, atol=1e-9)
+
+
 @pytest.mark.parametrize("mode", ["tcpm", "axes"])
 def test_linuxcnc_reads_compgens_program_to_the_simulators_positions(machines, tmp_path, mode):
     if shutil.which("rs274") is None:
@@ -223,11 +263,18 @@ def test_check_program_refuses_an_empty_or_impossible_ball_in_one_line(machines,
         assert code == 2 and words in err and err.count("\n") == 1 and "the ball: the ball" not in err, err
 
 
-def test_the_searched_clearance_is_the_least_along_housing_and_spindle():
+@pytest.mark.parametrize("held, face", [("nest", 0.0), ("probe", 0.0), ("nest", -35.0)])
+def test_the_searched_clearance_is_the_least_along_housing_and_spindle(held, face):
     """The closed forms (ball, stem) and the golden-section search (table) against a brute
     force: every part sampled every 0.02 mm, at random poses around the set-up (near the
-    ball, the stem and the table's face), some with the tool axis parallel to the stem."""
+    ball, the stem and the table's face), some with the tool axis parallel to the stem.
+    The parts are the machine file's, read here: the R-test's housing and spindle, or the
+    probe's stylus tip (a sphere), stylus, body and spindle. Poses whose tool axis stands
+    in the table near its rim read how deep the part is; ``face``: the table's face moved
+    below the C frame's origin."""
+    from dataclasses import replace
     m = load_machine(SEED_MACHINE)
+    m = replace(m, setup=replace(m.setup, table_top=face))
     s = m.setup
     rng = np.random.default_rng(5)
     n = 400
@@ -238,11 +285,23 @@ def test_the_searched_clearance_is_the_least_along_housing_and_spindle():
             max(lo, -150), min(hi, 150), n)
     q[:, m.index("Z")] = rng.uniform(m.axis("Z").travel[0], m.axis("Z").travel[0] + 300, n)
     q[:40, [m.index(a.name) for a in m.rotary_axes]] = 0.0     # the tool axis parallel to the stem
-    got, _ = clearances(m, q)
+    # the tool axis upright in the table, 1-20 mm inside its rim, between its faces
+    angle, radial = rng.uniform(0, 2 * np.pi, 20), s.table_radius - rng.uniform(1, 20, 20)
+    z = rng.uniform(s.table_top - s.table_thickness + 5, s.table_top - 5, 20)
+    rotary = np.zeros((20, len(m.rotary_axes)))
+    q[40:60] = motion.inverse(m, rotary, np.column_stack([radial * np.cos(angle), radial * np.sin(angle), z]))
+    probe = m.probe if held == "probe" else None
+    got, _ = clearances(m, q, probe)
     _, nest, axis = motion._frames(m, q)
     ball, rb = np.asarray(m.ball), s.ball_diameter / 2
     parts = {"housing": (-s.nest_below, m.probe_length, s.nest_radius),
              "spindle": (m.probe_length, m.probe_length + s.spindle_length, s.spindle_radius)}
+    if probe is not None:
+        parts = {"stylus tip": (0.0, 0.0, probe.stylus_diameter / 2),
+                 "stylus": (probe.stylus_diameter / 2, probe.stylus_length, probe.shaft_diameter / 2),
+                 "probe body": (probe.stylus_length, probe.length, probe.body_diameter / 2),
+                 "spindle": (probe.length, probe.length + s.spindle_length, s.spindle_radius)}
+    assert set(got) == {f"{part} / {solid}" for part in parts for solid in ("ball", "stem", "table")}
     for part, (lo, hi, radius) in parts.items():
         t = np.linspace(lo, hi, int((hi - lo) / 0.02) + 1)
         pts = nest[:, None, :] + t[None, :, None] * axis[:, None, :]
@@ -259,7 +318,7 @@ def test_the_searched_clearance_is_the_least_along_housing_and_spindle():
         inside = -np.minimum(np.minimum(top - z, z - bottom), s.table_radius - radial)
         table = np.where(outside > 0, outside, inside).min(axis=1) - radius
         np.testing.assert_allclose(got[f"{part} / table"], table, atol=0.02)
-        assert (got[f"{part} / table"] < 0).any() or part == "spindle"     # some poses reach in
+        assert (got[f"{part} / table"] < 0).any() or part in ("spindle", "stylus tip")   # some reach in
 
 
 def test_the_motion_check_applies_the_set_ups_margin_to_every_collision_rule():
