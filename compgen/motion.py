@@ -62,8 +62,8 @@ class Finding:
     line: int
     rule: str
     detail: str
-    depth_mm: float
     axes: str
+    depth_mm: float = 0.0        # how far a part enters a solid; 0: the finding is not a collision
 
     def text(self, where: str) -> str:
         depth = f" by {self.depth_mm:.1f} mm" if self.depth_mm > 0 else ""
@@ -327,11 +327,11 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
         if b.machine_coords:
             findings.append(Finding(b.line, "machine coordinates", "the machine file does not say where the "
                                     "machine datum lies against the set-up: this move cannot be checked",
-                                    0.0, b.text.strip()))
+                                    b.text.strip()))
             continue
         if not (tool and length):
             findings.append(Finding(b.line, "no tool call or length compensation", "the nest's length is not "
-                                    "active: every position would be off by its length", 0.0, b.text.strip()))
+                                    "active: every position would be off by its length", b.text.strip()))
             break
         unknown_axes = sorted(set(b.target) - set(letters))
         if unknown_axes:
@@ -345,7 +345,7 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
             if w is None:
                 if np.isnan(q).any():
                     findings.append(Finding(b.line, "TCP before positioning", "TCP is on before every axis "
-                                            "has been positioned", 0.0, b.text.strip()))
+                                            "has been positioned", b.text.strip()))
                     break
                 w = np.concatenate([world(machine, q[None])[0], q[rotary]])
             end = w.copy()
@@ -397,7 +397,7 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
             if np.isnan(z).any() or z.min() < safe:
                 findings.append(Finding(b.line, "axes positioned from an unknown place below the safe height",
                                         f"the nest is below Z {safe:g} before every axis has been positioned "
-                                        "there", 0.0, b.text.strip()))
+                                        "there", b.text.strip()))
             # the moves after it start from known places: they are checked all the same
         else:
             checkable.append(seg)
@@ -417,7 +417,7 @@ def _touch(machine: Machine, probe: ProbeSetup | None, b: Block, q: np.ndarray, 
                            hint="describe the probe in [probe] (see the bundled machines)")
     if np.isnan(q).any():
         findings.append(Finding(b.line, "probing from an unknown place", "an axis has not been positioned "
-                                "before the probing move", 0.0, b.text.strip()))
+                                "before the probing move", b.text.strip()))
         return None
     _, ends, _ = _frames(machine, np.array([q, end]))
     ball = np.asarray(machine.ball)
@@ -425,14 +425,14 @@ def _touch(machine: Machine, probe: ProbeSetup | None, b: Block, q: np.ndarray, 
     p0, d = ends[0] - ball, ends[1] - ends[0]
     a, half_b, c = d @ d, p0 @ d, p0 @ p0 - rho**2
     disc = half_b**2 - a * c
-    t = (-half_b - np.sqrt(disc)) / a if a > 0 and disc >= 0 else np.inf
+    t = (-half_b - np.sqrt(disc)) / a if a > 0 and disc >= 0 else np.nan    # NaN: its line passes by
     if c < 0 or not 0 <= t <= 1:
         what = ("starts inside the sphere" if c < 0 else
                 f"ends {np.sqrt(max(c + 2 * half_b + a, 0.0) + rho**2) - rho:.2f} mm short of it" if t > 1
                 else "misses it")
         findings.append(Finding(b.line, "probing move does not touch the sphere",
                                 f"the stylus tip {what}; the "
-                                "control stops the program with an error", 0.0, b.text.strip()))
+                                "control stops the program with an error", b.text.strip()))
         return None
     return q + t * (end - q)
 
@@ -568,7 +568,7 @@ def _seconds(machine: Machine, b: Block, path: np.ndarray, per_axis: np.ndarray,
         i = over[int(np.argmax(speed[over] / limits[over]))]
         unit = "deg" if machine.axes[i].rotary else "mm"
         findings.append(Finding(b.line, "feed above feed_max", f"{machine.axes[i].name} would move at "
-                                f"{speed[i]:.0f} {unit}/min, its feed_max is {limits[i]:g}", 0.0,
+                                f"{speed[i]:.0f} {unit}/min, its feed_max is {limits[i]:g}",
                                 _axes_text(machine, path[-1])))
     return float(minutes * 60.0)
 
@@ -581,7 +581,7 @@ def _check_travel(machine: Machine, b: Block, path: np.ndarray, findings: list) 
         if bad.size:
             j = bad[0]
             findings.append(Finding(b.line, "outside travel", f"{a.name} reaches {v[j]:.3f}, travel "
-                                    f"{lo:g}..{hi:g}", 0.0, _axes_text(machine, path[j])))
+                                    f"{lo:g}..{hi:g}", _axes_text(machine, path[j])))
             return
 
 
@@ -614,6 +614,6 @@ def _check_collisions(machine: Machine, segments: list[_Segment], findings: list
             part, thing = pair.split(" / ")
             what = (f"{part} enters the {thing}" if c[j] < 0 else
                     f"{part} within {c[j]:.1f} mm of the {thing} (margin {margin[j]:g} mm)")
-            findings.append(Finding(b.line, what, b.text.strip(), float(-c[j]) if c[j] < 0 else 0.0,
-                                    _axes_text(machine, paths[j])))
+            findings.append(Finding(b.line, what, b.text.strip(), _axes_text(machine, paths[j]),
+                                    max(float(-c[j]), 0.0)))
     return closest

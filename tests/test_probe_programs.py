@@ -140,3 +140,54 @@ def test_bad_probe_program_options_get_one_line(tmp_path, args, expected):
     code, _, err = run("probe-program", "--machine", SEED_MACHINE, *args, "-o", tmp_path / "P.H")
     assert code == 2 and expected in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "P.H").exists()
+
+
+@pytest.mark.parametrize("start, end, said", [
+    # along -x toward the sphere's side: touches where the tip's centre is rho from the ball's
+    ((5.0, 0.0, 0.0), (-2.0, 0.0, 0.0), None),
+    ((0.01, 0.0, 0.0), (-0.5, 0.0, 0.0), None),             # starting 0.01 mm off the sphere
+    ((0.004, 0.0, 0.0), (-0.004, 0.0, 0.0), None),          # a move of 8 µm that touches
+    ((5.0, 0.0, 0.0), (0.5, 0.0, 0.0), "ends 0.50 mm short of it"),
+    ((5.0, 0.0, 0.0), (9.0, 0.0, 0.0), "misses it"),        # moving away
+    ((-0.5, 0.0, 0.0), (-2.0, 0.0, 0.0), "starts inside the sphere"),
+    ((0.01, 0.0, 0.0), (2.0, 0.0, 0.0), "misses it"),       # 0.01 mm off, away
+    ((5.0, 3.0, 0.0), (5.0, 3.0, -30.0), "misses it"),      # beside the sphere, down past it
+])
+def test_a_probing_move_stops_where_the_tip_meets_the_sphere(start, end, said):
+    """``motion._touch`` on the seed machine, rotary axes at zero: ``start`` and ``end`` are
+    mm beyond contact along x (the tip's centre at rho = (sphere + tip) / 2 from the ball's
+    centre at 0), y, z. A touch stops on the contact sphere; a move that does not touch is a
+    finding that says why."""
+    from compgen.kinematics import inverse
+    from compgen.motion import Block, _touch, table_point
+    m = load_machine(SEED_MACHINE)
+    ball, rho = np.asarray(m.ball), (m.setup.ball_diameter + m.probe.stylus_diameter) / 2
+    at = [ball + [rho + p[0], p[1], p[2]] for p in (start, end)]
+    q0, q1 = inverse(m, np.zeros((2, len(m.rotary_axes))), np.array(at))
+    findings = []
+    got = _touch(m, m.probe, Block(7, "PROBE", "move", probe=True), q0, q1, findings)
+    if said is None:
+        assert findings == [] and got is not None
+        tip = table_point(m, got[None])[0]
+        assert np.linalg.norm(tip - ball) == pytest.approx(rho, abs=1e-9)
+        assert tip[0] > ball[0] and abs(tip[1] - ball[1]) < 1e-9       # on the near side, on the line
+    else:
+        assert got is None and len(findings) == 1
+        assert findings[0].text("P.H") == ("P.H:7: probing move does not touch the sphere: the stylus tip "
+                                           f"{said}; the control stops the program with an error (at PROBE)")
+
+
+def test_a_grazing_probing_move_touches():
+    """A move passing 0.3 µm inside the contact sphere touches it (near-tangent: the
+    discriminant is tiny but positive)."""
+    from compgen.kinematics import inverse
+    from compgen.motion import Block, _touch, table_point
+    m = load_machine(SEED_MACHINE)
+    ball, rho = np.asarray(m.ball), (m.setup.ball_diameter + m.probe.stylus_diameter) / 2
+    h = rho - 3e-4
+    at = np.array([ball + [h, 0.0, 3.5], ball + [h, 0.0, -3.5]])
+    q0, q1 = inverse(m, np.zeros((2, len(m.rotary_axes))), at)
+    findings = []
+    got = _touch(m, m.probe, Block(3, "PROBE", "move", probe=True), q0, q1, findings)
+    assert findings == [] and got is not None
+    assert np.linalg.norm(table_point(m, got[None])[0] - ball) == pytest.approx(rho, abs=1e-9)
