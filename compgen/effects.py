@@ -278,7 +278,7 @@ def resolve(machine: Machine, name: str, table: dict | None = None) -> Effect:
             raise CompgenError(f"{symbol}:wP (periodic, pitch P mm) is declared for a component error of a "
                                "linear axis, 0.5 ≤ P ≤ 10000", where=name,
                                hint="e.g. EXX:w5 for a 5 mm ball-screw period of X")
-        return Effect(symbol, carrier, slot, direction, Basis("w", 0, pitch=pitch),
+        return Effect(symbol, carrier, slot, direction, Basis("w", pitch=pitch),
                       f"{words}, periodic with a pitch of {pitch:g} mm",
                       "a periodic error along the axis: ball-screw pitch or scale interpolation")
     else:

@@ -81,7 +81,6 @@ class Check:
 
 WORD = re.compile(r"^([A-Z])([+-]?(?:\d{1,7}(?:\.\d{0,9})?|\.\d{1,9}))$", re.ASCII)
 SECONDS = re.compile(r"\d{1,5}(?:\.\d{0,6})?", re.ASCII)     # a dwell, as compgen writes it
-MOVE_MAX = 1e6           # mm or deg: beyond any machine's travel, and far within a float
 
 
 def words(tokens: list[str], line: int, allowed: str = "XYZABCF") -> dict[str, float]:

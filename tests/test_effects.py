@@ -204,3 +204,60 @@ def test_words_and_causes_name_the_physics(seed_machine):
     assert words["EZC:h1"].words.startswith("axial") and words["EXC:h2"].words.startswith("radial")
     assert words["EAC:h1"].words.startswith("tilt") and "scale" in words["EXX:p1"].cause
     assert "pitch of 5 mm" in words["EXX:w5"].words and "ball-screw" in words["EXX:w5"].cause
+
+
+def test_every_basis_has_the_shape_its_name_says():
+    """Each basis kind's values against its formula written out here: harmonics of the angle
+    (a tilting axis's from angle 0), polynomials of position per metre and of hours, the
+    saturating growth 1 − exp(−t/τ), a period along a linear axis in mm, the side of a
+    reversal, a constant."""
+    from compgen.effects import POLY_SCALE_MM, TIME_SCALE_S, Basis
+    x = np.array([-0.7, 0.0, 0.3, 1.9])
+    cases = {
+        Basis("h", 3): np.column_stack([np.cos(3 * x), np.sin(3 * x)]),
+        Basis("h", 2, origin=True): np.column_stack([np.cos(2 * x) - 1, np.sin(2 * x)]),
+        Basis("p", 2): (x**2)[:, None],
+        Basis("t", 1): x[:, None],
+        Basis("r", 1): x[:, None],
+        Basis("const"): np.ones((4, 1)),
+    }
+    for basis, expected in cases.items():
+        np.testing.assert_allclose(basis.values(x), expected, rtol=1e-14, atol=0)
+    mm = np.array([0.0, 1.25, 2.5, 7.0])                  # X at these mm, pitch 5 mm
+    turn = 2 * np.pi * mm / 5.0
+    np.testing.assert_allclose(Basis("w", pitch=5.0).values(mm / POLY_SCALE_MM),
+                               np.column_stack([np.cos(turn), np.sin(turn)]), atol=1e-12)
+    seconds = np.array([0.0, 300.0, 900.0, 3600.0])       # τ = 15 min
+    np.testing.assert_allclose(Basis("e", 15).values(seconds / TIME_SCALE_S)[:, 0],
+                               1 - np.exp(-seconds / 900.0), rtol=1e-12)
+
+
+def test_the_catalogue_offers_the_orders_it_says():
+    """Per symbol of the seed machine, the orders catalogue() offers: harmonics 1-4 of the
+    turning C, 1-2 of the tilting A, compounds both ways, polynomials 1-3 (a straightness
+    from 2: its order 1 is a squareness), drift in hours 1-2 and τ 5, 15, 45 min."""
+    names = {e.name for e in catalogue(SEED)}
+    have = lambda prefix: sorted(n[len(prefix):] for n in names if n.startswith(prefix))  # noqa: E731
+    assert have("ECC:") == ["h1", "h2", "h3", "h4", "r1"]
+    assert have("ECA:") == ["h1", "h2", "p1", "p2", "p3"]
+    assert have("EXC+EYC:") == ["h-1", "h-2", "h-3", "h-4", "h1", "h2", "h3", "h4"]
+    assert have("EYA+EZA:") == ["h-1", "h-2", "h1", "h2"]
+    assert have("EXX:") == ["p1", "p2", "p3", "r1"] and have("EYX:") == ["p2", "p3"]
+    assert have("drift_X:") == ["e15", "e45", "e5", "t1", "t2"]
+    assert have("XOC:") == ["e15", "e45", "e5"] and "XOC" in names
+
+
+@pytest.mark.parametrize("name, ok", [("EXX:w0.5", True), ("EXX:w10000", True), ("EXX:w0.4", False),
+                                      ("EXX:w10001", False), ("ECC:h99", True), ("ECC:h100", False),
+                                      ("drift_X:e999", True), ("EXC+EYC:h-99", True)])
+def test_orders_and_pitches_are_taken_within_their_ranges(name, ok):
+    if ok:
+        assert resolve(SEED, name).name == name
+    else:
+        with pytest.raises(CompgenError):
+            resolve(SEED, name)
+
+
+def test_a_linear_axis_positioning_error_linear_in_position_is_its_scale():
+    assert resolve(SEED, "EXX:p1").words.endswith("(scale: linear in position)")
+    assert "scale" not in resolve(SEED, "EXX:p2").words and "scale" not in resolve(SEED, "EYX:p2").words

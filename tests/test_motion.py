@@ -408,3 +408,103 @@ def test_heidenhain_tcpm_forms_the_check_does_not_model_are_refused(tmp_path, fo
     program.write_text(text.replace("FUNCTION TCPM F CONT AXIS POS PATHCTRL AXIS", form))
     code, out, err = run("check-program", "--machine", SEED_MACHINE, program)
     assert code == 2 and f"{form!r}: only" in err and "not modelled" not in out, (code, out, err)
+
+
+PROGRAM_TIMED = """0 BEGIN PGM T MM
+1 FUNCTION RESET TCPM
+2 TOOL CALL 99 Z S0
+3 L Z+378.0000 R0 FMAX
+4 L X+0.0000 Y+0.0000 A+0.0000 C+0.0000 R0 FMAX
+5 L C+30.0000 R0 F1000
+6 L X+60.0000 R0 F600
+7 CYCL DEF 9.0 DWELL TIME
+8 CYCL DEF 9.1 DWELL 2
+9 L X+60.0000 R0 FMAX
+10 L X-0.5000 R0 FMAX
+11 END PGM T MM
+"""
+
+
+def test_the_check_adds_the_programs_time_and_names_its_closest_approach():
+    """A hand-written program on the seed machine: from unknown places (no time), a turn of
+    30° at 1000 °/min (1.8 s), 60 mm at 600 mm/min (6 s), a 2 s dwell, a rapid that does not
+    move (0 s), then a rapid back to X−0.5 at X's feed_max. The closest approach is named by
+    its pair and line, and a finding's position is every axis's, mm and deg."""
+    from compgen.motion import run
+    m = load_machine(SEED_MACHINE)
+    ctl = controller("itnc530")
+    text = PROGRAM_TIMED
+    check = run(m, ctl.blocks(text, None), ctl.modulo_axes(m), ctl.angle_sense(m))
+    assert check.findings == () and check.blocks == 6
+    back = 60.5 / m.axis("X").feed_max * 60.0
+    assert check.seconds == pytest.approx(1.8 + 6.0 + 2.0 + back, abs=1e-9)
+    assert re.fullmatch(r"(housing|spindle) / (ball|stem|table), line (6|7|10|11)", check.closest_at), \
+        check.closest_at                                    # the lines of the file, counted from 1
+    # outside travel: the finding names the position of every axis, mm and deg
+    far = run(m, ctl.blocks(text.replace("X+60.0000 R0 F600", "X+999.0000 R0 F600"), None),
+              ctl.modulo_axes(m), ctl.angle_sense(m))
+    out = next(f for f in far.findings if f.rule == "outside travel")
+    assert out.line == 7 and out.depth_mm == 0.0
+    assert re.fullmatch(r"X\+\d+\.\d{3} Y\+0\.000 Z\+378\.000 A\+0\.000 C\+30\.000", out.axes), out.axes
+    assert float(out.axes.split()[0][1:]) > m.axis("X").travel[1]
+    assert out.text("T.H").startswith("T.H:7: outside travel: X reaches ")      # no depth: not a collision
+
+
+def test_address_words_are_read_once_each_and_a_feed_above_zero_is_a_feed():
+    from compgen.errors import CompgenError
+    from compgen.motion import words
+    assert words(["X+1.5", "A-90", "F0.5"], 3) == {"X": 1.5, "A": -90.0, "F": 0.5}
+    for bad in (["X+1", "X+2"], ["F0"], ["F-500"], ["Q7"]):
+        with pytest.raises(CompgenError, match="line 3: "):
+            words(bad, 3)
+    long = "X+1" + "0" * 100
+    with pytest.raises(CompgenError) as e:
+        words([long], 3)
+    assert f"{long[:60]}...'" in str(e.value) and long[:61] not in str(e.value)
+
+
+@pytest.mark.parametrize("how, now, value, end", [
+    ("+", 90.0, 90.0 - 1e-9, 90.0),        # where it is, to rounding: no turn either way
+    ("-", 90.0, 90.0 + 1e-9, 90.0),
+    ("short", 90.0, 450.0, 90.0),
+    ("+", 350.0, 10.0, 370.0),             # + turns up through 360
+    ("-", 10.0, 350.0, -10.0),             # - turns down through 0
+    ("-", 10.0, 20.0, -340.0),
+    ("short", 350.0, 10.0, 370.0),         # the shorter way: 20° up, not 340° down
+    ("short", 10.0, 200.0, -160.0),        # 190° ahead: 170° back
+    ("short", 10.0, 190.0, 190.0),         # exactly 180° ahead: ahead
+    ("+", np.nan, 400.0, 40.0),            # from an unknown place: to the value, modulo 360
+])
+def test_a_modulo_axis_turns_the_way_its_block_says(how, now, value, end):
+    from compgen.motion import Block, _turned
+    b = Block(4, "C", "move", turn={"C": how})
+    assert _turned(("C",), b, "C", value, now) == pytest.approx(end, abs=1e-6)
+    assert _turned((), Block(4, "C", "move"), "C", value, now) == value       # not modulo: as written
+
+
+def test_every_move_is_sampled_at_least_every_mm_and_half_degree_end_to_end():
+    """``_paths`` on moves in machine axes and under TCP: n + 1 samples, n the
+    larger of the millimetres and the half-degrees moved (rounded up), from start to end;
+    TCP moves in TCP coordinates, each converted to its own machine poses."""
+    from compgen.motion import _paths, _Segment, from_world
+    m = load_machine(SEED_MACHINE)
+    linear = [m.index(c) for c in "XYZ"]
+    rotary = [m.index(a.name) for a in m.rotary_axes]
+    b = motion.Block(1, "L", "move")
+    q0 = np.array([10.0, 20.0, 300.0, 0.0, 0.0])
+    q1 = q0 + [10.3, 0.0, 0.0, 0.0, np.radians(3.2)]            # 10.3 mm, 6.4 half-degrees: 11 steps
+    q2 = q1 + [0.0, 0.0, 0.0, np.radians(-7.3), 0.0]              # 14.6 half-degrees: 15 steps
+    w0 = np.array([5.0, -5.0, 250.0, 0.0, 0.0])
+    w1 = w0 + [2.0, 0.0, -1.0, np.radians(-4.2), np.radians(1.0)]   # 8.4 half-degrees: 9 steps
+    w2 = w1 + [0.0, 3.7, 0.0, 0.0, 0.0]                           # 3.7 mm: 4 steps
+    segs = [_Segment(b, False, q0, q1, False), _Segment(b, True, w0, w1, False),
+            _Segment(b, False, q1, q2, False), _Segment(b, True, w1, w2, False),
+            _Segment(b, False, q2, q2, False)]                       # no move: still one step
+    _paths(m, segs, linear, rotary)
+    for seg, n in zip(segs, (11, 9, 15, 4, 1), strict=True):
+        assert len(seg.path) == n + 1
+    np.testing.assert_allclose(segs[0].path, q0 + np.linspace(0, 1, 12)[:, None] * (q1 - q0), atol=1e-12)
+    np.testing.assert_allclose(segs[2].path[[0, -1]], [q1, q2], atol=1e-12)
+    for seg, (a, e) in ((segs[1], (w0, w1)), (segs[3], (w1, w2))):
+        tcp = a + np.linspace(0, 1, len(seg.path))[:, None] * (e - a)
+        np.testing.assert_allclose(seg.path, from_world(m, tcp[:, :3], tcp[:, 3:]), atol=1e-9)

@@ -208,3 +208,89 @@ def test_the_pose_list_says_from_which_side_the_program_reaches_every_pose(contr
     assert ran.shape == listed.shape == (len(poses), len(machine.rotary_axes))
     np.testing.assert_array_equal(ran, listed)
     assert {-1.0, 1.0} <= set(np.unique(listed[:, 0]))       # the there-and-back run shows both sides
+
+
+def _two_poses(machine, dx_mm, dc_deg):
+    """Two poses in machine axes: X moved by dx_mm and C turned by dc_deg between them."""
+    q = np.zeros((2, len(machine.axes)))
+    q[:, machine.index("Z")] = 200.0
+    q[1, machine.index("X")] = dx_mm
+    q[1, machine.index("C")] = np.radians(dc_deg)
+    return Poses(q, np.tile(machine.ball, (2, 1)), np.full(2, np.nan), np.array(["P", "P"]))
+
+
+def test_the_rotary_speed_at_the_programs_feed_is_checked_in_axes_mode(seed_machine):
+    """Axes mode: F (mm/min) runs along X Y Z and a turn rides on it. 10 mm at 500 mm/min
+    take 1.2 s, so 0.5° of C in them is 25 deg/min; with C's feed_max at 20 deg/min that is
+    refused, named, with the number; under TCPM a pose block only turns, at F deg/min."""
+    from dataclasses import replace
+
+    from compgen.emit.programs import _check_feed
+    from compgen.errors import CompgenError
+    slow = replace(seed_machine, workpiece=tuple(replace(a, feed_max=20.0) if a.name == "C" else a
+                                                 for a in seed_machine.workpiece))
+    with pytest.raises(CompgenError, match=r"^P: at feed 500 mm/min, C would turn at 25 deg/min between "
+                                           r"poses 1 and 2, above its feed_max 20"):
+        _check_feed(slow, _two_poses(slow, 10.0, 0.5), 500.0, "P", "axes")
+    _check_feed(slow, _two_poses(slow, 10.0, 0.3), 500.0, "P", "axes")          # 15 deg/min: fine
+    _check_feed(slow, _two_poses(slow, 10.0, 0.0), 500.0, "P", "axes")          # no turn
+    _check_feed(slow, _two_poses(slow, 0.0, 0.0), 500.0, "P", "axes")           # no move at all
+    with pytest.raises(CompgenError, match=r"deg/min where a TCPM pose block only turns\) exceeds C's"):
+        _check_feed(slow, _two_poses(slow, 10.0, 0.5), 500.0, "P", "tcpm")
+    _check_feed(slow, _two_poses(slow, 10.0, 0.5), 15.0, "P", "tcpm")
+
+
+@pytest.mark.parametrize("text, room, expected", [
+    ("a" * 24, 0, "A" * 24), ("7x-y", 0, "P7X_Y"), ("", 0, "RTEST"), ("a" * 19, 5, "A" * 19),
+    ("a" * 25, 0, None), ("a" * 20, 5, None)])
+def test_program_names_are_kept_whole_within_what_the_controls_keep(text, room, expected):
+    from compgen.emit.programs import program_name
+    from compgen.errors import CompgenError
+    if expected is None:
+        with pytest.raises(CompgenError, match=f"the control keeps {24 - room}"):
+            program_name(text, room)
+    else:
+        assert program_name(text, room) == expected
+
+
+@pytest.mark.parametrize("controller", CONTROLLERS)
+def test_a_path_of_one_pose_is_a_program(seed_machine, controller):
+    """A pose list whose paths hold one pose each (as the sign check's do)."""
+    poses = generate(seed_machine, ["K4"]).take(np.array([10]))
+    one = Poses(poses.q, poses.ball, poses.t, np.array(["ONE"]))
+    emitted = measure_program(seed_machine, one, "ONE", controller, "tcpm", "RT1", "0.1.0", DATE)
+    text = next(t for s, t in emitted.files.items() if s != ".poses.csv")
+    assert "---- ONE: poses 1 to 1" in text
+    assert emitted.files[".poses.csv"].count("\n") == 2
+
+
+def test_a_safe_height_above_z_travel_is_refused_before_anything_is_written(seed_machine):
+    """The set-up needs the nest 378 mm above the rotary axes to turn them; a Z travel that
+    ends at 350 mm cannot give it (the poses, 20 mm above them too, are within it)."""
+    from dataclasses import replace
+
+    from compgen.errors import CompgenError
+    short = replace(seed_machine, tool=tuple(replace(a, travel=(-300.0, 350.0)) if a.name == "Z" else a
+                                             for a in seed_machine.tool))
+    with pytest.raises(CompgenError, match=r"the safe height Z 378 above the rotary axes"):
+        measure_program(short, generate(short, ["K4"]), "K4", "itnc530", "tcpm", "RT", "0.1.0", DATE)
+
+
+def test_a_path_starting_at_the_end_of_travel_is_approached_from_inside(seed_machine):
+    """A path that starts at A's lower travel limit and turns A up: the approach cannot come
+    from 1° below, so it comes from 1° above, and the first pose's side is −1 (the second's
+    +1, reached going up). The program's approach block and the pose list say the same."""
+    from dataclasses import replace
+    m = replace(seed_machine, workpiece=tuple(replace(a, travel=(-90.0, 120.0)) if a.name == "A" else a
+                                              for a in seed_machine.workpiece))
+    a = np.radians(np.arange(-90.0, -79.0, 1.0))
+    q = np.zeros((len(a), len(m.axes)))
+    q[:, m.index("A")] = a
+    from compgen.kinematics import inverse
+    q = inverse(m, q[:, [m.index(x.name) for x in m.rotary_axes]], np.asarray(m.ball))
+    poses = Poses(q, np.tile(m.ball, (len(a), 1)), np.full(len(a), np.nan), np.array(["UP"] * len(a)))
+    emitted = measure_program(m, poses, "UP", "itnc530", "tcpm", "RT", "0.1.0", DATE)
+    rows = emitted.files[".poses.csv"].splitlines()
+    column = rows[0].split(",").index("A_side")
+    assert [r.split(",")[column] for r in rows[1:4]] == ["-1", "+1", "+1"]
+    assert re.search(r"L A-89\.0000 C-1\.0000 R0 FMAX ; approach from 1 deg before", emitted.files[".H"])

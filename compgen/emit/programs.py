@@ -53,7 +53,7 @@ def at_ball(machine: Machine, ball) -> Machine:
     checks a program: the datum, the safe height and the set-up's solids."""
     ball = tuple(float(v) for v in ball)
     check_ball(machine.setup, ball, "")
-    return machine if np.allclose(ball, machine.ball, rtol=0, atol=1e-6) else replace(machine, ball=ball)
+    return machine if ball == tuple(machine.ball) else replace(machine, ball=ball)
 
 
 def program_name(text: str, room: int = 0) -> str:
