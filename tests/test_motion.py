@@ -448,6 +448,12 @@ def test_the_check_adds_the_programs_time_and_names_its_closest_approach():
     assert re.fullmatch(r"X\+\d+\.\d{3} Y\+0\.000 Z\+378\.000 A\+0\.000 C\+30\.000", out.axes), out.axes
     assert float(out.axes.split()[0][1:]) > m.axis("X").travel[1]
     assert out.text("T.H").startswith("T.H:7: outside travel: X reaches ")      # no depth: not a collision
+    # a feed move at exactly X's feed_max is within it; 1 % above it is not
+    top = m.axis("X").feed_max
+    for feed, refused in ((top, False), (top * 1.01, True)):
+        fast = run(m, ctl.blocks(text.replace("X+60.0000 R0 F600", f"X+60.0000 R0 F{feed:g}"), None),
+                   ctl.modulo_axes(m), ctl.angle_sense(m))
+        assert any(f.rule == "feed above feed_max" for f in fast.findings) == refused, feed
 
 
 def test_address_words_are_read_once_each_and_a_feed_above_zero_is_a_feed():
@@ -508,3 +514,35 @@ def test_every_move_is_sampled_at_least_every_mm_and_half_degree_end_to_end():
     for seg, (a, e) in ((segs[1], (w0, w1)), (segs[3], (w1, w2))):
         tcp = a + np.linspace(0, 1, len(seg.path))[:, None] * (e - a)
         np.testing.assert_allclose(seg.path, from_world(m, tcp[:, :3], tcp[:, 3:]), atol=1e-9)
+
+
+def test_a_finding_says_how_deep_a_part_enters_and_only_then():
+    from compgen.motion import Finding
+    assert Finding(5, "housing enters the table", "L X+1", "X+1.000", 0.4).text("P.H") == \
+        "P.H:5: housing enters the table by 0.4 mm: L X+1 (at X+1.000)"
+    assert Finding(5, "outside travel", "X reaches 999", "X+999.000").text("P.H") == \
+        "P.H:5: outside travel: X reaches 999 (at X+999.000)"
+
+
+@pytest.mark.parametrize("length", [0.0, 0.3, 0.9, 12.0])
+def test_segment_distance_in_closed_form_for_parts_of_any_length(length):
+    """``_to_segment`` against a brute force for a part (a segment along random axes) of the
+    given length, to a point and to a segment, including parallel ones."""
+    from compgen.motion import _to_segment
+    rng = np.random.default_rng(int(length * 10))
+    n = 100
+    p0 = rng.uniform(-20, 20, (n, 3))
+    axis = rng.normal(size=(n, 3))
+    axis /= np.linalg.norm(axis, axis=1)[:, None]
+    axis[:10] = [0.0, 0.0, 1.0]                              # parallel to the segment below
+    p1 = p0 + length * axis
+    t = np.linspace(0, 1, 201)
+    on_p = p0[:, None, :] + t[None, :, None] * (p1 - p0)[:, None, :]
+    for q0, q1 in ((np.array([1.0, 2.0, 3.0]),) * 2, (np.array([0.0, 0.0, -5.0]), np.array([0.0, 0.0, 9.0]))):
+        on_q = q0 + t[:, None] * (q1 - q0)
+        brute = np.linalg.norm(on_p[:, :, None, :] - on_q[None, None, :, :], axis=3).min(axis=(1, 2))
+        got = _to_segment(p0, p1, q0, q1)
+        assert np.isfinite(got).all()
+        # the brute force samples each segment every 1/200 of it: within that of the least
+        np.testing.assert_allclose(got, brute, atol=(length + 14) / 200)
+        assert (got <= brute + 1e-12).all()
