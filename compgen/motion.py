@@ -78,6 +78,11 @@ class Check:
     closest_at: str
     findings: tuple[Finding, ...]
 
+    def first(self, where: str) -> str:
+        """The first finding's text, and how many more there are."""
+        more = len(self.findings) - 1
+        return self.findings[0].text(where) + (f" (and {more} more)" if more else "")
+
 
 WORD = re.compile(r"^([A-Z])([+-]?(?:\d{1,7}(?:\.\d{0,9})?|\.\d{1,9}))$", re.ASCII)
 SECONDS = re.compile(r"\d{1,5}(?:\.\d{0,6})?", re.ASCII)     # a dwell, as compgen writes it

@@ -17,7 +17,7 @@ import numpy as np
 
 from .errors import CompgenError
 from .files import MAX_DATA_BYTES, read_text
-from .kinematics import Poses, inverse, nominal
+from .kinematics import Poses, inverse, nominal, solved
 from .machine import IDENTIFIERS, Machine, check_ball, check_travel, identifier
 from .units import NUMBER
 
@@ -107,7 +107,8 @@ def read_poses(path: str | Path, machine: Machine) -> Poses:
             raise CompgenError(f"X, Y, Z are {off[bad[0]]:.3f} mm from where the nest meets the ball",
                                where=f"{table.where}:{table.lines[bad[0]]}",
                                hint="drop the X, Y, Z columns (compgen computes them) or fix the ball")
-    return Poses(q, ball, table.columns.get("t", np.full(len(q), np.nan)), table.labels, table.side(machine))
+    return solved(machine, Poses(q, ball, table.columns.get("t", np.full(len(q), np.nan)), table.labels,
+                                 table.side(machine)))
 
 
 @dataclass(frozen=True, eq=False)

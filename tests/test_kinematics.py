@@ -172,3 +172,22 @@ def test_runs_end_at_a_new_file_ball_or_label():
     assert runs(p).tolist() == [1, 1, 1, 2, 2, 2]                     # the time starts again
     moved = Poses(p.q, p.ball + np.array([[0, 0, 0]] * 3 + [[0, 0, 1]] * 3), np.arange(6.0), p.path)
     assert runs(moved).tolist() == [1, 1, 1, 2, 2, 2]
+
+
+def test_the_nominal_reading_at_poses_inverse_solved_is_zero_as_walked(seed_machine, tmp_path):
+    """read_poses marks its poses as inverse's solution (``solved``): their nominal reading
+    is taken as zero, not walked. Walking it anyway gives zero to rounding, at the seed
+    ball and elsewhere, with the table turned every way."""
+    from compgen.kinematics import nominal
+    from compgen.rtest import read_poses
+    m = seed_machine
+    rng = np.random.default_rng(4)
+    rows = "\n".join(f"P,{a:.4f},{c:.4f},{bx:.3f},{by:.3f},{bz:.3f}" for a, c, bx, by, bz in zip(
+        rng.uniform(-90, 90, 200), rng.uniform(-360, 360, 200), rng.uniform(-100, 100, 200),
+        rng.uniform(-100, 100, 200), rng.uniform(30, 200, 200), strict=True))
+    (tmp_path / "p.csv").write_text("path,A,C,bx,by,bz\n" + rows + "\n")
+    poses = read_poses(tmp_path / "p.csv", m)
+    assert not nominal(m, poses).any()                    # taken as zero
+    copy = Poses(poses.q, poses.ball, poses.t, poses.path)   # the same poses, not marked
+    walked = relative(m, copy, {})
+    assert np.abs(walked).max() < 1e-11                   # mm

@@ -546,3 +546,10 @@ def test_segment_distance_in_closed_form_for_parts_of_any_length(length):
         # the brute force samples each segment every 1/200 of it: within that of the least
         np.testing.assert_allclose(got, brute, atol=(length + 14) / 200)
         assert (got <= brute + 1e-12).all()
+
+
+def test_a_check_tells_its_first_finding_and_how_many_more():
+    from compgen.motion import Check, Finding
+    one = Finding(3, "outside travel", "X reaches 999", "X+999.000")
+    assert Check(1, 0.0, 1.0, "", (one,)).first("P.H") == one.text("P.H")
+    assert Check(1, 0.0, 1.0, "", (one, one, one)).first("P.H") == one.text("P.H") + " (and 2 more)"

@@ -136,10 +136,8 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
     result = motion.run(machine, ctl.blocks(text, "axes"), ctl.modulo_axes(machine), ctl.angle_sense(machine),
                         probe=setup)
     if result.findings:     # nothing unsafe leaves this function
-        more = f" (and {len(result.findings) - 1} more)" if len(result.findings) > 1 else ""
         raise CompgenError(f"the machine cannot probe {label} with the sphere at "
-                           f"{', '.join(f'{v:g}' for v in poses.ball[0])} mm: "
-                           f"{result.findings[0].text(name)}{more}",
+                           f"{', '.join(f'{v:g}' for v in poses.ball[0])} mm: {result.first(name)}",
                            hint="move the sphere, change [probe] (elevation, approach, stylus_length) or "
                                 "choose another path")
     return Emitted(files)

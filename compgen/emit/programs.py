@@ -151,10 +151,8 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
                   steps=steps, rotary=[a.name for a in machine.rotary_axes])
     result = motion.run(machine, ctl.blocks(text, mode), ctl.modulo_axes(machine), ctl.angle_sense(machine))
     if result.findings:     # compgen's own safety net: nothing unsafe leaves this function
-        more = f" (and {len(result.findings) - 1} more)" if len(result.findings) > 1 else ""
         at = ", ".join(f"{v:g}" for v in ball)
-        raise CompgenError(f"the machine cannot run {label} with the ball at {at} mm: "
-                           f"{result.findings[0].text(name)}{more}",
+        raise CompgenError(f"the machine cannot run {label} with the ball at {at} mm: {result.first(name)}",
                            hint="put the ball higher on its stem or nearer the rotary axes, or choose "
                                 "another path; the set-up's solids are the machine file's [rtest]")
     return Emitted({ctl.program_ext: text, ".poses.csv": pose_list(machine, poses)})
