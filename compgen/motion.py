@@ -34,7 +34,6 @@ from .transforms import apply
 
 STEP_MM, STEP_DEG = 1.0, 0.5
 SEARCH_MM = 0.01         # the closest point along housing and spindle axes, found to this
-ON_BALL_MM = 1e-3        # the nest centre this close to the ball's: a measuring pose
 TOUCH_MM = 1e-3          # a probing stylus tip this far into the sphere: rounding, not a crash
 
 

@@ -294,3 +294,19 @@ def test_a_path_starting_at_the_end_of_travel_is_approached_from_inside(seed_mac
     column = rows[0].split(",").index("A_side")
     assert [r.split(",")[column] for r in rows[1:4]] == ["-1", "+1", "+1"]
     assert re.search(r"L A-89\.0000 C-1\.0000 R0 FMAX ; approach from 1 deg before", emitted.files[".H"])
+
+
+@pytest.mark.parametrize("controller", CONTROLLERS)
+def test_a_path_run_again_later_is_run_where_the_pose_list_has_it(seed_machine, controller):
+    """K4, K1 and K4 again: the program takes the poses in the pose list's order (the
+    R-test's readings come in it), three segments, each with its own approach; before, the
+    two runs of K4 were joined into one segment ahead of K1."""
+    poses = generate(seed_machine, ["K4", "K1", "K4"])
+    emitted = measure_program(seed_machine, poses, "K4+K1+K4", controller, "tcpm", "RT", "0.1.0", DATE)
+    text = emitted.files[CONTROLLERS[controller].program_ext]
+    assert len(re.findall(r"---- K4: poses", text)) == 2 and "---- K1: poses 242 to 602" in text
+    _, _, rot = read_program(text, seed_machine, controller)
+    np.testing.assert_allclose(rot, np.degrees(poses.q[:, [3, 4]]), atol=FORMAT_DEG)
+    ran = _sides_as_run(seed_machine, controller, text, "tcpm")
+    listed = np.loadtxt(StringIO(emitted.files[".poses.csv"]), delimiter=",", skiprows=1, usecols=(9, 10))
+    np.testing.assert_array_equal(ran, listed)

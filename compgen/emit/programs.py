@@ -95,13 +95,11 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     # or a 300 mm lever would put the nest up to 0.3 µm off the ball
     angles = np.radians(np.round(np.degrees(poses.q[:, rotary]), ANGLE_DECIMALS))
     q = inverse(machine, angles, poses.ball)
-    # the program runs each path label's poses as one segment, in their order
-    segments = [np.flatnonzero(poses.path == p) for p in dict.fromkeys(poses.path)]
-    order = np.concatenate(segments)
-    side = np.empty_like(q)
+    # the program runs the poses in the pose list's order (the R-test's readings come in it),
+    # one segment, with its own approach and retract, per run of one path label
+    segments = np.split(np.arange(len(poses)), np.flatnonzero(poses.path[1:] != poses.path[:-1]) + 1)
     run = np.repeat(np.arange(len(segments)), list(map(len, segments)))
-    side[order] = program_sides(machine, q[order], run)
-    poses = Poses(q, poses.ball, poses.t, poses.path, side)
+    poses = Poses(q, poses.ball, poses.t, poses.path, program_sides(machine, q, run))
     lift = np.zeros(len(machine.axes))
     lift[linear[2]] = setup.clearance
     check_travel(machine, poses.q, label)
