@@ -389,10 +389,10 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
             travel_mm = float(np.linalg.norm(seg.end[:3] - seg.start[:3]))
         else:
             travel_mm = float(np.linalg.norm(delta[linear]))
-        turn_deg = float(np.degrees(np.abs(delta[rotary])).max()) if rotary else 0.0
+        turn_deg = float(np.degrees(np.abs(delta[rotary])).max())      # a machine has a rotary axis
         seconds += _seconds(machine, b, path, per_axis, top_step, travel_mm, turn_deg, findings)
-        if out:
-            _check_travel(machine, b, path, findings)
+        if out.any():
+            _check_travel(machine, b, path, out, findings)
         # an axis whose start is unknown (the program's first moves) is safe only where
         # nothing can be touched: at the safe height
         if seg.blind or np.isnan(path).any():
@@ -536,12 +536,12 @@ def _axes_text(machine: Machine, q: np.ndarray) -> str:
                     for a, v in zip(machine.axes, q, strict=True))
 
 
-def _per_segment(machine: Machine, segments: list[_Segment]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _per_segment(machine: Machine, segments: list[_Segment]) -> tuple[np.ndarray, np.ndarray, list]:
     """For every move at once (mm and deg): each axis's distance moved and its largest step
-    between samples, and whether an axis leaves its travel."""
+    between samples, and per move, which of its samples leave which axis's travel."""
     k = len(machine.axes)
     if not segments:
-        return np.zeros((0, k)), np.zeros((0, k)), np.zeros(0, bool)
+        return np.zeros((0, k)), np.zeros((0, k)), []
     scale = np.array([180 / np.pi if a.rotary else 1.0 for a in machine.axes])
     paths = np.concatenate([seg.path for seg in segments]) * scale
     starts = np.cumsum([0] + [len(seg.path) for seg in segments[:-1]])
@@ -550,8 +550,8 @@ def _per_segment(machine: Machine, segments: list[_Segment]) -> tuple[np.ndarray
     # every path has two samples or more (``_samples``): each move owns one step or more
     moved, fastest = np.add.reduceat(step, starts, axis=0), np.maximum.reduceat(step, starts, axis=0)
     lo, hi = np.array([a.travel for a in machine.axes]).T
-    bad = ((paths < lo - 1e-9) | (paths > hi + 1e-9)).any(axis=1)
-    return moved, fastest, np.logical_or.reduceat(bad, starts)
+    bad = (paths < lo - 1e-9) | (paths > hi + 1e-9)      # a limit itself, to rounding, is in travel
+    return moved, fastest, np.split(bad, starts[1:])
 
 
 def _seconds(machine: Machine, b: Block, path: np.ndarray, per_axis: np.ndarray, top_step: np.ndarray,
@@ -576,16 +576,14 @@ def _seconds(machine: Machine, b: Block, path: np.ndarray, per_axis: np.ndarray,
     return float(minutes * 60.0)
 
 
-def _check_travel(machine: Machine, b: Block, path: np.ndarray, findings: list) -> None:
-    for i, a in enumerate(machine.axes):
-        v = np.degrees(path[:, i]) if a.rotary else path[:, i]
-        lo, hi = a.travel
-        bad = np.flatnonzero((v < lo - 1e-9) | (v > hi + 1e-9))
-        if bad.size:
-            j = bad[0]
-            findings.append(Finding(b.line, "outside travel", f"{a.name} reaches {v[j]:.3f}, travel "
-                                    f"{lo:g}..{hi:g}", _axes_text(machine, path[j])))
-            return
+def _check_travel(machine: Machine, b: Block, path: np.ndarray, out: np.ndarray, findings: list) -> None:
+    """The first axis that leaves its travel in a move (``out``: per sample and axis)."""
+    i = int(np.flatnonzero(out.any(axis=0))[0])
+    j = int(np.flatnonzero(out[:, i])[0])
+    a = machine.axes[i]
+    v = np.degrees(path[j, i]) if a.rotary else path[j, i]
+    findings.append(Finding(b.line, "outside travel", f"{a.name} reaches {v:.3f}, travel "
+                            f"{a.travel[0]:g}..{a.travel[1]:g}", _axes_text(machine, path[j])))
 
 
 def _check_collisions(machine: Machine, segments: list[_Segment], findings: list,

@@ -448,12 +448,29 @@ def test_the_check_adds_the_programs_time_and_names_its_closest_approach():
     assert re.fullmatch(r"X\+\d+\.\d{3} Y\+0\.000 Z\+378\.000 A\+0\.000 C\+30\.000", out.axes), out.axes
     assert float(out.axes.split()[0][1:]) > m.axis("X").travel[1]
     assert out.text("T.H").startswith("T.H:7: outside travel: X reaches ")      # no depth: not a collision
-    # a feed move at exactly X's feed_max is within it; 1 % above it is not
+    # a feed move at exactly X's feed_max is within it; 1 % above it is not, and the finding
+    # stands at the move's end
     top = m.axis("X").feed_max
     for feed, refused in ((top, False), (top * 1.01, True)):
         fast = run(m, ctl.blocks(text.replace("X+60.0000 R0 F600", f"X+60.0000 R0 F{feed:g}"), None),
                    ctl.modulo_axes(m), ctl.angle_sense(m))
-        assert any(f.rule == "feed above feed_max" for f in fast.findings) == refused, feed
+        over = [f for f in fast.findings if f.rule == "feed above feed_max"]
+        assert len(over) == refused, feed
+        assert not over or over[0].axes == "X+60.000 Y+0.000 Z+378.000 A+0.000 C+30.000"
+    # A to the end of its travel, exactly, is within it
+    end = run(m, ctl.blocks(text.replace("5 L C+30.0000 R0 F1000", f"5 L A{m.axis('A').travel[0]:+.4f} C+30.0000 "
+                                         "R0 F1000"), None), ctl.modulo_axes(m), ctl.angle_sense(m))
+    assert not any(f.rule == "outside travel" for f in end.findings), end.findings
+    # a feed block that goes nowhere takes no time
+    still = run(m, ctl.blocks(text.replace("9 L X+60.0000 R0 FMAX", "9 L X+60.0000 R0 F600"), None),
+                ctl.modulo_axes(m), ctl.angle_sense(m))
+    assert still.seconds == pytest.approx(check.seconds, abs=1e-9)
+    # X 1.5 times its feed_max and C twice its own in one move: the finding names C, the
+    # axis furthest over its limit
+    both = run(m, ctl.blocks(text.replace("X+60.0000 R0 F600", "X+100.0000 C+102.0000 R0 F30000"), None),
+               ctl.modulo_axes(m), ctl.angle_sense(m))
+    over = [f for f in both.findings if f.rule == "feed above feed_max"]
+    assert len(over) == 1 and over[0].detail.startswith("C would move at 21600 deg/min"), over
 
 
 def test_address_words_are_read_once_each_and_a_feed_above_zero_is_a_feed():

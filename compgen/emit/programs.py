@@ -201,7 +201,7 @@ def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool
         """At the safe height: turn the rotary axes to ``target``'s, the nest kept in place."""
         q = state["q"]
         delta = np.degrees(np.abs(target[rotary] - q[rotary])).max()
-        n = max(1, int(np.ceil(delta / TURN_STEP_DEG))) if tcp_always else 1
+        n = int(np.ceil(delta / TURN_STEP_DEG)) if tcp_always else 1     # 0: already there
         for k in range(1, n + 1):
             step = q.copy()
             step[rotary] = q[rotary] + (target[rotary] - q[rotary]) * k / n
