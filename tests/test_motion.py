@@ -458,8 +458,9 @@ def test_the_check_adds_the_programs_time_and_names_its_closest_approach():
         assert len(over) == refused, feed
         assert not over or over[0].axes == "X+60.000 Y+0.000 Z+378.000 A+0.000 C+30.000"
     # A to the end of its travel, exactly, is within it
-    end = run(m, ctl.blocks(text.replace("5 L C+30.0000 R0 F1000", f"5 L A{m.axis('A').travel[0]:+.4f} C+30.0000 "
-                                         "R0 F1000"), None), ctl.modulo_axes(m), ctl.angle_sense(m))
+    to_end = f"5 L A{m.axis('A').travel[0]:+.4f} C+30.0000 R0 F1000"
+    end = run(m, ctl.blocks(text.replace("5 L C+30.0000 R0 F1000", to_end), None), ctl.modulo_axes(m),
+              ctl.angle_sense(m))
     assert not any(f.rule == "outside travel" for f in end.findings), end.findings
     # a feed block that goes nowhere takes no time
     still = run(m, ctl.blocks(text.replace("9 L X+60.0000 R0 FMAX", "9 L X+60.0000 R0 F600"), None),
