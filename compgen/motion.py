@@ -602,9 +602,8 @@ def _check_collisions(machine: Machine, segments: list[_Segment], findings: list
         margin = np.full(len(c), parts[pair.split(" / ")[0]][3])
         if probe is None and pair in ("housing / ball", "housing / stem"):
             c = np.where(measuring, np.inf, c)
-        if pair == "stylus tip / ball":
-            margin = np.where(probing, -TOUCH_MM, margin)
-            c = np.where(probing & (c >= -TOUCH_MM), np.inf, c) if probing.any() else c
+        if pair == "stylus tip / ball":       # probing, the tip touches: only entering counts
+            c = np.where(probing & (c >= -TOUCH_MM), np.inf, c)
         j = int(np.argmin(c))
         if c[j] < closest[0]:
             closest = (float(c[j]), f"{pair}, line {segments[owner[j]].block.line}")
