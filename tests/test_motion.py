@@ -571,3 +571,24 @@ def test_a_check_tells_its_first_finding_and_how_many_more():
     one = Finding(3, "outside travel", "X reaches 999", "X+999.000")
     assert Check(1, 0.0, 1.0, "", (one,)).first("P.H") == one.text("P.H")
     assert Check(1, 0.0, 1.0, "", (one, one, one)).first("P.H") == one.text("P.H") + " (and 2 more)"
+
+
+def test_a_part_near_a_solid_is_within_the_margin_not_inside_it():
+    """The nest lowered over the table's centre until its housing is 0.5 mm above the face:
+    a finding "within 0.5 mm of the table (margin …)", no depth; 0.5 mm lower it enters.
+    (The moves after it stay down there: their findings are not this test's.)"""
+    from compgen.motion import clearances, run
+    m = load_machine(SEED_MACHINE)
+    ctl = controller("itnc530")
+    q = np.zeros((1, len(m.axes)))
+    q[0, m.index("Z")] = 100.0
+    gap = clearances(m, q)[0]["housing / table"][0]
+    for above, expected in ((0.5, "housing within 0.5 mm of the table (margin 5 mm)"),
+                            (-0.5, "housing enters the table")):
+        z = 100.0 - gap + above
+        text = PROGRAM_TIMED.replace("6 L X+60.0000 R0 F600", f"6 L Z{z:+.4f} R0 F600")
+        found = [f for f in run(m, ctl.blocks(text, None), ctl.modulo_axes(m), ctl.angle_sense(m)).findings
+                 if "table" in f.rule and f.line == 7]         # the block that goes down
+        assert [f.rule for f in found] == [expected]
+        assert found[0].depth_mm == pytest.approx(max(-above, 0.0), abs=0.02)
+        assert (" by " in found[0].text("T.H")) == (above < 0)
