@@ -307,8 +307,8 @@ def _check_feed(machine: Machine, poses: Poses, feed: float, label: str, mode: s
     seconds = np.linalg.norm(np.diff(poses.q[:, linear], axis=0), axis=1) / feed * 60.0
     for a in machine.rotary_axes:
         turn = np.abs(np.diff(np.degrees(poses.q[:, machine.index(a.name)])))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            speed = np.where(turn > 0, turn / seconds * 60.0, 0.0)
+        with np.errstate(divide="ignore"):       # a turn with no X Y Z move: at once
+            speed = np.divide(turn * 60.0, seconds, out=np.zeros_like(turn), where=turn > 0)
         if speed.size and speed.max() > a.feed_max:
             i = int(speed.argmax())
             raise CompgenError(f"{label}: at feed {feed:g} mm/min, {a.name} would turn at "
