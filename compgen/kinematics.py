@@ -275,17 +275,22 @@ def same_pose(machine: Machine, poses: Poses, run: np.ndarray) -> np.ndarray:
     run has reached yet repeats only poses of its own run."""
     scale = np.array([180.0 / np.pi if a.rotary else 1.0 for a in machine.axes])
     side = poses.side.copy()
-    starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+    n = np.arange(len(poses))
+    start = np.maximum.accumulate(np.where(np.r_[True, run[1:] != run[:-1]], n, 0))   # each run's first
     for j in range(len(machine.axes)):
         unknown = np.isnan(side[:, j])
         if not unknown.any():
             continue
-        reached = np.empty(len(poses))
-        for a, b in zip(starts, [*starts[1:], len(poses)], strict=True):
-            reached[a:b] = _last_moves(np.sign(np.diff(poses.q[a:b, j])), np.nan)
-        side[:, j] = np.where(unknown, np.where(np.isnan(reached), 2.0 + run, reached), side[:, j])
+        step = np.r_[0.0, np.sign(np.diff(poses.q[:, j]))]
+        step[start == n] = 0.0                        # no move of its run reaches a run's first pose
+        last = np.maximum.accumulate(np.where(step != 0, n, -1))          # the last move up to here
+        reached = np.where(last >= start, step[np.maximum(last, 0)], 2.0 + run)
+        side[:, j] = np.where(unknown, reached, side[:, j])
     key = np.column_stack([np.round(poses.q * scale * 1e6), np.round(poses.ball * 1e6), side])
-    return np.unique(key, axis=0, return_inverse=True)[1].ravel()
+    key = np.ascontiguousarray(key.astype(np.int64))
+    # each row as one opaque value: unique of a 1-D array is a third of unique over rows
+    rows = key.view(np.dtype((np.void, key.dtype.itemsize * key.shape[1]))).ravel()
+    return np.unique(rows, return_inverse=True)[1].ravel()
 
 
 def program_sides(machine: Machine, q: np.ndarray, run: np.ndarray) -> np.ndarray:
