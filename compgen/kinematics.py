@@ -35,6 +35,9 @@ from .transforms import UNIT, apply, rodrigues, rot_axis, rot_exact, trans
 SLOT_INDEX = {d: i for i, d in enumerate(TRANSLATIONS + ROTATIONS)}
 
 
+FIELDS = ("q", "ball", "t", "path", "side")     # Poses' arrays, one row per pose
+
+
 @dataclass(frozen=True, eq=False)
 class Poses:
     """Commanded poses of one or more R-test sessions.
@@ -56,7 +59,7 @@ class Poses:
     def __post_init__(self):
         if self.side is None:
             object.__setattr__(self, "side", np.full(np.shape(self.q), np.nan))
-        for field in ("q", "ball", "t", "path", "side"):
+        for field in FIELDS:
             a = np.array(getattr(self, field))   # a copy: freezing must not touch the caller's
             a.setflags(write=False)
             object.__setattr__(self, field, a)
@@ -69,7 +72,7 @@ class Poses:
         # array; neither needs the copy the constructor makes of a caller's arrays (copying
         # the path labels was a tenth of predict's time at a million poses)
         out = object.__new__(Poses)
-        for field in ("q", "ball", "t", "path", "side"):
+        for field in FIELDS:
             a = getattr(self, field)[index]
             a.setflags(write=False)
             object.__setattr__(out, field, a)
@@ -86,8 +89,7 @@ class Poses:
     def concat(items: Sequence[Poses]) -> Poses:
         if len(items) == 1:      # the same poses: what is known of them (their nominal) holds
             return items[0]
-        return Poses(*(np.concatenate([getattr(p, f) for p in items])
-                       for f in ("q", "ball", "t", "path", "side")))
+        return Poses(*(np.concatenate([getattr(p, f) for p in items]) for f in FIELDS))
 
 
 class Model:
@@ -275,17 +277,15 @@ def same_pose(machine: Machine, poses: Poses, run: np.ndarray) -> np.ndarray:
     run has reached yet repeats only poses of its own run."""
     scale = np.array([180.0 / np.pi if a.rotary else 1.0 for a in machine.axes])
     side = poses.side.copy()
-    n = np.arange(len(poses))
-    start = np.maximum.accumulate(np.where(np.r_[True, run[1:] != run[:-1]], n, 0))   # each run's first
+    starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
     for j in range(len(machine.axes)):
         unknown = np.isnan(side[:, j])
         if not unknown.any():
             continue
-        step = np.r_[0.0, np.sign(np.diff(poses.q[:, j]))]
-        step[start == n] = 0.0                        # no move of its run reaches a run's first pose
-        last = np.maximum.accumulate(np.where(step != 0, n, -1))          # the last move up to here
-        reached = np.where(last >= start, step[np.maximum(last, 0)], 2.0 + run)
-        side[:, j] = np.where(unknown, reached, side[:, j])
+        reached = np.empty(len(poses))
+        for a, b in zip(starts, [*starts[1:], len(poses)], strict=True):
+            reached[a:b] = _last_moves(np.sign(np.diff(poses.q[a:b, j])), np.nan)
+        side[:, j] = np.where(unknown, np.where(np.isnan(reached), 2.0 + run, reached), side[:, j])
     key = np.column_stack([np.round(poses.q * scale * 1e6), np.round(poses.ball * 1e6), side])
     key = np.ascontiguousarray(key.astype(np.int64))
     # each row as one opaque value: unique of a 1-D array is a third of unique over rows
