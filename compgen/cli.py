@@ -451,8 +451,6 @@ def probe_program_cmd(machine_file, path_names, ball, controller_name, output, f
 @click.option("--json", "as_json", is_flag=True, help="Print the check as JSON.")
 def check_program_cmd(machine_file, program, controller_name, ball, mode, as_json):
     """Simulate PROGRAM block by block against the R-test set-up, travel and feeds."""
-    from .motion import run
-
     machine = load_machine(machine_file)
     ctl = controller(controller_name) if controller_name else for_program(Path(program).suffix, machine)
     if mode is not None and ctl.tcp_switchable:
@@ -467,8 +465,7 @@ def check_program_cmd(machine_file, program, controller_name, ball, mode, as_jso
     probing = any(b.probe for b in blocks)     # a probing program: the probe and its sphere
     if probing:
         machine = with_sphere(machine)
-    result = run(at_ball(machine, at), blocks, ctl.modulo_axes(machine), ctl.angle_sense(machine),
-                 probe=machine.probe if probing else None)
+    result = ctl.check(at_ball(machine, at), blocks, probe=machine.probe if probing else None)
     if as_json:
         click.echo(json.dumps({
             "format": "compgen.check/1", "program": program, "controller": ctl.name,

@@ -430,19 +430,17 @@ def test_the_check_adds_the_programs_time_and_names_its_closest_approach():
     30° at 1000 °/min (1.8 s), 60 mm at 600 mm/min (6 s), a 2 s dwell, a rapid that does not
     move (0 s), then a rapid back to X−0.5 at X's feed_max. The closest approach is named by
     its pair and line, and a finding's position is every axis's, mm and deg."""
-    from compgen.motion import run
     m = load_machine(SEED_MACHINE)
     ctl = controller("itnc530")
     text = PROGRAM_TIMED
-    check = run(m, ctl.blocks(text, None), ctl.modulo_axes(m), ctl.angle_sense(m))
+    check = ctl.check(m, ctl.blocks(text, None))
     assert check.findings == () and check.blocks == 6
     back = 60.5 / m.axis("X").feed_max * 60.0
     assert check.seconds == pytest.approx(1.8 + 6.0 + 2.0 + back, abs=1e-9)
     assert re.fullmatch(r"(housing|spindle) / (ball|stem|table), line (6|7|10|11)", check.closest_at), \
         check.closest_at                                    # the lines of the file, counted from 1
     # outside travel: the finding names the position of every axis, mm and deg
-    far = run(m, ctl.blocks(text.replace("X+60.0000 R0 F600", "X+999.0000 R0 F600"), None),
-              ctl.modulo_axes(m), ctl.angle_sense(m))
+    far = ctl.check(m, ctl.blocks(text.replace("X+60.0000 R0 F600", "X+999.0000 R0 F600"), None))
     out = next(f for f in far.findings if f.rule == "outside travel")
     assert out.line == 7 and out.depth_mm == 0.0
     assert re.fullmatch(r"X\+\d+\.\d{3} Y\+0\.000 Z\+378\.000 A\+0\.000 C\+30\.000", out.axes), out.axes
@@ -452,24 +450,21 @@ def test_the_check_adds_the_programs_time_and_names_its_closest_approach():
     # stands at the move's end
     top = m.axis("X").feed_max
     for feed, refused in ((top, False), (top * 1.01, True)):
-        fast = run(m, ctl.blocks(text.replace("X+60.0000 R0 F600", f"X+60.0000 R0 F{feed:g}"), None),
-                   ctl.modulo_axes(m), ctl.angle_sense(m))
+        fast = ctl.check(m, ctl.blocks(text.replace("X+60.0000 R0 F600", f"X+60.0000 R0 F{feed:g}"), None))
         over = [f for f in fast.findings if f.rule == "feed above feed_max"]
         assert len(over) == refused, feed
         assert not over or over[0].axes == "X+60.000 Y+0.000 Z+378.000 A+0.000 C+30.000"
     # A to the end of its travel, exactly, is within it
     to_end = f"5 L A{m.axis('A').travel[0]:+.4f} C+30.0000 R0 F1000"
-    end = run(m, ctl.blocks(text.replace("5 L C+30.0000 R0 F1000", to_end), None), ctl.modulo_axes(m),
-              ctl.angle_sense(m))
+    end = ctl.check(m, ctl.blocks(text.replace("5 L C+30.0000 R0 F1000", to_end), None))
     assert not any(f.rule == "outside travel" for f in end.findings), end.findings
     # a feed block that goes nowhere takes no time
-    still = run(m, ctl.blocks(text.replace("9 L X+60.0000 R0 FMAX", "9 L X+60.0000 R0 F600"), None),
-                ctl.modulo_axes(m), ctl.angle_sense(m))
+    still = ctl.check(m, ctl.blocks(text.replace("9 L X+60.0000 R0 FMAX", "9 L X+60.0000 R0 F600"), None))
     assert still.seconds == pytest.approx(check.seconds, abs=1e-9)
     # X 1.5 times its feed_max and C twice its own in one move: the finding names C, the
     # axis furthest over its limit
-    both = run(m, ctl.blocks(text.replace("X+60.0000 R0 F600", "X+100.0000 C+102.0000 R0 F30000"), None),
-               ctl.modulo_axes(m), ctl.angle_sense(m))
+    fast_both = text.replace("X+60.0000 R0 F600", "X+100.0000 C+102.0000 R0 F30000")
+    both = ctl.check(m, ctl.blocks(fast_both, None))
     over = [f for f in both.findings if f.rule == "feed above feed_max"]
     assert len(over) == 1 and over[0].detail.startswith("C would move at 21600 deg/min"), over
 
@@ -577,7 +572,7 @@ def test_a_part_near_a_solid_is_within_the_margin_not_inside_it():
     """The nest lowered over the table's centre until its housing is 0.5 mm above the face:
     a finding "within 0.5 mm of the table (margin …)", no depth; 0.5 mm lower it enters.
     (The moves after it stay down there: their findings are not this test's.)"""
-    from compgen.motion import clearances, run
+    from compgen.motion import clearances
     m = load_machine(SEED_MACHINE)
     ctl = controller("itnc530")
     q = np.zeros((1, len(m.axes)))
@@ -587,7 +582,7 @@ def test_a_part_near_a_solid_is_within_the_margin_not_inside_it():
                             (-0.5, "housing enters the table")):
         z = 100.0 - gap + above
         text = PROGRAM_TIMED.replace("6 L X+60.0000 R0 F600", f"6 L Z{z:+.4f} R0 F600")
-        found = [f for f in run(m, ctl.blocks(text, None), ctl.modulo_axes(m), ctl.angle_sense(m)).findings
+        found = [f for f in ctl.check(m, ctl.blocks(text, None)).findings
                  if "table" in f.rule and f.line == 7]         # the block that goes down
         assert [f.rule for f in found] == [expected]
         assert found[0].depth_mm == pytest.approx(max(-above, 0.0), abs=0.02)

@@ -13,8 +13,8 @@ import numpy as np
 
 from ..correction import CompTable, Held, Plan, comp_tables, squareness_tables
 from ..lines import AxisLine
-from ..machine import Machine
-from ..motion import Block
+from ..machine import Machine, ProbeSetup
+from ..motion import Block, Check, run
 from . import fmt_plain
 
 # A control's state read from several files is one text, each file after this line (LinuxCNC's
@@ -110,6 +110,11 @@ class Controller:
         ``mode`` (tcpm, axes): where the configuration, not the program, decides whether
         TCP is active (``tcp_switchable`` False), the mode it runs under."""
         raise NotImplementedError
+
+    def check(self, machine: Machine, blocks: list[Block], probe: ProbeSetup | None = None) -> Check:
+        """The motion check of ``blocks`` (``self.blocks``) as this control runs them: with
+        its modulo rule and its sense of the rotary axes (``motion.run``)."""
+        return run(machine, blocks, self.modulo_axes(machine), self.angle_sense(machine), probe=probe)
 
     def check_setup(self, machine: Machine) -> None:
         """Refuse a [program] set-up this control cannot run (e.g. a tool it cannot call)."""

@@ -7,8 +7,8 @@ centre, probes radially inwards to ``overtravel`` beyond it, logs the tip centre
 control latched, and goes back the way it came; between touches the stylus rises to the
 height of the first (from above), so it never crosses the sphere. Positions are machine
 axes from compgen's inverse kinematics (no TCP): the log's X, Y, Z are then the frame the
-log's contract names. The program is run through ``motion.run`` with the probe in the
-set-up before it is returned.
+log's contract names. The program is run through the motion check (``Controller.check``)
+with the probe in the set-up before it is returned.
 
 Per control, what writes the log: LinuxCNC ``G38.2`` with ``(LOGOPEN,…)``/``(LOG,…)`` and
 the probe result parameters #5061–#5063 (LinuxCNC's ``interp_parameter_def.hh``: "5061-5069
@@ -23,7 +23,6 @@ from dataclasses import replace
 
 import numpy as np
 
-from .. import motion
 from ..errors import CompgenError
 from ..kinematics import Poses, inverse
 from ..machine import Machine, check_travel
@@ -133,8 +132,7 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
         files["_HEAD.A"] = render("heidenhain/probe.A.j2", head=log_head)
         for path in count:
             files[f"_{path}.A"] = render("heidenhain/probe.A.j2", path=path, rotary=names, head=None)
-    result = motion.run(machine, ctl.blocks(text, "axes"), ctl.modulo_axes(machine), ctl.angle_sense(machine),
-                        probe=setup)
+    result = ctl.check(machine, ctl.blocks(text, "axes"), probe=setup)
     if result.findings:     # nothing unsafe leaves this function
         raise CompgenError(f"the machine cannot probe {label} with the sphere at "
                            f"{', '.join(f'{v:g}' for v in poses.ball[0])} mm: {result.first(name)}",

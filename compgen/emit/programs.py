@@ -147,7 +147,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
                   tool=setup.tool, feed=f"{setup.feed:g}", dwell=f"{setup.dwell:g}" if setup.dwell else "",
                   work_offset=setup.work_offset, max_step=f"{machine.limits.max_step_deg:g}",
                   steps=steps, rotary=[a.name for a in machine.rotary_axes])
-    result = motion.run(machine, ctl.blocks(text, mode), ctl.modulo_axes(machine), ctl.angle_sense(machine))
+    result = ctl.check(machine, ctl.blocks(text, mode))
     if result.findings:     # compgen's own safety net: nothing unsafe leaves this function
         at = ", ".join(f"{v:g}" for v in ball)
         raise CompgenError(f"the machine cannot run {label} with the ball at {at} mm: {result.first(name)}",
