@@ -35,6 +35,8 @@ from .transforms import apply
 STEP_MM, STEP_DEG = 1.0, 0.5
 SEARCH_MM = 0.01         # the closest point along housing and spindle axes, found to this
 TOUCH_MM = 1e-3          # a probing stylus tip this far into the sphere: rounding, not a crash
+ONLY_TURNS_MM = 1e-9     # X Y Z travel at or below this (rounding): the block only turns
+OVER_FEED = 1 + 1e-9     # a speed this much over feed_max is rounding of the feed, not over it
 
 
 @dataclass(frozen=True)
@@ -554,19 +556,25 @@ def _per_segment(machine: Machine, segments: list[_Segment]) -> tuple[np.ndarray
     return moved, fastest, np.split(bad, starts[1:])
 
 
+def feed_minutes(travel_mm, turn_deg, feed: float):
+    """Minutes a fed move takes at F: along the nest's path in its active frame (mm), or,
+    where the block only turns, F as deg/min on the axis turning furthest (``turn_deg``):
+    LinuxCNC's meaning and, unconfirmed (U9), the others'. Elementwise over arrays: the
+    motion check and measure-program's feed check judge a block by this one rule."""
+    return np.where(np.asarray(travel_mm) > ONLY_TURNS_MM, travel_mm, turn_deg) / feed
+
+
 def _seconds(machine: Machine, b: Block, path: np.ndarray, per_axis: np.ndarray, top_step: np.ndarray,
              travel_mm: float, turn_deg: float, findings: list) -> float:
     """Time of a move, and a finding where an axis would exceed its feed_max."""
     limits = np.array([a.feed_max for a in machine.axes])
     if b.rapid or b.feed is None:
         return float((per_axis / limits).max() * 60.0) if per_axis.any() else 0.0
-    # the control's feed: along the nest's path in its active frame; a block that only
-    # turns takes F as deg/min (LinuxCNC's and, unconfirmed U9, the others' meaning)
-    minutes = (travel_mm if travel_mm > 1e-9 else turn_deg) / b.feed
+    minutes = float(feed_minutes(travel_mm, turn_deg, b.feed))
     if minutes <= 0:
         return 0.0
     speed = top_step * ((len(path) - 1) / minutes)
-    over = np.flatnonzero(speed > limits * (1 + 1e-9))
+    over = np.flatnonzero(speed > limits * OVER_FEED)
     if over.size:
         i = over[int(np.argmax(speed[over] / limits[over]))]
         unit = "deg" if machine.axes[i].rotary else "mm"

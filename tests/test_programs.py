@@ -240,6 +240,25 @@ def test_the_rotary_speed_at_the_programs_feed_is_checked_in_axes_mode(seed_mach
     _check_feed(slow, _two_poses(slow, 10.0, 0.5), 15.0, "P", "tcpm")
 
 
+def test_a_pose_block_that_only_turns_runs_at_f_deg_per_min_in_both_checks(seed_machine):
+    """Axes mode, C turning with X Y Z still: F is deg/min (the motion check's rule, one
+    function for both); it was taken as an infinite speed by the program's feed check while
+    the motion check passed the same block at F deg/min."""
+    from dataclasses import replace
+
+    from compgen import motion
+    from compgen.emit.programs import _check_feed
+    from compgen.errors import CompgenError
+    slow = replace(seed_machine, workpiece=tuple(replace(a, feed_max=20.0) if a.name == "C" else a
+                                                 for a in seed_machine.workpiece))
+    _check_feed(slow, _two_poses(slow, 0.0, 0.5), 15.0, "P", "axes")            # 15 deg/min: fine
+    with pytest.raises(CompgenError, match=r"^P: at feed 25 mm/min, C would turn at 25 deg/min"):
+        _check_feed(slow, _two_poses(slow, 0.0, 0.5), 25.0, "P", "axes")
+    only = motion.ONLY_TURNS_MM
+    np.testing.assert_allclose(motion.feed_minutes(np.array([0.0, only, 2 * only, 10.0]), 3.0, 15.0),
+                               [0.2, 0.2, 2 * only / 15.0, 10.0 / 15.0])
+
+
 @pytest.mark.parametrize("text, room, expected", [
     ("a" * 24, 0, "A" * 24), ("7x-y", 0, "P7X_Y"), ("", 0, "RTEST"), ("a" * 19, 5, "A" * 19),
     ("a" * 25, 0, None), ("a" * 20, 5, None)])

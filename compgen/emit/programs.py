@@ -304,12 +304,14 @@ def _check_feed(machine: Machine, poses: Poses, feed: float, label: str, mode: s
                                    f"exceeds {a.name}'s feed_max {a.feed_max:g}", hint="lower [program] feed")
         return
     linear = [machine.index(c) for c in "XYZ"]
-    seconds = np.linalg.norm(np.diff(poses.q[:, linear], axis=0), axis=1) / feed * 60.0
-    for a in machine.rotary_axes:
-        turn = np.abs(np.diff(np.degrees(poses.q[:, machine.index(a.name)])))
-        with np.errstate(divide="ignore"):       # a turn with no X Y Z move: at once
-            speed = np.divide(turn * 60.0, seconds, out=np.zeros_like(turn), where=turn > 0)
-        if speed.size and speed.max() > a.feed_max:
+    rotary = [machine.index(a.name) for a in machine.rotary_axes]
+    turns = np.abs(np.diff(np.degrees(poses.q[:, rotary]), axis=0))
+    minutes = motion.feed_minutes(np.linalg.norm(np.diff(poses.q[:, linear], axis=0), axis=1),
+                                  turns.max(axis=1, initial=0.0), feed)
+    for k, a in enumerate(machine.rotary_axes):
+        with np.errstate(divide="ignore", invalid="ignore"):    # no move at all: no speed
+            speed = np.where(turns[:, k] > 0, turns[:, k] / minutes, 0.0)
+        if speed.size and speed.max() > a.feed_max * motion.OVER_FEED:
             i = int(speed.argmax())
             raise CompgenError(f"{label}: at feed {feed:g} mm/min, {a.name} would turn at "
                                f"{speed[i]:.0f} deg/min between poses {i + 1} and {i + 2}, above "
