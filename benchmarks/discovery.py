@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -62,6 +63,9 @@ CASES = {
     "C reversal (backlash) 10″: ±5″ by the direction C turns": ({"ECC:r1": 5 * ARCSEC}, "ECC:r1"),
     # K4 turns A back, K1 turns it one way, K2 holds it: each path's side from the pose list
     "A reversal (backlash) 10″: ±5″ by the direction A turns": ({"EAA:r1": 5 * ARCSEC}, "EAA:r1"),
+    # the same readings as a foreign program's: no A_side, C_side (each path's start side free)
+    "A reversal 10″, data without the sides": ({"EAA:r1": 5 * ARCSEC}, "EAA:r1"),
+    "C reversal 10″, data without the sides": ({"ECC:r1": 5 * ARCSEC}, "ECC:r1"),
     "XOC thermal growth 6 µm, τ = 15 min": ({"XOC:e15": 6 * UM}, "XOC:e15"),
     "drift in X saturating, 5 µm, τ = 5 min": ({"drift_X:e5": 5 * UM}, "drift_X:e5"),
     "C 2/rev angular 15″ under AR(1) ρ = 0.9": ({"ECC:h2c": 15 * ARCSEC}, "ECC:h2"),
@@ -103,14 +107,18 @@ def true_deviation(machine, truth, poses, outside=None) -> np.ndarray:
     return dev
 
 
-def session(machine, truth, poses, kind, rng, outside=None) -> RTestData:
+def session(machine, truth, poses, kind, rng, outside=None, blind=False) -> RTestData:
+    """Readings of the hidden machine at ``poses`` (the truth from the sides the program
+    ran); ``blind``: handed over without the sides, as a program that does not record them."""
     dev = true_deviation(machine, truth, poses, outside)
-    return RTestData(poses, dev + noise(kind, len(poses), rng), "sim.csv", "",
+    seen = Poses(poses.q, poses.ball, poses.t, poses.path) if blind else poses
+    return RTestData(seen, dev + noise(kind, len(poses), rng), "sim.csv", "",
                      tuple(range(2, len(poses) + 2)))
 
 
-def discover(machine, truth, kind, rng, outside=None) -> dict:
-    data = [session(machine, truth, generate(machine, ["K4", "K1", "K2"]), kind, rng, outside)]
+def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
+    measure = partial(session, blind=blind)      # every measurement of the case alike
+    data = [measure(machine, truth, generate(machine, ["K4", "K1", "K2"]), kind, rng, outside)]
     model, named, followed, last, looks = location_model(machine), [], [], None, 0
     for _ in range(MAX_ROUNDS):
         fit = identify(machine, data, model)
@@ -137,14 +145,14 @@ def discover(machine, truth, kind, rng, outside=None) -> dict:
                 continue
             m = found.rivals_separated_by[0]
             followed.append(m.label)
-            data.append(session(machine, truth, m.poses, kind, rng, outside))   # a fresh session
+            data.append(measure(machine, truth, m.poses, kind, rng, outside))   # a fresh session
         elif looks < MAX_LOOKS:      # explained to the noise: look where these data are blind
             m, _ = found.next_measurement
             if m is None:
                 break
             looks += 1
             followed.append(m.label)
-            data.append(session(machine, truth, m.poses, kind, rng, outside))
+            data.append(measure(machine, truth, m.poses, kind, rng, outside))
         else:
             break
     fit, found = last
@@ -174,7 +182,8 @@ def main() -> None:
             continue
         kind = "ar0.9" if "AR(1)" in name else "white"
         outside = expect if isinstance(expect, tuple) else None
-        out = discover(machine, {**TABLE4, **hidden}, kind, np.random.default_rng(11), outside)
+        out = discover(machine, {**TABLE4, **hidden}, kind, np.random.default_rng(11), outside,
+                       blind="without the sides" in name)
         if outside is not None:
             expect = outside[2]
         hit = any(expect in n for n in out["named"])

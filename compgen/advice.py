@@ -121,7 +121,8 @@ def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest")
         done = set(where_)
         for a in machine.rotary_axes:
             d = motion_direction(measured.q[:, machine.index(a.name)], run)
-            turned |= {w for w, moved in zip(where_, np.add.reduceat(d != 0, first), strict=True) if moved}
+            back = np.add.reduceat(d > 0, first) & np.add.reduceat(d < 0, first)     # both ways in a run
+            turned |= {w for w, both in zip(where_, back, strict=True) if both}
     out = []
     for where, tag, scale, dz, back in PLACES:
         if back and device == "probe":

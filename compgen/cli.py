@@ -27,7 +27,7 @@ from .errors import CONTROL, CompgenError
 from .files import STDOUT, read_text, write_all, write_atomically
 from .gate import fit_gate, unit_suspicion
 from .identify import identify, parse_fixed
-from .kinematics import unknown_sides
+from .kinematics import unknown_sides, unpredicted_sides
 from .machine_file import load_machine
 from .paths import generate
 from .probe import format_probe_log, probe_poses, simulate_touches
@@ -351,6 +351,9 @@ def predict_cmd(base, poses_file, output, force):
                 "constant per set-up aside")
     write_atomically(output, format_rtest(machine, data, comments), force, inputs=(base, poses_file))
     _said(output, f"wrote {output}: {len(poses)} poses predicted by {fit.marker}")
+    sides = unpredicted_sides(machine, fit.model, poses)
+    if sides:
+        _warn(sides)
 
 
 @main.command("measure-program")

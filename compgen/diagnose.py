@@ -24,12 +24,12 @@ from .advice import Advisor, Measurement
 from .effects import Effect, catalogue, effect_of_param, resolve
 from .emit.registry import controller
 from .errors import CompgenError
-from .kinematics import Model, Poses, both_sides, runs, same_pose
+from .kinematics import Model, Poses, StartSides, both_sides, runs, same_pose
 from .machine import Machine
 from .noise import Repeats, ar1, outliers, repeats, whiten
 from .results import FitResult
 from .rtest import RTestData, device_of
-from .signature import columns, products, r_factor, signatures
+from .signature import columns, products, r_factor
 from .significance import (
     ALPHA,
     COND_LIMIT,
@@ -241,20 +241,28 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     x = np.array([fit.parameters[n].value for n in fit.model])
     free = [model.names.index(n) for n in fit.free]
     r3 = y - model.deviation(poses, x)
+    starts = StartSides(machine, fit.model, poses).projector()
+    if starts is not None:       # each path's start side, fitted as fit fits it
+        r3 = starts.remove(r3)
     seg = runs(poses, np.repeat(np.arange(len(data)), [len(d) for d in data]))
     bad, size = outliers(r3 * 1e3, seg)
     if bad.size:
         keep = np.ones(len(poses), bool)
         keep[bad] = False
         poses, r3, seg = poses.take(keep), r3[keep], seg[keep]
+        starts = StartSides(machine, fit.model, poses).projector()
     # no noise given: what the data repeat says it, where they repeat enough
     said = repeats(same_pose(machine, poses, seg), r3, seg) if device is None else None
     device = said.sigma_um if said is not None else device
     r = r3.ravel()
-    # only Q and R of the model's Jacobian are kept: J's column norms are R's
-    Q, R = np.linalg.qr(model.jacobian(poses, x)[:, :, free].reshape(r.size, -1))
+    # only Q and R of the model's Jacobian are kept: J's column norms are R's. Free start
+    # sides (``StartSides``) come first in Q, and R is that of J without them, as fit has it
+    J = model.jacobian(poses, x)[:, :, free]
+    Q, R = np.linalg.qr((J if starts is None else starts(J.copy())).reshape(r.size, -1))
+    if starts is not None:
+        Q = np.hstack([starts.basis(len(poses)), Q])
     r = r - Q @ (Q.T @ r)             # the fit's residual without the outliers
-    rss, dof = float(r @ r), r.size - len(free)
+    rss, dof = float(r @ r), r.size - Q.shape[1]
 
     in_model = {effect_of_param(machine, n).name for n in fit.model}
     effects = [e for e in (catalogue(machine) if candidates is None
@@ -270,16 +278,21 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         raise CompgenError("no candidate effect left to try: the model holds them all")
     # ρ̂ from the residual once the best candidate (least squares) is added: the misfit of
     # a missing effect is not noise; then, if the noise is correlated, rank again whitened
-    noise = _Noise(seg, np.zeros_like(r3), Q, R)
+    noise = _Noise(seg, np.zeros_like(r3), Q)
     plain = products(machine, poses, effects, Q, r)
+    started = _started(machine, poses, effects)
+    plain |= {e: (C.T @ C, Q.T @ C, C.T @ r) for e, C in started.items()}
     ranked = _rank(effects, fit.free, R, r, noise, plain)
     best = max(ranked.values(), key=lambda row: (row.vis >= VISIBLE, row.share))
-    c = columns(machine, poses, [best.effect])
+    c = _columns(machine, poses, best.effect)
     rest = r - c @ np.linalg.lstsq(c - Q @ (Q.T @ c), r, rcond=None)[0]
     rho = ar1((rest - Q @ (Q.T @ rest)).reshape(-1, 3), seg)
     if rho.any():
-        noise = _Noise(seg, rho, Q, R)
-        white = products(machine, poses, effects, noise.Q, noise.off(noise.white(r)), (seg, rho))
+        noise = _Noise(seg, rho, Q)
+        rw = noise.off(noise.white(r))
+        white = products(machine, poses, effects, noise.Q, rw, (seg, rho))
+        white |= {e: (Cw.T @ Cw, noise.Q.T @ Cw, Cw.T @ rw)
+                  for e, Cw in ((e, noise.white(C)) for e, C in started.items())}
         ranked = _rank(effects, fit.free, R, r, noise, plain, white)
     rss_w = noise.rss(r)
 
@@ -337,10 +350,10 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     if unexplained:
         significant = []
     if len(significant) > 1:
-        first = noise.white(columns(machine, poses, [resolve(machine, significant[0].effect)]))
+        first = noise.white(_columns(machine, poses, resolve(machine, significant[0].effect)))
         others = [resolve(machine, c.effect) for c in significant[1:]]
         kept = still_significant(noise.Q, first, noise.white(r), (
-            (e, noise.white(c)) for e, c in signatures(machine, poses, others)), alpha)
+            (e, noise.white(_columns(machine, poses, e))) for e in others), alpha)
         after_best = tuple(e.name for e in others if e.name in kept)
     if significant:
         best = ranked[significant[0].effect]
@@ -385,6 +398,30 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         program_ext=_program_ext(machine), device_noise_um=device, repeats=said, misfit=misfit,
         lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, carries=carries, notes=notes,
         data_device=kind)
+
+
+def _without_b(R: np.ndarray, qj: np.ndarray, cc: np.ndarray, m: int) -> np.ndarray:
+    """The Gram matrix of X = [J | c] less its part along a candidate's start sides B, from
+    products alone: J = Q_J R and C = [c | B] with qj = Q_Jᵀ C, cc = CᵀC."""
+    XX = np.block([[R.T @ R, R.T @ qj[:, :m]], [qj[:, :m].T @ R, cc[:m, :m]]])
+    XB = np.vstack([R.T @ qj[:, m:], cc[:m, m:]])
+    return XX - XB @ np.linalg.lstsq(cc[m:, m:], XB.T, rcond=None)[0]
+
+
+def _started(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> dict[str, np.ndarray]:
+    """The reversal candidates that come with start sides on these poses (data without the
+    axis's side), by name: their columns as ``_columns`` makes them."""
+    return {e.name: _columns(machine, poses, e) for e in effects
+            if e.basis.kind == "r" and StartSides(machine, e.params, poses).count}
+
+
+def _columns(machine: Machine, poses: Poses, e: Effect) -> np.ndarray:
+    """An effect's first-order columns (3n, m); for a reversal on data that do not say each
+    pose's side, followed by the start sides ``fit --add`` fits with it (``StartSides``): so
+    what diagnose tries is what fit would fit."""
+    c = columns(machine, poses, [e])
+    starts = StartSides(machine, e.params, poses).projector() if e.basis.kind == "r" else None
+    return c if starts is None else np.hstack([c, starts.basis(len(poses))])
 
 
 def _unexplained(misfit, significant: bool, share: float | None, outside: Line | None) -> bool:
@@ -435,9 +472,9 @@ class _Noise:
     """The whitening of one diagnosis: segments, ρ per reading and direction, and the Q of
     the model's whitened Jacobian (QR). With ρ = 0 everywhere it is the identity."""
 
-    def __init__(self, seg: np.ndarray, rho: np.ndarray, Q: np.ndarray, R: np.ndarray):
+    def __init__(self, seg: np.ndarray, rho: np.ndarray, Q: np.ndarray):
         self.seg, self.rho = seg, rho
-        self.Q = np.linalg.qr(self.white(Q @ R))[0] if rho.any() else Q
+        self.Q = np.linalg.qr(self.white(Q))[0] if rho.any() else Q     # whitening keeps the span
 
     def white(self, x: np.ndarray) -> np.ndarray:
         """(3n,) or (3n, k), readings in (n, 3) order, made white."""
@@ -465,18 +502,23 @@ def _rank(effects: Sequence[Effect], free: Sequence[str], R: np.ndarray, r: np.n
     out = {}
     for e in effects:
         cc, qc, cr = plain[e.name]
+        m = len(e.params)           # columns beyond them: a reversal's start sides (``_columns``)
         norms = np.sqrt(np.diag(cc))
         vis_cols, drop, amp = explained(cc, qc, cr)
         keep = vis_cols >= VISIBLE
         drop_w = drop
         if white is not None and keep.any():
             _, drop_w, _ = explained(*white[e.name], keep)
-        absorbed = np.linalg.solve(R, qc)             # J⁺c: what each parameter takes
+        qj = qc[len(qc) - len(R):]                    # Q's columns of J (start sides first)
+        absorbed = np.linalg.solve(R, qj[:, :m])      # J⁺c: what each parameter takes
+        vis_cols, amp, norms = vis_cols[:m], amp[:m], norms[:m]
         size = max(float(np.linalg.norm(norms)), 1e-300)
         share = np.sqrt(np.sum((absorbed * J_norm[:, None]) ** 2, axis=1)) / size
         names = tuple(free[i] for i in np.argsort(-share) if share[i] >= ABSORBS)
-        # R of [J | c] is [[R, Qᵀc], [0, R of c⊥]]: fit --add's condition number, cheaply
-        joined = np.block([[R, qc], [np.zeros((len(cr), R.shape[1])), gram_factor(cc - qc.T @ qc)]])
+        # R of [J | c] is [[R, Qᵀc], [0, R of c⊥]]: fit --add's condition number, cheaply;
+        # with start sides B, that of [J | c] without its part along B, as fit projects them
+        joined = np.block([[R, qj], [np.zeros((m, R.shape[1])), gram_factor(cc - qc.T @ qc)]]) \
+            if len(cr) == m else gram_factor(_without_b(R, qj, cc, m))
         out[e.name] = _Row(e, float(vis_cols.max()), drop, drop_w, drop_w / max(rss_w, 1e-300),
                            int(keep.sum()), amp, names, bool(np.all(norms * 1e3 < SILENT_UM)),
                            norms, absorbed, condition(joined))

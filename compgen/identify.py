@@ -17,7 +17,7 @@ from . import __version__
 from .advice import Advisor
 from .effects import canonical, effect_of_param, location_model
 from .errors import CompgenError
-from .kinematics import Model, Poses, both_sides, runs
+from .kinematics import Model, Poses, StartSides, both_sides, runs
 from .machine import Machine
 from .noise import ar1, ar1_covariance
 from .results import DataRef, Estimate, FitResult
@@ -61,6 +61,14 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
 
     x = np.array([fixed.get(n, 0.0) for n in names])
     weights = Weights(data)
+    # where the data do not say which side a path started on, one free constant per path
+    # (``StartSides``), projected out of readings and Jacobian alike: the joint fit's
+    # estimates without carrying the constants (Frisch–Waugh–Lovell)
+    starts = StartSides(machine, names, poses)
+    project = starts.projector(weights.apply_at) or (lambda v: v)
+    if readings <= p + starts.count:
+        raise CompgenError(f"{len(poses)} poses give {readings} readings for {p} parameters and "
+                           f"{starts.count} free start sides", hint="measure more poses: a K4 path has 241")
 
     buffer = np.empty((len(names), len(poses), 3))
 
@@ -70,8 +78,9 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         ``buffer``: each call overwrites the last one's, which is never used again."""
         dev, J = m.linearise(poses, x, out=buffer)
         raw = y - dev
-        J = weights.apply(J if len(free) == len(names) else J[:, :, free])
-        return Step(raw, weights.apply(raw).ravel(), Normal(np.moveaxis(J, 2, 0).reshape(p, readings).T))
+        J = project(weights.apply(J if len(free) == len(names) else J[:, :, free]))
+        return Step(raw, project(weights.apply(raw)).ravel(),
+                    Normal(np.moveaxis(J, 2, 0).reshape(p, readings).T))
 
     def solve(x, at):
         # first order about here (seed eq. 26): y − dev(x) ≈ J Δa
@@ -91,7 +100,9 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         iterations += more
 
     raw, r, normal = at
-    dof = readings - p
+    if starts.count:            # the residual the joint fit leaves, constants fitted
+        raw = project.remove(raw, weights.apply(raw))
+    dof = readings - p - starts.count
     sigma2 = float(r @ r) / dof
     # readings taken close together (an R-test sampling at 100 Hz, or a set-up drifting
     # between poses) are not independent: the noise's AR(1) ρ of each run and direction
@@ -122,6 +133,17 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         residual=residual_stats(poses, raw, dof, rho),
         method=method, iterations=iterations, sign=sign, version=__version__,
         descriptions={n: e.words for n, e in zip(names, m.effects, strict=True)})
+
+
+def fitted(machine: Machine, fit: FitResult, data: Sequence[RTestData]) -> np.ndarray:
+    """The readings (n, 3) mm the fit's model gives at the data's poses, with each path's
+    start side where the data do not record it (``StartSides``, fitted to these readings as
+    ``identify`` fits them; readings unweighted): what the fit's residual is taken from."""
+    poses = Poses.concat([d.poses for d in data])
+    y = np.concatenate([d.deviation for d in data])
+    dev = Model(machine, fit.model).deviation(poses, np.array([fit.parameters[n].value for n in fit.model]))
+    starts = StartSides(machine, fit.model, poses).projector()
+    return dev if starts is None else y - starts.remove(y - dev)
 
 
 class Weights:
@@ -157,6 +179,12 @@ class Weights:
         if not self.active:
             return a
         return np.einsum("nij,nj...->ni...", self.L, a)
+
+    def apply_at(self, idx: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """``apply`` for the rows ``idx`` of the readings only: ``a`` is (len(idx), 3, …)."""
+        if not self.active:
+            return a
+        return np.einsum("nij,nj...->ni...", self.L[idx], a)
 
     def rescale(self, r: np.ndarray, normal: Normal) -> bool:
         """New variance factors from the residual (whitened, flat) and the Jacobian's normal

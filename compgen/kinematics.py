@@ -15,6 +15,7 @@ from __future__ import annotations
 import weakref
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -245,21 +246,95 @@ def runs(poses: Poses, source: np.ndarray | None = None) -> np.ndarray:
 
 
 def motion_direction(q: np.ndarray, run: np.ndarray) -> np.ndarray:
-    """The side of a reversal each pose is on: ±1 by the direction the axis moved to reach
-    it (poses in the order taken; standing still keeps the last direction, the first pose
-    takes its path's first move), less the path's mean. How the axis reached a path's start
-    is not known, so only the change within a path counts: a path in which the axis never
-    turns back is 0 throughout, and its side of the backlash stays with the location errors.
-    """
+    """The side of a reversal each pose is on, by the motion that reached it: ±1 by the
+    direction the axis last moved within its run (poses in the order taken; standing still
+    keeps it), 0 where no move of its run has reached the pose yet. How the axis reached a
+    path's start is not in such data: those poses (all of a run that holds the axis) get one
+    free constant per run (``StartSides``)."""
     out = np.zeros(len(q))
     starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
     for a, b in zip(starts, [*starts[1:], len(q)], strict=True):
-        step = np.sign(np.diff(q[a:b]))
-        if not ((step > 0).any() and (step < 0).any()):
-            continue
-        d = _last_moves(step, step[np.flatnonzero(step)[0]])
-        out[a:b] = d - d.mean()
+        out[a:b] = _last_moves(np.sign(np.diff(q[a:b])), 0.0)
     return out
+
+
+class StartSides:
+    """The side each run of a path starts on, where the data do not record it (no
+    ``A_side`` column): for every reversal (backlash) effect among ``names`` and every run
+    with poses that no move of the axis has reached yet, one free constant — the effect's
+    value at those poses, ± half the reversal as the unknown approach left it. They are
+    fitted beside the parameters (projected out, ``projector``: the estimates and their
+    uncertainties are the joint fit's, the constants themselves are not reported), so a path
+    that holds the axis or runs it one way leaves no offset of its own behind, where it
+    would look like drift."""
+
+    def __init__(self, machine: Machine, names: Iterable[str], poses: Poses):
+        self.machine, self.poses = machine, poses
+        run = runs(poses)
+        self.free: list[tuple[Effect, np.ndarray]] = []     # (effect, its constants' poses)
+        self.labels: list[tuple[str, str]] = []            # (axis, path) per constant
+        per_run: dict[int, list[tuple[Effect, np.ndarray]]] = {}
+        for e in dict.fromkeys(effect_of_param(machine, n) for n in names):
+            if e.basis.kind != "r":
+                continue
+            j = machine.index(e.carrier)
+            at = np.flatnonzero(np.isnan(poses.side[:, j]) & (motion_direction(poses.q[:, j], run) == 0))
+            for idx in np.split(at, np.flatnonzero(np.diff(run[at])) + 1) if at.size else ():
+                per_run.setdefault(int(run[idx[0]]), []).append((e, idx))
+                self.labels.append((e.carrier, str(poses.path[idx[0]])))
+        self.blocks = [per_run[k] for k in sorted(per_run)]
+
+    @property
+    def count(self) -> int:
+        return len(self.labels)
+
+    def projector(self, whiten=None) -> _Projector | None:
+        """Removes from readings (n, 3) or their Jacobian (n, 3, p) what the constants would
+        fit; ``whiten(idx, a)``, if given, whitens the rows ``idx`` of an (m, 3, …) array as
+        the fit whitens its readings. None where there is no constant."""
+        if not self.blocks:
+            return None
+        parts = []
+        for block in self.blocks:
+            idx = np.unique(np.concatenate([i for _, i in block]))
+            gains, made = SlotGains(self.machine, self.poses.take(idx)), {}
+            G = np.stack([effect_gains(gains, e, np.isin(idx, i).astype(float), made)[:, :, 0]
+                          for e, i in block], axis=-1)                  # (m, 3, c)
+            Gw = G if whiten is None else whiten(idx, G)
+            Q, R = np.linalg.qr(Gw.reshape(-1, G.shape[-1]))
+            parts.append((idx, G, Q, R))
+        return _Projector(parts)
+
+
+class _Projector:
+    def __init__(self, parts):
+        self.parts = parts
+
+    def __call__(self, v: np.ndarray) -> np.ndarray:
+        """``v`` (n, 3, …) whitened, less its part along the constants' columns (in place)."""
+        for idx, _, Q, _ in self.parts:
+            b = v[idx].reshape(len(idx) * 3, -1)
+            v[idx] = (b - Q @ (Q.T @ b)).reshape(v[idx].shape)
+        return v
+
+    def basis(self, n: int) -> np.ndarray:
+        """The constants' orthonormal columns over all ``n`` readings, (3n, k) in (n, 3) order."""
+        out = np.zeros((n, 3, sum(Q.shape[1] for *_, Q, _ in self.parts)))
+        k = 0
+        for idx, _, Q, _ in self.parts:
+            out[idx, :, k:k + Q.shape[1]] = Q.reshape(len(idx), 3, -1)
+            k += Q.shape[1]
+        return out.reshape(3 * n, -1)
+
+    def remove(self, raw: np.ndarray, white: np.ndarray | None = None) -> np.ndarray:
+        """The raw residual (n, 3) less the constants fitted to it (to ``white``, its whitened
+        form, where readings are weighted): what the joint fit leaves."""
+        out = raw.copy()
+        white = raw if white is None else white
+        for idx, G, Q, R in self.parts:
+            c = np.linalg.lstsq(R, Q.T @ white[idx].ravel(), rcond=None)[0]
+            out[idx] -= G @ c
+        return out
 
 
 def _last_moves(step: np.ndarray, first: float) -> np.ndarray:
@@ -317,18 +392,39 @@ def program_sides(machine: Machine, q: np.ndarray, run: np.ndarray) -> np.ndarra
 def unknown_sides(machine: Machine, names: Iterable[str], *poses: Poses) -> str | None:
     """What a reversal (backlash) effect among the parameters ``names`` cannot use in these
     poses (each data set's, looked at where it is), said once: the axes whose side the data
-    do not give at some pose (no ``A_side`` column), or None."""
-    effects = (effect_of_param(machine, n) for n in names)
-    axes = sorted({e.carrier for e in effects if e.basis.kind == "r"
-                   and any(np.isnan(p.side[:, machine.index(e.carrier)]).any() for p in poses)})
+    do not give at some pose (no ``A_side`` column), and the free constants that stand in
+    for it (``StartSides``), or None."""
+    reversals = [n for n in names if effect_of_param(machine, n).basis.kind == "r"]
+    axes = sorted({e.carrier for e in map(partial(effect_of_param, machine), reversals)
+                   if any(np.isnan(p.side[:, machine.index(e.carrier)]).any() for p in poses)})
     if not axes:
         return None
+    held = [lab for p in poses for lab in StartSides(machine, reversals, p).labels]
     cols = ", ".join(f"{a}_side" for a in axes)
+    where = "; ".join(f"{a}: {', '.join(dict.fromkeys(path or '(no label)' for b, path in held if b == a))}"
+                      for a in axes if any(b == a for b, _ in held))
     return (f"the data do not say from which side {' and '.join(axes)} reached each pose (no {cols} "
-            "column): a reversal counts only where it turns back within a path, and the side a path "
-            "starts on (all of it, where the axis never turns back) stays in the residual, where it "
-            "looks like drift. Measure with compgen's programs (their pose lists carry "
-            f"{cols}), or add the column")
+            f"column): each pose takes the side of the move that reached it, and the side a path "
+            f"starts on (all of a path that holds the axis) is fitted as a free constant per path "
+            f"— {len(held)} constant{'s' if len(held) != 1 else ''} ({where}) that cost the "
+            f"estimates what those poses would tell. Measure with compgen's programs (their pose "
+            f"lists carry {cols}), or add the column")
+
+
+def unpredicted_sides(machine: Machine, names: Iterable[str], poses: Poses) -> str | None:
+    """What ``predict`` cannot say at poses with no recorded side: those no move of their
+    path has reached yet are predicted without the model's reversal (its sign there is the
+    unknown approach's), or None."""
+    starts = StartSides(machine, names, poses)
+    if not starts.count:
+        return None
+    at = np.unique(np.concatenate([i for block in starts.blocks for _, i in block]))
+    axes = " and ".join(dict.fromkeys(a for a, _ in starts.labels))
+    paths = ", ".join(dict.fromkeys(p or "(no label)" for _, p in starts.labels))
+    return (f"the pose list does not say from which side {axes} reached each pose: {len(at)} poses that "
+            f"no move of their path has reached yet ({paths}) are predicted without the reversal "
+            f"(backlash) the fit holds, whose sign there only the approach decides. compgen's pose "
+            f"lists (measure-program) carry the sides")
 
 
 def both_sides(machine: Machine, axis: str, *poses: Poses) -> bool:
@@ -341,8 +437,8 @@ def both_sides(machine: Machine, axis: str, *poses: Poses) -> bool:
         seen |= set(np.unique(side[~np.isnan(side)]).tolist())
         unknown = np.isnan(side)
         if unknown.any():
-            d = motion_direction(p.q[unknown, j], runs(p.take(unknown)))
-            seen |= {1.0, -1.0} if (d != 0).any() else set()
+            d = motion_direction(p.q[:, j], runs(p))[unknown]
+            seen |= set(np.unique(d[d != 0]).tolist())
     return {1.0, -1.0} <= seen
 
 

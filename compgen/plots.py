@@ -19,7 +19,8 @@ from .advice import Measurement  # noqa: E402
 from .diagnose import Diagnosis  # noqa: E402
 from .effects import effect_of_param, resolve  # noqa: E402
 from .errors import CompgenError  # noqa: E402
-from .kinematics import Model, Poses  # noqa: E402
+from .identify import fitted  # noqa: E402
+from .kinematics import Poses  # noqa: E402
 from .machine import Machine  # noqa: E402
 from .results import FitResult  # noqa: E402
 from .rtest import RTestData  # noqa: E402
@@ -44,11 +45,6 @@ def _drawn(index: np.ndarray) -> np.ndarray:
 
 def _thinned(n: int) -> str:
     return f" (every {-(-n // DRAWN)}th of {n} readings drawn)" if n > DRAWN else ""
-
-
-def _predicted(machine: Machine, poses: Poses, fit: FitResult) -> np.ndarray:
-    model = Model(machine, fit.model)
-    return model.deviation(poses, np.array([fit.parameters[n].value for n in fit.model])) * 1e3
 
 
 def write_plots(folder: str | Path, machine: Machine, data: Sequence[RTestData], fit: FitResult,
@@ -81,8 +77,8 @@ def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
                            hint="compare fits made from the same R-test session")
     poses = Poses.concat([d.poses for d in data])
     measured = np.concatenate([d.deviation for d in data]) * 1e3
-    model = _predicted(machine, poses, fit)
-    earlier = _predicted(machine, poses, before) if before else None
+    model = fitted(machine, fit, data) * 1e3         # with the start sides it fitted, if any
+    earlier = fitted(machine, before, data) * 1e3 if before else None
     label = f"model ({len(fit.model)} parameters)"
     images = {}
     for path in dict.fromkeys(poses.path):
