@@ -400,6 +400,17 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         data_device=kind)
 
 
+def _beyond_starts(cc: np.ndarray, qc: np.ndarray, m: int) -> np.ndarray:
+    """The visibility of a reversal's own m columns beyond the model and its start sides (the
+    columns after them), from products: ‖c⊥‖/‖c‖ with c⊥ orthogonal to both. A reversal
+    whose side is the same throughout is its axis's zero offset: its constants and the
+    location errors take it whole, whatever its columns alone would show."""
+    P = cc - qc.T @ qc
+    S = P[:m, :m] - P[:m, m:] @ np.linalg.lstsq(P[m:, m:], P[m:, :m], rcond=None)[0]
+    norms = np.sqrt(np.diag(cc)[:m])
+    return np.where(norms > 0, np.sqrt(np.clip(np.diag(S), 0, None)) / np.where(norms > 0, norms, 1), 0.0)
+
+
 def _without_b(R: np.ndarray, qj: np.ndarray, cc: np.ndarray, m: int) -> np.ndarray:
     """The Gram matrix of X = [J | c] less its part along a candidate's start sides B, from
     products alone: J = Q_J R and C = [c | B] with qj = Q_Jᵀ C, cc = CᵀC."""
@@ -506,6 +517,10 @@ def _rank(effects: Sequence[Effect], free: Sequence[str], R: np.ndarray, r: np.n
         norms = np.sqrt(np.diag(cc))
         vis_cols, drop, amp = explained(cc, qc, cr)
         keep = vis_cols >= VISIBLE
+        if len(cr) > m:        # a reversal is seen only beyond the model and its start sides
+            vis_cols[:m] = _beyond_starts(cc, qc, m)
+            keep = (vis_cols >= VISIBLE) & bool((vis_cols[:m] >= VISIBLE).any())
+            _, drop, amp = explained(cc, qc, cr, keep)
         drop_w = drop
         if white is not None and keep.any():
             _, drop_w, _ = explained(*white[e.name], keep)

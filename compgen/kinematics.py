@@ -248,21 +248,25 @@ def runs(poses: Poses, source: np.ndarray | None = None) -> np.ndarray:
 def motion_direction(q: np.ndarray, run: np.ndarray) -> np.ndarray:
     """The side of a reversal each pose is on, by the motion that reached it: ±1 by the
     direction the axis last moved within its run (poses in the order taken; standing still
-    keeps it), 0 where no move of its run has reached the pose yet. How the axis reached a
-    path's start is not in such data: those poses (all of a run that holds the axis) get one
-    free constant per run (``StartSides``)."""
+    keeps it); the poses before its first move take that move's direction, as a program
+    approaches a path's start (compgen's do: ``program_sides``); 0 throughout a run that
+    never moves the axis, whose side only the approach decides: one free constant per such
+    run (``StartSides``)."""
     out = np.zeros(len(q))
     starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
     for a, b in zip(starts, [*starts[1:], len(q)], strict=True):
-        out[a:b] = _last_moves(np.sign(np.diff(q[a:b])), 0.0)
+        step = np.sign(np.diff(q[a:b]))
+        moved = np.flatnonzero(step)
+        if moved.size:
+            out[a:b] = _last_moves(step, step[moved[0]])
     return out
 
 
 class StartSides:
-    """The side each run of a path starts on, where the data do not record it (no
+    """The side of each run that holds an axis, where the data do not record it (no
     ``A_side`` column): for every reversal (backlash) effect among ``names`` and every run
-    with poses that no move of the axis has reached yet, one free constant — the effect's
-    value at those poses, ± half the reversal as the unknown approach left it. They are
+    that never moves its axis, one free constant — the effect's value there, ± half the
+    reversal as the unknown approach left it. They are
     fitted beside the parameters (projected out, ``projector``: the estimates and their
     uncertainties are the joint fit's, the constants themselves are not reported), so a path
     that holds the axis or runs it one way leaves no offset of its own behind, where it
@@ -403,28 +407,28 @@ def unknown_sides(machine: Machine, names: Iterable[str], *poses: Poses) -> str 
     cols = ", ".join(f"{a}_side" for a in axes)
     where = "; ".join(f"{a}: {', '.join(dict.fromkeys(path or '(no label)' for b, path in held if b == a))}"
                       for a in axes if any(b == a for b, _ in held))
+    count = f"{len(held)} constant{'s' if len(held) != 1 else ''} ({where})" if held else "none here"
     return (f"the data do not say from which side {' and '.join(axes)} reached each pose (no {cols} "
-            f"column): each pose takes the side of the move that reached it, and the side a path "
-            f"starts on (all of a path that holds the axis) is fitted as a free constant per path "
-            f"— {len(held)} constant{'s' if len(held) != 1 else ''} ({where}) that cost the "
-            f"estimates what those poses would tell. Measure with compgen's programs (their pose "
-            f"lists carry {cols}), or add the column")
+            f"column): each pose takes the side of the move that reached it (a path's first poses, "
+            f"that of its first move), and a path that holds the axis gets a free constant for its "
+            f"side — {count}. Measure with compgen's programs (their pose lists carry {cols}), or "
+            f"add the column")
 
 
 def unpredicted_sides(machine: Machine, names: Iterable[str], poses: Poses) -> str | None:
-    """What ``predict`` cannot say at poses with no recorded side: those no move of their
-    path has reached yet are predicted without the model's reversal (its sign there is the
-    unknown approach's), or None."""
+    """What ``predict`` cannot say at poses with no recorded side: paths that hold an axis
+    are predicted without the model's reversal of it (its sign there is the unknown
+    approach's), or None."""
     starts = StartSides(machine, names, poses)
     if not starts.count:
         return None
     at = np.unique(np.concatenate([i for block in starts.blocks for _, i in block]))
     axes = " and ".join(dict.fromkeys(a for a, _ in starts.labels))
     paths = ", ".join(dict.fromkeys(p or "(no label)" for _, p in starts.labels))
-    return (f"the pose list does not say from which side {axes} reached each pose: {len(at)} poses that "
-            f"no move of their path has reached yet ({paths}) are predicted without the reversal "
-            f"(backlash) the fit holds, whose sign there only the approach decides. compgen's pose "
-            f"lists (measure-program) carry the sides")
+    return (f"the pose list does not say from which side {axes} reached each pose: {len(at)} poses of "
+            f"paths that hold it ({paths}) are predicted without the reversal (backlash) the fit "
+            f"holds, whose sign there only the approach decides. compgen's pose lists "
+            f"(measure-program) carry the sides")
 
 
 def both_sides(machine: Machine, axis: str, *poses: Poses) -> bool:
