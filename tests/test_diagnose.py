@@ -8,7 +8,7 @@ from conftest import ARCSEC, TABLE4, UM
 from compgen.diagnose import diagnose
 from compgen.diagnose_text import report
 from compgen.effects import compose, location_model
-from compgen.identify import identify
+from compgen.identify import fitted, identify
 from compgen.paths import generate
 from compgen.rtest import RTestData
 from compgen.simulate import ar1_noise, simulate
@@ -588,6 +588,9 @@ def test_backlash_of_a_tilting_axis_is_found_from_the_side_each_pose_was_reached
     assert abs(stays.residual["sigma_um"] - NOISE_UM) < RMS_AFTER_TOLERANCE * NOISE_UM
     assert abs(stays.parameters["EAA:r1"].value - 5 * ARCSEC) < 3 * stays.parameters["EAA:r1"].std
     assert _predicts_unmeasured_balls(seed_machine, {**TABLE4, **truth}, stays) < 1.0
+    res = blind[0].deviation - fitted(seed_machine, stays, blind)       # what plots draw
+    dof = res.size - len(stays.free) - 1                                 # K2's constant
+    assert np.sqrt((res**2).sum() / dof) * 1e3 == pytest.approx(stays.residual["sigma_um"], rel=1e-6)
     after = diagnose(seed_machine, blind, stays, advise=False, noise_um=NOISE_UM)
     assert after.explained_to_noise and not after.significant, [c.effect for c in after.significant]
     assert after.sigma_um == pytest.approx(stays.residual["sigma_um"], rel=1e-6)   # the same dof

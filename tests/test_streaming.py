@@ -61,7 +61,7 @@ def test_a_dense_sessions_plots_draw_thinned_series_and_count_every_reading(seed
     import matplotlib.axes
 
     from compgen import plots
-    from compgen.identify import identify
+    from compgen.identify import fitted, identify
     from compgen.simulate import simulate
     poses = generate(seed_machine, ["K2"], rate_hz=100, feed=180)
     data = simulate(seed_machine, {"XOC": 2e-3}, poses, 0.5, np.random.default_rng(3))
@@ -78,7 +78,7 @@ def test_a_dense_sessions_plots_draw_thinned_series_and_count_every_reading(seed
     images = plots.figures(seed_machine, [data], fit)
     assert len(poses) == 12001 and max(drawn) <= plots.DRAWN, max(drawn)
     assert all("every 4th of 12001 readings drawn" in t for t in titles), titles
-    res = data.deviation * 1e3 - plots._predicted(seed_machine, poses, fit)
+    res = (data.deviation - fitted(seed_machine, fit, [data])) * 1e3
     rms = np.sqrt((res**2).mean(axis=0))
     assert abs(rms[0] - np.sqrt((res[::4, 0] ** 2).mean())) > 0.2
     legends = [f"K2: RMS {v:.2f} µm" for v in rms] * sum(k.startswith("residual-vs-") for k in images)
