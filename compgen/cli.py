@@ -638,7 +638,7 @@ def effects_cmd(machine_file, as_json):
         return
     for e in catalogue(machine):
         mark = "*" if e.name in default else " "
-        click.echo(f"{mark} {e.name:<14}{', '.join(e.params):<28}{e.words}")
+        click.echo(f"{mark} {e.name:<14}{', '.join(e.params):<27} {e.words}")
     click.echo("\n* in the default model")
 
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .effects import ROT_OF, TRANSLATIONS, effect_name, effect_of_param
+from .effects import POLY_SCALE_MM, ROT_OF, TRANSLATIONS, effect_name, effect_of_param
 from .errors import CompgenError
 from .kinematics import Model, Poses
 from .lines import AxisLine, axis_lines, controller_inverse, nominal_pivot
@@ -147,9 +147,14 @@ def _compensable_by_table(machine: Machine, e) -> bool:
     """A translation error of a linear axis ahead of every rotary axis in its chain, or the
     positioning error of a rotary axis: single-axis tables hold those exactly."""
     axis = machine.axis(e.carrier)
+    step = np.ptp(_grid(axis)) / (TABLE_POINTS - 1)
+    if e.basis.kind in ("s", "l"):      # a declared shape's corners: two table steps apart at least
+        at = np.degrees(e.basis.at) if axis.rotary else np.asarray(e.basis.at) * POLY_SCALE_MM
+        if step > np.diff(at).min() / 2:
+            return False
     if axis.rotary:
         return e.direction == ROT_OF[axis.direction]
-    if e.basis.kind == "w" and np.ptp(_grid(axis)) / (TABLE_POINTS - 1) > e.basis.pitch / PER_PITCH:
+    if e.basis.kind == "w" and step > e.basis.pitch / PER_PITCH:
         return False              # a table this coarse would alias the period
     chain = machine.workpiece if axis.side == "workpiece" else machine.tool
     ahead = chain[:chain.index(axis)]

@@ -30,6 +30,13 @@ letter O as in the seed report; ``X0C`` and ``E_X0C`` are accepted at input):
                        ``[effects] declared`` names it: a periodic component error of a
                        linear axis with a pitch in mm (a ball-screw or scale period),
                        ``EXX:w5c`` × cos(2π·X/5 mm) and ``EXX:w5s`` × sin(2π·X/5 mm)
+``EXX:s.screw``        declared: a component error of any axis as a spline through the
+                       knots of the machine file's ``[effects.shapes.screw] at`` (mm or deg),
+                       linear between, held beyond, zero at the first knot; parameters
+                       ``EXX:s.screw.2`` … its value at each later knot
+``EXX:l.laser``        declared: the shape of a lookup table (``at``, ``values``: a laser
+                       run's, say), scaled to a largest |value| of 1; the parameter is its
+                       size there
 =====================  ====================================================================
 
 Order 0 of a component error does not exist here on purpose: a constant error motion *is*
@@ -62,29 +69,39 @@ TIME_SCALE_S = 3600.0        # drift polynomials run in t / 1 h
 MAX_ORDER = {"h": 4, "p": 3, "t": 2}  # the candidate list offered by catalogue()
 MAX_ORDER_TILTING = 2        # harmonics of a tilting axis over its part of a turn
 TAUS_MIN = (5, 15, 45)       # saturating thermal growth offered: time constants, min
+SHAPE_NAME = r"[a-z][a-z0-9_]{0,31}"   # a declared shape's name ([effects.shapes.NAME])
 
 
 @dataclass(frozen=True)
 class Basis:
     """Shape of an effect in its coordinate: constant, harmonic k, polynomial k, time
-    polynomial k, saturating in time with τ = ``order`` minutes, or periodic along a linear
-    axis with a pitch of ``pitch`` mm."""
+    polynomial k, saturating in time with τ = ``order`` minutes, periodic along a linear
+    axis with a pitch of ``pitch`` mm, or a shape the machine file declares (``label``):
+    a spline through ``at`` (a value per knot) or a lookup table (``table`` at ``at``,
+    scaled to a largest |value| of 1: the parameter is its size)."""
 
-    kind: str            # "const", "h", "p", "t", "e", "r" or "w"
+    kind: str            # "const", "h", "p", "t", "e", "r", "w", "s" or "l"
     order: int = 0       # a compound's harmonic is signed: − turns against the axis
     origin: bool = False  # harmonics of a tilting axis: taken from angle 0 (cos kθ − 1)
     pitch: float = 0.0   # "w": the period along the axis, mm
+    label: str = ""      # "s", "l": the shape's name in the machine file
+    at: tuple[float, ...] = ()      # "s", "l": its positions, in the coordinate
+    table: tuple[float, ...] = ()   # "l": its values, largest |value| 1
 
     @property
     def suffix(self) -> str:
         if self.kind == "w":
             return f":w{self.pitch:g}"
+        if self.kind in ("s", "l"):
+            return f":{self.kind}.{self.label}"
         return "" if self.kind == "const" else f":{self.kind}{self.order}"
 
     @property
     def terms(self) -> tuple[str, ...]:
-        if self.kind in "hw":
+        if self.kind in ("h", "w"):
             return (f"{self.suffix}c", f"{self.suffix}s")
+        if self.kind == "s":           # none at the first knot: zero there (see ``values``)
+            return tuple(f"{self.suffix}.{i}" for i in range(2, len(self.at) + 1))
         return (self.suffix,)
 
     def values(self, x: np.ndarray) -> np.ndarray:
@@ -101,6 +118,11 @@ class Basis:
             return (1 - np.exp(-x * (60.0 / self.order)))[..., None]
         if self.kind == "r":              # x is the direction of motion, ±1 (0: never moved)
             return x[..., None]
+        if self.kind == "s":              # a hat per knot, linear between, held beyond; none
+            # at the first knot: a constant error motion is a location error (order 0 above)
+            return np.stack([np.interp(x, self.at, row) for row in np.eye(len(self.at))[1:]], axis=-1)
+        if self.kind == "l":
+            return np.interp(x, self.at, self.table)[..., None]
         return (x**self.order)[..., None]
 
 
@@ -271,6 +293,8 @@ def resolve(machine: Machine, name: str, table: dict | None = None) -> Effect:
             raise CompgenError(f"{symbol} needs an order, e.g. {symbol}:{kinds[0]}1",
                                where=name)
         basis = CONSTANT
+    elif (d := re.fullmatch(rf"([sl])\.({SHAPE_NAME})", order_txt)) is not None:
+        return _declared_shape(machine, name, symbol, table[symbol], d[1], d[2])
     elif (w := re.fullmatch(r"w(\d{1,5}(?:\.\d{1,4})?)", order_txt)) is not None:
         pitch = float(w[1])
         if "p" not in kinds or carrier not in machine.axis_names or machine.axis(carrier).rotary \
@@ -313,6 +337,8 @@ def resolve(machine: Machine, name: str, table: dict | None = None) -> Effect:
 def effect_name(param: str) -> str:
     """The name of the effect a parameter belongs to: ``ECC:h2c`` → ``ECC:h2``."""
     param = canonical(param)
+    if re.search(rf":s\.{SHAPE_NAME}\.\d+$", param):       # a spline's value at knot N
+        return param.rsplit(".", 1)[0]
     return param[:-1] if re.search(r":(?:h-?\d+|w[\d.]+)[cs]$", param) else param
 
 
@@ -324,6 +350,34 @@ def effect_of_param(machine: Machine, param: str) -> Effect:
         raise CompgenError(f"unknown parameter {param!r}",
                            hint=f"effect {effect.name} has parameters {', '.join(effect.params)}")
     return effect
+
+
+def _declared_shape(machine: Machine, name: str, symbol: str, entry: tuple, kind: str, label: str) -> Effect:
+    """``EXX:s.screw`` (a spline through the knots of ``[effects.shapes.screw]``) or
+    ``EXX:l.laser`` (its lookup table, fitted in size), for a component error of an axis."""
+    carrier, slot, direction, _, words, _, _ = entry
+    shape = machine.shapes.get(label)
+    what = "spline through knots (at)" if kind == "s" else "lookup table (at, values)"
+    if shape is None or shape.kind != kind:
+        raise CompgenError(f"{name}: the machine file declares no {what} named {label!r}", where=name,
+                           hint=f"declare it as [effects.shapes.{label}]: "
+                                + ("at = [positions]" if kind == "s" else "at = [positions], values = [...]"))
+    if slot != "comp" or carrier not in machine.axis_names or len(direction) != 1:
+        raise CompgenError(f"{name}: a declared shape is for a component error of an axis (e.g. EXX, ECC)",
+                           where=name)
+    axis = machine.axis(carrier)
+    at = np.radians(shape.at) if axis.rotary else np.asarray(shape.at) / POLY_SCALE_MM
+    unit = "deg" if axis.rotary else "mm"
+    if kind == "s":
+        return Effect(symbol, carrier, slot, direction, Basis("s", label=label, at=tuple(at.tolist())),
+                      f"{words}, a spline through {len(at)} knots from {shape.at[0]:g} to "
+                      f"{shape.at[-1]:g} {unit} ({label}; zero at the first, linear between, held beyond)",
+                      "declared by the user")
+    peak = max(abs(v) for v in shape.values)
+    return Effect(symbol, carrier, slot, direction,
+                  Basis("l", label=label, at=tuple(at.tolist()), table=tuple(v / peak for v in shape.values)),
+                  f"{words}, shaped as the lookup table {label} ({len(at)} points from {shape.at[0]:g} to "
+                  f"{shape.at[-1]:g} {unit}): its size at the table's largest value", "declared by the user")
 
 
 def catalogue(machine: Machine) -> tuple[Effect, ...]:

@@ -164,6 +164,21 @@ class Limits:
 
 
 @dataclass(frozen=True)
+class Shape:
+    """A shape the user declares for an effect along an axis (``[effects.shapes.NAME]``),
+    positions in the axis's unit (mm, deg), increasing: a spline through ``at`` with a free
+    value at each knot (``values`` empty), or a lookup table of ``values`` at ``at`` (a shape
+    known from elsewhere, fitted in size); linear between the points, held beyond them."""
+
+    at: tuple[float, ...]
+    values: tuple[float, ...] = ()
+
+    @property
+    def kind(self) -> str:
+        return "l" if self.values else "s"
+
+
+@dataclass(frozen=True)
 class Drift:
     """How far the machine's location errors may move between calibrations (``[drift]``):
     ``compgen check`` fails a change beyond these (and beyond ``k_sigma`` of its σ), the
@@ -198,6 +213,7 @@ class Machine:
     tolerances: dict[str, float] = field(default_factory=dict)   # path → max range, µm
     noise_um: float | None = None   # the R-test's own noise, 1σ per reading ([rtest] noise_um)
     declared: tuple[str, ...] = ()  # effects the user declares beyond the catalogue ([effects])
+    shapes: dict[str, Shape] = field(default_factory=dict)   # their shapes ([effects.shapes.NAME])
     source: str = ""
     sha256: str = ""
     bundled: str = ""    # the name of the bundled machine file it was read from, if it was one

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import hashlib
 import math
+import re
 import tomllib
 from dataclasses import replace
 from pathlib import Path
 
-from .effects import resolve
+from .effects import SHAPE_NAME, resolve
 from .emit.registry import CONTROLLERS
 from .errors import CompgenError
 from .files import read_text
@@ -25,6 +26,7 @@ from .machine import (
     ProbeSetup,
     ProgramSetup,
     Setup,
+    Shape,
     check_ball,
     identifier,
 )
@@ -142,11 +144,14 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
         g = get.sub("tolerances")
         g.only(set(paths))
         tolerances = {name: _positive(g, name) for name in g.doc}
-    declared = ()
+    declared, shapes = (), {}
     if "effects" in doc:
         g = get.sub("effects")
-        g.only({"declared"})
-        declared = tuple(g.names("declared"))
+        g.only({"declared", "shapes"})
+        if "shapes" in g.doc:
+            shapes = _shapes(g.sub("shapes"))
+            machine = replace(machine, shapes=shapes)
+        declared = tuple(g.names("declared")) if "declared" in g.doc else ()
         for i, name in enumerate(declared):
             try:
                 resolve(machine, name)
@@ -154,7 +159,7 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
                 raise CompgenError(exc.message, where=f"{g.at('declared')}[{i}]", hint=exc.hint) from None
     serial = identifier("serial", doc["serial"], get.at("serial")) if "serial" in doc else ""
     return replace(machine, paths=paths, program=program, probe=probe, limits=limits, tolerances=tolerances,
-                   declared=declared, drift=drift, serial=serial, **sections)
+                   declared=declared, shapes=shapes, drift=drift, serial=serial, **sections)
 
 
 def _probe(g: _Getter) -> ProbeSetup:
@@ -312,6 +317,28 @@ class _Getter:
         if index is None:
             return _Getter(self.table(key), self.at(key))
         return _Getter(self.list(key)[index], f"{self.at(key)}[{index}]")
+
+
+def _shapes(get: _Getter) -> dict[str, Shape]:
+    """``[effects.shapes.NAME]``: ``at`` alone (a spline's knots) or ``at`` and ``values``
+    (a lookup table), positions strictly increasing in the axis's unit (mm, deg)."""
+    out = {}
+    for name in get.doc:
+        if not re.fullmatch(SHAPE_NAME, name):
+            raise CompgenError(f"a shape's name is lower-case letters, digits and _, starting with a "
+                               f"letter, not {name!r}", where=get.at(name))
+        g = get.sub(name)
+        g.only({"at", "values"})
+        at = g._get("at")
+        n = len(at) if isinstance(at, list) else 0
+        at = g.numbers("at", max(n, 2 if "values" in g.doc else 3))   # a spline: zero at its first
+        if not all(b > a for a, b in zip(at[:-1], at[1:], strict=True)):
+            raise CompgenError("positions must increase strictly", where=g.at("at"))
+        values = tuple(g.numbers("values", len(at))) if "values" in g.doc else ()
+        if values and not any(values):
+            raise CompgenError("a lookup table of zeros has no shape", where=g.at("values"))
+        out[name] = Shape(tuple(at), values)
+    return out
 
 
 def _finite(v) -> bool:
