@@ -144,3 +144,26 @@ def test_fit_add_and_diagnose_take_a_declared_shape_from_the_command_line(machin
     assert "No candidate is significant: the model explains these data to the R-test" in out, out
     code, _, err = run("fit", "--machine", SEED_MACHINE, csv, "--add", "EXX:l.laser", "-o", tmp_path / "g")
     assert code == 2 and "declares no lookup table (at, values) named 'laser'" in err, err
+
+
+def test_kinematics_writes_a_declared_spline_into_the_compensation_table(machine, tmp_path):
+    """The .comp.csv holds EXX:s.screw on X's 37 points: the command that undoes the curve X
+    stood off by (within 0.5 µm of minus that curve, held beyond the knots) — the fitted
+    spline in X's sense — and a value that rounds to zero is written 0.000000, not -0.000000."""
+    from compgen.rtest import format_rtest
+    path = tmp_path / "m.toml"
+    path.write_text(SEED_MACHINE.read_text() + SHAPES)
+    csv = tmp_path / "s.csv"
+    csv.write_text(format_rtest(machine, _session(machine, KNOTS, SCREW, 1.0, 5)[0]))
+    assert run("fit", "--machine", path, csv, "--add", "EXX:s.screw", "-o", tmp_path / "f.json")[0] == 0
+    code, _, err = run("kinematics", "--from", tmp_path / "f.json", "-o", tmp_path / "KIN.TAB")
+    assert code == 0, err
+    text = (tmp_path / "KIN.comp.csv").read_text()
+    rows = [r.split(",") for r in text.splitlines() if r.startswith("EXX:s.screw,")]
+    assert len(rows) == 37 and "-0.000000" not in text
+    from compgen.results import load_fit
+    fit = load_fit(tmp_path / "f.json")
+    spline = [0.0] + [fit.parameters[f"EXX:s.screw.{i}"].value for i in range(2, 6)]
+    x, comp = np.array([[float(r[2]), float(r[4])] for r in rows]).T
+    np.testing.assert_allclose(comp, -machine.axis("X").sense * np.interp(x, KNOTS, spline), atol=1e-6)
+    assert np.abs(comp + 1e-3 * np.interp(x, KNOTS, SCREW)).max() < 0.5e-3

@@ -265,7 +265,9 @@ def _comp_csv(tables) -> str:
            "effect,input_axis,position,output_axis,compensation,unit"]
     for t in tables:
         for x, v in zip(t.grid, t.values, strict=True):
-            out.append(f"{t.effect},{t.input},{x:.4f},{t.output},{v:.6f},{t.unit}")
+            # rounded, + 0.0: what rounds to zero is written 0.000000, never -0.000000
+            out.append(f"{t.effect},{t.input},{round(x, 4) + 0.0:.4f},{t.output},"
+                       f"{round(v, 6) + 0.0:.6f},{t.unit}")
     return "\n".join(out) + "\n"
 
 
