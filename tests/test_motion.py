@@ -587,3 +587,53 @@ def test_a_part_near_a_solid_is_within_the_margin_not_inside_it():
         assert [f.rule for f in found] == [expected]
         assert found[0].depth_mm == pytest.approx(max(-above, 0.0), abs=0.02)
         assert (" by " in found[0].text("T.H")) == (above < 0)
+
+
+def test_where_rounding_ends_and_a_limit_begins():
+    """The tolerances that tell rounding from a real excess, each pinned at 1.5 times itself
+    (a doubled tolerance would pass it) and at half of itself: a modulo target 1.5e-6° from
+    where C stands is a turn (0.5e-6°: where it is); 1.5e-9 mm past either end of travel is
+    outside (the end itself is in); 1.5e-9 mm of X Y Z travel is a move (1e-9: only turns,
+    F in deg/min); a speed 1.5e-9 of itself over feed_max is over it."""
+    from compgen.motion import Block, _per_segment, _Segment, _turned, feed_minutes
+    b = Block(4, "C", "move", turn={"C": "+"})
+    assert _turned(("C",), b, "C", 90.0 + 1.5e-6, 90.0) == pytest.approx(90.0 + 1.5e-6, abs=1e-12)
+    assert _turned(("C",), b, "C", 90.0 + 0.5e-6, 90.0) == 90.0
+    m = load_machine(SEED_MACHINE)
+    x = m.index("X")
+    lo, hi = m.axis("X").travel
+    seg = _Segment(Block(1, "L", "move"), False, np.zeros(5), np.zeros(5), False)
+    seg.path = np.zeros((5, 5))
+    seg.path[:, m.index("Z")] = 300.0
+    seg.path[:, x] = [lo, hi, lo - 1.5e-9, hi + 1.5e-9, hi + 0.5e-9]
+    out = _per_segment(m, [seg])[2][0][:, x]
+    assert out.tolist() == [False, False, True, True, False]
+    assert feed_minutes(1.5e-9, 3.0, 15.0) == pytest.approx(1e-10)       # a move: 1.5e-9 mm at F15
+    assert feed_minutes(1.0e-9, 3.0, 15.0) == pytest.approx(0.2)         # only turns: 3° at F15
+    findings = []
+    limits = np.array([a.feed_max for a in m.axes])
+    motion._seconds(m, Block(2, "L", "move", feed=1.0), np.zeros((2, 5)), np.zeros(5),
+                    limits * (1 + 1.5e-9), 1.0, 0.0, findings)
+    assert [f.rule for f in findings] == ["feed above feed_max"]
+    motion._seconds(m, Block(2, "L", "move", feed=1.0), np.zeros((2, 5)), np.zeros(5),
+                    limits * (1 + 0.5e-9), 1.0, 0.0, findings)
+    assert len(findings) == 1
+
+
+@pytest.mark.parametrize("depth_um, enters", [(1.5, True), (0.5, False)])
+def test_a_probing_tip_may_touch_the_sphere_to_a_micrometre_not_enter_it(depth_um, enters):
+    """While probing, the stylus tip touches the sphere: 0.5 µm inside is the touch (its
+    rounding), 1.5 µm inside enters it (TOUCH_MM, 1 µm; pinned at half and 1.5 times)."""
+    from compgen.motion import Block, _check_collisions, _Segment
+    from compgen.probe import probe_poses
+    m = load_machine(SEED_MACHINE)
+    q = np.array(probe_poses(m, ["K4"]).q[0])                # the stylus tip at the sphere's centre
+    reach = (m.probe.sphere_diameter + m.probe.stylus_diameter) / 2
+    q[m.index("Z")] += reach - depth_um * 1e-3
+    tip = motion.clearances(m, q[None], m.probe)[0]["stylus tip / ball"][0]
+    assert tip == pytest.approx(-depth_um * 1e-3)
+    seg = _Segment(Block(7, "TCH PROBE", "move"), False, q, q, False, probing=True)
+    seg.path = np.array([q, q])
+    findings = []
+    _check_collisions(m, [seg], findings, m.probe)
+    assert ["stylus tip enters the ball" in f.rule for f in findings].count(True) == int(enters), findings

@@ -330,3 +330,19 @@ def test_a_path_run_again_later_is_run_where_the_pose_list_has_it(seed_machine, 
     ran = _sides_as_run(seed_machine, controller, text, "tcpm")
     listed = np.loadtxt(StringIO(emitted.files[".poses.csv"]), delimiter=",", skiprows=1, usecols=(9, 10))
     np.testing.assert_array_equal(ran, listed)
+
+
+def test_one_ball_per_program_to_the_pose_lists_resolution(seed_machine):
+    """A program measures one ball: poses whose balls differ by 1.5e-7 mm (below the pose
+    list's 6 decimals) are one ball; 1.5e-5 mm apart, two — refused, one program per ball."""
+    from compgen.errors import CompgenError
+    p = generate(seed_machine, ["K4"])
+
+    def shifted(by):
+        ball = np.array(p.ball, float)
+        ball[1::2, 0] += by
+        return Poses(p.q, ball, p.t, p.path, p.side)
+    emitted = measure_program(seed_machine, shifted(1.5e-7), "K4", "itnc530", "tcpm", "K4", "0", DATE)
+    assert "END PGM" in emitted.files[".H"]
+    with pytest.raises(CompgenError, match="a program measures one ball position; these poses hold 2"):
+        measure_program(seed_machine, shifted(1.5e-5), "K4", "itnc530", "tcpm", "K4", "0", DATE)
