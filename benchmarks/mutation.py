@@ -40,7 +40,7 @@ TESTS = {
     "compgen/emit/linuxcnc.py": [*EDITS, "tests/test_edge.py", *PROGRAMS],
     "compgen/motion.py": [*HOSTILE, "tests/test_probe_programs.py"],    # probing moves are motion's too
     "compgen/emit/programs.py": [*HOSTILE, "tests/test_trt.py"],        # read back under trt's senses
-    "compgen/effects.py": ["tests/test_effects.py", "tests/test_kinematics.py"],
+    "compgen/effects.py": ["tests/test_effects.py", "tests/test_kinematics.py", "tests/test_shapes.py"],
     "compgen/diagnose.py": ["tests/test_diagnose_stats.py", "tests/test_diagnose.py"],
     "compgen/noise.py": ["tests/test_noise.py", *(f"tests/test_diagnose.py::test_{t}" for t in (
         "outliers_are_listed_where_the_user_finds_them_and_flag_nothing",
