@@ -257,8 +257,8 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     r = r3.ravel()
     # only Q and R of the model's Jacobian are kept: J's column norms are R's. Free start
     # sides (``StartSides``) come first in Q, and R is that of J without them, as fit has it
-    J = model.jacobian(poses, x)[:, :, free]
-    Q, R = np.linalg.qr((J if starts is None else starts(J.copy())).reshape(r.size, -1))
+    J = model.jacobian(poses, x)[:, :, free]        # indexed by a list: a copy, projected in place
+    Q, R = np.linalg.qr((J if starts is None else starts(J)).reshape(r.size, -1))
     if starts is not None:
         Q = np.hstack([starts.basis(len(poses)), Q])
     r = r - Q @ (Q.T @ r)             # the fit's residual without the outliers

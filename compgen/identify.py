@@ -79,7 +79,7 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         dev, J = m.linearise(poses, x, out=buffer)
         raw = y - dev
         J = project(weights.apply(J if len(free) == len(names) else J[:, :, free]))
-        return Step(raw, project(weights.apply(raw)).ravel(),
+        return Step(raw, project(np.array(weights.apply(raw))).ravel(),     # a copy: raw stays raw
                     Normal(np.moveaxis(J, 2, 0).reshape(p, readings).T))
 
     def solve(x, at):

@@ -266,16 +266,14 @@ class StartSides:
     """The side of each run that holds an axis, where the data do not record it (no
     ``A_side`` column): for every reversal (backlash) effect among ``names`` and every run
     that never moves its axis, one free constant — the effect's value there, ± half the
-    reversal as the unknown approach left it. They are
-    fitted beside the parameters (projected out, ``projector``: the estimates and their
-    uncertainties are the joint fit's, the constants themselves are not reported), so a path
-    that holds the axis or runs it one way leaves no offset of its own behind, where it
-    would look like drift."""
+    reversal as the unknown approach left it. They are fitted beside the parameters
+    (projected out, ``projector``: the estimates and their uncertainties are the joint
+    fit's, the constants themselves are not reported), so a path that holds the axis leaves
+    no offset of its own behind, where it would look like drift."""
 
     def __init__(self, machine: Machine, names: Iterable[str], poses: Poses):
         self.machine, self.poses = machine, poses
         run = runs(poses)
-        self.free: list[tuple[Effect, np.ndarray]] = []     # (effect, its constants' poses)
         self.labels: list[tuple[str, str]] = []            # (axis, path) per constant
         per_run: dict[int, list[tuple[Effect, np.ndarray]]] = {}
         for e in dict.fromkeys(effect_of_param(machine, n) for n in names):

@@ -254,6 +254,10 @@ def test_a_pose_block_that_only_turns_runs_at_f_deg_per_min_in_both_checks(seed_
     _check_feed(slow, _two_poses(slow, 0.0, 0.5), 15.0, "P", "axes")            # 15 deg/min: fine
     with pytest.raises(CompgenError, match=r"^P: at feed 25 mm/min, C would turn at 25 deg/min"):
         _check_feed(slow, _two_poses(slow, 0.0, 0.5), 25.0, "P", "axes")
+    _check_feed(slow, _two_poses(slow, 0.0, 0.5), 20.0, "P", "axes")            # at feed_max: not over it
+    crawl = replace(slow, workpiece=tuple(replace(a, feed_max=0.5) if a.rotary else a
+                                          for a in slow.workpiece))
+    _check_feed(crawl, _two_poses(crawl, 10.0, 0.0), 500.0, "P", "axes")      # no turn: no speed at all
     only = motion.ONLY_TURNS_MM
     np.testing.assert_allclose(motion.feed_minutes(np.array([0.0, only, 2 * only, 10.0]), 3.0, 15.0),
                                [0.2, 0.2, 2 * only / 15.0, 10.0 / 15.0])
