@@ -286,6 +286,14 @@ class _Getter:
                                where=self.at(key))
         return [float(x) for x in v]
 
+    def series(self, key: str, least: int) -> list[float]:
+        """A list of ``least`` or more finite numbers."""
+        v = self._get(key)
+        if not isinstance(v, list | tuple) or len(v) < least or not all(_finite(x) for x in v):
+            raise CompgenError(f"must be a list of {least} or more finite numbers, got {_shown(v)}",
+                               where=self.at(key))
+        return [float(x) for x in v]
+
     def vec3(self, key: str, default=None) -> tuple[float, float, float]:
         return tuple(self.numbers(key, 3, default))
 
@@ -329,9 +337,7 @@ def _shapes(get: _Getter) -> dict[str, Shape]:
                                f"letter, not {name!r}", where=get.at(name))
         g = get.sub(name)
         g.only({"at", "values"})
-        at = g._get("at")
-        n = len(at) if isinstance(at, list) else 0
-        at = g.numbers("at", max(n, 2 if "values" in g.doc else 3))   # a spline: zero at its first
+        at = g.series("at", 2 if "values" in g.doc else 3)     # a spline is zero at its first knot
         if not all(b > a for a, b in zip(at[:-1], at[1:], strict=True)):
             raise CompgenError("positions must increase strictly", where=g.at("at"))
         values = tuple(g.numbers("values", len(at))) if "values" in g.doc else ()

@@ -111,7 +111,7 @@ def test_a_correction_table_holds_a_shape_only_where_its_corners_are_two_steps_a
 
 @pytest.mark.parametrize("shapes, says", [
     ("[effects.shapes.screw]\nat = [0, 100, 50]\n", r"effects: shapes: screw: at: positions must increase"),
-    ("[effects.shapes.screw]\nat = [0, 100]\n", r"effects: shapes: screw: at: must be a list of 3 finite"),
+    ("[effects.shapes.screw]\nat = [0, 100]\n", r"shapes: screw: at: must be a list of 3 or more finite"),
     ("[effects.shapes.t]\nat = [0, 1]\nvalues = [1, 2, 3]\n", r"shapes: t: values: must be a list of 2"),
     ("[effects.shapes.t]\nat = [0, 1]\nvalues = [0, 0]\n", r"shapes: t: values: a lookup table of zeros"),
     ("[effects.shapes.Screw]\nat = [0, 1, 2]\n", r"effects: shapes: Screw: a shape's name is lower-case"),
