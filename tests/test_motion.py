@@ -263,6 +263,18 @@ def test_check_program_refuses_an_empty_or_impossible_ball_in_one_line(machines,
         assert code == 2 and words in err and err.count("\n") == 1 and "the ball: the ball" not in err, err
 
 
+def _around_the_set_up(m, rng, n):
+    """``n`` random machine poses around the set-up: each rotary axis within ±100°, X and Y
+    within ±150 mm, Z in the lowest 300 mm of its travel (each axis drawn per pose)."""
+    q = np.zeros((n, len(m.axes)))
+    for i, a in enumerate(m.axes):
+        lo, hi = a.travel
+        q[:, i] = np.radians(rng.uniform(max(lo, -100), min(hi, 100), n)) if a.rotary else rng.uniform(
+            max(lo, -150), min(hi, 150), n)
+    q[:, m.index("Z")] = rng.uniform(m.axis("Z").travel[0], m.axis("Z").travel[0] + 300, n)
+    return q
+
+
 @pytest.mark.parametrize("held, face", [("nest", 0.0), ("probe", 0.0), ("nest", -35.0)])
 def test_the_searched_clearance_is_the_least_along_housing_and_spindle(held, face):
     """The closed forms (ball, stem) and the golden-section search (table) against a brute
@@ -278,12 +290,7 @@ def test_the_searched_clearance_is_the_least_along_housing_and_spindle(held, fac
     s = m.setup
     rng = np.random.default_rng(5)
     n = 400
-    q = np.zeros((n, len(m.axes)))
-    for i, a in enumerate(m.axes):
-        lo, hi = a.travel
-        q[:, i] = np.radians(rng.uniform(max(lo, -100), min(hi, 100))) if a.rotary else rng.uniform(
-            max(lo, -150), min(hi, 150), n)
-    q[:, m.index("Z")] = rng.uniform(m.axis("Z").travel[0], m.axis("Z").travel[0] + 300, n)
+    q = _around_the_set_up(m, rng, n)
     q[:40, [m.index(a.name) for a in m.rotary_axes]] = 0.0     # the tool axis parallel to the stem
     # the tool axis upright in the table, 1-20 mm inside its rim, between its faces
     angle, radial = rng.uniform(0, 2 * np.pi, 20), s.table_radius - rng.uniform(1, 20, 20)
@@ -647,14 +654,8 @@ def test_the_searched_table_clearance_is_the_least_to_a_micrometre_and_a_half():
     leaves 1.33 µm at these poses, 1.6–2.1 µm with a step twice as long)."""
     m = load_machine(SEED_MACHINE)
     s = m.setup
-    rng = np.random.default_rng(6)
     n = 60
-    q = np.zeros((n, len(m.axes)))
-    for i, a in enumerate(m.axes):
-        lo, hi = a.travel
-        q[:, i] = np.radians(rng.uniform(max(lo, -100), min(hi, 100), n)) if a.rotary else rng.uniform(
-            max(lo, -150), min(hi, 150), n)
-    q[:, m.index("Z")] = rng.uniform(m.axis("Z").travel[0], m.axis("Z").travel[0] + 300, n)
+    q = _around_the_set_up(m, np.random.default_rng(6), n)
     got, _ = clearances(m, q)
     _, nest, axis = motion._frames(m, q)
     top, bottom = s.table_top, s.table_top - s.table_thickness
