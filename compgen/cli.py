@@ -199,7 +199,7 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
         poses = generate(machine, names, ball=at, back=back, rate_hz=rate_hz, feed=feed)
     drive = None
     if edits:
-        held = read_edits(machine, {e: read_text(e, "edit", ansi_ok=True)[0] for e in edits},
+        held = read_edits(machine, {e: read_state(e) for e in edits},
                           read_state(current) if current else None)
         drive = partial(held.drive, machine)
     rng = np.random.default_rng(seed)
@@ -528,7 +528,8 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, reco
     name = program_name(out.stem, room=len("_SIGN"))
     emitted = kinematics_edit(machine, fit, ctl.name, text, ", ".join(current), name, __version__,
                               date.today().isoformat(), force,
-                              read_state(measured) if measured else None, out.stem, ", ".join(measured))
+                              read_state(measured) if measured else None, out.stem, ", ".join(measured),
+                              str(out.absolute().parent))
     main_key = ctl.main_suffix(text)
     files = {(out if key == main_key else out.with_name(out.stem + key)): body
              for key, body in emitted.files.items()}

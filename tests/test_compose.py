@@ -119,40 +119,53 @@ def test_linuxcnc_second_round_adds_to_the_pins(seed_machine):
 
 def test_linuxcnc_second_round_reads_the_configuration_through_its_ini(seed_machine, tmp_path):
     """The configuration's own HAL file sets the pins (one through a signal, its value an
-    INI reference); edit A is a further HALFILE in the INI. Given the INI as --current, edit
-    B is written over what LinuxCNC loads — every file, in order — and equals one edit of
-    A + B; over the configuration without A (what giving its HAL file alone amounted to)
-    it would undo A."""
+    INI reference). Edit A, given the INI, is the configuration to start with: A.ini, with
+    the HAL file written anew as A.machine.hal and the INI key changed where it stands.
+    Edit B, given A.ini, lands where one edit of A + B lands; over the configuration
+    without A it would undo A."""
     from compgen.emit import linuxcnc
+    from compgen.emit.linuxcnc_config import evaluate
     from compgen.emit.registry import read_state
     module, tilt, c = linuxcnc._trt(seed_machine)
     nominal = linuxcnc._nominal(seed_machine, tilt, c)
     (tmp_path / "machine.hal").write_text("\n".join(
-        [f"net zrot => {module}.z-rot-point", "sets zrot [KINS]ZROT",
-         *(f"setp {module}.{n} {v:.6f}" for n, v in nominal.items() if n != "z-rot-point")]) + "\n")
-    head = (f"[KINS]\nKINEMATICS = {module}\nZROT = {nominal['z-rot-point']:.6f}\n"
-            "[HAL]\nHALFILE = core_sim.hal\n")
-    (tmp_path / "before.ini").write_text(head + "HALFILE = machine.hal\n")
-    (tmp_path / "machine.ini").write_text(head + "HALFILE = machine.hal\nHALFILE = A.hal\n")
-    before = read_state(str(tmp_path / "before.ini"))
+        [f"net yrot => {module}.y-rot-point", "sets yrot [KINS]YROT",
+         *(f"setp {module}.{n} {v:.6f}" for n, v in nominal.items() if n != "y-rot-point")]) + "\n")
+    (tmp_path / "before.ini").write_text(f"[KINS]\nKINEMATICS = {module}\nYROT = {nominal['y-rot-point']:.6f}\n"
+                                         "[HAL]\nHALFILE = core_sim.hal\nHALFILE = machine.hal\n")
 
-    def edit(truth, state, where, name):
-        return kinematics_edit(seed_machine, _fit(seed_machine, truth), "linuxcnc", state, where, name, "0",
-                               "d").files[".hal"]
-    (tmp_path / "A.hal").write_text(edit(SEED_A, before, "before.ini", "A"))
-    state = read_state(str(tmp_path / "machine.ini"))
-    assert "core_sim.hal (not beside the INI" in state and "A.hal" in state
+    def edit(truth, ini, stem):
+        out = kinematics_edit(seed_machine, _fit(seed_machine, truth), "linuxcnc", read_state(str(tmp_path / ini)),
+                              str(tmp_path / ini), stem, "0", "d", stem=stem, folder=str(tmp_path))
+        for suffix, text in out.files.items():
+            (tmp_path / f"{stem}{suffix}").write_text(text)
+        return out
 
-    def pins(text):
-        got = {m[2]: float(m[3]) for m in SETP.finditer(text)}
-        got["z-rot-point"] = float(re.search(r"(?m)^sets zrot (\S+)", text)[1])
-        return got
-    two = pins(edit(SEED_B, state, str(tmp_path / "machine.ini"), "B"))
-    one = pins(edit(_sum(SEED_A, SEED_B), before, "before.ini", "AB"))
-    for name in one:
+    def pins(ini):
+        return linuxcnc.held_pins(evaluate(read_state(str(tmp_path / ini))), module)[0]
+
+    a = edit(SEED_A, "before.ini", "A")
+    assert set(a.files) >= {".ini", ".machine.hal", "_RESTORE.ini"}
+    assert "HALFILE = A.machine.hal" in a.files[".ini"] and "HALFILE = machine.hal" in a.files["_RESTORE.ini"]
+    # the INI key, where the value stands, holds what the edit without a configuration sets
+    alone = kinematics_edit(seed_machine, _fit(seed_machine, SEED_A), "linuxcnc", None, "", "H", "0", "d")
+    assert re.search(r"(?m)^YROT = (\S+)$", a.files[".ini"])[1] == re.search(
+        rf"(?m)^setp {module}.y-rot-point (\S+)", alone.files[".hal"])[1]
+    assert "sets yrot [KINS]YROT" in a.files[".machine.hal"]
+    assert (tmp_path / "machine.hal").read_text().count("setp") == 5        # the user's files are untouched
+    edit(SEED_B, "A.ini", "B")
+    edit(_sum(SEED_A, SEED_B), "before.ini", "AB")
+    edit(SEED_B, "before.ini", "U")
+    two, one, undone = pins("B.ini"), pins("AB.ini"), pins("U.ini")
+    for name in _pin_names_of(tilt):
         assert two[name] == pytest.approx(one[name], abs=2e-6 + SECOND_ORDER_MM), name
-    undone = pins(edit(SEED_B, before, "before.ini", "B"))
     assert max(abs(undone[n] - one[n]) for n in one) > 5 * UM
+    assert pins("B_RESTORE.ini") == pins("A.ini") and pins("A_RESTORE.ini") == pins("before.ini")
+
+
+def _pin_names_of(tilt):
+    from compgen.emit import linuxcnc
+    return linuxcnc._pin_names(tilt)
 
 
 @pytest.mark.parametrize("controller", ["itnc530", "sinumerik840d", "linuxcnc"])

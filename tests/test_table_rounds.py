@@ -185,51 +185,51 @@ LINUX_LATER = {**LINUX_TRUTH, "ECC:h2c": 9 * ARCSEC, "EYY:p1": 18 * UM, "XOC": 1
 
 def test_linuxcnc_joint_tables_compose_through_the_ini(seed_machine, tmp_path):
     """LinuxCNC's second round reads the joints' COMP_FILEs the INI loads and writes each
-    joint's table as the loaded one plus this round's; with round 2's files in the INI the
-    machine is at the noise, and the restore puts back the pins and the INI's lines."""
+    joint's table as the loaded one plus this round's; started with round 2's INI the
+    machine is at the noise, and round 2's restore is round 1's configuration."""
     from compgen.emit import linuxcnc
     from compgen.emit.registry import read_state
     machine = seed_machine
     module, tilt, c = linuxcnc._trt(machine)
     nominal = linuxcnc._nominal(machine, tilt, c)
     (tmp_path / "machine.hal").write_text("".join(f"setp {module}.{n} {v:.6f}\n" for n, v in nominal.items()))
-    head = f"[KINS]\nKINEMATICS = {module}\n[HAL]\nHALFILE = core_sim.hal\nHALFILE = machine.hal\n"
-    (tmp_path / "machine.ini").write_text(head)
+    (tmp_path / "machine.ini").write_text(f"[KINS]\nKINEMATICS = {module}\n[HAL]\nHALFILE = core_sim.hal\n"
+                                          "HALFILE = machine.hal\n[JOINT_1]\nTYPE = LINEAR\n"
+                                          "[JOINT_4]\nTYPE = ANGULAR\n")
     model = [*(n for n in location_model(machine) if n[1] == "O" and n[0] in "XYZ"), *TABLES]
     rng = np.random.default_rng(11)
     poses = generate(machine, ["K4", "K1", "K2"])
 
-    def measure(files, truth):
-        state = read_state(str(tmp_path / "before.ini")) if files else None
+    def measure(ini, truth):
         drive = None
-        if files:
-            loaded = read_edits(machine, {f: (tmp_path / f).read_text() for f in files}, state)
+        if ini:
+            loaded = read_edits(machine, {ini: read_state(str(tmp_path / ini))}, None)
             def drive(p):
                 return loaded.drive(machine, p)
         return simulate(machine, truth, poses, NOISE_UM, rng, drive)
 
-    def edit(data, stem):
+    def edit(data, ini, stem):
         fit = identify(machine, [data], model)
-        out = kinematics_edit(machine, fit, "linuxcnc", read_state(str(tmp_path / "machine.ini")),
-                              str(tmp_path / "machine.ini"), stem, "0", "d", stem=stem)
+        out = kinematics_edit(machine, fit, "linuxcnc", read_state(str(tmp_path / ini)), str(tmp_path / ini),
+                              stem, "0", "d", stem=stem, folder=str(tmp_path))
         for suffix, text in out.files.items():
             (tmp_path / f"{stem}{suffix}").write_text(text)
         return fit, out
 
-    (tmp_path / "before.ini").write_text(head)
-    fit_a, a = edit(measure([], LINUX_TRUTH), "A")
-    assert set(a.files) >= {".hal", "_RESTORE.hal", ".C.comp", ".Y.comp"}
-    joints = ("[JOINT_1]\nCOMP_FILE = {0}.Y.comp\nCOMP_FILE_TYPE = 1\n"
-              "[JOINT_4]\nCOMP_FILE = {0}.C.comp\nCOMP_FILE_TYPE = 1\n")
-    (tmp_path / "machine.ini").write_text(head + "HALFILE = A.hal\n" + joints.format("A"))
-    during = measure(["A.hal", "A.C.comp", "A.Y.comp"], LINUX_LATER)
-    fit_b, b = edit(during, "B")
+    fit_a, a = edit(measure(None, LINUX_TRUTH), "machine.ini", "A")
+    assert set(a.files) >= {".ini", "_RESTORE.ini", ".C.comp", ".Y.comp"}
+    for joint, axis in ((1, "Y"), (4, "C")):
+        assert re.search(rf"\[JOINT_{joint}\]\nCOMP_FILE = A.{axis}.comp\nCOMP_FILE_TYPE = 1\n", a.files[".ini"])
+    during = measure("A.ini", LINUX_LATER)
+    fit_b, b = edit(during, "A.ini", "B")
     assert "held one" in "\n".join(b.notes)
-    after = measure(["A.hal", "B.hal", "B.C.comp", "B.Y.comp"], LINUX_LATER)
+    after = measure("B.ini", LINUX_LATER)
     alone = kinematics_edit(machine, fit_b, "linuxcnc", None, "", "R", "0", "d", stem="R").files
     for suffix in (".C.comp", ".Y.comp"):
         (tmp_path / f"R{suffix}").write_text(alone[suffix])
-    undone = measure(["A.hal", "B.hal", "R.C.comp", "R.Y.comp"], LINUX_LATER)
+    (tmp_path / "U.ini").write_text(b.files[".ini"].replace("= B.C.comp", "= R.C.comp").replace("= B.Y.comp",
+                                                                                                "= R.Y.comp"))
+    undone = measure("U.ini", LINUX_LATER)
     rms = {k: identify(machine, [d], SETUP_NAMES).residual["rms_um"]
            for k, d in (("during", during), ("after", after), ("undone", undone))}
     print("LinuxCNC rounds, rms µm:", {k: round(v, 3) for k, v in rms.items()})
@@ -239,12 +239,9 @@ def test_linuxcnc_joint_tables_compose_through_the_ini(seed_machine, tmp_path):
     for suffix in (".C.comp", ".Y.comp"):
         ta, tb, tr = (linuxcnc.read_comp(f[suffix], machine, suffix) for f in (a.files, b.files, alone))
         np.testing.assert_allclose(tb.values, np.add(ta.values, tr.values), atol=2e-6)
-    # the restore: the pins as the INI's files set them (A's values, as written) and A's tables
-    restore = b.files["_RESTORE.hal"]
-    for line in a.files[".hal"].splitlines():
-        if line.startswith("setp"):
-            assert line.split("#")[0].strip() in restore
-    assert "COMP_FILE = A.C.comp, COMP_FILE_TYPE = 1" in restore
+    # the restore: round 1's configuration, pins and tables
+    held = {k: read_edits(machine, {k: read_state(str(tmp_path / k))}, None) for k in ("A.ini", "B_RESTORE.ini")}
+    np.testing.assert_allclose(held["B_RESTORE.ini"].drive(machine, poses), held["A.ini"].drive(machine, poses))
 
 
 def test_linuxcnc_type0_table_is_read_as_nominal_minus_actual(seed_machine, tmp_path):

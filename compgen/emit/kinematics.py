@@ -80,12 +80,13 @@ def corrected_by(machine: Machine, fit: FitResult, ctl: Controller) -> dict[str,
 def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, current: str | None,
                     current_where: str, name: str, version: str, date: str, force: bool = False,
                     measured: str | None = None, stem: str | None = None,
-                    measured_where: str = "--measured-with") -> Emitted:
+                    measured_where: str = "--measured-with", folder: str = "") -> Emitted:
     """The files of a kinematics edit for one control, with the sign check and notes.
 
     ``measured`` is the control's state while the data were measured, when it differs from
     ``current`` (part of a correction already loaded, say): the edit then writes the rest.
-    ``stem``: the file stem its files are written under, where one file names another.
+    ``stem``: the file stem its files are written under, where one file names another;
+    ``folder``: the folder they are written to.
     """
     ctl = controller(controller_name)
     for text in (current, measured):
@@ -120,7 +121,7 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
               f"then run the sign check {sign_name}: see its expected changes")
     words = lines_text(p)
     ctx = EditContext(name, header, tuple(words), tuple(expect), version, date, fit.marker, stem or name,
-                      tuple((n, e.std) for n, e in fit.parameters.items()))
+                      tuple((n, e.std) for n, e in fit.parameters.items()), folder)
     edit = ctl.edit(machine, p, current, current_where, ctx)
     notes = [*words]
     if p.setup:

@@ -31,7 +31,18 @@ from ..machine import Machine
 from ..motion import Block, dwell, gcode_move
 from ..units import NUMBER, number
 from . import fmt_plain, render
-from .base import FILE_MARK, Controller, EditContext, EditFiles
+from .base import Controller, EditContext, EditFiles
+from .linuxcnc_config import (
+    Configuration,
+    IniEntry,
+    Setting,
+    bundle,
+    configuration_files,
+    evaluate,
+    hal_file,
+    is_bundle,
+    then,
+)
 
 # the value is the rest of the line (a comment aside): halcmd takes one word, so "1.0 junk"
 # is refused as a value rather than read as 1.0
@@ -68,74 +79,6 @@ def _nominal(machine: Machine, tilt, c) -> dict[str, float]:
 
 
 
-# A configuration as LinuxCNC loads it, resolved from its INI: each HAL file after a line
-# "# compgen: HAL file NAME", in the order [HAL] HALFILE lists them, then the [HAL] HALCMD
-# commands (scripts/linuxcnc.in §4.3.7-4.3.8), then POSTGUI_HALFILE, which the GUI runs once
-# it is up (axis.py); a later file's setp overrides an earlier one's, as halcmd executes them.
-INI_MARK = "# compgen: HAL file"
-INI_SECTION = re.compile(r"^\s*\[([A-Za-z0-9_]+)\]\s*$")
-
-
-def _ini(text: str) -> dict[str, list[tuple[str, str]]]:
-    """An INI's sections: (key, value) pairs in order (a key may repeat, as HALFILE does)."""
-    out: dict[str, list[tuple[str, str]]] = {}
-    section = None
-    for line in text.splitlines():
-        if (m := INI_SECTION.match(line)) is not None:
-            section = out.setdefault(m[1], [])
-        elif section is not None and "=" in line and not line.lstrip().startswith(("#", ";")):
-            key, value = line.split("=", 1)
-            section.append((key.strip(), value.split("#", 1)[0].strip()))
-    return out
-
-
-def resolve_ini(path: str, text: str) -> str:
-    """The HAL the INI at ``path`` loads, each file marked, ``[SECTION]KEY`` references put in
-    from the INI as LinuxCNC does; a HAL file not beside the INI (LinuxCNC's own library)
-    is named and left out: it sets no trt pin."""
-    ini = _ini(text)
-    hal = [v for k, v in ini.get("HAL", []) if k == "HALFILE"]
-    commands = [v for k, v in ini.get("HAL", []) if k == "HALCMD"]
-    post = [v for k, v in ini.get("HAL", []) if k == "POSTGUI_HALFILE"]
-    if not hal:
-        raise CompgenError("the INI's [HAL] section names no HALFILE", where=path)
-    values = {(s, k): v for s, pairs in ini.items() for k, v in pairs}
-    folder, out = Path(path).parent, []
-    for name in [*hal, None, *post]:
-        if name is None:           # the HALCMD lines run between the two
-            out += [f"{INI_MARK} {path} [HAL] HALCMD", *commands] if commands else []
-            continue
-        if name.endswith(".tcl"):
-            raise CompgenError(f"HALFILE {name} is a Tcl HAL file, which compgen does not evaluate",
-                               where=path, hint="give the HAL file that sets the trt pins as --current")
-        file = folder / name
-        if not file.is_file():
-            out.append(f"{INI_MARK} {name} (not beside the INI: LinuxCNC's own, not read)")
-            continue
-        body = read_text(file, "HAL file", ansi_ok=True)[0]
-        body = re.sub(r"\[([A-Za-z0-9_]+)\]([A-Za-z0-9_]+)",
-                      lambda m: values.get((m[1], m[2]), m[0]), body)
-        out += [f"{INI_MARK} {file}", body]
-    for section, pairs in ini.items():       # the joints' tables (inijoint.cc: type 0 by default)
-        joint = re.fullmatch(r"JOINT_(\d+)", section)
-        keys = dict(pairs)
-        if joint is None or "COMP_FILE" not in keys:
-            continue
-        kind = keys.get("COMP_FILE_TYPE", "0")
-        if kind not in ("0", "1"):
-            raise CompgenError(f"[{section}] COMP_FILE_TYPE = {kind}: LinuxCNC takes 0 or 1", where=path)
-        file = folder / keys["COMP_FILE"]
-        if not file.is_file():
-            raise CompgenError(f"[{section}] COMP_FILE {keys['COMP_FILE']} is not beside the INI",
-                               where=path, hint="LinuxCNC would not load it either: correct the INI or put "
-                                                "the file there")
-        body = read_text(file, "joint compensation file", ansi_ok=True)[0]
-        out += [f"# compgen: file {file} (COMP_FILE of joint {joint[1]}, type {kind}: {keys['COMP_FILE']})",
-                body]
-    return "\n".join(out) + "\n"
-
-
-COMP_MARK = re.compile(r"^# compgen: file (.+) \(COMP_FILE of joint (\d+), type ([01]): (.+)\)$")
 TRIPLET = re.compile(r"^\s*(\S+)\s+(\S+)\s+(\S+)")
 
 
@@ -160,38 +103,61 @@ def _triplets(lines, where: str) -> np.ndarray:
     return out
 
 
-def loaded_joint_tables(machine: Machine, state: str) -> dict[str, tuple[CompTable, CompTable]]:
-    """Per axis, the trims (forward, reverse) of the joint tables an INI loads, as LinuxCNC
-    holds them (type 0's actual positions converted as nominal − actual)."""
-    out: dict[str, tuple[CompTable, CompTable]] = {}
-    lines = state.splitlines()
-    for i, line in enumerate(lines):
-        if (m := COMP_MARK.match(line)) is None:
+def configuration(state: str | None, where: str) -> Configuration | None:
+    """What LinuxCNC holds from ``state``: a configuration read from its INI, or one HAL
+    file run alone."""
+    if state is None:
+        return None
+    return evaluate(state) if is_bundle(state) else hal_file(state, where)
+
+
+def joint_comp(cfg: Configuration) -> dict[int, tuple[IniEntry, str, str]]:
+    """Each joint's COMP_FILE entry, its type ("0", "1") and the file's text."""
+    out = {}
+    for section in sorted({m[1] for _, t in cfg.ini.joined if (m := re.match(r"\s*\[JOINT_(\d+)\]", t))}):
+        comp = cfg.ini.get(f"JOINT_{section}", "COMP_FILE")
+        if comp is None:
             continue
-        joint = int(m[2])
-        axis = _joint_axis(machine, joint, m[1])
-        body = lines[i + 1:]
-        end = next((k for k, ln in enumerate(body) if FILE_MARK.match(ln)), len(body))
-        rows = _triplets(body[:end], m[1])
+        kind = cfg.ini.get(f"JOINT_{section}", "COMP_FILE_TYPE")
+        if kind is not None and kind.value not in ("0", "1"):
+            raise CompgenError(f"[JOINT_{section}] COMP_FILE_TYPE = {kind.value}: LinuxCNC takes 0 or 1",
+                               where=str(kind.place))
+        path = next(p for p, names in cfg.named_at.items() if (comp.place, comp.value) in names)
+        out[int(section)] = (comp, kind.value if kind else "0", cfg.texts[path])
+    return out
+
+
+def loaded_joint_tables(machine: Machine, state: str | None) -> dict[str, tuple[CompTable, CompTable]]:
+    """Per axis, the trims (forward, reverse) of the joint tables an INI loads, as LinuxCNC
+    holds them (type 0's actual positions converted as nominal − actual), each within the
+    machine file's [limits] of the axis's own error."""
+    out: dict[str, tuple[CompTable, CompTable]] = {}
+    if not is_bundle(state):
+        return out
+    for joint, (comp, kind, text) in joint_comp(evaluate(state)).items():
+        where = f"{comp.place} ({comp.value})"
+        axis = _joint_axis(machine, joint, str(comp.place))
+        rows = _triplets(text.splitlines(), where)
         if len(rows) > COMP_ENTRIES:
-            raise CompgenError(f"the joint table has {len(rows)} lines; LinuxCNC takes {COMP_ENTRIES}",
-                               where=m[1])
+            raise CompgenError(f"the joint table has {len(rows)} lines; LinuxCNC takes {COMP_ENTRIES}", where=where)
         nominal, fwd, rev = rows.T
-        if m[3] == "0":
+        if kind == "0":
             fwd, rev = nominal - fwd, nominal - rev
-        unit = "deg" if machine.axis(axis).rotary else "mm"
+        rotary = machine.axis(axis).rotary
+        bound = machine.limits.tilt_arcsec / 3600 if rotary else machine.limits.offset_um * 1e-3
+        worst = float(np.abs(np.concatenate([fwd, rev])).max())
+        if not worst <= bound:
+            raise CompgenError(f"joint {joint}'s table trims {axis} by up to {worst:g} {'deg' if rotary else 'mm'}: "
+                               f"beyond the machine file's [limits] ({'tilt_arcsec' if rotary else 'offset_um'})",
+                               where=where, hint="is this the configuration of the measured machine? If it "
+                                                 "is, raise [limits] in the machine file")
+        unit = "deg" if rotary else "mm"
 
         def table(v, nominal=nominal, joint=joint, axis=axis, unit=unit):
             return CompTable(f"joint {joint}", "as loaded", axis, axis, float(nominal[0]), float(nominal[-1]),
                              tuple(float(x) for x in v), False, unit, tuple(float(x) for x in nominal))
         out[axis] = (table(fwd), table(rev))
     return out
-
-
-def _comp_line(state: str, axis: str, machine: Machine) -> str:
-    """The INI's COMP_FILE of ``axis``'s joint, as it was (from the resolved ``state``)."""
-    return next(f"COMP_FILE = {m[4]}, COMP_FILE_TYPE = {m[3]}" for line in state.splitlines()
-                if (m := COMP_MARK.match(line)) is not None and _joint_axis(machine, int(m[2]), m[1]) == axis)
 
 
 def _joint_axis(machine: Machine, joint: int, where: str) -> str:
@@ -202,63 +168,41 @@ def _joint_axis(machine: Machine, joint: int, where: str) -> str:
 
 
 def read_hal(text: str, module: str, where: str) -> tuple[dict[str, float], dict[str, str]]:
-    """A HAL file's values of the module's pins (``setp``, or ``sets`` on the signal a pin is
-    netted to) and the signal each netted pin is on. A pin or signal set twice is refused
-    (HAL keeps the last: which was meant?)."""
-    return _read_hal_lines(text, module, where)[:2]
+    """A HAL file's values of the module's pins (``setp``, ``PIN = VALUE``, or ``sets`` on
+    the signal a pin is netted to) and the signal each netted pin is on, as halcmd runs it.
+    A pin or signal set twice in one file is refused (HAL keeps the last: which was meant?)."""
+    values, signal, _ = held_pins(configuration(text, where), module)
+    return values, signal
 
 
-def _read_hal_lines(text: str, module: str, where: str, nets: dict[str, str] | None = None
-                    ) -> tuple[dict[str, float], dict[str, str], dict[str, tuple[str, str]]]:
-    """read_hal's values and signals, and where (file:line) each pin's value was set with its
-    text as written; ``nets``: the pins netted to signals by files loaded before this one."""
-    signal = dict(nets or {})
-    for m in NET.finditer(text):
-        for word in m[2].split():
-            if word.startswith(f"{module}."):
-                signal[word[len(module) + 1:]] = m[1]
-    on_signal, values, line_of, mine = {}, {}, {}, set()
-    k = 0
-    for line in text.splitlines():
-        k += 1
-        if (mark := FILE_MARK.match(line)) is not None:     # the next HAL file of an INI
-            where, k, mine = mark[1], 0, set()
-            continue
-        at = f"{where}:{k}"
-        if (m := SETS.match(line)) is not None:
-            if ("sets", m[1]) in mine:
-                raise CompgenError(f"signal {m[1]} is set twice in one file (lines {on_signal[m[1]][1]} "
-                                   f"and {k})", where=at, hint="keep the one the configuration means")
-            mine.add(("sets", m[1]))
-            on_signal[m[1]] = (number(m[2], f"sets {m[1]}", at), (at, m[2]))
-        elif (m := SETP.match(line)) is not None and m[1] == module:
-            if m[2] in signal:
-                raise CompgenError(f"{module}.{m[2]} is set by setp and netted to {signal[m[2]]}: LinuxCNC "
-                                   "refuses to start such a configuration", where=at)
-            if ("setp", m[2]) in mine:
-                raise CompgenError(f"{module}.{m[2]} is set twice in one file (lines "
-                                   f"{line_of[m[2]][0].rsplit(':', 1)[1]} and {k})",
-                                   where=at, hint="keep the one the configuration means")
-            mine.add(("setp", m[2]))
-            values[m[2]], line_of[m[2]] = number(m[3], f"setp {module}.{m[2]}", at), (at, m[3])
-    for pin, sig in signal.items():
-        if sig in on_signal:
-            values[pin], line_of[pin] = on_signal[sig]
-    return values, signal, line_of
+def held_pins(cfg: Configuration, module: str
+              ) -> tuple[dict[str, float], dict[str, str], dict[str, Setting]]:
+    """The module's pins that hold a value in ``cfg``: values, the signal of each netted
+    pin, and the setting (value as written, place) of each."""
+    values, signal, setting = {}, {}, {}
+    names = {p[len(module) + 1:] for p in (*cfg.pins, *cfg.net) if p.startswith(f"{module}.")}
+    for n in names:
+        pin = f"{module}.{n}"
+        if pin in cfg.net:
+            signal[n] = cfg.net[pin]
+        s = cfg.value(pin)
+        if s is not None:
+            values[n], setting[n] = number(s.text, f"{pin}", str(s.place)), s
+    return values, signal, setting
 
 
-def pins(machine: Machine, p: Plan, current: str | None,
-         where: str) -> tuple[str, list[tuple[str, str, str, str]], list[str]]:
+def pins(machine: Machine, p: Plan, current: str | None, where: str
+         ) -> tuple[str, list[tuple[str, str, str, str]], list[str], dict[str, Setting]]:
     """The HAL assignments of the trt pins: (``setp`` or ``sets``, pin or signal, new value,
-    old value), each pin the way the current file sets it (a netted pin through its signal);
-    the current values (the HAL file) or the machine file's nominal, plus the corrections;
-    and what the pins cannot express."""
+    old value), each pin the way the current configuration sets it (a netted pin through its
+    signal); the current values or the machine file's nominal, plus the corrections; what
+    the pins cannot express; and where the configuration sets each pin."""
     module, tilt, c = _trt(machine)
     names = _pin_names(tilt)
     nominal = _nominal(machine, tilt, c)
-    held, signal = nominal, {}
+    held, signal, line_of = nominal, {}, {}
     if current is not None:
-        held, signal, line_of = _read_hal_lines(current, module, where)
+        held, signal, line_of = held_pins(configuration(current, where), module)
         for n in names:
             if n not in held:
                 why = (f"is netted to {signal[n]}, which another component drives" if n in signal
@@ -268,7 +212,7 @@ def pins(machine: Machine, p: Plan, current: str | None,
             if not abs(held[n] - nominal[n]) * 1e3 <= machine.limits.offset_um:
                 raise CompgenError(f"{module}.{n} = {held[n]:g} mm, {held[n] - nominal[n]:+.4f} mm from the "
                                    f"machine file's {nominal[n]:g}: beyond its [limits] offset_um "
-                                   f"{machine.limits.offset_um:g} µm", where=line_of[n][0],
+                                   f"{machine.limits.offset_um:g} µm", where=str(line_of[n].place),
                                    hint="is this the configuration of the measured machine? If it is, "
                                         "correct the machine file's offsets or raise [limits]")
     delta_r = p.lines[c.name].offset
@@ -278,19 +222,24 @@ def pins(machine: Machine, p: Plan, current: str | None,
              for n, line in p.lines.items() for i in range(3) if line.tilt[i] != 0]
     in_joints = {t.effect for t in joint_tables(machine, p)}
     other += [*p.squareness, *(e for e in p.tables if e not in in_joints), *p.not_compensable]
-    was = {n: line_of[n][1] if current is not None else fmt_plain(held[n], 6) for n in names}
+    was = {n: line_of[n].text if current is not None else fmt_plain(held[n], 6) for n in names}
     rows = [("sets", signal[n], fmt_plain(new[n], 6), was[n]) if n in signal else
             ("setp", f"{module}.{n}", fmt_plain(new[n], 6), was[n]) for n in names]
-    return module, rows, other
+    return module, rows, other, {n: line_of[n] for n in names if n in line_of}
 
 
 def read_lines(text: str, machine: Machine, current: str | None,
                lines: dict[str, AxisLine]) -> dict[str, AxisLine]:
-    """The axis lines a trt HAL edit sets, relative to ``current`` (default: nominal)."""
+    """The axis lines a trt edit sets, relative to ``current`` (default: nominal): ``text``
+    is a configuration to start with (read from its INI), or a HAL file loaded after
+    ``current``'s files, whose values reach the pins through their nets."""
     module, tilt, c = _trt(machine)
-    before, nets = read_hal(current, module, "current") if current else (_nominal(machine, tilt, c), {})
-    # the edit is loaded after the configuration's files: what it sets wins, through their nets
-    now = {**before, **_read_hal_lines(text, module, "edit", nets)[0]}
+    cfg = configuration(current, "current")
+    before = held_pins(cfg, module)[0] if cfg is not None else _nominal(machine, tilt, c)
+    if is_bundle(text):
+        now = held_pins(evaluate(text), module)[0]
+    else:
+        now = {**before, **held_pins(then(cfg, text, "edit") if cfg else hal_file(text, "edit"), module)[0]}
     r = np.array([now[f"{a}-rot-point"] - before[f"{a}-rot-point"] for a in "xyz"])
     d = np.array([now.get(f"{a}-offset", 0.0) - before.get(f"{a}-offset", 0.0) for a in "xyz"])
     zero = np.zeros(3)
@@ -440,8 +389,8 @@ class LinuxCNC(Controller):
     tcpm_on = re.compile(r"^; mode TCPM", re.MULTILINE)
     tcp_switchable = False
     section = "linuxcnc"
-    load_note = ("KIN.hal as a HALFILE after the configuration's own; the COMP_FILE lines its header "
-                 "names into the INI")
+    load_note = ("start LinuxCNC with KIN.ini, the configuration compgen wrote from the INI given as "
+                 "--current (the values changed where the configuration sets them)")
     holds_tilts = False           # trt kinematics: pivot positions only
     squareness_as = ""
 
@@ -449,7 +398,7 @@ class LinuxCNC(Controller):
         return joint_tables(machine, p)
 
     def main_suffix(self, current: str | None) -> str:
-        return ".hal"
+        return ".ini" if is_bundle(current) else ".hal"
 
     def read_section(self, get, machine: Machine) -> dict:
         """[linuxcnc]: ``conventional_directions``, the trt module's pin of that name. With it
@@ -479,41 +428,75 @@ class LinuxCNC(Controller):
 
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:
-        module, rows, other = pins(machine, p, current, where)
-        from_ini = current is not None and INI_MARK in current
-        loaded = loaded_joint_tables(machine, current) if current is not None else {}
+        module, rows, other, settings = pins(machine, p, current, where)
+        cfg = evaluate(current) if is_bundle(current) else None
+        loaded = loaded_joint_tables(machine, current)
         comps = comp_files(machine, p, ctx, loaded)
         ini_lines = [ini for ini, _ in comps.values()]
-        text = render("linuxcnc/kinematics.hal.j2", header=ctx.header, module=module, lines=ctx.lines,
-                      rows=rows, other=other, ini=ini_lines, restore=False)
+        sign = [f"sign check {ctx.name}_SIGN{self.program_ext}, expected change of the reading:", *ctx.expect]
         notes = [f"{cmd} {target} {v}  (was {w})" for cmd, target, v, w in rows]
-        ini = where if from_ini else "the configuration's INI"
-        notes.append(f"load it: HALFILE = {ctx.stem}.hal after the last HALFILE of [HAL] in {ini}; the next "
-                     "round's --current is that INI, so the next edit adds to this one")
-        if ini_lines:
-            notes += ["joint compensation tables: in the INI, set (replacing any COMP_FILE or BACKLASH of "
-                      "these joints)", *(f"  {line}" for line in ini_lines)]
-            notes.append(f"they hold the tables the INI loads plus this round's ({', '.join(sorted(loaded))} "
-                         "held one)" if loaded else "no joint had a table in the INI: they hold this round's "
-                         "correction" if from_ini else "--current is not the INI, so the joints' loaded "
-                         "tables are unknown: these hold this round's correction alone (give the INI to "
-                         "add to them)")
         if other:
             notes.append("not expressible in LinuxCNC's trt kinematics and joint tables: " + ", ".join(other))
-        if current is not None and "tool-offset" not in read_hal(current, module, where)[1]:
-            notes.append(f"{module}.tool-offset is not netted: net it to motion.tooloffset.z, or the "
-                         "table turns about the spindle nose instead of the nest (G43 lengths)")
-        # the restore: each pin back to the value read, as it was written; each joint's table
-        # back to the INI's lines (the files they name are not touched)
-        restore_ini = [f"[JOINT_{joint_number(machine, a)}] " + (
-            _comp_line(current, a, machine) if a in loaded else "no COMP_FILE (remove the line the edit set)")
-            for a in sorted({t.input for t in joint_tables(machine, p)})]
+        tool = f"{module}.tool-offset"
+        if current is not None and tool not in configuration(current, where).net:
+            notes.append(f"{tool} is not netted: net it to motion.tooloffset.z, or the table turns about the "
+                         "spindle nose instead of the nest (G43 lengths)")
+        if cfg is not None:
+            return self._configuration_edit(machine, cfg, current, ctx, rows, settings, comps, loaded,
+                                            [*ctx.header, *ctx.lines, *sign], notes)
+        text = render("linuxcnc/kinematics.hal.j2", header=ctx.header, module=module, lines=ctx.lines,
+                      rows=rows, other=other, ini=ini_lines, sign=sign, restore=False)
+        notes.append(f"load it: put these values where the configuration sets the pins. A HALFILE added "
+                     "after the others is overwritten by the INI's HALCMD lines and POSTGUI_HALFILE where "
+                     f"they set a pin (as LinuxCNC's own trt samples do): give the INI as --current and "
+                     f"{ctx.stem}.ini is the configuration to start with")
+        if ini_lines:
+            notes += ["joint compensation tables: in the INI, set (replacing any COMP_FILE or BACKLASH of "
+                      "these joints)", *(f"  {line}" for line in ini_lines),
+                      "--current is not the INI, so the joints' loaded tables are unknown: these hold this "
+                      "round's correction alone (give the INI to add to them)"]
+        restore_ini = [f"[JOINT_{joint_number(machine, a)}] no COMP_FILE (remove the line the edit set)"
+                       for a in sorted({t.input for t in joint_tables(machine, p)})]
         restore = render("linuxcnc/kinematics.hal.j2", module=module, lines=[], other=[], ini=restore_ini,
-                         rows=[(cmd, target, w, w) for cmd, target, _, w in rows], restore=True,
+                         rows=[(cmd, target, w, w) for cmd, target, _, w in rows], restore=True, sign=[],
                          header=[f"compgen {ctx.version}: restores the trt pins as they were read",
                                  *ctx.header[1:3], f"load it in place of {ctx.stem}.hal"])
         return EditFiles({".hal": text, "_RESTORE.hal": restore,
                           **{k: body for k, (_, body) in comps.items()}}, tuple(notes))
+
+    def _configuration_edit(self, machine: Machine, cfg: Configuration, current: str, ctx: EditContext,
+                            rows, settings: dict[str, Setting], comps, loaded, header: list[str],
+                            notes: list[str]) -> EditFiles:
+        """The configuration to start with: the INI (and each file that sets a changed pin)
+        written anew beside it, the joints' tables named in it; its restore, the INI as it was."""
+        if ctx.folder and Path(ctx.folder).resolve() != cfg.folder.resolve():
+            raise CompgenError(f"the configuration to start with names its files as the INI does, relative to "
+                               f"{cfg.folder}: write it there", where=ctx.folder,
+                               hint=f"give -o {cfg.folder / (ctx.stem + '.ini')}")
+        values = {f"{_trt(machine)[0]}.{n}": v for (_, _, v, w), n in zip(rows, settings, strict=True)
+                  if v != w}
+        joints = {joint_number(machine, suffix.split(".")[1]): f"{ctx.stem}{suffix}" for suffix in comps}
+        files = configuration_files(cfg, values, joints, ctx.stem, header)
+        for suffix, (_, body) in comps.items():
+            files[suffix] = body
+        start = f"{ctx.stem}.ini"
+        files["_RESTORE.ini"] = "\n".join([f"# compgen {ctx.version}: the configuration as it was before "
+                                           f"{start}; start LinuxCNC with this file to undo the edit",
+                                           cfg.texts[cfg.ini_path].rstrip("\n")]) + "\n"
+        changed = sorted(f"{s.place} ({s.text})" for n, s in settings.items()
+                         if f"{_trt(machine)[0]}.{n}" in values)
+        notes.append(f"start LinuxCNC with {cfg.folder / start}: the INI's own lines, with the values changed "
+                     "where the configuration sets them (" + "; ".join(changed) + ")"
+                     + ("; " + ", ".join(f"{ctx.stem}{k}" for k in files if k not in (".ini", "_RESTORE.ini")
+                                          and not k.endswith(".comp")) + " written anew beside it"
+                        if len([k for k in files if not k.endswith(".comp")]) > 2 else ""))
+        if comps:
+            notes.append("joint compensation tables " + ", ".join(f"{ctx.stem}{k}" for k in comps) + ": "
+                         + (f"the tables the INI loads plus this round's ({', '.join(sorted(loaded))} held one)"
+                            if loaded else "no joint had a table in the INI: they hold this round's correction"))
+        notes.append(f"to undo: start LinuxCNC with {ctx.stem}_RESTORE.ini (the INI as it was); the next "
+                     f"round's --current is {start}, so the next edit adds to this one")
+        return EditFiles(files, tuple(notes))
 
     def loaded_tables(self, machine: Machine, state: str, where: str) -> list[CompTable]:
         return [replace(fwd, values=tuple((np.add(fwd.values, rev.values) / 2).tolist()))
@@ -523,10 +506,11 @@ class LinuxCNC(Controller):
         return Held(read_lines(current, machine, measured, nominal_lines(machine)), {})
 
     def state(self, path: str, text: str) -> str | None:
-        return resolve_ini(path, text) if re.search(r"(?m)^\s*\[HAL\]\s*$", text) else None
+        # an INI (inivar finds a section by the start of its line): LinuxCNC's whole configuration
+        return bundle(path, text) if re.search(r"(?m)^[ \t]*\[HAL\]", text) else None
 
     def reads(self, text: str) -> bool:
-        return (SETP.search(text) is not None or COMP_NOTE.search(text) is not None
+        return (is_bundle(text) or SETP.search(text) is not None or COMP_NOTE.search(text) is not None
                 or (SETS.search(text) is not None and "kinematics edit" in text))
 
     def check_setup(self, machine: Machine) -> None:
@@ -541,6 +525,10 @@ class LinuxCNC(Controller):
                                where=f"{machine.source}: [program] tool", hint='e.g. tool = "99"')
 
     def read(self, machine: Machine, text: str, current: str | None, held: Held, where: str) -> Held:
+        if is_bundle(text):            # a configuration to start with: its pins and its joints' tables
+            tables = self.loaded_tables(machine, text, where)
+            return Held(read_lines(text, machine, current, held.lines), held.squareness,
+                        (*(t for t in held.tables if t.effect not in {tb.effect for tb in tables}), *tables))
         if COMP_NOTE.search(text):     # a joint's table replaces the one it held
             table = read_comp(text, machine, where)
             return Held(held.lines, held.squareness,
