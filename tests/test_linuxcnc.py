@@ -10,6 +10,7 @@ elsewhere the test is skipped when LinuxCNC is not installed.
 
 import contextlib
 import fcntl
+import json
 import os
 import re
 import shutil
@@ -28,7 +29,7 @@ from compgen.effects import location_model
 from compgen.emit import linuxcnc
 from compgen.emit.kinematics import kinematics_edit
 from compgen.emit.programs import measure_program
-from compgen.emit.registry import read_edits
+from compgen.emit.registry import read_edits, read_state
 from compgen.identify import identify
 from compgen.kinematics import Model, Poses
 from compgen.lines import controller_inverse
@@ -141,32 +142,9 @@ def run_linuxcnc(folder, machine, program: str, edit: str, budget_s: float = RUN
     (folder / "sim.tbl").write_text(f"T{tool} P1 Z{machine.probe_length:.6f} ;R-test nest\n")
     (folder / "sim.var").write_text("")
     (folder / "prog.ngc").write_text(program)
-    sockets = Path(tempfile.mkdtemp(prefix="compgen-rtapi-"))
-    sockets.chmod(0o777)                  # rtapi_app, no longer root, must create its socket
-    env = {**os.environ, "COMPGEN_NGC": str(folder / "prog.ngc"),
-           "COMPGEN_JOINTS": str(folder / "joints.txt"), "RTAPI_FIFO_PATH": str(sockets / "rtapi.sock")}
-    if os.geteuid() == 0:
-        env["RTAPI_UID"] = "65534"        # rtapi_app drops root to this uid
-    env.pop("PYTHONPATH", None)
-    # one LinuxCNC at a time on a machine (its launcher keeps /tmp/linuxcnc.lock): tests
-    # run at once (two pytest processes, xdist) wait here for each other
-    with open(Path(tempfile.gettempdir()) / "compgen-linuxcnc-test.lock", "w") as guard:
-        fcntl.flock(guard, fcntl.LOCK_EX)
-        lock = Path("/tmp/linuxcnc.lock")     # left by a run that died: the launcher would ask
-        if lock.exists() and subprocess.run(["pgrep", "-x", "milltask"], capture_output=True).returncode:
-            lock.unlink()
-        launcher = subprocess.Popen(["linuxcnc", str(folder / "sim.ini")], cwd=folder, env=env,
-                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                    start_new_session=True)
-        try:
-            stdout, _ = launcher.communicate(timeout=budget_s)
-        except subprocess.TimeoutExpired:
-            pytest.fail(f"LinuxCNC did not finish within {budget_s} s")
-        finally:
-            end_linuxcnc(env["COMPGEN_JOINTS"])
-            launcher.wait(timeout=30)        # reaped: the launcher was one of the run's processes
+    launcher = launch(folder, folder / "sim.ini", {"COMPGEN_NGC": str(folder / "prog.ngc")}, budget_s)
     result = folder / "joints.txt"
-    assert result.exists(), f"LinuxCNC wrote no joints (exit {launcher.returncode}): {stdout[-1500:]}"
+    assert result.exists(), f"LinuxCNC wrote no joints (exit {launcher.returncode}): {launcher.stdout[-1500:]}"
     text = result.read_text()
     assert text.rstrip().endswith("done"), text[-500:]
     stops = re.search(r"(?m)^stops (\d+)$", text)
@@ -174,6 +152,41 @@ def run_linuxcnc(folder, machine, program: str, edit: str, budget_s: float = RUN
     joints = {int(w[0]): np.array([float(v) for v in w[1:]])
               for w in (ln.split() for ln in text.splitlines()) if w[0].isdigit()}
     return {k: v - [0, 0, machine.probe_length, 0, 0] * 2 for k, v in joints.items()}
+
+
+def launch(folder: Path, ini: Path, more_env: dict[str, str], budget_s: float = RUN_BUDGET_S,
+           screen: bool = False) -> subprocess.CompletedProcess:
+    """Start LinuxCNC on ``ini`` as a user does (``linuxcnc INI``) and wait for its display
+    (a test driver) to end it; ``screen``: under a virtual X screen, for GUIs a
+    configuration loads itself (the trt samples' vismach models)."""
+    sockets = Path(tempfile.mkdtemp(prefix="compgen-rtapi-"))
+    sockets.chmod(0o777)                  # rtapi_app, no longer root, must create its socket
+    env = {**os.environ, **more_env, "COMPGEN_JOINTS": str(folder / "joints.txt"),
+           "RTAPI_FIFO_PATH": str(sockets / "rtapi.sock")}
+    if os.geteuid() == 0:
+        env["RTAPI_UID"] = "65534"        # rtapi_app drops root to this uid
+    env.pop("PYTHONPATH", None)
+    command = ["linuxcnc", str(ini)]
+    if screen:
+        assert shutil.which("xvfb-run"), "xvfb-run is required here (Debian's xvfb)"
+        command = ["xvfb-run", "-a", *command]
+    # one LinuxCNC at a time on a machine (its launcher keeps /tmp/linuxcnc.lock): tests
+    # run at once (two pytest processes, xdist) wait here for each other
+    with open(Path(tempfile.gettempdir()) / "compgen-linuxcnc-test.lock", "w") as guard:
+        fcntl.flock(guard, fcntl.LOCK_EX)
+        lock = Path("/tmp/linuxcnc.lock")     # left by a run that died: the launcher would ask
+        if lock.exists() and subprocess.run(["pgrep", "-x", "milltask"], capture_output=True).returncode:
+            lock.unlink()
+        launcher = subprocess.Popen(command, cwd=folder, env=env, stdout=subprocess.PIPE,
+                                    stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        try:
+            stdout, _ = launcher.communicate(timeout=budget_s)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"LinuxCNC did not finish within {budget_s} s")
+        finally:
+            end_linuxcnc(env["COMPGEN_JOINTS"])
+            launcher.wait(timeout=30)        # reaped: the launcher was one of the run's processes
+    return subprocess.CompletedProcess(command, launcher.returncode, stdout or "")
 
 
 def _at_poses(joints: dict[int, np.ndarray], program: str) -> np.ndarray:
@@ -253,3 +266,94 @@ def test_a_run_past_its_budget_is_ended_whole(tmp_path):
     with pytest.raises(pytest.fail.Exception, match="did not finish within"):
         run_linuxcnc(tmp_path / "run", machine, "G4 P600\nM2\n", "", budget_s=8)
     assert not _ours(str(tmp_path / "run" / "joints.txt"))
+
+
+# LinuxCNC's own trt sample configurations, as linuxcnc-uspace ships them: their pins are set
+# by [HAL] HALCMD lines, which LinuxCNC runs after every HALFILE
+SAMPLES = Path("/usr/share/doc/linuxcnc/examples/sample-configs/sim/axis/vismach/5axis/table-rotary-tilting")
+# joint positions to read the tables' trims at: a joint's trim applies once it has moved
+# (control.c), so the home position comes last; short moves, at the sample's 20 mm/s, 30 deg/s
+READ_AT = [[10, -60, 8, -20, 45], [-12, 60, -10, 25, 110], [15, 20, 12, -10, 200], [0, 0, 0, 0, 0]]
+
+
+def sample_copy(folder: Path, machine, halfile: bool = False) -> Path:
+    """LinuxCNC's sample configuration for the machine's trt module, copied to ``folder``
+    with the machine file's pins where the sample sets them (as an integrator would) and
+    the read-back test display in place of AXIS. The POSTGUI_HALFILE connects AXIS's panel
+    only, and goes with it. ``halfile``: the same configuration with its HALCMD lines moved
+    into a HAL file loaded as the second HALFILE."""
+    module, tilt, c = linuxcnc._trt(machine)
+    nominal = linuxcnc._nominal(machine, tilt, c)
+    kins = module[:5]
+    shutil.copytree(SAMPLES, folder)
+    for f in folder.rglob("*"):
+        f.chmod(0o755 if f.is_dir() else 0o644)          # Debian ships them read-only
+    ini = (folder / f"{kins}-trt.ini").read_text()
+    ini = re.sub(r"(?m)^(\s*DISPLAY = )axis$", rf"\g<1>{HERE / 'read_back.py'}", ini)
+    ini = re.sub(r"(?m)^POSTGUI_HALFILE = .*\n", "", ini)
+    ini = re.sub(r"(?m)^(HALCMD = sets\s+:([xyz]-offset)\s+)\S+$", lambda m: m[1] + f"{nominal[m[2]]:.6f}", ini)
+    ini = re.sub(r"(?m)^(HALCMD = setp \S+\.([xyz]-rot-point)\s+)\S+$", lambda m: m[1] + f"{nominal[m[2]]:.6f}",
+                 ini)
+    if halfile:
+        commands = re.findall(r"(?m)^HALCMD = (.*)$", ini)
+        (folder / "trt.hal").write_text("\n".join(commands) + "\n")
+        ini = re.sub(r"(?m)^HALCMD = .*\n", "", ini).replace("HALFILE = LIB:basic_sim.tcl",
+                                                             "HALFILE = LIB:basic_sim.tcl\nHALFILE = trt.hal")
+    path = folder / f"{kins}-trt.ini"
+    path.write_text(ini)
+    return path
+
+
+def read_back(ini: Path, machine) -> dict:
+    """What LinuxCNC itself holds once it started ``ini``: the trt pins (halcmd getp) and
+    the joints' commands and motor commands at ``READ_AT``."""
+    module, tilt, _ = linuxcnc._trt(machine)
+    pins = ",".join(f"{module}.{n}" for n in linuxcnc._pin_names(tilt))
+    done = launch(ini.parent, ini, {"COMPGEN_PINS": pins, "COMPGEN_POSITIONS": json.dumps(READ_AT)}, screen=True)
+    result = ini.parent / "joints.txt"
+    assert result.exists(), f"LinuxCNC wrote nothing (exit {done.returncode}): {done.stdout[-1500:]}"
+    got = json.loads(result.read_text())
+    assert got.get("done"), (got, done.stdout[-1500:])
+    return got
+
+
+def test_linuxcnc_starts_its_own_sample_with_compgens_configuration_and_holds_the_correction(machine, tmp_path):
+    """The edit of LinuxCNC's own shipped trt sample (pins set by HALCMD lines) is the
+    configuration to start with; LinuxCNC started with it reports (halcmd getp) the pins
+    compgen computes, and the joints' tables trim the motors as compgen's tables say. The
+    same configuration with its HALCMD lines in a HAL file gives the same final state (on
+    xyzac: each start takes some 20 s at the sample's speeds)."""
+    kins = linuxcnc._trt(machine)[0][:5]
+    module = linuxcnc._trt(machine)[0]
+    truth = TRUTH[kins]
+    fit = identify(machine, [simulate(machine, truth, generate(machine, ["K4", "K1", "K2"]), NOISE_UM,
+                                      np.random.default_rng(5))], [*location_model(machine), *TABLES[kins]])
+    alone = kinematics_edit(machine, fit, "linuxcnc", None, "", "H", "0", "d").files   # no configuration
+    want = {m[2]: float(m[3]) for m in re.finditer(rf"(?m)^setp ({re.escape(module)})\.(\S+) (\S+)",
+                                                    alone[".hal"])}
+    states = {}
+    for variant, halfile in (("halcmd", False), ("halfile", True))[:2 if kins == "xyzac" else 1]:
+        ini = sample_copy(tmp_path / variant, machine, halfile)
+        out = kinematics_edit(machine, fit, "linuxcnc", read_state(str(ini)), str(ini), "KIN", "0", "d",
+                              stem="KIN", folder=str(ini.parent))
+        for suffix, text in out.files.items():
+            (ini.parent / f"KIN{suffix}").write_text(text)
+        assert ("KIN.trt.hal" in out.files[".ini"]) == halfile
+        got = read_back(ini.parent / "KIN.ini", machine)
+        pins = {name.split(".", 1)[1]: v for name, v in got["values"].items()}
+        assert pins == pytest.approx(want, abs=1e-9), (pins, want)
+        shown = {name.split(".", 1)[1]: float(v) for name, v in got["pins"].items()}    # getp: 7 digits
+        assert shown == pytest.approx(want, rel=1e-6, abs=1e-9), (shown, want)
+        q, motor = (np.array([j[k] for j in got["joints"]]) for k in (0, 1))
+        np.testing.assert_allclose(q, READ_AT, atol=1e-9)      # identity kinematics at start (identityfirst)
+        for suffix in (k for k in out.files if k.endswith(".comp")):
+            table = linuxcnc.read_comp(out.files[suffix], machine, suffix)
+            j = linuxcnc.joint_number(machine, table.input)
+            expect = np.interp(q[:, j], table.grid, table.values)
+            np.testing.assert_allclose(motor[:, j] - q[:, j], expect, atol=1e-7)
+            assert np.abs(expect).max() > 1e-4                  # the tables do trim the motors
+        states[variant] = (pins, motor)
+        print(f"LinuxCNC {kins} sample ({variant}): pins {pins}")
+    if "halfile" in states:
+        assert states["halcmd"][0] == states["halfile"][0]
+        np.testing.assert_array_equal(states["halcmd"][1], states["halfile"][1])
