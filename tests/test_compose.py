@@ -131,12 +131,14 @@ def test_linuxcnc_second_round_reads_the_configuration_through_its_ini(seed_mach
     (tmp_path / "machine.hal").write_text("\n".join(
         [f"net yrot => {module}.y-rot-point", "sets yrot [KINS]YROT",
          *(f"setp {module}.{n} {v:.6f}" for n, v in nominal.items() if n != "y-rot-point")]) + "\n")
-    (tmp_path / "before.ini").write_text(f"[KINS]\nKINEMATICS = {module}\nYROT = {nominal['y-rot-point']:.6f}\n"
+    (tmp_path / "before.ini").write_text(f"[KINS]\nKINEMATICS = {module}\n"
+                                         f"YROT = {nominal['y-rot-point']:.6f}\n"
                                          "[HAL]\nHALFILE = core_sim.hal\nHALFILE = machine.hal\n")
 
     def edit(truth, ini, stem):
-        out = kinematics_edit(seed_machine, _fit(seed_machine, truth), "linuxcnc", read_state(str(tmp_path / ini)),
-                              str(tmp_path / ini), stem, "0", "d", stem=stem, folder=str(tmp_path))
+        out = kinematics_edit(seed_machine, _fit(seed_machine, truth), "linuxcnc",
+                              read_state(str(tmp_path / ini)), str(tmp_path / ini), stem, "0", "d", stem=stem,
+                              folder=str(tmp_path))
         for suffix, text in out.files.items():
             (tmp_path / f"{stem}{suffix}").write_text(text)
         return out

@@ -144,7 +144,8 @@ def run_linuxcnc(folder, machine, program: str, edit: str, budget_s: float = RUN
     (folder / "prog.ngc").write_text(program)
     launcher = launch(folder, folder / "sim.ini", {"COMPGEN_NGC": str(folder / "prog.ngc")}, budget_s)
     result = folder / "joints.txt"
-    assert result.exists(), f"LinuxCNC wrote no joints (exit {launcher.returncode}): {launcher.stdout[-1500:]}"
+    assert result.exists(), (f"LinuxCNC wrote no joints (exit {launcher.returncode})",
+                             launcher.stdout[-1500:])
     text = result.read_text()
     assert text.rstrip().endswith("done"), text[-500:]
     stops = re.search(r"(?m)^stops (\d+)$", text)
@@ -291,9 +292,8 @@ def sample_copy(folder: Path, machine, halfile: bool = False) -> Path:
     ini = (folder / f"{kins}-trt.ini").read_text()
     ini = re.sub(r"(?m)^(\s*DISPLAY = )axis$", rf"\g<1>{HERE / 'read_back.py'}", ini)
     ini = re.sub(r"(?m)^POSTGUI_HALFILE = .*\n", "", ini)
-    ini = re.sub(r"(?m)^(HALCMD = sets\s+:([xyz]-offset)\s+)\S+$", lambda m: m[1] + f"{nominal[m[2]]:.6f}", ini)
-    ini = re.sub(r"(?m)^(HALCMD = setp \S+\.([xyz]-rot-point)\s+)\S+$", lambda m: m[1] + f"{nominal[m[2]]:.6f}",
-                 ini)
+    for pins in (r"sets\s+:([xyz]-offset)", r"setp \S+\.([xyz]-rot-point)"):
+        ini = re.sub(rf"(?m)^(HALCMD = {pins}\s+)\S+$", lambda m: m[1] + f"{nominal[m[2]]:.6f}", ini)
     if halfile:
         commands = re.findall(r"(?m)^HALCMD = (.*)$", ini)
         (folder / "trt.hal").write_text("\n".join(commands) + "\n")
@@ -309,7 +309,8 @@ def read_back(ini: Path, machine) -> dict:
     the joints' commands and motor commands at ``READ_AT``."""
     module, tilt, _ = linuxcnc._trt(machine)
     pins = ",".join(f"{module}.{n}" for n in linuxcnc._pin_names(tilt))
-    done = launch(ini.parent, ini, {"COMPGEN_PINS": pins, "COMPGEN_POSITIONS": json.dumps(READ_AT)}, screen=True)
+    done = launch(ini.parent, ini, {"COMPGEN_PINS": pins, "COMPGEN_POSITIONS": json.dumps(READ_AT)},
+                  screen=True)
     result = ini.parent / "joints.txt"
     assert result.exists(), f"LinuxCNC wrote nothing (exit {done.returncode}): {done.stdout[-1500:]}"
     got = json.loads(result.read_text())
@@ -317,7 +318,7 @@ def read_back(ini: Path, machine) -> dict:
     return got
 
 
-def test_linuxcnc_starts_its_own_sample_with_compgens_configuration_and_holds_the_correction(machine, tmp_path):
+def test_linuxcnc_starts_its_own_sample_with_compgens_configuration_and_holds_it(machine, tmp_path):
     """The edit of LinuxCNC's own shipped trt sample (pins set by HALCMD lines) is the
     configuration to start with; LinuxCNC started with it reports (halcmd getp) the pins
     compgen computes, and the joints' tables trim the motors as compgen's tables say. The

@@ -219,7 +219,8 @@ def test_linuxcnc_joint_tables_compose_through_the_ini(seed_machine, tmp_path):
     fit_a, a = edit(measure(None, LINUX_TRUTH), "machine.ini", "A")
     assert set(a.files) >= {".ini", "_RESTORE.ini", ".C.comp", ".Y.comp"}
     for joint, axis in ((1, "Y"), (4, "C")):
-        assert re.search(rf"\[JOINT_{joint}\]\nCOMP_FILE = A.{axis}.comp\nCOMP_FILE_TYPE = 1\n", a.files[".ini"])
+        section = rf"\[JOINT_{joint}\]\nCOMP_FILE = A.{axis}.comp\nCOMP_FILE_TYPE = 1\n"
+        assert re.search(section, a.files[".ini"])
     during = measure("A.ini", LINUX_LATER)
     fit_b, b = edit(during, "A.ini", "B")
     assert "held one" in "\n".join(b.notes)
@@ -240,8 +241,9 @@ def test_linuxcnc_joint_tables_compose_through_the_ini(seed_machine, tmp_path):
         ta, tb, tr = (linuxcnc.read_comp(f[suffix], machine, suffix) for f in (a.files, b.files, alone))
         np.testing.assert_allclose(tb.values, np.add(ta.values, tr.values), atol=2e-6)
     # the restore: round 1's configuration, pins and tables
-    held = {k: read_edits(machine, {k: read_state(str(tmp_path / k))}, None) for k in ("A.ini", "B_RESTORE.ini")}
-    np.testing.assert_allclose(held["B_RESTORE.ini"].drive(machine, poses), held["A.ini"].drive(machine, poses))
+    a_held, restored = (read_edits(machine, {k: read_state(str(tmp_path / k))}, None)
+                        for k in ("A.ini", "B_RESTORE.ini"))
+    np.testing.assert_allclose(restored.drive(machine, poses), a_held.drive(machine, poses))
 
 
 def test_linuxcnc_type0_table_is_read_as_nominal_minus_actual(seed_machine, tmp_path):

@@ -54,7 +54,7 @@ class EditContext:
     marker: str = ""          # the fit's marker (``FitResult.marker``)
     stem: str = ""            # the file stem the edit's files are written under (default: name)
     sigma: tuple = ()         # (parameter, σ in mm or rad) of the fit: what a file's rounding may lose
-    folder: str = ""          # where the files are written ("": beside the state read), for files naming files
+    folder: str = ""          # where the files go ("": beside the state read): files that name files
 
 
 @dataclass(frozen=True)

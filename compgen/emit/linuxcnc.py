@@ -25,7 +25,6 @@ import numpy as np
 
 from ..correction import ARCSEC, CompTable, Held, Plan, comp_tables, compose_tables, nominal_lines, pivot_of
 from ..errors import CompgenError
-from ..files import read_text
 from ..lines import AxisLine
 from ..machine import Machine
 from ..motion import Block, dwell, gcode_move
@@ -139,7 +138,8 @@ def loaded_joint_tables(machine: Machine, state: str | None) -> dict[str, tuple[
         axis = _joint_axis(machine, joint, str(comp.place))
         rows = _triplets(text.splitlines(), where)
         if len(rows) > COMP_ENTRIES:
-            raise CompgenError(f"the joint table has {len(rows)} lines; LinuxCNC takes {COMP_ENTRIES}", where=where)
+            raise CompgenError(f"the joint table has {len(rows)} lines; LinuxCNC takes {COMP_ENTRIES}",
+                               where=where)
         nominal, fwd, rev = rows.T
         if kind == "0":
             fwd, rev = nominal - fwd, nominal - rev
@@ -147,8 +147,9 @@ def loaded_joint_tables(machine: Machine, state: str | None) -> dict[str, tuple[
         bound = machine.limits.tilt_arcsec / 3600 if rotary else machine.limits.offset_um * 1e-3
         worst = float(np.abs(np.concatenate([fwd, rev])).max())
         if not worst <= bound:
-            raise CompgenError(f"joint {joint}'s table trims {axis} by up to {worst:g} {'deg' if rotary else 'mm'}: "
-                               f"beyond the machine file's [limits] ({'tilt_arcsec' if rotary else 'offset_um'})",
+            unit, key = ("deg", "tilt_arcsec") if rotary else ("mm", "offset_um")
+            raise CompgenError(f"joint {joint}'s table trims {axis} by up to {worst:g} {unit}: beyond the "
+                               f"machine file's [limits] ({key})",
                                where=where, hint="is this the configuration of the measured machine? If it "
                                                  "is, raise [limits] in the machine file")
         unit = "deg" if rotary else "mm"
@@ -384,7 +385,7 @@ class LinuxCNC(Controller):
     program_ext = ".ngc"
     comment = "#"
     tcp_words = "trt kinematics"
-    backup = "a copy of the HAL file that sets the trt kinematics pins"
+    backup = "a copy of the configuration's folder (its INI, HAL files and joint tables)"
     pose_line = re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)")
     tcpm_on = re.compile(r"^; mode TCPM", re.MULTILINE)
     tcp_switchable = False
@@ -470,11 +471,11 @@ class LinuxCNC(Controller):
         """The configuration to start with: the INI (and each file that sets a changed pin)
         written anew beside it, the joints' tables named in it; its restore, the INI as it was."""
         if ctx.folder and Path(ctx.folder).resolve() != cfg.folder.resolve():
-            raise CompgenError(f"the configuration to start with names its files as the INI does, relative to "
+            raise CompgenError("the configuration to start with names its files as the INI does, relative to "
                                f"{cfg.folder}: write it there", where=ctx.folder,
                                hint=f"give -o {cfg.folder / (ctx.stem + '.ini')}")
         values = {f"{_trt(machine)[0]}.{n}": v for (_, _, v, w), n in zip(rows, settings, strict=True)
-                  if v != w}
+                  if float(v) != float(w)}
         joints = {joint_number(machine, suffix.split(".")[1]): f"{ctx.stem}{suffix}" for suffix in comps}
         files = configuration_files(cfg, values, joints, ctx.stem, header)
         for suffix, (_, body) in comps.items():
@@ -483,17 +484,18 @@ class LinuxCNC(Controller):
         files["_RESTORE.ini"] = "\n".join([f"# compgen {ctx.version}: the configuration as it was before "
                                            f"{start}; start LinuxCNC with this file to undo the edit",
                                            cfg.texts[cfg.ini_path].rstrip("\n")]) + "\n"
-        changed = sorted(f"{s.place} ({s.text})" for n, s in settings.items()
-                         if f"{_trt(machine)[0]}.{n}" in values)
-        notes.append(f"start LinuxCNC with {cfg.folder / start}: the INI's own lines, with the values changed "
+        changed = sorted(f"{s.place} ({s.text} -> {values[pin]})" for n, s in settings.items()
+                         if (pin := f"{_trt(machine)[0]}.{n}") in values)
+        notes.append(f"start LinuxCNC with {cfg.folder / start}: the INI's own lines, the values changed "
                      "where the configuration sets them (" + "; ".join(changed) + ")"
                      + ("; " + ", ".join(f"{ctx.stem}{k}" for k in files if k not in (".ini", "_RESTORE.ini")
                                           and not k.endswith(".comp")) + " written anew beside it"
                         if len([k for k in files if not k.endswith(".comp")]) > 2 else ""))
         if comps:
             notes.append("joint compensation tables " + ", ".join(f"{ctx.stem}{k}" for k in comps) + ": "
-                         + (f"the tables the INI loads plus this round's ({', '.join(sorted(loaded))} held one)"
-                            if loaded else "no joint had a table in the INI: they hold this round's correction"))
+                         + (f"the tables the INI loads plus this round's ({', '.join(sorted(loaded))} held "
+                            "one)" if loaded else "no joint had a table in the INI: they hold this round's "
+                                                  "correction"))
         notes.append(f"to undo: start LinuxCNC with {ctx.stem}_RESTORE.ini (the INI as it was); the next "
                      f"round's --current is {start}, so the next edit adds to this one")
         return EditFiles(files, tuple(notes))

@@ -34,16 +34,46 @@ from ..units import number
 HALLIB = Path("/usr/share/linuxcnc/hallib")
 # LinuxCNC 2.9's HAL library (linuxcnc-uspace's hallib): known by name where LinuxCNC is not
 # installed beside compgen. None of them sets a kinematics module's pins.
-LIBRARY = frozenset("""axis_manualtoolchange.hal basic_sim.tcl check_config.tcl check_xyz_constraints.hal
-core_servo.hal core_sim.hal core_sim9.hal core_stepper.hal gantrysim.hal hal_procs_lib.tcl halcheck.tcl
-hookup_moveoff.tcl lathe.hal locking_indexer.hal moveoff_external.hal plasmac.tcl qtplasmac_comp.hal
-servo_sim.hal sim_ldelta.hal sim_lib.tcl sim_rdelta.hal sim_spindle_encoder.hal simulated-gantry-home.hal
-simulated_home.hal simulated_limits.hal tripodsim.hal util_lib.tcl var_show.tcl wheeljogpins.tcl""".split())
-INI_LINE_MAX = 255          # iniparse reads a line in pieces of 255 characters
+LIBRARY = frozenset(
+    [
+        "axis_manualtoolchange.hal",
+        "basic_sim.tcl",
+        "check_config.tcl",
+        "check_xyz_constraints.hal",
+        "core_servo.hal",
+        "core_sim.hal",
+        "core_sim9.hal",
+        "core_stepper.hal",
+        "gantrysim.hal",
+        "hal_procs_lib.tcl",
+        "halcheck.tcl",
+        "hookup_moveoff.tcl",
+        "lathe.hal",
+        "locking_indexer.hal",
+        "moveoff_external.hal",
+        "plasmac.tcl",
+        "qtplasmac_comp.hal",
+        "servo_sim.hal",
+        "sim_ldelta.hal",
+        "sim_lib.tcl",
+        "sim_rdelta.hal",
+        "sim_spindle_encoder.hal",
+        "simulated-gantry-home.hal",
+        "simulated_home.hal",
+        "simulated_limits.hal",
+        "tripodsim.hal",
+        "util_lib.tcl",
+        "var_show.tcl",
+        "wheeljogpins.tcl",
+    ]
+)
+INI_LINE_MAX = 255  # iniparse reads a line in pieces of 255 characters
 MARK = "# compgen: file "
-BUNDLE_MARK = re.compile(r"^# compgen: file (.+) \((INI|#INCLUDE|HALFILE|POSTGUI_HALFILE|source|COMP_FILE"
-                         r"|library) ?(.*)\)$")
-NAME_WORDS = re.compile(r"[0-9A-Za-z.\-_]+")     # halcmd's characters of a variable's name
+BUNDLE_MARK = re.compile(
+    r"^# compgen: file (.+) \((INI|#INCLUDE|HALFILE|POSTGUI_HALFILE|source|COMP_FILE"
+    r"|library) ?(.*)\)$"
+)
+NAME_WORDS = re.compile(r"[0-9A-Za-z.\-_]+")  # halcmd's characters of a variable's name
 
 
 @dataclass(frozen=True)
@@ -51,7 +81,7 @@ class Place:
     """A line of one of the configuration's files."""
 
     file: str
-    line: int             # from 1
+    line: int  # from 1
 
     def __str__(self) -> str:
         return f"{self.file}:{self.line}"
@@ -116,11 +146,11 @@ class Ini:
         ends at the first occurrence without a value, where LinuxCNC's loops end."""
         out = []
         for place, text in self.section(section):
-            if not text.startswith(key) or text[len(key):len(key) + 1] not in (" ", "\t", "\r", "="):
+            if not text.startswith(key) or text[len(key) : len(key) + 1] not in (" ", "\t", "\r", "="):
                 continue
-            if "=" not in text[len(key):]:
+            if "=" not in text[len(key) :]:
                 break
-            value = text[len(key):].split("=", 1)[1].strip(" \t\r\n")
+            value = text[len(key) :].split("=", 1)[1].strip(" \t\r\n")
             if not value:
                 break
             out.append(IniEntry(value, place))
@@ -136,8 +166,9 @@ class Ini:
 Loader = Callable[[str, str, Place | None], tuple[str, str | None]]
 
 
-def _expand_includes(path: str, text: str, load: Loader
-                     ) -> tuple[list[tuple[Place, str]], list[tuple[str, str, Place, str]]]:
+def _expand_includes(
+    path: str, text: str, load: Loader
+) -> tuple[list[tuple[Place, str]], list[tuple[str, str, Place, str]]]:
     """The INI's lines with each ``#INCLUDE`` replaced by its file's (handle_includes: only
     where some line starts with ``#INCLUDE``; one level: an included file's own
     ``#INCLUDE`` stays a comment), and each included file (path, text, place, name)."""
@@ -148,27 +179,36 @@ def _expand_includes(path: str, text: str, load: Loader
     for k, line in enumerate(lines, start=1):
         at = Place(path, k)
         if len(line) > INI_LINE_MAX:
-            raise CompgenError(f"a line of {len(line)} characters: LinuxCNC reads {INI_LINE_MAX} of a line and "
-                               "the rest as a line of its own", where=str(at))
+            raise CompgenError(
+                f"a line of {len(line)} characters: LinuxCNC reads {INI_LINE_MAX} of a line and "
+                "the rest as a line of its own",
+                where=str(at),
+            )
         words = line.split(None, 1)
         if not (expands and words and words[0] == "#INCLUDE"):
             out.append((at, line))
             continue
         if len(words) < 2:
-            raise CompgenError("#INCLUDE without a file name (LinuxCNC says so and goes on without it)",
-                               where=str(at))
+            raise CompgenError(
+                "#INCLUDE without a file name (LinuxCNC says so and goes on without it)", where=str(at)
+            )
         name = words[1].strip()
         inc_path, inc_text = load("#INCLUDE", name, at)
         inc_text = inc_text or ""
         included.append((inc_path, inc_text, at, name))
         for j, inc in enumerate(inc_text.splitlines(), start=1):
             if inc.split(None, 1)[:1] == ["#INCLUDE"]:
-                raise CompgenError("an #INCLUDE inside an included file: LinuxCNC expands one level and "
-                                   "takes this line as a comment", where=f"{inc_path}:{j}",
-                                   hint="include that file from the INI itself")
+                raise CompgenError(
+                    "an #INCLUDE inside an included file: LinuxCNC expands one level and "
+                    "takes this line as a comment",
+                    where=f"{inc_path}:{j}",
+                    hint="include that file from the INI itself",
+                )
             if len(inc) > INI_LINE_MAX:
-                raise CompgenError(f"a line of {len(inc)} characters: LinuxCNC reads {INI_LINE_MAX} of a line",
-                                   where=f"{inc_path}:{j}")
+                raise CompgenError(
+                    f"a line of {len(inc)} characters: LinuxCNC reads {INI_LINE_MAX} of a line",
+                    where=f"{inc_path}:{j}",
+                )
             out.append((Place(inc_path, j), inc))
     return out, included
 
@@ -183,38 +223,56 @@ def _file_loader(ini_path: Path, files: dict[str, tuple[str, str, str]]) -> Load
         where = str(at) if at else str(ini_path)
         if kind == "#INCLUDE":
             if re.search(r"[`$;|&<>(){}\\]", name):
-                raise CompgenError(f"#INCLUDE {name}: the start script expands this name with the shell, which "
-                                   "compgen does not do", where=where, hint="name the file plainly")
+                raise CompgenError(
+                    f"#INCLUDE {name}: the start script expands this name with the shell, which "
+                    "compgen does not do",
+                    where=where,
+                    hint="name the file plainly",
+                )
             target = Path(os.path.expanduser(name))
         elif kind == "HALFILE":
             if name.startswith("LIB:"):
                 base = name[4:]
-                if not base or (HALLIB.is_dir() and not (HALLIB / base).is_file()) or (
-                        not HALLIB.is_dir() and base not in LIBRARY):
+                if (
+                    not base
+                    or (HALLIB.is_dir() and not (HALLIB / base).is_file())
+                    or (not HALLIB.is_dir() and base not in LIBRARY)
+                ):
                     raise CompgenError(f"HALFILE {name}: no such file in LinuxCNC's HAL library", where=where)
                 files[name] = ("library", name, "")
                 return name, None
             target = Path(os.path.expanduser(name))
-            if not target.is_absolute() and not (folder / target).exists() and (
-                    (HALLIB / target).is_file() or (not HALLIB.is_dir() and name in LIBRARY)):
-                files[name] = ("library", name, "")        # found in HALLIB_PATH's second folder
+            if (
+                not target.is_absolute()
+                and not (folder / target).exists()
+                and ((HALLIB / target).is_file() or (not HALLIB.is_dir() and name in LIBRARY))
+            ):
+                files[name] = ("library", name, "")  # found in HALLIB_PATH's second folder
                 return name, None
         else:
             target = Path(name)
         full = target if target.is_absolute() else folder / target
         what = {"#INCLUDE": "included INI file", "COMP_FILE": "joint compensation file"}.get(kind, "HAL file")
         if not full.exists():
-            raise CompgenError(f"{kind} {name}: no such file ({full}); LinuxCNC would stop, or go on without it",
-                               where=where, hint="correct the INI, or put the file there")
+            raise CompgenError(
+                f"{kind} {name}: no such file ({full}); LinuxCNC would stop, or go on without it",
+                where=where,
+                hint="correct the INI, or put the file there",
+            )
         try:
             text = read_text(full, what, ansi_ok=True)[0]
         except CompgenError as exc:
             raise CompgenError(f"{kind} {name}: {exc.message}", where=where) from None
         if any(line.startswith(MARK) for line in text.splitlines()):
-            raise CompgenError(f"{kind} {name} holds a line starting {MARK.strip()!r}, which compgen uses to join "
-                               "a configuration's files", where=str(full), hint="change that comment")
+            raise CompgenError(
+                f"{kind} {name} holds a line starting {MARK.strip()!r}, which compgen uses to join "
+                "a configuration's files",
+                where=str(full),
+                hint="change that comment",
+            )
         files[str(full)] = (kind, name, text)
         return str(full), text
+
     return load
 
 
@@ -225,8 +283,12 @@ def bundle(path: str, text: str) -> str:
     files: dict[str, tuple[str, str, str]] = {}
     load = _file_loader(ini_path, files)
     if any(line.startswith(MARK) for line in text.splitlines()):
-        raise CompgenError(f"the INI holds a line starting {MARK.strip()!r}, which compgen uses to join a "
-                           "configuration's files", where=path, hint="change that comment")
+        raise CompgenError(
+            f"the INI holds a line starting {MARK.strip()!r}, which compgen uses to join a "
+            "configuration's files",
+            where=path,
+            hint="change that comment",
+        )
     _evaluate(str(ini_path), text, load)
     body = [f"{MARK}{ini_path} (INI)", text.rstrip("\n")]
     for full, (kind, name, content) in files.items():
@@ -263,14 +325,19 @@ def evaluate(state: str) -> Configuration:
             return p, t
         if ("library", name) in files:
             return name, None
-        raise CompgenError(f"{kind} {name} is not among the configuration's files as read",
-                           where=str(at) if at else ini_path)
+        raise CompgenError(
+            f"{kind} {name} is not among the configuration's files as read", where=str(at) if at else ini_path
+        )
+
     return _evaluate(ini_path, ini_text, load)
 
 
 def _no_files(kind: str, name: str, at: Place | None) -> tuple[str, str | None]:
-    raise CompgenError(f"{kind} {name}: compgen reads the files a configuration names from its INI",
-                       where=str(at) if at else None, hint="give the configuration's INI as --current")
+    raise CompgenError(
+        f"{kind} {name}: compgen reads the files a configuration names from its INI",
+        where=str(at) if at else None,
+        hint="give the configuration's INI as --current",
+    )
 
 
 def hal_file(text: str, where: str) -> Configuration:
@@ -284,8 +351,16 @@ def hal_file(text: str, where: str) -> Configuration:
 
 def then(cfg: Configuration, text: str, where: str) -> Configuration:
     """``cfg`` with the HAL file ``text`` run after everything it ran (a further HALFILE)."""
-    more = Configuration(cfg.ini_path, cfg.ini, {**cfg.texts, where: text}, dict(cfg.named_at), dict(cfg.pins),
-                         dict(cfg.net), dict(cfg.signals), list(cfg.library))
+    more = Configuration(
+        cfg.ini_path,
+        cfg.ini,
+        {**cfg.texts, where: text},
+        dict(cfg.named_at),
+        dict(cfg.pins),
+        dict(cfg.net),
+        dict(cfg.signals),
+        list(cfg.library),
+    )
     run = _Hal(more, _no_files)
     for k, raw in enumerate(text.splitlines(), start=1):
         run.line(raw, Place(where, k))
@@ -293,6 +368,7 @@ def then(cfg: Configuration, text: str, where: str) -> Configuration:
 
 
 # --- HAL as halcmd runs it ----------------------------------------------------------------
+
 
 @dataclass
 class Configuration:
@@ -303,10 +379,10 @@ class Configuration:
     ini: Ini
     texts: dict[str, str]
     named_at: dict[str, list[tuple[Place, str]]]
-    pins: dict[str, Setting] = field(default_factory=dict)       # a pin's own value (setp)
-    net: dict[str, str] = field(default_factory=dict)            # pin → signal
+    pins: dict[str, Setting] = field(default_factory=dict)  # a pin's own value (setp)
+    net: dict[str, str] = field(default_factory=dict)  # pin → signal
     signals: dict[str, Setting | None] = field(default_factory=dict)
-    library: list[str] = field(default_factory=list)              # HAL library files, not read
+    library: list[str] = field(default_factory=list)  # HAL library files, not read
 
     def value(self, pin: str) -> Setting | None:
         """The pin's value as HAL holds it once everything ran, and its place."""
@@ -327,8 +403,11 @@ def _evaluate(ini_path: str, ini_text: str, load: Loader) -> Configuration:
         cfg.texts[inc_path] = inc_text
         cfg.named_at.setdefault(inc_path, []).append((at, name))
     if ini.get("HAL", "TWOPASS") is not None:
-        raise CompgenError("[HAL] TWOPASS: LinuxCNC runs the HAL files in two passes (twopass.tcl), which "
-                           "compgen does not evaluate", where=str(ini.get("HAL", "TWOPASS").place))
+        raise CompgenError(
+            "[HAL] TWOPASS: LinuxCNC runs the HAL files in two passes (twopass.tcl), which "
+            "compgen does not evaluate",
+            where=str(ini.get("HAL", "TWOPASS").place),
+        )
     run = _Hal(cfg, load)
     for entry in ini.all("HAL", "HALFILE"):
         name = entry.value.split(None, 1)[0]
@@ -350,8 +429,8 @@ class _Hal:
 
     def __init__(self, cfg: Configuration, load: Loader):
         self.cfg, self.load = cfg, load
-        self.pending: dict[str, Place] = {}     # signals set before any net names them
-        self.set_in: dict[tuple[str, str, str], Place] = {}   # (file, kind, name) set once a file
+        self.pending: dict[str, Place] = {}  # signals set before any net names them
+        self.set_in: dict[tuple[str, str, str], Place] = {}  # (file, kind, name) set once a file
 
     def file(self, kind: str, name: str, at: Place) -> None:
         full, text = self.load(kind, name, at)
@@ -361,8 +440,11 @@ class _Hal:
         self.cfg.texts[full] = text
         self.cfg.named_at.setdefault(full, []).append((at, name))
         if full.endswith(".tcl"):
-            raise CompgenError(f"{kind} {name} is a Tcl HAL file, which compgen does not evaluate", where=str(at),
-                               hint="set the kinematics pins in a .hal file or in HALCMD lines")
+            raise CompgenError(
+                f"{kind} {name} is a Tcl HAL file, which compgen does not evaluate",
+                where=str(at),
+                hint="set the kinematics pins in a .hal file or in HALCMD lines",
+            )
         for k, raw in enumerate(text.splitlines(), start=1):
             self.line(raw, Place(full, k))
 
@@ -371,20 +453,25 @@ class _Hal:
         # comment taken off and nothing from the INI put in
         for bad, why in (("#", "a comment"), ("[", "an INI reference"), ("$", "a variable")):
             if bad in entry.value:
-                raise CompgenError(f"HALCMD {entry.value!r} holds {why}: halcmd takes a HALCMD line's words as "
-                                   "they are, so this line would stop LinuxCNC's start", where=str(entry.place))
+                raise CompgenError(
+                    f"HALCMD {entry.value!r} holds {why}: halcmd takes a HALCMD line's words as "
+                    "they are, so this line would stop LinuxCNC's start",
+                    where=str(entry.place),
+                )
         self.command(entry.value.split(), [None] * len(entry.value.split()), entry.place, "HALCMD")
 
     def line(self, raw: str, at: Place) -> None:
         body, quote = [], None
-        for ch in raw:                  # strip_comments: '#' outside quotes ends the line
+        for ch in raw:  # strip_comments: '#' outside quotes ends the line
             if quote is None and ch == "#":
                 break
             if ch in "'\"":
                 quote = None if quote == ch else (ch if quote is None else quote)
             body.append(ch)
         if quote is not None:
-            raise CompgenError("an unterminated quoted string: halcmd stops LinuxCNC's start here", where=str(at))
+            raise CompgenError(
+                "an unterminated quoted string: halcmd stops LinuxCNC's start here", where=str(at)
+            )
         words = "".join(body).split()
         if not words:
             return
@@ -397,15 +484,20 @@ class _Hal:
 
     def substitute(self, word: str, at: Place) -> tuple[str, IniEntry | None]:
         """halcmd's replace_vars on one word; a word that is one INI reference keeps its entry."""
-        if "$" in word:     # LinuxCNC's environment: a pin's value with one is refused as no number
+        if "$" in word:  # LinuxCNC's environment: a pin's value with one is refused as no number
             return word, None
         m = re.fullmatch(r"\[([^\]]*)\]\(?(" + NAME_WORDS.pattern + r")\)?", word)
         out, origin = word, None
         for ref in re.finditer(r"\[([^\]]*)\]\(?(" + NAME_WORDS.pattern + r")\)?", word):
-            entry = (self.cfg.ini.get(ref[1], ref[2]) if ref[1] else
-                     next((e for s in self._sections() if (e := self.cfg.ini.get(s, ref[2]))), None))
+            entry = (
+                self.cfg.ini.get(ref[1], ref[2])
+                if ref[1]
+                else next((e for s in self._sections() if (e := self.cfg.ini.get(s, ref[2]))), None)
+            )
             if entry is None:
-                raise CompgenError(f"{ref[0]} is not in the INI: halcmd stops LinuxCNC's start here", where=str(at))
+                raise CompgenError(
+                    f"{ref[0]} is not in the INI: halcmd stops LinuxCNC's start here", where=str(at)
+                )
             out = out.replace(ref[0], entry.value, 1)
             origin = entry if m is not None else None
         return out, origin
@@ -422,8 +514,9 @@ class _Hal:
         elif cmd == "sets" and len(words) == 3:
             self.sets(words[1], words[2], origins[2], at, how)
         elif cmd in ("setp", "sets"):
-            raise CompgenError(f"{cmd} takes a name and one value; halcmd stops LinuxCNC's start here",
-                               where=str(at))
+            raise CompgenError(
+                f"{cmd} takes a name and one value; halcmd stops LinuxCNC's start here", where=str(at)
+            )
         elif cmd == "net" and len(words) >= 2:
             for pin in words[2:]:
                 if pin not in ("=>", "<=", "<=>"):
@@ -435,20 +528,29 @@ class _Hal:
         elif cmd == "source" and len(words) == 2:
             self.file("source", words[1], at)
         elif cmd in ("unlinkp", "delsig", "linkpp"):
-            raise CompgenError(f"{cmd}: compgen does not evaluate it", where=str(at),
-                               hint="connect the kinematics pins with net, setp and sets")
+            raise CompgenError(
+                f"{cmd}: compgen does not evaluate it",
+                where=str(at),
+                hint="connect the kinematics pins with net, setp and sets",
+            )
 
     def _once(self, kind: str, name: str, at: Place) -> None:
         key = (at.file, kind, name)
         if key in self.set_in:
-            raise CompgenError(f"{name} is set twice in one file (lines {self.set_in[key].line} and {at.line})",
-                               where=str(at), hint="keep the one the configuration means")
+            raise CompgenError(
+                f"{name} is set twice in one file (lines {self.set_in[key].line} and {at.line})",
+                where=str(at),
+                hint="keep the one the configuration means",
+            )
         self.set_in[key] = at
 
     def setp(self, pin: str, value: str, origin: IniEntry | None, at: Place, how: str) -> None:
         if pin in self.cfg.net:
-            raise CompgenError(f"setp {pin}: the pin is netted to {self.cfg.net[pin]}; LinuxCNC refuses to start "
-                               "such a configuration", where=str(at))
+            raise CompgenError(
+                f"setp {pin}: the pin is netted to {self.cfg.net[pin]}; LinuxCNC refuses to start "
+                "such a configuration",
+                where=str(at),
+            )
         if how == "file":
             self._once("setp", pin, at)
         self.cfg.pins[pin] = self._setting(value, origin, at)
@@ -457,18 +559,24 @@ class _Hal:
         if how == "file":
             self._once("sets", signal, at)
         if signal not in self.cfg.signals and not self.cfg.library:
-            self.pending[signal] = at     # (a library file, not read, may have made it)
+            self.pending[signal] = at  # (a library file, not read, may have made it)
         self.cfg.signals[signal] = self._setting(value, origin, at)
 
     def link(self, pin: str, signal: str, at: Place) -> None:
         if pin in self.cfg.net and self.cfg.net[pin] != signal:
-            raise CompgenError(f"net {signal}: {pin} is already on {self.cfg.net[pin]}; LinuxCNC refuses to "
-                               "start such a configuration", where=str(at))
+            raise CompgenError(
+                f"net {signal}: {pin} is already on {self.cfg.net[pin]}; LinuxCNC refuses to "
+                "start such a configuration",
+                where=str(at),
+            )
         if signal in self.pending:
-            raise CompgenError(f"signal {signal} is set at {self.pending[signal]} before this line makes it: "
-                               "LinuxCNC stops its start there", where=str(at),
-                               hint="set the signal after the net that makes it")
-        if signal not in self.cfg.signals:          # a new signal takes its first pin's value
+            raise CompgenError(
+                f"signal {signal} is set at {self.pending[signal]} before this line makes it: "
+                "LinuxCNC stops its start there",
+                where=str(at),
+                hint="set the signal after the net that makes it",
+            )
+        if signal not in self.cfg.signals:  # a new signal takes its first pin's value
             self.cfg.signals[signal] = self.cfg.pins.get(pin)
         self.cfg.net[pin] = signal
 
@@ -484,20 +592,24 @@ def number_of(s: Setting, what: str) -> float:
 
 # --- the configuration to start with --------------------------------------------------------
 
+
 def _replace_word(line: str, old: str, new: str, last: bool, at: Place) -> str:
     """``line`` with the word ``old`` (between white space, ``=`` or the line's ends, before
     any halcmd comment) replaced by ``new``: the last such word (a value) or the first (a
     file name after its key)."""
-    end = len(line) if line.lstrip().startswith(("#INCLUDE", "#", ";")) else (line.find("#") % (len(line) + 1))
+    end = (
+        len(line) if line.lstrip().startswith(("#INCLUDE", "#", ";")) else (line.find("#") % (len(line) + 1))
+    )
     found = list(re.finditer(r"(?<![^\s=])" + re.escape(old) + r"(?![^\s#])", line[:end]))
     if not found:
         raise CompgenError(f"{old!r} is not a word of this line as compgen read it", where=str(at))
     m = found[-1] if last else found[0]
-    return line[:m.start()] + new + line[m.end():]
+    return line[: m.start()] + new + line[m.end() :]
 
 
-def configuration_files(cfg: Configuration, values: dict[str, str], joints: dict[int, str], stem: str,
-                        header: list[str]) -> dict[str, str]:
+def configuration_files(
+    cfg: Configuration, values: dict[str, str], joints: dict[int, str], stem: str, header: list[str]
+) -> dict[str, str]:
     """The configuration to start with, as files to write beside the INI (suffix after
     ``stem`` → text): each pin of ``values`` (pin → new value) changed where the
     configuration sets it, each joint of ``joints`` (joint → table file) given that
@@ -509,23 +621,31 @@ def configuration_files(cfg: Configuration, values: dict[str, str], joints: dict
 
     def change(place: Place, old: str, new: str, last: bool = True) -> None:
         if place in changed and changed[place][1] != new:
-            raise CompgenError(f"one place sets two values that now differ ({changed[place][1]} and {new}): "
-                               "compgen cannot change one without the other", where=str(place),
-                               hint="set each kinematics pin on a line of its own")
+            raise CompgenError(
+                f"one place sets two values that now differ ({changed[place][1]} and {new}): "
+                "compgen cannot change one without the other",
+                where=str(place),
+                hint="set each kinematics pin on a line of its own",
+            )
         changed[place] = (old, new, last)
 
     for pin, new in values.items():
         s = cfg.value(pin)
         assert s is not None
         if lines[s.place.file][s.place.line - 1].endswith("\\"):
-            raise CompgenError("the value is on a line that a backslash joins to the next: compgen does not "
-                               "rewrite such lines", where=str(s.place))
+            raise CompgenError(
+                "the value is on a line that a backslash joins to the next: compgen does not "
+                "rewrite such lines",
+                where=str(s.place),
+            )
         change(s.place, s.text, new)
     for joint, name in joints.items():
         section = f"JOINT_{joint}"
         head = cfg.ini.header(section)
         if head is None:
-            raise CompgenError(f"the INI has no [{section}] section for the joint's table", where=cfg.ini_path)
+            raise CompgenError(
+                f"the INI has no [{section}] section for the joint's table", where=cfg.ini_path
+            )
         comp, kind = cfg.ini.get(section, "COMP_FILE"), cfg.ini.get(section, "COMP_FILE_TYPE")
         if comp is None:
             after.setdefault(head, []).extend([f"COMP_FILE = {name}", "COMP_FILE_TYPE = 1"])
@@ -555,8 +675,8 @@ def configuration_files(cfg: Configuration, values: dict[str, str], joints: dict
             if place.file == file:
                 text[place.line - 1] = _replace_word(text[place.line - 1], old, new, last, place)
         for place in sorted((p for p in after if p.file == file), key=lambda p: -p.line):
-            text[place.line:place.line] = after[place]
-        body = [f"# {h}" for h in header] + text      # '#' opens a comment in an INI and in HAL
+            text[place.line : place.line] = after[place]
+        body = [f"# {h}" for h in header] + text  # '#' opens a comment in an INI and in HAL
         suffix = ".ini" if file == cfg.ini_path else "." + Path(file).name
         out[suffix] = "\n".join(body) + "\n"
     return out

@@ -1,0 +1,262 @@
+"""LinuxCNC's configuration read as LinuxCNC starts it (inivar, the start script, halcmd),
+each case one a reader that looked at the files rather than at LinuxCNC got wrong; and the
+configuration to start with that an edit writes, evaluated the same way."""
+
+import re
+
+import numpy as np
+import pytest
+from conftest import ARCSEC, UM
+
+from compgen.effects import location_model
+from compgen.emit import linuxcnc
+from compgen.emit.kinematics import kinematics_edit
+from compgen.emit.linuxcnc_config import evaluate
+from compgen.emit.registry import read_state
+from compgen.errors import CompgenError
+from compgen.identify import identify
+from compgen.paths import generate
+from compgen.simulate import simulate
+
+TRUTH = {"XOC": 12 * UM, "YOC": -9 * UM, "YOA": 20 * UM, "ZOA": -15 * UM, "AOC": 5 * ARCSEC}
+
+
+@pytest.fixture
+def trt(seed_machine):
+    module, tilt, c = linuxcnc._trt(seed_machine)
+    return module, linuxcnc._nominal(seed_machine, tilt, c)
+
+
+def _config(tmp_path, ini: str, **files: str):
+    for name, text in files.items():
+        (tmp_path / name.replace("__", ".")).write_text(text)
+    (tmp_path / "m.ini").write_text(ini)
+    return read_state(str(tmp_path / "m.ini"))
+
+
+def _pins(state, module):
+    return linuxcnc.held_pins(evaluate(state), module)[0]
+
+
+def _setp(module, nominal, skip=()):
+    return "".join(f"setp {module}.{n} {v:.6f}\n" for n, v in nominal.items() if n not in skip)
+
+
+def test_a_key_given_twice_takes_its_first_value_and_a_second_section_is_not_read(tmp_path, trt):
+    module, nominal = trt
+    state = _config(
+        tmp_path,
+        "[TRT]\nZ = 29.794\nZ = 99\n[HAL]\nHALFILE = a.hal\n[HAL]\nHALFILE = b.hal\n",
+        a__hal=_setp(module, nominal, ["z-rot-point"]) + f"setp {module}.z-rot-point [TRT]Z\n",
+        b__hal=f"setp {module}.x-rot-point 5\n",
+    )
+    assert _pins(state, module)["z-rot-point"] == 29.794  # inivar: the first occurrence
+    assert _pins(state, module)["x-rot-point"] == 0.0  # the second [HAL] is never read
+    assert "(HALFILE b.hal)" not in state
+
+
+def test_an_include_is_expanded_and_its_joint_table_kept(tmp_path, trt, seed_machine):
+    module, nominal = trt
+    table = "0 0.001 0.001\n360 0.001 0.001\n"
+    state = _config(
+        tmp_path,
+        "[HAL]\nHALFILE = a.hal\n#INCLUDE joints.inc\n",
+        a__hal=_setp(module, nominal),
+        joints__inc="[JOINT_4]\nCOMP_FILE = c.comp\nCOMP_FILE_TYPE = 1\n",
+        c__comp=table,
+    )
+    ((fwd, _),) = linuxcnc.loaded_joint_tables(seed_machine, state).values()
+    assert fwd.input == "C" and fwd.values == (0.001, 0.001)
+    fit = identify(
+        seed_machine,
+        [
+            simulate(
+                seed_machine, {**TRUTH, "ECC:h2c": 3 * ARCSEC}, generate(seed_machine, ["K4", "K1", "K2"])
+            )
+        ],
+        [*location_model(seed_machine), "ECC:h2c", "ECC:h2s"],
+    )
+    out = kinematics_edit(
+        seed_machine,
+        fit,
+        "linuxcnc",
+        state,
+        str(tmp_path / "m.ini"),
+        "N",
+        "0",
+        "d",
+        stem="N",
+        folder=str(tmp_path),
+    )
+    # the table stands in the included file: written anew with the INI naming it
+    assert "#INCLUDE N.joints.inc" in out.files[".ini"]
+    assert (
+        "COMP_FILE = N.C.comp" in out.files[".joints.inc"]
+        and "COMP_FILE_TYPE = 1" in out.files[".joints.inc"]
+    )
+
+
+@pytest.mark.parametrize(
+    "ini, files, says",
+    [
+        ("[HAL]\nHALFILE = gone.hal\n", {}, r"m.ini:2: HALFILE gone.hal: no such file"),
+        (
+            "[HAL]\nHALFILE = LIB:nothere.tcl\n",
+            {},
+            r"m.ini:2: HALFILE LIB:nothere.tcl: no such file in LinuxCNC's",
+        ),
+        ("[HAL]\nPOSTGUI_HALFILE = post.hal\n", {}, r"m.ini:2: POSTGUI_HALFILE post.hal: no such file"),
+        (
+            "[HAL]\nHALFILE = a.hal\n#INCLUDE x.inc\n",
+            {"a__hal": ""},
+            r"m.ini:3: #INCLUDE x.inc: no such file",
+        ),
+        ("[HAL]\nHALFILE = sub\n", {}, r"m.ini:2: HALFILE sub: not a regular file"),
+        (
+            "[HAL]\nHALFILE = a.hal\n[JOINT_4]\nCOMP_FILE = c.comp\n",
+            {"a__hal": ""},
+            r"m.ini:4: COMP_FILE c.comp: no such",
+        ),
+        ("[HAL]\nHALFILE = own.tcl\n", {"own__tcl": "puts hi\n"}, r"m.ini:2: .*Tcl HAL file"),
+        (
+            "[HAL]\nHALCMD = setp xyzac-trt-kins.x-rot-point 0 # zero\n",
+            {},
+            r"m.ini:2: HALCMD .* holds a comment",
+        ),
+        (
+            "[HAL]\nHALFILE = a.hal\n",
+            {"a__hal": "sets s 1\nnet s xyzac-trt-kins.x-rot-point\n"},
+            r"a.hal:2: signal s is set at .*a.hal:1 before this line makes it",
+        ),
+        (
+            "[HAL]\nHALFILE = a.hal\n",
+            {"a__hal": "setp xyzac-trt-kins.x-rot-point [TRT]X\n"},
+            r"a.hal:1: \[TRT\]X is not",
+        ),
+        (
+            "[HAL]\nHALFILE = a.hal\n",
+            {"a__hal": "setp xyzac-trt-kins.x-rot-point '0\n"},
+            r"a.hal:1: an unterminated",
+        ),
+    ],
+)
+def test_every_file_and_line_linuxcnc_would_stop_at_is_refused_with_its_line(tmp_path, ini, files, says):
+    (tmp_path / "sub").mkdir()
+    with pytest.raises(CompgenError, match=says):
+        _config(tmp_path, ini, **files)
+
+
+def test_library_files_are_linuxcncs_own_and_a_halfile_edit_is_overwritten_by_halcmd(tmp_path, trt):
+    """The trt samples' way: LIB:basic_sim.tcl, then HALCMD lines set the pins. A further
+    HALFILE (the old way to load an edit) runs before them: its setp is overwritten, its
+    sets on a HALCMD-made signal stops LinuxCNC's start."""
+    module, nominal = trt
+    sample = (
+        "[HAL]\nHALFILE = LIB:basic_sim.tcl -no_use_hal_manualtoolchange\n"
+        f"HALCMD = net :y-offset {module}.y-offset\nHALCMD = sets :y-offset 0\n"
+        + "".join(f"HALCMD = setp {module}.{n} {v:.6f}\n" for n, v in nominal.items() if n != "y-offset")
+    )
+    state = _config(tmp_path, sample)
+    assert _pins(state, module) == pytest.approx(nominal)
+    late = _config(
+        tmp_path,
+        sample.replace("[HAL]\n", "[HAL]\nHALFILE = edit.hal\n"),
+        edit__hal=f"setp {module}.x-rot-point 0.5\n",
+    )
+    assert _pins(late, module)["x-rot-point"] == nominal["x-rot-point"]  # HALCMD runs after it
+    with pytest.raises(CompgenError, match=r"m.ini:4: signal :y-offset is set at .*edit.hal:1 before"):
+        _config(
+            tmp_path, sample.replace("[HAL]\n", "[HAL]\nHALFILE = edit.hal\n"), edit__hal="sets :y-offset 1\n"
+        )
+
+
+def test_halcmd_forms_pin_equals_value_and_comments_anywhere(tmp_path, trt):
+    module, nominal = trt
+    hal = (
+        f"net yo {module}.y-offset # {module}.x-rot-point is not on this signal\nsets yo 0.25\n"
+        f"{module}.x-rot-point = 0.125\n"
+        + _setp(module, nominal, ["y-offset", "x-rot-point"]).replace("\n", "   # pin\n", 1)
+    )
+    state = _config(
+        tmp_path,
+        "[HAL]\nHALFILE = a.hal\nPOSTGUI_HALFILE = post.hal\n",
+        a__hal=hal,
+        post__hal=f"setp {module}.z-offset -29.5\n",
+    )
+    pins = _pins(state, module)
+    assert pins["x-rot-point"] == 0.125 and pins["y-offset"] == 0.25
+    assert pins["z-offset"] == -29.5  # POSTGUI_HALFILE runs last
+    assert evaluate(state).net == {f"{module}.y-offset": "yo"}
+
+
+def test_a_new_signal_takes_the_value_its_first_pin_held(tmp_path, trt):
+    module, nominal = trt
+    state = _config(
+        tmp_path, "[HAL]\nHALFILE = a.hal\n", a__hal=_setp(module, nominal) + f"net zz {module}.z-offset\n"
+    )
+    assert _pins(state, module)["z-offset"] == nominal["z-offset"]
+
+
+def test_a_joint_table_beyond_the_limits_is_refused_with_its_line(tmp_path, trt, seed_machine):
+    module, nominal = trt
+    state = _config(
+        tmp_path,
+        "[HAL]\nHALFILE = a.hal\n[JOINT_1]\nCOMP_FILE = y.comp\nCOMP_FILE_TYPE = 1\n",
+        a__hal=_setp(module, nominal),
+        y__comp="-100 0.5 0.5\n100 0 0\n",
+    )
+    with pytest.raises(CompgenError, match=r"m.ini:4 \(y.comp\): joint 1's table trims Y by up to 0.5 mm"):
+        linuxcnc.loaded_joint_tables(seed_machine, state)
+
+
+def test_the_configuration_to_start_with_holds_exactly_the_correction(tmp_path, trt, seed_machine):
+    """Pins set in three places (a HALCMD line, a HAL file, an INI key a HAL line takes):
+    the new INI, evaluated as LinuxCNC starts it, holds the pins of the edit written with no
+    configuration; the user's files are untouched; writing it elsewhere is refused."""
+    module, nominal = trt
+    ini = (
+        "[TRT]\nYO = {yo:.6f}\n[HAL]\nHALFILE = LIB:basic_sim.tcl\nHALFILE = trt.hal\n"
+        f"HALCMD = setp {module}.x-rot-point {nominal['x-rot-point']:.6f}\n"
+    ).format(yo=nominal["y-offset"])
+    hal = f"setp {module}.y-offset [TRT]YO\n" + _setp(module, nominal, ["x-rot-point", "y-offset"])
+    state = _config(tmp_path, ini, trt__hal=hal)
+    fit = identify(seed_machine, [simulate(seed_machine, TRUTH, generate(seed_machine, ["K4", "K1", "K2"]))])
+    out = kinematics_edit(
+        seed_machine,
+        fit,
+        "linuxcnc",
+        state,
+        str(tmp_path / "m.ini"),
+        "N",
+        "0",
+        "d",
+        stem="N",
+        folder=str(tmp_path),
+    ).files
+    alone = kinematics_edit(seed_machine, fit, "linuxcnc", None, "", "H", "0", "d").files[".hal"]
+    want = {m[1]: float(m[2]) for m in re.finditer(rf"(?m)^setp {module}\.(\S+) (\S+)", alone)}
+    for suffix, text in out.items():
+        (tmp_path / f"N{suffix}").write_text(text)
+    got = _pins(read_state(str(tmp_path / "N.ini")), module)
+    assert {n: got[n] for n in want} == pytest.approx(want, abs=1e-12) and len(want) == 5
+    assert re.search(r"(?m)^YO = (\S+)$", out[".ini"])[1] == f"{want['y-offset']:.6f}"
+    assert f"HALCMD = setp {module}.x-rot-point {want['x-rot-point']:.6f}" in out[".ini"]
+    assert "HALFILE = N.trt.hal" in out[".ini"] and "[TRT]YO" in out[".trt.hal"]
+    assert (tmp_path / "trt.hal").read_text() == hal and (tmp_path / "m.ini").read_text() == ini
+    assert _pins(read_state(str(tmp_path / "N_RESTORE.ini")), module) == pytest.approx(nominal)
+    elsewhere = tmp_path / "other"
+    elsewhere.mkdir()
+    with pytest.raises(CompgenError, match="write it there"):
+        kinematics_edit(
+            seed_machine,
+            fit,
+            "linuxcnc",
+            state,
+            str(tmp_path / "m.ini"),
+            "N",
+            "0",
+            "d",
+            stem="N",
+            folder=str(elsewhere),
+        )
+    assert np.isfinite(list(want.values())).all()
