@@ -260,3 +260,26 @@ def test_the_configuration_to_start_with_holds_exactly_the_correction(tmp_path, 
             folder=str(elsewhere),
         )
     assert np.isfinite(list(want.values())).all()
+
+
+@pytest.mark.parametrize("lines, says", [
+    ("conventional_directions = false\nversion = \"2.10\"\n", "does not invert its own forward kinematics"),
+    ("conventional_directions = false\n", "which LinuxCNC runs xyzbc-trt-kins"),
+    ("conventional_directions = true\nversion = \"2.9\"\n", "has no conventional-directions pin"),
+    ("conventional_directions = false\nversion = 2.10\n", "must be LinuxCNC's version as text"),
+    ("conventional_directions = true\nversion = \"2.10\"\n", None),
+    ("conventional_directions = false\nversion = \"2.9.4\"\n", None),
+])
+def test_xyzbc_trt_at_pin_0_is_refused_from_linuxcnc_2_10(tmp_path, lines, says):
+    """Upstream's xyzbc inverse from 2.10 carries pin 1's signs in dpx/dpz: at pin 0 the
+    nest would stand 2·sin B·dz off under TCP, so the machine file must say the version."""
+    from conftest import BC_MACHINE
+
+    from compgen.machine_file import load_machine
+    text = re.sub(r"(?ms)^\[linuxcnc\].*?(?=^\[)", "[linuxcnc]\n" + lines + "\n", BC_MACHINE.read_text())
+    (tmp_path / "m.toml").write_text(text)
+    if says is None:
+        assert load_machine(tmp_path / "m.toml").linuxcnc["version"] is not None
+    else:
+        with pytest.raises(CompgenError, match=says):
+            load_machine(tmp_path / "m.toml")

@@ -49,6 +49,8 @@ def _machine(tmp_path, source, conventional):
     text = re.sub(r'controller = "\w+"', 'controller = "linuxcnc"', source.read_text())
     text = text.replace('tool = "RTEST"', 'tool = "7"').replace(
         "conventional_directions = false", f"conventional_directions = {str(conventional).lower()}")
+    if conventional:            # the pin exists from LinuxCNC 2.10
+        text = text.replace('version = "2.9"', 'version = "2.10"')
     path = tmp_path / f"m{int(conventional)}.toml"
     path.write_text(text)
     return load_machine(path)

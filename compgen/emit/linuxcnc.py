@@ -48,6 +48,15 @@ from .linuxcnc_config import (
 SETP = re.compile(r"^[ \t]*setp[ \t]+(\S+?)\.(\S+)[ \t]+([^#\n]*?)[ \t]*(?:#.*)?$", re.MULTILINE)
 SETS = re.compile(r"^[ \t]*sets[ \t]+(\S+)[ \t]+([^#\n]*?)[ \t]*(?:#.*)?$", re.MULTILINE)
 NET = re.compile(r"^\s*net\s+(\S+)\s+(.*)$", re.MULTILINE)
+PIN_SINCE = (2, 10)          # the trt modules' conventional-directions pin (commit bfb687eaa6)
+# Upstream's trtfuncs.c from 2.10 (xyzbc_inverse_math) writes the tilted offsets with the
+# signs of conventional-directions 1 whatever the pin says, while its forward kinematics
+# follows the pin: at pin 0 the inverse no longer inverts the forward.
+XYZBC_PIN0 = ("LinuxCNC 2.10's xyzbc-trt-kins at conventional-directions 0 does not invert its own forward "
+              "kinematics: trtfuncs.c xyzbc_inverse_math has 'dpx = -cos(b_rad)*dx + sin(b_rad)*dz + dx' and "
+              "'dpz = -sin(b_rad)*dx - cos(b_rad)*dz + dz' (the signs of pin 1; 2.9 had '- sin(b_rad)*dz' and "
+              "'+ sin(b_rad)*dx'), while xyzbc_forward_math turns by con = -1 at pin 0: under TCP the nest "
+              "stands off by 2*sin(B)*(z-offset + tool-offset) in X and 2*sin(B)*x-offset in Z")
 COMP_ENTRIES = 256           # EMCMOT_COMP_SIZE: the lines a joint's table may hold
 TURNS_DEG = 1260.0           # a full-turn axis's table repeats its turn over ±this (≤ 256 lines)
 COMP_NOTE = re.compile(r"^# compgen joint compensation for LinuxCNC: joint (\d+) = ([A-Z]) \((mm|deg)\)",
@@ -406,9 +415,34 @@ class LinuxCNC(Controller):
         true, its kinematics turn A (or B) and C the other way (``trtfuncs.c``: every term
         with a single sine of an angle is multiplied by ``con`` = +1, else −1; the pin exists
         from LinuxCNC 2.10, commit bfb687eaa6, and is false by default)."""
-        get.only({"conventional_directions"})
-        return {"conventional_directions": get.flag("conventional_directions",
-                                                    "the trt module's conventional-directions pin")}
+        get.only({"conventional_directions", "version"})
+        conventional = get.flag("conventional_directions", "the trt module's conventional-directions pin")
+        version = None
+        if "version" in get.doc:
+            text = get.doc["version"]
+            m = re.fullmatch(r"(\d+)\.(\d+)(?:\.\d+)?", text) if isinstance(text, str) else None
+            if m is None:
+                raise CompgenError(f"must be LinuxCNC's version as text, e.g. \"2.9\", got {text!r}",
+                                   where=get.at("version"), hint="linuxcnc_info, or the splash screen, shows it")
+            version = (int(m[1]), int(m[2]))
+        if conventional and version is not None and version < PIN_SINCE:
+            raise CompgenError(f"LinuxCNC {get.doc['version']} has no conventional-directions pin (it came with "
+                               "2.10): its trt kinematics turn the axes the unconventional way",
+                               where=get.at("conventional_directions"), hint="set it false")
+        try:
+            module = _trt(machine)[0]
+        except CompgenError:
+            module = ""
+        if module == "xyzbc-trt-kins" and not conventional:
+            if version is None:
+                raise CompgenError("which LinuxCNC runs xyzbc-trt-kins with conventional-directions 0 decides "
+                                   "whether its inverse kinematics inverts its forward kinematics",
+                                   where=get.at("version"), hint='add version = "2.9" (or the one the machine runs)')
+            if version >= PIN_SINCE:
+                raise CompgenError(XYZBC_PIN0, where=get.at("conventional_directions"),
+                                   hint="set the module's conventional-directions pin to 1 in the configuration "
+                                        "and conventional_directions = true here")
+        return {"conventional_directions": conventional, "version": version}
 
     def angle_sense(self, machine: Machine) -> dict[str, int]:
         flip = -1 if (machine.linuxcnc or {}).get("conventional_directions") else 1
