@@ -53,7 +53,8 @@ PIN_SINCE = (2, 10)          # the trt modules' conventional-directions pin (com
 # signs of conventional-directions 1 whatever the pin says, while its forward kinematics
 # follows the pin: at pin 0 the inverse no longer inverts the forward.
 XYZBC_PIN0 = ("LinuxCNC 2.10's xyzbc-trt-kins at conventional-directions 0 does not invert its own forward "
-              "kinematics: trtfuncs.c xyzbc_inverse_math has 'dpx = -cos(b_rad)*dx + sin(b_rad)*dz + dx' and "
+              "kinematics: trtfuncs.c xyzbc_inverse_math has 'dpx = -cos(b_rad)*dx + sin(b_rad)*dz + dx' "
+              "and "
               "'dpz = -sin(b_rad)*dx - cos(b_rad)*dz + dz' (the signs of pin 1; 2.9 had '- sin(b_rad)*dz' and "
               "'+ sin(b_rad)*dx'), while xyzbc_forward_math turns by con = -1 at pin 0: under TCP the nest "
               "stands off by 2*sin(B)*(z-offset + tool-offset) in X and 2*sin(B)*x-offset in Z")
@@ -423,11 +424,12 @@ class LinuxCNC(Controller):
             m = re.fullmatch(r"(\d+)\.(\d+)(?:\.\d+)?", text) if isinstance(text, str) else None
             if m is None:
                 raise CompgenError(f"must be LinuxCNC's version as text, e.g. \"2.9\", got {text!r}",
-                                   where=get.at("version"), hint="linuxcnc_info, or the splash screen, shows it")
+                                   where=get.at("version"),
+                                   hint="linuxcnc_info, or the splash screen, shows it")
             version = (int(m[1]), int(m[2]))
         if conventional and version is not None and version < PIN_SINCE:
-            raise CompgenError(f"LinuxCNC {get.doc['version']} has no conventional-directions pin (it came with "
-                               "2.10): its trt kinematics turn the axes the unconventional way",
+            raise CompgenError(f"LinuxCNC {get.doc['version']} has no conventional-directions pin (it came "
+                               "with 2.10): its trt kinematics turn the axes the unconventional way",
                                where=get.at("conventional_directions"), hint="set it false")
         try:
             module = _trt(machine)[0]
@@ -435,13 +437,14 @@ class LinuxCNC(Controller):
             module = ""
         if module == "xyzbc-trt-kins" and not conventional:
             if version is None:
-                raise CompgenError("which LinuxCNC runs xyzbc-trt-kins with conventional-directions 0 decides "
-                                   "whether its inverse kinematics inverts its forward kinematics",
-                                   where=get.at("version"), hint='add version = "2.9" (or the one the machine runs)')
+                raise CompgenError("which LinuxCNC runs xyzbc-trt-kins with conventional-directions 0 "
+                                   "decides whether its inverse kinematics inverts its forward kinematics",
+                                   where=get.at("version"),
+                                   hint='add version = "2.9" (or the one the machine runs)')
             if version >= PIN_SINCE:
                 raise CompgenError(XYZBC_PIN0, where=get.at("conventional_directions"),
-                                   hint="set the module's conventional-directions pin to 1 in the configuration "
-                                        "and conventional_directions = true here")
+                                   hint="set the module's conventional-directions pin to 1 in the "
+                                        "configuration and conventional_directions = true here")
         return {"conventional_directions": conventional, "version": version}
 
     def angle_sense(self, machine: Machine) -> dict[str, int]:
