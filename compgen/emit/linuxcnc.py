@@ -56,7 +56,8 @@ XYZBC_PIN0 = ("LinuxCNC 2.10's xyzbc-trt-kins at conventional-directions 0 does 
               "kinematics: trtfuncs.c xyzbc_inverse_math has 'dpx = -cos(b_rad)*dx + sin(b_rad)*dz + dx' "
               "and 'dpz = -sin(b_rad)*dx - cos(b_rad)*dz + dz' (the signs of pin 1; 2.9 had "
               "'- sin(b_rad)*dz' and '+ sin(b_rad)*dx'), while xyzbc_forward_math turns by con = -1 at "
-              "pin 0: under TCP the nest stands off by 2*sin(B)*(z-offset + tool-offset) in X and 2*sin(B)*x-offset in Z")
+              "pin 0: under TCP the nest stands off by 2*sin(B)*(z-offset + tool-offset) in X and "
+              "2*sin(B)*x-offset in Z")
 COMP_ENTRIES = 256           # EMCMOT_COMP_SIZE: the lines a joint's table may hold
 TURNS_DEG = 1260.0           # a full-turn axis's table repeats its turn over ±this (≤ 256 lines)
 COMP_NOTE = re.compile(r"^# compgen joint compensation for LinuxCNC: joint (\d+) = ([A-Z]) \((mm|deg)\)",
