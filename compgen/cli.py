@@ -397,11 +397,13 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, contro
     program = emitted.files[ctl.program_ext]
     if not output:
         click.echo(program, nl=False)
-        click.echo("compgen: the pose list was not written; give -o FILE to get it beside the "
-                   "program", err=True)
+        click.echo("compgen: the pose list was not written" + "".join(f" (nor {name}{k}, which the program "
+                                                                      "shows its messages from)"
+                                                                      for k in sorted(emitted.named))
+                   + "; give -o FILE to get it beside the program", err=True)
         return
     out = Path(output)
-    files = {out: program, out.with_name(f"{out.stem}.poses.csv"): emitted.files[".poses.csv"]}
+    files = emitted.paths(out, name, ctl.program_ext)
     write_all(files, force, inputs=(machine_file, poses_file))
     click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, {mode} mode, "
                f"{ctl.words}", err=True)
@@ -428,10 +430,10 @@ def probe_program_cmd(machine_file, path_names, ball, controller_name, output, f
     poses = probe_poses(machine, names, _vec3(ball, "--ball") if ball is not None else None)
     ctl = controller(controller_name or machine.controller)
     out = Path(output)
-    emitted = probe_program(machine, poses, "+".join(names), ctl.name, program_name(out.stem, room=4),
-                            __version__, date.today().isoformat())
-    files = {out if suffix == ctl.program_ext else out.with_name(out.stem + suffix): body
-             for suffix, body in emitted.files.items()}
+    name = program_name(out.stem, room=4)
+    emitted = probe_program(machine, poses, "+".join(names), ctl.name, name, __version__,
+                            date.today().isoformat())
+    files = emitted.paths(out, name, ctl.program_ext)
     write_all(files, force, inputs=(machine_file,))
     click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, "
                f"{machine.probe.touches} touches "
@@ -531,8 +533,7 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, reco
                               read_state(measured) if measured else None, out.stem, ", ".join(measured),
                               str(out.absolute().parent))
     main_key = ctl.main_suffix(text)
-    files = {(out if key == main_key else out.with_name(out.stem + key)): body
-             for key, body in emitted.files.items()}
+    files = emitted.paths(out, name, main_key)
     if len(current) == 1 and main_key in emitted.files:   # the edited state keeps its encoding
         files[out] = _encoded_like(current[0], files[out])
     write_all(files, force, inputs=(base, *current, *measured, machine.source, *(d.file for d in fit.data)))

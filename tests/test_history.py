@@ -183,7 +183,7 @@ def test_history_commands_on_a_real_fit(tmp_path, monkeypatch):
     assert sorted(corrects) == sorted(["YOA", "ZOA", "BOA", "COA", "XOC", "YOC", "AOC", "BOC"])
     fit = load_fit(tmp_path / "fit.json")
     assert all(corrects[n] == fit.parameters[n].value for n in corrects)
-    assert set(json.loads(edit["written"])) == {"EDIT.TAB", "EDIT.txt", "EDIT_SIGN.H"}
+    assert set(json.loads(edit["written"])) == {"EDIT.TAB", "EDIT.txt", "EDIT_SIGN.H", "EDIT_SIGN_MSG.A"}
     assert list(json.loads(edit["loaded"]).values())[0] == hashlib.sha256(
         (ROOT / "examples" / "itnc530-current.TAB").read_bytes()).hexdigest()
     rc, out, _ = run("history", "show", "--machine", "ac-trunnion-itnc530")

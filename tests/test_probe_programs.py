@@ -191,3 +191,83 @@ def test_a_grazing_probing_move_touches():
     got = _touch(m, m.probe, Block(3, "PROBE", "move", probe=True), q0, q1, findings)
     assert findings == [] and got is not None
     assert np.linalg.norm(table_point(m, got[None])[0] - ball) == pytest.approx(rho, abs=1e-9)
+
+
+@pytest.mark.parametrize("ctl", list(EXT))
+def test_every_probing_program_stops_for_the_preset_check_before_its_first_touch(tmp_path, ctl):
+    """As every measuring program does: once, the stylus over the sphere, a message the
+    control shows (LinuxCNC MSG, SINUMERIK MSG, HEIDENHAIN FN 16 to SCREEN with its format
+    file beside the program), then a stop, before the first probing move."""
+    out, _ = _program(tmp_path, SEED_MACHINE, ctl, "K4")
+    lines = out.read_text().splitlines()
+    stop = {"itnc530": r"^\d+ STOP\b", "sinumerik840d": r"^M0$", "linuxcnc": r"^M0$"}[ctl]
+    probe = {"itnc530": r" TCH PROBE 4\.3 ", "sinumerik840d": r"^MEAS=1 ", "linuxcnc": r"^G38\.2 "}[ctl]
+    stops = [i for i, ln in enumerate(lines) if re.search(stop, ln)]
+    first = next(i for i, ln in enumerate(lines) if re.search(probe, ln))
+    message = {"itnc530": r"FN 16: F-PRINT TNC:\\PROBE_MSG\.A / SCREEN:",
+               "sinumerik840d": r'^MSG\("PRESET CHECK', "linuxcnc": r"^\(MSG, PRESET CHECK"}[ctl]
+    preset = [i for i in stops if re.search(message, lines[i - 1])]
+    assert len(preset) == 1 and preset[0] < first, (stops, first)
+    if ctl == "itnc530":
+        shown = (out.parent / "PROBE_MSG.A").read_text()
+        assert re.fullmatch(r'"PRESET CHECK: the stylus tip is 5 mm above the sphere[^";%]*";\n', shown), \
+            shown
+        assert all(len(m) <= 124 for m in re.findall(r'"([^"]*)"', shown))
+
+
+def test_sinumerik_probing_checks_every_switch_and_every_write(tmp_path):
+    """After each MEAS block: STOPRE and a stop with a message unless $AC_MEA[1] says the
+    probe switched; after each WRITE a stop unless it wrote (a full log drops lines, MD11420).
+    check-program refuses the program with either guard taken out."""
+    out, _ = _program(tmp_path, SEED_MACHINE, "sinumerik840d", "K4")
+    text = out.read_text()
+    lines = [ln.split(";")[0].strip() for ln in text.splitlines()]
+    meas = [i for i, ln in enumerate(lines) if ln.startswith("MEAS=1 ")]
+    writes = [i for i, ln in enumerate(lines) if ln.startswith("WRITE(")]
+    assert len(meas) == 12 * 5 and len(writes) == len(meas) + 4
+    for i in meas:
+        assert lines[i + 1:i + 7] == ["STOPRE", "IF $AC_MEA[1]==0", lines[i + 3], "M0", "M30", "ENDIF"]
+        assert lines[i + 3].startswith('MSG("PROBE DID NOT SWITCH')
+    for i in writes:
+        assert lines[i + 1] == "IF ERR<>0" and lines[i + 2].startswith('MSG("LOG NOT WRITTEN') and \
+            lines[i + 3:i + 6] == ["M0", "M30", "ENDIF"]
+    for cut in ("IF $AC_MEA[1]==0", "IF ERR<>0"):
+        raw = text.splitlines()
+        at = next(k for k, ln in enumerate(raw) if ln.startswith(cut))
+        (out.parent / "cut.MPF").write_text("\n".join(raw[:at] + raw[at + 5:]) + "\n")
+        code, _, err = run("check-program", "--machine", SEED_MACHINE, out.parent / "cut.MPF")
+        assert code == 2 and f"line {at + 1}:" in err and "must follow" in err, err
+
+
+def test_heidenhain_probing_cycle_retracts_and_a_deflected_one_is_refused(tmp_path):
+    out, _ = _program(tmp_path, SEED_MACHINE, "itnc530", "K4")
+    text = out.read_text()
+    assert re.findall(r"TCH PROBE 4\.3 ABST\S+ F\S+ (MB\S+) ", text) == ["MB+5.0000"] * 60
+    (out.parent / "mb0.H").write_text(text.replace("MB+5.0000", "MB0", 1))
+    code, _, err = run("check-program", "--machine", SEED_MACHINE, out.parent / "mb0.H")
+    assert code == 2 and "MB0: cycle 4 leaves the stylus deflected" in err, err
+
+
+def test_names_that_a_control_would_expand_in_its_log_stay_out_of_it(tmp_path):
+    """A '#' in the machine's name is a parameter to LinuxCNC's LOG, '%' a format to FN 16:
+    the name is left out of the log (compgen would refuse the log it came back in); a path
+    label the log cannot carry is refused with one line."""
+    from compgen.emit.probing import probe_program
+    from compgen.probe import probe_poses
+
+    text = SEED_MACHINE.read_text()
+    name = re.search(r'(?m)^name = "([^"]*)"', text)[1]
+    for odd in ("#3", "100%", "a;b", "x\"y"):
+        m = tmp_path / "m.toml"
+        m.write_text(text.replace(f'name = "{name}"', f"name = {odd!r}".replace("'", '"') if '"' not in odd
+                                  else 'name = "x\\"y"', 1))
+        machine = load_machine(m)
+        for ctl in EXT:
+            files = probe_program(machine, probe_poses(machine, ["K4"]), "K4", ctl, "P", "0", "d").files
+            assert "# machine =" not in "\n".join(files.values()), (odd, ctl)
+    machine = load_machine(SEED_MACHINE)
+    from compgen.kinematics import Poses
+    poses = probe_poses(machine, ["K4"])
+    poses = Poses(poses.q, poses.ball, poses.t, np.full(len(poses), "K#4", dtype=object))
+    with pytest.raises(Exception, match="path label 'K#4' cannot stand in the control's log"):
+        probe_program(machine, poses, "K4", "linuxcnc", "P", "0", "d")

@@ -5,7 +5,7 @@ from io import StringIO
 
 import numpy as np
 import pytest
-from conftest import SEED_MACHINE, run, vector
+from conftest import ROOT, SEED_MACHINE, run, vector
 
 from compgen.emit.programs import measure_program, read_program
 from compgen.emit.registry import CONTROLLERS
@@ -196,8 +196,8 @@ def test_the_pose_list_says_from_which_side_the_program_reaches_every_pose(contr
     from compgen.machine_file import load_machine
 
     machine = load_machine(SEED_MACHINE if which == "seed" else BC_MACHINE)
-    if which == "bc" and controller != machine.controller:
-        pytest.skip("the B/C machine's file sets up SINUMERIK only (its tool is a name)")
+    if which == "bc" and controller == "linuxcnc":
+        pytest.skip("the B/C machine's nest is a tool by name, which LinuxCNC does not call")
     names = list(machine.paths)
     poses = Poses.concat([generate(machine, names[:1], back=True), generate(machine, names)])
     emitted = measure_program(machine, poses, "all", controller, mode, "RT", "0.1.0", DATE)
@@ -350,3 +350,34 @@ def test_one_ball_per_program_to_the_pose_lists_resolution(seed_machine):
     assert "END PGM" in emitted.files[".H"]
     with pytest.raises(CompgenError, match="a program measures one ball position; these poses hold 2"):
         measure_program(seed_machine, shifted(1.5e-5), "K4", "itnc530", "tcpm", "K4", "0", DATE)
+
+
+def test_heidenhain_calls_a_tool_by_name_in_quotes_and_refuses_a_bare_name(tmp_path):
+    """TOOL CALL RTEST Z is rejected by the control: a name goes in double quotes; a number
+    as it is. check-program refuses the bare name at its line."""
+    text = SEED_MACHINE.read_text().replace('tool = "99"', 'tool = "RTEST"', 1)
+    assert 'tool = "RTEST"' in text
+    (tmp_path / "m.toml").write_text(text)
+    out = tmp_path / "K4.H"
+    code, _, err = run("measure-program", "--machine", tmp_path / "m.toml", "--path", "K4", "-o", out)
+    assert code == 0, err
+    program = out.read_text()
+    assert re.search(r'(?m)^\d+ TOOL CALL "RTEST" Z S0 ', program)
+    assert run("check-program", "--machine", tmp_path / "m.toml", out)[0] == 0
+    bare = tmp_path / "BARE.H"
+    bare.write_text(program.replace('TOOL CALL "RTEST"', "TOOL CALL RTEST"))
+    code, _, err = run("check-program", "--machine", tmp_path / "m.toml", bare)
+    line = 1 + next(k for k, ln in enumerate(program.splitlines()) if "TOOL CALL" in ln)
+    assert code == 2 and f"line {line}:" in err and "needs double quotes" in err, err
+    assert re.search(r"(?m)^\d+ TOOL CALL 99 Z S0 ", (ROOT / "tests" / "golden" / "ac-trunnion-itnc530" /
+                                                      "itnc530" / "rtest-tcpm.H").read_text())
+
+
+def test_the_heidenhain_preset_check_is_a_message_the_control_shows(tmp_path):
+    out = tmp_path / "k4.H"          # a lower-case stem: the program and its message file are K4
+    code, _, err = run("measure-program", "--machine", SEED_MACHINE, "--path", "K4", "-o", out)
+    assert code == 0, err
+    lines = out.read_text().splitlines()
+    at = next(k for k, ln in enumerate(lines) if re.search(r"^\d+ STOP\b", ln))
+    assert re.fullmatch(r"\d+ FN 16: F-PRINT TNC:\\K4_MSG\.A / SCREEN:", lines[at - 1])
+    assert (tmp_path / "K4_MSG.A").read_text().startswith('"PRESET CHECK: the nest is 20 mm above the ball')

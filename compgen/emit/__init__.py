@@ -26,6 +26,16 @@ class Emitted:
 
     files: dict[str, str]
     notes: tuple[str, ...] = field(default_factory=tuple)
+    named: frozenset[str] = frozenset()    # suffixes of files a program names by its program name
+
+    def paths(self, out: Path, name: str, main: str) -> dict[Path, str]:
+        """Where each file goes, ``out`` holding the ``main`` one: a file a program names
+        (``TNC:\\NAME_MSG.A``) beside it under the program's name, the others under
+        ``out``'s stem."""
+        def path(suffix: str) -> Path:
+            stem = name if suffix in self.named else out.stem
+            return out if suffix == main else out.with_name(stem + suffix)
+        return {path(suffix): body for suffix, body in self.files.items()}
 
 
 def ascii_text(text: str) -> str:

@@ -120,6 +120,14 @@ class Controller:
     def check_setup(self, machine: Machine) -> None:
         """Refuse a [program] set-up this control cannot run (e.g. a tool it cannot call)."""
 
+    def tool_word(self, tool: str) -> str:
+        """A tool as this control's tool call names it."""
+        return tool
+
+    def message_files(self, name: str, messages: list[str]) -> dict[str, str]:
+        """Files (suffix → text) a program ``name`` needs to show ``messages`` to the operator."""
+        return {}
+
     def state(self, path: str, text: str) -> str | None:
         """The control's state from the file ``path`` (its ``text``) when the file is this
         control's configuration to be resolved (LinuxCNC's INI), else None: the file is the

@@ -280,8 +280,12 @@ TCPM = "FUNCTION TCPM F CONT AXIS POS PATHCTRL AXIS"
 
 PROBE_DIRECTION = re.compile(r"TCH PROBE 4\.2 IX([+-]\d{1,3}\.\d{1,9}) IY([+-]\d{1,3}\.\d{1,9}) "
                              r"IZ([+-]\d{1,3}\.\d{1,9})")
-PROBE_RUN = re.compile(r"TCH PROBE 4\.3 ABST\+?(\d{1,4}(?:\.\d{1,6})?) F(\d{1,6}(?:\.\d{1,6})?) MB0 "
-                       r"REFERENCE SYSTEM:0")
+# MB: how far the cycle retracts the stylus after the touch; MB0 leaves it deflected
+PROBE_RUN = re.compile(r"TCH PROBE 4\.3 ABST\+?(\d{1,4}(?:\.\d{1,6})?) F(\d{1,6}(?:\.\d{1,6})?) "
+                       r"MB\+?(\d{1,4}(?:\.\d{1,6})?) REFERENCE SYSTEM:0")
+# a tool by number, or by name in double quotes (TOOL CALL "NAME" Z): the control rejects a bare name
+TOOL_CALL = re.compile(r'TOOL CALL (?:\d{1,9}|"[^"]+") Z( S\S*)?')
+MESSAGE = re.compile(r"FN 16: F-PRINT TNC:\\[\w.]+_MSG\.A / SCREEN:")
 
 
 def program_blocks(text: str) -> list[Block]:
@@ -330,8 +334,14 @@ def program_blocks(text: str) -> list[Block]:
         elif (d := re.fullmatch(r"CYCL DEF 7\.[123] [XYZ]([+-]?\d{1,7}(?:\.\d{0,9})?)", b)) is not None:
             if float(d[1]) != 0:
                 raise CompgenError(f"line {k}: a datum shift moves the preset compgen's positions are in")
-        elif re.fullmatch(r"TOOL CALL \S+ Z( S\S*)?", b):
+        elif TOOL_CALL.fullmatch(b):
             out += [Block(k, raw, "tool"), Block(k, raw, "length", on=True)]
+        elif b.startswith("TOOL CALL "):
+            raise CompgenError(f"line {k}: {b!r}: a tool called by name needs double quotes (TOOL CALL "
+                               "\"NAME\" Z): the control rejects the block",
+                               hint="write the program with compgen")
+        elif MESSAGE.fullmatch(b):              # the preset check's message, shown in a window (U16)
+            out.append(Block(k, raw, "log"))
         elif (d := re.fullmatch(r"CYCL DEF 9\.1 DWELL (\S+)", b)) is not None:
             out.append(dwell(d[1], k, raw))
         elif b.startswith("L "):
@@ -348,6 +358,9 @@ def program_blocks(text: str) -> list[Block]:
             if not 0.999 < np.linalg.norm(direction) < 1.001:
                 raise CompgenError(f"line {k}: the probing direction is not a unit vector")
         elif (d := PROBE_RUN.fullmatch(b)) is not None:
+            if float(d[3]) == 0:
+                raise CompgenError(f"line {k}: MB0: cycle 4 leaves the stylus deflected at the touch",
+                                   hint="give a retraction (MB) of a few mm, as compgen writes it")
             if direction is None or len(at) < 3:
                 raise CompgenError(f"line {k}: a probing cycle without its direction (TCH PROBE 4.2) or "
                                    "from a place no block gave", hint="give the program compgen wrote")
@@ -409,6 +422,13 @@ class Heidenhain(Controller):
                              line.tilt - then[n].tilt) for n, line in now.items()}
         sq_now, sq_then = (read_squareness(t, machine) for t in (current, measured))
         return Held(lines, {k: sq_now.get(k, 0.0) - sq_then.get(k, 0.0) for k in {**sq_now, **sq_then}})
+
+    def tool_word(self, tool: str) -> str:
+        return tool if tool.isdigit() else f'"{tool}"'
+
+    def message_files(self, name: str, messages: list[str]) -> dict[str, str]:
+        # FN 16: F-PRINT to SCREEN: shows the format file's text in a window (U16)
+        return {"_MSG.A": render("heidenhain/probe.A.j2", head=messages)}
 
     def reads(self, text: str) -> bool:
         return ROW.search(text) is not None

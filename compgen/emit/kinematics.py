@@ -24,9 +24,10 @@ SIGN_SEEN_UM = 1.0     # a change of the reading an R-test shows for certain at 
 
 
 def sign_check(machine: Machine, p: Plan, ctl: Controller, name: str, version: str,
-               date: str) -> tuple[str, list[str]]:
-    """A short program that turns each rotary axis alone, and the reading change the edit
-    should cause at each pose (after minus before, µm): a wrong sign shows in a minute."""
+               date: str) -> tuple[Emitted, list[str]]:
+    """A short program that turns each rotary axis alone (with the files it names), and the
+    reading change the edit should cause at each pose (after minus before, µm): a wrong sign
+    shows in a minute."""
     rows, labels = [], []
     for a in machine.rotary_axes:
         lo, hi = a.travel
@@ -57,7 +58,7 @@ def sign_check(machine: Machine, p: Plan, ctl: Controller, name: str, version: s
                       "show its sign")
     program = measure_program(machine, at_poses.take(np.flatnonzero(keep)), "sign check", ctl.name, "tcpm",
                               name, version, date)
-    return program.files[ctl.program_ext], expect
+    return program, expect
 
 
 def corrected_by(machine: Machine, fit: FitResult, ctl: Controller) -> dict[str, float]:
@@ -112,6 +113,8 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
                                                  "same tables in both")
     sign_name = program_name(f"{name}_SIGN")
     signcheck, expect = sign_check(machine, p, ctl, sign_name, version, date)
+    # the sign check and the files it names by its name (NAME_SIGN_MSG.A)
+    named = {f"_SIGN{k}": v for k, v in signcheck.files.items() if k in signcheck.named}
     header = (f"compgen {version} kinematics edit, {date}",
               f"machine: {ascii_text(machine.name)}; controller: {ctl.words}",
               f"from {fit.marker}: machine file {ascii_text(Path(fit.machine['file']).name)}, data "
@@ -130,4 +133,5 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
     if p.not_compensable:
         notes.append(f"not compensable on {ctl.words} by compgen: " + ", ".join(p.not_compensable))
     notes += ["sign check, expected change of the reading after the edit:", *expect]
-    return Emitted({**edit.files, f"_SIGN{ctl.program_ext}": signcheck}, tuple(notes))
+    return Emitted({**edit.files, f"_SIGN{ctl.program_ext}": signcheck.files[ctl.program_ext], **named},
+                   tuple(notes), frozenset(named))

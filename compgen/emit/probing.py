@@ -19,6 +19,7 @@ F-PRINT``. What no source read so far confirms is marked in ``templates/unconfir
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -71,6 +72,9 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
     reach = []                                 # every point the stylus goes to, for the travel check
     for i in range(len(poses)):
         path = ascii_text(str(poses.path[i]))
+        if not LOG_WORD.fullmatch(path):
+            raise CompgenError(f"path label {path!r} cannot stand in the control's log lines",
+                               hint="name paths with letters, digits, _ and - (e.g. K4)")
         count[path] = count.get(path, 0) + 1
         c = poses.q[i, linear]
         turn = {n: float(np.degrees(poses.q[i, j])) for n, j in zip(names, rotary, strict=True)}
@@ -85,6 +89,9 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
             if j:
                 steps.append({"kind": "feed", "axes": dict(zip("XYZ", over, strict=True))})
             steps.append({"kind": "feed", "axes": dict(zip("XYZ", start, strict=True))})
+            if i == j == 0:       # the preset and the sphere, seen before the first touch
+                steps.append({"kind": "stop",
+                              "note": PROBE_PRESET_CHECK.format(approach=f"{setup.approach:g}")})
             steps.append({"kind": "probe", "axes": dict(zip("XYZ", target, strict=True)),
                           "direction": -direction, "distance": setup.approach + setup.overtravel})
             steps.append({"kind": "log", "path": path, "pose": count[path], "turn": turn,
@@ -124,24 +131,34 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
                 *([f"# machine = {machine.name}"] if _loggable(machine.name) else []),
                 ",".join(["path", "pose", *names, "X", "Y", "Z", *DIRECTION])]
     text = render(f"{ctl.family}/probe{ctl.program_ext}.j2", name=name, header=header, steps=steps,
-                  tool=setup.tool, feed=f"{setup.feed:g}", probe_feed=f"{setup.probe_feed:g}",
+                  tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}", probe_feed=f"{setup.probe_feed:g}",
                   work_offset=machine.program.work_offset, log_name=log_name, log_head=log_head,
-                  rotary=names, number=ctl.number)
-    files = {ctl.program_ext: text, ".poses.csv": pose_list(machine, poses)}
+                  rotary=names, number=ctl.number, retract=ctl.number(setup.approach, 4))
+    named = ctl.message_files(name, [s["note"] for s in steps if s["kind"] == "stop"])
     if ctl.family == "heidenhain":           # FN 16 prints through format files: the head, a line per path
-        files["_HEAD.A"] = render("heidenhain/probe.A.j2", head=log_head)
+        named["_HEAD.A"] = render("heidenhain/probe.A.j2", head=log_head)
         for path in count:
-            files[f"_{path}.A"] = render("heidenhain/probe.A.j2", path=path, rotary=names, head=None)
+            named[f"_{path}.A"] = render("heidenhain/probe.A.j2", path=path, rotary=names, head=None)
+    files = {ctl.program_ext: text, ".poses.csv": pose_list(machine, poses), **named}
     result = ctl.check(machine, ctl.blocks(text, "axes"), probe=setup)
     if result.findings:     # nothing unsafe leaves this function
         raise CompgenError(f"the machine cannot probe {label} with the sphere at "
                            f"{', '.join(f'{v:g}' for v in poses.ball[0])} mm: {result.first(name)}",
                            hint="move the sphere, change [probe] (elevation, approach, stylus_length) or "
                                 "choose another path")
-    return Emitted(files)
+    return Emitted(files, named=frozenset(named))
+
+
+# what every control's log line carries as written: LinuxCNC expands "#" (a parameter) in a
+# LOG comment, which ends at ")"; a SINUMERIK string ends at '"'; HEIDENHAIN's FN 16 format
+# reads "%" as a format and "\"" as the text's end; ";" starts a comment in two of them
+LOG_WORD = re.compile(r"[A-Za-z0-9_][A-Za-z0-9 _.,:+/-]*")
+# the operator sees, before the stylus first goes down, that the sphere is where the preset
+# puts it (one line under the 124 characters a SINUMERIK message shows)
+PROBE_PRESET_CHECK = ("PRESET CHECK: the stylus tip is {approach} mm above the sphere and the sphere must be "
+                      "centred under it. Start to go on")
 
 
 def _loggable(text: str) -> bool:
-    """Whether every control's log line can carry ``text``: a LinuxCNC comment ends at ")",
-    a SINUMERIK string at '"'."""
-    return not any(ch in text for ch in '()";') and text.isascii()
+    """Whether every control's log line carries ``text`` as written (else it is left out)."""
+    return LOG_WORD.fullmatch(text) is not None

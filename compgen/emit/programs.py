@@ -144,7 +144,8 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
         "first run: single block, feed override low, nest and ball clear of clamps",
     ]
     text = render(f"{ctl.family}/program{ctl.program_ext}.j2", name=name, header=header, mode=mode,
-                  tool=setup.tool, feed=f"{setup.feed:g}", dwell=f"{setup.dwell:g}" if setup.dwell else "",
+                  tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}",
+                  dwell=f"{setup.dwell:g}" if setup.dwell else "",
                   work_offset=setup.work_offset, max_step=f"{machine.limits.max_step_deg:g}",
                   steps=steps, rotary=[a.name for a in machine.rotary_axes])
     result = ctl.check(machine, ctl.blocks(text, mode))
@@ -153,7 +154,9 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
         raise CompgenError(f"the machine cannot run {label} with the ball at {at} mm: {result.first(name)}",
                            hint="put the ball higher on its stem or nearer the rotary axes, or choose "
                                 "another path; the set-up's solids are the machine file's [rtest]")
-    return Emitted({ctl.program_ext: text, ".poses.csv": pose_list(machine, poses)})
+    messages = ctl.message_files(name, [s["note"] for s in steps if s["kind"] == "stop"])
+    return Emitted({ctl.program_ext: text, ".poses.csv": pose_list(machine, poses), **messages},
+                   named=frozenset(messages))
 
 
 ROT = set("ABC")
