@@ -63,6 +63,16 @@ class CompTable:
         return np.interp(x, self.grid, self.values)
 
 
+def unrolled(t: CompTable, travel: tuple[float, float], span: float) -> CompTable:
+    """A modulo table as a plain one over the axis's ``travel`` (within ±``span``), for a
+    control that does not wrap the table's input: its turn repeated on the same step."""
+    first = np.ceil(max(travel[0], -span) / t.step) * t.step
+    grid = np.arange(first, min(travel[1], span) + t.step / 2, t.step)
+    values = np.interp(t.start + np.mod(grid - t.start, t.stop - t.start), t.grid, t.values)
+    return CompTable(t.effect, t.words, t.input, t.output, float(grid[0]), float(grid[-1]),
+                     tuple(float(v) for v in values), False, t.unit)
+
+
 def compose_tables(loaded: list[CompTable], new: list[CompTable]) -> list[CompTable]:
     """The tables a control holds once an edit's ``new`` tables are added to the ``loaded``
     ones (an earlier round's, the OEM's): the new tables of one input and output axis are
@@ -147,7 +157,7 @@ def _compensable_by_table(machine: Machine, e) -> bool:
     """A translation error of a linear axis ahead of every rotary axis in its chain, or the
     positioning error of a rotary axis: single-axis tables hold those exactly."""
     axis = machine.axis(e.carrier)
-    step = np.ptp(_grid(axis)) / (TABLE_POINTS - 1)
+    step = float(np.diff(_grid(axis))[0])
     if e.basis.kind in ("s", "l"):      # a declared shape's corners: two table steps apart at least
         at = np.degrees(e.basis.at) if axis.rotary else np.asarray(e.basis.at) * POLY_SCALE_MM
         if step > np.diff(at).min() / 2:
@@ -248,9 +258,21 @@ def squareness_tables(machine: Machine, p: Plan) -> list[CompTable]:
 
 
 def _grid(axis) -> np.ndarray:
-    """Table positions over the axis: a whole turn for a full-turn axis, else its travel."""
+    """Table positions over the axis (a whole turn for a full-turn axis, else its travel) on
+    a round step, the finest of 1, 2, 2.5, 5 × 10^k that needs at most TABLE_POINTS: one
+    whose multiples are both ends where there is one, else from a multiple at or below the
+    start to one at or above the end. Controls place each value at MIN + n·STEP: a round
+    step that divides the range is written exactly."""
     lo, hi = (0.0, 360.0) if axis.full_turn else axis.travel
-    return np.linspace(lo, hi, TABLE_POINTS)
+    steps = [m * 10.0 ** k for k in range(-3, 7) for m in (1.0, 2.0, 2.5, 5.0)]
+    for exact in (True, False):
+        for step in steps:
+            first, last = np.floor(lo / step + 1e-9), np.ceil(hi / step - 1e-9)
+            if exact and (abs(first * step - lo) > 1e-9 or abs(last * step - hi) > 1e-9):
+                continue
+            if last - first + 1 <= TABLE_POINTS:
+                return np.arange(first, last + 1) * step
+    raise CompgenError(f"{axis.name}'s travel {lo:g}..{hi:g} is too long for a compensation table")
 
 
 def _table(effect, words, axis, out_axis, grid, values, unit) -> CompTable:

@@ -249,7 +249,8 @@ def test_sinumerik_vectors_of_any_length_and_a_wrong_record(bc_machine):
     off = np.radians([0.5, 2.0])
     near, far = (_record(c11=2 * np.sin(a), c12=-2 * np.cos(a)) for a in off)
     kinematics_edit(bc_machine, fit, "sinumerik840d", near, "c", "K", "0", "d")
-    with pytest.raises(CompgenError, match="is not the one the machine file says it holds"):
+    with pytest.raises(CompgenError, match=r"c:5: the record's vector for C .* is not the one the machine "
+                                           r"file"):
         kinematics_edit(bc_machine, fit, "sinumerik840d", far, "c", "K", "0", "d")
 
 

@@ -147,7 +147,8 @@ def test_fit_add_and_diagnose_take_a_declared_shape_from_the_command_line(machin
 
 
 def test_kinematics_writes_a_declared_spline_into_the_compensation_table(machine, tmp_path):
-    """The .comp.csv holds EXX:s.screw on X's 37 points: the command that undoes the curve X
+    """The .comp.csv holds EXX:s.screw on X's 33 points (a round 25 mm step over ±400 mm,
+    the finest that spans X's travel in at most 37): the command that undoes the curve X
     stood off by (within 0.5 µm of minus that curve, held beyond the knots) — the fitted
     spline in X's sense — and a value that rounds to zero is written 0.000000, not -0.000000."""
     from compgen.rtest import format_rtest
@@ -160,7 +161,7 @@ def test_kinematics_writes_a_declared_spline_into_the_compensation_table(machine
     assert code == 0, err
     text = (tmp_path / "KIN.comp.csv").read_text()
     rows = [r.split(",") for r in text.splitlines() if r.startswith("EXX:s.screw,")]
-    assert len(rows) == 37 and "-0.000000" not in text
+    assert len(rows) == 33 and [float(r[2]) for r in rows[:2]] == [-400.0, -375.0] and "-0.000000" not in text
     from compgen.results import load_fit
     fit = load_fit(tmp_path / "f.json")
     spline = [0.0] + [fit.parameters[f"EXX:s.screw.{i}"].value for i in range(2, 6)]

@@ -124,14 +124,30 @@ def test_sinumerik_cec_restore_puts_back_the_tables_read(bc_machine):
 @pytest.mark.parametrize("damage, says", [
     ("$AN_CEC_STEP[0]=10.000000\n", "assigned twice"),
     ("", "lacks $AN_CEC_STEP"),
+    ("MAX=359", "do not span its 37 values in whole steps"),        # MAX not MIN + 36 steps
+    ("MIN=400", "do not span"),                                      # MIN above MAX
+    ("STEP=0", "do not span"),
+    ("STEP=-10", "do not span"),
+    ("STEP=9.7", "do not span"),
+    ("VALUE", "do not span"),                                        # a 38th value
+    ("MODULO=2", "$AN_CEC_IS_MODULO is 2"),
 ])
 def test_a_damaged_cec_state_is_refused_with_its_line(bc_machine, damage, says):
     model = [*location_model(bc_machine), *TABLES]
     _, a = _edit(bc_machine, _measure(bc_machine, {}, np.random.default_rng(1), OEM_CARR), OEM_CARR, "A",
                  model)
     cec = a.files["_CEC.INI"]
-    cec = cec + damage if damage else "\n".join(ln for ln in cec.splitlines()
-                                                 if not ln.startswith("$AN_CEC_STEP[0]"))
+    key = {"MAX=359": ("$AN_CEC_MAX[0]=", "359"), "MIN=400": ("$AN_CEC_MIN[0]=", "400"),
+           "STEP=0": ("$AN_CEC_STEP[0]=", "0"), "STEP=-10": ("$AN_CEC_STEP[0]=", "-10"),
+           "STEP=9.7": ("$AN_CEC_STEP[0]=", "9.7"), "MODULO=2": ("$AN_CEC_IS_MODULO[0]=", "2")}
+    if damage in key:
+        start, value = key[damage]
+        cec = "\n".join(start + value if ln.startswith(start) else ln for ln in cec.splitlines())
+    elif damage == "VALUE":
+        cec = cec.replace("$AN_CEC_INPUT_AXIS[0]", "$AN_CEC[0,37]=0.0\n$AN_CEC_INPUT_AXIS[0]")
+    else:
+        cec = cec + damage if damage else "\n".join(ln for ln in cec.splitlines()
+                                                     if not ln.startswith("$AN_CEC_STEP[0]"))
     with pytest.raises(CompgenError, match=re.escape(says)) as e:
         sinumerik.read_cec(joined([("carr", OEM_CARR), ("cec.ini", cec)]), bc_machine, "x")
     assert "cec.ini:" in str(e.value.where)
@@ -259,3 +275,86 @@ def test_linuxcnc_type0_table_is_read_as_nominal_minus_actual(seed_machine, tmp_
     with pytest.raises(CompgenError, match="do not increase"):
         read_state(str(tmp_path / "m.ini")) and linuxcnc.loaded_joint_tables(
             seed_machine, read_state(str(tmp_path / "m.ini")))
+
+
+def test_every_cec_table_compgen_writes_spans_its_values_in_whole_steps(bc_machine):
+    """(MAX − MIN) / STEP is exactly the number of steps the values span, as written: the
+    control places value n at MIN + n·STEP. Steps are round (1, 2, 2.5, 5 × 10^k)."""
+    from decimal import Decimal
+    model = [*location_model(bc_machine), *TABLES]
+    data = _measure(bc_machine, {}, np.random.default_rng(1), OEM_CARR)
+    _, a = _edit(bc_machine, data, OEM_CARR, "A", model)
+    cec = a.files["_CEC.INI"]
+    tables = set(re.findall(r"(?m)^\$AN_CEC_STEP\[(\d+)\]", cec))
+    assert len(tables) == 2
+    for k in tables:
+        get = {w: Decimal(re.search(rf"(?m)^\$AN_CEC_{w}\[{k}\]=(\S+)$", cec)[1])
+               for w in ("MIN", "MAX", "STEP")}
+        count = len(re.findall(rf"(?m)^\$AN_CEC\[{k},\d+\]=", cec))
+        assert (get["MAX"] - get["MIN"]) / get["STEP"] == count - 1, (k, get, count)
+        assert get["STEP"].normalize().as_tuple().digits[0] in (1, 2, 5)
+
+
+def test_a_turn_table_is_modulo_only_on_a_modulo_axis_and_a_new_table_names_its_data(bc_machine, tmp_path):
+    """C's 2/rev table is a modulo table where the machine file says C is modulo; where it
+    says C is not, the turn repeats over C's travel (IS_MODULO 0); where it does not say,
+    the edit is refused. A table in a new slot names the data that enable it."""
+    from dataclasses import replace
+
+    model = [*location_model(bc_machine), *TABLES]
+    data = _measure(bc_machine, {}, np.random.default_rng(1), OEM_CARR)
+    _, a = _edit(bc_machine, data, OEM_CARR, "A", model)
+    assert "$AN_CEC_IS_MODULO[0]=1" in a.files["_CEC.INI"]
+    notes = "\n".join(a.notes)
+    for k in (0, 1):
+        assert f"CEC table {k} is new: MD18342 $MN_MM_CEC_MAX_POINTS[{k}] >=" in notes
+        assert f"SD41300 $SN_CEC_TABLE_ENABLE[{k}] = 1" in notes
+    assert "MD32710 $MA_CEC_ENABLE = 0 on C1, Y1" in notes
+    plain = replace(bc_machine, sinumerik={**bc_machine.sinumerik, "modulo": ()})
+    _, b = _edit(plain, data, OEM_CARR, "B", model)
+    table = sinumerik.read_cec(b.files["_CEC.INI"], plain)
+    c = next(t for t in table if t.input == "C")
+    assert not c.modulo and (c.start, c.stop) == (max(plain.axis("C").travel[0], -1260.0),
+                                                    min(plain.axis("C").travel[1], 1260.0))
+    ran = np.linspace(c.start, c.stop, 997)
+    modulo = next(t for t in sinumerik.read_cec(a.files["_CEC.INI"], bc_machine) if t.input == "C")
+    np.testing.assert_allclose(c.at(ran), modulo.at(ran), atol=1e-6)
+    unsaid = replace(bc_machine, sinumerik={**bc_machine.sinumerik, "modulo": None})
+    with pytest.raises(CompgenError, match=r"does not say whether it is"):
+        _edit(unsaid, data, OEM_CARR, "U", model)
+
+
+@pytest.mark.parametrize("record, says", [
+    ("$TC_CARR4[1]=500.0\n", r"c:\d+: \$TC_CARR4\[1\] \(l2.x\) = 500 mm: the machine file does not say which "
+                             r"l2"),
+    ("$TC_CARR4[1]=500.0\n", r"c:\d+: \$TC_CARR4\[1\] \(l2.x\) = 500 mm, \+500.0000 mm from the machine "
+                             r"file's 0"),
+    ("$TC_CARR5[1]=0.05\n", None),                                        # 50 µm: within [limits]
+])
+def test_the_records_coarse_offsets_are_checked_against_the_machine_file(bc_machine, record, says):
+    from dataclasses import replace
+    machine = bc_machine
+    if "the machine file's 0" in (says or "") or says is None:
+        machine = replace(bc_machine, sinumerik={**bc_machine.sinumerik, "offsets": {
+            "l2": np.zeros(3), "l3": np.zeros(3), "l4": np.zeros(3)}})
+    fit = identify(machine, [_measure(machine, {}, np.random.default_rng(2), OEM_CARR)])
+    state = OEM_CARR + record
+    if says is None:
+        kinematics_edit(machine, fit, "sinumerik840d", state, "c", "K", "0", "d")
+    else:
+        with pytest.raises(CompgenError, match=says):
+            kinematics_edit(machine, fit, "sinumerik840d", state, "c", "K", "0", "d")
+
+
+def test_the_machine_file_declares_the_records_coarse_offsets(tmp_path):
+    from conftest import BC_MACHINE
+
+    from compgen.machine_file import load_machine
+    offsets = "offsets = { l2 = [0.0, 0.0, -120.5], l4 = [1, 2, 3] }\n"
+    text = BC_MACHINE.read_text().replace("tcarr = 1 ", offsets + "tcarr = 1 ")
+    (tmp_path / "m.toml").write_text(text)
+    got = load_machine(tmp_path / "m.toml").sinumerik["offsets"]
+    assert set(got) == {"l2", "l4"} and got["l2"].tolist() == [0.0, 0.0, -120.5]
+    (tmp_path / "m.toml").write_text(text.replace("l4 =", "l5 ="))
+    with pytest.raises(CompgenError, match="unknown key l5"):
+        load_machine(tmp_path / "m.toml")

@@ -57,7 +57,8 @@ def sign_check(machine: Machine, p: Plan, ctl: Controller, name: str, version: s
         expect.append(f"the edit changes no reading by {SIGN_SEEN_UM:g} um or more: this check cannot "
                       "show its sign")
     program = measure_program(machine, at_poses.take(np.flatnonzero(keep)), "sign check", ctl.name, "tcpm",
-                              name, version, date)
+                              name, version, date,
+                              notes=("expected change of the reading after the edit:", *expect))
     return program, expect
 
 

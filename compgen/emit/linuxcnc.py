@@ -23,7 +23,17 @@ from pathlib import Path
 
 import numpy as np
 
-from ..correction import ARCSEC, CompTable, Held, Plan, comp_tables, compose_tables, nominal_lines, pivot_of
+from ..correction import (
+    ARCSEC,
+    CompTable,
+    Held,
+    Plan,
+    comp_tables,
+    compose_tables,
+    nominal_lines,
+    pivot_of,
+    unrolled,
+)
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
@@ -271,14 +281,7 @@ def joint_tables(machine: Machine, p: Plan) -> list[CompTable]:
     for t in comp_tables(machine, p):
         if t.input != t.output:
             continue                   # a cross table: no joint's own error
-        if t.modulo:
-            travel = machine.axis(t.input).travel
-            first = np.ceil(max(travel[0], -TURNS_DEG) / t.step) * t.step
-            grid = np.arange(first, min(travel[1], TURNS_DEG) + t.step / 2, t.step)
-            values = np.interp(t.start + np.mod(grid - t.start, t.stop - t.start), t.grid, t.values)
-            t = CompTable(t.effect, t.words, t.input, t.output, float(grid[0]), float(grid[-1]),
-                          tuple(float(v) for v in values), False, t.unit)
-        out.append(t)
+        out.append(unrolled(t, machine.axis(t.input).travel, TURNS_DEG) if t.modulo else t)
     return out
 
 

@@ -69,9 +69,11 @@ def program_name(text: str, room: int = 0) -> str:
 
 
 def measure_program(machine: Machine, poses: Poses, label: str, controller_name: str, mode: str,
-                    name: str, version: str, date: str, list_name: str | None = None) -> Emitted:
+                    name: str, version: str, date: str, list_name: str | None = None,
+                    notes: tuple[str, ...] = ()) -> Emitted:
     """The program text and its pose list (CSV v1 without readings), checked for safety.
-    ``list_name`` is the pose list's file stem, as the user gave it (default ``name``).
+    ``list_name`` is the pose list's file stem, as the user gave it (default ``name``);
+    ``notes``: more lines for the program's header.
 
     Each path label is a segment with its own approach and retract along machine Z, so a
     program may chain paths whose ends are far apart.
@@ -142,6 +144,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
                               for a, j in zip(machine.rotary_axes, rotary, strict=True)) + " deg",
         "rotary axes turn only at the safe height; the nest moves onto and off the ball along its axis",
         "first run: single block, feed override low, nest and ball clear of clamps",
+        *(ascii_text(n) for n in notes),
     ]
     text = render(f"{ctl.family}/program{ctl.program_ext}.j2", name=name, header=header, mode=mode,
                   tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}",

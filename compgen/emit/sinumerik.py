@@ -9,10 +9,20 @@ from __future__ import annotations
 
 import re
 from dataclasses import replace
+from decimal import Decimal
 
 import numpy as np
 
-from ..correction import CompTable, Held, Plan, comp_tables, compose_tables, nominal_lines, squareness_tables
+from ..correction import (
+    CompTable,
+    Held,
+    Plan,
+    comp_tables,
+    compose_tables,
+    nominal_lines,
+    squareness_tables,
+    unrolled,
+)
 from ..errors import CompgenError
 from ..lines import AxisLine
 from ..machine import Machine
@@ -27,7 +37,10 @@ VECTOR_DECIMALS = 10
 CARR = re.compile(r"^\s*\$TC_CARR(\d+)\[(\d+)\]\s*=\s*(\S+?)\s*(?:;.*)?$")
 CEC = re.compile(r"^\$AN_CEC(_[A-Z_]+)?\[(\d+)(?:,(\d+))?\]=\(?([^);\s]+)\)?")
 FINE = {"l2": (44, 45, 46), "l3": (55, 56, 57), "l4": (58, 59, 60)}
+# the coarse (base) offsets the OEM set: l1 $TC_CARR1-3, l2 4-6, l3 15-17, l4 18-20
+COARSE = {"l1": (1, 2, 3), "l2": (4, 5, 6), "l3": (15, 16, 17), "l4": (18, 19, 20)}
 VECTOR = {1: (7, 8, 9), 2: (10, 11, 12)}
+SPAN_DEG = 1260.0       # a non-modulo axis's table repeats its turn over its travel within ±this
 SAME_AXIS_DEG = 1.0     # a record's vector further than this from the machine file's: wrong record
 
 
@@ -54,12 +67,48 @@ def _carr_lines(text: str, where: str, record: int) -> dict[int, tuple[float, st
 def check_current(text: str, where: str, machine: Machine) -> None:
     """The record as read is plausible for this machine: every fine offset within [limits]
     offset_um of the machine file's geometry (a fine offset is a correction of it), and
-    within MD20188 where the machine file gives it; refused with its file and line."""
+    within MD20188 where the machine file gives it; every coarse offset within [limits]
+    offset_um of the one the machine file says the control holds ([sinumerik] offsets), a
+    record that holds one the machine file does not give refused; each vector within
+    SAME_AXIS_DEG of the machine file's. Refused with its file and line."""
     record = machine.sinumerik["tcarr"]
     bound_mm = machine.limits.offset_um * 1e-3
     limit = machine.sinumerik.get("fine_limit_mm")
     fine = {i for idx in FINE.values() for i in idx}
-    for n, (value, _, at) in _carr_lines(text, where, record).items():
+    lines = _carr_lines(text, where, record)
+    declared = machine.sinumerik.get("offsets") or {}
+    for vec, idx in COARSE.items():
+        for k, n in enumerate(idx):
+            if n not in lines:
+                continue
+            value, _, at = lines[n]
+            if vec not in declared:
+                raise CompgenError(f"$TC_CARR{n}[{record}] ({vec}.{'xyz'[k]}) = {value:g} mm: the machine "
+                                   f"file does not say which {vec} the control holds, so this record cannot "
+                                   "be told to be the measured machine's", where=at,
+                                   hint=f"add offsets = {{ {vec} = [x, y, z] }} to [sinumerik], as the OEM "
+                                        "set the record")
+            want = declared[vec][k]
+            if not abs(value - want) <= bound_mm:
+                raise CompgenError(f"$TC_CARR{n}[{record}] ({vec}.{'xyz'[k]}) = {value:g} mm, "
+                                   f"{value - want:+.4f} mm from the machine file's {want:g}: beyond its "
+                                   "[limits] offset_um "
+                                   f"{machine.limits.offset_um:g} µm", where=at,
+                                   hint="is this the record of the measured machine? If it is, correct "
+                                        "[sinumerik] offsets")
+    for i, a in enumerate(machine.rotary_axes, start=1):
+        if not all(n in lines for n in VECTOR[i]):
+            continue
+        now = np.array([lines[n][0] for n in VECTOR[i]])
+        held = machine.sinumerik["vectors"][a.name]
+        size = np.linalg.norm(now)
+        if size == 0 or np.degrees(np.arccos(np.clip(now @ held / size, -1, 1))) > SAME_AXIS_DEG:
+            raise CompgenError(f"the record's vector for {a.name} {now.tolist()} is not the one the "
+                               f"machine file says the control holds {held.tolist()}",
+                               where=lines[VECTOR[i][0]][2],
+                               hint="is this the record of the measured machine? else correct [sinumerik] "
+                                    "vectors")
+    for n, (value, _, at) in lines.items():
         if n not in fine:
             continue
         if not abs(value) <= bound_mm:
@@ -95,14 +144,8 @@ def carr_values(machine: Machine, p: Plan, current: dict[int, float]) -> tuple[d
             diff.append(f"$TC_CARR{n} ({vec}.{'xyz'[k]} fine) {fmt_plain(current[n], MM_DECIMALS)} -> "
                         f"{fmt_plain(new[n], MM_DECIMALS)} mm")
     for i, a in enumerate(axes, start=1):
-        held = cfg["vectors"][a.name]
-        now = np.array([current[n] for n in VECTOR[i]])
+        now = np.array([current[n] for n in VECTOR[i]])     # within SAME_AXIS_DEG (check_current)
         size = np.linalg.norm(now)
-        if size == 0 or np.degrees(np.arccos(np.clip(now @ held / size, -1, 1))) > SAME_AXIS_DEG:
-            raise CompgenError(f"the control's vector for {a.name} {now.tolist()} is not the one the machine "
-                               f"file says it holds {held.tolist()}",
-                               hint="is this the record of the measured machine? else correct [sinumerik] "
-                                    "vectors")
         # compose: turn what the record holds (the OEM's or an earlier edit's tilt included)
         # by the tilt the fit found, measured relative to that state
         v = rot_exact(p.lines[a.name].tilt)[:3, :3] @ (now / size)
@@ -172,6 +215,16 @@ def read_cec(text: str, machine: Machine, where: str = "CEC file") -> list[CompT
             raise CompgenError(f"CEC table {k} lacks " + (f"$AN_CEC_{missing[0].upper()}" if missing else
                                                          "values 0, 1, 2, ... without a gap"),
                                where=t["at"], hint="give the table as the control holds it")
+        # the control places value n at MIN + n·STEP up to MAX: the three must agree with the values
+        steps = (t["max"] - t["min"]) / t["step"] if t["step"] > 0 else float("nan")
+        if not (t["min"] < t["max"] and t["step"] > 0 and abs(steps - round(steps)) < 1e-6
+                and round(steps) == len(values) - 1):
+            raise CompgenError(f"CEC table {k}: MIN {t['min']:g}, MAX {t['max']:g}, STEP {t['step']:g} "
+                               f"do not span its {len(values)} values in whole steps", where=t["at"],
+                               hint="give the table as the control holds it")
+        if t["is_modulo"] not in (0, 1):
+            raise CompgenError(f"CEC table {k}: $AN_CEC_IS_MODULO is {t['is_modulo']:g}, not 0 or 1",
+                               where=t["at"])
         unknown = [n for n in (t["input_axis"], t["output_axis"]) if n not in channel]
         if unknown:
             raise CompgenError(f"CEC table {k} names machine axis {unknown[0]!r}, which the machine file's "
@@ -202,12 +255,20 @@ def _machine_axes(machine: Machine) -> dict[str, str]:
 
 
 def _cec_text(t: CompTable, index: int, names: dict[str, str]) -> dict:
+    """A table's entries as written: MIN, STEP and MAX such that (MAX − MIN) / STEP is the
+    whole number of steps the values span, in the decimals written (the control derives
+    each value's position from them)."""
     if t.points:
         raise CompgenError(f"CEC table {index} would need uneven steps", hint="give tables on even steps")
+    low, step = Decimal(fmt_plain(t.start, 6)), Decimal(fmt_plain(t.step, 6))
+    high = low + step * (len(t.values) - 1)
+    if step <= 0 or abs(float(high) - t.stop) > 1e-6 * max(1.0, abs(t.stop)):
+        raise CompgenError(f"CEC table {index}'s step {t.step!r} does not divide {t.start:g}..{t.stop:g} "
+                           "into "
+                           f"{len(t.values) - 1} whole steps at 6 decimals")
     return {"index": index, "effect": t.effect, "words": ascii_text(t.words), "input": names[t.input],
-            "output": names[t.output], "step": fmt_plain(t.step, 6), "min": fmt_plain(t.start, 4),
-            "max": fmt_plain(t.stop, 4), "modulo": int(t.modulo), "unit": t.unit,
-            "values": [fmt_plain(v, 6) for v in t.values]}
+            "output": names[t.output], "step": str(step), "min": str(low), "max": str(high),
+            "modulo": int(t.modulo), "unit": t.unit, "values": [fmt_plain(v, 6) for v in t.values]}
 
 
 # A 360° modulo rotary axis (MD30310 ROT_IS_MODULO) moves to a plain absolute position the way
@@ -320,7 +381,8 @@ class Sinumerik840D(Controller):
     def read_section(self, get, machine: Machine) -> dict:
         """[sinumerik]: the $TC_CARR record, the axis vectors as the control holds them, and
         the machine-axis names of the CEC tables."""
-        get.only({"tcarr", "vectors", "machine_axes", "modulo", "fine_correction", "fine_limit_mm"})
+        get.only({"tcarr", "vectors", "machine_axes", "modulo", "fine_correction", "fine_limit_mm",
+                  "offsets"})
         get.sub("vectors").only({a.name for a in machine.rotary_axes})
         record = int(get.number("tcarr"))
         kinds = {a.name: "P" if a.side == "workpiece" else "T" for a in machine.rotary_axes}
@@ -353,8 +415,14 @@ class Sinumerik840D(Controller):
         fine = (get.flag("fine_correction", "SD42974 $SC_TOCARR_FINE_CORRECTION = 1 or 0")
                 if "fine_correction" in get.doc else None)
         limit = get.number("fine_limit_mm") if "fine_limit_mm" in get.doc else None    # MD20188
+        offsets = {}          # the coarse offsets as the control holds them (the OEM's), mm
+        if "offsets" in get.doc:
+            g = get.sub("offsets")
+            g.only(set(COARSE))
+            offsets = {k: np.array(g.vec3(k)) for k in COARSE if k in g.doc}
         return {"tcarr": record, "kind": {"P": "P", "T": "T"}.get(kind, "M"), "vectors": vectors,
-                "machine_axes": names, "modulo": modulo, "fine_correction": fine, "fine_limit_mm": limit}
+                "machine_axes": names, "modulo": modulo, "fine_correction": fine, "fine_limit_mm": limit,
+                "offsets": offsets}
 
     def main_suffix(self, current: str | None) -> str:
         return ".MPF"
@@ -416,8 +484,15 @@ class Sinumerik840D(Controller):
                                "the control would refuse it",
                                hint="move the excess into the base offsets with the OEM, then edit again")
         loaded = self.loaded_tables(machine, current, where)
-        new = comp_tables(machine, p) + squareness_tables(machine, p)
+        new = [self._plain(machine, t) for t in comp_tables(machine, p) + squareness_tables(machine, p)]
         tables = compose_tables(loaded, new)
+        for t in tables:
+            if t.modulo and t.input not in (machine.sinumerik.get("modulo") or ()):
+                raise CompgenError(f"{t.effect} is a modulo table on {t.input}, which the machine file says "
+                                   "is "
+                                   "not a modulo axis ([sinumerik] modulo)", where=where,
+                                   hint=f"is {t.input} modulo (MD30310)? Correct [sinumerik] modulo, or the "
+                                        "table")
 
         def carr(values):      # vectors are unitless, offsets mm
             return [(n, fmt_plain(v, VECTOR_DECIMALS if n <= 12 else MM_DECIMALS)) for n, v in values.items()]
@@ -453,12 +528,41 @@ class Sinumerik840D(Controller):
             if not loaded:
                 notes.append("no CEC tables were read from --current: they hold this round's correction "
                              "alone; if the control holds CEC tables, give their file as a further --current")
+            outputs = sorted({names[t.output] for _, t in placed})
+            notes.append("load the CEC file with MD32710 $MA_CEC_ENABLE = 0 on " + ", ".join(outputs)
+                         + " (K3 03/2013 p.237: tables load only with the compensation off), then set it to "
+                           "1 "
+                           "and NEWCONF")
+            for k, t in placed:
+                if t.effect not in slots:      # a table the control has not held: its data first
+                    notes.append(f"CEC table {k} is new: MD18342 $MN_MM_CEC_MAX_POINTS[{k}] >= "
+                                 f"{len(t.values)} "
+                                 "(static memory, formatted at the next run-up: archive first), SD41300 "
+                                 f"$SN_CEC_TABLE_ENABLE[{k}] = 1 (K3 03/2013 p.245)")
         if p.squareness:
             notes.append("squareness goes to linear CEC tables: " + ", ".join(p.squareness))
         return EditFiles(files, tuple(notes))
 
     def loaded_tables(self, machine: Machine, state: str, where: str) -> list[CompTable]:
         return read_cec(state, machine, where) if "$AN_CEC" in state else []
+
+    def tables(self, machine: Machine, p: Plan) -> list[CompTable]:
+        return [self._plain(machine, t) for t in super().tables(machine, p)]
+
+    @staticmethod
+    def _plain(machine: Machine, t: CompTable) -> CompTable:
+        """A table as the control can hold it: a turn of a full-turn axis is a modulo table
+        only on a modulo axis (MD30310); on another it repeats over the axis's travel."""
+        if not t.modulo:
+            return t
+        modulo = machine.sinumerik.get("modulo")
+        if modulo is None:
+            raise CompgenError(f"a table over {t.input}'s turn ({t.effect}) is modulo only on a modulo axis, "
+                               "and "
+                               "the machine file does not say whether it is",
+                               where=f"{machine.source}: [sinumerik] modulo",
+                               hint=f'add modulo = ["{t.input}"] (MD30310 ROT_IS_MODULO = 1) or modulo = []')
+        return t if t.input in modulo else unrolled(t, machine.axis(t.input).travel, SPAN_DEG)
 
     def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
         if machine.sinumerik is None:
