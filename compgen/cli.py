@@ -23,7 +23,7 @@ from .emit.kinematics import corrected_by, kinematics_edit
 from .emit.probing import probe_program, with_sphere
 from .emit.programs import MODES, NAME_MAX, at_ball, measure_program, program_ball, program_name
 from .emit.registry import CONTROLLERS, controller, for_program, read_edits, read_state
-from .errors import CONTROL, CompgenError
+from .errors import CompgenError, one_line
 from .files import STDOUT, read_text, write_all, write_atomically
 from .gate import fit_gate, unit_suspicion
 from .identify import identify, parse_fixed
@@ -43,13 +43,7 @@ class _Failed(click.ClickException):
     exit_code = 2
 
     def show(self, file=None):
-        click.echo(f"compgen: error: {_one_line(self.message)}", err=True)
-
-
-def _one_line(text: str) -> str:
-    """A message names what the user gave, which may hold line breaks: they are shown, not
-    obeyed, so that an error is always one line."""
-    return CONTROL.sub(lambda m: repr(m[0])[1:-1], text)
+        click.echo(f"compgen: error: {one_line(self.message)}", err=True)
 
 
 class _Internal(_Failed):
@@ -70,7 +64,7 @@ class _Group(click.Group):
             if not standalone:
                 raise
             command = f"{exc.ctx.command_path} --help" if exc.ctx else f"{me()} --help"
-            click.echo(f"compgen: error: {_one_line(exc.format_message())} (see {command})", err=True)
+            click.echo(f"compgen: error: {one_line(exc.format_message())} (see {command})", err=True)
             sys.exit(exc.exit_code)
         except click.ClickException as exc:
             if not standalone:

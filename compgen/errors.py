@@ -6,7 +6,13 @@ import re
 
 # a line break or other control character: in an emitted file it would start a block of its
 # own, in a message a second line
-CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+CONTROL = re.compile(r"[\x00-\x1f\x7f\x85\u2028\u2029]")
+
+
+def one_line(text: str) -> str:
+    """``text`` (a file name, a label) kept on one line of an output: each control character
+    written as its escape, ``\\n``, ``\\x07``."""
+    return CONTROL.sub(lambda m: m[0].encode("unicode_escape").decode("ascii"), text)
 
 
 class CompgenError(Exception):

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import CompgenError
+from .errors import CompgenError, one_line
 from .files import read_text
 from .kinematics import Poses, inverse
 from .machine import Machine, ProbeSetup
@@ -337,7 +337,7 @@ def format_probe_log(machine: Machine, setup: ProbeSetup, poses: Poses, tips: np
     """A probe log v1: ``tips`` and ``directions`` (n, m, 3) per pose and touch."""
     rotary = [machine.index(a.name) for a in machine.rotary_axes]
     names = [a.name for a in machine.rotary_axes]
-    out = [MAGIC, *(f"# {c}" for c in comments),
+    out = [MAGIC, *(f"# {one_line(c)}" for c in comments),
            f"# sphere_diameter = {setup.sphere_diameter:.4f}",
            f"# stylus_diameter = {setup.stylus_diameter:.4f}",
            f"# machine = {machine.name}",

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import CompgenError
+from .errors import CompgenError, one_line
 from .files import MAX_DATA_BYTES, read_text
 from .kinematics import Poses, inverse, nominal, solved
 from .machine import IDENTIFIERS, Machine, check_ball, check_travel, identifier
@@ -304,7 +304,7 @@ def format_rtest(machine: Machine, data: RTestData, comments: tuple[str, ...] = 
         [] if ball_default else list(BALL)) + list(sides)
     out = io.StringIO()
     for c in comments:
-        out.write(f"# {c}\n")
+        out.write(f"# {one_line(c)}\n")
     w = csv.writer(out, lineterminator="\n")
     w.writerow(header)
     # one format for a row's numbers (what axis_cells writes, then µm, then the ball); the

@@ -6,7 +6,7 @@ simulated as something else, never an internal error (exit 3)."""
 import re
 
 import pytest
-from conftest import BC_MACHINE, SEED_MACHINE, run
+from conftest import BC_MACHINE, ROOT, SEED_MACHINE, run
 
 MACHINES = {".H": SEED_MACHINE, ".MPF": BC_MACHINE, ".ngc": SEED_MACHINE}
 
@@ -159,3 +159,42 @@ def test_measure_program_checks_the_clearance_above_the_poses_along_z(tmp_path):
     m = _machine_with(tmp_path, "travel = [-300.0, 400.0]", f"travel = [-300.0, {top + 10:.3f}]")
     code, _, err = run("measure-program", "--machine", m, "--path", "K4", "-o", tmp_path / "X.H")
     assert code == 2 and "(clearance 20 mm above)" in err and "puts Z at" in err, err
+
+
+@pytest.mark.parametrize("ball", ["X-0,5 Y0 Z100 mm", "X1e2 Y0 Z100 mm", "X10 Y0 mm", "X10 Y0 Z100 inch"])
+def test_a_header_ball_that_does_not_read_is_refused_not_replaced(tmp_path, ball):
+    """A program's header names its ball; one that does not read as X Y Z mm is refused with
+    its line, never silently replaced by the machine file's ball."""
+    out = tmp_path / "K4.ngc"
+    code, _, err = run("measure-program", "--machine", SEED_MACHINE, "--controller", "linuxcnc",
+                       "--path", "K4", "-o", out)
+    assert code == 0, err
+    text = out.read_text()
+    line = 1 + next(k for k, ln in enumerate(text.splitlines()) if "ball centre in the table frame:" in ln)
+    bad = tmp_path / "B.ngc"
+    said = r"(ball centre in the table frame: )X\S+ Y\S+ Z\S+ mm"
+    bad.write_text(re.sub(said, lambda m: m[1] + ball, text))
+    code, _, err = run("check-program", "--machine", SEED_MACHINE, "--mode", "tcpm", bad)
+    assert code == 2 and f"line {line}: the header names the ball as" in err, err
+    assert len(err.splitlines()) == 1
+    given = run("check-program", "--machine", SEED_MACHINE, "--mode", "tcpm", "--ball", "0,0,100", bad)
+    assert given[0] in (0, 1)
+
+
+def test_a_file_name_with_a_line_break_stays_on_its_comment_line(tmp_path):
+    """predict writes the pose list's name into its CSV comments: a line break in it is
+    written as \\n, not obeyed (it would start a line the reader takes for data)."""
+    poses = tmp_path / "a\nb.csv"
+    code, _, err = run("measure-program", "--machine", SEED_MACHINE, "--controller", "linuxcnc",
+                       "--path", "K4", "-o", tmp_path / "K4.ngc")
+    assert code == 0, err
+    poses.write_text((tmp_path / "K4.poses.csv").read_text())
+    fit = tmp_path / "fit.json"
+    data = tmp_path / "s.csv"
+    truth = ROOT / "examples" / "truth-table4.json"
+    assert run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "--paths", "K4", "-o", data)[0] == 0
+    assert run("fit", "--machine", SEED_MACHINE, data, "-o", fit)[0] == 0
+    code, _, err = run("predict", "--from", fit, "--poses", poses, "-o", tmp_path / "p.csv")
+    assert code == 0, err
+    text = (tmp_path / "p.csv").read_text()
+    assert "a\\nb.csv" in text and not any(ln.startswith("b.csv") for ln in text.splitlines())

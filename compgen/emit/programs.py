@@ -40,7 +40,15 @@ _BALL_LINE = re.compile(re.escape(BALL_HEADER) + r" X([-+]?\d+(?:\.\d+)?) Y([-+]
 
 def program_ball(text: str) -> tuple[float, float, float] | None:
     """The ball a compgen program was written for (mm, table frame), from its header; None
-    for a program without that line. Two different balls in one header are refused."""
+    for a program without that line. Two different balls in one header are refused, and so
+    is a header line naming the ball that does not read as one: it is not replaced by the
+    machine file's ball without a word."""
+    for k, line in enumerate(text.splitlines(), start=1):
+        if BALL_HEADER in line and _BALL_LINE.search(line) is None:
+            said = line.split(BALL_HEADER, 1)[1].strip()
+            raise CompgenError(f"line {k}: the header names the ball as {said!r}, not as X… Y… Z… mm: which "
+                               "ball the program was written for is unknown",
+                               hint="give it with --ball X,Y,Z, or the program compgen wrote")
     found = {tuple(float(v) for v in m.groups()) for m in _BALL_LINE.finditer(text)}
     if len(found) > 1:
         raise CompgenError(f"the program's header names {len(found)} ball positions",
