@@ -38,6 +38,12 @@ def _pins(state, module):
     return linuxcnc.held_pins(evaluate(state), module)[0]
 
 
+def _edit_ini(machine, fit, state, folder):
+    """The edit with ``m.ini``'s configuration as --current, its files to go to ``folder``."""
+    return kinematics_edit(machine, fit, "linuxcnc", state, "m.ini", "N", "0", "d", stem="N",
+                           folder=str(folder))
+
+
 def _setp(module, nominal, skip=()):
     return "".join(f"setp {module}.{n} {v:.6f}\n" for n, v in nominal.items() if n not in skip)
 
@@ -76,18 +82,7 @@ def test_an_include_is_expanded_and_its_joint_table_kept(tmp_path, trt, seed_mac
         ],
         [*location_model(seed_machine), "ECC:h2c", "ECC:h2s"],
     )
-    out = kinematics_edit(
-        seed_machine,
-        fit,
-        "linuxcnc",
-        state,
-        str(tmp_path / "m.ini"),
-        "N",
-        "0",
-        "d",
-        stem="N",
-        folder=str(tmp_path),
-    )
+    out = _edit_ini(seed_machine, fit, state, tmp_path)
     # the table stands in the included file: written anew with the INI naming it
     assert "#INCLUDE N.joints.inc" in out.files[".ini"]
     assert (
@@ -221,18 +216,7 @@ def test_the_configuration_to_start_with_holds_exactly_the_correction(tmp_path, 
     hal = f"setp {module}.y-offset [TRT]YO\n" + _setp(module, nominal, ["x-rot-point", "y-offset"])
     state = _config(tmp_path, ini, trt__hal=hal)
     fit = identify(seed_machine, [simulate(seed_machine, TRUTH, generate(seed_machine, ["K4", "K1", "K2"]))])
-    out = kinematics_edit(
-        seed_machine,
-        fit,
-        "linuxcnc",
-        state,
-        str(tmp_path / "m.ini"),
-        "N",
-        "0",
-        "d",
-        stem="N",
-        folder=str(tmp_path),
-    ).files
+    out = _edit_ini(seed_machine, fit, state, tmp_path).files
     alone = kinematics_edit(seed_machine, fit, "linuxcnc", None, "", "H", "0", "d").files[".hal"]
     want = {m[1]: float(m[2]) for m in re.finditer(rf"(?m)^setp {module}\.(\S+) (\S+)", alone)}
     for suffix, text in out.items():
@@ -247,18 +231,7 @@ def test_the_configuration_to_start_with_holds_exactly_the_correction(tmp_path, 
     elsewhere = tmp_path / "other"
     elsewhere.mkdir()
     with pytest.raises(CompgenError, match="write it there"):
-        kinematics_edit(
-            seed_machine,
-            fit,
-            "linuxcnc",
-            state,
-            str(tmp_path / "m.ini"),
-            "N",
-            "0",
-            "d",
-            stem="N",
-            folder=str(elsewhere),
-        )
+        _edit_ini(seed_machine, fit, state, elsewhere)
     assert np.isfinite(list(want.values())).all()
 
 

@@ -484,7 +484,9 @@ class _Hal:
 
     def substitute(self, word: str, at: Place) -> tuple[str, IniEntry | None]:
         """halcmd's replace_vars on one word; a word that is one INI reference keeps its entry."""
-        if "$" in word:  # LinuxCNC's environment: a pin's value with one is refused as no number
+        # LinuxCNC's environment, or a HAL file read without its INI: the word stays as it is, and
+        # a pin's value that holds it is refused as no number
+        if "$" in word or not self.cfg.ini.lines:
             return word, None
         m = re.fullmatch(r"\[([^\]]*)\]\(?(" + NAME_WORDS.pattern + r")\)?", word)
         out, origin = word, None

@@ -7,31 +7,14 @@ import time
 
 import hal
 import linuxcnc
+from display import Display
 
-s, c = linuxcnc.stat(), linuxcnc.command()
-reader = hal.component("compgen-driver")
-reader.ready()
-
-
-def wait(cond, seconds=30):
-    end = time.time() + seconds
-    while time.time() < end:
-        s.poll()
-        if cond():
-            return True
-        time.sleep(0.01)
-    raise TimeoutError("LinuxCNC did not reach the expected state")
-
+display = Display("compgen-driver")
+s, c, wait = display.s, display.c, display.wait
 
 with open(os.environ["COMPGEN_JOINTS"], "w") as out:
     try:
-        c.state(linuxcnc.STATE_ESTOP_RESET)
-        c.state(linuxcnc.STATE_ON)
-        wait(lambda: s.task_state == linuxcnc.STATE_ON)
-        c.mode(linuxcnc.MODE_MANUAL)
-        c.teleop_enable(0)
-        c.home(-1)
-        wait(lambda: all(s.homed[:5]))
+        display.on_and_homed()
         # every joint out and back, as homing moves it on a real machine: a joint's
         # compensation table applies once it has moved (control.c keeps the last trim while
         # a joint stands, and it starts at zero)

@@ -13,31 +13,13 @@ import time
 
 import hal
 import linuxcnc
+from display import Display
 
-s, c = linuxcnc.stat(), linuxcnc.command()
-reader = hal.component("compgen-read-back")
-reader.ready()
-
-
-def wait(cond, seconds=30):
-    end = time.time() + seconds
-    while time.time() < end:
-        s.poll()
-        if cond():
-            return True
-        time.sleep(0.01)
-    raise TimeoutError("LinuxCNC did not reach the expected state")
-
-
+display = Display("compgen-read-back")
+s, c, wait = display.s, display.c, display.wait
 out = {}
 try:
-    c.state(linuxcnc.STATE_ESTOP_RESET)
-    c.state(linuxcnc.STATE_ON)
-    wait(lambda: s.task_state == linuxcnc.STATE_ON)
-    c.mode(linuxcnc.MODE_MANUAL)
-    c.teleop_enable(0)
-    c.home(-1)
-    wait(lambda: all(s.homed[:5]))
+    display.on_and_homed()
     out["values"] = {p: hal.get_value(p) for p in os.environ["COMPGEN_PINS"].split(",")}
     out["pins"] = {
         p: subprocess.run(["halcmd", "getp", p], capture_output=True, text=True, check=True).stdout.strip()
