@@ -24,7 +24,7 @@ from .emit.probing import probe_program, with_sphere
 from .emit.programs import MODES, NAME_MAX, at_ball, measure_program, program_ball, program_name
 from .emit.registry import CONTROLLERS, controller, for_program, read_edits, read_state
 from .errors import CompgenError, one_line
-from .files import STDOUT, read_text, write_all, write_atomically
+from .files import STDOUT, new_command, read_text, write_all, write_atomically
 from .gate import fit_gate, unit_suspicion
 from .identify import identify, parse_fixed
 from .kinematics import unknown_sides, unpredicted_sides
@@ -78,6 +78,7 @@ class _Group(click.Group):
             sys.exit(1)
 
     def invoke(self, ctx):
+        new_command()
         try:
             done = super().invoke(ctx)
             sys.stdout.flush()           # a full disk or a closed pipe shows here, not at exit
@@ -501,10 +502,15 @@ def check_program_cmd(machine_file, program, controller_name, ball, mode, as_jso
               help="Main file (the new table, the change list or the .MPF); the sign check and any "
                    "tables go beside it with the same stem.")
 @FORCE
+@click.option("--despite-gate", "despite", is_flag=True,
+              help="Write the edit although the fit does not explain its data (said on the terminal, in the "
+                   "edit's header and in the history).")
+@click.option("--beyond-limits", "beyond", is_flag=True,
+              help="Write corrections larger than the machine file's [limits].")
 @RECORD
 @DATE
 @DB
-def kinematics_cmd(base, controller_name, current, measured, output, force, record, taken, db):
+def kinematics_cmd(base, controller_name, current, measured, output, force, despite, beyond, record, taken, db):
     """Write the controller's kinematics edit for a fit, with a sign check and a backup step."""
     fit = load_fit(base)
     machine, sets = reload(fit)
@@ -516,16 +522,18 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, reco
     text = read_state(current) if current else None
     _progress("checking that the fit explains its data")
     reasons = fit_gate(machine, sets, fit)
-    if reasons and not force:
+    if reasons and not despite:
         raise CompgenError("this fit should not reach the control: " + "; ".join(reasons),
-                           hint=f"settle that first (see {me()} diagnose --from {base}); --force writes "
-                                "the edit anyway")
+                           hint=f"settle that first (see {me()} diagnose --from {base}); --despite-gate "
+                                "writes the edit anyway")
+    if reasons:
+        _warn("writing an edit despite the fit gate: " + "; ".join(reasons))
     out = Path(output)
     name = program_name(out.stem, room=len("_SIGN"))
     emitted = kinematics_edit(machine, fit, ctl.name, text, ", ".join(current), name, __version__,
-                              date.today().isoformat(), force,
+                              date.today().isoformat(), beyond,
                               read_state(measured) if measured else None, out.stem, ", ".join(measured),
-                              str(out.absolute().parent))
+                              str(out.absolute().parent), despite=tuple(reasons))
     main_key = ctl.main_suffix(text)
     files = emitted.paths(out, name, main_key)
     if len(current) == 1 and main_key in emitted.files:   # the edited state keeps its encoding

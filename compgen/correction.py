@@ -192,7 +192,7 @@ def _check_bounds(machine: Machine, p: Plan, force: bool) -> None:
     if too_big and not force:
         raise CompgenError("correction beyond the plausibility limits: " + "; ".join(too_big),
                            hint="Check the R-test set-up and the fit first; a real error this large "
-                                "needs the OEM. Raise [limits] in the machine file or use --force")
+                                "needs the OEM. Raise [limits] in the machine file or use --beyond-limits")
 
 
 def rest(machine: Machine, p: Plan, held: Held, force: bool = False) -> Plan:

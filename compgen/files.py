@@ -19,6 +19,21 @@ MAX_BYTES = 64 * 2**20      # a state, a program, a machine file: more is not on
 MAX_DATA_BYTES = 256 * 2**20
 
 
+# Every file the running command has read, and the history store it opened: an output never
+# replaces one, --force or not (the CLI starts each command with none).
+_READ: set[Path] = set()
+
+
+def reading(path: str | Path) -> None:
+    """Note ``path`` as an input of the running command."""
+    _READ.add(Path(path).resolve())
+
+
+def new_command() -> None:
+    """A command starts: it has read nothing yet."""
+    _READ.clear()
+
+
 def _regular(path: Path, what: str, limit: int = MAX_BYTES) -> None:
     try:
         st = path.stat()
@@ -38,6 +53,7 @@ def read_text(path: str | Path, what: str, ansi_ok: bool = False,
     """
     path = Path(path)
     _regular(path, what, limit)
+    reading(path)
     try:
         raw = path.read_bytes()
     except OSError as exc:
@@ -96,7 +112,7 @@ def _target(path: Path, force: bool, inputs: tuple[Path, ...]) -> None:
     """Refuse an output path before anything is written."""
     if CONTROL.search(str(path)):
         raise CompgenError(f"output name {str(path)!r} holds a control character", hint="choose a plain name")
-    for source in inputs:
+    for source in (*inputs, *_READ):
         if path.resolve() == source.resolve() or (path.exists() and source.exists()
                                                   and path.samefile(source)):
             raise CompgenError("output would overwrite an input of this command", where=str(path),

@@ -205,8 +205,8 @@ def _entries(store: Store, mid: int) -> tuple[list[Entry], list[dict]]:
     fits = store.rows("SELECT f.id, f.marker, f.kind, f.parameters, f.sigma_um, f.verdict, s.taken, s.device "
                       "FROM fits f JOIN sessions s ON s.id = f.session_id WHERE s.machine_id = ? "
                       "ORDER BY s.taken, f.id", (mid,))
-    edits = store.rows("SELECT e.id, e.taken, e.controller, e.corrects, e.written, e.loaded, f.marker "
-                       "FROM edits e JOIN fits f ON f.id = e.fit_id WHERE e.machine_id = ? "
+    edits = store.rows("SELECT e.id, e.taken, e.controller, e.corrects, e.written, e.loaded, f.marker, "
+                       "f.verdict FROM edits e JOIN fits f ON f.id = e.fit_id WHERE e.machine_id = ? "
                        "ORDER BY e.taken, e.id", (mid,))
     for e in edits:
         e["corrects"] = json.loads(e["corrects"])
@@ -530,7 +530,9 @@ def trend_text(t: Trend) -> str:
     for _, is_fit, e in sorted(events, key=lambda x: (x[0], x[1])):
         if not is_fit:
             lines.append(f"{e['taken'][:10]:<12}{'edit':<11}{e['controller'][:11]:<12}corrects "
-                         + ", ".join(e["corrects"]) + f" (from {e['marker']})")
+                         + ", ".join(e["corrects"]) + f" (from {e['marker']}"
+                         + (f", written despite the fit gate: {e['verdict']})" if e["verdict"] != "accepted"
+                            else ")"))
             continue
         cells = []
         for n in t.params:

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from . import me
 from .errors import CompgenError
+from .files import reading
 
 APP = "compgen.history"
 DEFAULT_FILE = "compgen-history.sqlite"
@@ -278,6 +279,7 @@ def open_store(given: str | None = None, create: bool = True) -> Store:
             if f.read(16) != b"SQLite format 3\x00":
                 raise CompgenError("this file is not an SQLite history store", where=str(path),
                                    hint="give another --db")
+    reading(path)             # no command writes a file over the store it opened
     db = sqlite3.connect(path, timeout=60.0, isolation_level=None)
     db.execute("PRAGMA foreign_keys = ON")
     store = Store(str(path), db, postgres=False)

@@ -22,8 +22,10 @@ cg simulate --machine $m --truth examples/truth-seed-session.json --device probe
   --seed 2026 -o "$work/PROBE_LOG.csv" --force
 cg fit --machine $m "$work/PROBE_LOG.csv" -o "$work/fit.json" --force
 
-echo "== 3. where does the model fail?"
-cg diagnose --from "$work/fit.json"
+echo "== 3. where does the model fail? (it names C's 2/rev radial motion: add it and fit again)"
+cg diagnose --from "$work/fit.json" || true
+cg fit --from "$work/fit.json" --add EXC:h2 -o "$work/fit2.json" --force
+cg diagnose --from "$work/fit2.json"
 
 echo "== 4. the kinematics edit for the control's table"
-cg kinematics --from "$work/fit.json" --current examples/itnc530-current.TAB -o "$work/KIN.TAB" --force
+cg kinematics --from "$work/fit2.json" --current examples/itnc530-current.TAB -o "$work/KIN.TAB" --force

@@ -296,7 +296,7 @@ def test_dash_output_goes_to_stdout_and_multi_file_outputs_refuse_it(hidden_sess
     code, out, err = run("fit", "--from", fit, "-o", "-")
     assert code == 0 and json.loads(out)["format"] == "compgen.fit/1" and "wrote -" in err
     assert not (tmp_path / "-").exists() and not (folder / "-").exists()
-    code, out, err = run("kinematics", "--from", fit, "-o", "-", "--force")
+    code, out, err = run("kinematics", "--from", fit, "-o", "-", "--despite-gate")
     assert code == 2 and "-o - writes one file" in err, err
 
 

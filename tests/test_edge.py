@@ -347,8 +347,15 @@ def test_a_fit_that_does_not_explain_its_data_writes_no_edit(fitted, tmp_path, d
     assert code == 2 and err.count("\n") == 1 and expected in err, err
     assert "diagnose --from" in err and "see compgen diagnose" not in err
     assert not out.exists()
+    # --force overwrites, nothing more: the gate has its own option, said everywhere
     code, _, err = run("kinematics", "--from", fit, "--controller", "itnc530", "-o", out, "--force")
-    assert code == 0 or "plausibility" in err, err
+    assert code == 2 and expected in err and "--despite-gate" in err and not out.exists(), err
+    code, _, err = run("kinematics", "--from", fit, "--controller", "itnc530", "-o", out, "--despite-gate",
+                       "--beyond-limits")
+    assert code == 0, err
+    assert "warning: writing an edit despite the fit gate: " in err and expected in err
+    said = [ln for ln in out.read_text().splitlines() if "WRITTEN DESPITE THE FIT GATE: " in ln]
+    assert any(expected.replace("µ", "u") in ln for ln in said), said
 
 
 def test_a_fit_that_explains_its_data_passes_the_gate(fitted, tmp_path):
@@ -393,7 +400,7 @@ def test_hostile_data_rows_are_refused_with_their_line(tmp_path, change, expecte
 def test_a_fit_with_damaged_numbers_is_refused_by_every_command(fitted, tmp_path, change, expected):
     fit = _edited_fit(fitted, tmp_path, change)
     for args in (("diagnose", "--from", fit), ("compare", "--from", fit),
-                 ("kinematics", "--from", fit, "-o", tmp_path / "K.txt", "--force"),
+                 ("kinematics", "--from", fit, "-o", tmp_path / "K.txt", "--despite-gate"),
                  ("report", "--from", fit, "-o", tmp_path / "r.html")):
         code, _, err = run(*args)
         assert code == 2 and err.count("\n") == 1 and expected in err, (args[0], err)

@@ -399,3 +399,21 @@ def test_the_measurement_a_failed_check_advises_runs_as_printed(year, tmp_path):
     assert done.returncode == 0 and (tmp_path / "calibration.H").exists(), (command, done.stderr)
     rc, out, err = run("check-program", "--machine", "ac-trunnion-itnc530", tmp_path / "calibration.H")
     assert rc == 0, out + err
+
+
+def test_an_edit_written_despite_the_gate_says_so_in_the_history(tmp_path, monkeypatch):
+    """The example session's fit misses EXC:h2: kinematics refuses it without --despite-gate
+    (--force only overwrites); with it, the history's trend names the edit as written despite
+    the gate, with the gate's reasons."""
+    monkeypatch.chdir(tmp_path)
+    assert run("fit", "--machine", "ac-trunnion-itnc530", ROOT / "examples" / "seed-session.csv",
+               "-o", "fit.json")[0] == 0
+    args = ["kinematics", "--from", "fit.json", "-o", "EDIT.TAB", "--record", "--date", "2026-03-02"]
+    rc, _, err = run(*args, "--force")
+    assert rc == 2 and "--despite-gate" in err and not (tmp_path / "EDIT.TAB").exists()
+    rc, out, err = run(*args, "--despite-gate")
+    assert rc == 0 and "recorded the edit" in out, out + err
+    rc, out, err = run("history", "trend", "--machine", "ac-trunnion-itnc530")
+    assert rc == 0, err
+    edit = next(ln for ln in out.splitlines() if " edit " in f" {ln} ")
+    assert "written despite the fit gate: diagnose finds effects the model misses" in edit, out

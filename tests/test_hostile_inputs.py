@@ -154,3 +154,30 @@ def test_a_control_character_inside_a_state_value_is_refused_with_its_line(tmp_p
     good = tmp_path / "cr.TAB"                 # a CR alone is a line end where no line ends in LF
     good.write_text((ROOT / "examples" / "itnc530-current.TAB").read_text().replace("\n", "\r"), newline="")
     assert read_text(good, "state", ansi_ok=True)[0].count("\r") == 12
+
+
+def test_no_output_replaces_an_input_of_its_command_even_with_force(tmp_path, monkeypatch):
+    """The history store, the machine file and the data a command read are its inputs:
+    --force overwrites an earlier output, never one of them (each refused in one line, the
+    file byte for byte as it was)."""
+    monkeypatch.chdir(tmp_path)
+    machine = tmp_path / "m.toml"
+    machine.write_text(SEED_MACHINE.read_text())
+    data, fit, store = tmp_path / "s.csv", tmp_path / "f.json", tmp_path / "h.sqlite"
+    truth = ROOT / "examples" / "truth-table4.json"
+    assert run("simulate", "--machine", machine, "--truth", truth, "--paths", "K4,K1,K2", "-o", data)[0] == 0
+    code, _, err = run("fit", "--machine", machine, data, "-o", fit, "--record", "--db", store)
+    assert code == 0, err
+    cases = [
+        ("history", "export", "--db", store, "-o", store, "--force"),
+        ("history", "trend", "--machine", machine, "--db", store, "--plot", store, "--force"),
+        ("history", "trend", "--machine", machine, "--db", store, "--plot", machine, "--force"),
+        ("report", "--from", fit, "-o", machine, "--force"),
+        ("report", "--from", fit, "-o", data, "--force"),
+        ("predict", "--from", fit, "--poses", data, "-o", machine, "--force"),
+    ]
+    for args in cases:
+        before = {p: p.read_bytes() for p in (machine, data, fit, store)}
+        code, _, err = run(*args)
+        assert code == 2 and "overwrite an input" in err and len(err.splitlines()) == 1, (args, err)
+        assert {p: p.read_bytes() for p in before} == before, args

@@ -6,7 +6,7 @@ import re
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, UM
+from conftest import ARCSEC, SEED_MACHINE, UM
 
 from compgen.effects import location_model
 from compgen.emit import linuxcnc
@@ -18,6 +18,7 @@ from compgen.identify import identify
 from compgen.paths import generate
 from compgen.simulate import simulate
 
+SEED_MACHINE_TEXT = SEED_MACHINE.read_text()
 TRUTH = {"XOC": 12 * UM, "YOC": -9 * UM, "YOA": 20 * UM, "ZOA": -15 * UM, "AOC": 5 * ARCSEC}
 
 
@@ -256,3 +257,33 @@ def test_xyzbc_trt_at_pin_0_is_refused_from_linuxcnc_2_10(tmp_path, lines, says)
     else:
         with pytest.raises(CompgenError, match=says):
             load_machine(tmp_path / "m.toml")
+
+
+def test_the_command_writes_the_configuration_beside_the_ini(tmp_path, trt, seed_machine):
+    """`kinematics --current CONFIG.ini -o CONFIG/KIN.ini`: the INI, a changed HAL file and
+    the restore beside it, the notes saying what to start; elsewhere, or over its own files
+    without --force, one line and nothing written."""
+    from conftest import run
+
+    from compgen.rtest import format_rtest
+    module, nominal = trt
+    text = SEED_MACHINE_TEXT.replace('controller = "itnc530"', 'controller = "linuxcnc"')
+    (tmp_path / "m.toml").write_text(text)
+    machine = (tmp_path / "m.toml")
+    config = tmp_path / "config"
+    config.mkdir()
+    (config / "trt.hal").write_text(_setp(module, nominal))
+    (config / "machine.ini").write_text("[HAL]\nHALFILE = LIB:basic_sim.tcl\nHALFILE = trt.hal\n")
+    data = simulate(seed_machine, TRUTH, generate(seed_machine, ["K4", "K1", "K2"]))
+    (tmp_path / "s.csv").write_text(format_rtest(seed_machine, data))
+    assert run("fit", "--machine", machine, tmp_path / "s.csv", "-o", tmp_path / "fit.json")[0] == 0
+    args = ["kinematics", "--from", tmp_path / "fit.json", "--current", config / "machine.ini"]
+    code, out, err = run(*args, "-o", tmp_path / "KIN.ini")
+    assert code == 2 and "write it there" in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "KIN.ini").exists()
+    code, out, err = run(*args, "-o", config / "KIN.ini")
+    assert code == 0, err
+    assert {p.name for p in config.iterdir()} >= {"KIN.ini", "KIN.trt.hal", "KIN_RESTORE.ini", "KIN_SIGN.ngc"}
+    assert f"start LinuxCNC with {config / 'KIN.ini'}" in out
+    code, _, err = run(*args, "-o", config / "KIN.ini")
+    assert code == 2 and "exists" in err, err

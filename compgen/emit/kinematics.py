@@ -82,13 +82,15 @@ def corrected_by(machine: Machine, fit: FitResult, ctl: Controller) -> dict[str,
 def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, current: str | None,
                     current_where: str, name: str, version: str, date: str, force: bool = False,
                     measured: str | None = None, stem: str | None = None,
-                    measured_where: str = "--measured-with", folder: str = "") -> Emitted:
+                    measured_where: str = "--measured-with", folder: str = "",
+                    despite: tuple[str, ...] = ()) -> Emitted:
     """The files of a kinematics edit for one control, with the sign check and notes.
 
     ``measured`` is the control's state while the data were measured, when it differs from
     ``current`` (part of a correction already loaded, say): the edit then writes the rest.
     ``stem``: the file stem its files are written under, where one file names another;
-    ``folder``: the folder they are written to.
+    ``folder``: the folder they are written to; ``despite``: the fit gate's reasons, where the
+    edit is written although the fit does not explain its data (its header says so).
     """
     ctl = controller(controller_name)
     for text in (current, measured):
@@ -120,6 +122,7 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
               f"machine: {ascii_text(machine.name)}; controller: {ctl.words}",
               f"from {fit.marker}: machine file {ascii_text(Path(fit.machine['file']).name)}, data "
               + ", ".join(ascii_text(Path(d.file).name) for d in fit.data),
+              *(f"WRITTEN DESPITE THE FIT GATE: {ascii_text(r)}" for r in despite),
               "corrections add to the kinematics active while the R-test ran under TCPM/TRAORI",
               "BACKUP FIRST: " + ctl.backup,
               f"then run the sign check {sign_name}: see its expected changes")
