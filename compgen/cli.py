@@ -510,7 +510,8 @@ def check_program_cmd(machine_file, program, controller_name, ball, mode, as_jso
 @RECORD
 @DATE
 @DB
-def kinematics_cmd(base, controller_name, current, measured, output, force, despite, beyond, record, taken, db):
+def kinematics_cmd(base, controller_name, current, measured, output, force, despite, beyond, record, taken,
+                   db):
     """Write the controller's kinematics edit for a fit, with a sign check and a backup step."""
     fit = load_fit(base)
     machine, sets = reload(fit)

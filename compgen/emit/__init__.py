@@ -42,7 +42,8 @@ def ascii_text(text: str) -> str:
     """Free text (a machine's name, a file name) made safe for a comment of any control:
     plain ASCII (µm → um, ″ → arcsec, accents dropped), one line (control characters become
     spaces), and no comment terminator (LinuxCNC's parentheses become brackets)."""
-    text = text.replace("µ", "u").replace("″", " arcsec").replace("σ", "sigma").replace("°", " deg").replace("→", "->")
+    for sign, word in (("µ", "u"), ("″", " arcsec"), ("σ", "sigma"), ("°", " deg"), ("→", "->")):
+        text = text.replace(sign, word)
     text = unicodedata.normalize("NFKD", text).encode("ascii", "ignore").decode("ascii")
     return CONTROL.sub(" ", text).replace("(", "[").replace(")", "]")
 
