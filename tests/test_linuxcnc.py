@@ -178,15 +178,24 @@ def launch(folder: Path, ini: Path, more_env: dict[str, str], budget_s: float = 
         lock = Path("/tmp/linuxcnc.lock")     # left by a run that died: the launcher would ask
         if lock.exists() and subprocess.run(["pgrep", "-x", "milltask"], capture_output=True).returncode:
             lock.unlink()
-        launcher = subprocess.Popen(command, cwd=folder, env=env, stdout=subprocess.PIPE,
+        # a terminal as its input: the start script then prints to the pipe what it otherwise
+        # writes to temporary files it deletes (``if ! tty -s``)
+        terminal, keys = os.openpty()
+        launcher = subprocess.Popen(command, cwd=folder, env=env, stdin=keys, stdout=subprocess.PIPE,
                                     stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        os.close(keys)
+        late = False
         try:
             stdout, _ = launcher.communicate(timeout=budget_s)
         except subprocess.TimeoutExpired:
-            pytest.fail(f"LinuxCNC did not finish within {budget_s} s")
+            late = True
         finally:
             end_linuxcnc(env["COMPGEN_JOINTS"])
-            launcher.wait(timeout=30)        # reaped: the launcher was one of the run's processes
+            os.close(terminal)
+        if late:                             # what LinuxCNC said until then, to read in the failure
+            stdout, _ = launcher.communicate(timeout=30)
+            pytest.fail(f"LinuxCNC did not finish within {budget_s} s; it said: {(stdout or '')[-2000:]}")
+        launcher.wait(timeout=30)            # reaped: the launcher was one of the run's processes
     return subprocess.CompletedProcess(command, launcher.returncode, stdout or "")
 
 
@@ -261,10 +270,10 @@ def test_compgens_edit_loaded_into_linuxcnc_removes_what_it_can_hold(machine, tm
 
 
 def test_a_run_past_its_budget_is_ended_whole(tmp_path):
-    """A program that does not finish in time fails its test and leaves no LinuxCNC process
-    behind (linuxcncsvr and rtapi_app run in sessions of their own)."""
+    """A program that does not finish in time fails its test with what LinuxCNC said, and
+    leaves no LinuxCNC process behind (linuxcncsvr and rtapi_app run in sessions of their own)."""
     machine = load_machine(_as_linuxcnc(tmp_path, SEED_MACHINE))
-    with pytest.raises(pytest.fail.Exception, match="did not finish within"):
+    with pytest.raises(pytest.fail.Exception, match=r"did not finish within 8 s; it said: (?s:.*)LINUXCNC"):
         run_linuxcnc(tmp_path / "run", machine, "G4 P600\nM2\n", "", budget_s=8)
     assert not _ours(str(tmp_path / "run" / "joints.txt"))
 
