@@ -3,6 +3,7 @@ YOC, a crash that moves BOA in month 7, an edit after it), checks against the la
 calibration, a plant's concurrent writers, a killed writer, and a database that refuses
 what compgen's role may not do. The PostgreSQL server is real, started by the tests."""
 
+import contextlib
 import hashlib
 import json
 import math
@@ -206,7 +207,9 @@ def test_the_database_refuses_updates_and_compgen_refuses_foreign_and_newer_stor
             with pytest.raises(sqlite3.IntegrityError, match="append-only"):
                 store.db.execute(sql)
     foreign = tmp_path / "other.sqlite"
-    sqlite3.connect(foreign).execute("CREATE TABLE orders (id INTEGER)").connection.commit()
+    with contextlib.closing(sqlite3.connect(foreign)) as db:     # closed: Python 3.13 warns of one left open
+        db.execute("CREATE TABLE orders (id INTEGER)")
+        db.commit()
     rc, _, err = run("history", "list", "--db", foreign)
     assert rc == 2 and "not a compgen history" in err
     newer = tmp_path / "newer.sqlite"

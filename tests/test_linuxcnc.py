@@ -211,7 +211,12 @@ def _every(machine, step=6):
     return generate(machine, ["K4"]).take(np.arange(0, 241, step))
 
 
-def test_linuxcnc_runs_the_k4_program_where_compgen_puts_it(machine, tmp_path):
+def test_linuxcnc_runs_the_k4_program_where_compgen_puts_it(tmp_path):
+    """The seed machine's K4 program on xyzac-trt-kins at its nominal pins: LinuxCNC's joints
+    are the pose list's. (xyzbc-trt-kins runs compgen's programs in the edit test below, and
+    its forward kinematics is held to compgen's programs in test_trt.py: one start each is
+    what the suite's five minutes allow.)"""
+    machine = load_machine(_as_linuxcnc(tmp_path, SEED_MACHINE))
     poses = _every(machine)
     emitted = measure_program(machine, poses, "K4", "linuxcnc", "tcpm", "K4", "0", "d")
     program, listed = emitted.files[".ngc"], emitted.files[".poses.csv"]
