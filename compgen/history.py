@@ -15,14 +15,14 @@ import math
 import shlex
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 
 import numpy as np
 
 from . import me
 from .effects import effect_of_param
-from .emit.registry import controller
-from .errors import CompgenError
+from .emit.registry import CONTROLLERS, controller
+from .errors import CompgenError, one_line
 from .machine import Machine
 from .results import FitResult
 from .rtest import device_of
@@ -33,16 +33,25 @@ DAYS_PER_MONTH = 30.0
 DEVICES = ("rtest", "probe")
 
 
+EARLIEST = datetime(1970, 1, 1, tzinfo=UTC)
+
+
 def taken_at(text: str | None) -> str:
-    """A session's date as given (ISO 8601, a date or a date and time; UTC if no zone), or now."""
+    """A session's date as given (ISO 8601, a date or a date and time; UTC if no zone), or
+    now: stored as the UTC instant, so that dates given with different offsets compare in
+    time order as the text they are kept as. None before 1970 or after tomorrow."""
     if not text:
         return now()
     try:
         t = datetime.fromisoformat(text)
-    except ValueError:
+    except (ValueError, TypeError):
         raise CompgenError(f"{text!r} is not a date",
-                           hint="give it as 2026-07-15 or 2026-07-15T09:30") from None
-    return (t if t.tzinfo else t.replace(tzinfo=UTC)).isoformat(timespec="seconds")
+                           hint="give it as 2026-07-15 or 2026-07-15T09:30+02:00") from None
+    t = (t if t.tzinfo else t.replace(tzinfo=UTC)).astimezone(UTC)
+    if not EARLIEST <= t <= datetime.now(UTC) + timedelta(days=1):
+        raise CompgenError(f"{text!r} is not a date a measurement was taken on (1970 to tomorrow)",
+                           hint="check the year and the clock of the machine that wrote it")
+    return t.isoformat(timespec="seconds")
 
 
 def _days(a: str, b: str) -> float:
@@ -587,6 +596,96 @@ def check_export(doc, where: str) -> None:
                            hint=f"make one with {me()} history export -o H.json on the other store")
 
 
+def _valid_rows(t: dict[str, list], where: str) -> None:
+    """Every row of an export as compgen writes its rows, checked before anything is written
+    (a row the store would keep forever must not break every later read): dates (normalised to
+    UTC), one-line names, JSON columns, finite numbers, kinds, controllers, ids that exist,
+    and each fit's marker recomputed from its own fit_json."""
+    def bad(table, row, what):
+        rid = row.get("id") if isinstance(row, dict) else None
+        raise CompgenError(f"{table} row {rid!r}: {what}; nothing was imported", where=where,
+                           hint="import an export compgen wrote, unchanged")
+
+    def text(table, row, key, line=True):
+        v = row.get(key)
+        if not isinstance(v, str) or (line and one_line(v) != v):
+            bad(table, row, f"{key} is not one line of text")
+        return v
+
+    def doc(table, row, key, kind):
+        v = row.get(key)
+        try:
+            v = json.loads(v) if isinstance(v, str) else v
+        except ValueError:
+            bad(table, row, f"{key} is not JSON")
+        if not isinstance(v, kind):
+            bad(table, row, f"{key} is not a JSON {kind.__name__}")
+        return v
+
+    def finite(table, row, key):
+        v = row.get(key)
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            bad(table, row, f"{key} is not a finite number")
+
+    for table, rows in t.items():
+        for row in rows:
+            if not isinstance(row, dict) or type(row.get("id")) is not int:
+                bad(table, row if isinstance(row, dict) else {}, "no whole-number id")
+    ids = {table: {r["id"] for r in rows} for table, rows in t.items()}
+    for table, refs in (("sessions", {"machine_id": "machines"}), ("fits", {"session_id": "sessions"}),
+                        ("edits", {"machine_id": "machines", "fit_id": "fits"}),
+                        ("checks", {"machine_id": "machines", "fit_id": "fits", "against_fit_id": "fits"})):
+        for row in t[table]:
+            for key, other in refs.items():
+                if row.get(key) not in ids[other]:
+                    bad(table, row, f"{key} names no {other[:-1]} of the export")
+    for m in t["machines"]:
+        text("machines", m, "name"), text("machines", m, "serial")
+    for s in t["sessions"]:
+        try:
+            s["taken"] = taken_at(text("sessions", s, "taken"))
+        except CompgenError as exc:
+            bad("sessions", s, exc.message)
+        text("sessions", s, "device"), text("sessions", s, "operator")
+        temps = doc("sessions", s, "temperatures", dict)
+        if not all(isinstance(v, int | float) and math.isfinite(v) for v in temps.values()):
+            bad("sessions", s, "a temperature is not a finite number")
+        doc("sessions", s, "data", list)
+    for f in t["fits"]:
+        if f.get("kind") not in ("calibration", "check"):
+            bad("fits", f, "kind is neither calibration nor check")
+        finite("fits", f, "sigma_um"), finite("fits", f, "rms_um")
+        text("fits", f, "verdict")
+        model, params = doc("fits", f, "model", list), doc("fits", f, "parameters", dict)
+        for q in params.values():
+            if not isinstance(q, dict) or not all(isinstance(q.get(k), int | float) and math.isfinite(q[k])
+                                                  for k in ("value", "std")):
+                bad("fits", f, "a parameter's value or σ is not a finite number")
+        try:
+            fit = FitResult.from_dict(doc("fits", f, "fit_json", dict))
+        except (CompgenError, KeyError, TypeError, ValueError):
+            bad("fits", f, "fit_json is not a fit compgen wrote")
+        marker = fit.marker
+        if model != list(fit.model) or params != {n: {"value": e.value, "std": e.std, "unit": e.unit}
+                                                  for n, e in fit.parameters.items()}:
+            bad("fits", f, "its model or parameters are not its fit_json's: the row was changed")
+        if marker != f.get("marker"):
+            bad("fits", f, f"its marker {f.get('marker')!r} is not its fit's ({marker}): the row was changed")
+    for e in t["edits"]:
+        if e.get("controller") not in CONTROLLERS:
+            bad("edits", e, "controller is none compgen knows")
+        for key in ("corrects", "written", "loaded"):
+            doc("edits", e, key, dict)
+        try:
+            e["taken"] = taken_at(text("edits", e, "taken"))
+        except CompgenError as exc:
+            bad("edits", e, exc.message)
+    for c in t["checks"]:
+        if c.get("passed") not in (0, 1) or isinstance(c.get("passed"), bool):
+            bad("checks", c, "passed is neither 0 nor 1")
+        doc("checks", c, "summary", dict)
+
+
 def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str, int]:
     """Another store's export, appended in one transaction with its origin recorded. Refused:
     this store's own rows, an export already imported, or a fit this store already holds
@@ -600,6 +699,10 @@ def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str
                            hint="nothing to import")
     try:
         t = {name: list(doc["tables"][name]) for name in _COLUMNS}
+    except (KeyError, TypeError) as exc:
+        raise CompgenError(f"the export is incomplete or damaged ({exc!r})", where=where) from None
+    _valid_rows(t, where)
+    try:
         machines = {m["id"]: (m["name"], m["serial"]) for m in t["machines"]}
         session_machine = {s["id"]: machines[s["machine_id"]] for s in t["sessions"]}
         held = {(session_machine[f["session_id"]], f["marker"]) for f in t["fits"]}

@@ -8,6 +8,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import sqlite3
 import subprocess
 import sys
@@ -21,6 +22,7 @@ from compgen import history as H
 from compgen.effects import location_model
 from compgen.emit.kinematics import corrected_by
 from compgen.emit.registry import controller
+from compgen.errors import CompgenError
 from compgen.gate import fit_gate
 from compgen.identify import identify
 from compgen.machine_file import load_machine
@@ -420,3 +422,76 @@ def test_an_edit_written_despite_the_gate_says_so_in_the_history(tmp_path, monke
     assert rc == 0, err
     edit = next(ln for ln in out.splitlines() if " edit " in f" {ln} ")
     assert "written despite the fit gate: diagnose finds effects the model misses" in edit, out
+
+
+@pytest.mark.parametrize("text, stored", [
+    ("2026-03-01T10:00+02:00", "2026-03-01T08:00:00+00:00"),
+    ("2026-03-01T09:00-01:00", "2026-03-01T10:00:00+00:00"),
+    ("2026-03-01", "2026-03-01T00:00:00+00:00"),
+])
+def test_dates_are_kept_as_utc_instants(text, stored):
+    """10:00 at +02:00 comes before 09:00 at −01:00: kept as UTC, the text orders as time does."""
+    assert H.taken_at(text) == stored
+
+
+@pytest.mark.parametrize("text", ["9999-01-01", "1969-12-31T23:59+00:00", "2026-13-01", "yesterday",
+                                  "3000-01-01T00:00Z"])
+def test_a_date_no_measurement_was_taken_on_is_refused(text):
+    with pytest.raises(CompgenError, match="is not a date"):
+        H.taken_at(text)
+
+
+def test_an_edit_is_ordered_against_its_fit_in_time_not_as_text(tmp_path, year):
+    """A fit taken 10:00 at +02:00 (08:00 UTC) and an edit at 09:00 at +00:00: the edit comes
+    after the fit and is recorded; at 07:30 UTC given as 09:30+02:00 it comes before, refused
+    (as text, "09:30+02:00" > "08:00" and "09:00+00:00" < "10:00+02:00" said the opposite)."""
+    machine, _, fits, (efit, corrects) = year
+    store = init(tmp_path / "h.sqlite")[0]
+    try:
+        H.record_fit(store, efit, machine, taken="2026-03-01T10:00+02:00")
+        with pytest.raises(CompgenError, match="cannot come before the fit"):
+            H.record_edit(store, efit, machine, "itnc530", corrects, {}, {}, taken="2026-03-01T09:30+02:00")
+        H.record_edit(store, efit, machine, "itnc530", corrects, {}, {}, taken="2026-03-01T09:00+00:00")
+    finally:
+        store.close()
+
+
+def _first(tables, name):
+    return tables[name][0]
+
+
+@pytest.mark.parametrize("damage, says", [
+    (lambda t: _first(t, "sessions").update(taken="9999-01-01"), "sessions row .*is not a date a "
+                                                                 "measurement"),
+    (lambda t: _first(t, "sessions").update(taken="2026-02-30"), "sessions row .*is not a date"),
+    (lambda t: _first(t, "fits").update(sigma_um="0.5"), "fits row .*sigma_um is not a finite number"),
+    (lambda t: _first(t, "fits").update(rms_um=True), "rms_um is not a finite number"),
+    (lambda t: _first(t, "fits").update(parameters="{broken"), "parameters is not JSON"),
+    (lambda t: _first(t, "fits").update(kind="calibrated"), "kind is neither"),
+    (lambda t: _first(t, "fits").update(marker="fit:000000"), "is not its fit's"),
+    (lambda t: _first(t, "fits").update(parameters=json.dumps({"XOC": {"value": 1, "std": 0.1,
+                                                                         "unit": "mm"}})),
+     "model or parameters are not its fit_json's"),
+    (lambda t: _first(t, "fits").update(session_id=10 ** 9), "session_id names no session"),
+    (lambda t: _first(t, "machines").update(name="a\nb"), "name is not one line"),
+    (lambda t: _first(t, "edits").update(controller="fanuc"), "controller is none compgen knows"),
+    (lambda t: _first(t, "edits").update(taken="tomorrow"), "edits row .*is not a date"),
+])
+def test_an_import_with_a_damaged_row_is_refused_and_leaves_the_store_as_it_was(tmp_path, year, monkeypatch,
+                                                                               damage, says):
+    """Each row is checked before the import's transaction: a bad date, text in a number,
+    broken JSON, a kind, an id, a changed fit: one line, and the store byte for byte as it was."""
+    monkeypatch.chdir(tmp_path)
+    _record(tmp_path / "a.sqlite", year).close()
+    assert run("history", "export", "--db", "a.sqlite", "-o", "a.json")[0] == 0
+    doc = json.loads((tmp_path / "a.json").read_text())
+    damage(doc["tables"])
+    (tmp_path / "bad.json").write_text(json.dumps(doc))
+    assert run("history", "init", "--db", "b.sqlite")[0] == 0
+    before = (tmp_path / "b.sqlite").read_bytes()
+    rc, _, err = run("history", "import", "bad.json", "--db", "b.sqlite")
+    assert rc == 2 and re.search(says, err) and "nothing was imported" in err, err
+    assert len(err.splitlines()) == 1
+    assert (tmp_path / "b.sqlite").read_bytes() == before
+    rc, out, err = run("history", "import", "a.json", "--db", "b.sqlite")     # the export as written imports
+    assert rc == 0, err
