@@ -66,9 +66,18 @@ VERSION = MIGRATIONS[-1][0]
 
 
 def redact(url: str) -> str:
-    """The store as it may be shown: a DSN's password replaced by ***."""
-    url = re.sub(r"(://[^/@:]*):[^@]*@", r"\1:***@", url)
-    return re.sub(r"(password\s*=\s*)('[^']*'|\S+)", r"\1***", url, flags=re.I)
+    """The store as it may be shown: a DSN's password replaced by ***. In a URL the user
+    information runs to the last "@" before the path (a password may hold "@"); in a
+    keyword DSN the password is a word or a quoted string with backslash escapes."""
+    scheme = re.match(r"(?i)[a-z][a-z0-9+.-]*://", url)
+    if scheme:
+        rest = url[scheme.end():]
+        host_end = rest.find("/") if "/" in rest else len(rest)
+        at = rest.rfind("@", 0, host_end)
+        if at >= 0 and ":" in rest[:at]:
+            user = rest[:rest.index(":")]
+            url = url[:scheme.end()] + f"{user}:***" + rest[at:]
+    return re.sub(r"(password\s*=\s*)('(?:[^'\\]|\\.)*'|\S+)", r"\1***", url, flags=re.I)
 
 
 def now() -> str:
@@ -81,9 +90,24 @@ def store_url(given: str | None) -> str:
 
 
 def _is_postgres(url: str) -> bool:
-    """A postgresql:// URL or a libpq keyword DSN (``host=… dbname=…``); anything else is a file."""
-    return (url.startswith(("postgresql://", "postgres://"))
-            or bool(re.match(r"^\s*(host|dbname|user|service)\s*=", url)))
+    """A postgresql:// URL or a libpq keyword DSN (any ``keyword=value``, as libpq parses
+    it); a file name otherwise, given plainly or as sqlite:///PATH. A name with "=" that
+    libpq does not read is refused rather than taken for a file (it may hold a password)."""
+    if url.lower().startswith(("postgresql://", "postgres://")):
+        return True
+    if "=" not in url or url.startswith("sqlite:///"):
+        return False
+    try:
+        from psycopg import conninfo
+    except ImportError:        # no PostgreSQL client here: a keyword DSN is still one
+        return bool(re.match(r"^\s*[A-Za-z_]+\s*=", url))
+    try:
+        conninfo.conninfo_to_dict(url)
+    except Exception:          # psycopg.ProgrammingError: libpq's own words, which may echo a password
+        raise CompgenError(f"--db {redact(url)!r} is neither a connection string libpq reads nor a plain "
+                           "file name", hint="give postgresql://user@host/db, host=… dbname=…, or "
+                                             "sqlite:///PATH for a file whose name holds '='") from None
+    return True
 
 
 class Store:

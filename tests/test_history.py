@@ -495,3 +495,29 @@ def test_an_import_with_a_damaged_row_is_refused_and_leaves_the_store_as_it_was(
     assert (tmp_path / "b.sqlite").read_bytes() == before
     rc, out, err = run("history", "import", "a.json", "--db", "b.sqlite")     # the export as written imports
     assert rc == 0, err
+
+
+@pytest.mark.parametrize("dsn, shown", [
+    ("postgresql://u:p@ss@host/db", "postgresql://u:***@host/db"),
+    ("POSTGRESQL://u:secret@h/db", "POSTGRESQL://u:***@h/db"),
+    ("port=5432 dbname=x password=a@b", "port=5432 dbname=x password=***"),
+    ("host=h password='a b\\' c' dbname=d", "host=h password=*** dbname=d"),
+])
+def test_a_password_is_never_shown_in_part(dsn, shown):
+    from compgen.store import redact
+    assert redact(dsn) == shown and "ss@" not in redact(dsn) and "secret" not in redact(dsn)
+
+
+@pytest.mark.parametrize("dsn, postgres", [
+    ("port=5432 dbname=plant", True),          # a keyword DSN not starting with host/dbname/user
+    ("options='-c x=y' dbname=plant", True),
+    ("sqlite:///odd=name.sqlite", False),
+    ("plain.sqlite", False),
+])
+def test_a_keyword_dsn_is_read_by_libpq_never_taken_for_a_file(tmp_path, monkeypatch, dsn, postgres):
+    from compgen.store import _is_postgres
+    monkeypatch.chdir(tmp_path)
+    assert _is_postgres(dsn) == postgres
+    rc, _, err = run("history", "list", "--db", "password=hunter2 nonsense=1")
+    assert rc == 2 and "hunter2" not in err and "libpq" in err, err
+    assert list(tmp_path.iterdir()) == []            # no file named after the DSN
