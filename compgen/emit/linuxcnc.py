@@ -57,7 +57,6 @@ from .linuxcnc_config import (
 # is refused as a value rather than read as 1.0
 SETP = re.compile(r"^[ \t]*setp[ \t]+(\S+?)\.(\S+)[ \t]+([^#\n]*?)[ \t]*(?:#.*)?$", re.MULTILINE)
 SETS = re.compile(r"^[ \t]*sets[ \t]+(\S+)[ \t]+([^#\n]*?)[ \t]*(?:#.*)?$", re.MULTILINE)
-NET = re.compile(r"^\s*net\s+(\S+)\s+(.*)$", re.MULTILINE)
 PIN_SINCE = (2, 10)          # the trt modules' conventional-directions pin (commit bfb687eaa6)
 # Upstream's trtfuncs.c from 2.10 (xyzbc_inverse_math) writes the tilted offsets with the
 # signs of conventional-directions 1 whatever the pin says, while its forward kinematics

@@ -28,7 +28,6 @@ from pathlib import Path
 
 from ..errors import CompgenError
 from ..files import read_text
-from ..units import number
 
 # Debian's HALLIB_DIR; the start script searches ".:$HALLIB_DIR" for a plain HALFILE name
 HALLIB = Path("/usr/share/linuxcnc/hallib")
@@ -416,7 +415,7 @@ def _evaluate(ini_path: str, ini_text: str, load: Loader) -> Configuration:
         run.halcmd(entry)
     for entry in ini.all("HAL", "POSTGUI_HALFILE"):
         run.file("POSTGUI_HALFILE", entry.value, entry.place)
-    for section in {m[1] for _, t in ini.joined if (m := re.match(r"\s*\[(JOINT_\d+)\]", t))}:
+    for section in sorted({m[1] for _, t in ini.joined if (m := re.match(r"\s*\[(JOINT_\d+)\]", t))}):
         if (comp := ini.get(section, "COMP_FILE")) is not None:
             full, text = load("COMP_FILE", comp.value, comp.place)
             cfg.texts[full] = text or ""
@@ -587,9 +586,6 @@ class _Hal:
             return Setting(value, origin.place, "ini")
         return Setting(value, at, "hal")
 
-
-def number_of(s: Setting, what: str) -> float:
-    return number(s.text, what, str(s.place))
 
 
 # --- the configuration to start with --------------------------------------------------------
