@@ -43,7 +43,6 @@ from . import fmt_plain, render
 from .base import Controller, EditContext, EditFiles
 from .linuxcnc_config import (
     Configuration,
-    IniEntry,
     Setting,
     bundle,
     configuration_files,
@@ -129,22 +128,6 @@ def configuration(state: str | None, where: str) -> Configuration | None:
     return evaluate(state) if is_bundle(state) else hal_file(state, where)
 
 
-def joint_comp(cfg: Configuration) -> dict[int, tuple[IniEntry, str, str]]:
-    """Each joint's COMP_FILE entry, its type ("0", "1") and the file's text."""
-    out = {}
-    for section in sorted({m[1] for _, t in cfg.ini.joined if (m := re.match(r"\s*\[JOINT_(\d+)\]", t))}):
-        comp = cfg.ini.get(f"JOINT_{section}", "COMP_FILE")
-        if comp is None:
-            continue
-        kind = cfg.ini.get(f"JOINT_{section}", "COMP_FILE_TYPE")
-        if kind is not None and kind.value not in ("0", "1"):
-            raise CompgenError(f"[JOINT_{section}] COMP_FILE_TYPE = {kind.value}: LinuxCNC takes 0 or 1",
-                               where=str(kind.place))
-        path = next(p for p, names in cfg.named_at.items() if (comp.place, comp.value) in names)
-        out[int(section)] = (comp, kind.value if kind else "0", cfg.texts[path])
-    return out
-
-
 def loaded_joint_tables(machine: Machine, state: str | None) -> dict[str, tuple[CompTable, CompTable]]:
     """Per axis, the trims (forward, reverse) of the joint tables an INI loads, as LinuxCNC
     holds them (type 0's actual positions converted as nominal − actual), each within the
@@ -152,7 +135,7 @@ def loaded_joint_tables(machine: Machine, state: str | None) -> dict[str, tuple[
     out: dict[str, tuple[CompTable, CompTable]] = {}
     if not is_bundle(state):
         return out
-    for joint, (comp, kind, text) in joint_comp(evaluate(state)).items():
+    for joint, (comp, kind, text) in evaluate(state).joints.items():
         where = f"{comp.place} ({comp.value})"
         axis = _joint_axis(machine, joint, str(comp.place))
         rows = _triplets(text.splitlines(), where)

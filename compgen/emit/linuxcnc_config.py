@@ -382,6 +382,8 @@ class Configuration:
     net: dict[str, str] = field(default_factory=dict)  # pin → signal
     signals: dict[str, Setting | None] = field(default_factory=dict)
     library: list[str] = field(default_factory=list)  # HAL library files, not read
+    # per joint: its COMP_FILE entry, the type ("0" by default, inijoint.cc) and the file's text
+    joints: dict[int, tuple[IniEntry, str, str]] = field(default_factory=dict)
 
     def value(self, pin: str) -> Setting | None:
         """The pin's value as HAL holds it once everything ran, and its place."""
@@ -415,11 +417,17 @@ def _evaluate(ini_path: str, ini_text: str, load: Loader) -> Configuration:
         run.halcmd(entry)
     for entry in ini.all("HAL", "POSTGUI_HALFILE"):
         run.file("POSTGUI_HALFILE", entry.value, entry.place)
-    for section in sorted({m[1] for _, t in ini.joined if (m := re.match(r"\s*\[(JOINT_\d+)\]", t))}):
-        if (comp := ini.get(section, "COMP_FILE")) is not None:
-            full, text = load("COMP_FILE", comp.value, comp.place)
-            cfg.texts[full] = text or ""
-            cfg.named_at.setdefault(full, []).append((comp.place, comp.value))
+    for joint in sorted({int(m[1]) for _, t in ini.joined if (m := re.match(r"\s*\[JOINT_(\d+)\]", t))}):
+        if (comp := ini.get(f"JOINT_{joint}", "COMP_FILE")) is None:
+            continue
+        kind = ini.get(f"JOINT_{joint}", "COMP_FILE_TYPE")
+        if kind is not None and kind.value not in ("0", "1"):
+            raise CompgenError(f"[JOINT_{joint}] COMP_FILE_TYPE = {kind.value}: LinuxCNC takes 0 or 1",
+                               where=str(kind.place))
+        full, text = load("COMP_FILE", comp.value, comp.place)
+        cfg.texts[full] = text or ""
+        cfg.named_at.setdefault(full, []).append((comp.place, comp.value))
+        cfg.joints[joint] = (comp, kind.value if kind else "0", text or "")
     return cfg
 
 
