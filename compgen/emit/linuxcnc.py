@@ -132,10 +132,12 @@ def loaded_joint_tables(machine: Machine, state: str | None) -> dict[str, tuple[
     """Per axis, the trims (forward, reverse) of the joint tables an INI loads, as LinuxCNC
     holds them (type 0's actual positions converted as nominal − actual), each within the
     machine file's [limits] of the axis's own error."""
+    return _joint_tables(machine, evaluate(state)) if is_bundle(state) else {}
+
+
+def _joint_tables(machine: Machine, cfg: Configuration) -> dict[str, tuple[CompTable, CompTable]]:
     out: dict[str, tuple[CompTable, CompTable]] = {}
-    if not is_bundle(state):
-        return out
-    for joint, (comp, kind, text) in evaluate(state).joints.items():
+    for joint, (comp, kind, text) in cfg.joints.items():
         where = f"{comp.place} ({comp.value})"
         axis = _joint_axis(machine, joint, str(comp.place))
         rows = _triplets(text.splitlines(), where)
@@ -194,7 +196,7 @@ def held_pins(cfg: Configuration, module: str
     return values, signal, setting
 
 
-def pins(machine: Machine, p: Plan, current: str | None, where: str
+def pins(machine: Machine, p: Plan, current: Configuration | None, where: str
          ) -> tuple[str, list[tuple[str, str, str, str]], list[str], dict[str, Setting]]:
     """The HAL assignments of the trt pins: (``setp`` or ``sets``, pin or signal, new value,
     old value), each pin the way the current configuration sets it (a netted pin through its
@@ -205,7 +207,7 @@ def pins(machine: Machine, p: Plan, current: str | None, where: str
     nominal = _nominal(machine, tilt, c)
     held, signal, line_of = nominal, {}, {}
     if current is not None:
-        held, signal, line_of = held_pins(configuration(current, where), module)
+        held, signal, line_of = held_pins(current, module)
         for n in names:
             if n not in held:
                 why = (f"is netted to {signal[n]}, which another component drives" if n in signal
@@ -451,9 +453,10 @@ class LinuxCNC(Controller):
 
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:
-        module, rows, other, settings = pins(machine, p, current, where)
-        cfg = evaluate(current) if is_bundle(current) else None
-        loaded = loaded_joint_tables(machine, current)
+        state = configuration(current, where)       # the configuration, evaluated once
+        module, rows, other, settings = pins(machine, p, state, where)
+        cfg = state if is_bundle(current) else None
+        loaded = _joint_tables(machine, cfg) if cfg is not None else {}
         comps = comp_files(machine, p, ctx, loaded)
         ini_lines = [ini for ini, _ in comps.values()]
         sign = [f"sign check {ctx.name}_SIGN{self.program_ext}, expected change of the reading:", *ctx.expect]
@@ -461,11 +464,11 @@ class LinuxCNC(Controller):
         if other:
             notes.append("not expressible in LinuxCNC's trt kinematics and joint tables: " + ", ".join(other))
         tool = f"{module}.tool-offset"
-        if current is not None and tool not in configuration(current, where).net:
+        if state is not None and tool not in state.net:
             notes.append(f"{tool} is not netted: net it to motion.tooloffset.z, or the table turns about the "
                          "spindle nose instead of the nest (G43 lengths)")
         if cfg is not None:
-            return self._configuration_edit(machine, cfg, current, ctx, rows, settings, comps, loaded,
+            return self._configuration_edit(machine, cfg, ctx, rows, settings, comps, loaded,
                                             [*ctx.header, *ctx.lines, *sign], notes)
         text = render("linuxcnc/kinematics.hal.j2", header=ctx.header, module=module, lines=ctx.lines,
                       rows=rows, other=other, ini=ini_lines, sign=sign, restore=False)
@@ -487,7 +490,7 @@ class LinuxCNC(Controller):
         return EditFiles({".hal": text, "_RESTORE.hal": restore,
                           **{k: body for k, (_, body) in comps.items()}}, tuple(notes))
 
-    def _configuration_edit(self, machine: Machine, cfg: Configuration, current: str, ctx: EditContext,
+    def _configuration_edit(self, machine: Machine, cfg: Configuration, ctx: EditContext,
                             rows, settings: dict[str, Setting], comps, loaded, header: list[str],
                             notes: list[str]) -> EditFiles:
         """The configuration to start with: the INI (and each file that sets a changed pin)
