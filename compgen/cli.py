@@ -539,18 +539,29 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
     files = emitted.paths(out, name, main_key)
     if len(current) == 1 and main_key in emitted.files:   # the edited state keeps its encoding
         files[out] = _encoded_like(current[0], files[out])
+    written = {str(p): _sha256(body) for p, body in files.items()}
+    recorded = None
+    if record:         # refused before anything is written: a fit's correction is recorded once
+        from .history import Recorded, record_edit, record_fit, refuse_second_edit
+        store = _store(db)
+        try:
+            refuse_second_edit(store, fit, machine, written, None)
+        except Recorded as exc:
+            recorded = exc.message
     write_all(files, force, inputs=(base, *current, *measured, machine.source, *(d.file for d in fit.data)))
     click.echo("\n".join(emitted.notes))
     click.echo("wrote " + ", ".join(str(p) for p in files))
-    if record:
-        from .history import record_edit, record_fit
-        store = _store(db)
+    if record and recorded is None:
         record_fit(store, fit, machine, taken=taken, verdict=reasons, exist_ok=True)
-        eid = record_edit(store, fit, machine, ctl.name, corrected_by(machine, fit, ctl),
-                          {str(p): _sha256(body) for p, body in files.items()},
-                          {p: _sha256(read_text(p, "state file", ansi_ok=True)[1]) for p in current},
-                          taken=taken)
-        click.echo(f"recorded the edit as #{eid} in {store.where}")
+        try:
+            eid = record_edit(store, fit, machine, ctl.name, corrected_by(machine, fit, ctl), written,
+                              {p: _sha256(read_text(p, "state file", ansi_ok=True)[1]) for p in current},
+                              taken=taken)
+            recorded = f"recorded the edit as #{eid}"
+        except Recorded as exc:
+            recorded = exc.message
+    if record:
+        click.echo(f"{recorded} in {store.where}")
 
 
 @main.command("compare")
@@ -844,8 +855,11 @@ def history_fleet_cmd(every_days, as_json, db):
 @click.option("--date", "taken", default=None, help="When the data were measured (ISO 8601; default now).")
 @click.option("--operator", default="", help="Who measured.")
 @click.option("--json", "as_json", is_flag=True, help="Print the check as JSON.")
+@click.option("--machine-changed", is_flag=True,
+              help="Check though the machine file changed since the calibration (a known change of a "
+                   "tolerance or a limit); said in the check.")
 @DB
-def check_cmd(machine_file, data, serial, taken, operator, as_json, db):
+def check_cmd(machine_file, data, serial, taken, operator, as_json, machine_changed, db):
     """Check a short measurement (e.g. K4 only) against the machine's last accepted
     calibration: each location error's change with its σ, pass or fail, what to do next.
     The check is recorded in the history."""
@@ -857,7 +871,7 @@ def check_cmd(machine_file, data, serial, taken, operator, as_json, db):
     when = taken_at(taken)
     calibration, entries, edits = last_calibration(store, machine, serial, before=when)
     fit = identify(machine, sets, location_model(machine))
-    result = check(machine, fit, sets, calibration, entries, edits, when, serial)
+    result = check(machine, fit, sets, calibration, entries, edits, when, serial, machine_changed)
     record_check(store, result, fit, machine, serial=serial, operator=operator)
     click.echo(json.dumps(result.summary(), indent=2, ensure_ascii=False) if as_json else result.text(),
                nl=as_json)

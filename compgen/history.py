@@ -10,6 +10,7 @@ edit is still one.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import shlex
@@ -88,6 +89,15 @@ def machine_id(store: Store, machine: Machine, serial: str | None = None) -> int
     return found
 
 
+def _key(*parts) -> str:
+    """A row's content key: the same fit (or the edit from it) recorded twice is one row."""
+    return hashlib.sha256(json.dumps(parts, ensure_ascii=False).encode()).hexdigest()
+
+
+class Recorded(CompgenError):
+    """The row is in the history already (found before writing, or by the database's key)."""
+
+
 def record_fit(store: Store, fit: FitResult, machine: Machine, *, serial: str | None = None,
                taken: str | None = None, device: str | None = None, operator: str = "",
                temperatures: Mapping[str, float] | None = None, kind: str = "calibration",
@@ -104,34 +114,59 @@ def record_fit(store: Store, fit: FitResult, machine: Machine, *, serial: str | 
         raise CompgenError("the fit was made with another machine file than the one given",
                            hint="give the machine file the fit names, or refit")
     when = taken_at(taken)
-    with store.writing():
-        same = store.rows("SELECT f.id FROM fits f JOIN sessions s ON s.id = f.session_id JOIN machines m "
-                          "ON m.id = s.machine_id WHERE f.marker = ? AND m.name = ? AND m.serial = ?",
-                          (fit.marker, name, serial))
-        if same and exist_ok:
-            return int(same[0]["id"])
-        if same:
-            raise CompgenError(f"this fit ({fit.marker}) is already in the history", where=store.where,
-                               hint=f"{me()} history show --machine {_ref(machine)} lists it")
-        mid = _machine_id(store, name, serial, create=True)
-        return _session_and_fit(store, mid, fit, machine, when, device, operator, temperatures or {}, kind,
-                                "; ".join(verdict) or "accepted")
+    try:
+        with store.writing():
+            mid = _machine_id(store, name, serial, create=True)
+            return _session_and_fit(store, mid, fit, machine, when, device, operator, temperatures or {},
+                                    kind, "; ".join(verdict) or "accepted")
+    except Recorded:
+        if not exist_ok:
+            raise
+        return int(_fit_rows(store, fit.marker, name, serial)[0]["id"])
+
+
+def _fit_rows(store: Store, marker: str, name: str, serial: str) -> list[dict]:
+    return store.rows("SELECT f.id, s.taken FROM fits f JOIN sessions s ON s.id = f.session_id "
+                      "JOIN machines m ON m.id = s.machine_id WHERE f.marker = ? AND m.name = ? "
+                      "AND m.serial = ? ORDER BY f.id", (marker, name, serial))
 
 
 def _session_and_fit(store: Store, mid: int, fit: FitResult, machine: Machine, taken: str, device: str,
                      operator: str, temperatures: Mapping[str, float], kind: str, verdict: str) -> int:
-    """The two rows every measurement adds (inside the caller's transaction); the fit's id."""
+    """The two rows every measurement adds (inside the caller's transaction); the fit's id.
+    A fit the machine's history holds already is refused (``Recorded``), the transaction
+    undone: by compgen's look first, and by the database's unique key when two writers
+    record it at once."""
+    name, serial = store.rows("SELECT name, serial FROM machines WHERE id = ?", (mid,))[0].values()
+    twice = Recorded(
+        f"this fit ({fit.marker}) is already in the history", where=store.where,
+        hint=f"{me()} history show --machine {_ref(machine)} lists it")
+    if _fit_rows(store, fit.marker, name, serial):
+        raise twice
     sid = store.insert("sessions", {
         "machine_id": mid, "taken": taken, "device": device, "operator": operator,
         "temperatures": dict(temperatures), "machine_sha256": machine.sha256,
         "data": [{"file": d.file, "sha256": d.sha256, "rows": d.rows} for d in fit.data],
         "recorded": now()})
-    return store.insert("fits", {
+    fid = store.insert("fits", {
         "session_id": sid, "marker": fit.marker, "kind": kind, "model": list(fit.model),
         "parameters": {n: {"value": e.value, "std": e.std, "unit": e.unit}
                        for n, e in fit.parameters.items()},
         "sigma_um": fit.residual["sigma_um"], "rms_um": fit.residual["rms_um"], "verdict": verdict,
-        "fit_json": fit.to_dict(), "recorded": now()})
+        "fit_json": fit.to_dict(), "recorded": now(),
+        "content_sha256": _key("fit", name, serial, fit.marker)}, unique="content_sha256")
+    if fid is None:
+        raise twice
+    return fid
+
+
+def edit_of(store: Store, fit: FitResult, machine: Machine, serial: str | None = None) -> dict | None:
+    """The edit recorded from ``fit``, if any: its id, when, and the files' checksums."""
+    name, serial = machine_key(machine, serial)
+    rows = store.rows("SELECT e.id, e.taken, e.written FROM edits e JOIN fits f ON f.id = e.fit_id "
+                      "JOIN machines m ON m.id = e.machine_id WHERE f.marker = ? AND m.name = ? "
+                      "AND m.serial = ? ORDER BY e.id", (fit.marker, name, serial))
+    return {**rows[0], "written": json.loads(rows[0]["written"])} if rows else None
 
 
 def record_edit(store: Store, fit: FitResult, machine: Machine, controller: str,
@@ -140,12 +175,11 @@ def record_edit(store: Store, fit: FitResult, machine: Machine, controller: str,
                 taken: str | None = None) -> int:
     """An edit written from ``fit`` (recorded before it): the location errors it corrects
     (name → value, mm or rad), the files written and those loaded on the control (name →
-    SHA-256)."""
+    SHA-256). One edit per fit: the same edit again is ``Recorded`` (its correction must
+    not count twice), another edit from the same fit is refused."""
     name, serial = machine_key(machine, serial)
     with store.writing():
-        rows = store.rows("SELECT f.id, s.taken FROM fits f JOIN sessions s ON s.id = f.session_id "
-                          "JOIN machines m ON m.id = s.machine_id WHERE f.marker = ? AND m.name = ? "
-                          "AND m.serial = ?", (fit.marker, name, serial))
+        rows = _fit_rows(store, fit.marker, name, serial)
         if not rows:
             raise CompgenError(f"the edit's fit ({fit.marker}) is not in the history", where=store.where,
                                hint=f"record it first: {me()} history add FIT.json")
@@ -153,10 +187,31 @@ def record_edit(store: Store, fit: FitResult, machine: Machine, controller: str,
         if when < rows[0]["taken"]:
             raise CompgenError("an edit cannot come before the fit it was written from",
                                hint=f"the fit was measured {rows[0]['taken']}")
-        return store.insert("edits", {
+        refuse_second_edit(store, fit, machine, written, serial)
+        eid = store.insert("edits", {
             "machine_id": _machine_id(store, name, serial, create=False), "fit_id": rows[0]["id"],
             "controller": controller, "corrects": dict(corrects), "written": dict(written),
-            "loaded": dict(loaded), "taken": when, "recorded": now()})
+            "loaded": dict(loaded), "taken": when, "recorded": now(),
+            "content_sha256": _key("edit", name, serial, fit.marker)}, unique="content_sha256")
+        if eid is None:         # another writer recorded it a moment ago
+            raise Recorded(f"the edit from {fit.marker} is already in the history", where=store.where)
+        return eid
+
+
+def refuse_second_edit(store: Store, fit: FitResult, machine: Machine, written: Mapping[str, str],
+                        serial: str | None) -> None:
+    """Before any file is written: the same edit again is ``Recorded``; another edit from a
+    fit whose edit is recorded would count its correction twice in every later value."""
+    had = edit_of(store, fit, machine, serial)
+    if had is None:
+        return
+    if sorted(had["written"].values()) == sorted(written.values()):
+        raise Recorded(f"this edit is recorded already (#{had['id']}, {had['taken'][:10]})",
+                       where=store.where)
+    raise CompgenError(f"an edit from {fit.marker} is recorded already (#{had['id']}, {had['taken'][:10]}), "
+                       "with other files: a fit's correction is made once", where=store.where,
+                       hint="leave out --record (the history keeps the edit that was loaded), or measure "
+                            "again and write the edit from that fit")
 
 
 # -- reading it back
@@ -176,6 +231,8 @@ class Entry:
     std: dict[str, float]
     units: dict[str, str]
     corrected: dict[str, float]       # sum of the corrections written before it (mm, rad)
+    recorded_by: str = ""             # the database role that wrote it (PostgreSQL)
+    machine_sha256: str = ""          # the machine file it was measured with
 
     def machine_value(self, name: str) -> float:
         return self.values[name] + self.corrected.get(name, 0.0)
@@ -211,8 +268,11 @@ class Trend:
 
 
 def _entries(store: Store, mid: int) -> tuple[list[Entry], list[dict]]:
-    fits = store.rows("SELECT f.id, f.marker, f.kind, f.parameters, f.sigma_um, f.verdict, s.taken, s.device "
-                      "FROM fits f JOIN sessions s ON s.id = f.session_id WHERE s.machine_id = ? "
+    """The machine's fits in time order, each with the corrections written before it (one
+    sweep through fits and edits together: linear in their number)."""
+    fits = store.rows("SELECT f.id, f.marker, f.kind, f.parameters, f.sigma_um, f.verdict, "
+                      "f.recorded_by, s.taken, s.device, s.machine_sha256 FROM fits f "
+                      "JOIN sessions s ON s.id = f.session_id WHERE s.machine_id = ? "
                       "ORDER BY s.taken, f.id", (mid,))
     edits = store.rows("SELECT e.id, e.taken, e.controller, e.corrects, e.written, e.loaded, f.marker, "
                        "f.verdict FROM edits e JOIN fits f ON f.id = e.fit_id WHERE e.machine_id = ? "
@@ -221,17 +281,19 @@ def _entries(store: Store, mid: int) -> tuple[list[Entry], list[dict]]:
         e["corrects"] = json.loads(e["corrects"])
         e["written"], e["loaded"] = json.loads(e["written"]), json.loads(e["loaded"])
     out = []
+    corrected: dict[str, float] = {}
+    done = 0
     for f in fits:
+        while done < len(edits) and edits[done]["taken"] <= f["taken"]:
+            for n, v in edits[done]["corrects"].items():
+                corrected[n] = corrected.get(n, 0.0) + v
+            done += 1
         p = json.loads(f["parameters"])
-        corrected: dict[str, float] = {}
-        for e in edits:
-            if e["taken"] <= f["taken"]:
-                for n, v in e["corrects"].items():
-                    corrected[n] = corrected.get(n, 0.0) + v
         out.append(Entry(f["id"], f["taken"], f["marker"], f["kind"], f["device"], f["verdict"],
                          f["sigma_um"],
                          {n: q["value"] for n, q in p.items()}, {n: q["std"] for n, q in p.items()},
-                         {n: q["unit"] for n, q in p.items()}, corrected))
+                         {n: q["unit"] for n, q in p.items()}, dict(corrected),
+                         f["recorded_by"] or "", f["machine_sha256"]))
     return out, edits
 
 
@@ -266,41 +328,62 @@ def trend(store: Store, machine: Machine, serial: str | None = None,
 def flags(machine: Machine, entries: Sequence[Entry], names: Sequence[str]) -> list[Flag]:
     """Steps: a machine value moving from one fit to the next beyond ``[drift]``'s limit and
     beyond k σ of the change. Drifts: the slope of the machine values since the last step
-    (three fits at least), beyond the monthly limit and k σ of the slope."""
+    (three fits at least), beyond the monthly limit and k σ of the slope. One pass: the
+    slope's sums grow with each fit (linear in the number of fits)."""
     k = machine.drift.k_sigma
     out = []
     for n in names:
         run = [e for e in entries if n in e.values and e.std.get(n, 0.0) > 0]
-        start, drifting = 0, False
+        if not run:
+            continue
+        line, drifting = _Line(run[0].taken), False
+        line.add(run[0], n)
         for i in range(1, len(run)):
             a, b = run[i - 1], run[i]
             change = b.machine_value(n) - a.machine_value(n)
             std = math.hypot(a.std[n], b.std[n])
             if abs(change) > _limit(machine, b.units[n]) and abs(change) > k * std:
                 out.append(Flag("step", n, b.taken, change, std, b.units[n]))
-                start, drifting = i, False
+                line, drifting = _Line(b.taken), False
+                line.add(b, n)
                 continue
-            seg = run[start:i + 1]
-            if len(seg) < 3 or drifting:
+            line.add(b, n)
+            if line.count < 3 or drifting:
                 continue
-            rate, rate_std = _slope(seg, n)
+            rate, rate_std = line.slope()
             if abs(rate) > _limit(machine, b.units[n], per_month=True) and abs(rate) > k * rate_std:
-                out.append(Flag("drift", n, b.taken, rate, rate_std, b.units[n], seg[0].taken))
+                out.append(Flag("drift", n, b.taken, rate, rate_std, b.units[n], line.since))
                 drifting = True          # flagged once per run: the trend table shows the rest
     return sorted(out, key=lambda f: (f.taken, f.param))
 
 
-def _slope(seg: Sequence[Entry], n: str) -> tuple[float, float]:
-    """Weighted least-squares slope per month of the machine values, and its σ (scaled by
-    the scatter when that exceeds the fits' own σ: a slope is not surer than its points)."""
-    t = np.array([_days(seg[0].taken, e.taken) / DAYS_PER_MONTH for e in seg])
-    y = np.array([e.machine_value(n) for e in seg])
-    w = 1.0 / np.array([e.std[n] for e in seg]) ** 2
-    A = np.column_stack([np.ones_like(t), t]) * np.sqrt(w)[:, None]
-    coef, *_ = np.linalg.lstsq(A, y * np.sqrt(w), rcond=None)
-    cov = np.linalg.inv(A.T @ A)
-    chi2 = float(np.sum(w * (y - coef[0] - coef[1] * t) ** 2)) / max(len(seg) - 2, 1)
-    return float(coef[1]), float(np.sqrt(cov[1, 1] * max(chi2, 1.0)))
+class _Line:
+    """A weighted least-squares line through machine values over months since ``since``,
+    kept as its sums: the slope per month and its σ (scaled by the scatter when that exceeds
+    the fits' own σ: a slope is not surer than its points)."""
+
+    def __init__(self, since: str):
+        self.since, self.count = since, 0
+        self.s = np.zeros(6)          # Σw, Σwt, Σwt², Σwy, Σwty, Σwy²
+        self.y0 = None                # values relative to the first: no cancellation in Σwy²
+
+    def add(self, e: Entry, n: str) -> None:
+        t = _days(self.since, e.taken) / DAYS_PER_MONTH
+        if self.y0 is None:
+            self.y0 = e.machine_value(n)
+        y, w = e.machine_value(n) - self.y0, 1.0 / e.std[n] ** 2
+        self.s += w * np.array([1.0, t, t * t, y, t * y, y * y])
+        self.count += 1
+
+    def slope(self) -> tuple[float, float]:
+        sw, st, stt, sy, sty, syy = self.s
+        det = sw * stt - st * st
+        if det <= 0:
+            return 0.0, math.inf
+        b = (sw * sty - st * sy) / det
+        a = (sy - b * st) / sw
+        chi2 = max(syy - 2 * a * sy - 2 * b * sty + a * a * sw + 2 * a * b * st + b * b * stt, 0.0)
+        return float(b), float(math.sqrt(sw / det * max(chi2 / max(self.count - 2, 1), 1.0)))
 
 
 def last_calibration(store: Store, machine: Machine, serial: str | None = None,
@@ -316,7 +399,29 @@ def last_calibration(store: Store, machine: Machine, serial: str | None = None,
         raise CompgenError("no accepted calibration of this machine is recorded (each recorded fit "
                            "has a reason it should not reach the control)", where=store.where,
                            hint=f"{me()} history show --machine {_ref(machine)} lists them")
+    _as_fitted(store, accepted[-1])
     return accepted[-1], entries, edits
+
+
+def _as_fitted(store: Store, entry: Entry) -> None:
+    """A reference is trusted only as its own fit wrote it: its values, model and marker
+    recomputed from the fit.json kept with it. A row whose values were written by hand (a
+    writer of the database can append one) is named and refused, never compared against."""
+    row = store.rows("SELECT model, parameters, fit_json FROM fits WHERE id = ?", (entry.id,))[0]
+    who = f", recorded by {one_line(entry.recorded_by)}" if entry.recorded_by else ""
+    try:
+        fit = FitResult.from_dict(json.loads(row["fit_json"]))
+        same = (json.loads(row["model"]) == list(fit.model) and fit.marker == entry.marker
+                and json.loads(row["parameters"]) == {n: {"value": e.value, "std": e.std, "unit": e.unit}
+                                                      for n, e in fit.parameters.items()})
+    except (CompgenError, KeyError, TypeError, ValueError):
+        same = False
+    if not same:
+        raise CompgenError(f"the last accepted calibration (fit #{entry.id}, {one_line(entry.marker)}, "
+                           f"{entry.taken[:16]}{who}) does not hold the values its own fit gives: the row "
+                           "was not written by compgen's fit", where=store.where,
+                           hint="ask the store's owner to look at that row; compgen checks against no "
+                                "calibration it cannot trust")
 
 
 def fleet(store: Store, every_days: float, today: str | None = None) -> list[dict]:
@@ -390,6 +495,7 @@ class CheckResult:
     paths: dict[str, str]          # path → PASS/FAIL against [tolerances]
     flags: list[Flag]
     advice: list[str]
+    machine_changed: bool = False    # checked with another machine file than the calibration's
 
     @property
     def passed(self) -> bool:
@@ -405,14 +511,20 @@ class CheckResult:
                 "sigma_um": self.sigma_um, "paths": self.paths,
                 "changes": [{"parameter": c.param, "change": c.change, "std": c.std, "unit": c.unit,
                              "limit": c.limit, "status": c.status} for c in self.changes],
-                "flags": [f.text() for f in self.flags], "advice": self.advice}
+                "flags": [f.text() for f in self.flags], "advice": self.advice,
+                "machine_file_changed": self.machine_changed,
+                **({"recorded_by": self.against.recorded_by} if self.against.recorded_by else {})}
 
     def text(self) -> str:
-        lines = [f"compgen check: {self.machine}{f' ({self.serial})' if self.serial else ''}, measured "
-                 f"{self.taken[:16]}",
-                 f"  against the calibration of {self.against.taken[:16]} ({self.against.marker}), "
-                 "corrections written since counted",
-                 "", f"  {'param':<6}{'change':>9}   {'σ':<12}{'':<16}{'status':<7}"]
+        who = f", recorded by {one_line(self.against.recorded_by)}" if self.against.recorded_by else ""
+        serial = f" ({one_line(self.serial)})" if self.serial else ""
+        lines = [f"compgen check: {one_line(self.machine)}{serial}, "
+                 f"measured {self.taken[:16]}",
+                 f"  against the calibration of {self.against.taken[:16]} ({self.against.marker}{who}), "
+                 "corrections written since counted"]
+        if self.machine_changed:
+            lines.append("  with a machine file changed since that calibration (--machine-changed)")
+        lines += ["", f"  {'param':<6}{'change':>9}   {'σ':<12}{'':<16}{'status':<7}"]
         lines += [c.text() for c in self.changes]
         lines.append(f"\n  residual σ̂ {self.sigma_um:.3f} µm (the calibration's "
                      f"{self.against.sigma_um:.3f} µm)")
@@ -424,14 +536,26 @@ class CheckResult:
 
 
 def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: Sequence[Entry],
-          edits: Sequence[dict], taken: str, serial: str | None = None) -> CheckResult:
+          edits: Sequence[dict], taken: str, serial: str | None = None,
+          machine_changed: bool = False) -> CheckResult:
     """A short measurement's fit against the last accepted calibration: each location
     error's change (machine values: the corrections written since are counted) with its σ,
-    the paths against ``[tolerances]``, and a drift or step it completes."""
+    the paths against ``[tolerances]``, and a drift or step it completes. A machine file
+    other than the calibration's is refused: its nominal geometry, limits or tolerances may
+    differ, and the changes would be measured against another machine; ``machine_changed``
+    checks anyway and says so."""
     from .compare import beyond_setup
     from .kinematics import Poses
 
     name, serial = machine_key(machine, serial)
+    changed = bool(calibration.machine_sha256) and calibration.machine_sha256 != machine.sha256
+    if changed and not machine_changed:
+        raise CompgenError(f"the machine file changed since the calibration of {calibration.taken[:16]} "
+                           f"(SHA-256 {calibration.machine_sha256[:12]}… then, {machine.sha256[:12]}… now)",
+                           where=machine.source,
+                           hint="check with the machine file of then; or, if the change is known (a "
+                                "tolerance, a limit), add --machine-changed; after a change of geometry, "
+                                "calibrate again")
     k = machine.drift.k_sigma
     corrected: dict[str, float] = {}
     for e in edits:
@@ -495,7 +619,7 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
             advice.append(f"{f.param} drifts steadily ({f.text().split('  ', 1)[1]}): plan the next "
                           "calibration before it reaches its limit, and look for its cause (warm-up, season)")
     return CheckResult(name, serial, calibration, fit.marker, taken, changes, fit.residual["sigma_um"],
-                       paths, new_flags, advice)
+                       paths, new_flags, advice, changed)
 
 
 def record_check(store: Store, result: CheckResult, fit: FitResult, machine: Machine, *,
@@ -726,13 +850,26 @@ def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str
             ids["sessions"][s["id"]] = store.insert("sessions", {
                 **{k: s[k] for k in _COLUMNS["sessions"][2:]}, "machine_id": ids["machines"][s["machine_id"]],
                 "import_id": imp})
+        markers = {}
         for f in t["fits"]:
+            name, serial = session_machine[f["session_id"]]
+            markers[f["id"]] = f["marker"]
             ids["fits"][f["id"]] = store.insert("fits", {
-                **{k: f[k] for k in _COLUMNS["fits"][2:]}, "session_id": ids["sessions"][f["session_id"]]})
+                **{k: f[k] for k in _COLUMNS["fits"][2:]}, "session_id": ids["sessions"][f["session_id"]],
+                "content_sha256": _key("fit", name, serial, f["marker"])}, unique="content_sha256")
+            if ids["fits"][f["id"]] is None:
+                raise CompgenError(f"the export holds fit {f['marker']} of {name!r} twice; nothing was "
+                                   "imported", where=where, hint="import an export compgen wrote, unchanged")
         for e in t["edits"]:
-            store.insert("edits", {**{k: e[k] for k in _COLUMNS["edits"][3:]},
-                                   "machine_id": ids["machines"][e["machine_id"]],
-                                   "fit_id": ids["fits"][e["fit_id"]]})
+            name, serial = machines[e["machine_id"]]
+            if store.insert("edits", {**{k: e[k] for k in _COLUMNS["edits"][3:]},
+                                      "machine_id": ids["machines"][e["machine_id"]],
+                                      "fit_id": ids["fits"][e["fit_id"]],
+                                      "content_sha256": _key("edit", name, serial, markers[e["fit_id"]])},
+                            unique="content_sha256") is None:
+                raise CompgenError(f"the export holds two edits from fit {markers[e['fit_id']]} of {name!r}; "
+                                   "nothing was imported", where=where,
+                                   hint="a fit's correction is made once: import an export compgen wrote")
         for c in t["checks"]:
             store.insert("checks", {**{k: c[k] for k in _COLUMNS["checks"][4:]},
                                     "machine_id": ids["machines"][c["machine_id"]],

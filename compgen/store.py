@@ -61,8 +61,33 @@ MIGRATIONS: tuple[tuple[int, tuple[str, ...]], ...] = (
                recorded TEXT NOT NULL)""",
         "ALTER TABLE sessions ADD COLUMN import_id BIGINT REFERENCES imports(id)",
     )),
+    # the same fit or edit recorded twice (a retry, two writers at once) is one row, by the
+    # database's word; rows recorded before stay without a key (append-only: never updated).
+    # recorded_by: the database role that wrote a row (PostgreSQL sets it; nobody can choose it)
+    (3, (
+        "ALTER TABLE fits ADD COLUMN content_sha256 TEXT",
+        "CREATE UNIQUE INDEX fits_content ON fits (content_sha256)",
+        "ALTER TABLE edits ADD COLUMN content_sha256 TEXT",
+        "CREATE UNIQUE INDEX edits_content ON edits (content_sha256)",
+        "ALTER TABLE fits ADD COLUMN recorded_by TEXT",
+        "ALTER TABLE edits ADD COLUMN recorded_by TEXT",
+    )),
 )
 VERSION = MIGRATIONS[-1][0]
+# What PostgreSQL adds to a migration: the role that writes a row is the database's word
+POSTGRES_MIGRATIONS: dict[int, tuple[str, ...]] = {
+    3: (f"""CREATE OR REPLACE FUNCTION {PG_SCHEMA}.recorded_by() RETURNS trigger LANGUAGE plpgsql AS $$
+            BEGIN NEW.recorded_by := session_user; RETURN NEW; END $$""",
+        *(f"CREATE TRIGGER {t}_recorded_by BEFORE INSERT ON {t} FOR EACH ROW "
+          f"EXECUTE FUNCTION {PG_SCHEMA}.recorded_by()" for t in ("fits", "edits")),
+        # a writer granted INSERT on the schema's table by an earlier compgen loses it
+        f"""DO $$ DECLARE r record; BEGIN
+            FOR r IN SELECT DISTINCT grantee FROM information_schema.role_table_grants
+                     WHERE table_schema = '{PG_SCHEMA}' AND table_name = 'compgen_schema'
+                     AND privilege_type <> 'SELECT' AND grantee NOT IN (current_user, 'PUBLIC') LOOP
+                EXECUTE format('REVOKE INSERT ON {PG_SCHEMA}.compgen_schema FROM %I', r.grantee);
+            END LOOP; END $$"""),
+}
 
 
 def redact(url: str) -> str:
@@ -127,14 +152,17 @@ class Store:
             names = [d[0] for d in cur.description]
             return [dict(zip(names, r, strict=True)) for r in cur.fetchall()]
 
-    def insert(self, table: str, row: Mapping) -> int:
-        """One row, JSON columns given as Python values; returns its id."""
+    def insert(self, table: str, row: Mapping, unique: str | None = None) -> int | None:
+        """One row, JSON columns given as Python values; returns its id. With ``unique`` (a
+        column with a unique key), None when a row with that value is there already: the
+        database decides, so two writers at once still make one row."""
         values = [json.dumps(v, sort_keys=True, allow_nan=False) if isinstance(v, dict | list) else v
                   for v in row.values()]
         sql = (f"INSERT INTO {table} ({', '.join(row)}) VALUES ({', '.join('?' * len(row))}) "
-               "RETURNING id")
+               + (f"ON CONFLICT ({unique}) DO NOTHING " if unique else "") + "RETURNING id")
         with self._errors():
-            return int(self.db.execute(self._sql(sql), values).fetchone()[0])
+            got = self.db.execute(self._sql(sql), values).fetchone()
+        return None if got is None else int(got[0])
 
     @contextmanager
     def writing(self) -> Iterator[Store]:
@@ -221,6 +249,8 @@ class Store:
                 for statement in ddl:
                     self.db.execute(statement.format(id=ident, json=kind))
                 self._append_only([t for t in TABLES if f"CREATE TABLE {t} " in "".join(ddl)])
+                for statement in POSTGRES_MIGRATIONS.get(v, ()) if self.postgres else ():
+                    self.db.execute(statement)
                 self.db.execute(self._sql("INSERT INTO compgen_schema VALUES (?, ?, ?, ?)"),
                                 (APP, v, store_id, now()))
         return [v for v, _ in todo]
@@ -254,6 +284,9 @@ class Store:
             self.db.execute(f"GRANT USAGE ON SCHEMA {PG_SCHEMA} TO {role}")
             self.db.execute(f"REVOKE ALL ON ALL TABLES IN SCHEMA {PG_SCHEMA} FROM {role}")
             self.db.execute(f"GRANT SELECT, INSERT ON ALL TABLES IN SCHEMA {PG_SCHEMA} TO {role}")
+            # the schema's own table is the owner's: a row a writer added there would make
+            # every later open refuse the store (or take it for another version)
+            self.db.execute(f"REVOKE INSERT ON {PG_SCHEMA}.compgen_schema FROM {role}")
             self.db.execute(f"GRANT USAGE ON ALL SEQUENCES IN SCHEMA {PG_SCHEMA} TO {role}")
 
 

@@ -12,6 +12,7 @@ import re
 import sqlite3
 import subprocess
 import sys
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -226,6 +227,7 @@ def test_the_database_refuses_updates_and_compgen_refuses_foreign_and_newer_stor
 
 WRITER = """
 import sys
+import time
 from dataclasses import replace
 from compgen import history as H
 from compgen.machine_file import load_machine
@@ -250,10 +252,10 @@ from compgen.results import load_fit
 from compgen.store import Store, open_store
 url, fit_file = sys.argv[1], sys.argv[2]
 insert = Store.insert
-def dying(self, table, row):
+def dying(self, table, row, **how):
     if table == "fits":                          # the session row is in, the fit not yet
         os.kill(os.getpid(), signal.SIGKILL)
-    return insert(self, table, row)
+    return insert(self, table, row, **how)
 Store.insert = dying
 H.record_fit(open_store(url), load_fit(fit_file), load_machine("ac-trunnion-itnc530"), taken="2026-02-01")
 """
@@ -380,16 +382,25 @@ def test_another_stores_history_is_imported_only_when_asked_and_only_once(year, 
 
 def test_a_store_of_the_first_schema_is_migrated_and_keeps_its_rows(tmp_path, fit_file, monkeypatch):
     import compgen.store as S
+    with open_store(tmp_path / "now.sqlite") as now:        # the rows as the first schema held them
+        H.record_fit(now, load_fit(fit_file), load_machine("ac-trunnion-itnc530"), taken="2026-01-05")
+        tables = H.export_all(now)["tables"]
     with monkeypatch.context() as m:
         m.setattr(S, "MIGRATIONS", S.MIGRATIONS[:1])
         m.setattr(S, "VERSION", 1)
-        with open_store(tmp_path / "old.sqlite") as old:
-            H.record_fit(old, load_fit(fit_file), load_machine("ac-trunnion-itnc530"), taken="2026-01-05")
+        with open_store(tmp_path / "old.sqlite") as old, old.writing():
+            for table in ("machines", "sessions", "fits"):
+                for row in tables[table]:
+                    old.insert(table, row)
             assert old.version() == 1
     with open_store(tmp_path / "old.sqlite") as new:
-        assert new.version() == 2
+        assert new.version() == S.VERSION == 3
         assert new.rows("SELECT import_id FROM sessions") == [{"import_id": None}]
+        assert new.rows("SELECT content_sha256 FROM fits") == [{"content_sha256": None}]
         assert _counts(new) == {"machines": 1, "sessions": 1, "fits": 1}
+        # a fit recorded before the key is still found: the same fit is not recorded again
+        with pytest.raises(H.Recorded):
+            H.record_fit(new, load_fit(fit_file), load_machine("ac-trunnion-itnc530"), taken="2026-01-05")
 
 
 def test_the_measurement_a_failed_check_advises_runs_as_printed(year, tmp_path):
@@ -521,3 +532,139 @@ def test_a_keyword_dsn_is_read_by_libpq_never_taken_for_a_file(tmp_path, monkeyp
     rc, _, err = run("history", "list", "--db", "password=hunter2 nonsense=1")
     assert rc == 2 and "hunter2" not in err and "libpq" in err, err
     assert list(tmp_path.iterdir()) == []            # no file named after the DSN
+
+
+def test_the_drift_line_kept_as_sums_is_the_weighted_least_squares_line():
+    """trend/check read a machine's fits once: the drift's slope and σ kept as running sums
+    equal the weighted least-squares line fitted anew (σ scaled up by the scatter)."""
+    rng = np.random.default_rng(7)
+    for n in (3, 5, 40):
+        days = np.sort(rng.uniform(0, 400, n))
+        std = rng.uniform(0.2, 2.0, n) * UM
+        y = 0.01 + 1.3 * UM * days / H.DAYS_PER_MONTH + rng.normal(0, 1, n) * std * rng.uniform(0.5, 3)
+        entries = [H.Entry(i, H.taken_at(f"2026-01-01T00:00Z") if i == 0 else
+                           (np.datetime64("2026-01-01T00:00") + np.timedelta64(int(d * 86400), "s"))
+                           .astype(str) + "+00:00", "fit:0", "calibration", "rtest", "accepted", 1.0,
+                           {"YOC": float(v)}, {"YOC": float(s)}, {"YOC": "mm"}, {})
+                   for i, (d, v, s) in enumerate(zip(np.r_[0, days[1:]], y, std, strict=True))]
+        line = H._Line(entries[0].taken)
+        for e in entries:
+            line.add(e, "YOC")
+        t = np.array([H._days(entries[0].taken, e.taken) / H.DAYS_PER_MONTH for e in entries])
+        w = 1 / std ** 2
+        A = np.column_stack([np.ones(n), t]) * np.sqrt(w)[:, None]
+        coef = np.linalg.lstsq(A, y * np.sqrt(w), rcond=None)[0]
+        chi2 = np.sum(w * (y - A @ coef / np.sqrt(w)) ** 2) / max(n - 2, 1)
+        sigma = np.sqrt(np.linalg.inv(A.T @ A)[1, 1] * max(chi2, 1.0))
+        assert line.slope() == pytest.approx((coef[1], sigma), rel=1e-6)
+
+
+def test_check_refuses_a_machine_file_changed_since_the_calibration(year, tmp_path):
+    machine = year[0]
+    changed = tmp_path / "m.toml"
+    changed.write_text(machine.source_text if hasattr(machine, "source_text") else
+                       (ROOT / "machines" / "ac-trunnion-itnc530.toml").read_text() + "\n# K4 tolerance 4 µm\n")
+    other = load_machine(str(changed))
+    assert other.name == machine.name and other.sha256 != machine.sha256
+    with _record(tmp_path / "h.sqlite", year) as store:
+        d = _session(machine, _truth(machine, year[1], "2026-08-10T10:00", year[3][1]), ["K4"], 103, "c.csv")
+        fit = identify(other, [d], location_model(other))
+        when = H.taken_at("2026-08-10T10:00")
+        calibration, entries, edits = H.last_calibration(store, other, before=when)
+        with pytest.raises(CompgenError, match="machine file changed since the calibration") as got:
+            H.check(other, fit, [d], calibration, entries, edits, when)
+        assert "--machine-changed" in str(got.value)
+        result = H.check(other, fit, [d], calibration, entries, edits, when, machine_changed=True)
+        assert result.passed and result.summary()["machine_file_changed"] is True
+        assert "machine file changed since that calibration" in result.text()
+        assert H.check(machine, fit, [d], calibration, entries, edits, when).summary()[
+            "machine_file_changed"] is False
+
+
+def test_the_same_edit_twice_is_one_row_and_a_second_edit_from_a_fit_is_refused_before_writing(
+        tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert run("fit", "--machine", "ac-trunnion-itnc530", ROOT / "examples" / "seed-session.csv",
+               "-o", "fit.json")[0] == 0
+    args = ["kinematics", "--from", "fit.json", "--record", "--date", "2026-03-02", "--despite-gate"]
+    rc, out, err = run(*args, "-o", "EDIT.TAB")
+    assert rc == 0 and "recorded the edit as #1" in out, out + err
+    rc, out, err = run(*args, "-o", "EDIT.TAB", "--force")         # the same edit again: one row
+    assert rc == 0 and "this edit is recorded already (#1" in out, out + err
+    rc, out, err = run(*args, "-o", "OTHER.TAB")                   # other files: refused, nothing written
+    assert rc == 2 and "a fit's correction is made once" in err and not (tmp_path / "OTHER.TAB").exists()
+    with open_store("compgen-history.sqlite") as store:
+        assert store.rows("SELECT COUNT(*) AS n FROM edits") == [{"n": 1}]
+        fit = load_fit("fit.json")
+        machine = load_machine("ac-trunnion-itnc530")
+        with pytest.raises(H.Recorded):
+            H.record_edit(store, fit, machine, "itnc530", {}, H.edit_of(store, fit, machine)["written"], {},
+                          taken="2026-03-03")
+
+
+ADD_SAME = """
+import sys, time
+from compgen import history as H
+from compgen.machine_file import load_machine
+from compgen.results import load_fit
+from compgen.store import open_store
+look = H._fit_rows
+def slow(*args):                 # every writer looks, finds nothing, and only then inserts
+    found = look(*args)
+    time.sleep(1.5)
+    return found
+H._fit_rows = slow
+store, fit, machine = open_store(sys.argv[2]), load_fit(sys.argv[1]), load_machine("ac-trunnion-itnc530")
+time.sleep(max(float(sys.argv[3]) - time.time(), 0))      # and all at once
+try:
+    H.record_fit(store, fit, machine, taken="2026-02-01")
+except H.Recorded as exc:
+    sys.exit(str(exc))
+"""
+
+
+def test_eight_writers_adding_the_same_fit_at_once_make_one_row(pg_db, fit_file):
+    """Every writer looks first and finds nothing; the database's unique key lets one in."""
+    assert run("history", "init", "--db", pg_db)[0] == 0
+    with open_store(pg_db) as store, store.writing():     # the machine is known: its row holds no one up
+        H._machine_id(store, *H.machine_key(load_machine("ac-trunnion-itnc530")), create=True)
+    start = time.time() + 4
+    procs = [subprocess.Popen([sys.executable, "-c", ADD_SAME, str(fit_file), pg_db, str(start)],
+                              env={**os.environ, "PYTHONPATH": str(ROOT)}, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for _ in range(8)]
+    done = [(p.communicate(timeout=240), p.returncode) for p in procs]
+    assert sorted(rc for _, rc in done) == [0] + [1] * 7, done
+    assert all("is already in the history" in err for (_, err), rc in done if rc == 1), done
+    with open_store(pg_db) as store:
+        assert _counts(store) == {"machines": 1, "sessions": 1, "fits": 1}
+
+
+def test_a_writer_can_neither_break_the_schema_nor_pass_a_forged_calibration_to_check(pg_db, fit_file, year):
+    import psycopg
+    with psycopg.connect(pg_db, autocommit=True) as owner:
+        owner.execute("CREATE ROLE forger LOGIN")
+    assert run("history", "init", "--db", pg_db, "--grant", "forger")[0] == 0
+    writer = pg_db.replace("compgen_owner@", "forger@")
+    machine = year[0]
+    with open_store(writer) as store:
+        H.record_fit(store, load_fit(fit_file), machine, taken="2026-01-01T09:00Z")
+    with psycopg.connect(writer, autocommit=True) as db:
+        with pytest.raises(psycopg.errors.InsufficientPrivilege):
+            db.execute("INSERT INTO compgen.compgen_schema VALUES ('compgen.history', 99, 'x', 'now')")
+        # a forged calibration: the real fit's row with BOA's value changed, claiming the owner wrote it
+        row = db.execute("SELECT session_id, marker, kind, model, parameters, sigma_um, rms_um, verdict, "
+                         "fit_json, recorded FROM compgen.fits").fetchone()
+        params = json.loads(row[4])
+        params["BOA"]["value"] += 100 * ARCSEC
+        session = db.execute("INSERT INTO compgen.sessions (machine_id, taken, device, operator, temperatures, "
+                             "machine_sha256, data, recorded) SELECT machine_id, '2026-01-02T09:00:00+00:00', "
+                             "device, operator, temperatures, machine_sha256, data, recorded FROM "
+                             "compgen.sessions RETURNING id").fetchone()[0]
+        db.execute("INSERT INTO compgen.fits (session_id, marker, kind, model, parameters, sigma_um, rms_um, "
+                   "verdict, fit_json, recorded, recorded_by) VALUES (%s, %s, %s, %s, %s, %s, %s, %s, %s, %s, "
+                   "'compgen_owner')", (session, *row[1:4], json.dumps(params), *row[5:]))
+    with open_store(pg_db) as store:
+        assert store.version() == 3           # the store still opens for everyone
+        assert {r["recorded_by"] for r in store.rows("SELECT recorded_by FROM fits")} == {"forger"}
+        with pytest.raises(CompgenError, match=r"recorded by forger\).*does not hold the values its own fit"):
+            H.last_calibration(store, machine)
