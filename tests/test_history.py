@@ -542,7 +542,7 @@ def test_the_drift_line_kept_as_sums_is_the_weighted_least_squares_line():
         days = np.sort(rng.uniform(0, 400, n))
         std = rng.uniform(0.2, 2.0, n) * UM
         y = 0.01 + 1.3 * UM * days / H.DAYS_PER_MONTH + rng.normal(0, 1, n) * std * rng.uniform(0.5, 3)
-        entries = [H.Entry(i, H.taken_at(f"2026-01-01T00:00Z") if i == 0 else
+        entries = [H.Entry(i, H.taken_at("2026-01-01T00:00Z") if i == 0 else
                            (np.datetime64("2026-01-01T00:00") + np.timedelta64(int(d * 86400), "s"))
                            .astype(str) + "+00:00", "fit:0", "calibration", "rtest", "accepted", 1.0,
                            {"YOC": float(v)}, {"YOC": float(s)}, {"YOC": "mm"}, {})
