@@ -562,7 +562,7 @@ def test_the_drift_line_kept_as_sums_is_the_weighted_least_squares_line():
 def test_check_refuses_a_machine_file_changed_since_the_calibration(year, tmp_path):
     machine = year[0]
     changed = tmp_path / "m.toml"
-    changed.write_text((ROOT / "machines" / "ac-trunnion-itnc530.toml").read_text() + "\n# K4 re-toleranced\n")
+    changed.write_text((ROOT / "machines" / "ac-trunnion-itnc530.toml").read_text() + "\n# changed\n")
     other = load_machine(str(changed))
     assert other.name == machine.name and other.sha256 != machine.sha256
     with _record(tmp_path / "h.sqlite", year) as store:
@@ -657,7 +657,8 @@ def test_a_writer_can_neither_break_the_schema_nor_pass_a_forged_calibration_to_
         params["BOA"]["value"] += 100 * ARCSEC
         session = db.execute(
             "INSERT INTO compgen.sessions (machine_id, taken, device, operator, temperatures, "
-            "machine_sha256, data, recorded) SELECT machine_id, '2026-01-02T09:00:00+00:00', device, operator, temperatures, "
+            "machine_sha256, data, recorded) SELECT machine_id, '2026-01-02T09:00:00+00:00', device, "
+            "operator, temperatures, "
             "machine_sha256, data, recorded FROM compgen.sessions RETURNING id").fetchone()[0]
         db.execute("INSERT INTO compgen.fits (session_id, marker, kind, model, parameters, sigma_um, rms_um, "
                    "verdict, fit_json, recorded, recorded_by) VALUES (%s, %s, %s, %s, %s, %s, %s, %s, %s, "
