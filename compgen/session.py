@@ -9,7 +9,7 @@ from .effects import effect_of_param
 from .errors import CompgenError
 from .machine import Machine
 from .machine_file import load_machine
-from .probe import MAGIC, is_probe_log, read_probe_log, sphere_centres
+from .probe import MAGIC, PROBE_FAMILY, read_probe_log, sphere_centres
 from .results import FitResult
 from .rtest import RTestData, read_rtest
 
@@ -25,7 +25,7 @@ def read_data(path: str | Path, machine: Machine, sign: str = "nest-minus-ball",
                 head = f.read(len(MAGIC) + 3).decode("utf-8", "replace")
         except OSError:
             pass
-    if not is_probe_log(head):
+    if not head.lstrip("\ufeff").startswith(PROBE_FAMILY):     # a probe log of any version is one
         return read_rtest(path, machine, sign)
     centres = sphere_centres(read_probe_log(path, machine), machine)
     for w in centres.warnings:

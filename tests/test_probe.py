@@ -42,14 +42,14 @@ def _rows(every=5, hidden_ecc_arcsec=0.0):
 
 
 def write_log(path, noise_um=1.0, seed=0, stylus=3.0, true_stylus=None, every=5, hidden_ecc_arcsec=0.0,
-              damage=None):
+              damage=None, dirs=DIRS):
     """A probe log v1 of the seed machine with the Table 4 errors; ``damage`` edits the
     touch rows (a list of [path, pose, A, C, x, y, z, nx, ny, nz] cells) before writing."""
     rng = np.random.default_rng(seed)
     rho = (25.4 + (true_stylus or stylus)) / 2
     touches = []
     for k, (label, a, c, centre) in enumerate(_rows(every, hidden_ecc_arcsec), 1):
-        for u in DIRS:
+        for u in dirs:
             tip = centre + (rho + rng.normal(0, noise_um * 1e-3)) * u
             touches.append([label, str(k), a, c, *(f"{v:.5f}" for v in tip), *(f"{-v:.6f}" for v in u)])
     if damage:
@@ -177,11 +177,24 @@ def test_a_missing_touch_is_flagged_and_too_few_refused(tmp_path):
              f"k2.log:{line_of(10)}:")
 
 
-def test_a_coplanar_pose_is_refused(tmp_path):
-    def no_top(t):                                 # pose 2 probed around only: one plane
+def test_a_pose_without_its_top_touch_is_fitted_from_the_four_and_flagged(tmp_path):
+    """Four side touches lie in one plane, but on a known radius they fix the centre (their
+    directions climb 30°): fitted from the rest, as the doc says, and flagged at its line."""
+    machine = load_machine(SEED_MACHINE)
+    def no_top(t):                                 # pose 2 probed around only
         del t[5]
-    _refused(tmp_path, write_log(tmp_path / "k.log", damage=no_top), "pose 2", "one plane",
-             f"k.log:{line_of(5)}:")
+    whole = sphere_centres(read_probe_log(write_log(tmp_path / "a.log"), machine), machine)
+    got = sphere_centres(read_probe_log(write_log(tmp_path / "k.log", damage=no_top), machine), machine)
+    assert any(f"k.log:{line_of(5)}:" in w and "a touch is missing" in w for w in got.warnings), got.warnings
+    shift = (got.centre[1] - whole.centre[1]) * 1e3
+    sigma = np.sqrt(np.diag(got.data.cov[1])) * 1e3
+    assert np.all(np.abs(shift) < 5 * sigma + 0.5) and sigma.max() < 3.0, (shift, sigma)
+
+
+def test_touches_that_all_look_at_the_centre_from_one_plane_are_refused(tmp_path):
+    equator = [np.array([np.cos(a), np.sin(a), 0.0]) for a in np.radians([0, 90, 180, 270, 45])]
+    _refused(tmp_path, write_log(tmp_path / "k.log", dirs=equator), "pose 1", "one plane through the centre",
+             f"k.log:{line_of(0)}:")
 
 
 def test_a_touch_that_moved_away_is_refused(tmp_path):
@@ -210,3 +223,39 @@ def test_a_probe_calibration_and_check_are_kept_as_probe_sessions(tmp_path):
     assert code == 0 and out.count(" probe ") == 2 and " rtest " not in out, out
     code, _, err = run("history", "add", tmp_path / "a.json", "--device", "rtest", "--db", db)
     assert code == 2 and "--device rtest, but the fit's data are probe data" in err, err
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda s: s.replace("# compgen probe log v1", "# compgen probe log v10", 1), ["v10"]),
+    (lambda s: s.replace("# sphere_diameter = 25.4", "# sphere_diameter = 2_5.4", 1),
+     ["sphere_diameter '2_5.4' is not a number", "k.log:2:"]),
+    (lambda s: s.replace("# sphere_diameter = 25.4", "# sphere_diameter = \u0662\u0665.\u0664", 1),
+     ["is not a number (a finite one, in ASCII digits)"]),
+    (lambda s: s.replace("# stylus_diameter = 3.0", "# stylus_diameter = 3.0\n# stylus_diameter = 2.0", 1),
+     ["gives stylus_diameter twice (line 3 and line 4)", "k.log:4:"]),
+])
+def test_the_logs_head_is_read_strictly(tmp_path, edit, words):
+    log = write_log(tmp_path / "k.log")
+    log.write_text(edit(log.read_text()))
+    _refused(tmp_path, log, *words)
+
+
+def test_a_touch_or_a_pose_logged_twice_is_refused_with_its_line(tmp_path):
+    def twice(t):                                  # pose 2's second touch logged again within it
+        t.insert(7, list(t[6]))
+    _refused(tmp_path, write_log(tmp_path / "t.log", damage=twice), "pose 2", "repeats line",
+             f"t.log:{line_of(7)}:", "logged twice")
+
+    def copied(t):                                 # pose 3 copied 400 times as poses of its own
+        pose3 = [r for r in t if r[1] == "3"]
+        last = max(int(r[1]) for r in t)
+        t += [[r[0], str(last + k), *r[2:]] for k in range(1, 401) for r in pose3]
+    err = _refused(tmp_path, write_log(tmp_path / "c.log", damage=copied), "repeat those from line",
+                   "pose logged twice (or copied)")
+    assert f"from line {line_of(10)} " in err, err       # pose 3's first line is named
+
+    machine = load_machine(SEED_MACHINE)            # a noise-free simulation repeats a pose: read
+    def again(t):
+        t += [[r[0], str(99), *r[2:]] for r in t if r[1] == "3"]
+    log = write_log(tmp_path / "n.log", noise_um=0.0, damage=again)
+    sphere_centres(read_probe_log(log, machine), machine)

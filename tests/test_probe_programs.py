@@ -67,15 +67,21 @@ def test_a_damaged_probing_program_is_refused_at_its_line(tmp_path, ctl, find, r
     assert re.search(rf"BAD{re.escape(EXT[ctl])}:({at}|{at + 1}|{at + 2}|{at + 3}): ", stdout), stdout
 
 
-def test_linuxcnc_runs_the_probing_program_and_its_log_is_a_probe_log(tmp_path):
+@pytest.mark.parametrize("ball", [None, "-217.504,-0.279,111.537"])
+def test_linuxcnc_runs_the_probing_program_and_its_log_is_a_probe_log(tmp_path, ball):
     """rs274 (LinuxCNC's interpreter) reads the program to the simulator's probing moves;
     the LOG lines it writes, each probe result set where the stylus meets the sphere, are a
-    probe log v1 that compgen fits back to the nominal machine."""
+    probe log v1 that compgen fits back to the nominal machine: with the sphere where the
+    machine file has it, and 100 mm lower (as diagnose advises a probe user): the log says
+    where it stood (bx, by, bz)."""
     if shutil.which("rs274") is None:
         if os.environ.get("COMPGEN_REQUIRE_LINUXCNC"):
             pytest.fail("rs274 (LinuxCNC's interpreter) is required here")
         pytest.skip("rs274 is not installed (apt-get install linuxcnc-uspace)")
-    out, _ = _program(tmp_path, SEED_MACHINE, "linuxcnc")
+    out = tmp_path / "PROBE.ngc"
+    code, _, err = run("probe-program", "--machine", SEED_MACHINE, "--path", "all", "--controller",
+                       "linuxcnc", "-o", out, *([f"--ball={ball}"] if ball else []))
+    assert code == 0, err
     (out.parent / "t.tbl").write_text("T98 P1 Z120 ;probe\n")
     (out.parent / "v.var").write_text("")
     (out.parent / "rs.ini").write_text("[RS274NGC]\nPARAMETER_FILE = v.var\n[TRAJ]\nLINEAR_UNITS = mm\n"
@@ -90,23 +96,27 @@ def test_linuxcnc_runs_the_probing_program_and_its_log_is_a_probe_log(tmp_path):
     logged = re.findall(r'LOG\("([^"]*)"\)', canon)
     assert logged[:4] == ["# compgen probe log v1", "# sphere_diameter = 25.4000",
                           "# stylus_diameter = 3.0000",
-                          "path,pose,A,C,X,Y,Z,nx,ny,nz"]
+                          "path,pose,A,C,X,Y,Z,nx,ny,nz,bx,by,bz"]
     rows = [r.split(",") for r in logged[4:]]
     assert len(rows) == len(probes)
+    machine = load_machine(SEED_MACHINE)
+    stood = [float(v) for v in ball.split(",")] if ball else list(machine.ball)
     # the interpreter's probe "touches" at the target: the stylus meets the sphere overtravel
     # (2 mm) before it, back along the probing direction
     for r, target in zip(rows, probes, strict=True):
         n = np.array([float(v) for v in r[7:10]])
         logged_xyz = np.array([float(v) for v in r[4:7]])
         np.testing.assert_allclose(logged_xyz, target, atol=1e-6)     # #5061-#5063 as rs274 set them
+        np.testing.assert_allclose([float(v) for v in r[10:13]], stood, atol=1e-4)
         r[4:7] = [f"{v:.6f}" for v in target - 2.0 * n]
     log = tmp_path / "PROBE_LOG.log"
     log.write_text("\n".join(logged[:4] + [",".join(r) for r in rows]) + "\n")
-    machine = load_machine(SEED_MACHINE)
     fit = identify(machine, [sphere_centres(read_probe_log(log, machine), machine).data])
     # nominal, to the 0.1 µm the program writes its positions in: below 0.1 µm and 0.2″
     assert all(abs(e.value) < (1e-4 if e.unit == "mm" else 1e-6)
                for e in fit.parameters.values()), fit.parameters
+    code, _, err = run("fit", "--machine", SEED_MACHINE, log, "-o", tmp_path / "fit.json")
+    assert code == 0, err
 
 
 def test_simulate_a_probe_log_then_fit_it(tmp_path):

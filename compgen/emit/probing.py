@@ -29,6 +29,7 @@ from ..kinematics import Poses, inverse
 from ..machine import Machine, check_travel
 from ..motion import safe_height
 from ..probe import DIRECTION, MAGIC, need_probe, touch_directions
+from ..rtest import BALL
 from . import Emitted, ascii_text, render
 from .programs import ANGLE_DECIMALS, BALL_HEADER, LINEAR_DECIMALS, at_ball, pose_list
 from .registry import controller
@@ -129,16 +130,20 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
     log_head = [MAGIC, f"# sphere_diameter = {setup.sphere_diameter:.4f}",
                 f"# stylus_diameter = {setup.stylus_diameter:.4f}",
                 *([f"# machine = {machine.name}"] if _loggable(machine.name) else []),
-                ",".join(["path", "pose", *names, "X", "Y", "Z", *DIRECTION])]
+                ",".join(["path", "pose", *names, "X", "Y", "Z", *DIRECTION, *BALL])]
+    # where the sphere stood, on every touch's line (the contract's bx, by, bz): a log of the
+    # sphere moved as a diagnosis advised is fitted where it was, not where the machine file has it
+    ball = ",".join(f"{v:.4f}" for v in poses.ball[0])
     text = render(f"{ctl.family}/probe{ctl.program_ext}.j2", name=name, header=header, steps=steps,
                   tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}", probe_feed=f"{setup.probe_feed:g}",
                   work_offset=machine.program.work_offset, log_name=log_name, log_head=log_head,
-                  rotary=names, number=ctl.number, retract=ctl.number(setup.approach, 4))
+                  rotary=names, number=ctl.number, retract=ctl.number(setup.approach, 4), ball=ball)
     named = ctl.message_files(name, [s["note"] for s in steps if s["kind"] == "stop"])
     if ctl.family == "heidenhain":           # FN 16 prints through format files: the head, a line per path
         named["_HEAD.A"] = render("heidenhain/probe.A.j2", head=log_head)
         for path in count:
-            named[f"_{path}.A"] = render("heidenhain/probe.A.j2", path=path, rotary=names, head=None)
+            named[f"_{path}.A"] = render("heidenhain/probe.A.j2", path=path, rotary=names, head=None,
+                                         ball=ball)
     files = {ctl.program_ext: text, ".poses.csv": pose_list(machine, poses), **named}
     result = ctl.check(machine, ctl.blocks(text, "axes"), probe=setup)
     if result.findings:     # nothing unsafe leaves this function
