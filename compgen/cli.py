@@ -737,8 +737,8 @@ def history_list_cmd(db):
                       "LEFT JOIN sessions s ON s.machine_id = m.id LEFT JOIN fits f ON f.session_id = s.id "
                       "GROUP BY m.id, m.name, m.serial ORDER BY m.name, m.serial")
     for r in rows:
-        serial = f" ({r['serial']})" if r["serial"] else ""
-        click.echo(f"{r['name']}{serial}: {r['fits']} fit(s), last {str(r['last'])[:16]}")
+        serial = f" ({one_line(r['serial'])})" if r["serial"] else ""
+        click.echo(f"{one_line(r['name'])}{serial}: {r['fits']} fit(s), last {str(r['last'])[:16]}")
     if not rows:
         click.echo(f"{store.where}: no machine recorded yet")
 
@@ -751,10 +751,11 @@ def history_show_cmd(machine_file, serial, db):
     """The machine's fits and edits, in time order."""
     from .history import trend
     t = trend(_store(db, create=False), load_machine(machine_file), serial)
-    click.echo(f"{t.machine}{f' ({t.serial})' if t.serial else ''}")
-    events = [(e.taken, f"  {e.taken[:16]}  {e.kind:<12}{e.marker}  {e.device:<6}σ̂ {e.sigma_um:.3f} µm  "
-                         f"{e.verdict}") for e in t.entries]
-    events += [(e["taken"], f"  {e['taken'][:16]}  edit        from {e['marker']} for {e['controller']}: "
+    click.echo(f"{one_line(t.machine)}{f' ({one_line(t.serial)})' if t.serial else ''}")
+    events = [(e.taken, f"  {e.taken[:16]}  {e.kind:<12}{one_line(e.marker)}  {e.device:<6}σ̂ "
+                        f"{e.sigma_um:.3f} µm  {one_line(e.verdict)}") for e in t.entries]
+    events += [(e["taken"], f"  {e['taken'][:16]}  edit        from {one_line(e['marker'])} for "
+                            f"{e['controller']}: "
                             "corrects "
                             + (", ".join(e["corrects"]) or "nothing")) for e in t.edits]
     click.echo("\n".join(text for _, text in sorted(events, key=lambda x: x[0])))
@@ -843,7 +844,8 @@ def history_fleet_cmd(every_days, as_json, db):
     click.echo(f"{'machine':<40}{'serial':<14}{'calibrated':<12}{'checked':<12}{'check':<7}{'due':<12}")
     for r in rows:
         check = "-" if r["last_check_passed"] is None else ("pass" if r["last_check_passed"] else "FAIL")
-        click.echo(f"{r['machine'][:39]:<40}{r['serial'][:13]:<14}{(r['last_calibration'] or '-')[:10]:<12}"
+        name, serial = one_line(r["machine"])[:39], one_line(r["serial"])[:13]
+        click.echo(f"{name:<40}{serial:<14}{(r['last_calibration'] or '-')[:10]:<12}"
                    f"{(r['last_check'] or '-')[:10]:<12}{check:<7}{(r['due'] or '-'):<12}"
                    + ("OVERDUE" if r["overdue"] else ""))
 

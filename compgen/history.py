@@ -657,14 +657,16 @@ def trend_text(t: Trend) -> str:
     """One row per fit: each location error's machine value ± σ (µm, ″); edits between."""
     units = {n: shown(1.0, next(e.units[n] for e in t.entries if n in e.units))[1] for n in t.params}
     head = "".join(f"{n + ' ' + units[n]:>18}" for n in t.params)
-    lines = [f"{t.machine}{f' ({t.serial})' if t.serial else ''}: machine values (measured + corrections "
+    serial = f" ({one_line(t.serial)})" if t.serial else ""
+    lines = [f"{one_line(t.machine)}{serial}: machine values (measured + corrections "
              "written before), ± σ", f"{'date':<12}{'fit':<11}{'kind':<12}{head}"]
     events = [(e.taken, 1, e) for e in t.entries] + [(d["taken"], 0, d) for d in t.edits]
     for _, is_fit, e in sorted(events, key=lambda x: (x[0], x[1])):
         if not is_fit:
             lines.append(f"{e['taken'][:10]:<12}{'edit':<11}{e['controller'][:11]:<12}corrects "
-                         + ", ".join(e["corrects"]) + f" (from {e['marker']}"
-                         + (f", written despite the fit gate: {e['verdict']})" if e["verdict"] != "accepted"
+                         + ", ".join(map(one_line, e["corrects"])) + f" (from {one_line(e['marker'])}"
+                         + (f", written despite the fit gate: {one_line(e['verdict'])})"
+                            if e["verdict"] != "accepted"
                             else ")"))
             continue
         cells = []
@@ -676,7 +678,7 @@ def trend_text(t: Trend) -> str:
             s, _ = shown(e.std[n], e.units[n])
             mark = "*" if any(f.param == n and f.taken == e.taken for f in t.flags) else " "
             cells.append(f"{v:>10.2f} ± {s:<4.2f}{mark}")
-        lines.append(f"{e.taken[:10]:<12}{e.marker:<11}{e.kind:<12}{''.join(cells)}")
+        lines.append(f"{e.taken[:10]:<12}{one_line(e.marker):<11}{e.kind:<12}{''.join(cells)}")
     lines.append("")
     lines += [f"flagged: {f.text()}" for f in t.flags] or ["nothing flagged against [drift]"]
     return "\n".join(lines) + "\n"

@@ -12,13 +12,16 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")   # files only: no display on a machine-side laptop or CI
+# a machine's name, a path label or a serial is text, never mathtext: "$x_1$" in a name is
+# drawn as written (a lone "$" would otherwise stop the plot); compgen's own labels use none
+matplotlib.rcParams["text.parse_math"] = False
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .advice import Measurement  # noqa: E402
 from .diagnose import Diagnosis  # noqa: E402
 from .effects import effect_of_param, resolve  # noqa: E402
-from .errors import CompgenError  # noqa: E402
+from .errors import CompgenError, one_line  # noqa: E402
 from .identify import fitted  # noqa: E402
 from .kinematics import Poses  # noqa: E402
 from .machine import Machine  # noqa: E402
@@ -94,7 +97,8 @@ def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
             ax.plot(shown_at, model[at, k], "-", color="tab:blue", label=label)
             ax.set_ylabel(f"{DIRECTIONS[k]} (µm)")
             ax.grid(alpha=0.3)
-        axes[0].set_title(f"{path or 'data'}: measured vs model, {machine.name}{_thinned(len(sel))}",
+        name = one_line(machine.name)
+        axes[0].set_title(f"{path or 'data'}: measured vs model, {name}{_thinned(len(sel))}",
                           fontsize=10)
         axes[0].legend(loc="best", fontsize=8)
         axes[-1].set_xlabel("pose")
@@ -121,7 +125,7 @@ def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
             ax.set_ylabel(f"{DIRECTIONS[k]} (µm)")
             ax.grid(alpha=0.3)
         line = next((x for x in (found.lines if found is not None else ()) if x.against == axis.name), None)
-        axes[0].set_title(f"residual against {axis.name} per path, {machine.name}{thinned}"
+        axes[0].set_title(f"residual against {axis.name} per path, {one_line(machine.name)}{thinned}"
                           + (f"\nstrongest line: {line.text()}" if line is not None else ""), fontsize=9)
         axes[0].legend(loc="best", fontsize=8)
         axes[-1].set_xlabel(f"{axis.name} ({'deg' if axis.rotary else 'mm'})")
@@ -215,6 +219,6 @@ def trend_png(t) -> bytes:
         if bad:
             ax.plot([when[i] for i in bad], v[bad], "o", ms=10, mfc="none", mec="red")
         ax.set_ylabel(f"{name} ({unit})")
-    axes[0, 0].set_title(f"{t.machine}: machine values over time (dashed: edits; red: flagged)")
+    axes[0, 0].set_title(f"{one_line(t.machine)}: machine values over time (dashed: edits; red: flagged)")
     fig.autofmt_xdate()
     return _png(fig)

@@ -668,3 +668,26 @@ def test_a_writer_can_neither_break_the_schema_nor_pass_a_forged_calibration_to_
         assert {r["recorded_by"] for r in store.rows("SELECT recorded_by FROM fits")} == {"forger"}
         with pytest.raises(CompgenError, match=r"recorded by forger\).*does not hold the values its own fit"):
             H.last_calibration(store, machine)
+
+
+def test_a_machine_name_with_mathtext_and_a_writers_line_break_print_as_written(tmp_path, monkeypatch):
+    """A name is text: "$\\undefinedcmd_{$" once stopped the trend plot (matplotlib read it as
+    mathtext); a name with a line break, as a database writer can append it, stays on its line."""
+    monkeypatch.chdir(tmp_path)
+    text = (ROOT / "machines" / "ac-trunnion-itnc530.toml").read_text()
+    name = r'name = "Cell $\\\\undefinedcmd_{$ 3"'
+    (tmp_path / "m.toml").write_text(re.sub(r"(?m)^name = .*$", name, text))
+    assert run("simulate", "--machine", "m.toml", "--truth", ROOT / "examples" / "truth-table4.json",
+               "--paths", "K4", "--noise-um", "0.5", "-o", "a.csv")[0] == 0
+    rc, out, err = run("fit", "--machine", "m.toml", "a.csv", "-o", "fit.json", "--record", "--date",
+                       "2026-03-01")
+    assert rc == 0, err
+    rc, out, err = run("history", "trend", "--machine", "m.toml", "--plot", "t.png")
+    assert rc == 0 and (tmp_path / "t.png").read_bytes()[:4] == b"\x89PNG", out + err
+    with open_store("compgen-history.sqlite") as store, store.writing():
+        store.insert("machines", {"name": "forged\nPASS: all machines", "serial": "", "recorded": "x"})
+    rc, out, err = run("history", "list")
+    assert rc == 0 and "PASS: all machines" in out and not any(
+        ln.startswith("PASS") for ln in out.splitlines()), out
+    rc, out, err = run("history", "fleet")
+    assert rc == 0 and not any(ln.startswith("PASS") for ln in out.splitlines()), out

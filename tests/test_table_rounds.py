@@ -131,6 +131,9 @@ def test_sinumerik_cec_restore_puts_back_the_tables_read(bc_machine):
     ("STEP=9.7", "do not span"),
     ("VALUE", "do not span"),                                        # a 38th value
     ("MODULO=2", "$AN_CEC_IS_MODULO is 2"),
+    ("STEP=1e-9", "do not span"),                                    # 2.6·10^11 points: counted, not made
+    ("$AN_CEC_MIN[-1]=0\n", "is no CEC entry compgen reads"),        # a negative table is not skipped
+    ("$AN_CEC[0,x]=0\n", "is no CEC entry compgen reads"),
 ])
 def test_a_damaged_cec_state_is_refused_with_its_line(bc_machine, damage, says):
     model = [*location_model(bc_machine), *TABLES]
@@ -139,7 +142,8 @@ def test_a_damaged_cec_state_is_refused_with_its_line(bc_machine, damage, says):
     cec = a.files["_CEC.INI"]
     key = {"MAX=359": ("$AN_CEC_MAX[0]=", "359"), "MIN=400": ("$AN_CEC_MIN[0]=", "400"),
            "STEP=0": ("$AN_CEC_STEP[0]=", "0"), "STEP=-10": ("$AN_CEC_STEP[0]=", "-10"),
-           "STEP=9.7": ("$AN_CEC_STEP[0]=", "9.7"), "MODULO=2": ("$AN_CEC_IS_MODULO[0]=", "2")}
+           "STEP=9.7": ("$AN_CEC_STEP[0]=", "9.7"),
+           "STEP=1e-9": ("$AN_CEC_STEP[0]=", "1e-9"), "MODULO=2": ("$AN_CEC_IS_MODULO[0]=", "2")}
     if damage in key:
         start, value = key[damage]
         cec = "\n".join(start + value if ln.startswith(start) else ln for ln in cec.splitlines())

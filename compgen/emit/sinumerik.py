@@ -23,7 +23,7 @@ from ..correction import (
     squareness_tables,
     unrolled,
 )
-from ..errors import CompgenError
+from ..errors import CompgenError, one_line
 from ..lines import AxisLine
 from ..machine import Machine
 from ..motion import Block, dwell, gcode_move
@@ -193,6 +193,10 @@ def read_cec(text: str, machine: Machine, where: str = "CEC file") -> list[CompT
     for at, line in state_lines(text, where):
         m = CEC.match(line.strip())
         if not m:
+            if line.strip().upper().startswith("$AN_CEC"):    # skipped, it would be lost from the next round
+                raise CompgenError(f"{one_line(line.strip())[:60]!r} is no CEC entry compgen reads "
+                                   "($AN_CEC…[table] or $AN_CEC[table,point] = value, table and point whole "
+                                   "numbers from 0)", where=at, hint="give the table as the control holds it")
             continue
         key = line.strip().split("=", 1)[0]
         if key in seen:
