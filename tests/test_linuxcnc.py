@@ -175,8 +175,12 @@ def launch(folder: Path, ini: Path, more_env: dict[str, str], budget_s: float = 
     # run at once (two pytest processes, xdist) wait here for each other
     with open(Path(tempfile.gettempdir()) / "compgen-linuxcnc-test.lock", "w") as guard:
         fcntl.flock(guard, fcntl.LOCK_EX)
-        lock = Path("/tmp/linuxcnc.lock")     # left by a run that died: the launcher would ask
-        if lock.exists() and subprocess.run(["pgrep", "-x", "milltask"], capture_output=True).returncode:
+        lock = Path("/tmp/linuxcnc.lock")     # LinuxCNC's own, one path for every run on the machine
+        running = subprocess.run(["pgrep", "-x", "milltask"], capture_output=True, text=True)
+        if running.returncode == 0:         # another LinuxCNC: its launcher would offer to end it
+            pytest.fail(f"another LinuxCNC runs on this machine (milltask {running.stdout.split()}); the "
+                        "test neither waits for it nor ends it: run the test when it has stopped")
+        if lock.exists():                   # left by a run that died: the launcher would ask
             lock.unlink()
         # a terminal as its input: the start script then prints to the pipe what it otherwise
         # writes to temporary files it deletes (``if ! tty -s``)
