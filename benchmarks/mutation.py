@@ -1,7 +1,8 @@
-"""Mutation testing of the sign-critical modules: does the suite notice a wrong sign, unit
-or axis index? A benchmark, run outside CI (it takes minutes).
+"""Mutation testing of the sign-critical modules and the wings: does the suite notice a
+wrong sign, unit or axis index? A benchmark, run outside CI (it takes minutes).
 
     python benchmarks/mutation.py [--jobs 2] [--only compgen/units.py] [--lines 140-150] [--list]
+    python benchmarks/mutation.py --draw 100 [--seed S]     # a fresh random sample of all of them
 
 Each mutant is one small change (the issue's kinds): ``+`` ↔ ``-``, ``*`` ↔ ``/``, a unary
 minus dropped or added, an integer index 0/1/2 shifted, a numeric constant changed (0 → 1,
@@ -42,13 +43,21 @@ TESTS = {
     "compgen/emit/programs.py": [*HOSTILE, "tests/test_trt.py"],        # read back under trt's senses
     "compgen/effects.py": ["tests/test_effects.py", "tests/test_kinematics.py", "tests/test_shapes.py"],
     "compgen/diagnose.py": ["tests/test_diagnose_stats.py", "tests/test_diagnose.py"],
+    # the wings: probe logs, the history and its store, diagnose's spectrum and significance
+    "compgen/probe.py": ["tests/test_probe.py", "tests/test_probe_programs.py"],
+    "compgen/emit/probing.py": ["tests/test_probe_programs.py", "tests/test_probe.py"],
+    "compgen/store.py": ["tests/test_history.py"],
+    "compgen/history.py": ["tests/test_history.py"],
+    "compgen/spectrum.py": ["tests/test_diagnose_stats.py", "tests/test_diagnose.py"],
+    "compgen/significance.py": ["tests/test_diagnose_stats.py", "tests/test_diagnose.py"],
     "compgen/noise.py": ["tests/test_noise.py", *(f"tests/test_diagnose.py::test_{t}" for t in (
         "outliers_are_listed_where_the_user_finds_them_and_flag_nothing",
         "correlated_noise_flags_nothing_because_it_is_whitened",
         "under_correlated_noise_a_real_effect_is_still_found"))],
 }
-# functions of diagnose.py that are its statistics (the rest is reporting)
-ONLY_FUNCTIONS = {"compgen/diagnose.py": {"_p_value", "_explained", "_still_significant"}}
+# functions to mutate only, by module (none now: diagnose's statistics moved to
+# significance.py and spectrum.py, which are mutated whole)
+ONLY_FUNCTIONS: dict[str, set[str]] = {}
 
 
 class Sites(ast.NodeVisitor):
@@ -156,11 +165,20 @@ def main() -> None:
     ap.add_argument("--tests", action="append", default=None,
                     help="run these tests instead of the module's selection (repeatable): a quick look, "
                          "not the measurement")
+    ap.add_argument("--draw", type=int, default=None, metavar="N",
+                    help="run N mutants drawn at random from all of them (a fresh sample: --seed)")
+    ap.add_argument("--seed", type=int, default=None, help="the draw's seed (default: from the clock)")
     args = ap.parse_args()
     modules = args.only or list(TESTS)
     lo, hi = map(int, args.lines.split("-")) if args.lines else (0, 10**9)
     plan = [(m, i, line, kind, text) for m in modules
             for i, line, kind, text in mutants(ROOT / m, ONLY_FUNCTIONS.get(m)) if lo <= line <= hi]
+    if args.draw:
+        import random
+        seed = args.seed if args.seed is not None else time.time_ns() % 10**6
+        total = len(plan)
+        plan = random.Random(seed).sample(plan, min(args.draw, total))
+        print(f"a draw of {len(plan)} of {total} mutants (seed {seed})")
     print(f"{len(plan)} mutants in {len(modules)} modules")
     lines = {m: (ROOT / m).read_text().splitlines() for m in modules}    # as mutated, not as edited since
     if args.list:
