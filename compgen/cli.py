@@ -28,6 +28,7 @@ from .files import STDOUT, new_command, read_text, write_all, write_atomically
 from .gate import fit_gate, unit_suspicion
 from .identify import identify, parse_fixed
 from .kinematics import unknown_sides, unpredicted_sides
+from .machine import identifier
 from .machine_file import load_machine
 from .paths import generate
 from .probe import format_probe_log, probe_poses, simulate_touches
@@ -126,7 +127,8 @@ FORCE = click.option("--force", is_flag=True, help="Overwrite an existing output
 DB = click.option("--db", default=None, metavar="STORE",
                   help="The history store: an SQLite file (default: $COMPGEN_DB, else "
                        "compgen-history.sqlite here) or postgresql://user@host/db.")
-SERIAL = click.option("--serial", default=None, help="The machine's serial (default: the machine file's).")
+SERIAL = click.option("--serial", default=None, help="The machine's serial (default: the machine file's).",
+                      callback=lambda _c, _p, v: v and identifier("serial", v, "--serial"))
 RECORD = click.option("--record", is_flag=True, help="Also record it in the machine's history (--db).")
 DATE = click.option("--date", "taken", default=None,
                     help="With --record: when the data were measured or the edit written (ISO 8601; "

@@ -24,7 +24,7 @@ from . import me
 from .effects import effect_of_param
 from .emit.registry import CONTROLLERS, controller
 from .errors import CompgenError, one_line
-from .machine import Machine
+from .machine import Machine, identifier
 from .results import FitResult
 from .rtest import device_of
 from .store import Store, now
@@ -65,6 +65,10 @@ def _ref(machine: Machine) -> str:
 
 
 def machine_key(machine: Machine, serial: str | None = None) -> tuple[str, str]:
+    """The machine's name and serial as the history keys it: a ``--serial`` by the machine
+    file's rule for one (one line: it is printed in every history text)."""
+    if serial is not None and serial != "":
+        identifier("serial", serial, "--serial")
     return machine.name, serial if serial is not None else machine.serial
 
 
@@ -714,12 +718,19 @@ def export_all(store: Store, machine_name: str | None = None) -> dict:
             "rows": export_rows(store, machine_name)}
 
 
-def check_export(doc, where: str) -> None:
-    """Refuse what is not a history export before any store is opened (or made) for it."""
+def check_export(doc, where: str) -> dict[str, list]:
+    """An export's tables, every row checked (``_valid_rows``): what is not a history export
+    compgen wrote is refused before any store is opened (or made) for it."""
     if (not isinstance(doc, dict) or doc.get("format") != EXPORT_FORMAT
             or not isinstance(doc.get("tables"), dict)):
         raise CompgenError("not a compgen history export", where=where,
                            hint=f"make one with {me()} history export -o H.json on the other store")
+    try:
+        t = {name: list(doc["tables"][name]) for name in _COLUMNS}
+    except (KeyError, TypeError) as exc:
+        raise CompgenError(f"the export is incomplete or damaged ({exc!r})", where=where) from None
+    _valid_rows(t, where)
+    return t
 
 
 def _valid_rows(t: dict[str, list], where: str) -> None:
@@ -766,7 +777,12 @@ def _valid_rows(t: dict[str, list], where: str) -> None:
                 if row.get(key) not in ids[other]:
                     bad(table, row, f"{key} names no {other[:-1]} of the export")
     for m in t["machines"]:
-        text("machines", m, "name"), text("machines", m, "serial")
+        text("machines", m, "name")
+        if text("machines", m, "serial"):
+            try:
+                identifier("serial", m["serial"], "serial")
+            except CompgenError as exc:
+                bad("machines", m, exc.message)
     for s in t["sessions"]:
         try:
             s["taken"] = taken_at(text("sessions", s, "taken"))
@@ -816,18 +832,13 @@ def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str
     """Another store's export, appended in one transaction with its origin recorded. Refused:
     this store's own rows, an export already imported, or a fit this store already holds
     (for the same machine): nothing is merged silently, and nothing twice."""
-    check_export(doc, where)
+    t = check_export(doc, where)
     if doc.get("store_id") == store.store_id():
         raise CompgenError("this export is this store's own history", where=where,
                            hint="nothing to import")
     if store.rows("SELECT id FROM imports WHERE file_sha256 = ?", (sha256,)):
         raise CompgenError("this export has been imported here already", where=where,
                            hint="nothing to import")
-    try:
-        t = {name: list(doc["tables"][name]) for name in _COLUMNS}
-    except (KeyError, TypeError) as exc:
-        raise CompgenError(f"the export is incomplete or damaged ({exc!r})", where=where) from None
-    _valid_rows(t, where)
     try:
         machines = {m["id"]: (m["name"], m["serial"]) for m in t["machines"]}
         session_machine = {s["id"]: machines[s["machine_id"]] for s in t["sessions"]}

@@ -485,6 +485,7 @@ def _first(tables, name):
      "model or parameters are not its fit_json's"),
     (lambda t: _first(t, "fits").update(session_id=10 ** 9), "session_id names no session"),
     (lambda t: _first(t, "machines").update(name="a\nb"), "name is not one line"),
+    (lambda t: _first(t, "machines").update(serial="A/B C"), "machines row .*not a valid serial"),
     (lambda t: _first(t, "edits").update(controller="fanuc"), "controller is none compgen knows"),
     (lambda t: _first(t, "edits").update(taken="tomorrow"), "edits row .*is not a date"),
 ])
@@ -504,6 +505,8 @@ def test_an_import_with_a_damaged_row_is_refused_and_leaves_the_store_as_it_was(
     assert rc == 2 and re.search(says, err) and "nothing was imported" in err, err
     assert len(err.splitlines()) == 1
     assert (tmp_path / "b.sqlite").read_bytes() == before
+    rc, _, err = run("history", "import", "bad.json", "--db", "new.sqlite")   # nor is a store made for it
+    assert rc == 2 and not (tmp_path / "new.sqlite").exists(), err
     rc, out, err = run("history", "import", "a.json", "--db", "b.sqlite")     # the export as written imports
     assert rc == 0, err
 
@@ -557,6 +560,11 @@ def test_the_drift_line_kept_as_sums_is_the_weighted_least_squares_line():
         chi2 = np.sum(w * (y - A @ coef / np.sqrt(w)) ** 2) / max(n - 2, 1)
         sigma = np.sqrt(np.linalg.inv(A.T @ A)[1, 1] * max(chi2, 1.0))
         assert line.slope() == pytest.approx((coef[1], sigma), rel=1e-6)
+
+
+def test_a_serial_is_one_line_by_the_machine_files_rule(tmp_path, fit_file):
+    rc, _, err = run("history", "add", fit_file, "--serial", "A\nB", "--db", tmp_path / "h.sqlite")
+    assert rc == 2 and "not a valid serial" in err and len(err.splitlines()) == 1, err
 
 
 def test_check_refuses_a_machine_file_changed_since_the_calibration(year, tmp_path):
