@@ -54,6 +54,8 @@ class Case:
     expect: str                           # "refuse" or "accept"
     outputs: list[str] = field(default_factory=list)   # files that must not exist after a refusal
     special: str = ""                     # "fifo": the data file is a FIFO
+    secret: str = ""                      # must appear in no output, message or file name
+    unchanged: list[str] = field(default_factory=list)  # files byte for byte as given, after a refusal
 
 
 def _csv_rows():
@@ -303,6 +305,40 @@ def output_cases() -> list[Case]:
     ]
 
 
+SECRET = "s3cr3t-Pw"
+
+
+def history_cases() -> list[Case]:
+    """Dates, serials and stores as a user (or an attacker) gives them to the history."""
+    add = ["history", "add", "{dir}/fit.json", "--db", "{dir}/h.sqlite"]
+    out = []
+    for date, expect in (("2026-03-01", "accept"), ("2026-03-01T10:00+02:00", "accept"),
+                         ("2026-03-01T10:00:00.5-05:30", "accept"), ("2026-03-01T10:00Z", "accept"),
+                         ("9999-01-01", "refuse"), ("1969-12-31T23:59Z", "refuse"), ("2026-02-30", "refuse"),
+                         ("2026-03-01T25:00", "refuse"), ("yesterday", "refuse"), ("", "accept"),
+                         ("\u0662\u0660\u0662\u0666-03-01", "refuse"), ("2026-03-01\n2027", "refuse"),
+                         ("+2026-03-01", "refuse"), ("2026-03-01T10:00+25:00", "refuse"),
+                         ("2026-W09", "either"), ("20260301", "either"), ("3000-01-01T00:00Z", "refuse")):
+        out.append(Case("history", f"--date {date!r}", {}, [*add, "--date", date], expect,
+                        ["h.sqlite"]))
+    for serial, expect in (("DMU-50/1234", "accept"), ("A\nB", "refuse"), ("A B", "refuse"),
+                           ("x" * 41, "refuse"), ("$(reboot)", "refuse"), ("-rf", "refuse"),
+                           ("A\x1b[2J", "refuse")):
+        out.append(Case("history", f"--serial {serial!r}", {}, [*add, "--serial", serial], expect,
+                        ["h.sqlite"]))
+    for dsn in (f"user=x password={SECRET} host=/nonexistent dbname=y",
+                f"postgresql://u:{SECRET}@127.0.0.1:1/db", f"POSTGRESQL://u:{SECRET}@127.0.0.1:1/db",
+                f"postgres://u:p@{SECRET}@127.0.0.1:1/db", f"port=1 password={SECRET} host=127.0.0.1",
+                f"password='{SECRET} x' host=127.0.0.1 port=1", f"password={SECRET}",
+                f"sslmode=require password={SECRET} host=127.0.0.1 port=1",
+                f"{SECRET}=x", f"host=127.0.0.1 port=1 password = {SECRET}", f"dbname=x password={SECRET} ="):
+        for command in (["history", "list"], ["history", "init"], add):
+            out.append(Case("dsn", f"{command[1]} --db {dsn!r}", {},
+                            [*(c for c in command if c not in ("--db", "{dir}/h.sqlite")), "--db", dsn],
+                            "refuse", secret=SECRET))
+    return out
+
+
 # -- hostile variants derived from valid inputs: each valid file, each edit a slip makes
 
 CONTROL_CHARS = ("\x07", "\x1b", "\x0b", "\x0c", "\x85", "\u2028", "\r", "\x00")
@@ -358,7 +394,8 @@ def _variants(text: str, rng: random.Random, n: int) -> list[tuple[str, str, str
     return out
 
 
-def derived_cases(rng: random.Random, programs: dict[str, Path], per_surface: int) -> list[Case]:
+def derived_cases(rng: random.Random, programs: dict[str, Path], per_surface: int,
+                  wings: dict[str, Path]) -> list[Case]:
     """Hostile variants of every valid input, run through the command that reads it."""
     out = []
     vectors = {7: -1.0, 8: 0.0, 9: 0.0, 10: 0.0, 11: 0.0, 12: -1.0}
@@ -382,17 +419,72 @@ def derived_cases(rng: random.Random, programs: dict[str, Path], per_surface: in
         surfaces.append(("program", path.name, path.read_text(),
                          ["check-program", "--machine", str(SEED), "--controller", ctl, *mode,
                           "{dir}/" + path.name], []))
+    # the wings: a probe log, a history export, a CEC table as state, LinuxCNC's own INI
+    target = wings["target"].read_bytes()           # an existing store: a refusal leaves it as it was
+    beside = {"probe": {}, "import": {"target.sqlite": target}, "cec": {"A.MPF": wings["carr"].read_text()},
+              "ini": {str(p.relative_to(wings["trt"])): p.read_bytes() for p in wings["trt"].rglob("*")
+                      if p.is_file() and p.name != "xyzac-trt.ini"}}
+    surfaces += [
+        ("probe", "log.csv", wings["probe"].read_text(),
+         ["fit", "--machine", str(SEED), "{dir}/log.csv", "-o", "{dir}/out.json"], ["out.json"]),
+        ("import", "h.json", wings["export"].read_text(),
+         ["history", "import", "{dir}/h.json", "--db", "{dir}/target.sqlite"], []),
+        ("cec", "cec.INI", wings["cec"].read_text(),
+         ["kinematics", "--from", str(wings["bcfit"]), "--current", "{dir}/A.MPF", "--current",
+          "{dir}/cec.INI", "-o", "{dir}/K.MPF"], ["K.MPF"]),
+        ("ini", "xyzac-trt.ini", (wings["trt"] / "xyzac-trt.ini").read_text(),
+         ["kinematics", "--from", "{dir}/fit.json", "--controller", "linuxcnc", "--current",
+          "{dir}/xyzac-trt.ini", "-o", "{dir}/KIN.ini"], ["KIN.ini"]),
+    ]
     for kind, name, text, args, outputs in surfaces:
         for what, variant, expect in _variants(text, rng, per_surface):
-            out.append(Case(f"gen-{kind}", f"{name} [{args[0]}]: {what}", {name: variant}, args, expect,
-                            outputs))
+            files = {**beside.get(kind, {}), name: variant}
+            out.append(Case(f"gen-{kind}", f"{name} [{args[0]}]: {what}", files, args, expect,
+                            outputs, unchanged=["target.sqlite"] if kind == "import" else []))
     return out
+
+
+def wing_inputs(work: Path, compgen: list[str]) -> dict[str, Path]:
+    """The wings' valid inputs, made as a user makes them: a probe log, a history export and
+    another store to import it into, a B/C machine's CEC tables and the fit for a second
+    round, and LinuxCNC's own xyzac-trt sample with the seed machine's pins."""
+    sys.path[:0] = [str(ROOT / "tests")]
+    from test_linuxcnc import sample_copy  # the tests' copy of Debian's sample
+
+    from compgen.machine_file import load_machine
+
+    def run(*args):
+        subprocess.run([*compgen, *map(str, args)], check=True, capture_output=True, cwd=work)
+
+    truth = ROOT / "examples" / "truth-table4.json"
+    run("simulate", "--machine", SEED, "--truth", truth, "--device", "probe", "--noise-um", "1",
+        "-o", "probe.log")
+    run("history", "add", FIT, "--db", "a.sqlite", "--date", "2026-03-01")
+    run("kinematics", "--from", FIT, "-o", "E.TAB", "--record", "--db", "a.sqlite", "--date", "2026-03-02",
+        "--despite-gate")
+    run("history", "export", "--db", "a.sqlite", "-o", "h.json")
+    run("history", "init", "--db", "target.sqlite")
+    (work / "bt.json").write_text('{"parameters": {"ECC:h2c": {"value": 4e-5, "unit": "rad"}, '
+                                  '"EYY:p1": {"value": 0.015, "unit": "mm"}}}')
+    bc = "bc-table-sinumerik840d"
+    for k in (1, 2):
+        run("simulate", "--machine", bc, "--truth", "bt.json", "--paths", "K4,K1,K2", "--noise-um", "0.5",
+            "--seed", k, "-o", f"bc{k}.csv")
+        run("fit", "--machine", bc, f"bc{k}.csv", "-o", f"bc{k}0.json")
+        run("fit", "--from", f"bc{k}0.json", "--add", "ECC:h2", "--add", "EYY:p1", "-o", f"bcfit{k}.json")
+    run("kinematics", "--from", "bcfit1.json", "--current", ROOT / "examples" / "bc-tcarr-current.txt",
+        "-o", "A.MPF")
+    sample_copy(work / "trt", load_machine(str(SEED)))
+    return {"probe": work / "probe.log", "export": work / "h.json", "target": work / "target.sqlite",
+            "cec": work / "A_CEC.INI", "carr": work / "A.MPF", "bcfit": work / "bcfit2.json",
+            "trt": work / "trt"}
 
 
 def run_case(case: Case, work: Path, compgen: list[str]) -> tuple[Case, str, str]:
     folder = Path(tempfile.mkdtemp(dir=work))
     (folder / "fit.json").write_text(json.dumps(_absolute(json.loads(FIT.read_text()))))
     for name, content in case.files.items():
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
         (folder / name).write_bytes(content if isinstance(content, bytes) else content.encode("utf-8"))
     if case.special == "fifo":
         os.mkfifo(folder / "data.csv")
@@ -418,6 +510,9 @@ def run_case(case: Case, work: Path, compgen: list[str]) -> tuple[Case, str, str
             break
     if "Traceback" in err or code == 3 or code not in (0, 1, 2):
         return case, "traceback", err.strip().splitlines()[-1] if err.strip() else f"exit {code}"
+    if case.secret and (case.secret in err + done.stdout
+                        or any(case.secret in p.name for p in folder.rglob("*"))):
+        return case, "leaked", (err + done.stdout)[:200]
     written = [p for p in folder.iterdir() if p.name not in before and p.is_file()]
     block = re.compile(rf"(?m)^\s*\d*\s*{re.escape(EVIL)}")      # the text as a block of its own
     injected = [p.name for p in written if block.search(p.read_text("latin-1"))]
@@ -430,8 +525,9 @@ def run_case(case: Case, work: Path, compgen: list[str]) -> tuple[Case, str, str
         if len(lines) != 1 or not lines[0].startswith("compgen: error:"):
             return case, "unclear refusal", err.strip()[:200]
         left = [o for o in case.outputs if (folder / o).exists() and o not in before]
-        if left:
-            return case, "half-written", ", ".join(left)
+        changed = [u for u in case.unchanged if (folder / u).read_bytes() != case.files[u]]
+        if left or changed:
+            return case, "half-written", ", ".join(left + changed)
         return case, "ok", lines[0][:160]
     if case.expect == "refuse":
         return case, "silent accept", ""
@@ -446,7 +542,7 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--show", action="store_true", help="print every case's outcome")
-    ap.add_argument("--generated", type=int, default=60, help="hostile variants per valid input (9 inputs)")
+    ap.add_argument("--generated", type=int, default=60, help="hostile variants per valid input (13 inputs)")
     args = ap.parse_args()
     compgen = [sys.executable, "-m", "compgen"]
     work = Path(tempfile.mkdtemp(prefix="compgen-fuzz-"))
@@ -460,22 +556,23 @@ def main() -> None:
         subprocess.run([*compgen, "measure-program", "--machine", str(SEED), "--path", "K2",
                         "--controller", ctl, "-o", str(programs[ctl])],
                        check=True, capture_output=True, cwd=ROOT)
+    wings = wing_inputs(work, compgen)
     rng = random.Random(args.seed)
     cases = [*csv_cases(rng), *machine_cases(), *fit_cases(), *current_cases(), *output_cases(),
-             *derived_cases(rng, programs, args.generated)]
+             *history_cases(), *derived_cases(rng, programs, args.generated, wings)]
     t0 = time.perf_counter()
     with ThreadPoolExecutor(args.jobs) as pool:
         results = list(pool.map(lambda c: run_case(c, work, compgen), cases))
     shutil.rmtree(work, ignore_errors=True)
     kinds = sorted({c.kind for c in cases})
     outcomes = ["ok", "traceback", "silent accept", "injected", "hang", "wrong refusal", "unclear refusal",
-                "half-written"]
+                "half-written", "leaked"]
     print(f"{len(cases)} cases in {time.perf_counter() - t0:.0f} s (seed {args.seed})")
-    print(f"{'kind':<10}{'cases':>6}" + "".join(f"{o:>16}" for o in outcomes))
+    print(f"{'kind':<12}{'cases':>6}" + "".join(f"{o:>16}" for o in outcomes))
     for k in kinds:
         mine = [r for r in results if r[0].kind == k]
-        print(f"{k:<10}{len(mine):>6}" + "".join(f"{sum(r[1] == o for r in mine):>16}" for o in outcomes))
-    print(f"{'all':<10}{len(results):>6}"
+        print(f"{k:<12}{len(mine):>6}" + "".join(f"{sum(r[1] == o for r in mine):>16}" for o in outcomes))
+    print(f"{'all':<12}{len(results):>6}"
           + "".join(f"{sum(r[1] == o for r in results):>16}" for o in outcomes))
     for case, outcome, detail in results:
         if outcome != "ok" or args.show:

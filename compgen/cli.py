@@ -251,6 +251,9 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
 def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, method, sign, output, force,
             record, taken, db):
     """Identify location errors (and any added effects) from R-test DATA files (CSV v1)."""
+    if record:
+        from .history import taken_at
+        taken = taken_at(taken)      # a bad --date is refused before fit.json is written
     if more and not base:
         raise CompgenError("--data adds to a fit's data: give --from FIT.json too",
                            hint=f"without a fit: {me()} fit --machine M DATA.csv … -o fit.json")
@@ -544,7 +547,8 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
     written = {str(p): _sha256(body) for p, body in files.items()}
     recorded = None
     if record:         # refused before anything is written: a fit's correction is recorded once
-        from .history import Recorded, record_edit, record_fit, refuse_second_edit
+        from .history import Recorded, record_edit, record_fit, refuse_second_edit, taken_at
+        taken = taken_at(taken)      # before a store is opened (or made) for it
         store = _store(db)
         try:
             refuse_second_edit(store, fit, machine, written, None)
@@ -688,7 +692,8 @@ def history_init_cmd(db, grant):
 
 
 def _record_fit(db, fit_file, machine_file, serial, taken, device, operator, temperatures):
-    from .history import record_fit
+    from .history import record_fit, taken_at
+    taken = taken_at(taken)          # before a store is opened (or made) for it
     fit = load_fit(fit_file)
     machine, sets = reload(fit, machine_file)
     _progress("checking that the fit explains its data")
@@ -871,8 +876,8 @@ def check_cmd(machine_file, data, serial, taken, operator, as_json, machine_chan
     machine = load_machine(machine_file)
     sets = [read_data(p, machine, warn=_warn) for p in data]
     _refuse_twice(sets)
-    store = _store(db, create=False)
     when = taken_at(taken)
+    store = _store(db, create=False)
     calibration, entries, edits = last_calibration(store, machine, serial, before=when)
     fit = identify(machine, sets, location_model(machine))
     result = check(machine, fit, sets, calibration, entries, edits, when, serial, machine_changed)

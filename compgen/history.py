@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import re
 import shlex
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -35,6 +36,8 @@ DEVICES = ("rtest", "probe")
 
 
 EARLIEST = datetime(1970, 1, 1, tzinfo=UTC)
+DATE = re.compile(r"[0-9]{4}-[0-9]{2}-[0-9]{2}(?:[T ][0-9]{2}:[0-9]{2}(?::[0-9]{2}(?:\.[0-9]{1,6})?)?"
+                  r"(?:Z|[+-][0-9]{2}:[0-9]{2})?)?")
 
 
 def taken_at(text: str | None) -> str:
@@ -43,6 +46,11 @@ def taken_at(text: str | None) -> str:
     time order as the text they are kept as. None before 1970 or after tomorrow."""
     if not text:
         return now()
+    # the forms people write, in ASCII digits: Python's own reader takes any character
+    # between date and time ("2026-03-01\n2027" is 20:27), weeks and other scripts' digits
+    if not isinstance(text, str) or not DATE.fullmatch(text):
+        raise CompgenError(f"{text!r} is not a date",
+                           hint="give it as 2026-07-15 or 2026-07-15T09:30+02:00") from None
     try:
         t = datetime.fromisoformat(text)
     except (ValueError, TypeError):

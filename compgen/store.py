@@ -129,9 +129,10 @@ def _is_postgres(url: str) -> bool:
     try:
         conninfo.conninfo_to_dict(url)
     except Exception:          # psycopg.ProgrammingError: libpq's own words, which may echo a password
-        raise CompgenError(f"--db {redact(url)!r} is neither a connection string libpq reads nor a plain "
-                           "file name", hint="give postgresql://user@host/db, host=… dbname=…, or "
-                                             "sqlite:///PATH for a file whose name holds '='") from None
+        raise CompgenError("--db is neither a connection string libpq reads nor a plain file name (it is not "
+                           "shown: it may hold a password)",
+                           hint="give postgresql://user@host/db, host=… dbname=…, or "
+                                "sqlite:///PATH for a file whose name holds '='") from None
     return True
 
 
@@ -301,9 +302,25 @@ def _is_psycopg_error(exc: Exception) -> bool:
 
 
 def _scrub(text: str, url: str) -> str:
-    """A driver's message with any password from ``url`` taken out."""
-    m = re.search(r"://[^/@:]*:([^@]*)@", url) or re.search(r"password\s*=\s*'?([^'\s]+)", url, re.I)
-    return text.replace(m[1], "***") if m and m[1] else text
+    """A driver's message with any password from ``url`` taken out: the one libpq reads,
+    and, in a URL, the user information to its last "@" (a password holding "@" is read by
+    libpq as part of the host, which its messages then name)."""
+    secrets = set()
+    try:
+        from psycopg import conninfo
+        secrets.add(conninfo.conninfo_to_dict(url).get("password") or "")
+    except Exception:          # no psycopg, or a DSN libpq does not read: the patterns below
+        pass
+    scheme = re.match(r"(?i)[a-z][a-z0-9+.-]*://", url)
+    if scheme:
+        rest = url[scheme.end():]
+        info = rest[:rest.rfind("@", 0, rest.find("/") if "/" in rest else len(rest))]
+        if ":" in info:
+            secrets |= {info.split(":", 1)[1], *info.split(":", 1)[1].split("@")}
+    secrets |= {m[1] for m in re.finditer(r"password\s*=\s*'?([^'\s]+)", url, re.I)}
+    for secret in sorted((x for x in secrets if len(x) >= 3), key=len, reverse=True):
+        text = text.replace(secret, "***")
+    return text
 
 
 def open_store(given: str | None = None, create: bool = True) -> Store:

@@ -446,7 +446,8 @@ def test_dates_are_kept_as_utc_instants(text, stored):
 
 
 @pytest.mark.parametrize("text", ["9999-01-01", "1969-12-31T23:59+00:00", "2026-13-01", "yesterday",
-                                  "3000-01-01T00:00Z"])
+                                  "3000-01-01T00:00Z", "2026-03-01\n2027", "2026-03-01x10:00", "2026-W09",
+                                  "\u0662\u0660\u0662\u0666-03-01"])
 def test_a_date_no_measurement_was_taken_on_is_refused(text):
     with pytest.raises(CompgenError, match="is not a date"):
         H.taken_at(text)
@@ -565,6 +566,8 @@ def test_the_drift_line_kept_as_sums_is_the_weighted_least_squares_line():
 def test_a_serial_is_one_line_by_the_machine_files_rule(tmp_path, fit_file):
     rc, _, err = run("history", "add", fit_file, "--serial", "A\nB", "--db", tmp_path / "h.sqlite")
     assert rc == 2 and "not a valid serial" in err and len(err.splitlines()) == 1, err
+    rc, _, err = run("history", "add", fit_file, "--date", "9999-01-01", "--db", tmp_path / "h.sqlite")
+    assert rc == 2 and "not a date" in err and not (tmp_path / "h.sqlite").exists(), err   # no store made
 
 
 def test_check_refuses_a_machine_file_changed_since_the_calibration(year, tmp_path):
@@ -699,3 +702,16 @@ def test_a_machine_name_with_mathtext_and_a_writers_line_break_print_as_written(
         ln.startswith("PASS") for ln in out.splitlines()), out
     rc, out, err = run("history", "fleet")
     assert rc == 0 and not any(ln.startswith("PASS") for ln in out.splitlines()), out
+
+
+@pytest.mark.parametrize("dsn", ["postgres://u:p@s3cr3t-Pw@127.0.0.1:1/db", "s3cr3t-Pw=x",
+                                 "host=127.0.0.1 port=1 password = s3cr3t-Pw", "password='s3cr3t-Pw x' port=1"])
+def test_no_message_shows_a_password_however_libpq_reads_the_dsn(tmp_path, dsn):
+    """libpq reads "u:p@s3cr3t-Pw@host" as the password p and the host "s3cr3t-Pw@host",
+    and its message names that host; a DSN it cannot read is not echoed at all. Nor is a
+    bad --date leaving a store behind."""
+    for args in (["history", "list"], ["history", "init"]):
+        rc, out, err = run(*args, "--db", dsn)
+        assert rc == 2 and "s3cr3t" not in out + err and len(err.splitlines()) == 1, err
+    rc, _, err = run("history", "list", "--db", tmp_path / "h.sqlite")
+    assert rc == 2 and not (tmp_path / "h.sqlite").exists()
