@@ -705,7 +705,8 @@ def test_a_machine_name_with_mathtext_and_a_writers_line_break_print_as_written(
 
 
 @pytest.mark.parametrize("dsn", ["postgres://u:p@s3cr3t-Pw@127.0.0.1:1/db", "s3cr3t-Pw=x",
-                                 "host=127.0.0.1 port=1 password = s3cr3t-Pw", "password='s3cr3t-Pw x' port=1"])
+                                 "host=127.0.0.1 port=1 password = s3cr3t-Pw",
+                                 "password='s3cr3t-Pw x' port=1"])
 def test_no_message_shows_a_password_however_libpq_reads_the_dsn(tmp_path, dsn):
     """libpq reads "u:p@s3cr3t-Pw@host" as the password p and the host "s3cr3t-Pw@host",
     and its message names that host; a DSN it cannot read is not echoed at all. Nor is a
