@@ -776,6 +776,9 @@ def _valid_rows(t: dict[str, list], where: str) -> None:
         for row in rows:
             if not isinstance(row, dict) or type(row.get("id")) is not int:
                 bad(table, row if isinstance(row, dict) else {}, "no whole-number id")
+            if set(row) != set(_COLUMNS[table]):
+                odd = sorted(set(row) ^ set(_COLUMNS[table]))
+                bad(table, row, f"its columns are not a {table[:-1]}'s ({', '.join(odd)})")
     ids = {table: {r["id"] for r in rows} for table, rows in t.items()}
     for table, refs in (("sessions", {"machine_id": "machines"}), ("fits", {"session_id": "sessions"}),
                         ("edits", {"machine_id": "machines", "fit_id": "fits"}),

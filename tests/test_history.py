@@ -489,6 +489,9 @@ def _first(tables, name):
     (lambda t: _first(t, "machines").update(serial="A/B C"), "machines row .*not a valid serial"),
     (lambda t: _first(t, "edits").update(controller="fanuc"), "controller is none compgen knows"),
     (lambda t: _first(t, "edits").update(taken="tomorrow"), "edits row .*is not a date"),
+    (lambda t: _first(t, "sessions").pop("machine_sha256"), "sessions row .*columns are not a session's "
+                                                            r"\(machine_sha256\)"),
+    (lambda t: _first(t, "fits").update(recorded_by="owner"), "columns are not a fit's"),
 ])
 def test_an_import_with_a_damaged_row_is_refused_and_leaves_the_store_as_it_was(tmp_path, year, monkeypatch,
                                                                                damage, says):
