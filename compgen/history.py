@@ -856,6 +856,21 @@ def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str
         held = {(session_machine[f["session_id"]], f["marker"]) for f in t["fits"]}
     except (KeyError, TypeError) as exc:
         raise CompgenError(f"the export is incomplete or damaged ({exc!r})", where=where) from None
+    # a machine of the same name and serial here is the same machine only if it was measured
+    # with a machine file this store has seen for it (two plants' "DMU-50" without serials are
+    # two machines, never merged silently)
+    files_here: dict[tuple, set] = {}
+    for r in store.rows("SELECT m.name, m.serial, s.machine_sha256 FROM sessions s "
+                        "JOIN machines m ON m.id = s.machine_id"):
+        files_here.setdefault((r["name"], r["serial"]), set()).add(r["machine_sha256"])
+    for s in t["sessions"]:
+        key = machines[s["machine_id"]]
+        if key in files_here and s["machine_sha256"] not in files_here[key]:
+            raise CompgenError(f"machine {key[0]!r}{f' serial {key[1]}' if key[1] else ''} of the export was "
+                               "measured with a machine file this store never saw for it: another machine "
+                               "of the same name?", where=where,
+                               hint="give each machine its serial in its machine file, or import into "
+                                    "another store; nothing was imported")
     mine = {((r["name"], r["serial"]), r["marker"]) for r in store.rows(
         "SELECT m.name, m.serial, f.marker FROM fits f JOIN sessions s ON s.id = f.session_id "
         "JOIN machines m ON m.id = s.machine_id")}

@@ -378,6 +378,17 @@ def test_another_stores_history_is_imported_only_when_asked_and_only_once(year, 
     _record(tmp_path / "b.sqlite", year).close()                      # the same fits, recorded again
     rc, _, err = run("history", "import", "a.json", "--db", "b.sqlite")
     assert rc == 2 and "12 fit(s) of the export are already here" in err
+    # another plant's machine of the same name (no serial), measured with its own machine file
+    (tmp_path / "other.toml").write_text((ROOT / "machines" / "ac-trunnion-itnc530.toml").read_text()
+                                         + "\n# the other plant's\n")
+    with open_store(tmp_path / "c.sqlite") as c:
+        fit = year[2][0][1]
+        other = load_machine(str(tmp_path / "other.toml"))
+        H.record_fit(c, replace(fit, machine={**fit.machine, "sha256": ""}), other, taken="2025-06-01")
+    before = (tmp_path / "c.sqlite").read_bytes()
+    rc, _, err = run("history", "import", "a.json", "--db", "c.sqlite")
+    assert rc == 2 and "another machine of the same name" in err, err
+    assert (tmp_path / "c.sqlite").read_bytes() == before
 
 
 def test_a_store_of_the_first_schema_is_migrated_and_keeps_its_rows(tmp_path, fit_file, monkeypatch):
