@@ -63,6 +63,13 @@ def taken_at(text: str | None) -> str:
     return t.isoformat(timespec="seconds")
 
 
+def _utc(text: str) -> str:
+    """A stored date as the UTC instant ``taken_at`` keeps (rows of an older compgen kept
+    the offset they were given; this compgen's rows come back as they are)."""
+    t = datetime.fromisoformat(text)
+    return (t if t.tzinfo else t.replace(tzinfo=UTC)).astimezone(UTC).isoformat(timespec="seconds")
+
+
 def _days(a: str, b: str) -> float:
     return (datetime.fromisoformat(b) - datetime.fromisoformat(a)).total_seconds() / 86400.0
 
@@ -292,6 +299,11 @@ def _entries(store: Store, mid: int) -> tuple[list[Entry], list[dict]]:
     for e in edits:
         e["corrects"] = json.loads(e["corrects"])
         e["written"], e["loaded"] = json.loads(e["written"]), json.loads(e["loaded"])
+        e["taken"] = _utc(e["taken"])
+    for f in fits:
+        f["taken"] = _utc(f["taken"])
+    fits.sort(key=lambda f: (f["taken"], f["id"]))       # as instants: rows an older compgen kept
+    edits.sort(key=lambda e: (e["taken"], e["id"]))      # with their offsets order as time does
     out = []
     corrected: dict[str, float] = {}
     done = 0
@@ -449,6 +461,11 @@ def fleet(store: Store, every_days: float, today: str | None = None) -> list[dic
                             "ORDER BY s.taken, c.id",
                             (m["id"],))
         edits = store.rows("SELECT taken FROM edits WHERE machine_id = ? ORDER BY taken", (m["id"],))
+        for row in (*fits, *checks, *edits):
+            row["taken"] = _utc(row["taken"])
+        fits.sort(key=lambda f: f["taken"])
+        checks.sort(key=lambda c: c["taken"])
+        edits.sort(key=lambda e: e["taken"])
         calib = [f for f in fits if f["kind"] == "calibration" and f["verdict"] == "accepted"]
         last = max([f["taken"] for f in fits] or [""])
         due = (datetime.fromisoformat(last).timestamp() + every_days * 86400) if last else None

@@ -730,3 +730,22 @@ def test_no_message_shows_a_password_however_libpq_reads_the_dsn(tmp_path, dsn):
         assert rc == 2 and "s3cr3t" not in out + err and len(err.splitlines()) == 1, err
     rc, _, err = run("history", "list", "--db", tmp_path / "h.sqlite")
     assert rc == 2 and not (tmp_path / "h.sqlite").exists()
+
+
+def test_rows_an_older_compgen_kept_with_their_offsets_are_read_in_time_order(tmp_path, year):
+    """Before dates were kept as UTC instants, "2026-03-01T10:00:00+02:00" (08:00 UTC) was
+    stored as given: as text it sorts after "2026-03-01T09:00:00+00:00", in time before."""
+    machine, _, fits, _ = year
+    with open_store(tmp_path / "h.sqlite") as store:
+        H.record_fit(store, fits[0][1], machine, taken="2026-03-01T09:00:00+00:00")
+        session = store.rows("SELECT * FROM sessions")[0]
+        fit = store.rows("SELECT * FROM fits")[0]
+        with store.writing():
+            sid = store.insert("sessions", {k: v for k, v in session.items() if k != "id"}
+                               | {"taken": "2026-03-01T10:00:00+02:00"})
+            store.insert("fits", {k: v for k, v in fit.items() if k not in ("id", "content_sha256")}
+                         | {"session_id": sid, "marker": "fit:older"})
+        t = H.trend(store, machine)
+        assert [(e.marker, e.taken) for e in t.entries] == [
+            ("fit:older", "2026-03-01T08:00:00+00:00"), (fit["marker"], "2026-03-01T09:00:00+00:00")]
+        assert H.fleet(store, 90.0)[0]["last_calibration"] == "2026-03-01T09:00:00+00:00"
