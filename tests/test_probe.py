@@ -5,6 +5,8 @@ with Gaussian trigger noise along the radius."""
 
 import csv
 import json
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -259,3 +261,34 @@ def test_a_touch_or_a_pose_logged_twice_is_refused_with_its_line(tmp_path):
         t += [[r[0], str(99), *r[2:]] for r in t if r[1] == "3"]
     log = write_log(tmp_path / "n.log", noise_um=0.0, damage=again)
     sphere_centres(read_probe_log(log, machine), machine)
+
+
+def test_a_pose_whose_sphere_stood_elsewhere_is_refused_at_its_own_line(tmp_path):
+    """Pose 4's touches 6 mm off in Y (the sphere knocked, or another pose's lines): named
+    by pose and line, not the log's first far pose or coordinate."""
+    def knocked(t):
+        for r in t:
+            if r[1] == "4":
+                r[5] = f"{float(r[5]) + 6.0:.5f}"
+    first = next(i for i, r in enumerate(_touches()) if r[1] == "4")
+    _refused(tmp_path, write_log(tmp_path / "k.log", damage=knocked), "pose 4", "from where the machine file",
+             f"k.log:{line_of(first)}:")
+
+
+@pytest.mark.parametrize("after", [1, 2])
+def test_touches_of_one_pose_apart_are_refused_at_the_line_between(tmp_path, after):
+    """Pose 3's first touch among pose 2's, after its first or its second: the line named is
+    the stranger's."""
+    def apart(t):
+        i = next(k for k, r in enumerate(t) if r[1] == "2")
+        j = next(k for k, r in enumerate(t) if r[1] == "3")
+        t.insert(i + after, t.pop(j))
+    i = next(k for k, r in enumerate(_touches()) if r[1] == "2")
+    _refused(tmp_path, write_log(tmp_path / "k.log", damage=apart), "pose 2", "are not together",
+             f"k.log:{line_of(i + after)}:")
+
+
+def _touches():
+    got = []
+    write_log(Path(tempfile.mkdtemp()) / "t.log", damage=got.extend)
+    return got
