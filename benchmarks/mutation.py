@@ -35,10 +35,14 @@ TESTS = {
     "compgen/kinematics.py": ["tests/test_kinematics.py", "tests/test_effects.py", "tests/test_identify.py"],
     "compgen/units.py": ["tests/test_units.py", "tests/test_edge.py"],
     "compgen/correction.py": [*EDITS, "tests/test_edge.py"],
-    "compgen/emit/heidenhain.py": [*EDITS, "tests/test_tab.py", "tests/test_edge.py", *PROGRAMS],
+    "compgen/emit/heidenhain.py": [*EDITS, "tests/test_tab.py", "tests/test_edge.py", *PROGRAMS,
+                                   "tests/test_probe_programs.py"],
     "compgen/emit/tab.py": ["tests/test_tab.py", "tests/test_kinematics_edit.py"],
-    "compgen/emit/sinumerik.py": [*EDITS, "tests/test_edge.py", *PROGRAMS],
-    "compgen/emit/linuxcnc.py": [*EDITS, "tests/test_edge.py", *PROGRAMS],
+    # each control's probing programs, second rounds and configuration are its writer's too
+    "compgen/emit/sinumerik.py": [*EDITS, "tests/test_edge.py", *PROGRAMS, "tests/test_probe_programs.py",
+                                  "tests/test_table_rounds.py"],
+    "compgen/emit/linuxcnc.py": [*EDITS, "tests/test_edge.py", *PROGRAMS, "tests/test_probe_programs.py",
+                                 "tests/test_table_rounds.py", "tests/test_linuxcnc_config.py"],
     "compgen/motion.py": [*HOSTILE, "tests/test_probe_programs.py"],    # probing moves are motion's too
     "compgen/emit/programs.py": [*HOSTILE, "tests/test_trt.py"],        # read back under trt's senses
     "compgen/effects.py": ["tests/test_effects.py", "tests/test_kinematics.py", "tests/test_shapes.py"],

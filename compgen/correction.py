@@ -47,6 +47,14 @@ class CompTable:
     unit: str
     points: tuple[float, ...] = ()   # the input positions where they are uneven (a LinuxCNC table's)
 
+    def __post_init__(self):
+        # uneven positions and the range must say the same: start and stop are what every
+        # control's writer and the composing of rounds read
+        if self.points and (len(self.points) != len(self.values) or self.points[0] != self.start
+                            or self.points[-1] != self.stop or any(np.diff(self.points) <= 0)):
+            raise ValueError(f"{self.effect}: its positions {self.points[:3]}… do not run from {self.start} "
+                             f"to {self.stop} over its {len(self.values)} values")
+
     @property
     def step(self) -> float:
         return (self.stop - self.start) / (len(self.values) - 1)

@@ -292,3 +292,20 @@ def _touches():
     got = []
     write_log(Path(tempfile.mkdtemp()) / "t.log", damage=got.extend)
     return got
+
+
+def test_a_log_without_times_is_written_without_its_t_column_and_reads_back(tmp_path):
+    """Poses with no times (a pose list without t): the log's header drops t with the rows."""
+    from compgen.kinematics import Poses
+    from compgen.probe import format_probe_log, need_probe, probe_poses, simulate_touches
+
+    machine = load_machine(SEED_MACHINE)
+    timed = probe_poses(machine, ["K4"])
+    poses = Poses(timed.q, timed.ball, np.full(len(timed), np.nan), timed.path)
+    tips, directions = simulate_touches(machine, poses, np.zeros((len(poses), 3)), 0.5,
+                                        np.random.default_rng(1))
+    text = format_probe_log(machine, need_probe(machine), poses, tips, directions)
+    assert text.splitlines()[4].startswith("path,pose,A,C,X,Y,Z,")
+    (tmp_path / "u.log").write_text(text)
+    log = read_probe_log(tmp_path / "u.log", machine)
+    assert np.isnan(log.t).all() and len(sphere_centres(log, machine).centre) == len(poses)

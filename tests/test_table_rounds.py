@@ -362,3 +362,17 @@ def test_the_machine_file_declares_the_records_coarse_offsets(tmp_path):
     (tmp_path / "m.toml").write_text(text.replace("l4 =", "l5 ="))
     with pytest.raises(CompgenError, match="unknown key l5"):
         load_machine(tmp_path / "m.toml")
+
+
+@pytest.mark.parametrize("travel, step", [((0.0, 360.0), 10.0), ((-180.0, 180.0), 10.0), ((0.0, 370.0), 20.0),
+                                          ((-200.0, 160.0), 10.0), ((0.0, 36.0), 1.0), ((0.0, 37.0), 2.0)])
+def test_a_generated_table_has_at_most_37_points_on_the_finest_round_step(travel, step):
+    """0..360 at 10 is 37 points; 0..370 at 10 would be 38: the next round step, 20, ends
+    beyond the end (no round step divides 370 within 37 points but 20's multiples cover it)."""
+    from types import SimpleNamespace
+
+    from compgen.correction import TABLE_POINTS, _grid
+    grid = _grid(SimpleNamespace(full_turn=False, travel=travel, name="X"))
+    assert len(grid) <= TABLE_POINTS == 37
+    assert grid[1] - grid[0] == pytest.approx(step)
+    assert grid[0] <= travel[0] and grid[-1] >= travel[1]
