@@ -135,6 +135,14 @@ def test_json_contract(seed_machine, poses):
     assert rms == sorted(rms)                                 # best first
     for c in d["candidates"]:                                 # every name is one --add takes
         compose(seed_machine, ["XOC"], [c["effect"]])
+    # the figures read back against their definitions: RMS over every reading as the fit has
+    # it, units as a person reads them, a turning axis's terms 1 to 4 per revolution
+    fit = identify(seed_machine, data)
+    assert d["rms_um"] == pytest.approx(fit.residual["rms_um"], rel=1e-9)
+    assert d["sigma_um"] == pytest.approx(fit.residual["sigma_um"], rel=1e-9)
+    assert d["readings"] == 3 * len(data[0].poses)
+    assert set(d["bias_sensitivity"]["units"].values()) <= {"µm", "″"}
+    assert set(d["per_axis"]["C"]) == {"1/rev", "2/rev", "3/rev", "4/rev"}
 
 
 def test_diagnose_whole_catalogue_on_the_bc_machine(bc_machine):

@@ -124,3 +124,26 @@ def test_products_a_block_at_a_time_equal_those_of_the_whole_columns(seed_machin
             np.testing.assert_allclose(cc, c.T @ c, rtol=0, atol=1e-12 * scale, err_msg=e.name)
             np.testing.assert_allclose(qc, Q.T @ c, rtol=0, atol=1e-12 * np.sqrt(scale), err_msg=e.name)
             np.testing.assert_allclose(cr, c.T @ r, rtol=0, atol=1e-12 * np.sqrt(scale) * 50, err_msg=e.name)
+
+
+def test_the_scans_sums_are_the_least_squares_sines_sum_of_squares():
+    """The scan's sum of squares at each frequency (from running phasors) is what the least-
+    squares sine with a constant removes, fitted anew; with the model's columns taken out too."""
+    from compgen.spectrum import _drops, _fit
+
+    rng = np.random.default_rng(4)
+    x = np.sort(rng.uniform(0, 400, 90))                 # uneven, as poses are: cos and sin correlate
+    y = rng.normal(0, 1, (90, 3)) + 0.7 * np.sin(2 * np.pi * x / 37 + np.array([[0.4], [1.0], [2.0]])).T
+    y -= y.mean(axis=0)
+    grid = np.linspace(1 / 300, 1 / 5, 40)
+    # the model's columns as they come: orthonormal, holding a constant (the set-up terms),
+    # not centred; one block per direction, and the residual orthogonal to its block
+    Qd = np.stack([np.linalg.qr(np.column_stack([np.ones_like(x), x / 400 + d, np.cos(x / (50 + d))]))[0]
+                   for d in range(3)])
+    for blocks in (None, Qd):
+        r = y if blocks is None else np.column_stack([y[:, d] - blocks[d] @ (blocks[d].T @ y[:, d])
+                                                      for d in range(3)])
+        got = _drops(x, r, grid, blocks)
+        for d in range(3):
+            want = [_fit(x, r[:, d], f, None if blocks is None else blocks[d])[0] for f in grid]
+            np.testing.assert_allclose(got[:, d], want, rtol=1e-7, atol=1e-9)
