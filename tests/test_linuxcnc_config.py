@@ -205,6 +205,15 @@ def test_a_joint_table_beyond_the_limits_is_refused_with_its_line(tmp_path, trt,
         linuxcnc.loaded_joint_tables(seed_machine, state)
 
 
+def test_a_table_for_a_joint_the_trt_module_lacks_is_refused_with_its_line(tmp_path, trt, seed_machine):
+    """The trt modules have joints 0-4 (X Y Z and the two rotary axes)."""
+    module, nominal = trt
+    state = _config(tmp_path, "[HAL]\nHALFILE = a.hal\n[JOINT_5]\nCOMP_FILE = w.comp\nCOMP_FILE_TYPE = 1\n",
+                    a__hal=_setp(module, nominal), w__comp="-100 0 0\n100 0 0\n")
+    with pytest.raises(CompgenError, match=r"joint 5 has a COMP_FILE, and the trt module has joints 0-4"):
+        linuxcnc.loaded_joint_tables(seed_machine, state)
+
+
 def test_the_configuration_to_start_with_holds_exactly_the_correction(tmp_path, trt, seed_machine):
     """Pins set in three places (a HALCMD line, a HAL file, an INI key a HAL line takes):
     the new INI, evaluated as LinuxCNC starts it, holds the pins of the edit written with no
