@@ -31,7 +31,8 @@ PROGRAMS = ["tests/test_motion.py", "tests/test_programs.py"]     # the controll
 HOSTILE = [*PROGRAMS, "tests/test_hostile_programs.py"]            # what check-program must refuse
 TESTS = {
     "compgen/lines.py": ["tests/test_lines.py", *EDITS],
-    "compgen/identify.py": ["tests/test_identify.py", "tests/test_startup.py"],
+    "compgen/identify.py": ["tests/test_identify.py", "tests/test_startup.py",
+                            "tests/test_probe.py"],        # two devices' variance components
     "compgen/kinematics.py": ["tests/test_kinematics.py", "tests/test_effects.py", "tests/test_identify.py"],
     "compgen/units.py": ["tests/test_units.py", "tests/test_edge.py"],
     "compgen/correction.py": [*EDITS, "tests/test_edge.py"],
