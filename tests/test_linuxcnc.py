@@ -101,6 +101,20 @@ def _ours(marker: str) -> list[int]:
     return pids
 
 
+def _milltasks() -> list[int]:
+    """Live LinuxCNC task processes on the machine (a zombie left for init to reap, as a
+    container's init may leave it a while, is no running LinuxCNC)."""
+    pids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            name, state = re.match(r"\d+ \((.*)\) (\S)", stat.read_text()).groups()
+        except (OSError, AttributeError):
+            continue
+        if name == "milltask" and state != "Z":
+            pids.append(int(stat.parent.name))
+    return pids
+
+
 def end_linuxcnc(marker: str, grace_s: float = 10.0) -> None:
     """End every process of the run named by ``marker``, whatever state it is in: the
     launcher's own shutdown first (SIGTERM), then SIGKILL for what is left."""
@@ -115,7 +129,7 @@ def end_linuxcnc(marker: str, grace_s: float = 10.0) -> None:
             break
     assert not _ours(marker), f"LinuxCNC processes {_ours(marker)} survived SIGKILL"
     lock = Path("/tmp/linuxcnc.lock")
-    if lock.exists() and subprocess.run(["pgrep", "-x", "milltask"], capture_output=True).returncode:
+    if lock.exists() and not _milltasks():
         lock.unlink()
 
 
@@ -176,10 +190,10 @@ def launch(folder: Path, ini: Path, more_env: dict[str, str], budget_s: float = 
     with open(Path(tempfile.gettempdir()) / "compgen-linuxcnc-test.lock", "w") as guard:
         fcntl.flock(guard, fcntl.LOCK_EX)
         lock = Path("/tmp/linuxcnc.lock")     # LinuxCNC's own, one path for every run on the machine
-        running = subprocess.run(["pgrep", "-x", "milltask"], capture_output=True, text=True)
-        if running.returncode == 0:         # another LinuxCNC: its launcher would offer to end it
-            pytest.fail(f"another LinuxCNC runs on this machine (milltask {running.stdout.split()}); the "
-                        "test neither waits for it nor ends it: run the test when it has stopped")
+        running = _milltasks()
+        if running:                         # another LinuxCNC: its launcher would offer to end it
+            pytest.fail(f"another LinuxCNC runs on this machine (milltask {running}); the test neither "
+                        "waits for it nor ends it: run the test when it has stopped")
         if lock.exists():                   # left by a run that died: the launcher would ask
             lock.unlink()
         # a terminal as its input: the start script then prints to the pipe what it otherwise
