@@ -53,8 +53,7 @@ TESTS = {
     "compgen/emit/probing.py": ["tests/test_probe_programs.py", "tests/test_probe.py"],
     "compgen/store.py": ["tests/test_history.py"],
     "compgen/history.py": ["tests/test_history.py"],
-    "compgen/spectrum.py": ["tests/test_diagnose_stats.py", "tests/test_diagnose.py",
-                            "tests/test_streaming.py"],      # a dense session's scan on a subset
+    "compgen/spectrum.py": ["tests/test_diagnose_stats.py", "tests/test_diagnose.py"],
     "compgen/significance.py": ["tests/test_diagnose_stats.py", "tests/test_diagnose.py"],
     "compgen/noise.py": ["tests/test_noise.py", *(f"tests/test_diagnose.py::test_{t}" for t in (
         "outliers_are_listed_where_the_user_finds_them_and_flag_nothing",
