@@ -147,3 +147,28 @@ def test_the_scans_sums_are_the_least_squares_sines_sum_of_squares():
         for d in range(3):
             want = [_fit(x, r[:, d], f, None if blocks is None else blocks[d])[0] for f in grid]
             np.testing.assert_allclose(got[:, d], want, rtol=1e-7, atol=1e-9)
+
+
+def test_a_periodic_drift_in_a_dense_session_is_found_at_its_period_in_seconds():
+    """13 000 poses (denser than the scan's 12 000: scanned on an even subset, refined and
+    judged on all): a 2 µm sine in time of period 900 s is the time line, its period in s."""
+    from compgen.kinematics import Poses
+    from compgen.machine_file import load_machine
+    from compgen.paths import generate
+    from compgen.spectrum import SCAN_POSES, strongest_lines
+
+    machine = load_machine("ac-trunnion-itnc530")
+    k4 = generate(machine, ["K4"])
+    reps = -(-13_000 // len(k4))
+    q = np.tile(k4.q, (reps, 1))[:13_000]
+    n = len(q)
+    assert n > SCAN_POSES
+    t = np.arange(n) * 0.5
+    poses = Poses(q, np.tile(k4.ball, (reps, 1))[:n], t, np.array(["K4"] * n))
+    rng = np.random.default_rng(2)
+    r = rng.normal(0, 0.3e-3, (n, 3))
+    r[:, 1] += 2e-3 * np.sin(2 * np.pi * t / 900.0 + 0.3)
+    r -= r.mean(axis=0)
+    line = next(x for x in strongest_lines(machine, poses, r) if x.against == "time")
+    assert line.direction == "dY" and line.period == pytest.approx(900.0, rel=2e-3)
+    assert line.amplitude_um == pytest.approx(2.0, rel=0.05) and line.p_value < 1e-6
