@@ -306,6 +306,8 @@ def test_a_log_without_times_is_written_without_its_t_column_and_reads_back(tmp_
                                         np.random.default_rng(1))
     text = format_probe_log(machine, need_probe(machine), poses, tips, directions)
     assert text.splitlines()[4].startswith("path,pose,A,C,X,Y,Z,")
+    numbers = sorted({int(line.split(",")[1]) for line in text.splitlines()[5:]})
+    assert numbers == list(range(1, len(poses) + 1))          # poses numbered from 1 (the contract)
     (tmp_path / "u.log").write_text(text)
     log = read_probe_log(tmp_path / "u.log", machine)
     assert np.isnan(log.t).all() and len(sphere_centres(log, machine).centre) == len(poses)

@@ -376,3 +376,18 @@ def test_a_generated_table_has_at_most_37_points_on_the_finest_round_step(travel
     assert len(grid) <= TABLE_POINTS == 37
     assert grid[1] - grid[0] == pytest.approx(step)
     assert grid[0] <= travel[0] and grid[-1] >= travel[1]
+
+
+def test_a_modulo_table_unrolled_over_the_travel_repeats_its_turn_on_the_same_step():
+    """For a control that does not wrap a table's input: the turn's values at every position
+    of the travel (clipped to ±span) on the table's own step, as the wrapped table gives them."""
+    from compgen.correction import unrolled
+    turn = CompTable("ECC", "", "C", "C", 30.0, 390.0, tuple(np.sin(np.radians(np.arange(30, 391, 10)) * 2)),
+                     True, "deg")
+    plain = unrolled(turn, (-400.0, 500.0), 2520.0)
+    assert (plain.start, plain.stop, plain.modulo, plain.step) == (-400.0, 500.0, False, 10.0)
+    grid = np.arange(-400.0, 501.0, 10.0)
+    np.testing.assert_allclose(plain.values, turn.at(grid), atol=1e-12)
+    np.testing.assert_allclose(plain.values, np.sin(np.radians(grid) * 2), atol=1e-12)
+    clipped = unrolled(turn, (-4000.0, 4000.0), 720.0)
+    assert (clipped.start, clipped.stop) == (-720.0, 720.0)
