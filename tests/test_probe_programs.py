@@ -158,6 +158,9 @@ def test_bad_probe_program_options_get_one_line(tmp_path, args, expected):
     ((0.01, 0.0, 0.0), (-0.5, 0.0, 0.0), None),             # starting 0.01 mm off the sphere
     ((0.004, 0.0, 0.0), (-0.004, 0.0, 0.0), None),          # a move of 8 µm that touches
     ((5.0, 0.0, 0.0), (0.5, 0.0, 0.0), "ends 0.50 mm short of it"),
+    ((5.0, 0.0, 0.0), (0.01, 0.0, 0.0), "ends 0.01 mm short of it"),
+    # 2 mm beside the line through the centre: its end is √((ρ + 1)² + 2²) − ρ from the sphere
+    ((5.0, 2.0, 0.0), (1.0, 2.0, 0.0), "ends 1.13 mm short of it"),
     ((5.0, 0.0, 0.0), (9.0, 0.0, 0.0), "misses it"),        # moving away
     ((-0.5, 0.0, 0.0), (-2.0, 0.0, 0.0), "starts inside the sphere"),
     ((0.01, 0.0, 0.0), (2.0, 0.0, 0.0), "misses it"),       # 0.01 mm off, away

@@ -391,3 +391,23 @@ def test_a_modulo_table_unrolled_over_the_travel_repeats_its_turn_on_the_same_st
     np.testing.assert_allclose(plain.values, np.sin(np.radians(grid) * 2), atol=1e-12)
     clipped = unrolled(turn, (-4000.0, 4000.0), 720.0)
     assert (clipped.start, clipped.stop) == (-720.0, 720.0)
+
+
+def test_a_linuxcnc_joint_table_of_a_long_travel_turn_spans_the_travel_within_1260_degrees(seed_machine):
+    """LinuxCNC does not wrap a joint's table: C's 2/rev table repeats its turn over C's
+    travel (±720° on the seed machine) and, for a longer travel, over ±1260° (what the
+    README promises; 256 lines at most)."""
+    from dataclasses import replace
+
+    from compgen.emit import linuxcnc
+    model = [*(n for n in location_model(seed_machine) if n[1] == "O" and n[0] in "XYZ"), *TABLES]
+    data = simulate(seed_machine, LINUX_TRUTH, generate(seed_machine, ["K4", "K1", "K2"]), NOISE_UM,
+                    np.random.default_rng(3))
+    fit = identify(seed_machine, [data], model)
+    long = replace(seed_machine, workpiece=tuple(replace(a, travel=(-3000.0, 3000.0)) if a.name == "C" else a
+                                                 for a in seed_machine.workpiece))
+    for machine, span in ((seed_machine, 720.0), (long, 1260.0)):
+        files = kinematics_edit(machine, fit, "linuxcnc", None, "", "R", "0", "d", stem="R").files
+        c = linuxcnc.read_comp(files[".C.comp"], machine, ".C.comp")
+        assert (c.grid[0], c.grid[-1]) == (-span, span) and len(c.grid) <= linuxcnc.COMP_ENTRIES
+        np.testing.assert_allclose(c.at(c.grid), c.at(np.mod(c.grid, 360.0)), atol=2e-6)   # one turn repeated

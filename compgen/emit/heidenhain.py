@@ -29,7 +29,8 @@ MM_DECIMALS = 5          # 0.01 µm
 DEG_DECIMALS = 7         # 0.0004″
 # a table's rounding may lose up to the correction's uncertainty, and never less than this:
 # half a typical R-test's noise (0.5 µm), which no re-measurement could tell; 0.25″ moves a
-# ball 200 mm from the axis by 0.24 µm
+# ball 200 mm from the axis by 0.24 µm. Both lie far above compgen's own rounding (half of
+# 10⁻⁵ mm, 10⁻⁶ inch or 10⁻⁷ °), so that never decides.
 LOSS_FLOOR_MM, LOSS_FLOOR_DEG = 0.25e-3, 0.25 / 3600.0
 # a Trans row naming its ISO symbol, in a table (``NR KEY AXIS COORD DOC``) or a change list
 ISO = re.compile(r"-?[XYZABC]0[A-Z]")
@@ -82,11 +83,9 @@ def edit_table(table: TabTable, rows: dict[str, tuple[list[Row], list[Row]]], wh
 
     def written(text: str, want: float, row: Row) -> str:
         lost = abs(table.mm(text, row.axis) - want)
-        inch = row.axis in "XYZ" and table.unit == "INCH"     # compgen's own rounding, in mm or deg
-        own = 0.5 * 10.0 ** -(_decimals(row.axis) + inch) * (MM_PER[table.unit] if inch else 1.0)
         std = sigma.get(row.doc.lstrip("-").replace("0", "O"), 0.0)
         floor = LOSS_FLOOR_MM if row.axis in "XYZ" else LOSS_FLOOR_DEG
-        allowed = max(own, floor, std if row.axis in "XYZ" else np.degrees(std)) * 1.001
+        allowed = max(floor, std if row.axis in "XYZ" else np.degrees(std)) * 1.001
         if lost > allowed:
             unit = "um" if row.axis in "XYZ" else "arcsec"
             scale = 1e3 if row.axis in "XYZ" else 3600.0
