@@ -17,6 +17,7 @@ import argparse
 import ast
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -150,28 +151,40 @@ def mutants(path: Path, functions: set[str] | None):
         yield i, node.lineno, f"{kind} -> {changed.strip()[:90]}", text
 
 
-def run_mutant(work: Path, module: str, text: str, tests: list[str], whole: bool) -> bool:
-    """True when the tests fail (the mutant is killed): the module's selection first (most
-    mutants fail there in seconds), then, for one that passes it and with ``whole``, the rest
-    of the suite — the question is whether the suite notices, not one file of it."""
+def run_mutant(work: Path, module: str, text: str, tests: list[str], whole: bool) -> str | None:
+    """What kills the mutant (None: it survives): the module's selection first (most mutants
+    fail there in seconds), then, for one that passes it and with ``whole``, the rest of the
+    suite — the question is whether the suite notices, not one file of it. A kill by the rest
+    names the test that failed, for a reader to judge."""
     target = work / module
     original = target.read_text()
     target.write_text(text)
     env = {**os.environ, "PYTHONPATH": str(work), "PYTHONDONTWRITEBYTECODE": "1"}
 
-    def fails(*args) -> bool:
-        try:
-            done = subprocess.run([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
-                                   *SKIP, *args], cwd=work, env=env, capture_output=True,
-                                  timeout=900)     # a mutant that loops is killed
-        except subprocess.TimeoutExpired:
-            return True
-        return done.returncode not in (0, 5)       # 5: nothing collected (a selection of one test gone)
+    def fails(timeout: float, *args) -> str | None:
+        # its own process group: a mutant that loops inside a command the tests start is
+        # stopped with the tests, not left spinning after them
+        with tempfile.TemporaryFile("w+") as out:
+            proc = subprocess.Popen([sys.executable, "-m", "pytest", "-x", "-q", "-rfE", "-p",
+                                     "no:cacheprovider", *SKIP, *args], cwd=work, env=env, stdout=out,
+                                    stderr=subprocess.STDOUT, start_new_session=True)
+            try:
+                code = proc.wait(timeout)
+            except subprocess.TimeoutExpired:              # a mutant that loops is killed
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+                return "a timeout"
+            if code in (0, 5):                             # 5: nothing collected (a selection's test gone)
+                return None
+            out.seek(0)
+            failed = [ln.split(" - ")[0] for ln in out.read().splitlines()
+                      if ln.startswith(("FAILED", "ERROR"))]
+            return failed[0] if failed else f"exit {code}"
     try:
-        if fails(*tests):
-            return True
+        if fails(300, *tests):       # every selection runs in well under a minute
+            return "the selection"
         rest = [f"--deselect={t}" for t in tests if "::" not in t]
-        return whole and fails("tests", *rest)
+        return fails(900, "tests", *rest) if whole else None
     finally:
         target.write_text(original)
 
@@ -189,6 +202,7 @@ def main() -> None:
     ap.add_argument("--draw", type=int, default=None, metavar="N",
                     help="run N mutants drawn at random from all of them (a fresh sample: --seed)")
     ap.add_argument("--seed", type=int, default=None, help="the draw's seed (default: from the clock)")
+    ap.add_argument("--no-control", action="store_true", help="skip the unmutated tree's run")
     ap.add_argument("--selection-only", action="store_true",
                     help="run the module's selection only, not the rest of the suite for its survivors "
                          "(the runs before 2026-12-03 were measured so)")
@@ -202,7 +216,7 @@ def main() -> None:
         seed = args.seed if args.seed is not None else time.time_ns() % 10**6
         total = len(plan)
         plan = random.Random(seed).sample(plan, min(args.draw, total))
-        print(f"a draw of {len(plan)} of {total} mutants (seed {seed})")
+        print(f"a draw of {len(plan)} of {total} mutants (seed {seed})", flush=True)
     print(f"{len(plan)} mutants in {len(modules)} modules")
     lines = {m: (ROOT / m).read_text().splitlines() for m in modules}    # as mutated, not as edited since
     if args.list:
@@ -212,13 +226,31 @@ def main() -> None:
     works = []
     for j in range(args.jobs):
         work = Path(tempfile.mkdtemp(prefix=f"compgen-mut{j}-"))
-        for part in ("compgen", "tests", "templates", "machines", "examples", "pyproject.toml"):
-            src = ROOT / part
-            (shutil.copytree if src.is_dir() else shutil.copy)(src, work / part)
+        # the checkout's files as git knows them (docs, README and benchmarks are read by tests too);
+        # the files being edited are taken as they are now
+        tracked = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout
+        for name in tracked.decode().split("\0"):
+            if name and (ROOT / name).is_file():
+                (work / name).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(ROOT / name, work / name)
         (work.parent / "shared").exists() or os.symlink(ROOT.parent / "shared", work.parent / "shared") \
             if (ROOT.parent / "shared").exists() and not (work.parent / "shared").exists() else None
         works.append(work)
     t0 = time.perf_counter()
+    whole = not (args.selection_only or args.tests)
+    # the control: the unmutated tree through the same runs, all jobs at once as the mutants
+    # run. Were a test to fail here (a shared resource, a flaky test), every mutant reaching
+    # it would count as killed: the run stops instead.
+    if not args.no_control:
+        with ThreadPoolExecutor(args.jobs) as pool:
+            failed = [w for w, bad in zip(works, pool.map(
+                lambda w: run_mutant(w, modules[0], (ROOT / modules[0]).read_text(),
+                                     args.tests or TESTS[modules[0]], whole), works), strict=True) if bad]
+        if failed:
+            sys.exit(f"the unmutated tree fails its tests in {len(failed)} of {len(works)} copies: "
+                     "no mutant can be judged (run the suite there to see why)")
+        print(f"control: the unmutated tree passes in all {len(works)} copies "
+              f"({time.perf_counter() - t0:.0f} s)", flush=True)
     free = list(range(args.jobs))
     lock = threading.Lock()
 
@@ -226,8 +258,7 @@ def main() -> None:
         with lock:
             j = free.pop()
         try:
-            return p, run_mutant(works[j], p[0], p[4], args.tests or TESTS[p[0]],
-                              not (args.selection_only or args.tests))
+            return p, run_mutant(works[j], p[0], p[4], args.tests or TESTS[p[0]], whole)
         finally:
             with lock:
                 free.append(j)
@@ -235,11 +266,17 @@ def main() -> None:
     results = []
     with ThreadPoolExecutor(args.jobs) as pool:     # each result printed as it comes: a run
         for future in as_completed([pool.submit(one, p) for p in plan]):   # cut short keeps them
-            (m, _, line, kind, _text), killed = future.result()
-            results.append(future.result())
+            (m, _, line, kind, _text), by = future.result()
+            killed = by is not None
+            results.append(((m, _, line, kind, _text), killed))
+            if by not in (None, "the selection"):
+                print(f"killed by the rest of the suite {m}:{line} {kind}: {by}", flush=True)
             if not killed:
                 src = lines[m][line - 1].strip()
                 print(f"SURVIVED {m}:{line} {kind}: {src[:100]}", flush=True)
+            if len(results) % 10 == 0:
+                print(f"  ... {len(results)} of {len(plan)} run, {sum(k for _, k in results)} killed "
+                      f"({time.perf_counter() - t0:.0f} s)", flush=True)
     for w in works:
         shutil.rmtree(w, ignore_errors=True)
     killed = sum(k for _, k in results)

@@ -225,7 +225,8 @@ def test_each_line_is_the_documented_scan_judged_by_the_joint_least_squares():
         assert line.period == pytest.approx(want, rel=2e-3), line
         drop, amp = joint(v, omega_of(line.period), d)
         # no period near the found one removes more (the refined peak, not a grid point)
-        assert max(joint(v, omega_of(line.period * (1 + e)), d)[0] for e in (-1e-3, 1e-3)) <= drop * (1 + 1e-9)
+        near = (joint(v, omega_of(line.period * (1 + e)), d)[0] for e in (-1e-3, 1e-3))
+        assert max(near) <= drop * (1 + 1e-9)
         assert line.sum_sq == pytest.approx(drop, rel=1e-6, abs=0)
         assert line.amplitude_um == pytest.approx(amp * 1e3, rel=1e-6)
         assert line.share == pytest.approx(drop / rss, rel=1e-6)

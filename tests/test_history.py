@@ -703,7 +703,7 @@ def test_a_machine_name_with_mathtext_and_a_writers_line_break_print_as_written(
     name = r'name = "Cell $\\\\undefinedcmd_{$ 3"'
     (tmp_path / "m.toml").write_text(re.sub(r"(?m)^name = .*$", name, text))
     assert run("simulate", "--machine", "m.toml", "--truth", ROOT / "examples" / "truth-table4.json",
-               "--paths", "K4", "--noise-um", "0.5", "-o", "a.csv")[0] == 0
+               "--paths", "K4", "--noise-um", "0.5", "--seed", "1", "-o", "a.csv")[0] == 0
     rc, out, err = run("fit", "--machine", "m.toml", "a.csv", "-o", "fit.json", "--record", "--date",
                        "2026-03-01")
     assert rc == 0, err

@@ -108,7 +108,7 @@ def test_a_carr_value_in_another_script_or_with_underscores_is_refused(tmp_path)
     (bc / "t.json").write_text(json.dumps({"parameters": {"XOC": {"value": 5, "unit": "um"},
                                                           "XOB": {"value": -4, "unit": "um"}}}))
     code, _, err = run("simulate", "--machine", BC_MACHINE, "--truth", bc / "t.json", "--noise-um", "0.5",
-                       "-o", bc / "s.csv")
+                       "--seed", "5", "-o", bc / "s.csv")
     assert code == 0, err
     code, _, err = run("fit", "--machine", BC_MACHINE, bc / "s.csv", "-o", bc / "f.json")
     assert code == 0, err
