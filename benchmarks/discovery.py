@@ -37,6 +37,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from conftest import ARCSEC, SEED_MACHINE, TABLE4, UM  # noqa: E402
 
+from compgen.advice import Advisor  # noqa: E402
 from compgen.diagnose import diagnose  # noqa: E402
 from compgen.effects import compose, location_model  # noqa: E402
 from compgen.identify import identify  # noqa: E402
@@ -122,7 +123,7 @@ def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
     model, named, followed, last, looks = location_model(machine), [], [], None, 0
     for _ in range(MAX_ROUNDS):
         fit = identify(machine, data, model)
-        found = diagnose(machine, data, fit, noise_um=SIGMA_UM)
+        found = diagnose(machine, data, fit, noise_um=SIGMA_UM, advisor=Advisor)
         last = (fit, found)
         line = found.outside_line or (found.lines[0] if found.lines else None)
         if found.unexplained and line is not None and line.unit == "mm":
@@ -202,7 +203,7 @@ def main() -> None:
         for seed in range(args.draws):
             rng = np.random.default_rng(1000 + seed)
             data = [session(machine, TABLE4, poses, kind, rng)]
-            found = diagnose(machine, data, identify(machine, data), noise_um=SIGMA_UM, advise=False)
+            found = diagnose(machine, data, identify(machine, data), noise_um=SIGMA_UM)
             flagged += bool(found.significant) or found.unexplained
             unexplained += found.unexplained
             outliers.append(len(found.outliers))
@@ -212,7 +213,7 @@ def main() -> None:
     for seed in range(args.draws):
         rng = np.random.default_rng(2000 + seed)
         data = [session(machine, {**TABLE4, "ECC:h2c": 15 * ARCSEC}, poses, "ar0.8", rng)]
-        found = diagnose(machine, data, identify(machine, data))
+        found = diagnose(machine, data, identify(machine, data), advisor=Advisor)
         found_ecc += found.significant[:1] and found.significant[0].effect == "ECC:h2"
     print(f"  power: ECC:h2 of 15″ under AR(1) ρ = 0.8 named first in {found_ecc}/{args.draws}")
     print(f"\n{time.time() - t0:.0f} s")

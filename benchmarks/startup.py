@@ -67,9 +67,11 @@ def library_peaks(csv: Path) -> tuple[float, float]:
         "import sys, tracemalloc, json\n"
         "from compgen.machine_file import load_machine\nfrom compgen.rtest import read_rtest\n"
         "from compgen.identify import identify\nfrom compgen.diagnose import diagnose\n"
+        "from compgen.advice import Advisor\n"
         f"m = load_machine({str(MACHINE)!r}); d = [read_rtest({str(csv)!r}, m)]\n"
         "tracemalloc.start(); fit = identify(m, d); a = tracemalloc.get_traced_memory()[1]\n"
-        "tracemalloc.reset_peak(); diagnose(m, d, fit); b = tracemalloc.get_traced_memory()[1]\n"
+        "tracemalloc.reset_peak(); diagnose(m, d, fit, advisor=Advisor)\n"
+        "b = tracemalloc.get_traced_memory()[1]\n"
         "print(json.dumps([a / 2**20, b / 2**20]))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return tuple(json.loads(out.stdout))
@@ -82,9 +84,10 @@ def blas_threads(csv: Path, repeats: int) -> dict[str, tuple[float, float]]:
         "import json, statistics, time\nfrom threadpoolctl import threadpool_limits\n"
         "from compgen.machine_file import load_machine\nfrom compgen.rtest import read_rtest\n"
         "from compgen.identify import identify\nfrom compgen.diagnose import diagnose\n"
+        "from compgen.advice import Advisor\n"
         f"m = load_machine({str(MACHINE)!r}); d = [read_rtest({str(csv)!r}, m)]\n"
         "def once():\n    w, c = time.perf_counter(), time.process_time()\n"
-        "    diagnose(m, d, identify(m, d))\n"
+        "    diagnose(m, d, identify(m, d), advisor=Advisor)\n"
         "    return time.perf_counter() - w, time.process_time() - c\n"
         "once(); out = {}\n"
         "for label, limit in (('default', None), ('one', 1)):\n"

@@ -18,6 +18,7 @@ import numpy as np
 
 from .emit.probing import probe_program
 from .emit.programs import measure_program
+from .emit.registry import controller
 from .errors import CompgenError
 from .kinematics import Poses, motion_direction, runs
 from .machine import Machine
@@ -77,6 +78,7 @@ class Advisor:
 
     def __init__(self, machine: Machine, measured: Poses | None = None, device: str = "rtest"):
         self.machine = machine
+        self.program_ext = controller(machine.controller).program_ext    # of the commands advised
         self.candidates = _candidates(machine, measured, device)
         self._why: dict[str, str | None] = {}
 

@@ -14,6 +14,7 @@ import click
 import numpy as np
 
 from . import __version__, called_as, me
+from .advice import Advisor
 from .checklist import checklist, markdown
 from .compare import compare
 from .diagnose import diagnose
@@ -281,7 +282,7 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
     fixed = {n: v for n, v in fixed.items() if n in model} | parse_fixed(machine, fixes)
     _refuse_twice(sets)
     _progress(f"fitting {len(model)} effects to {sum(len(s) for s in sets)} poses")
-    result = identify(machine, sets, model, fixed, method, sign)
+    result = identify(machine, sets, model, fixed, method, sign, advisor=Advisor)
     write_atomically(output, result.to_json(Path(output).resolve().parent), force,
                      inputs=(machine.source, base, *(s.source for s in sets)))
     _said(output, result.report() + f"\nwrote {output}")
@@ -318,7 +319,7 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um):
     _progress(f"trying {'the catalogue' if names is None else len(names)} effects against "
               f"{sum(len(s) for s in sets)} poses")
     result = diagnose(machine, sets, fit, names, fit_file=base, machine_ref=machine_ref(fit),
-                      noise_um=noise_um)
+                      noise_um=noise_um, advisor=Advisor)
     named = compose(machine, fit.model, [c.effect for c in result.candidates if c.significant])
     sides = unknown_sides(machine, named, *(s.poses for s in sets))
     if sides:
@@ -627,7 +628,7 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
         read_text(path, "file", ansi_ok=True)   # a missing file fails before anything is drawn
     post = [read_data(p, machine, fit.sign, _warn) for p in post_files]
     _progress("1/3 diagnose")
-    found = diagnose(machine, sets, fit, fit_file=base)
+    found = diagnose(machine, sets, fit, fit_file=base, advisor=Advisor)
     _progress("2/3 compare")
     comparison = compare(machine, sets, fit, controller_name or machine.controller, post)
     _progress("3/3 plots")
@@ -879,7 +880,7 @@ def check_cmd(machine_file, data, serial, taken, operator, as_json, machine_chan
     when = taken_at(taken)
     store = _store(db, create=False)
     calibration, entries, edits = last_calibration(store, machine, serial, before=when)
-    fit = identify(machine, sets, location_model(machine))
+    fit = identify(machine, sets, location_model(machine), advisor=Advisor)
     result = check(machine, fit, sets, calibration, entries, edits, when, serial, machine_changed)
     record_check(store, result, fit, machine, serial=serial, operator=operator)
     click.echo(json.dumps(result.summary(), indent=2, ensure_ascii=False) if as_json else result.text(),

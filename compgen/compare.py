@@ -168,7 +168,7 @@ def _measured(machine: Machine, fit: FitResult, post: Sequence[RTestData], predi
                             "loaded with the right sign (sign check) and that the set-up did not change.")
         try:
             refit = identify(machine, list(post), fit.model)
-            found = diagnose(machine, list(post), refit, advise=False)
+            found = diagnose(machine, list(post), refit)
             best = found.candidates[0]
             out["diagnose"] = (f"{best.effect} ({best.description}) would leave "
                                f"{best.rms_after_um:.3f} µm of {found.rms_um:.3f} µm"

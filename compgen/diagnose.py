@@ -7,22 +7,22 @@ number of effects tried (``significance.py``). An effect whose signature the mod
 entirely (‖c⊥‖/‖c‖ below ``VISIBLE``), or that ``fit --add`` would refuse on these data
 (one rule: ``significance.condition``), is never "found": it is reported with the
 measurement that would separate it, and only measurements the machine can make are named
-(``advice.py``). The words are ``diagnose_text.py``'s.
+(an advisor the caller passes in: ``advice.Advisor``, which writes and checks their
+programs). The words are ``diagnose_text.py``'s.
 
 References: ``docs/diagnose.md`` (visibility, bias, F and score tests).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from itertools import combinations
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .advice import Advisor, Measurement
 from .effects import Effect, catalogue, effect_of_param, resolve
-from .emit.registry import controller
 from .errors import CompgenError
 from .kinematics import Model, Poses, StartSides, both_sides, runs, same_pose
 from .machine import Machine
@@ -44,6 +44,9 @@ from .significance import (
 )
 from .spectrum import Line, strongest_lines
 from .units import shown
+
+if TYPE_CHECKING:        # the type only: advice writes programs, a layer above
+    from .advice import Advisor, Measurement
 
 SEPARATES = 0.05      # visibility an extra measurement must give to count as separating
 ABSORBS = 0.25        # share of an effect's signature a parameter must take to be named
@@ -218,15 +221,16 @@ class Diagnosis:
 
 def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
              candidates: Sequence[str] | None = None, alpha: float = ALPHA,
-             fit_file: str = "", advise: bool = True, machine_ref: str = "",
+             fit_file: str = "", advisor: Callable[..., Advisor] | None = None, machine_ref: str = "",
              noise_um: float | None = None) -> Diagnosis:
     """Rank the effects not in ``fit``'s model by how much of its residual they explain.
 
     Outlying readings are listed and left out; the tests are made on the readings made white
     by their segments' AR(1) correlation (``noise.py``), estimated from the residual once the
-    best candidate is added (the misfit of a missing effect is not noise). With ``advise``,
-    the measurements that would separate what these data cannot are searched for among
-    those the machine can make (``advice.py``); ``machine_ref`` is how the commands printed
+    best candidate is added (the misfit of a missing effect is not noise). With an
+    ``advisor`` (``advisor(machine, poses, device)``: ``advice.Advisor``), the measurements
+    that would separate what these data cannot are searched for among those the machine can
+    make; ``machine_ref`` is how the commands printed
     name the machine file. ``noise_um`` is the R-test's own noise (default: the machine
     file's ``[rtest] noise_um``): with it, the residual is tested against it per path and
     direction, and what no catalogue effect accounts for is called unexplained."""
@@ -309,13 +313,13 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
             silent=row.silent, share=row.share, condition=row.cond))
     out.sort(key=lambda c: (not c.visible, -c.share))
     model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
-    advisor = Advisor(machine, poses, kind) if advise else None
+    advising = advisor(machine, poses, kind) if advisor is not None else None
     # seen, but not to be added as a whole: a part of it the model absorbs (fit --add
     # refuses it), so the measurement that shows that part is what to advise
     unseen = [c for c in out if not c.visible or (c.significant and not c.separable)]
-    if advisor is not None and unseen:
+    if advising is not None and unseen:
         seen = _separating(machine, model_effects, poses, [resolve(machine, c.effect) for c in unseen],
-                           advisor)
+                           advising)
         out = [replace(c, separated_by=seen[c.effect]) if c.effect in seen else c for c in out]
 
     # bias: data holding a unit of candidate parameter j shift the fitted parameters by
@@ -360,12 +364,12 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         rival_names = rivals((best.drop_w, best.k_eff), {
             c.effect: (ranked[c.effect].drop_w, ranked[c.effect].k_eff)
             for c in out if c.visible and c.effect != best.effect.name}, rss_w / dof, alpha, bool(after_best))
-        if rival_names and advisor is not None:
+        if rival_names and advising is not None:
             group = [best, *(ranked[e] for e in rival_names)]
             by_rival, rivals_separated_by, rivals_open = _telling_apart(
-                machine, model_effects, poses, group, rss / dof, advisor)
+                machine, model_effects, poses, group, rss / dof, advising)
             out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
-        if rival_names and advisor is not None and not rivals_separated_by:
+        if rival_names and advising is not None and not rivals_separated_by:
             # equivalent everywhere: put first the one the location errors absorb least, so
             # that adding it leaves them where an effect without that absorbed part has them
             group = [c for c in out if c.significant and c.effect in (best.effect.name, *rival_names)]
@@ -395,7 +399,8 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         after_best=after_best, rivals=rival_names, rivals_separated_by=rivals_separated_by,
         outliers=_outlier_rows(data, bad, size), noise=_noise_summary(seg, noise.rho, poses.path),
         rivals_open=rivals_open, machine_ref=machine_ref or machine.source,
-        program_ext=_program_ext(machine), device_noise_um=device, repeats=said, misfit=misfit,
+        program_ext=advising.program_ext if advising is not None else "", device_noise_um=device,
+        repeats=said, misfit=misfit,
         lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, carries=carries, notes=notes,
         data_device=kind)
 
@@ -453,11 +458,6 @@ def _outside_line(lines, device: float | None, misfit, alpha: float, best_sum_sq
     return next((line for line in lines if line.unit == "mm" and line.amplitude_um >= RESOLVES_UM
                  and line.p_value < alpha / max(len(lines), 1)
                  and line.sum_sq >= LINE_OVER_BEST * best_sum_sq and line.share >= LINE_SHARE), None)
-
-
-def _program_ext(machine: Machine) -> str:
-
-    return controller(machine.controller).program_ext
 
 
 @dataclass(frozen=True)

@@ -41,7 +41,7 @@ def fit_gate(machine: Machine, data: Sequence[RTestData], fit: FitResult) -> lis
         reasons.append(f"the fit leaves σ̂ = {sigma:.2f} µm, above the {SIGMA_PLAUSIBLE_UM:g} µm an R-test's "
                        "noise allows: the model misses an effect, or the data are wrong (columns "
                        "swapped, a sign, a mismatched machine file)")
-    found = diagnose(machine, data, fit, advise=False)
+    found = diagnose(machine, data, fit)
     if found.unexplained:
         where = (f"the residual exceeds the R-test's noise ({found.misfit[0]['direction']} of "
                  f"{found.misfit[0]['path']}: {found.misfit[0]['rms_um']:.2f} µm against "

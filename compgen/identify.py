@@ -14,7 +14,6 @@ from typing import NamedTuple
 import numpy as np
 
 from . import __version__
-from .advice import Advisor
 from .effects import canonical, effect_of_param, location_model
 from .errors import CompgenError
 from .kinematics import Model, Poses, StartSides, both_sides, runs
@@ -31,7 +30,7 @@ STEP_TOL_SHOWN = 1e-7     # µm or arcsec: Gauss–Newton has converged below th
 
 def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] | None = None,
              fixed: Mapping[str, float] | None = None, method: str = "exact",
-             sign: str = "nest-minus-ball") -> FitResult:
+             sign: str = "nest-minus-ball", advisor=None) -> FitResult:
     """Identify the parameters of ``model`` from R-test data.
 
     Parameters
@@ -40,6 +39,10 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
     fixed : name → value (mm, rad) held fixed; names not in ``model`` are added to it
     method : ``"exact"`` (first-order start, then Gauss–Newton on the exact model) or
         ``"linear"`` (first-order only, as the seed)
+    advisor : what makes the measurements a machine can add, ``advisor(machine, measured)``
+        with ``.candidates`` and ``.runnable(ms, most)`` (``advice.Advisor``, which writes and
+        checks their programs: the controllers' layer, so the caller passes it in). With it, a
+        refusal names those that would separate what these data cannot.
     """
     if method not in ("exact", "linear"):
         raise CompgenError(f"method must be 'exact' or 'linear', not {method!r}")
@@ -92,7 +95,7 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         return x, at, iterations
 
     at = linearise(x)
-    check_identifiable(machine, m, free, at.normal, poses)
+    check_identifiable(machine, m, free, at.normal, poses, advisor)
     x, at, iterations = solve(x, at)
     # devices of unknown relative noise: their variances are estimated with the fit
     while weights.estimated and weights.rescale(at.r, at.normal):
@@ -277,10 +280,10 @@ def _gauss_newton(linearise, x, at, free, m):
 
 
 def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarray | Normal,
-                       measured: Poses | None = None) -> None:
+                       measured: Poses | None = None, advisor=None) -> None:
     """Refuse a rank-deficient or badly conditioned problem, naming what cannot be separated
-    and which of the machine's paths, or a second ball position, not ``measured`` already,
-    would separate it."""
+    and, with an ``advisor`` (``identify``'s), which of the machine's paths, or a second ball
+    position, not ``measured`` already, would separate it."""
     normal = J if isinstance(J, Normal) else Normal(J)
     J, norm = normal.J, normal.norm
     names = [m.names[i] for i in free]
@@ -312,8 +315,8 @@ def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarra
         f"these data cannot separate the parameters ({cond}): moving "
         + "; or ".join(combos) + " changes the readings by less than 1/"
         + f"{COND_LIMIT:g} of the best-seen combination",
-        hint=_separating_measurements(machine, m, free, J, measured) +
-             "; or hold one parameter of each combination with --fix NAME=VALUE")
+        hint=("" if advisor is None else _separating_measurements(machine, m, free, J, measured, advisor(
+            machine, measured)) + "; or ") + "hold one parameter of each combination with --fix NAME=VALUE")
 
 
 def _sparse_basis(V: np.ndarray) -> np.ndarray:
@@ -335,8 +338,7 @@ def _sparse_basis(V: np.ndarray) -> np.ndarray:
 
 
 def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.ndarray,
-                             measured: Poses | None) -> str:
-    advisor = Advisor(machine, measured)
+                             measured: Poses | None, advisor) -> str:
     options = []
     # a reversal seen from one side only is its axis's zero offset, not its backlash
     reversals = {m.effects[j].carrier for j in free if m.effects[j].basis.kind == "r"}

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, TABLE4, UM
 
+from compgen.advice import Advisor
 from compgen.diagnose import diagnose
 from compgen.diagnose_text import report
 from compgen.effects import compose, location_model
@@ -46,7 +47,7 @@ def _session(machine, poses, hidden, seed=7):
 def test_hidden_effect_is_named_first_and_adding_it_brings_rms_to_noise(seed_machine, poses, name):
     data = [_session(seed_machine, poses, HIDDEN[name])]
     base = identify(seed_machine, data)
-    found = diagnose(seed_machine, data, base)
+    found = diagnose(seed_machine, data, base, advisor=Advisor)
     best = found.candidates[0]
     # a squareness of Z (BOZ, AOZ) and an angular error of the Z carriage growing with Z
     # (EBZ:p1, EAZ:p1) both move the nest by the tool length times an angle ∝ Z: with one
@@ -64,7 +65,7 @@ def test_ambiguous_scale_is_reported_with_the_measurement_that_resolves_it(seed_
     # On these paths X ≈ x_ball·cos C: an X scale error looks like a 1/rev radial motion of C.
     hidden = {"EXX:p1": 10 * UM}
     data = [_session(seed_machine, poses, hidden)]
-    found = diagnose(seed_machine, data, identify(seed_machine, data))
+    found = diagnose(seed_machine, data, identify(seed_machine, data), advisor=Advisor)
     named = [found.significant[0].effect, *found.rivals]
     assert "EXX:p1" in named and len(named) > 1
     advice = [m for m in found.rivals_separated_by if "half its radius" in m.label]
@@ -81,14 +82,14 @@ def test_ambiguous_scale_is_reported_with_the_measurement_that_resolves_it(seed_
     # follow the advice: add K4 with the ball at half its radius, and the tie is broken
     half = generate(seed_machine, ["K4"], ball=np.asarray(seed_machine.ball) * [0.5, 0.5, 1.0])
     data.append(_session(seed_machine, half, hidden, seed=8))
-    found = diagnose(seed_machine, data, identify(seed_machine, data))
+    found = diagnose(seed_machine, data, identify(seed_machine, data), advisor=Advisor)
     assert found.candidates[0].effect == "EXX:p1" and found.candidates[0].significant
     assert "EXX:p1" not in found.rivals
 
 
 def test_clean_data_flag_nothing(seed_machine, poses):
     data = [_session(seed_machine, poses, {})]
-    found = diagnose(seed_machine, data, identify(seed_machine, data))
+    found = diagnose(seed_machine, data, identify(seed_machine, data), advisor=Advisor)
     assert not found.significant
     assert found.to_dict()["explained_to_noise"]
     assert "explains these data to the noise level" in report(found)
@@ -98,7 +99,7 @@ def test_invisible_effects_are_never_found_and_their_confounding_is_reported(see
     hidden = {"nest_X": 5 * UM, "EZC:h1c": 3 * UM}   # nest set-up offset; axial 1/rev of C
     data = [_session(seed_machine, poses, hidden)]
     base = identify(seed_machine, data)
-    found = diagnose(seed_machine, data, base)
+    found = diagnose(seed_machine, data, base, advisor=Advisor)
     assert not found.significant
     by_name = {c.effect: c for c in found.candidates}
     for name in ("nest_X", "EZC:h1"):
@@ -116,7 +117,7 @@ def test_bias_sensitivity_predicts_the_shift_a_hidden_effect_causes(seed_machine
     hidden = {"EXC:h2c": amplitude_um * UM}
     clean, biased = (identify(seed_machine, [simulate(seed_machine, {**TABLE4, **h}, poses)])
                      for h in ({}, hidden))
-    found = diagnose(seed_machine, [simulate(seed_machine, TABLE4, poses)], clean)
+    found = diagnose(seed_machine, [simulate(seed_machine, TABLE4, poses)], clean, advisor=Advisor)
     for name in TABLE4:
         shift = (biased.parameters[name].value - clean.parameters[name].value)
         shift_shown = shift / (UM if name[0] in "XYZ" else ARCSEC)
@@ -126,7 +127,7 @@ def test_bias_sensitivity_predicts_the_shift_a_hidden_effect_causes(seed_machine
 
 def test_json_contract(seed_machine, poses):
     data = [_session(seed_machine, poses, HIDDEN["ECC:h2"])]
-    d = diagnose(seed_machine, data, identify(seed_machine, data)).to_dict()
+    d = diagnose(seed_machine, data, identify(seed_machine, data), advisor=Advisor).to_dict()
     assert isinstance(d["rms_um"], float)
     first = d["candidates"][0]
     assert {"effect", "significant", "rms_after_um", "confounded_with", "description"} <= set(first)
@@ -149,7 +150,7 @@ def test_diagnose_whole_catalogue_on_the_bc_machine(bc_machine):
     poses = generate(bc_machine, ["K4", "K1", "K2"])
     hidden = {"ECB:p1": 4 * ARCSEC}                           # B tilt about Z, per rad of B
     data = [simulate(bc_machine, hidden, poses, NOISE_UM, np.random.default_rng(3))]
-    found = diagnose(bc_machine, data, identify(bc_machine, data))
+    found = diagnose(bc_machine, data, identify(bc_machine, data), advisor=Advisor)
     assert found.candidates[0].effect == "ECB:p1" and found.candidates[0].significant
 
 
@@ -182,7 +183,7 @@ def test_outliers_are_listed_where_the_user_finds_them_and_flag_nothing(seed_mac
     data = [_with_noise(seed_machine, poses, {}, noise)]
     fit = identify(seed_machine, data)
     assert fit.residual["sigma_um"] > 1.3 * NOISE_UM            # the fit itself is inflated
-    found = diagnose(seed_machine, data, fit)
+    found = diagnose(seed_machine, data, fit, advisor=Advisor)
     assert [(o["file"], o["line"], o["path"]) for o in found.outliers] == \
         [("s.csv", i + 2, poses.path[i]) for i in bad]
     assert all(abs(o["size_um"] - 20) < 3 for o in found.outliers)
@@ -196,19 +197,19 @@ def test_correlated_noise_flags_nothing_because_it_is_whitened(seed_machine, pos
     tested as if the noise were white flag effects (what diagnose did before)."""
     data = [_with_noise(seed_machine, poses, {}, _ar1_mm(len(poses), 0.8, np.random.default_rng(5)))]
     fit = identify(seed_machine, data)
-    found = diagnose(seed_machine, data, fit)
+    found = diagnose(seed_machine, data, fit, advisor=Advisor)
     assert not found.significant, [c.effect for c in found.significant]
     assert all(0.6 < rho < 0.95 for rhos in found.noise.values() for rho in rhos), found.noise
     assert "AR(1)" in report(found)
     import compgen.diagnose as module
     monkeypatch.setattr(module, "ar1", lambda r, seg: np.zeros_like(r))
-    assert diagnose(seed_machine, data, fit).significant
+    assert diagnose(seed_machine, data, fit, advisor=Advisor).significant
 
 
 def test_under_correlated_noise_a_real_effect_is_still_found(seed_machine, poses):
     hidden = {"ECC:h2c": 15 * ARCSEC}
     data = [_with_noise(seed_machine, poses, hidden, _ar1_mm(len(poses), 0.8, np.random.default_rng(6)))]
-    found = diagnose(seed_machine, data, identify(seed_machine, data))
+    found = diagnose(seed_machine, data, identify(seed_machine, data), advisor=Advisor)
     assert found.found == "ECC:h2", ([c.effect for c in found.significant[:3]], found.rivals)
 
 
@@ -220,7 +221,7 @@ def test_a_turning_radial_motion_is_named_after_the_follow_ups_it_advises(seed_m
     truth = {**TABLE4, "EXC+EYC:h2c": 3 * UM}
     rng = np.random.default_rng(9)
     data = [_with_noise(seed_machine, poses, truth, rng.normal(0, NOISE_UM * 1e-3, (len(poses), 3)))]
-    found = diagnose(seed_machine, data, identify(seed_machine, data))
+    found = diagnose(seed_machine, data, identify(seed_machine, data), advisor=Advisor)
     assert found.found is None and "EXC+EYC:h2" in (found.significant[0].effect, *found.rivals)
     followed = []
     for _ in range(3):
@@ -237,7 +238,7 @@ def test_a_turning_radial_motion_is_named_after_the_follow_ups_it_advises(seed_m
         followed.append(m.label)
         extra = generate(seed_machine, [m.path], ball=m.ball, back=m.back)
         data.append(_with_noise(seed_machine, extra, truth, rng.normal(0, NOISE_UM * 1e-3, (len(extra), 3))))
-        found = diagnose(seed_machine, data, identify(seed_machine, data))
+        found = diagnose(seed_machine, data, identify(seed_machine, data), advisor=Advisor)
     assert found.found == "EXC+EYC:h2", (followed, found.significant[0].effect, found.rivals)
     fit = identify(seed_machine, data, compose(seed_machine, identify(seed_machine, data).model,
                                                ["EXC+EYC:h2"]))
@@ -252,7 +253,7 @@ def test_rivals_no_measurement_separates_are_said_to_be_equivalent(seed_machine,
     truth = {**TABLE4, "ECA:h1s": 20 * ARCSEC}
     data = [_session(seed_machine, poses, {"ECA:h1s": 20 * ARCSEC})]
     base = identify(seed_machine, data)
-    found = diagnose(seed_machine, data, base)
+    found = diagnose(seed_machine, data, base, advisor=Advisor)
     named = {found.significant[0].effect, *found.rivals}
     assert found.found is None and {"ECA:h1", "EBA+ECA:h-1"} <= named, named
     assert found.to_dict()["rivals_equivalent"] and not found.rivals_separated_by
@@ -267,7 +268,7 @@ def test_a_reversal_is_advised_to_be_run_there_and_back_and_then_found(seed_mach
     show it, and with that run added names it."""
     truth = {"ECC:r1": 5 * ARCSEC}
     data = [_session(seed_machine, poses, truth)]
-    found = diagnose(seed_machine, data, identify(seed_machine, data))
+    found = diagnose(seed_machine, data, identify(seed_machine, data), advisor=Advisor)
     assert not found.significant
     backlash = next(c for c in found.candidates if c.effect == "ECC:r1")
     assert not backlash.visible
@@ -275,7 +276,7 @@ def test_a_reversal_is_advised_to_be_run_there_and_back_and_then_found(seed_mach
     assert back and all(m.label.endswith("there and back") for m in back)
     assert "ECC:r1 " in report(found) and f"would be seen with {back[0].label}" in report(found)
     data.append(_session(seed_machine, generate(seed_machine, [back[0].path], back=True), truth, seed=8))
-    found = diagnose(seed_machine, data, identify(seed_machine, data))
+    found = diagnose(seed_machine, data, identify(seed_machine, data), advisor=Advisor)
     assert found.found == "ECC:r1", ([c.effect for c in found.significant[:3]], found.rivals)
 
 
@@ -287,7 +288,7 @@ def test_of_equivalent_rivals_the_one_leaving_the_location_errors_true_comes_fir
     hidden = {"EBA+ECA:h-1c": 10 * ARCSEC}
     data = [_session(seed_machine, poses, hidden)]
     base = identify(seed_machine, data)
-    found = diagnose(seed_machine, data, base)
+    found = diagnose(seed_machine, data, base, advisor=Advisor)
     assert found.to_dict()["rivals_equivalent"] and {"EBA:h1", "ECA:h1"} <= set(found.rivals)
     assert found.significant[0].effect == "EBA+ECA:h-1"
     fit = identify(seed_machine, data, compose(seed_machine, base.model, ["EBA+ECA:h-1"]))
@@ -339,7 +340,7 @@ def test_an_effect_outside_the_catalogue_is_unexplained_never_found(seed_machine
     data = [_outside_session(seed_machine, poses, axis, pitch)]
     fit = identify(seed_machine, data)
     for noise in (None, NOISE_UM):
-        found = diagnose(seed_machine, data, fit, advise=False, noise_um=noise)
+        found = diagnose(seed_machine, data, fit, noise_um=noise)
         assert found.unexplained and found.found is None, [c.effect for c in found.significant[:3]]
         assert not found.explained_to_noise and not found.to_dict()["explained_to_noise"]
         line = found.lines[0]
@@ -359,11 +360,11 @@ def test_declaring_the_shape_brings_the_residual_to_the_noise_and_predicts_unmea
     from compgen.effects import location_model
     from compgen.kinematics import Model
     data = [_outside_session(seed_machine, poses, axis, pitch)]
-    line = diagnose(seed_machine, data, identify(seed_machine, data), advise=False).lines[0]
+    line = diagnose(seed_machine, data, identify(seed_machine, data)).lines[0]
     declared = f"E{axis}{axis}:w{line.period:.3f}"            # as diagnose prints it
     fit = identify(seed_machine, data, compose(seed_machine, location_model(seed_machine), [declared]))
     assert fit.residual["sigma_um"] == pytest.approx(NOISE_UM, rel=0.05)
-    after = diagnose(seed_machine, data, fit, advise=False, noise_um=NOISE_UM)
+    after = diagnose(seed_machine, data, fit, noise_um=NOISE_UM)
     assert not after.unexplained and after.misfit == () and after.explained_to_noise
     x = np.array([fit.parameters[n].value for n in fit.model])
     for ball in UNMEASURED_BALLS:
@@ -392,7 +393,7 @@ def test_without_a_given_noise_a_repeated_run_says_it_and_an_outside_effect_is_u
     every pose of the first, reached the same way, and their scatter is the noise (the
     periodic error repeats with the pose: it is not scatter). Against it, dX fails."""
     data = _repeated(seed_machine, ("X", 5.0))
-    found = diagnose(seed_machine, data, identify(seed_machine, data), advise=False)
+    found = diagnose(seed_machine, data, identify(seed_machine, data))
     assert found.repeats is not None and found.noise_from == "repeats"
     assert found.device_noise_um == pytest.approx(NOISE_UM, rel=0.1)
     assert found.repeats.poses == 240 and found.repeats.dwell == 0      # K4's first pose: side unknown
@@ -403,10 +404,10 @@ def test_without_a_given_noise_a_repeated_run_says_it_and_an_outside_effect_is_u
     assert "the residual exceeds the repeats' (480 readings of 240 poses read more than once)" \
         in report(found)
     clean = _repeated(seed_machine)
-    found = diagnose(seed_machine, clean, identify(seed_machine, clean), advise=False)
+    found = diagnose(seed_machine, clean, identify(seed_machine, clean))
     assert found.explained_to_noise and found.misfit == () and found.noise_from == "repeats"
     # a given noise is used as given: repeats are not looked at
-    given = diagnose(seed_machine, clean, identify(seed_machine, clean), advise=False, noise_um=0.7)
+    given = diagnose(seed_machine, clean, identify(seed_machine, clean), noise_um=0.7)
     assert given.repeats is None and given.noise_from == "given" and given.device_noise_um == 0.7
 
 
@@ -440,16 +441,16 @@ def test_repeats_are_poses_reached_the_same_way(seed_machine):
 
 def test_with_the_rtest_noise_a_catalogue_effect_is_still_found(seed_machine, poses):
     data = [_session(seed_machine, poses, {"ECC:h2c": 15 * ARCSEC})]
-    found = diagnose(seed_machine, data, identify(seed_machine, data), advise=False, noise_um=NOISE_UM)
+    found = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM)
     assert found.found == "ECC:h2" and found.best_share_of_excess > 0.9 and not found.unexplained
 
 
 def test_clean_data_at_the_rtest_noise_are_explained(seed_machine, poses):
     data = [_session(seed_machine, poses, {})]
-    found = diagnose(seed_machine, data, identify(seed_machine, data), advise=False, noise_um=NOISE_UM)
+    found = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM)
     assert found.explained_to_noise and not found.misfit and not found.unexplained
     # a noise claimed too small is caught: the residual exceeds it everywhere
-    tight = diagnose(seed_machine, data, identify(seed_machine, data), advise=False, noise_um=0.3)
+    tight = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=0.3)
     assert len(tight.misfit) == 9 and tight.unexplained
 
 
@@ -462,7 +463,7 @@ def test_the_residual_is_drawn_against_each_linear_axis_with_its_strongest_line(
     from compgen.plots import figures
     data = [_outside_session(seed_machine, poses, "X", 5.0)]
     fit = identify(seed_machine, data)
-    found = diagnose(seed_machine, data, fit, advise=False)
+    found = diagnose(seed_machine, data, fit)
     line = next(x for x in found.lines if x.against == "X")
     assert line.unit == "mm" and abs(line.period - 5.0) < 0.01
     titles, title = [], matplotlib.axes.Axes.set_title
@@ -484,7 +485,7 @@ def test_an_effect_declared_in_the_machine_file_is_tried_and_found(tmp_path, pos
     machine = load_machine(tmp_path / "m.toml")
     assert machine.noise_um == 0.5 and machine.declared == ("EXX:w5",)
     data = [_outside_session(machine, poses, "X", 5.0)]
-    found = diagnose(machine, data, identify(machine, data), advise=False)
+    found = diagnose(machine, data, identify(machine, data))
     assert found.found == "EXX:w5" and found.device_noise_um == 0.5 and not found.unexplained
     (tmp_path / "bad.toml").write_text(text + '\n[effects]\ndeclared = ["ECC:w5"]\n')
     with pytest.raises(CompgenError, match=r"bad.toml: effects: declared\[0\]: .*linear axis"):
@@ -524,7 +525,7 @@ def test_noiseless_data_are_not_unexplained(seed_machine, poses):
     """Rounding-level residuals hold 'significant' lines of 1e-10 µm: below what an R-test
     resolves, they are not a finding."""
     data = [RTestData(poses, simulate(seed_machine, TABLE4, poses).deviation, "sim.csv", "", ())]
-    found = diagnose(seed_machine, data, identify(seed_machine, data), advise=False)
+    found = diagnose(seed_machine, data, identify(seed_machine, data))
     assert not found.unexplained and found.outside_line is None
 
 
@@ -539,7 +540,7 @@ def test_one_rule_of_separability_for_diagnose_and_fit(seed_machine):
     for hidden in ({"EZC:h1c": 3 * UM}, {"EAC+EBC:h2c": 8 * ARCSEC}):
         data = [_session(seed_machine, p, hidden, seed=s) for s, p in enumerate(poses)]
         base = identify(seed_machine, data)
-        found = diagnose(seed_machine, data, base, advise=False)
+        found = diagnose(seed_machine, data, base)
         visible = [c for c in found.candidates if c.visible][:3]
         absorbed = [c for c in found.candidates if not c.visible and not c.silent][:3]
         for c in visible + absorbed:
@@ -581,7 +582,7 @@ def test_backlash_of_a_tilting_axis_is_found_from_the_side_each_pose_was_reached
     data = [simulate(seed_machine, TABLE4, poses, NOISE_UM, np.random.default_rng(7), drive=drive)]
     assert not np.isnan(data[0].poses.side[:, 3:]).any()
     base = identify(seed_machine, data)
-    found = diagnose(seed_machine, data, base)
+    found = diagnose(seed_machine, data, base, advisor=Advisor)
     assert found.found == "EAA:r1", ([c.effect for c in found.significant[:3]], found.rivals)
     fit = identify(seed_machine, data, compose(seed_machine, base.model, ["EAA:r1"]))
     assert abs(fit.residual["sigma_um"] - NOISE_UM) < RMS_AFTER_TOLERANCE * NOISE_UM
@@ -591,7 +592,7 @@ def test_backlash_of_a_tilting_axis_is_found_from_the_side_each_pose_was_reached
     p = data[0].poses
     blind = [RTestData(Poses(p.q, p.ball, p.t, p.path), data[0].deviation)]
     blind_base = identify(seed_machine, blind)
-    assert diagnose(seed_machine, blind, blind_base).found == "EAA:r1"
+    assert diagnose(seed_machine, blind, blind_base, advisor=Advisor).found == "EAA:r1"
     stays = identify(seed_machine, blind, compose(seed_machine, base.model, ["EAA:r1"]))
     assert abs(stays.residual["sigma_um"] - NOISE_UM) < RMS_AFTER_TOLERANCE * NOISE_UM
     assert abs(stays.parameters["EAA:r1"].value - 5 * ARCSEC) < 3 * stays.parameters["EAA:r1"].std
@@ -599,7 +600,7 @@ def test_backlash_of_a_tilting_axis_is_found_from_the_side_each_pose_was_reached
     res = blind[0].deviation - fitted(seed_machine, stays, blind)       # what plots draw
     dof = res.size - len(stays.free) - 1                                 # K2's constant
     assert np.sqrt((res**2).sum() / dof) * 1e3 == pytest.approx(stays.residual["sigma_um"], rel=1e-6)
-    after = diagnose(seed_machine, blind, stays, advise=False, noise_um=NOISE_UM)
+    after = diagnose(seed_machine, blind, stays, noise_um=NOISE_UM)
     assert after.explained_to_noise and not after.significant, [c.effect for c in after.significant]
     assert after.sigma_um == pytest.approx(stays.residual["sigma_um"], rel=1e-6)   # the same dof
     said = unknown_sides(seed_machine, stays.model, blind[0].poses)
@@ -638,7 +639,7 @@ def test_a_reversal_seen_only_through_its_start_sides_is_invisible(seed_machine)
                  np.random.default_rng(3), drive=drive)
     blind = [RTestData(Poses(d.poses.q, d.poses.ball, d.poses.t, d.poses.path), d.deviation)]
     base = identify(seed_machine, blind)
-    c = next(c for c in diagnose(seed_machine, blind, base, advise=False, noise_um=NOISE_UM).candidates
+    c = next(c for c in diagnose(seed_machine, blind, base, noise_um=NOISE_UM).candidates
              if c.effect == "EAA:r1")
     assert not c.visible and not c.separable and not c.significant, c.visibility
     with pytest.raises(CompgenError, match="cannot separate"):

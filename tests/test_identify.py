@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, ROOT, TABLE4, UM, vector
 
+from compgen.advice import Advisor
 from compgen.errors import CompgenError
 from compgen.identify import identify
 from compgen.paths import generate
@@ -73,12 +74,11 @@ def test_k2_alone_cannot_separate_and_says_what_would(seed_machine, rng):
     """K2 turns C at A = 0: four combinations are invisible, with coefficients derived here
     from the geometry, and the separating measurements are ranked by the condition number
     computed here from the stacked, column-normalised Jacobians."""
-    from compgen.advice import Advisor
     from compgen.identify import COND_LIMIT
     from compgen.kinematics import Model
     data = simulate(seed_machine, TABLE4, generate(seed_machine, ["K2"]), NOISE_UM, rng)
     with pytest.raises(CompgenError) as exc:
-        identify(seed_machine, [data])
+        identify(seed_machine, [data], advisor=Advisor)
     text = str(exc.value)
     assert "cannot separate the parameters (singular)" in text      # exactly, up to rounding
     # at A = 0 a tilt θ of A's line about Z moves the ball (x = -217.504 mm) by θ·x in Y:
@@ -285,7 +285,6 @@ def test_a_weak_pair_is_refused_and_only_what_separates_it_is_offered(seed_machi
     (condition computed here); K2 again, or higher, adds nothing and is not offered."""
     import dataclasses
 
-    from compgen.advice import Advisor
     from compgen.identify import COND_LIMIT, check_identifiable
     from compgen.kinematics import Model
     k2 = dataclasses.replace(seed_machine, paths={"K2": seed_machine.paths["K2"]})
@@ -294,7 +293,7 @@ def test_a_weak_pair_is_refused_and_only_what_separates_it_is_offered(seed_machi
     s = np.linalg.svd(J / np.linalg.norm(J, axis=0), compute_uv=False)
     assert s[0] / s[1] > COND_LIMIT            # weak against the first, not against the second
     with pytest.raises(CompgenError) as exc:
-        check_identifiable(k2, m, [0, 1], J)
+        check_identifiable(k2, m, [0, 1], J, advisor=Advisor)
     text = str(exc.value)
     assert f"(condition number {s[0] / s[1]:.3g})" in text, text
     offered = {}
@@ -316,7 +315,7 @@ def test_when_no_measurement_separates_the_refusal_says_so(seed_machine, rng):
     data = simulate(k2, TABLE4, generate(k2, ["K2"]), NOISE_UM, rng)
     with pytest.raises(CompgenError, match="No single path or ball position of the machine file "
                                            "separates them; or hold"):
-        identify(k2, [data])
+        identify(k2, [data], advisor=Advisor)
 
 
 def test_a_small_part_of_a_combination_is_named(seed_machine):
@@ -369,7 +368,7 @@ def test_a_reversal_on_one_way_paths_is_refused_with_what_would_show_it(seed_mac
     data = simulate(seed_machine, TABLE4, generate(seed_machine, ["K4", "K1", "K2"]))
     with pytest.raises(CompgenError, match=r"YOW by .* together with ECC:r1 .* would: K2 there and back "
                                            r"\(condition \d+\); or hold") as refused:
-        identify(seed_machine, [data], [*TABLE4, "ECC:r1"])
+        identify(seed_machine, [data], [*TABLE4, "ECC:r1"], advisor=Advisor)
     assert "radius" not in str(refused.value) and "lower" not in str(refused.value)
     both_ways = simulate(seed_machine, {**TABLE4, "ECC:r1": 5 * ARCSEC},
                          generate(seed_machine, ["K4", "K1", "K2"], back=True))

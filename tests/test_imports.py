@@ -14,12 +14,25 @@ def _module(path: Path) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
+def _runtime_nodes(tree: ast.AST):
+    """Every node but those under ``if TYPE_CHECKING:`` (a type's name for the reader, no
+    import when the module runs)."""
+    todo = [tree]
+    while todo:
+        node = todo.pop()
+        yield node
+        for child in ast.iter_child_nodes(node):
+            if not (isinstance(child, ast.If) and isinstance(child.test, ast.Name)
+                    and child.test.id == "TYPE_CHECKING"):
+                todo.append(child)
+
+
 def _graph() -> dict[str, set[str]]:
     modules = {_module(p): p for p in PACKAGE.rglob("*.py")}
     graph = {m: set() for m in modules}
     for name, path in modules.items():
         package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        for node in _runtime_nodes(ast.parse(path.read_text(), str(path))):
             if isinstance(node, ast.ImportFrom):
                 base = package
                 for _ in range(node.level - 1):
@@ -69,3 +82,33 @@ def test_the_graph_reader_sees_lazy_imports():
     assert "compgen.emit.registry" in graph["compgen.machine_file"]
     assert "compgen.emit.programs" in graph["compgen.advice"]
     assert "compgen.plots" in graph["compgen.cli"]          # imported inside a command
+
+
+def _reach(graph: dict[str, set[str]], start: str) -> set[str]:
+    seen, todo = set(), [start]
+    while todo:
+        for t in graph[todo.pop()] - seen:
+            seen.add(t)
+            todo.append(t)
+    return seen
+
+
+def test_the_statistics_load_no_controller_program_motion_store_or_history():
+    """The fit and diagnose are statistics on the model and the data: the measurements they
+    advise are checked by an advisor their caller passes in (``advice.Advisor``, which
+    writes programs), so importing them, at the top or inside any function, reaches none
+    of the layers above."""
+    graph = _graph()
+    above = ("compgen.emit", "compgen.advice", "compgen.motion", "compgen.correction", "compgen.store",
+             "compgen.history", "compgen.cli", "compgen.plots", "compgen.report")
+    for statistics in ("compgen.identify", "compgen.diagnose", "compgen.noise", "compgen.significance",
+                       "compgen.spectrum", "compgen.signature"):
+        up = sorted(m for m in _reach(graph, statistics) if m.startswith(above))
+        assert not up, f"{statistics} reaches {up}"
+
+
+def test_the_graph_reader_skips_type_only_imports():
+    """diagnose names ``advice.Measurement`` for its readers under ``if TYPE_CHECKING:``:
+    no arrow; the reader sees the others."""
+    arrows = _graph()["compgen.diagnose"]
+    assert "compgen.advice" not in arrows and "compgen.spectrum" in arrows

@@ -77,7 +77,7 @@ def test_a_lookup_table_is_fitted_in_size(machine):
     size = fit.parameters["EXX:l.laser"]
     assert abs(size.value * 1e3 + 4.5) < 3 * size.std * 1e3, (size.value, size.std)
     assert abs(fit.residual["sigma_um"] - NOISE_UM) < 0.05
-    found = diagnose(machine, data, base, candidates=["EXX:l.laser", "EXX:p2", "EXX:p3"], advise=False)
+    found = diagnose(machine, data, base, candidates=["EXX:l.laser", "EXX:p2", "EXX:p3"])
     assert found.found == "EXX:l.laser", [c.effect for c in found.significant]
 
 
