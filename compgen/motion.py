@@ -292,6 +292,10 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
     ``probe``: the program holds probing moves made with this probe (the machine's set-up
     ball is its sphere); each stops where the stylus tip meets the sphere."""
     sense = sense or {}
+
+    def sensed(letter: str, v: float) -> float:     # a word's angle as the machine file turns it
+        return -v if sense.get(letter, 1) < 0 else v
+
     k = len(machine.axes)
     linear = [machine.index(c) for c in "XYZ"]
     rotary = [machine.index(a.name) for a in machine.rotary_axes]
@@ -317,7 +321,7 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
                 raise CompgenError(f"line {b.line}: the guard reads {', '.join(missing)}, which this machine "
                                    "lacks", hint="the program was written for another machine")
             for letter, v in b.target.items():
-                q[letters[letter]] = np.radians(v * sense.get(letter, 1)) if letters[letter] in rotary else v
+                q[letters[letter]] = np.radians(sensed(letter, v)) if letters[letter] in rotary else v
         elif b.kind == "tcp":
             settle()
             w, tcp = None, b.on
@@ -360,7 +364,7 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
                     end[linear.index(i)] = v
                 else:
                     now = w[3 + rotary.index(i)]
-                    v = _turned(modulo, b, letter, v * sense.get(letter, 1), np.degrees(now))
+                    v = _turned(modulo, b, letter, sensed(letter, v), np.degrees(now))
                     end[3 + rotary.index(i)] = np.radians(v)
             segments.append(_Segment(b, True, w, end, False))
             w = end
@@ -370,7 +374,7 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
         end = q.copy()
         for letter, v in b.target.items():
             i = letters[letter]
-            end[i] = (np.radians(_turned(modulo, b, letter, v * sense.get(letter, 1), np.degrees(q[i])))
+            end[i] = (np.radians(_turned(modulo, b, letter, sensed(letter, v), np.degrees(q[i])))
                       if i in rotary else v)
         if b.probe:
             end = _touch(machine, probe, b, q, end, findings)

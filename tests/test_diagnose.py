@@ -200,6 +200,7 @@ def test_correlated_noise_flags_nothing_because_it_is_whitened(seed_machine, pos
     found = diagnose(seed_machine, data, fit, advisor=Advisor)
     assert not found.significant, [c.effect for c in found.significant]
     assert all(0.6 < rho < 0.95 for rhos in found.noise.values() for rho in rhos), found.noise
+    assert all(round(rho, 3) == rho for rhos in found.noise.values() for rho in rhos)    # as documented
     assert "AR(1)" in report(found)
     import compgen.diagnose as module
     monkeypatch.setattr(module, "ar1", lambda r, seg: np.zeros_like(r))

@@ -218,7 +218,7 @@ def test_each_line_is_the_documented_scan_judged_by_the_joint_least_squares():
 
     for against, v, omega_of, d, want, count in (
             ("X", x, lambda p: 2 * np.pi / p, 0, 2.5, np.ptp(x) / 2.0 - 2),
-            ("C", c, lambda p: p, 1, 30.0, 36),
+            ("C", c, lambda p: p, 1, 30.0, 36),                   # orders 1 to 36: exactly 36
             ("time", t, lambda p: 2 * np.pi / p, 2, 90.0, np.ptp(t) / 60.0 - 2)):
         line = lines[against]
         assert line.direction == f"d{'XYZ'[d]}", line
@@ -232,4 +232,47 @@ def test_each_line_is_the_documented_scan_judged_by_the_joint_least_squares():
         assert line.share == pytest.approx(drop / rss, rel=1e-6)
         F = (drop / 2) / ((rss - drop) / (r.size - 3))
         assert line.p_value == pytest.approx(min(1.0, stats.f.sf(F, 2, r.size - 3) * count),
-                                             rel=1.5 / count + 1e-6, abs=0), (line, count)
+                                             rel=(1e-9 if against == "C" else 1.5 / count) + 1e-6,
+                                             abs=0), (line, count)
+
+
+def test_a_rival_removes_within_the_noise_of_the_best_or_while_misfit_is_left_nine_tenths_of_it():
+    """χ²(k, α)·σ² is what chance moves a sum of squares by: a candidate removing that
+    little less than the best is a rival whatever the misfit; while the best leaves misfit
+    (it is not the whole story), one removing RIVAL = 0.9 of what the best removes is too."""
+    from scipy import stats
+
+    from compgen.significance import RIVAL, rivals
+    sigma2, alpha = 0.01, 0.01
+    within = stats.chi2.isf(alpha, 2) * sigma2                   # 0.092
+    best = (100.0, 2)
+    others = {"close": (100.0 - 0.9 * within, 2), "far": (100.0 - 1.1 * within, 2),
+              "nine_tenths": (90.5, 1), "most": (89.5, 1), "unseen": (99.99, 0)}
+    assert RIVAL == 0.9
+    assert rivals(best, others, sigma2, alpha, misfit_left=False) == ("close",)
+    assert rivals(best, others, sigma2, alpha, misfit_left=True) == ("close", "far", "nine_tenths")
+
+
+def test_lack_of_fit_is_the_chi2_test_of_each_path_and_direction_against_the_noise():
+    """Two paths, dY of one at 1.3× the noise and dZ of the other at 1.6×: only they fail,
+    the worst first; their RMS and p-values (χ² with n·dof_share degrees of freedom,
+    Bonferroni over 2 paths × 3) as defined; AR(1) ρ shrinks the degrees of freedom by
+    (1 − ρ²)/(1 + ρ²)."""
+    from scipy import stats
+
+    from compgen.significance import lack_of_fit
+    rng = np.random.default_rng(3)
+    n, noise_um, share = 400, 1.0, 0.9
+    groups = np.repeat(["K4", "K1"], n)
+    r = rng.normal(0, noise_um * 1e-3 * np.sqrt(share), (2 * n, 3))
+    r[:n, 1] *= 1.3
+    r[n:, 2] *= 1.6
+    for rho in (0.0, 0.3):
+        got = lack_of_fit(r, groups, noise_um, np.full((2 * n, 3), rho), share, 0.01)
+        assert [(m["path"], m["direction"]) for m in got] == [("K1", "dZ"), ("K4", "dY")]
+        for m, rg in zip(got, (r[n:, 2], r[:n, 1]), strict=True):
+            k = round(n * share * (1 - rho**2) / (1 + rho**2))
+            ratio = np.mean(rg**2) / share / (noise_um * 1e-3) ** 2
+            assert m["rms_um"] == pytest.approx(np.sqrt(np.mean(rg**2)) * 1e3, rel=1e-12)
+            p = stats.chi2.sf(k * ratio, k) * 6
+            assert 1e-300 < p < 1e-3 and m["p_value"] == pytest.approx(p, rel=1e-6, abs=0)

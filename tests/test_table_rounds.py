@@ -411,3 +411,16 @@ def test_a_linuxcnc_joint_table_of_a_long_travel_turn_spans_the_travel_within_12
         c = linuxcnc.read_comp(files[".C.comp"], machine, ".C.comp")
         assert (c.grid[0], c.grid[-1]) == (-span, span) and len(c.grid) <= linuxcnc.COMP_ENTRIES
         np.testing.assert_allclose(c.at(c.grid), c.at(np.mod(c.grid, 360.0)), atol=2e-6)   # one turn repeated
+
+
+@pytest.mark.parametrize("points, start, stop, values", [
+    ((-1.0, 1.0, 10.0), 1.0, 10.0, 3),        # the first position is not the start (the second is)
+    ((1.0, 5.0, 9.0), 1.0, 10.0, 3),          # the last is not the stop
+    ((1.0, 5.0, 10.0, 12.0), 1.0, 10.0, 4),   # past the stop
+    ((1.0, 5.0, 5.0), 1.0, 5.0, 3),           # not increasing
+    ((1.0, 10.0), 1.0, 10.0, 3),              # two positions for three values
+])
+def test_uneven_positions_must_run_from_the_tables_start_to_its_stop(points, start, stop, values):
+    with pytest.raises(ValueError, match="do not run from"):
+        CompTable("EXX:t", "", "X", "X", start, stop, (0.001,) * values, False, "mm", points)
+    CompTable("EXX:t", "", "X", "X", 1.0, 10.0, (0.001,) * 3, False, "mm", (1.0, 4.0, 10.0))   # as it must be
