@@ -47,7 +47,7 @@ TESTS = {
                                   "tests/test_table_rounds.py"],
     "compgen/emit/linuxcnc.py": [*EDITS, "tests/test_edge.py", *PROGRAMS, "tests/test_probe_programs.py",
                                  "tests/test_table_rounds.py", "tests/test_linuxcnc_config.py"],
-    "compgen/motion.py": [*HOSTILE, "tests/test_probe_programs.py", "tests/test_trt.py"],  # probing, trt senses
+    "compgen/motion.py": [*HOSTILE, "tests/test_probe_programs.py", "tests/test_trt.py"],   # probes, senses
     "compgen/emit/programs.py": [*HOSTILE, "tests/test_trt.py"],        # read back under trt's senses
     "compgen/effects.py": ["tests/test_effects.py", "tests/test_kinematics.py", "tests/test_shapes.py"],
     # diagnose and its statistics: the closed-form tests first (quick to fail), the distributions
