@@ -374,3 +374,18 @@ def test_a_reversal_on_one_way_paths_is_refused_with_what_would_show_it(seed_mac
                          generate(seed_machine, ["K4", "K1", "K2"], back=True))
     fit = identify(seed_machine, [both_ways], [*TABLE4, "ECC:r1"])
     assert abs(fit.parameters["ECC:r1"].value - 5 * ARCSEC) < 1e-4 * ARCSEC
+
+
+def test_the_exact_fit_stops_when_its_step_is_below_the_tolerance_within_max_iter(seed_machine, monkeypatch):
+    """A fit that took n Gauss–Newton steps sees its (n+1)-th below the tolerance: it runs
+    with MAX_ITER = n + 1 and is refused, naming the cap, with n."""
+    import compgen.identify as module
+    big = {k: 30 * v for k, v in TABLE4.items()}        # far enough from linear to take steps
+    data = [simulate(seed_machine, big, generate(seed_machine, ["K4", "K1", "K2"]))]
+    n = identify(seed_machine, data).iterations
+    assert n >= 1
+    monkeypatch.setattr(module, "MAX_ITER", n + 1)
+    assert identify(seed_machine, data).iterations == n
+    monkeypatch.setattr(module, "MAX_ITER", n)
+    with pytest.raises(CompgenError, match=f"did not converge in {n} iterations"):
+        identify(seed_machine, data)
