@@ -26,7 +26,7 @@ from .emit.programs import MODES, NAME_MAX, at_ball, measure_program, program_ba
 from .emit.registry import CONTROLLERS, controller, for_program, read_edits, read_state
 from .errors import CompgenError, one_line
 from .files import STDOUT, new_command, read_text, write_all, write_atomically
-from .gate import fit_gate, unit_suspicion
+from .gate import fit_gate, gate_edit, unit_suspicion
 from .identify import identify, parse_fixed
 from .kinematics import unknown_sides, unpredicted_sides
 from .machine import identifier
@@ -280,7 +280,6 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
         model = [n.strip() for n in model_names.split(",") if n.strip()]
     model = compose(machine, model, add, remove)
     fixed = {n: v for n, v in fixed.items() if n in model} | parse_fixed(machine, fixes)
-    _refuse_twice(sets)
     _progress(f"fitting {len(model)} effects to {sum(len(s) for s in sets)} poses")
     result = identify(machine, sets, model, fixed, method, sign, advisor=Advisor)
     write_atomically(output, result.to_json(Path(output).resolve().parent), force,
@@ -528,11 +527,7 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
                                hint=f"give --current (and --measured-with) once: {ctl.backup}")
     text = read_state(current) if current else None
     _progress("checking that the fit explains its data")
-    reasons = fit_gate(machine, sets, fit)
-    if reasons and not despite:
-        raise CompgenError("this fit should not reach the control: " + "; ".join(reasons),
-                           hint=f"settle that first (see {me()} diagnose --from {base}); --despite-gate "
-                                "writes the edit anyway")
+    reasons = gate_edit(machine, sets, fit, base, despite)
     if reasons:
         _warn("writing an edit despite the fit gate: " + "; ".join(reasons))
     out = Path(output)
@@ -740,15 +735,8 @@ def history_add_cmd(fit_file, machine_file, serial, taken, device, operator, tem
 @DB
 def history_list_cmd(db):
     """Every machine in the store, with its number of fits and its last one."""
-    store = _store(db, create=False)
-    rows = store.rows("SELECT m.name, m.serial, COUNT(f.id) AS fits, MAX(s.taken) AS last FROM machines m "
-                      "LEFT JOIN sessions s ON s.machine_id = m.id LEFT JOIN fits f ON f.session_id = s.id "
-                      "GROUP BY m.id, m.name, m.serial ORDER BY m.name, m.serial")
-    for r in rows:
-        serial = f" ({one_line(r['serial'])})" if r["serial"] else ""
-        click.echo(f"{one_line(r['name'])}{serial}: {r['fits']} fit(s), last {str(r['last'])[:16]}")
-    if not rows:
-        click.echo(f"{store.where}: no machine recorded yet")
+    from .history import machines_text
+    click.echo(machines_text(_store(db, create=False)))
 
 
 @history_cmd.command("show")
@@ -798,25 +786,10 @@ def history_trend_cmd(machine_file, serial, params, plot, as_json, force, db):
 def history_export_cmd(machine_name, output, force, db):
     """Every fit's parameters, one row each, as CSV; a .json file holds the whole history
     too (sessions, fits, edits, checks), which `history import` reads into another store."""
-    from .history import export_all, export_rows
-    store = _store(db, create=False)
-    if output.endswith(".json"):        # whole: what history import reads, and the flat rows
-        doc = export_all(store, machine_name)
-        rows = doc["rows"]
-        text = json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
-    else:
-        rows = export_rows(store, machine_name)
-        import csv
-        import io
-        out = io.StringIO()
-        fields = ["name", "serial", "taken", "device", "operator", "marker", "kind", "verdict", "sigma_um",
-                  "parameter", "value", "std", "unit"]
-        w = csv.DictWriter(out, fields, lineterminator="\n")
-        w.writeheader()
-        w.writerows({k: r[k] for k in fields} for r in rows)
-        text = out.getvalue()
+    from .history import export_text
+    count, text = export_text(_store(db, create=False), machine_name, output.endswith(".json"))
     write_atomically(output, text, force)
-    _said(output, f"wrote {len(rows)} rows to {output}")
+    _said(output, f"wrote {count} rows to {output}")
 
 
 @history_cmd.command("import")
@@ -876,7 +849,6 @@ def check_cmd(machine_file, data, serial, taken, operator, as_json, machine_chan
     from .history import check, last_calibration, record_check, taken_at
     machine = load_machine(machine_file)
     sets = [read_data(p, machine, warn=_warn) for p in data]
-    _refuse_twice(sets)
     when = taken_at(taken)
     store = _store(db, create=False)
     calibration, entries, edits = last_calibration(store, machine, serial, before=when)
@@ -907,16 +879,6 @@ def _encoded_like(source: str, body: str) -> str | bytes:
 def _sha256(body: str | bytes) -> str:
     import hashlib
     return hashlib.sha256(body.encode() if isinstance(body, str) else body).hexdigest()
-
-
-def _refuse_twice(sets) -> None:
-    """The same readings twice would be fitted as independent: every σ √2 too small."""
-    seen = {}
-    for d in sets:
-        if d.sha256 in seen:
-            raise CompgenError(f"{d.source} holds the same readings as {seen[d.sha256]} (equal checksums)",
-                               hint="give each measurement once")
-        seen[d.sha256] = d.source
 
 
 def _path_names(machine, text: str) -> list[str]:

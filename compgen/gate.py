@@ -6,7 +6,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from . import me
 from .diagnose import diagnose
+from .errors import CompgenError
 from .machine import Machine
 from .results import FitResult
 from .rtest import RTestData
@@ -53,4 +55,16 @@ def fit_gate(machine: Machine, data: Sequence[RTestData], fit: FitResult) -> lis
         reasons.append("diagnose finds effects the model misses: "
                        + ", ".join(c.effect for c in found.significant[:3])
                        + " (run diagnose, add the effect with fit --add, and refit)")
+    return reasons
+
+
+def gate_edit(machine: Machine, data: Sequence[RTestData], fit: FitResult, fit_file: str,
+              despite: bool = False) -> tuple[str, ...]:
+    """The gate before an edit: the fit's reasons not to reach a control, refused unless
+    written ``despite`` them (then returned, for the edit's header and the history)."""
+    reasons = tuple(fit_gate(machine, data, fit))
+    if reasons and not despite:
+        raise CompgenError("this fit should not reach the control: " + "; ".join(reasons),
+                           hint=f"settle that first (see {me()} diagnose --from {fit_file}); --despite-gate "
+                                "writes the edit anyway")
     return reasons

@@ -10,7 +10,9 @@ edit is still one.
 
 from __future__ import annotations
 
+import csv
 import hashlib
+import io
 import json
 import math
 import re
@@ -490,6 +492,38 @@ def export_rows(store: Store, machine_name: str | None = None) -> list[dict]:
         for n, p in json.loads(r.pop("parameters")).items():
             out.append({**r, "parameter": n, "value": p["value"], "std": p["std"], "unit": p["unit"]})
     return out
+
+
+EXPORT_FIELDS = ["name", "serial", "taken", "device", "operator", "marker", "kind", "verdict", "sigma_um",
+                 "parameter", "value", "std", "unit"]
+
+
+def export_text(store: Store, machine_name: str | None, whole: bool) -> tuple[int, str]:
+    """The export's rows counted and its text: JSON, the whole history (what ``import``
+    reads) with the flat rows, when ``whole``; else the flat rows as CSV."""
+    if whole:
+        doc = export_all(store, machine_name)
+        return len(doc["rows"]), json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
+    rows = export_rows(store, machine_name)
+    out = io.StringIO()
+    w = csv.DictWriter(out, EXPORT_FIELDS, lineterminator="\n")
+    w.writeheader()
+    w.writerows({k: r[k] for k in EXPORT_FIELDS} for r in rows)
+    return len(rows), out.getvalue()
+
+
+def machines_text(store: Store) -> str:
+    """Every machine in the store, with its number of fits and its last one, a line each."""
+    rows = store.rows("SELECT m.name, m.serial, COUNT(f.id) AS fits, MAX(s.taken) AS last FROM machines m "
+                      "LEFT JOIN sessions s ON s.machine_id = m.id LEFT JOIN fits f ON f.session_id = s.id "
+                      "GROUP BY m.id, m.name, m.serial ORDER BY m.name, m.serial")
+    if not rows:
+        return f"{store.where}: no machine recorded yet"
+    lines = []
+    for r in rows:
+        serial = f" ({one_line(r['serial'])})" if r["serial"] else ""
+        lines.append(f"{one_line(r['name'])}{serial}: {r['fits']} fit(s), last {str(r['last'])[:16]}")
+    return "\n".join(lines)
 
 
 # -- a check against the last calibration

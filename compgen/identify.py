@@ -20,7 +20,7 @@ from .kinematics import Model, Poses, StartSides, both_sides, runs
 from .machine import Machine
 from .noise import ar1, ar1_covariance
 from .results import DataRef, Estimate, FitResult
-from .rtest import RTestData
+from .rtest import RTestData, refuse_twice
 from .significance import COND_LIMIT, condition
 from .units import parse_quantity, shown
 
@@ -48,6 +48,7 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         raise CompgenError(f"method must be 'exact' or 'linear', not {method!r}")
     if not data:
         raise CompgenError("no data to fit")
+    refuse_twice(data)
     fixed = dict(fixed or {})
     names = list(model or location_model(machine))
     names += [n for n in fixed if n not in names]

@@ -45,6 +45,17 @@ class RTestData:
         return len(self.poses)
 
 
+def refuse_twice(sets) -> None:
+    """The same readings twice would be fitted as independent: every σ √2 too small. Sets
+    read from files are compared by their checksums."""
+    seen = {}
+    for d in sets:
+        if d.sha256 and d.sha256 in seen:
+            raise CompgenError(f"{d.source} holds the same readings as {seen[d.sha256]} (equal checksums)",
+                               hint="give each measurement once")
+        seen[d.sha256] = d.source
+
+
 def device_of(data) -> str:
     """The device of measurements (``RTestData`` or a fit's data entries): "probe" when
     every one is from a probe log, else "rtest"."""

@@ -389,3 +389,11 @@ def test_the_exact_fit_stops_when_its_step_is_below_the_tolerance_within_max_ite
     monkeypatch.setattr(module, "MAX_ITER", n)
     with pytest.raises(CompgenError, match=f"did not converge in {n} iterations"):
         identify(seed_machine, data)
+
+
+def test_the_library_refuses_the_same_readings_twice(seed_machine):
+    """A caller of ``identify`` passing one file twice would get every σ √2 too small: the
+    rule is the library's, not only the command line's."""
+    data = read_rtest(vector("seed-table4-noiseless.csv"), seed_machine)
+    with pytest.raises(CompgenError, match="holds the same readings as"):
+        identify(seed_machine, [data, data])
