@@ -276,3 +276,21 @@ def test_lack_of_fit_is_the_chi2_test_of_each_path_and_direction_against_the_noi
             assert m["rms_um"] == pytest.approx(np.sqrt(np.mean(rg**2)) * 1e3, rel=1e-12)
             p = stats.chi2.sf(k * ratio, k) * 6
             assert 1e-300 < p < 1e-3 and m["p_value"] == pytest.approx(p, rel=1e-6, abs=0)
+
+
+def test_a_sine_the_models_columns_hold_is_no_line():
+    """Where the model's columns hold the cos/sin pair of a frequency (as a 1/rev term of a
+    location error does), the pair's part the model cannot absorb is below SEEN of the
+    pair: the scan gives it no sum of squares, however the residual looks there."""
+    from compgen.spectrum import SEEN, _drops
+
+    rng = np.random.default_rng(8)
+    x = np.arange(200) * 37.0 / 20       # ten whole periods of 37: cos² and sin² sum alike
+    f0 = 1 / 37.0
+    pair = np.column_stack([np.ones_like(x), np.cos(2 * np.pi * f0 * x), np.sin(2 * np.pi * f0 * x)])
+    Qd = np.stack([np.linalg.qr(pair + 1e-4 * rng.normal(size=pair.shape))[0] for _ in range(3)])
+    y = rng.normal(size=(200, 3))
+    y = np.column_stack([y[:, d] - Qd[d] @ (Qd[d].T @ y[:, d]) for d in range(3)])
+    assert SEEN > 1e-3
+    drops = _drops(x, y, np.array([f0, 1 / 11.0]), Qd)
+    assert np.all(drops[0] == 0.0) and np.all(drops[1] > 0.0), drops

@@ -424,3 +424,15 @@ def test_uneven_positions_must_run_from_the_tables_start_to_its_stop(points, sta
     with pytest.raises(ValueError, match="do not run from"):
         CompTable("EXX:t", "", "X", "X", start, stop, (0.001,) * values, False, "mm", points)
     CompTable("EXX:t", "", "X", "X", 1.0, 10.0, (0.001,) * 3, False, "mm", (1.0, 4.0, 10.0))   # as it must be
+
+
+def test_a_periodic_error_goes_into_a_table_only_with_eight_points_a_pitch(seed_machine):
+    """X's table on the seed machine (±400 mm) steps 25 mm: a 200 mm pitch has its 8 points
+    a pitch, a 5 mm screw period (docs: `kinematics` lists it, no table) would alias."""
+    from compgen.correction import _compensable_by_table, _grid
+    from compgen.effects import resolve
+    step = float(np.diff(_grid(seed_machine.axis("X")))[0])
+    assert step == 25.0
+    assert _compensable_by_table(seed_machine, resolve(seed_machine, "EXX:w200"))
+    assert not _compensable_by_table(seed_machine, resolve(seed_machine, "EXX:w5"))
+    assert not _compensable_by_table(seed_machine, resolve(seed_machine, "EXX:w199"))   # 7.96 a pitch
