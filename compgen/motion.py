@@ -294,7 +294,7 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
     sense = sense or {}
 
     def sensed(letter: str, v: float) -> float:     # a word's angle as the machine file turns it
-        return -v if sense.get(letter, 1) < 0 else v
+        return -v if sense.get(letter) == -1 else v
 
     k = len(machine.axes)
     linear = [machine.index(c) for c in "XYZ"]
