@@ -13,8 +13,9 @@ from pathlib import Path
 
 from compgen.emit.programs import measure_program
 from compgen.emit.registry import controller
+from compgen.frames import safe_height
 from compgen.machine_file import load_machine
-from compgen.motion import run, safe_height
+from compgen.motion import run
 from compgen.paths import generate
 
 ROOT = Path(__file__).resolve().parents[1]

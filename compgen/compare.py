@@ -19,13 +19,12 @@ from .correction import plan
 from .diagnose import diagnose
 from .emit.registry import controller
 from .errors import CompgenError
-from .identify import identify
+from .identify import beyond_setup, identify
 from .kinematics import Model, Poses
 from .machine import Machine
 from .results import FitResult
 from .rtest import RTestData
 
-SETUP = ("XOW", "YOW", "ZOW")
 AS_PREDICTED = (1.25, 0.2)   # measured RMS within 1.25 × predicted + 0.2 µm counts as predicted
 
 
@@ -138,11 +137,6 @@ def _warnings(machine: Machine, fit: FitResult, pred: dict) -> list[str]:
             out.append(f"{name} is predicted at {max(stats['range_um']):.2f} µm range, beyond its tolerance "
                        f"{tol:g} µm: this edit alone cannot bring it into tolerance")
     return out
-
-
-def beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
-    fit = identify(machine, [RTestData(poses, reading)], list(SETUP))
-    return {"rms_um": fit.residual["rms_um"], "per_path": fit.residual["per_path"]}
 
 
 def _measured(machine: Machine, fit: FitResult, post: Sequence[RTestData], predicted: dict) -> dict:

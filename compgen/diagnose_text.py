@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import shlex
 from itertools import combinations
+from typing import TYPE_CHECKING
 
 from . import me
-from .advice import Measurement
 from .diagnose import Diagnosis
 from .effects import effect_name
 from .units import three, three_header
+
+if TYPE_CHECKING:        # the type only: advice writes programs, a layer above
+    from .advice import Measurement
 
 
 def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:

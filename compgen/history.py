@@ -607,7 +607,7 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
     other than the calibration's is refused: its nominal geometry, limits or tolerances may
     differ, and the changes would be measured against another machine; ``machine_changed``
     checks anyway and says so."""
-    from .compare import beyond_setup
+    from .identify import beyond_setup
     from .kinematics import Poses
 
     name, serial = machine_key(machine, serial)

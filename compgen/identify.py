@@ -399,3 +399,13 @@ def parse_fixed(machine: Machine, items: Sequence[str]) -> dict[str, float]:
         effect = effect_of_param(machine, name.strip())
         out[canonical(name)] = parse_quantity(value, effect.unit, where=f"--fix {item}")
     return out
+
+
+SETUP = ("XOW", "YOW", "ZOW")      # the ball's offset: what every set-up has anew
+
+
+def beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
+    """RMS and per-path figures of ``reading`` (n, 3) mm beyond the set-up terms alone:
+    what an edit leaves, or a check measures, whatever the ball's offset."""
+    fit = identify(machine, [RTestData(poses, reading)], list(SETUP))
+    return {"rms_um": fit.residual["rms_um"], "per_path": fit.residual["per_path"]}

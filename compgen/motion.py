@@ -27,10 +27,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import CompgenError
-from .kinematics import Poses, _chain, inverse
+from .frames import frames, from_world, safe_height, world
 from .machine import Machine, ProbeSetup
 from .search import golden_least
-from .transforms import apply
 
 STEP_MM, STEP_DEG = 1.0, 0.5
 SEARCH_MM = 0.01         # the closest point along housing and spindle axes, found to this
@@ -136,60 +135,6 @@ def unknown(line: int, text: str) -> CompgenError:
                              "blocks cannot be shown safe")
 
 
-def safe_height(machine: Machine) -> float:
-    """The height of the nest centre above the rotary axes' intersection at which nothing
-    of the set-up can be touched at any orientation: every solid lies within R of the
-    intersection, and the housing reaches ``nest_below`` and its radius below the centre."""
-    s = machine.setup
-    table = _frames(machine, np.zeros((1, len(machine.axes))))[0][0]
-    normal = table[:3, 2]
-    reach = np.linalg.norm(apply(table, np.asarray(machine.ball))) + s.ball_diameter / 2
-    for z in (s.table_top, s.table_top - s.table_thickness):
-        # the rim's farthest point: |c + R·u|² = |c|² + R² + 2R c·u, greatest for the unit u
-        # in the table's plane along c's part in that plane
-        c = table[:3, 3] + z * normal
-        across = np.linalg.norm(c - (c @ normal) * normal)
-        reach = max(reach, np.sqrt(c @ c + s.table_radius**2 + 2 * s.table_radius * across))
-    return float(np.ceil(reach + s.nest_below + s.nest_radius + s.margin))
-
-
-def _frames(machine: Machine, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The nominal table frame (n, 4, 4), and in it the nest centre and the tool axis (n, 3)."""
-    poses = Poses.at(q, np.zeros(3))
-    zero = np.zeros((len(q), 6))
-    table = _chain(machine, machine.workpiece, poses, {}, zero)
-    tool = _chain(machine, machine.tool, poses, {}, zero)
-    R = table[:, :3, :3]
-    return (table, np.einsum("nji,nj->ni", R, tool[:, :3, 3] - table[:, :3, 3]),
-            np.einsum("nji,nj->ni", R, tool[:, :3, 2]))
-
-
-def table_axis_down(machine: Machine, q: np.ndarray) -> np.ndarray:
-    """(n, 3): the table frame's −z in the machine frame at poses ``q``: where a stem
-    standing on the table points from the ball."""
-    return -_frames(machine, q)[0][:, :3, 2]
-
-
-def table_point(machine: Machine, q: np.ndarray) -> np.ndarray:
-    """The table-frame point under the nest centre at poses ``q`` (n, k), mm."""
-    return _frames(machine, q)[1]
-
-
-def world(machine: Machine, q: np.ndarray) -> np.ndarray:
-    """The TCP coordinates of poses ``q``: the linear axes that put the nest on the same
-    table point with the rotary axes at zero (what compgen writes under TCPM/TRAORI/trt)."""
-    rot = np.zeros((len(q), len(machine.rotary_axes)))
-    linear = [machine.index(c) for c in "XYZ"]
-    return inverse(machine, rot, table_point(machine, q))[:, linear]
-
-
-def from_world(machine: Machine, xyz: np.ndarray, rot_rad: np.ndarray) -> np.ndarray:
-    """Poses that put the nest on the table point with TCP coordinates ``xyz`` at ``rot_rad``."""
-    q0 = np.zeros((len(xyz), len(machine.axes)))
-    q0[:, [machine.index(c) for c in "XYZ"]] = xyz
-    return inverse(machine, rot_rad, table_point(machine, q0))
-
-
 def tooling(machine: Machine,
             probe: ProbeSetup | None = None) -> dict[str, tuple[float, float, float, float]]:
     """The parts of what the spindle holds, along the tool axis from the tool point (nest or
@@ -218,7 +163,7 @@ def clearances(machine: Machine, q: np.ndarray,
     the table is a convex solid, so the signed distance from it is convex along the axis:
     its least value over the part is found by golden-section search, to ``SEARCH_MM``."""
     s = machine.setup
-    _, nest, axis = _frames(machine, q)                                      # table frame
+    _, nest, axis = frames(machine, q)                                      # table frame
     ball = np.asarray(machine.ball)
     rb = s.ball_diameter / 2
     stem_top = ball[2] - rb
@@ -428,7 +373,7 @@ def _touch(machine: Machine, probe: ProbeSetup | None, b: Block, q: np.ndarray, 
         findings.append(Finding(b.line, "probing from an unknown place", "an axis has not been positioned "
                                 "before the probing move", b.text.strip()))
         return None
-    _, ends, _ = _frames(machine, np.array([q, end]))
+    _, ends, _ = frames(machine, np.array([q, end]))
     ball = np.asarray(machine.ball)
     rho = (machine.setup.ball_diameter + probe.stylus_diameter) / 2
     p0, d = ends[0] - ball, ends[1] - ends[0]

@@ -19,9 +19,9 @@ import numpy as np
 
 from .errors import CompgenError, one_line
 from .files import read_text
+from .frames import table_axis_down
 from .kinematics import Poses, inverse
 from .machine import Machine, ProbeSetup
-from .motion import table_axis_down
 from .rtest import BALL, READING_MAX_MM, RTestData, _read_table, axis_cells
 from .units import number
 

@@ -112,3 +112,47 @@ def test_the_graph_reader_skips_type_only_imports():
     no arrow; the reader sees the others."""
     arrows = _graph()["compgen.diagnose"]
     assert "compgen.advice" not in arrows and "compgen.spectrum" in arrows
+
+
+# The package's floor plan, lowest first: a module imports only from its own layer or those
+# below (docs/layout.md draws it). The statistics take their advisor from their caller.
+LAYERS = [
+    ("base", {"compgen", "compgen.errors", "compgen.units", "compgen.files", "compgen.transforms",
+              "compgen.search"}),
+    ("model", {"compgen.machine", "compgen.effects", "compgen.kinematics", "compgen.lines", "compgen.paths",
+               "compgen.frames"}),
+    ("data", {"compgen.rtest", "compgen.probe", "compgen.simulate"}),
+    ("statistics", {"compgen.noise", "compgen.significance", "compgen.spectrum", "compgen.signature",
+                    "compgen.results", "compgen.identify", "compgen.diagnose", "compgen.diagnose_text",
+                    "compgen.gate"}),
+    ("set-up", {"compgen.motion"}),
+    ("controllers", {"compgen.correction", "compgen.advice", "compgen.emit", "compgen.emit.base",
+                     "compgen.emit.registry", "compgen.emit.tab", "compgen.emit.heidenhain",
+                     "compgen.emit.sinumerik", "compgen.emit.linuxcnc", "compgen.emit.linuxcnc_config",
+                     "compgen.emit.programs", "compgen.emit.probing", "compgen.emit.kinematics"}),
+    ("configuration", {"compgen.machine_file", "compgen.session"}),     # a machine file names its control
+    ("store", {"compgen.store", "compgen.history"}),
+    ("commands", {"compgen.compare", "compgen.report", "compgen.plots", "compgen.checklist", "compgen.cli",
+                  "compgen.__main__"}),
+]
+
+
+def _arrows_up(graph: dict[str, set[str]], layer_of: dict[str, int]) -> list[str]:
+    return sorted(f"{m} ({LAYERS[layer_of[m]][0]}) -> {t} ({LAYERS[layer_of[t]][0]})"
+                  for m, targets in graph.items() for t in targets if layer_of[t] > layer_of[m])
+
+
+def test_every_module_has_a_layer_and_no_import_points_up():
+    graph = _graph()
+    layer_of = {m: k for k, (_, members) in enumerate(LAYERS) for m in members}
+    assert set(graph) == set(layer_of), sorted(set(graph) ^ set(layer_of))
+    up = _arrows_up(graph, layer_of)
+    assert not up, "\n".join(up)
+
+
+def test_the_layer_test_sees_an_arrow_up():
+    """The statistics importing the advice (what they did before) is named."""
+    graph = _graph()
+    layer_of = {m: k for k, (_, members) in enumerate(LAYERS) for m in members}
+    graph["compgen.identify"] = graph["compgen.identify"] | {"compgen.advice"}
+    assert _arrows_up(graph, layer_of) == ["compgen.identify (statistics) -> compgen.advice (controllers)"]

@@ -14,8 +14,10 @@ from conftest import BC_MACHINE, SEED_MACHINE, run
 from compgen import motion
 from compgen.emit.registry import controller
 from compgen.errors import CompgenError
+from compgen.frames import frames, safe_height
+from compgen.kinematics import inverse
 from compgen.machine_file import load_machine
-from compgen.motion import clearances, safe_height
+from compgen.motion import clearances
 
 PROGRAMS = [(m, c, mode, path) for m in ("seed", "bc") for c in ("itnc530", "sinumerik840d", "linuxcnc")
             for mode in ("tcpm", "axes") for path in ("K4", "K1,K2", "all")]
@@ -135,13 +137,12 @@ def test_the_safe_height_is_the_farthest_point_of_the_set_up(machines, dx, dy):
     the farthest rim point then lies at one angle only."""
     from dataclasses import replace
 
-    from compgen.motion import _frames
     from compgen.transforms import apply
     seed = load_machine(machines["seed"])
     m = replace(seed, workpiece=tuple(replace(a, offset=(a.offset[0] + dx, a.offset[1] + dy, a.offset[2]))
                                       if a.name == "C" else a for a in seed.workpiece))
     s = m.setup
-    table = _frames(m, np.zeros((1, len(m.axes))))[0][0]
+    table = frames(m, np.zeros((1, len(m.axes))))[0][0]
     t = np.linspace(0, 2 * np.pi, 3600, endpoint=False)
     rims = [np.column_stack([s.table_radius * np.cos(t), s.table_radius * np.sin(t), np.full_like(t, z)])
             for z in (s.table_top, s.table_top - s.table_thickness)]
@@ -153,8 +154,8 @@ def test_the_safe_height_is_the_farthest_point_of_the_set_up(machines, dx, dy):
 def test_the_stem_points_down_the_table_at_every_pose(machines):
     """table_axis_down (where a probe's stem stands from its sphere) against the walk of the
     chains: a table point 1 mm lower on the stem moves the reading by minus that vector."""
+    from compgen.frames import table_axis_down
     from compgen.kinematics import Model, Poses
-    from compgen.motion import table_axis_down
     for key in ("seed", "bc"):
         m = load_machine(machines[key])
         rng = np.random.default_rng(2)
@@ -296,10 +297,10 @@ def test_the_searched_clearance_is_the_least_along_housing_and_spindle(held, fac
     angle, radial = rng.uniform(0, 2 * np.pi, 20), s.table_radius - rng.uniform(1, 20, 20)
     z = rng.uniform(s.table_top - s.table_thickness + 5, s.table_top - 5, 20)
     rotary = np.zeros((20, len(m.rotary_axes)))
-    q[40:60] = motion.inverse(m, rotary, np.column_stack([radial * np.cos(angle), radial * np.sin(angle), z]))
+    q[40:60] = inverse(m, rotary, np.column_stack([radial * np.cos(angle), radial * np.sin(angle), z]))
     probe = m.probe if held == "probe" else None
     got, _ = clearances(m, q, probe)
-    _, nest, axis = motion._frames(m, q)
+    _, nest, axis = frames(m, q)
     ball, rb = np.asarray(m.ball), s.ball_diameter / 2
     parts = {"housing": (-s.nest_below, m.probe_length, s.nest_radius),
              "spindle": (m.probe_length, m.probe_length + s.spindle_length, s.spindle_radius)}
@@ -512,7 +513,8 @@ def test_every_move_is_sampled_at_least_every_mm_and_half_degree_end_to_end():
     """``_paths`` on moves in machine axes and under TCP: n + 1 samples, n the
     larger of the millimetres and the half-degrees moved (rounded up), from start to end;
     TCP moves in TCP coordinates, each converted to its own machine poses."""
-    from compgen.motion import _paths, _Segment, from_world
+    from compgen.frames import from_world
+    from compgen.motion import _paths, _Segment
     m = load_machine(SEED_MACHINE)
     linear = [m.index(c) for c in "XYZ"]
     rotary = [m.index(a.name) for a in m.rotary_axes]
@@ -657,7 +659,7 @@ def test_the_searched_table_clearance_is_the_least_to_a_micrometre_and_a_half():
     n = 60
     q = _around_the_set_up(m, np.random.default_rng(6), n)
     got, _ = clearances(m, q)
-    _, nest, axis = motion._frames(m, q)
+    _, nest, axis = frames(m, q)
     top, bottom = s.table_top, s.table_top - s.table_thickness
 
     def table(t):                                  # (n, k) signed distance of nest + t·axis

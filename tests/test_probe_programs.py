@@ -171,8 +171,9 @@ def test_a_probing_move_stops_where_the_tip_meets_the_sphere(start, end, said):
     mm beyond contact along x (the tip's centre at rho = (sphere + tip) / 2 from the ball's
     centre at 0), y, z. A touch stops on the contact sphere; a move that does not touch is a
     finding that says why."""
+    from compgen.frames import table_point
     from compgen.kinematics import inverse
-    from compgen.motion import Block, _touch, table_point
+    from compgen.motion import Block, _touch
     m = load_machine(SEED_MACHINE)
     ball, rho = np.asarray(m.ball), (m.setup.ball_diameter + m.probe.stylus_diameter) / 2
     at = [ball + [rho + p[0], p[1], p[2]] for p in (start, end)]
@@ -193,8 +194,9 @@ def test_a_probing_move_stops_where_the_tip_meets_the_sphere(start, end, said):
 def test_a_grazing_probing_move_touches():
     """A move passing 0.3 µm inside the contact sphere touches it (near-tangent: the
     discriminant is tiny but positive)."""
+    from compgen.frames import table_point
     from compgen.kinematics import inverse
-    from compgen.motion import Block, _touch, table_point
+    from compgen.motion import Block, _touch
     m = load_machine(SEED_MACHINE)
     ball, rho = np.asarray(m.ball), (m.setup.ball_diameter + m.probe.stylus_diameter) / 2
     h = rho - 3e-4

@@ -25,9 +25,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import CompgenError
+from ..frames import safe_height
 from ..kinematics import Poses, inverse
 from ..machine import Machine, check_travel
-from ..motion import safe_height
 from ..probe import DIRECTION, MAGIC, need_probe, touch_directions
 from ..rtest import BALL
 from . import Emitted, ascii_text, render

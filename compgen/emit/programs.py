@@ -18,9 +18,9 @@ import numpy as np
 
 from .. import motion
 from ..errors import CompgenError
+from ..frames import safe_height, world
 from ..kinematics import APPROACH_DEG, Poses, inverse, program_sides
 from ..machine import Machine, check_ball, check_travel
-from ..motion import safe_height
 from ..rtest import BALL, axis_cells, side_columns
 from ..units import number
 from . import Emitted, ascii_text, render
@@ -273,7 +273,7 @@ def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool
         turn_to(zero)
     tcp = [s for s in steps if s.get("q") is not None]
     if tcp:
-        xyz = motion.world(machine, np.array([s["q"] for s in tcp]))
+        xyz = world(machine, np.array([s["q"] for s in tcp]))
         for s, w in zip(tcp, xyz, strict=True):
             s["axes"].update(zip("XYZ", w, strict=True))
     return steps
