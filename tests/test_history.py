@@ -42,7 +42,7 @@ EDIT_DATE = "2026-07-02T09:00:00+00:00"
 def _truth(machine, base, when: str, corrected: dict) -> dict:
     """The machine on ``when``: the seed's errors, YOC drifting since 1 January, BOA after
     the crash; minus what the control corrects (an edit loaded)."""
-    months = H._days("2026-01-01T00:00:00+00:00", H.taken_at(when)) / H.DAYS_PER_MONTH
+    months = H.days("2026-01-01T00:00:00+00:00", H.taken_at(when)) / H.DAYS_PER_MONTH
     t = dict(base)
     t["YOC"] += YOC_PER_MONTH * months
     if when >= CRASH[0]:
@@ -565,10 +565,11 @@ def test_the_drift_line_kept_as_sums_is_the_weighted_least_squares_line():
                            .astype(str) + "+00:00", "fit:0", "calibration", "rtest", "accepted", 1.0,
                            {"YOC": float(v)}, {"YOC": float(s)}, {"YOC": "mm"}, {})
                    for i, (d, v, s) in enumerate(zip(np.r_[0, days[1:]], y, std, strict=True))]
-        line = H._Line(entries[0].taken)
+        from compgen.history.drift import _Line
+        line = _Line(entries[0].taken)
         for e in entries:
             line.add(e, "YOC")
-        t = np.array([H._days(entries[0].taken, e.taken) / H.DAYS_PER_MONTH for e in entries])
+        t = np.array([H.days(entries[0].taken, e.taken) / H.DAYS_PER_MONTH for e in entries])
         w = 1 / std ** 2
         A = np.column_stack([np.ones(n), t]) * np.sqrt(w)[:, None]
         coef = np.linalg.lstsq(A, y * np.sqrt(w), rcond=None)[0]
@@ -632,12 +633,13 @@ from compgen import history as H
 from compgen.machine_file import load_machine
 from compgen.results import load_fit
 from compgen.store import open_store
-look = H._fit_rows
+from compgen.history import ledger
+look = ledger._fit_rows
 def slow(*args):                 # every writer looks, finds nothing, and only then inserts
     found = look(*args)
     time.sleep(1.5)
     return found
-H._fit_rows = slow
+ledger._fit_rows = slow
 store, fit, machine = open_store(sys.argv[2]), load_fit(sys.argv[1]), load_machine("ac-trunnion-itnc530")
 time.sleep(max(float(sys.argv[3]) - time.time(), 0))      # and all at once
 try:
@@ -651,7 +653,7 @@ def test_eight_writers_adding_the_same_fit_at_once_make_one_row(pg_db, fit_file)
     """Every writer looks first and finds nothing; the database's unique key lets one in."""
     assert run("history", "init", "--db", pg_db)[0] == 0
     with open_store(pg_db) as store, store.writing():     # the machine is known: its row holds no one up
-        H._machine_id(store, *H.machine_key(load_machine("ac-trunnion-itnc530")), create=True)
+        H.lookup_machine(store, *H.machine_key(load_machine("ac-trunnion-itnc530")), create=True)
     start = time.time() + 4
     procs = [subprocess.Popen([sys.executable, "-c", ADD_SAME, str(fit_file), pg_db, str(start)],
                               env={**os.environ, "PYTHONPATH": str(ROOT)}, stdout=subprocess.PIPE,

@@ -131,7 +131,8 @@ LAYERS = [
                      "compgen.emit.sinumerik", "compgen.emit.linuxcnc", "compgen.emit.linuxcnc_config",
                      "compgen.emit.programs", "compgen.emit.probing", "compgen.emit.kinematics"}),
     ("configuration", {"compgen.machine_file", "compgen.session"}),     # a machine file names its control
-    ("store", {"compgen.store", "compgen.history"}),
+    ("store", {"compgen.store", "compgen.history", "compgen.history.ledger", "compgen.history.drift",
+               "compgen.history.checks", "compgen.history.words", "compgen.history.exchange"}),
     ("commands", {"compgen.compare", "compgen.report", "compgen.plots", "compgen.checklist", "compgen.cli",
                   "compgen.__main__"}),
 ]

@@ -1,0 +1,193 @@
+"""A short measurement against the last accepted calibration: pass or fail per location
+error, and what to do next."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import me
+from ..effects import effect_of_param
+from ..emit.registry import controller
+from ..errors import CompgenError, one_line
+from ..machine import Machine
+from ..results import FitResult
+from ..rtest import device_of
+from ..store import Store, now
+from ..units import shown
+from .drift import Entry, Flag, flags, limit_of, machine_params
+from .ledger import file_ref, lookup_machine, machine_key, session_and_fit
+
+
+@dataclass
+class Change:
+    param: str
+    change: float          # machine value now minus at the calibration (mm, rad)
+    std: float
+    unit: str
+    limit: float
+    status: str            # "pass", "fail", or "unsure" (beyond the limit, but not beyond k σ)
+    words: str
+
+    def text(self) -> str:
+        v, u = shown(self.change, self.unit)
+        s, _ = shown(self.std, self.unit)
+        lim, _ = shown(self.limit, self.unit)
+        return (f"  {self.param:<6}{v:>+9.2f} ± {s:.2f} {u:<7}limit {lim:g} {u:<7}"
+                f"{self.status.upper():<7}{self.words}")
+
+
+@dataclass
+class CheckResult:
+    machine: str
+    serial: str
+    against: Entry
+    marker: str
+    taken: str
+    changes: list[Change]
+    sigma_um: float
+    paths: dict[str, str]          # path → PASS/FAIL against [tolerances]
+    flags: list[Flag]
+    advice: list[str]
+    machine_changed: bool = False    # checked with another machine file than the calibration's
+
+    @property
+    def passed(self) -> bool:
+        """Every location error within its limit and every path within its tolerance; a
+        change too uncertain to judge does not pass (a drift within limits does, with advice)."""
+        return (all(c.status == "pass" for c in self.changes)
+                and not any(v.startswith("FAIL") for v in self.paths.values()))
+
+    def summary(self) -> dict:
+        return {"format": "compgen.check/1", "machine": self.machine, "serial": self.serial,
+                "passed": self.passed, "taken": self.taken, "fit": self.marker,
+                "against": {"fit": self.against.marker, "taken": self.against.taken},
+                "sigma_um": self.sigma_um, "paths": self.paths,
+                "changes": [{"parameter": c.param, "change": c.change, "std": c.std, "unit": c.unit,
+                             "limit": c.limit, "status": c.status} for c in self.changes],
+                "flags": [f.text() for f in self.flags], "advice": self.advice,
+                "machine_file_changed": self.machine_changed,
+                **({"recorded_by": self.against.recorded_by} if self.against.recorded_by else {})}
+
+    def text(self) -> str:
+        who = f", recorded by {one_line(self.against.recorded_by)}" if self.against.recorded_by else ""
+        serial = f" ({one_line(self.serial)})" if self.serial else ""
+        lines = [f"compgen check: {one_line(self.machine)}{serial}, "
+                 f"measured {self.taken[:16]}",
+                 f"  against the calibration of {self.against.taken[:16]} ({self.against.marker}{who}), "
+                 "corrections written since counted"]
+        if self.machine_changed:
+            lines.append("  with a machine file changed since that calibration (--machine-changed)")
+        lines += ["", f"  {'param':<6}{'change':>9}   {'σ':<12}{'':<16}{'status':<7}"]
+        lines += [c.text() for c in self.changes]
+        lines.append(f"\n  residual σ̂ {self.sigma_um:.3f} µm (the calibration's "
+                     f"{self.against.sigma_um:.3f} µm)")
+        lines += [f"  {p}: {v} µm range beyond the set-up" for p, v in self.paths.items()]
+        lines += [f"  flagged: {f.text()}" for f in self.flags]
+        lines += ["", "PASS: the machine is where its last calibration left it" if self.passed else "FAIL"]
+        lines += [f"  next: {a}" for a in self.advice]
+        return "\n".join(lines) + "\n"
+
+
+def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: Sequence[Entry],
+          edits: Sequence[dict], taken: str, serial: str | None = None,
+          machine_changed: bool = False) -> CheckResult:
+    """A short measurement's fit against the last accepted calibration: each location
+    error's change (machine values: the corrections written since are counted) with its σ,
+    the paths against ``[tolerances]``, and a drift or step it completes. A machine file
+    other than the calibration's is refused: its nominal geometry, limits or tolerances may
+    differ, and the changes would be measured against another machine; ``machine_changed``
+    checks anyway and says so."""
+    from ..identify import beyond_setup
+    from ..kinematics import Poses
+
+    name, serial = machine_key(machine, serial)
+    changed = bool(calibration.machine_sha256) and calibration.machine_sha256 != machine.sha256
+    if changed and not machine_changed:
+        raise CompgenError(f"the machine file changed since the calibration of {calibration.taken[:16]} "
+                           f"(SHA-256 {calibration.machine_sha256[:12]}… then, {machine.sha256[:12]}… now)",
+                           where=machine.source,
+                           hint="check with the machine file of then; or, if the change is known (a "
+                                "tolerance, a limit), add --machine-changed; after a change of geometry, "
+                                "calibrate again")
+    k = machine.drift.k_sigma
+    corrected: dict[str, float] = {}
+    for e in edits:
+        if e["taken"] <= taken:
+            for n, v in e["corrects"].items():
+                corrected[n] = corrected.get(n, 0.0) + v
+    now_entry = Entry(0, taken, fit.marker, "check", "rtest", "", fit.residual["sigma_um"],
+                      {n: e.value for n, e in fit.parameters.items()},
+                      {n: e.std for n, e in fit.parameters.items()},
+                      {n: e.unit for n, e in fit.parameters.items()}, corrected)
+    names = [n for n in machine_params(machine, fit.model) if n in calibration.values]
+    changes = []
+    for n in names:
+        change = now_entry.machine_value(n) - calibration.machine_value(n)
+        std = math.hypot(now_entry.std[n], calibration.std[n])
+        limit = limit_of(machine, now_entry.units[n])
+        status = "pass" if abs(change) <= limit else ("fail" if abs(change) > k * std else "unsure")
+        changes.append(Change(n, change, std, now_entry.units[n], limit, status,
+                              effect_of_param(machine, n).words))
+    got = beyond_setup(machine, Poses.concat([d.poses for d in data]),
+                       np.concatenate([d.deviation for d in data]))
+    paths = {}
+    for p, stats in got["per_path"].items():
+        if p in machine.tolerances:
+            worst = max(stats["range_um"])
+            tol = machine.tolerances[p]
+            paths[p] = f"PASS {worst:.2f} <= {tol:g}" if worst <= tol else f"FAIL {worst:.2f} > {tol:g}"
+    series = [e for e in entries if e.taken <= taken] + [now_entry]
+    new_flags = [f for f in flags(machine, series, names) if f.taken == taken]
+    advice = []
+    failed = [c for c in changes if c.status == "fail"]
+    if failed:
+        worst = max(failed, key=lambda c: abs(c.change) / c.limit)
+        advice.append(f"re-calibrate: {', '.join(c.param for c in failed)} moved beyond its limit "
+                      f"({worst.param}, {worst.words}, most); measure all paths ({me()} measure-program "
+                      f"--machine {file_ref(machine)} --path all -o calibration"
+                      f"{controller(machine.controller).program_ext}), fit, and write the edit with "
+                      "kinematics")
+        axes = {c.param[-1] for c in failed}      # ISO 230 symbols end with the axis they locate
+        if len(axes) == 1:
+            axis = axes.pop()
+            advice.append(f"look at axis {axis} first: a location error of one axis moving alone points "
+                          "to a collision, a loosened clamp or a bearing, not to temperature")
+    if any(c.status == "unsure" for c in changes):
+        advice.append("measure more (all paths, or the check path twice): "
+                      + ", ".join(c.param for c in changes if c.status == "unsure")
+                      + " may have moved beyond its limit, but its σ is too large to say")
+    if fit.residual["sigma_um"] > 2.0 * calibration.sigma_um and fit.residual["sigma_um"] > 1.0:
+        advice.append(f"check the set-up: the residual σ̂ is {fit.residual['sigma_um']:.2f} µm against the "
+                      f"calibration's {calibration.sigma_um:.2f} µm (ball stem, nest, temperature, a loose "
+                      "magnet base)")
+    if any(v.startswith("FAIL") for v in paths.values()):
+        advice.append("a path is beyond its tolerance: re-calibrate, then compare the predicted residual"
+                      if failed else
+                      "the location errors are where the last calibration found them, but a path is beyond "
+                      f"its tolerance: that calibration ({calibration.marker}, {calibration.taken[:10]}) "
+                      "is not corrected on the control; write the edit from its fit.json with kinematics, "
+                      "and load it")
+    for f in new_flags:
+        if f.kind == "drift":
+            advice.append(f"{f.param} drifts steadily ({f.text().split('  ', 1)[1]}): plan the next "
+                          "calibration before it reaches its limit, and look for its cause (warm-up, season)")
+    return CheckResult(name, serial, calibration, fit.marker, taken, changes, fit.residual["sigma_um"],
+                       paths, new_flags, advice, changed)
+
+
+def record_check(store: Store, result: CheckResult, fit: FitResult, machine: Machine, *,
+                 serial: str | None = None, operator: str = "") -> int:
+    """The check's session, its fit and its verdict, in one transaction."""
+    name, serial = machine_key(machine, serial)
+    with store.writing():
+        mid = lookup_machine(store, name, serial, create=False)
+        fid = session_and_fit(store, mid, fit, machine, result.taken, device_of(fit.data), operator, {},
+                               "check",
+                               "check passed" if result.passed else "check failed")
+        return store.insert("checks", {"machine_id": mid, "fit_id": fid, "against_fit_id": result.against.id,
+                                       "passed": int(result.passed), "summary": result.summary(),
+                                       "recorded": now()})

@@ -1,0 +1,270 @@
+"""Moving a history between stores: exported whole, imported only when every row is valid,
+and the flat rows a spreadsheet takes."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+
+from .. import me
+from ..emit.registry import CONTROLLERS
+from ..errors import CompgenError, one_line
+from ..machine import identifier
+from ..results import FitResult
+from ..store import Store, now
+from .ledger import content_key, lookup_machine, taken_at
+
+
+def export_rows(store: Store, machine_name: str | None = None) -> list[dict]:
+    """One row per fit and parameter: the flat table a spreadsheet or a plant's database takes."""
+    sql = ("SELECT m.name, m.serial, s.taken, s.device, s.operator, f.marker, f.kind, f.verdict, f.sigma_um, "
+           "f.parameters FROM fits f JOIN sessions s ON s.id = f.session_id "
+           "JOIN machines m ON m.id = s.machine_id"
+           + (" WHERE m.name = ?" if machine_name else "") + " ORDER BY m.name, m.serial, s.taken, f.id")
+    out = []
+    for r in store.rows(sql, (machine_name,) if machine_name else ()):
+        for n, p in json.loads(r.pop("parameters")).items():
+            out.append({**r, "parameter": n, "value": p["value"], "std": p["std"], "unit": p["unit"]})
+    return out
+
+
+EXPORT_FIELDS = ["name", "serial", "taken", "device", "operator", "marker", "kind", "verdict", "sigma_um",
+                 "parameter", "value", "std", "unit"]
+
+
+def export_text(store: Store, machine_name: str | None, whole: bool) -> tuple[int, str]:
+    """The export's rows counted and its text: JSON, the whole history (what ``import``
+    reads) with the flat rows, when ``whole``; else the flat rows as CSV."""
+    if whole:
+        doc = export_all(store, machine_name)
+        return len(doc["rows"]), json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
+    rows = export_rows(store, machine_name)
+    out = io.StringIO()
+    w = csv.DictWriter(out, EXPORT_FIELDS, lineterminator="\n")
+    w.writeheader()
+    w.writerows({k: r[k] for k in EXPORT_FIELDS} for r in rows)
+    return len(rows), out.getvalue()
+
+
+EXPORT_FORMAT = "compgen.history-export/1"
+
+
+_COLUMNS = {
+    "machines": ("id", "name", "serial", "recorded"),
+    "sessions": ("id", "machine_id", "taken", "device", "operator", "temperatures", "machine_sha256", "data",
+                 "recorded"),
+    "fits": ("id", "session_id", "marker", "kind", "model", "parameters", "sigma_um", "rms_um", "verdict",
+             "fit_json", "recorded"),
+    "edits": ("id", "machine_id", "fit_id", "controller", "corrects", "written", "loaded", "taken",
+              "recorded"),
+    "checks": ("id", "machine_id", "fit_id", "against_fit_id", "passed", "summary", "recorded"),
+}
+
+
+def export_all(store: Store, machine_name: str | None = None) -> dict:
+    """The store's rows (of one machine, or all), with the store's id: what ``import_history``
+    takes, and the flat rows a spreadsheet takes."""
+    mids = [r["id"] for r in store.rows("SELECT id, name FROM machines ORDER BY id")
+            if machine_name is None or r["name"] == machine_name]
+    keep = ",".join(str(int(m)) for m in mids) or "NULL"
+    where = {"machines": f"id IN ({keep})", "sessions": f"machine_id IN ({keep})",
+             "fits": f"session_id IN (SELECT id FROM sessions WHERE machine_id IN ({keep}))",
+             "edits": f"machine_id IN ({keep})", "checks": f"machine_id IN ({keep})"}
+    tables = {t: store.rows(f"SELECT {', '.join(c)} FROM {t} WHERE {where[t]} ORDER BY id")
+              for t, c in _COLUMNS.items()}
+    return {"format": EXPORT_FORMAT, "store_id": store.store_id(), "exported": now(), "tables": tables,
+            "rows": export_rows(store, machine_name)}
+
+
+def check_export(doc, where: str) -> dict[str, list]:
+    """An export's tables, every row checked (``_valid_rows``): what is not a history export
+    compgen wrote is refused before any store is opened (or made) for it."""
+    if (not isinstance(doc, dict) or doc.get("format") != EXPORT_FORMAT
+            or not isinstance(doc.get("tables"), dict)):
+        raise CompgenError("not a compgen history export", where=where,
+                           hint=f"make one with {me()} history export -o H.json on the other store")
+    try:
+        t = {name: list(doc["tables"][name]) for name in _COLUMNS}
+    except (KeyError, TypeError) as exc:
+        raise CompgenError(f"the export is incomplete or damaged ({exc!r})", where=where) from None
+    _valid_rows(t, where)
+    return t
+
+
+def _valid_rows(t: dict[str, list], where: str) -> None:
+    """Every row of an export as compgen writes its rows, checked before anything is written
+    (a row the store would keep forever must not break every later read): dates (normalised to
+    UTC), one-line names, JSON columns, finite numbers, kinds, controllers, ids that exist,
+    and each fit's marker recomputed from its own fit_json."""
+    def bad(table, row, what):
+        rid = row.get("id") if isinstance(row, dict) else None
+        raise CompgenError(f"{table} row {rid!r}: {what}; nothing was imported", where=where,
+                           hint="import an export compgen wrote, unchanged")
+
+    def text(table, row, key, line=True):
+        v = row.get(key)
+        if not isinstance(v, str) or (line and one_line(v) != v):
+            bad(table, row, f"{key} is not one line of text")
+        return v
+
+    def doc(table, row, key, kind):
+        v = row.get(key)
+        try:
+            v = json.loads(v) if isinstance(v, str) else v
+        except ValueError:
+            bad(table, row, f"{key} is not JSON")
+        if not isinstance(v, kind):
+            bad(table, row, f"{key} is not a JSON {kind.__name__}")
+        return v
+
+    def finite(table, row, key):
+        v = row.get(key)
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            bad(table, row, f"{key} is not a finite number")
+
+    for table, rows in t.items():
+        for row in rows:
+            if not isinstance(row, dict) or type(row.get("id")) is not int:
+                bad(table, row if isinstance(row, dict) else {}, "no whole-number id")
+            if set(row) != set(_COLUMNS[table]):
+                odd = sorted(set(row) ^ set(_COLUMNS[table]))
+                bad(table, row, f"its columns are not a {table[:-1]}'s ({', '.join(odd)})")
+    ids = {table: {r["id"] for r in rows} for table, rows in t.items()}
+    for table, refs in (("sessions", {"machine_id": "machines"}), ("fits", {"session_id": "sessions"}),
+                        ("edits", {"machine_id": "machines", "fit_id": "fits"}),
+                        ("checks", {"machine_id": "machines", "fit_id": "fits", "against_fit_id": "fits"})):
+        for row in t[table]:
+            for key, other in refs.items():
+                if row.get(key) not in ids[other]:
+                    bad(table, row, f"{key} names no {other[:-1]} of the export")
+    for m in t["machines"]:
+        text("machines", m, "name")
+        if text("machines", m, "serial"):
+            try:
+                identifier("serial", m["serial"], "serial")
+            except CompgenError as exc:
+                bad("machines", m, exc.message)
+    for s in t["sessions"]:
+        try:
+            s["taken"] = taken_at(text("sessions", s, "taken"))
+        except CompgenError as exc:
+            bad("sessions", s, exc.message)
+        text("sessions", s, "device"), text("sessions", s, "operator")
+        temps = doc("sessions", s, "temperatures", dict)
+        if not all(isinstance(v, int | float) and math.isfinite(v) for v in temps.values()):
+            bad("sessions", s, "a temperature is not a finite number")
+        doc("sessions", s, "data", list)
+    for f in t["fits"]:
+        if f.get("kind") not in ("calibration", "check"):
+            bad("fits", f, "kind is neither calibration nor check")
+        finite("fits", f, "sigma_um"), finite("fits", f, "rms_um")
+        text("fits", f, "verdict")
+        model, params = doc("fits", f, "model", list), doc("fits", f, "parameters", dict)
+        for q in params.values():
+            if not isinstance(q, dict) or not all(isinstance(q.get(k), int | float) and math.isfinite(q[k])
+                                                  for k in ("value", "std")):
+                bad("fits", f, "a parameter's value or σ is not a finite number")
+        try:
+            fit = FitResult.from_dict(doc("fits", f, "fit_json", dict))
+        except (CompgenError, KeyError, TypeError, ValueError):
+            bad("fits", f, "fit_json is not a fit compgen wrote")
+        marker = fit.marker
+        if model != list(fit.model) or params != {n: {"value": e.value, "std": e.std, "unit": e.unit}
+                                                  for n, e in fit.parameters.items()}:
+            bad("fits", f, "its model or parameters are not its fit_json's: the row was changed")
+        if marker != f.get("marker"):
+            bad("fits", f, f"its marker {f.get('marker')!r} is not its fit's ({marker}): the row was changed")
+    for e in t["edits"]:
+        if e.get("controller") not in CONTROLLERS:
+            bad("edits", e, "controller is none compgen knows")
+        for key in ("corrects", "written", "loaded"):
+            doc("edits", e, key, dict)
+        try:
+            e["taken"] = taken_at(text("edits", e, "taken"))
+        except CompgenError as exc:
+            bad("edits", e, exc.message)
+    for c in t["checks"]:
+        if c.get("passed") not in (0, 1) or isinstance(c.get("passed"), bool):
+            bad("checks", c, "passed is neither 0 nor 1")
+        doc("checks", c, "summary", dict)
+
+
+def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str, int]:
+    """Another store's export, appended in one transaction with its origin recorded. Refused:
+    this store's own rows, an export already imported, or a fit this store already holds
+    (for the same machine): nothing is merged silently, and nothing twice."""
+    t = check_export(doc, where)
+    if doc.get("store_id") == store.store_id():
+        raise CompgenError("this export is this store's own history", where=where,
+                           hint="nothing to import")
+    if store.rows("SELECT id FROM imports WHERE file_sha256 = ?", (sha256,)):
+        raise CompgenError("this export has been imported here already", where=where,
+                           hint="nothing to import")
+    try:
+        machines = {m["id"]: (m["name"], m["serial"]) for m in t["machines"]}
+        session_machine = {s["id"]: machines[s["machine_id"]] for s in t["sessions"]}
+        held = {(session_machine[f["session_id"]], f["marker"]) for f in t["fits"]}
+    except (KeyError, TypeError) as exc:
+        raise CompgenError(f"the export is incomplete or damaged ({exc!r})", where=where) from None
+    # a machine of the same name and serial here is the same machine only if it was measured
+    # with a machine file this store has seen for it (two plants' "DMU-50" without serials are
+    # two machines, never merged silently)
+    files_here: dict[tuple, set] = {}
+    for r in store.rows("SELECT m.name, m.serial, s.machine_sha256 FROM sessions s "
+                        "JOIN machines m ON m.id = s.machine_id"):
+        files_here.setdefault((r["name"], r["serial"]), set()).add(r["machine_sha256"])
+    for s in t["sessions"]:
+        key = machines[s["machine_id"]]
+        if key in files_here and s["machine_sha256"] not in files_here[key]:
+            raise CompgenError(f"machine {key[0]!r}{f' serial {key[1]}' if key[1] else ''} of the export was "
+                               "measured with a machine file this store never saw for it: another machine "
+                               "of the same name?", where=where,
+                               hint="give each machine its serial in its machine file, or import into "
+                                    "another store; nothing was imported")
+    mine = {((r["name"], r["serial"]), r["marker"]) for r in store.rows(
+        "SELECT m.name, m.serial, f.marker FROM fits f JOIN sessions s ON s.id = f.session_id "
+        "JOIN machines m ON m.id = s.machine_id")}
+    twice = sorted(held & mine)
+    if twice:
+        raise CompgenError(f"{len(twice)} fit(s) of the export are already here (first: {twice[0][1]} of "
+                           f"{twice[0][0][0]!r})", where=where,
+                           hint="the two stores share history: import into a fresh store, or keep them apart")
+    ids: dict[str, dict] = {name: {} for name in _COLUMNS}
+    with store.writing():
+        imp = store.insert("imports", {"origin_store": str(doc["store_id"]), "file_sha256": sha256,
+                                       "recorded": now()})
+        for m in t["machines"]:
+            ids["machines"][m["id"]] = lookup_machine(store, m["name"], m["serial"], create=True)
+        for s in t["sessions"]:
+            ids["sessions"][s["id"]] = store.insert("sessions", {
+                **{k: s[k] for k in _COLUMNS["sessions"][2:]}, "machine_id": ids["machines"][s["machine_id"]],
+                "import_id": imp})
+        markers = {}
+        for f in t["fits"]:
+            name, serial = session_machine[f["session_id"]]
+            markers[f["id"]] = f["marker"]
+            ids["fits"][f["id"]] = store.insert("fits", {
+                **{k: f[k] for k in _COLUMNS["fits"][2:]}, "session_id": ids["sessions"][f["session_id"]],
+                "content_sha256": content_key("fit", name, serial, f["marker"])}, unique="content_sha256")
+            if ids["fits"][f["id"]] is None:
+                raise CompgenError(f"the export holds fit {f['marker']} of {name!r} twice; nothing was "
+                                   "imported", where=where, hint="import an export compgen wrote, unchanged")
+        for e in t["edits"]:
+            name, serial = machines[e["machine_id"]]
+            if store.insert("edits", {**{k: e[k] for k in _COLUMNS["edits"][3:]},
+                                      "machine_id": ids["machines"][e["machine_id"]],
+                                      "fit_id": ids["fits"][e["fit_id"]],
+                                      "content_sha256": content_key("edit", name, serial,
+                                                                    markers[e["fit_id"]])},
+                            unique="content_sha256") is None:
+                raise CompgenError(f"the export holds two edits from fit {markers[e['fit_id']]} of {name!r}; "
+                                   "nothing was imported", where=where,
+                                   hint="a fit's correction is made once: import an export compgen wrote")
+        for c in t["checks"]:
+            store.insert("checks", {**{k: c[k] for k in _COLUMNS["checks"][4:]},
+                                    "machine_id": ids["machines"][c["machine_id"]],
+                                    "fit_id": ids["fits"][c["fit_id"]],
+                                    "against_fit_id": ids["fits"][c["against_fit_id"]]})
+    return {name: len(t[name]) for name in _COLUMNS}
