@@ -753,3 +753,19 @@ def test_rows_an_older_compgen_kept_with_their_offsets_are_read_in_time_order(tm
         assert [(e.marker, e.taken) for e in t.entries] == [
             ("fit:older", "2026-03-01T08:00:00+00:00"), (fit["marker"], "2026-03-01T09:00:00+00:00")]
         assert H.fleet(store, 90.0)[0]["last_calibration"] == "2026-03-01T09:00:00+00:00"
+
+
+@pytest.mark.parametrize("noise_um, said", [(1.3, True), (0.9, False)])
+def test_a_check_far_noisier_than_its_calibration_asks_to_check_the_set_up(year, tmp_path, noise_um, said):
+    """The calibrations leave σ̂ ≈ 0.5 µm: a check at 1.3 µm (over twice that, and over
+    1 µm) asks for the set-up to be checked; one at 0.9 µm does not."""
+    machine, base, _, (_, corrects) = year
+    with _record(tmp_path / "h.sqlite", year) as store:
+        when = H.taken_at("2026-08-10T10:00")
+        truth = _truth(machine, base, "2026-08-10T10:00", corrects)
+        d = simulate(machine, truth, generate(machine, ["K4"]), noise_um, np.random.default_rng(5))
+        fit = identify(machine, [d], location_model(machine))
+        calibration, entries, edits = H.last_calibration(store, machine, before=when)
+        assert calibration.sigma_um < 0.6
+        result = H.check(machine, fit, [d], calibration, entries, edits, when)
+        assert any("check the set-up" in a for a in result.advice) == said, result.advice

@@ -436,3 +436,16 @@ def test_a_periodic_error_goes_into_a_table_only_with_eight_points_a_pitch(seed_
     assert _compensable_by_table(seed_machine, resolve(seed_machine, "EXX:w200"))
     assert not _compensable_by_table(seed_machine, resolve(seed_machine, "EXX:w5"))
     assert not _compensable_by_table(seed_machine, resolve(seed_machine, "EXX:w199"))   # 7.96 a pitch
+
+
+def test_composed_uneven_tables_keep_points_a_files_rounding_cannot_join():
+    """Positions within 2e-6 are one point (a file's rounding); 3e-6 apart, both are kept,
+    and the sum holds at each."""
+    old = CompTable("EXX:a", "", "X", "X", 0.0, 10.0, (0.0, 0.002, 0.0), False, "mm", (0.0, 1.000003, 10.0))
+    new = CompTable("EXX:b", "", "X", "X", 0.0, 10.0, (0.0, 0.001, 0.0), False, "mm", (0.0, 1.0, 10.0))
+    (got,) = compose_tables([old], [new])
+    assert got.grid.tolist() == [0.0, 1.0, 1.000003, 10.0]
+    np.testing.assert_allclose(got.values, old.at(got.grid) + new.at(got.grid), atol=1e-12)
+    near = CompTable("EXX:b", "", "X", "X", 0.0, 10.0, (0.0, 0.001, 0.0), False, "mm", (0.0, 1.0000015, 10.0))
+    joined = compose_tables([old], [near])[0].grid.tolist()
+    assert len(joined) == 3 and joined[1] in (1.0000015, 1.000003), joined
