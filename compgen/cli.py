@@ -1,11 +1,10 @@
 """The command line: a thin translator over the library. Nothing imports it."""
 
+
 from __future__ import annotations
 
 import json
-import os
 import shlex
-import sys
 from datetime import date
 from functools import partial
 from pathlib import Path
@@ -13,9 +12,28 @@ from pathlib import Path
 import click
 import numpy as np
 
-from . import __version__, called_as, me
+from . import __version__, me
 from .advice import Advisor
 from .checklist import checklist, markdown
+from .cli_common import (
+    CONTROLLER_NAMES,
+    DATE,
+    DB,
+    FILE,
+    FORCE,
+    MACHINE,
+    OUTPUT,
+    RECORD,
+    Group,
+    encoded_like,
+    named_paths,
+    progress,
+    said,
+    sha256_of,
+    vec3,
+    warn,
+)
+from .cli_history import check_cmd, history_cmd, history_store, record_fit_file
 from .compare import compare
 from .diagnose import diagnose
 from .diagnose_text import report as diagnosis_text
@@ -23,120 +41,23 @@ from .effects import catalogue, compose, location_model
 from .emit.kinematics import corrected_by, kinematics_edit
 from .emit.probing import probe_program, with_sphere
 from .emit.programs import MODES, NAME_MAX, at_ball, measure_program, program_ball, program_name
-from .emit.registry import CONTROLLERS, controller, for_program, read_edits, read_state
-from .errors import CompgenError, one_line
-from .files import STDOUT, new_command, read_text, write_all, write_atomically
-from .gate import fit_gate, gate_edit, unit_suspicion
+from .emit.registry import controller, for_program, read_edits, read_state
+from .errors import CompgenError
+from .files import STDOUT, read_text, write_all, write_atomically
+from .gate import gate_edit, unit_suspicion
 from .identify import identify, parse_fixed
 from .kinematics import unknown_sides, unpredicted_sides
-from .machine import identifier
 from .machine_file import load_machine
 from .paths import generate
 from .probe import format_probe_log, probe_poses, simulate_touches
 from .report import report_html
 from .results import load_fit
-from .rtest import SIGNS, device_of, format_rtest, read_poses
+from .rtest import SIGNS, format_rtest, read_poses
 from .session import fit_machine, machine_ref, read_data, reload
 from .simulate import read_truth, simulate
-from .units import number
 
 
-class _Failed(click.ClickException):
-    exit_code = 2
-
-    def show(self, file=None):
-        click.echo(f"compgen: error: {one_line(self.message)}", err=True)
-
-
-class _Internal(_Failed):
-    exit_code = 3
-
-
-class _Group(click.Group):
-    """Turns every CompgenError into one line on stderr and exit code 2."""
-
-    def main(self, *args, **kwargs):
-        # usage lines and hints name compgen so that, pasted into bash, it is compgen that runs
-        called_as(sys.argv[0], sys.executable)
-        kwargs["prog_name"] = me() if kwargs.get("prog_name") in (None, "compgen") else kwargs["prog_name"]
-        standalone = kwargs.pop("standalone_mode", True)
-        try:
-            return super().main(*args, standalone_mode=False, **kwargs)
-        except click.UsageError as exc:    # one line too, with the way to the usage
-            if not standalone:
-                raise
-            command = f"{exc.ctx.command_path} --help" if exc.ctx else f"{me()} --help"
-            click.echo(f"compgen: error: {one_line(exc.format_message())} (see {command})", err=True)
-            sys.exit(exc.exit_code)
-        except click.ClickException as exc:
-            if not standalone:
-                raise
-            exc.show()
-            sys.exit(exc.exit_code)
-        except click.Abort:
-            if not standalone:
-                raise
-            click.echo("Aborted!", err=True)
-            sys.exit(1)
-
-    def invoke(self, ctx):
-        new_command()
-        try:
-            done = super().invoke(ctx)
-            sys.stdout.flush()           # a full disk or a closed pipe shows here, not at exit
-            return done
-        except BrokenPipeError:          # `compgen effects | head -1`: ordinary use, quietly done
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-            raise SystemExit(0) from None
-        except CompgenError as exc:
-            raise _Failed(str(exc)) from None
-        except OSError as exc:           # the system's refusal (a full disk, no permission): not a bug
-            raise _Failed(f"{exc.filename or 'standard output'}: {exc.strerror or exc}") from None
-        except (click.exceptions.Exit, click.ClickException, click.Abort, SystemExit, KeyboardInterrupt):
-            raise
-        except Exception as exc:     # a bug of compgen's: one line, and the way to the details
-            if os.environ.get("COMPGEN_DEBUG"):
-                raise
-            raise _Internal(f"internal error ({type(exc).__name__}: {exc}); this is a bug in compgen. "
-                            "Run again with COMPGEN_DEBUG=1 for the traceback and report it") from None
-
-
-def _said(output: str, text: str) -> None:
-    """What a command says once it has written ``output``: on stdout, unless the output
-    itself went there (-o -)."""
-    click.echo(text, err=output == STDOUT)
-
-
-def _warn(message: str) -> None:
-    click.echo(f"compgen: warning: {message}", err=True)
-
-
-def _progress(message: str) -> None:
-    """One line on stderr before work that can take seconds, for a person at a terminal
-    (a pipe or a script gets nothing)."""
-    if sys.stderr.isatty():
-        click.echo(f"compgen: {message} ...", err=True)
-
-
-FILE = click.Path(dir_okay=False)
-CONTROLLER_NAMES = " | ".join(CONTROLLERS)
-MACHINE = click.option("--machine", "machine_file", type=FILE, required=True,
-                       help="Machine file (TOML), or a bundled machine by name: ac-trunnion-itnc530, "
-                            "bc-table-sinumerik840d.")
-OUTPUT = click.option("-o", "--output", type=FILE, required=True, help="File to write.")
-FORCE = click.option("--force", is_flag=True, help="Overwrite an existing output file.")
-DB = click.option("--db", default=None, metavar="STORE",
-                  help="The history store: an SQLite file (default: $COMPGEN_DB, else "
-                       "compgen-history.sqlite here) or postgresql://user@host/db.")
-SERIAL = click.option("--serial", default=None, help="The machine's serial (default: the machine file's).",
-                      callback=lambda _c, _p, v: v and identifier("serial", v, "--serial"))
-RECORD = click.option("--record", is_flag=True, help="Also record it in the machine's history (--db).")
-DATE = click.option("--date", "taken", default=None,
-                    help="With --record: when the data were measured or the edit written (ISO 8601; "
-                         "default now).")
-
-
-@click.group(cls=_Group)
+@click.group(cls=Group)
 @click.version_option(__version__, prog_name="compgen")
 def main():
     """compgen: find where a five-axis machine's rotary axes really are, from R-test data."""
@@ -185,7 +106,7 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
     names = [p for p in path_names.split(",") if p.strip()]
     if not names:
         raise CompgenError("--paths names no path")
-    at = _vec3(ball, "--ball") if ball is not None else None
+    at = vec3(ball, "--ball") if ball is not None else None
     if device == "probe":
         if back or noise_rho or rate_hz is not None or feed is not None:
             raise CompgenError("--there-and-back, --noise-rho, --rate-hz and --feed are for R-test sessions",
@@ -219,7 +140,7 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
         text = format_rtest(machine, data, comments)
     write_atomically(output, text, force, inputs=(machine_file, truth, *edits, *current))
     touches = f", {machine.probe.touches} touches each" if device == "probe" else ""
-    _said(output, f"wrote {output}: {len(poses)} poses{touches} ({', '.join(names)})")
+    said(output, f"wrote {output}: {len(poses)} poses{touches} ({', '.join(names)})")
 
 
 @main.command("fit")
@@ -266,7 +187,7 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
         start = load_fit(base)
         machine, sets = reload(start, machine_file)
         sign = sign or start.sign
-        sets += [read_data(p, machine, sign, _warn) for p in more]
+        sets += [read_data(p, machine, sign, warn) for p in more]
         model = start.model
         fixed = {n: e.value for n, e in start.parameters.items() if e.fixed}
     else:
@@ -274,25 +195,25 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
             raise CompgenError("give --machine and DATA files, or --from a fit.json")
         machine = load_machine(machine_file)
         sign = sign or SIGNS[0]
-        sets = [read_data(p, machine, sign, _warn) for p in data]
+        sets = [read_data(p, machine, sign, warn) for p in data]
         model, fixed = location_model(machine), {}
     if model_names:
         model = [n.strip() for n in model_names.split(",") if n.strip()]
     model = compose(machine, model, add, remove)
     fixed = {n: v for n, v in fixed.items() if n in model} | parse_fixed(machine, fixes)
-    _progress(f"fitting {len(model)} effects to {sum(len(s) for s in sets)} poses")
+    progress(f"fitting {len(model)} effects to {sum(len(s) for s in sets)} poses")
     result = identify(machine, sets, model, fixed, method, sign, advisor=Advisor)
     write_atomically(output, result.to_json(Path(output).resolve().parent), force,
                      inputs=(machine.source, base, *(s.source for s in sets)))
-    _said(output, result.report() + f"\nwrote {output}")
+    said(output, result.report() + f"\nwrote {output}")
     sides = unknown_sides(machine, result.model, *(s.poses for s in sets))
     if sides:
-        _warn(sides)
+        warn(sides)
     suspicion = unit_suspicion(sets)
     if suspicion:
         click.echo(f"compgen: warning: {suspicion}; kinematics will refuse this fit", err=True)
     if record and output != STDOUT:
-        _, _, fid, reasons = _record_fit(db, output, None, None, taken, None, "", ())
+        _, _, fid, reasons = record_fit_file(db, output, None, None, taken, None, "", ())
         click.echo(f"recorded as calibration #{fid}" + (": NOT accepted as a reference" if reasons else ""))
 
 
@@ -315,14 +236,14 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um):
     fit = load_fit(base)
     machine, sets = reload(fit)
     names = [c.strip() for c in candidates.split(",") if c.strip()] if candidates else None
-    _progress(f"trying {'the catalogue' if names is None else len(names)} effects against "
+    progress(f"trying {'the catalogue' if names is None else len(names)} effects against "
               f"{sum(len(s) for s in sets)} poses")
     result = diagnose(machine, sets, fit, names, fit_file=base, machine_ref=machine_ref(fit),
                       noise_um=noise_um, advisor=Advisor)
     named = compose(machine, fit.model, [c.effect for c in result.candidates if c.significant])
     sides = unknown_sides(machine, named, *(s.poses for s in sets))
     if sides:
-        _warn(sides)
+        warn(sides)
     if plots_dir:
         from .plots import write_plots  # matplotlib only when asked for
         earlier = load_fit(before) if before else None
@@ -350,10 +271,10 @@ def predict_cmd(base, poses_file, output, force):
                 "the fit's set-up terms (ball offset) belong to its own set-up: compare with a "
                 "constant per set-up aside")
     write_atomically(output, format_rtest(machine, data, comments), force, inputs=(base, poses_file))
-    _said(output, f"wrote {output}: {len(poses)} poses predicted by {fit.marker}")
+    said(output, f"wrote {output}: {len(poses)} poses predicted by {fit.marker}")
     sides = unpredicted_sides(machine, fit.model, poses)
     if sides:
-        _warn(sides)
+        warn(sides)
 
 
 @main.command("measure-program")
@@ -386,8 +307,8 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, contro
     if poses_file:
         poses, label = read_poses(poses_file, machine), Path(poses_file).stem
     else:
-        names = _path_names(machine, path_names)
-        poses = generate(machine, names, ball=_vec3(ball, "--ball") if ball is not None else None, back=back)
+        names = named_paths(machine, path_names)
+        poses = generate(machine, names, ball=vec3(ball, "--ball") if ball is not None else None, back=back)
         label = "+".join(names) + "_BACK" * back
     ctl = controller(controller_name or machine.controller)
     output = None if output == STDOUT else output      # -o - is stdout, as no -o
@@ -426,8 +347,8 @@ def probe_program_cmd(machine_file, path_names, ball, controller_name, output, f
     """Write a probing program: a touch probe on the calibration sphere at each pose, every
     touch logged on the control as a probe log v1; checked with the probe in the set-up."""
     machine = load_machine(machine_file)
-    names = _path_names(machine, path_names)
-    poses = probe_poses(machine, names, _vec3(ball, "--ball") if ball is not None else None)
+    names = named_paths(machine, path_names)
+    poses = probe_poses(machine, names, vec3(ball, "--ball") if ball is not None else None)
     ctl = controller(controller_name or machine.controller)
     out = Path(output)
     name = program_name(out.stem, room=4)
@@ -463,7 +384,7 @@ def check_program_cmd(machine_file, program, controller_name, ball, mode, as_jso
                            "switch it themselves", hint="leave --mode out")
     text = read_text(program, "program", ansi_ok=True)[0]
     header = None if ball is not None else program_ball(text)   # --ball overrides the header
-    at, source = ((_vec3(ball, "--ball"), "--ball") if ball is not None else
+    at, source = ((vec3(ball, "--ball"), "--ball") if ball is not None else
                   (header, "the program's header") if header is not None else
                   (machine.ball, "the machine file"))
     blocks = ctl.blocks(text, mode)
@@ -526,10 +447,10 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
             raise CompgenError(f"{ctl.words} reads its state from one file; {len(given)} were given",
                                hint=f"give --current (and --measured-with) once: {ctl.backup}")
     text = read_state(current) if current else None
-    _progress("checking that the fit explains its data")
+    progress("checking that the fit explains its data")
     reasons = gate_edit(machine, sets, fit, base, despite)
     if reasons:
-        _warn("writing an edit despite the fit gate: " + "; ".join(reasons))
+        warn("writing an edit despite the fit gate: " + "; ".join(reasons))
     out = Path(output)
     name = program_name(out.stem, room=len("_SIGN"))
     emitted = kinematics_edit(machine, fit, ctl.name, text, ", ".join(current), name, __version__,
@@ -539,13 +460,13 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
     main_key = ctl.main_suffix(text)
     files = emitted.paths(out, name, main_key)
     if len(current) == 1 and main_key in emitted.files:   # the edited state keeps its encoding
-        files[out] = _encoded_like(current[0], files[out])
-    written = {str(p): _sha256(body) for p, body in files.items()}
+        files[out] = encoded_like(current[0], files[out])
+    written = {str(p): sha256_of(body) for p, body in files.items()}
     recorded = None
     if record:         # refused before anything is written: a fit's correction is recorded once
         from .history import Recorded, record_edit, record_fit, refuse_second_edit, taken_at
         taken = taken_at(taken)      # before a store is opened (or made) for it
-        store = _store(db)
+        store = history_store(db)
         try:
             refuse_second_edit(store, fit, machine, written, None)
         except Recorded as exc:
@@ -557,7 +478,7 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
         record_fit(store, fit, machine, taken=taken, verdict=reasons, exist_ok=True)
         try:
             eid = record_edit(store, fit, machine, ctl.name, corrected_by(machine, fit, ctl), written,
-                              {p: _sha256(read_text(p, "state file", ansi_ok=True)[1]) for p in current},
+                              {p: sha256_of(read_text(p, "state file", ansi_ok=True)[1]) for p in current},
                               taken=taken)
             recorded = f"recorded the edit as #{eid}"
         except Recorded as exc:
@@ -577,7 +498,7 @@ def compare_cmd(base, controller_name, post_files, as_json):
     """What the kinematics edit will achieve, and, with --post data, whether it did."""
     fit = load_fit(base)
     machine, sets = reload(fit)
-    post = [read_data(p, machine, fit.sign, _warn) for p in post_files]
+    post = [read_data(p, machine, fit.sign, warn) for p in post_files]
     result = compare(machine, sets, fit, controller_name or machine.controller, post)
     click.echo(json.dumps(result.to_dict(), indent=2, ensure_ascii=False) if as_json
                else result.report(), nl=as_json)
@@ -621,24 +542,24 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
     machine, sets = reload(fit)
     for path in emitted:
         read_text(path, "file", ansi_ok=True)   # a missing file fails before anything is drawn
-    post = [read_data(p, machine, fit.sign, _warn) for p in post_files]
-    _progress("1/3 diagnose")
+    post = [read_data(p, machine, fit.sign, warn) for p in post_files]
+    progress("1/3 diagnose")
     found = diagnose(machine, sets, fit, fit_file=base, advisor=Advisor)
-    _progress("2/3 compare")
+    progress("2/3 compare")
     comparison = compare(machine, sets, fit, controller_name or machine.controller, post)
-    _progress("3/3 plots")
+    progress("3/3 plots")
     images = figures(machine, sets, fit, load_fit(before) if before else None, found)
     steps = checklist(machine, folder or Path(base).parent, comparison.to_dict())
     past = png = None
     if with_history:
         from .history import trend
         from .plots import trend_png
-        past = trend(_store(db, create=False), machine)
+        past = trend(history_store(db, create=False), machine)
         png = trend_png(past)
     html = report_html(machine, fit, found, images, comparison, emitted, steps, __version__,
                        date.today().isoformat(), past, png)
     write_atomically(output, html, force, inputs=(base, before, *post_files, *emitted))
-    _said(output, f"wrote {output}")
+    said(output, f"wrote {output}")
 
 
 @main.command("effects")
@@ -660,236 +581,6 @@ def effects_cmd(machine_file, as_json):
     click.echo("\n* in the default model")
 
 
-def _store(db: str | None, create: bool = True):
-    """The history store, closed with the command (whether it succeeds or refuses)."""
-    from .store import open_store  # the store only for the commands that use it
-    store = open_store(db, create)
-    click.get_current_context().call_on_close(store.close)
-    return store
 
-
-@main.group("history")
-def history_cmd():
-    """A machine's calibrations over time: record, list, trend, export, fleet."""
-
-
-@history_cmd.command("init")
-@DB
-@click.option("--grant", multiple=True, metavar="ROLE",
-              help="PostgreSQL: let ROLE read and append (never update or delete). Repeatable.")
-def history_init_cmd(db, grant):
-    """Create or migrate the store (PostgreSQL: run as the schema's owner)."""
-    from .store import VERSION, init
-    store, applied = init(db, tuple(grant))
-    store.close()
-    click.echo(f"{store.where}: schema {VERSION}"
-               + (f" (applied {', '.join(map(str, applied))})" if applied else " (up to date)")
-               + (f"; {', '.join(grant)} may read and append" if grant else ""))
-
-
-def _record_fit(db, fit_file, machine_file, serial, taken, device, operator, temperatures):
-    from .history import record_fit, taken_at
-    taken = taken_at(taken)          # before a store is opened (or made) for it
-    fit = load_fit(fit_file)
-    machine, sets = reload(fit, machine_file)
-    _progress("checking that the fit explains its data")
-    reasons = fit_gate(machine, sets, fit)
-    temps = {}
-    for item in temperatures:
-        key, _, value = item.partition("=")
-        if not key.strip() or not value:
-            raise CompgenError(f"--temperature takes NAME=°C, not {item!r}",
-                               hint="e.g. --temperature spindle=23.5")
-        temps[key.strip()] = number(value, f"--temperature {key.strip()}", "")
-    measured = device_of(fit.data)
-    if device is not None and device != measured:
-        raise CompgenError(f"--device {device}, but the fit's data are {measured} data",
-                           hint="leave --device out: the fit file says which device measured")
-    store = _store(db)
-    fid = record_fit(store, fit, machine, serial=serial, taken=taken, device=measured, operator=operator,
-                     temperatures=temps, verdict=reasons)
-    return store, fit, fid, reasons
-
-
-@history_cmd.command("add")
-@click.argument("fit_file", type=FILE)
-@click.option("--machine", "machine_file", type=FILE, default=None,
-              help="The fit's machine file (default: its own).")
-@SERIAL
-@click.option("--date", "taken", default=None, help="When the data were measured (ISO 8601; default now).")
-@click.option("--device", type=click.Choice(["rtest", "probe"]), default=None,
-              help="The device that measured (default: what the fit file says; a contradiction is refused).")
-@click.option("--operator", default="", help="Who measured.")
-@click.option("--temperature", "temperatures", multiple=True, metavar="NAME=°C",
-              help="A temperature during the measurement, e.g. --temperature hall=21.5. Repeatable.")
-@DB
-def history_add_cmd(fit_file, machine_file, serial, taken, device, operator, temperatures, db):
-    """Record a calibration (a fit.json) in the machine's history."""
-    store, fit, fid, reasons = _record_fit(db, fit_file, machine_file, serial, taken, device, operator,
-                                           temperatures)
-    click.echo(f"recorded {fit.marker} as calibration #{fid} in {store.where}: "
-               + ("accepted" if not reasons else "NOT accepted as a reference: " + "; ".join(reasons)))
-
-
-@history_cmd.command("list")
-@DB
-def history_list_cmd(db):
-    """Every machine in the store, with its number of fits and its last one."""
-    from .history import machines_text
-    click.echo(machines_text(_store(db, create=False)))
-
-
-@history_cmd.command("show")
-@MACHINE
-@SERIAL
-@DB
-def history_show_cmd(machine_file, serial, db):
-    """The machine's fits and edits, in time order."""
-    from .history import trend
-    t = trend(_store(db, create=False), load_machine(machine_file), serial)
-    click.echo(f"{one_line(t.machine)}{f' ({one_line(t.serial)})' if t.serial else ''}")
-    events = [(e.taken, f"  {e.taken[:16]}  {e.kind:<12}{one_line(e.marker)}  {e.device:<6}σ̂ "
-                        f"{e.sigma_um:.3f} µm  {one_line(e.verdict)}") for e in t.entries]
-    events += [(e["taken"], f"  {e['taken'][:16]}  edit        from {one_line(e['marker'])} for "
-                            f"{e['controller']}: "
-                            "corrects "
-                            + (", ".join(e["corrects"]) or "nothing")) for e in t.edits]
-    click.echo("\n".join(text for _, text in sorted(events, key=lambda x: x[0])))
-
-
-@history_cmd.command("trend")
-@MACHINE
-@SERIAL
-@click.option("--param", "params", default=None, help="Comma-separated location errors (default: all).")
-@click.option("--plot", type=FILE, default=None, help="Also draw the trend into this PNG.")
-@click.option("--json", "as_json", is_flag=True, help="Print the trend as JSON.")
-@FORCE
-@DB
-def history_trend_cmd(machine_file, serial, params, plot, as_json, force, db):
-    """Every location error over time (machine values: corrections written are counted),
-    with its σ, the edits, and the steps and drifts flagged against [drift]."""
-    from .history import trend, trend_dict, trend_text
-    names = [n.strip() for n in params.split(",") if n.strip()] if params else None
-    t = trend(_store(db, create=False), load_machine(machine_file), serial, names)
-    if plot:
-        from .plots import trend_png
-        write_atomically(plot, trend_png(t), force)
-    click.echo(json.dumps(trend_dict(t), indent=2, ensure_ascii=False) if as_json else trend_text(t),
-               nl=as_json)
-
-
-@history_cmd.command("export")
-@click.option("--machine", "machine_name", default=None, help="Only this machine (its name).")
-@OUTPUT
-@FORCE
-@DB
-def history_export_cmd(machine_name, output, force, db):
-    """Every fit's parameters, one row each, as CSV; a .json file holds the whole history
-    too (sessions, fits, edits, checks), which `history import` reads into another store."""
-    from .history import export_text
-    count, text = export_text(_store(db, create=False), machine_name, output.endswith(".json"))
-    write_atomically(output, text, force)
-    _said(output, f"wrote {count} rows to {output}")
-
-
-@history_cmd.command("import")
-@click.argument("export_file", type=FILE)
-@DB
-def history_import_cmd(export_file, db):
-    """Append another store's history (a `history export -o H.json`) to this one, its origin
-    recorded; refused if it is this store's own, was imported before, or shares a fit."""
-    import hashlib
-
-    from .files import read_json
-    from .history import check_export, import_history
-    raw = read_text(export_file, "history export")[1]
-    doc = read_json(export_file, "history export")
-    check_export(doc, export_file)          # before a store is made for it
-    store = _store(db)
-    counts = import_history(store, doc, hashlib.sha256(raw).hexdigest(), export_file)
-    click.echo(f"imported into {store.where}: " + ", ".join(f"{n} {k}" for k, n in counts.items()))
-
-
-@history_cmd.command("fleet")
-@click.option("--every-days", type=click.FloatRange(min=0, min_open=True), default=90.0, show_default=True,
-              help="A check is due this long after a machine's last measurement.")
-@click.option("--json", "as_json", is_flag=True)
-@DB
-def history_fleet_cmd(every_days, as_json, db):
-    """Every machine's last calibration, check and edit, and when its next check is due."""
-    from .history import fleet
-    rows = fleet(_store(db, create=False), every_days)
-    if as_json:
-        click.echo(json.dumps({"format": "compgen.fleet/1", "machines": rows}, indent=2, ensure_ascii=False))
-        return
-    click.echo(f"{'machine':<40}{'serial':<14}{'calibrated':<12}{'checked':<12}{'check':<7}{'due':<12}")
-    for r in rows:
-        check = "-" if r["last_check_passed"] is None else ("pass" if r["last_check_passed"] else "FAIL")
-        name, serial = one_line(r["machine"])[:39], one_line(r["serial"])[:13]
-        click.echo(f"{name:<40}{serial:<14}{(r['last_calibration'] or '-')[:10]:<12}"
-                   f"{(r['last_check'] or '-')[:10]:<12}{check:<7}{(r['due'] or '-'):<12}"
-                   + ("OVERDUE" if r["overdue"] else ""))
-
-
-@main.command("check")
-@MACHINE
-@click.argument("data", nargs=-1, type=FILE, required=True)
-@SERIAL
-@click.option("--date", "taken", default=None, help="When the data were measured (ISO 8601; default now).")
-@click.option("--operator", default="", help="Who measured.")
-@click.option("--json", "as_json", is_flag=True, help="Print the check as JSON.")
-@click.option("--machine-changed", is_flag=True,
-              help="Check though the machine file changed since the calibration (a known change of a "
-                   "tolerance or a limit); said in the check.")
-@DB
-def check_cmd(machine_file, data, serial, taken, operator, as_json, machine_changed, db):
-    """Check a short measurement (e.g. K4 only) against the machine's last accepted
-    calibration: each location error's change with its σ, pass or fail, what to do next.
-    The check is recorded in the history."""
-    from .history import check, last_calibration, record_check, taken_at
-    machine = load_machine(machine_file)
-    sets = [read_data(p, machine, warn=_warn) for p in data]
-    when = taken_at(taken)
-    store = _store(db, create=False)
-    calibration, entries, edits = last_calibration(store, machine, serial, before=when)
-    fit = identify(machine, sets, location_model(machine), advisor=Advisor)
-    result = check(machine, fit, sets, calibration, entries, edits, when, serial, machine_changed)
-    record_check(store, result, fit, machine, serial=serial, operator=operator)
-    click.echo(json.dumps(result.summary(), indent=2, ensure_ascii=False) if as_json else result.text(),
-               nl=as_json)
-    if not result.passed:
-        sys.exit(1)
-
-
-def _encoded_like(source: str, body: str) -> str | bytes:
-    """A file edited from a user's ANSI (Latin-1) file goes back in Latin-1: a control's
-    export stays what the control reads. UTF-8 (and ASCII) files stay UTF-8."""
-    raw = read_text(source, "state file", ansi_ok=True)[1]
-    try:
-        raw.decode("utf-8")
-        return body
-    except UnicodeDecodeError:
-        try:
-            return body.encode("latin-1")
-        except UnicodeEncodeError as exc:
-            raise CompgenError(f"the edit holds {body[exc.start]!r}, which the Latin-1 file {source} "
-                               "cannot hold", hint="report this: compgen writes ASCII into tables") from None
-
-
-def _sha256(body: str | bytes) -> str:
-    import hashlib
-    return hashlib.sha256(body.encode() if isinstance(body, str) else body).hexdigest()
-
-
-def _path_names(machine, text: str) -> list[str]:
-    """--path: a comma list of the machine file's paths, or 'all'."""
-    if text.strip().lower() == "all":
-        return list(machine.paths)
-    return [p.strip() for p in text.split(",") if p.strip()]
-
-
-def _vec3(text: str, option: str) -> list[float]:
-    parts = text.split(",")
-    if len(parts) != 3:
-        raise CompgenError(f"{option} takes three numbers X,Y,Z in mm, not {text!r}")
-    return [number(x, f"{option} {'XYZ'[k]}", "") for k, x in enumerate(parts)]
+main.add_command(history_cmd)
+main.add_command(check_cmd)

@@ -134,6 +134,7 @@ LAYERS = [
     ("store", {"compgen.store", "compgen.history", "compgen.history.ledger", "compgen.history.drift",
                "compgen.history.checks", "compgen.history.words", "compgen.history.exchange"}),
     ("commands", {"compgen.compare", "compgen.report", "compgen.plots", "compgen.checklist", "compgen.cli",
+                  "compgen.cli_common", "compgen.cli_history",
                   "compgen.__main__"}),
 ]
 
