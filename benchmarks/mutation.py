@@ -37,6 +37,9 @@ TESTS = {
     "compgen/identify.py": ["tests/test_identify.py", "tests/test_startup.py",
                             "tests/test_probe.py"],        # two devices' variance components
     "compgen/kinematics.py": ["tests/test_kinematics.py", "tests/test_effects.py", "tests/test_identify.py"],
+    # the reversal sides: the start sides' constants are fitted by identify and diagnose
+    "compgen/sides.py": ["tests/test_kinematics.py", "tests/test_identify.py", "tests/test_diagnose.py",
+                         "tests/test_programs.py"],
     "compgen/units.py": ["tests/test_units.py", "tests/test_edge.py"],
     "compgen/correction.py": [*EDITS, "tests/test_edge.py"],
     "compgen/emit/heidenhain.py": [*EDITS, "tests/test_tab.py", "tests/test_edge.py", *PROGRAMS,

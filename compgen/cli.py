@@ -46,7 +46,6 @@ from .errors import CompgenError
 from .files import STDOUT, read_text, write_all, write_atomically
 from .gate import gate_edit, unit_suspicion
 from .identify import identify, parse_fixed
-from .kinematics import unknown_sides, unpredicted_sides
 from .machine_file import load_machine
 from .paths import generate
 from .probe import format_probe_log, probe_poses, simulate_touches
@@ -54,6 +53,7 @@ from .report import report_html
 from .results import load_fit
 from .rtest import SIGNS, format_rtest, read_poses
 from .session import fit_machine, machine_ref, read_data, reload
+from .sides import unknown_sides, unpredicted_sides
 from .simulate import read_truth, simulate
 
 

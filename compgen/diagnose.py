@@ -24,11 +24,12 @@ import numpy as np
 
 from .effects import Effect, catalogue, effect_of_param, resolve
 from .errors import CompgenError
-from .kinematics import Model, Poses, StartSides, both_sides, runs, same_pose
+from .kinematics import Model, Poses, runs
 from .machine import Machine
 from .noise import Repeats, ar1, outliers, repeats, whiten
 from .results import FitResult
 from .rtest import RTestData, device_of
+from .sides import StartSides, both_sides, same_pose
 from .signature import columns, products, r_factor
 from .significance import (
     ALPHA,

@@ -16,11 +16,12 @@ import numpy as np
 from . import __version__
 from .effects import canonical, effect_of_param, location_model
 from .errors import CompgenError
-from .kinematics import Model, Poses, StartSides, both_sides, runs
+from .kinematics import Model, Poses, runs
 from .machine import Machine
 from .noise import ar1, ar1_covariance
 from .results import DataRef, Estimate, FitResult
 from .rtest import RTestData, refuse_twice
+from .sides import StartSides, both_sides
 from .significance import COND_LIMIT, condition
 from .units import parse_quantity, shown
 

@@ -131,7 +131,7 @@ def outliers(r_um: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 @dataclass(frozen=True)
 class Repeats:
     """The noise as the data repeat it: the scatter of readings of one pose, reached the same
-    way (``kinematics.same_pose``), pooled over every pose read more than once."""
+    way (``sides.same_pose``), pooled over every pose read more than once."""
 
     sigma_um: float     # per reading and direction
     readings: int       # readings of repeated poses

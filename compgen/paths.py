@@ -13,8 +13,9 @@ import numpy as np
 
 from .errors import CompgenError
 from .files import MAX_DATA_BYTES
-from .kinematics import Poses, inverse, program_sides
+from .kinematics import Poses, inverse
 from .machine import Machine, PathDef, check_travel
+from .sides import program_sides
 
 GAP_S = 20.0   # pause between two paths of one session (re-positioning), s
 MAX_POSES = MAX_DATA_BYTES // 96   # a CSV v1 row of five axes is ~96 bytes: ~2.8 million readings

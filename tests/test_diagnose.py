@@ -415,8 +415,9 @@ def test_without_a_given_noise_a_repeated_run_says_it_and_an_outside_effect_is_u
 def test_repeats_are_poses_reached_the_same_way(seed_machine):
     """A backlash is not scatter: a pose counts as a repeat of another only reached from the
     same side on every axis; a dwell's samples are told as such; too few say nothing."""
-    from compgen.kinematics import Poses, runs, same_pose
+    from compgen.kinematics import Poses, runs
     from compgen.noise import repeats
+    from compgen.sides import same_pose
     q = np.radians([[0, 0, 0, -10, 0], [0, 0, 0, -20, 0], [0, 0, 0, -10, 0], [0, 0, 0, -20, 0],
                     [0, 0, 0, -10, 0]])
     p = Poses(q, np.zeros((5, 3)), np.arange(5.0), np.array(["P"] * 5))
@@ -569,8 +570,9 @@ def test_backlash_of_a_tilting_axis_is_found_from_the_side_each_pose_was_reached
     1.5 µm left, AOC 1.6″ off, predictions 1.7 µm off.)"""
     from conftest import SEED_MACHINE, run
 
-    from compgen.kinematics import Poses, unknown_sides
+    from compgen.kinematics import Poses
     from compgen.rtest import format_rtest
+    from compgen.sides import unknown_sides
 
     truth = {"EAA:r1": 5 * ARCSEC}
     a = seed_machine.index("A")

@@ -120,7 +120,7 @@ LAYERS = [
     ("base", {"compgen", "compgen.errors", "compgen.units", "compgen.files", "compgen.transforms",
               "compgen.search"}),
     ("model", {"compgen.machine", "compgen.effects", "compgen.kinematics", "compgen.lines", "compgen.paths",
-               "compgen.frames"}),
+               "compgen.frames", "compgen.sides"}),
     ("data", {"compgen.rtest", "compgen.probe", "compgen.simulate"}),
     ("statistics", {"compgen.noise", "compgen.significance", "compgen.spectrum", "compgen.signature",
                     "compgen.results", "compgen.identify", "compgen.diagnose", "compgen.diagnose_text",

@@ -169,8 +169,9 @@ def test_a_free_constant_stands_for_the_side_of_a_path_that_holds_the_axis(seed_
     """Without A_side: one constant for K2 (A held), fitted with the model (the readings'
     part along the effect's gain there is removed); none for K4 and K1, which move A; none
     where the data carry the side, none without a reversal in the model."""
-    from compgen.kinematics import Model, StartSides
+    from compgen.kinematics import Model
     from compgen.paths import generate
+    from compgen.sides import StartSides
     p = generate(seed_machine, ["K4", "K1", "K2"])
     blind = Poses(p.q, p.ball, p.t, p.path)
     starts = StartSides(seed_machine, ["XOC", "EAA:r1"], blind)

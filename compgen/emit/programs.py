@@ -19,9 +19,10 @@ import numpy as np
 from .. import motion
 from ..errors import CompgenError
 from ..frames import safe_height, world
-from ..kinematics import APPROACH_DEG, Poses, inverse, program_sides
+from ..kinematics import Poses, inverse
 from ..machine import Machine, check_ball, check_travel
 from ..rtest import BALL, axis_cells, side_columns
+from ..sides import APPROACH_DEG, program_sides
 from ..units import number
 from . import Emitted, ascii_text, render
 from .registry import controller
@@ -235,7 +236,7 @@ def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool
         steps.append({"kind": "comment", "note": f"---- {ascii_text(str(poses.path[seg[0]]) or label)}: "
                                                  f"poses {seg[0] + 1} to {seg[-1] + 1}"})
         # every rotary axis reaches the first pose from the side the pose list declares
-        # (kinematics.program_sides): where each axis's backlash is at every pose is known
+        # (sides.program_sides): where each axis's backlash is at every pose is known
         before = first.copy()
         before[rotary] -= poses.side[seg[0], rotary] * np.radians(APPROACH_DEG)
         for target, note in ((before, f"approach from {APPROACH_DEG:g} deg before"), (first, "")):
