@@ -294,3 +294,20 @@ def test_a_sine_the_models_columns_hold_is_no_line():
     assert SEEN > 1e-3
     drops = _drops(x, y, np.array([f0, 1 / 11.0]), Qd)
     assert np.all(drops[0] == 0.0) and np.all(drops[1] > 0.0), drops
+
+
+def test_a_line_along_a_linear_axis_is_outside_the_catalogue_by_each_of_its_rules():
+    """Unknown device noise: a pitch line is what is missing when it is significant over all
+    lines, resolved (≥ RESOLVES_UM), removes LINE_OVER_BEST = 2× what the best candidate
+    removes and LINE_SHARE = 10 % of the residual; each rule alone keeps it out."""
+    from dataclasses import replace
+
+    from compgen.diagnose import _outside_line
+    from compgen.spectrum import Line
+    line = Line("X", "dX", 5.0, "mm", 0.15, 0.15, 1e-6, 3.0)     # 0.15 µm, 15 %, 3.0 against 2 × 1.4
+    others = [Line("C", "dY", 2.0, "/rev", 1.0, 0.9, 1e-9, 50.0)]      # a rotary line never counts
+    assert _outside_line([line, *others], None, (), 0.01, 1.4) is line
+    for changed in (replace(line, share=0.09), replace(line, sum_sq=2.7), replace(line, amplitude_um=0.09),
+                    replace(line, p_value=0.006), replace(line, unit="s")):
+        assert _outside_line([changed, *others], None, (), 0.01, 1.4) is None, changed
+    assert _outside_line([line], 0.5, (), 0.01, 1.4) is None            # within a known noise: not judged

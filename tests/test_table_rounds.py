@@ -449,3 +449,22 @@ def test_composed_uneven_tables_keep_points_a_files_rounding_cannot_join():
     near = CompTable("EXX:b", "", "X", "X", 0.0, 10.0, (0.0, 0.001, 0.0), False, "mm", (0.0, 1.0000015, 10.0))
     joined = compose_tables([old], [near])[0].grid.tolist()
     assert len(joined) == 3 and joined[1] in (1.0000015, 1.000003), joined
+
+
+@pytest.mark.parametrize("stop, count, written", [
+    (350.0, 4, "350.000001"),     # 350/3 at 6 decimals: 1e-6 off, within 1e-6 of 350
+    (0.3, 8, "0.299999"),         # 1e-6 off: within 1e-6 (the tolerance is never below that)
+    (1.0, 3, "1.000000"),         # a step of 0.5
+    (1.0, 37, None),              # 1/36 at 6 decimals: 8e-6 off
+    (1.0, 32, None),              # 1/31: 2e-6 off
+])
+def test_a_cec_table_is_written_where_its_six_decimals_reach_its_stop(stop, count, written):
+    """The step at 6 decimals times the steps must reach the stop within 1e-6 of its size
+    (at least 1e-6): the control places value n at MIN + n·STEP."""
+    from compgen.emit.sinumerik import _cec_text
+    t = CompTable("EXX:t", "", "X", "X", 0.0, stop, (0.0,) * count, False, "mm")
+    if written is None:
+        with pytest.raises(CompgenError, match="does not divide"):
+            _cec_text(t, 0, {"X": "X1"})
+    else:
+        assert _cec_text(t, 0, {"X": "X1"})["max"] == written
