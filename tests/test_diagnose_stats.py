@@ -172,6 +172,15 @@ def test_a_periodic_drift_in_a_dense_session_is_found_at_its_period_in_seconds()
     line = next(x for x in strongest_lines(machine, poses, r) if x.against == "time")
     assert line.direction == "dY" and line.period == pytest.approx(900.0, rel=2e-3)
     assert line.amplitude_um == pytest.approx(2.0, rel=0.05) and line.p_value < 1e-6
+    # with the model's columns (the residual orthogonal to them), scanned on the subset
+    # with those columns made orthonormal there: the same line, every figure on all poses
+    from compgen.kinematics import Model
+    Q = np.linalg.qr(Model(machine, ["XOW", "YOW", "ZOW", "XOC", "YOC", "AOC", "BOC"])
+                     .jacobian(poses).reshape(3 * n, -1))[0]
+    rq = (r.reshape(-1) - Q @ (Q.T @ r.reshape(-1))).reshape(n, 3)
+    with_q = next(x for x in strongest_lines(machine, poses, rq, Q) if x.against == "time")
+    assert with_q.direction == "dY" and with_q.period == pytest.approx(900.0, rel=2e-3)
+    assert with_q.amplitude_um == pytest.approx(2.0, rel=0.05) and with_q.p_value < 1e-6
 
 
 def test_each_line_is_the_documented_scan_judged_by_the_joint_least_squares():

@@ -151,3 +151,30 @@ def test_the_lag_one_estimate_is_corrected_for_its_bias():
     x -= x.mean(axis=1, keepdims=True)
     got = ar1(x.reshape(-1, 3), np.repeat(np.arange(runs), n))[::n]
     assert abs(got.mean() - rho) < 0.01, got.mean()
+
+
+def test_poses_repeat_only_with_the_same_ball_and_axes_to_the_csvs_resolution(seed_machine):
+    """K4 at one ball and again 100 mm higher: the same commanded axes, another ball, so no
+    pose repeats one of the other session; K4 run twice at one ball repeats pose for pose,
+    but its first; a ball or an X 2 µm off (beyond the CSV's 1e-6 mm) is another pose, 0.4 nm
+    off the same."""
+    from compgen.kinematics import Poses, runs
+    from compgen.paths import generate
+    from compgen.sides import same_pose
+    k4 = generate(seed_machine, ["K4"])
+    x = seed_machine.index("X")
+    q = k4.q.copy()
+    q[:, x] = np.round(q[:, x], 6)             # X as a CSV holds it
+    a = Poses(q, k4.ball, k4.t, k4.path)
+    for dz, dx, repeated in ((100.0, 0, False), (0.0, 0, True), (0.002, 0, False), (4e-7, 0, True),
+                             (0.0, 4e-7, True), (0.0, 0.002, False)):
+        q = a.q.copy()
+        q[:, x] += dx
+        b = Poses(q, a.ball + [0.0, 0.0, dz], a.t, a.path)
+        both = Poses.concat([a, b])
+        group = same_pose(seed_machine, both, runs(both))
+        n = len(a)
+        assert len(set(group[:n])) > 0.9 * n          # K4's poses are not one another's repeats
+        same = group[:n] == group[n:]
+        # (a run's first pose, reached by no move of its run yet, repeats only its own run's)
+        assert (same[1:].all() and not same[0]) if repeated else not same.any(), same.sum()
