@@ -9,6 +9,10 @@ minus dropped or added, an integer index 0/1/2 shifted, a numeric constant chang
 1 → 0, x → 2x). A mutant is *killed* when the module's tests fail with it. The module's
 tests are a fixed selection (``TESTS``), so a run stays in minutes. Survivors are printed
 with their line; ``benchmarks/mutation-survivors.md`` says why each cannot change an output.
+
+A mutant that passes its selection runs the rest of the suite (LinuxCNC's real runs aside;
+``--selection-only`` skips that), and a run starts with the unmutated tree passing the same
+steps in every copy at once: a test failing there would count every mutant as killed.
 """
 
 from __future__ import annotations
