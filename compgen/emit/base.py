@@ -124,6 +124,14 @@ class Controller:
         """A tool as this control's tool call names it."""
         return tool
 
+    def check_tool(self, tool: str, where: str) -> None:
+        """Refuse a tool this control's tool call cannot name (``where``: the machine file's key)."""
+
+    def log_files(self, head: list[str], paths, rotary: list[str], ball: str) -> dict[str, str]:
+        """Files (suffix → text) a probing program needs to write its log on this control, beside
+        its message files: the log's ``head`` lines, a line per touch of each of ``paths``."""
+        return {}
+
     def message_files(self, name: str, messages: list[str]) -> dict[str, str]:
         """Files (suffix → text) a program ``name`` needs to show ``messages`` to the operator."""
         return {}

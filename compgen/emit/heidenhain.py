@@ -429,6 +429,12 @@ class Heidenhain(Controller):
         # FN 16: F-PRINT to SCREEN: shows the format file's text in a window (U16)
         return {"_MSG.A": render("heidenhain/probe.A.j2", head=messages)}
 
+    def log_files(self, head: list[str], paths, rotary: list[str], ball: str) -> dict[str, str]:
+        # FN 16 prints through format files: the head, and a line per touch of each path
+        return {"_HEAD.A": render("heidenhain/probe.A.j2", head=head),
+                **{f"_{path}.A": render("heidenhain/probe.A.j2", path=path, rotary=rotary, head=None,
+                                        ball=ball) for path in paths}}
+
     def reads(self, text: str) -> bool:
         return ROW.search(text) is not None
 

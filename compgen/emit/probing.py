@@ -51,9 +51,7 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
     if len(balls) > 1:
         raise CompgenError(f"a program probes one sphere position; these poses hold {len(balls)}",
                            hint="write one program per sphere position")
-    if ctl.family == "linuxcnc" and not setup.tool.isdigit():
-        raise CompgenError(f"LinuxCNC calls tools by number; [probe] tool is {setup.tool!r}",
-                           where=f"{machine.source}: [probe] tool", hint='e.g. tool = "98"')
+    ctl.check_tool(setup.tool, f"{machine.source}: [probe] tool")
     if machine.program is None:
         raise CompgenError(f"machine file {machine.source} has no [program] section",
                            hint="it gives the work offset the program's positions are in")
@@ -138,12 +136,8 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
                   tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}", probe_feed=f"{setup.probe_feed:g}",
                   work_offset=machine.program.work_offset, log_name=log_name, log_head=log_head,
                   rotary=names, number=ctl.number, retract=ctl.number(setup.approach, 4), ball=ball)
-    named = ctl.message_files(name, [s["note"] for s in steps if s["kind"] == "stop"])
-    if ctl.family == "heidenhain":           # FN 16 prints through format files: the head, a line per path
-        named["_HEAD.A"] = render("heidenhain/probe.A.j2", head=log_head)
-        for path in count:
-            named[f"_{path}.A"] = render("heidenhain/probe.A.j2", path=path, rotary=names, head=None,
-                                         ball=ball)
+    named = {**ctl.message_files(name, [s["note"] for s in steps if s["kind"] == "stop"]),
+             **ctl.log_files(log_head, list(count), names, ball)}
     files = {ctl.program_ext: text, ".poses.csv": pose_list(machine, poses), **named}
     result = ctl.check(machine, ctl.blocks(text, "axes"), probe=setup)
     if result.findings:     # nothing unsafe leaves this function
