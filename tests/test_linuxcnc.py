@@ -296,8 +296,8 @@ def test_a_run_past_its_budget_is_ended_whole(tmp_path):
     """A program that does not finish in time fails its test with what LinuxCNC said, and
     leaves no LinuxCNC process behind (linuxcncsvr and rtapi_app run in sessions of their own)."""
     machine = load_machine(_as_linuxcnc(tmp_path, SEED_MACHINE))
-    with pytest.raises(pytest.fail.Exception, match=r"did not finish within 8 s; it said: (?s:.*)LINUXCNC"):
-        run_linuxcnc(tmp_path / "run", machine, "G4 P600\nM2\n", "", budget_s=8)
+    with pytest.raises(pytest.fail.Exception, match=r"did not finish within 4 s; it said: (?s:.*)LINUXCNC"):
+        run_linuxcnc(tmp_path / "run", machine, "G4 P600\nM2\n", "", budget_s=4)
     assert not _ours(str(tmp_path / "run" / "joints.txt"))
 
 
