@@ -129,6 +129,7 @@ LAYERS = [
     ("controllers", {"compgen.correction", "compgen.advice", "compgen.emit", "compgen.emit.base",
                      "compgen.emit.registry", "compgen.emit.tab", "compgen.emit.heidenhain",
                      "compgen.emit.sinumerik", "compgen.emit.linuxcnc", "compgen.emit.linuxcnc_config",
+                     "compgen.emit.linuxcnc_files",
                      "compgen.emit.programs", "compgen.emit.probing", "compgen.emit.kinematics"}),
     ("configuration", {"compgen.machine_file", "compgen.session"}),     # a machine file names its control
     ("store", {"compgen.store", "compgen.history", "compgen.history.ledger", "compgen.history.drift",

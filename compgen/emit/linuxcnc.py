@@ -43,7 +43,6 @@ from . import fmt_plain, render
 from .base import Controller, EditContext, EditFiles
 from .linuxcnc_config import (
     Configuration,
-    Setting,
     bundle,
     configuration_files,
     evaluate,
@@ -51,6 +50,7 @@ from .linuxcnc_config import (
     is_bundle,
     then,
 )
+from .linuxcnc_files import Setting
 
 # the value is the rest of the line (a comment aside): halcmd takes one word, so "1.0 junk"
 # is refused as a value rather than read as 1.0
