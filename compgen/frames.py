@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kinematics import Poses, _chain, inverse
+from .kinematics import Poses, chain_transform, inverse
 from .machine import Machine
 from .transforms import apply
 
@@ -33,8 +33,8 @@ def frames(machine: Machine, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
     """The nominal table frame (n, 4, 4), and in it the nest centre and the tool axis (n, 3)."""
     poses = Poses.at(q, np.zeros(3))
     zero = np.zeros((len(q), 6))
-    table = _chain(machine, machine.workpiece, poses, {}, zero)
-    tool = _chain(machine, machine.tool, poses, {}, zero)
+    table = chain_transform(machine, machine.workpiece, poses, {}, zero)
+    tool = chain_transform(machine, machine.tool, poses, {}, zero)
     R = table[:, :3, :3]
     return (table, np.einsum("nji,nj->ni", R, tool[:, :3, 3] - table[:, :3, 3]),
             np.einsum("nji,nj->ni", R, tool[:, :3, 2]))

@@ -131,7 +131,7 @@ class Model:
         """Frame of axis ``chain[i]`` just before its own motion, machine frame, (n, 4, 4)."""
         slots = self._slots(poses, np.asarray(values, float))
         zero = np.zeros((len(poses), 6))
-        T = _chain(self.machine, chain[:i], poses, slots, zero)
+        T = chain_transform(self.machine, chain[:i], poses, slots, zero)
         axis = chain[i]
         q = poses.q[:, self.machine.index(axis.name)]
         return T @ _link(axis, q, slots.get((axis.name, "loc"), zero),
@@ -486,8 +486,10 @@ def _link(axis: Axis, q: np.ndarray, loc: np.ndarray, comp: np.ndarray, motion: 
     return T
 
 
-def _chain(machine: Machine, axes: Sequence[Axis], poses: Poses, slots: Mapping,
-           zero: np.ndarray, lines: Mapping[str, tuple] | None = None) -> np.ndarray:
+def chain_transform(machine: Machine, axes: Sequence[Axis], poses: Poses, slots: Mapping,
+                    zero: np.ndarray, lines: Mapping[str, tuple] | None = None) -> np.ndarray:
+    """The transform (n, 4, 4) of ``axes`` (a chain or its start) at the poses, with the
+    errors of ``slots`` (zero: the nominal chain)."""
     T = np.broadcast_to(np.eye(4), (len(poses), 4, 4))
     for axis in axes:
         q = poses.q[:, machine.index(axis.name)]

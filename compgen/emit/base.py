@@ -124,8 +124,9 @@ class Controller:
         """A tool as this control's tool call names it."""
         return tool
 
-    def check_tool(self, tool: str, where: str) -> None:
-        """Refuse a tool this control's tool call cannot name (``where``: the machine file's key)."""
+    def check_tool(self, tool: str, key: str, source: str) -> None:
+        """Refuse a tool this control's tool call cannot name (``key``: the machine file's, e.g.
+        "[probe] tool", in the file ``source``)."""
 
     def log_files(self, head: list[str], paths, rotary: list[str], ball: str) -> dict[str, str]:
         """Files (suffix → text) a probing program needs to write its log on this control, beside

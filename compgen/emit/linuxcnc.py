@@ -540,10 +540,10 @@ class LinuxCNC(Controller):
         return (is_bundle(text) or SETP.search(text) is not None or COMP_NOTE.search(text) is not None
                 or (SETS.search(text) is not None and "kinematics edit" in text))
 
-    def check_tool(self, tool: str, where: str) -> None:
+    def check_tool(self, tool: str, key: str, source: str) -> None:
         if not re.fullmatch(r"\d{1,5}", tool):
-            raise CompgenError(f"LinuxCNC calls tools by number; {where.rsplit(': ', 1)[-1]} is {tool!r}",
-                               where=where, hint='e.g. tool = "99"')
+            raise CompgenError(f"LinuxCNC calls tools by number; {key} is {tool!r}", where=f"{source}: {key}",
+                               hint='e.g. tool = "99"')
 
     def check_setup(self, machine: Machine) -> None:
         if machine.linuxcnc is None:
@@ -552,7 +552,7 @@ class LinuxCNC(Controller):
                                where=f"{machine.source}: [linuxcnc] conventional_directions",
                                hint="set conventional_directions = false (before LinuxCNC 2.10, or the "
                                     "module's conventional-directions pin at its default 0) or true (pin 1)")
-        self.check_tool(machine.program.tool, f"{machine.source}: [program] tool")
+        self.check_tool(machine.program.tool, "[program] tool", machine.source)
 
     def read(self, machine: Machine, text: str, current: str | None, held: Held, where: str) -> Held:
         if is_bundle(text):            # a configuration to start with: its pins and its joints' tables

@@ -51,7 +51,7 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
     if len(balls) > 1:
         raise CompgenError(f"a program probes one sphere position; these poses hold {len(balls)}",
                            hint="write one program per sphere position")
-    ctl.check_tool(setup.tool, f"{machine.source}: [probe] tool")
+    ctl.check_tool(setup.tool, "[probe] tool", machine.source)
     if machine.program is None:
         raise CompgenError(f"machine file {machine.source} has no [program] section",
                            hint="it gives the work offset the program's positions are in")
