@@ -250,12 +250,13 @@ def main() -> None:
     t0 = time.perf_counter()
     whole = not (args.selection_only or args.tests)
     # the control: the unmutated tree through the same runs, all jobs at once as the mutants
-    # run. Were a test to fail here (a shared resource, a flaky test), every mutant reaching
-    # it would count as killed: the run stops instead.
+    # run, its first module written as every mutant is (ast.unparse: no comments). Were a test
+    # to fail here (a shared resource, a flaky test, a test reading a comment), every mutant
+    # reaching it would count as killed: the run stops instead.
     if not args.no_control:
         with ThreadPoolExecutor(args.jobs) as pool:
             failed = [w for w, bad in zip(works, pool.map(
-                lambda w: run_mutant(w, modules[0], (ROOT / modules[0]).read_text(),
+                lambda w: run_mutant(w, modules[0], ast.unparse(ast.parse((ROOT / modules[0]).read_text())),
                                      args.tests or TESTS[modules[0]], whole), works), strict=True) if bad]
         if failed:
             sys.exit(f"the unmutated tree fails its tests in {len(failed)} of {len(works)} copies: "

@@ -231,10 +231,10 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     best candidate is added (the misfit of a missing effect is not noise). With an
     ``advisor`` (``advisor(machine, poses, device)``: ``advice.Advisor``), the measurements
     that would separate what these data cannot are searched for among those the machine can
-    make; ``machine_ref`` is how the commands printed
-    name the machine file. ``noise_um`` is the R-test's own noise (default: the machine
-    file's ``[rtest] noise_um``): with it, the residual is tested against it per path and
-    direction, and what no catalogue effect accounts for is called unexplained."""
+    make; ``machine_ref`` is how the commands printed name the machine file. ``noise_um``
+    is the R-test's own noise (default: the machine file's ``[rtest] noise_um``): with it,
+    the residual is tested against it per path and direction, and what no catalogue effect
+    accounts for is called unexplained."""
     kind = device_of(data)
     device = noise_um if noise_um is not None else machine.noise_um
     if kind == "probe" and noise_um is None:   # a probe's centres carry their noise from the touches
