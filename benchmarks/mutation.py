@@ -60,6 +60,8 @@ TESTS = {
     # diagnose and its statistics: the closed-form tests first (quick to fail), the distributions
     # against scipy (test_startup), the declared shapes and the loop a user follows
     "compgen/diagnose.py": [*STATS, "tests/test_edge.py", "tests/test_loop.py"],
+    "compgen/ranking.py": [*STATS, "tests/test_loop.py"],
+    "compgen/separation.py": [*STATS, "tests/test_loop.py"],
     # the wings: probe logs, the history and its store, diagnose's spectrum and significance
     "compgen/probe.py": ["tests/test_probe.py", "tests/test_probe_programs.py"],
     "compgen/emit/probing.py": ["tests/test_probe_programs.py", "tests/test_probe.py"],

@@ -23,7 +23,7 @@ from .identify import beyond_setup, identify
 from .kinematics import Model, Poses
 from .machine import Machine
 from .results import FitResult
-from .rtest import RTestData
+from .rtest import Measurements, RTestData
 
 AS_PREDICTED = (1.25, 0.2)   # measured RMS within 1.25 × predicted + 0.2 µm counts as predicted
 
@@ -103,8 +103,8 @@ def _rms(stats: dict | None) -> float:
 def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, controller_name: str,
             post: Sequence[RTestData] = ()) -> Comparison:
     ctl = controller(controller_name)
-    poses = Poses.concat([d.poses for d in data])
-    y = np.concatenate([d.deviation for d in data])
+    joined = Measurements.concat(data)
+    poses, y = joined.poses, joined.deviation
     model = Model(machine, fit.model)
     x = np.array([fit.parameters[n].value for n in fit.model])
     residual = y - model.deviation(poses, x)
@@ -140,8 +140,8 @@ def _warnings(machine: Machine, fit: FitResult, pred: dict) -> list[str]:
 
 
 def _measured(machine: Machine, fit: FitResult, post: Sequence[RTestData], predicted: dict) -> dict:
-    poses = Poses.concat([d.poses for d in post])
-    y = np.concatenate([d.deviation for d in post])
+    joined = Measurements.concat(post)
+    poses, y = joined.poses, joined.deviation
     got = beyond_setup(machine, poses, y)
     tolerances = machine.tolerances
     verdicts = {}

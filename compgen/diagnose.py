@@ -17,7 +17,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
-from itertools import combinations
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -26,18 +25,17 @@ from .effects import Effect, catalogue, effect_of_param, resolve
 from .errors import CompgenError
 from .kinematics import Model, Poses, runs
 from .machine import Machine
-from .noise import Repeats, ar1, outliers, repeats, whiten
+from .noise import Repeats, ar1, outliers, repeats
+from .ranking import Row, Whitening, effect_columns, rank, started_reversals
 from .results import FitResult
-from .rtest import RTestData, device_of
-from .sides import StartSides, both_sides, same_pose
-from .signature import columns, products, r_factor
+from .rtest import Measurements, RTestData
+from .separation import separating, telling_apart
+from .sides import StartSides, same_pose
+from .signature import products
 from .significance import (
     ALPHA,
     COND_LIMIT,
     VISIBLE,
-    condition,
-    explained,
-    gram_factor,
     lack_of_fit,
     p_value,
     rivals,
@@ -49,11 +47,6 @@ from .units import shown
 if TYPE_CHECKING:        # the type only: advice writes programs, a layer above
     from .advice import Advisor, Measurement
 
-SEPARATES = 0.05      # visibility an extra measurement must give to count as separating
-ABSORBS = 0.25        # share of an effect's signature a parameter must take to be named
-SILENT_UM = 1e-9      # µm per unit over all readings: the effect moves nothing at all
-TELLS_APART = 25.0    # σ̂² of misfit a measurement must add between two rivals (5 σ)
-ADVISED = 3           # measurements named per effect, shortest first (each written and motion-checked)
 # Where the residual exceeds the R-test's own noise, the best candidate must remove this
 # share of the excess to be named: a catalogue curve that fits a little of an effect outside
 # the catalogue by chance (a 5 mm screw period removed ~10 % as EXC:h3) is not its cause
@@ -220,6 +213,31 @@ class Diagnosis:
         }
 
 
+@dataclass(frozen=True, eq=False)
+class _Residual:
+    """The fit's residual on its data without the outlying readings (step 1): the poses, the
+    runs they form, the residual r (3n,) beyond the model's span and its start sides, and
+    the Q (start sides first) and R of the model's Jacobian."""
+
+    poses: Poses
+    seg: np.ndarray
+    r: np.ndarray
+    r3: np.ndarray      # (n, 3) the residual as the fit left it (before Q's projection)
+    Q: np.ndarray
+    R: np.ndarray
+    bad: np.ndarray
+    size: np.ndarray
+    model: Model
+
+    @property
+    def rss(self) -> float:
+        return float(self.r @ self.r)
+
+    @property
+    def dof(self) -> int:
+        return self.r.size - self.Q.shape[1]
+
+
 def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
              candidates: Sequence[str] | None = None, alpha: float = ALPHA,
              fit_file: str = "", advisor: Callable[..., Advisor] | None = None, machine_ref: str = "",
@@ -235,72 +253,21 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     is the R-test's own noise (default: the machine file's ``[rtest] noise_um``): with it,
     the residual is tested against it per path and direction, and what no catalogue effect
     accounts for is called unexplained."""
-    kind = device_of(data)
+    joined = Measurements.concat(data)
+    kind = joined.device
     device = noise_um if noise_um is not None else machine.noise_um
     if kind == "probe" and noise_um is None:   # a probe's centres carry their noise from the touches
-        cov = np.concatenate([d.cov for d in data])
+        cov = joined.covariance(np.zeros((3, 3)))
         device = float(np.sqrt(np.einsum("nii->", cov) / (3 * len(cov)))) * 1e3
-    poses = Poses.concat([d.poses for d in data])
-    y = np.concatenate([d.deviation for d in data])
-    model = Model(machine, fit.model)
-    x = np.array([fit.parameters[n].value for n in fit.model])
-    free = [model.names.index(n) for n in fit.free]
-    r3 = y - model.deviation(poses, x)
-    starts = StartSides(machine, fit.model, poses).projector()
-    if starts is not None:       # each path's start side, fitted as fit fits it
-        r3 = starts.remove(r3)
-    seg = runs(poses, np.repeat(np.arange(len(data)), [len(d) for d in data]))
-    bad, size = outliers(r3 * 1e3, seg)
-    if bad.size:
-        keep = np.ones(len(poses), bool)
-        keep[bad] = False
-        poses, r3, seg = poses.take(keep), r3[keep], seg[keep]
-        starts = StartSides(machine, fit.model, poses).projector()
+    res = _residual(machine, joined, fit)
+    poses, r, rss, dof = res.poses, res.r, res.rss, res.dof
     # no noise given: what the data repeat says it, where they repeat enough
-    said = repeats(same_pose(machine, poses, seg), r3, seg) if device is None else None
+    said = repeats(same_pose(machine, poses, res.seg), res.r3, res.seg) if device is None else None
     device = said.sigma_um if said is not None else device
-    r = r3.ravel()
-    # only Q and R of the model's Jacobian are kept: J's column norms are R's. Free start
-    # sides (``StartSides``) come first in Q, and R is that of J without them, as fit has it
-    J = model.jacobian(poses, x)[:, :, free]        # indexed by a list: a copy, projected in place
-    Q, R = np.linalg.qr((J if starts is None else starts(J)).reshape(r.size, -1))
-    if starts is not None:
-        Q = np.hstack([starts.basis(len(poses)), Q])
-    r = r - Q @ (Q.T @ r)             # the fit's residual without the outliers
-    rss, dof = float(r @ r), r.size - Q.shape[1]
 
-    in_model = {effect_of_param(machine, n).name for n in fit.model}
-    effects = [e for e in (catalogue(machine) if candidates is None
-                           else [resolve(machine, c) for c in candidates]) if e.name not in in_model]
-    notes = ()
-    if candidates is None and np.isnan(poses.t).any():   # a drift needs the time of every reading
-        timed = [e.name for e in effects if e.carrier == "time" or e.basis.kind == "e"]
-        effects = [e for e in effects if e.name not in timed]
-        if timed:
-            notes = (f"  not tried: {', '.join(timed)} (they need the time t of every reading; "
-                     "these data do not give it)",)
-    if not effects:
-        raise CompgenError("no candidate effect left to try: the model holds them all")
-    # ρ̂ from the residual once the best candidate (least squares) is added: the misfit of
-    # a missing effect is not noise; then, if the noise is correlated, rank again whitened
-    noise = _Noise(seg, np.zeros_like(r3), Q)
-    plain = products(machine, poses, effects, Q, r)
-    started = _started(machine, poses, effects)
-    plain |= {e: (C.T @ C, Q.T @ C, C.T @ r) for e, C in started.items()}
-    ranked = _rank(effects, fit.free, R, r, noise, plain)
-    best = max(ranked.values(), key=lambda row: (row.vis >= VISIBLE, row.share))
-    c = _columns(machine, poses, best.effect)
-    rest = r - c @ np.linalg.lstsq(c - Q @ (Q.T @ c), r, rcond=None)[0]
-    rho = ar1((rest - Q @ (Q.T @ rest)).reshape(-1, 3), seg)
-    if rho.any():
-        noise = _Noise(seg, rho, Q)
-        rw = noise.off(noise.white(r))
-        white = products(machine, poses, effects, noise.Q, rw, (seg, rho))
-        white |= {e: (Cw.T @ Cw, noise.Q.T @ Cw, Cw.T @ rw)
-                  for e, Cw in ((e, noise.white(C)) for e, C in started.items())}
-        ranked = _rank(effects, fit.free, R, r, noise, plain, white)
+    effects, notes = _to_try(machine, fit, candidates, poses)
+    ranked, noise = _ranked(machine, fit, effects, res)
     rss_w = noise.rss(r)
-
     tested = sum(1 for row in ranked.values() if row.k_eff)
     out = []
     for e in effects:
@@ -319,24 +286,10 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     # refuses it), so the measurement that shows that part is what to advise
     unseen = [c for c in out if not c.visible or (c.significant and not c.separable)]
     if advising is not None and unseen:
-        seen = _separating(machine, model_effects, poses, [resolve(machine, c.effect) for c in unseen],
-                           advising)
+        seen = separating(machine, model_effects, poses, [resolve(machine, c.effect) for c in unseen],
+                          advising)
         out = [replace(c, separated_by=seen[c.effect]) if c.effect in seen else c for c in out]
-
-    # bias: data holding a unit of candidate parameter j shift the fitted parameters by
-    # (J⁺C)ᵢⱼ, first order; kept in shown units (µm or ″ per µm or ″ of j)
-    units_of = {n: model.effects[model.names.index(n)].unit for n in fit.free}
-    bias = {n: {} for n in fit.free}
-    units = {n: shown(1.0, units_of[n])[1] for n in fit.free}
-    signature_um = {}
-    for e in effects:
-        row = ranked[e.name]
-        for j, pname in enumerate(e.params):
-            units[pname] = shown(1.0, e.unit)[1]
-            per_shown = shown(1.0, e.unit)[0]
-            signature_um[pname] = float(row.norms[j] / np.sqrt(len(poses))) * 1e3 / per_shown
-            for i, n in enumerate(fit.free):
-                bias[n][pname] = float(row.absorbed[i, j] * shown(1.0, units_of[n])[0] / per_shown)
+    bias, units, signature_um = _bias(fit, res, effects, ranked)
 
     significant = [c for c in out if c.significant]
     misfit, share = (), None
@@ -345,30 +298,146 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         excess = rss - dof * (device * 1e-3) ** 2
         if significant and excess > 0:
             share = min(1.0, ranked[significant[0].effect].drop / excess)
-    lines = strongest_lines(machine, poses, r.reshape(-1, 3), Q)
+    lines = strongest_lines(machine, poses, r.reshape(-1, 3), res.Q)
     best_sum_sq = ranked[significant[0].effect].drop if significant else 0.0
     unexplained = _unexplained(misfit, bool(significant), share,
                                _outside_line(lines, device, misfit, alpha, best_sum_sq))
 
     # rivals of a curve that fits a little of an unexplained misfit by chance: not pursued
+    out, rival = _rivals(machine, res, [] if unexplained else significant, out, ranked, noise,
+                         model_effects, alpha, advising)
+    return Diagnosis(
+        machine=machine.name, fit_file=fit_file, model=fit.model,
+        rms_um=float(np.sqrt(rss / r.size)) * 1e3, sigma_um=float(np.sqrt(rss / dof)) * 1e3,
+        readings=int(r.size), per_path=fit.residual["per_path"],
+        per_axis=_per_axis(machine, poses, r.reshape(-1, 3)),
+        candidates=tuple(out), bias=bias, bias_units=units, signature_um=signature_um,
+        tested=tested, alpha=alpha, **rival,
+        carries=_carries(fit, res, out, ranked, rival["rivals"]),
+        outliers=_outlier_rows(data, res.bad, res.size), noise=_noise_summary(res.seg, noise.rho, poses.path),
+        machine_ref=machine_ref or machine.source,
+        program_ext=advising.program_ext if advising is not None else "", device_noise_um=device,
+        repeats=said, misfit=misfit,
+        lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, notes=notes,
+        data_device=kind)
+
+
+def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residual:
+    """Step 1: the fit's residual, each path's start side fitted as fit fits it, outlying
+    readings (``noise.outliers``) left out. Only Q and R of the model's Jacobian are kept:
+    J's column norms are R's. Free start sides (``StartSides``) come first in Q, and R is
+    that of J without them, as fit has it."""
+    poses = joined.poses
+    model = Model(machine, fit.model)
+    x = np.array([fit.parameters[n].value for n in fit.model])
+    free = [model.names.index(n) for n in fit.free]
+    r3 = joined.deviation - model.deviation(poses, x)
+    starts = StartSides(machine, fit.model, poses).projector()
+    if starts is not None:
+        r3 = starts.remove(r3)
+    seg = runs(poses, joined.set_of)
+    bad, size = outliers(r3 * 1e3, seg)
+    if bad.size:
+        keep = np.ones(len(poses), bool)
+        keep[bad] = False
+        poses, r3, seg = poses.take(keep), r3[keep], seg[keep]
+        starts = StartSides(machine, fit.model, poses).projector()
+    r = r3.ravel()
+    J = model.jacobian(poses, x)[:, :, free]        # indexed by a list: a copy, projected in place
+    Q, R = np.linalg.qr((J if starts is None else starts(J)).reshape(r.size, -1))
+    if starts is not None:
+        Q = np.hstack([starts.basis(len(poses)), Q])
+    return _Residual(poses, seg, r - Q @ (Q.T @ r), r3, Q, R, bad, size, model)
+
+
+def _to_try(machine: Machine, fit: FitResult, candidates: Sequence[str] | None,
+            poses: Poses) -> tuple[list[Effect], tuple[str, ...]]:
+    """Step 2: the effects to try (the catalogue's, or those named) not in the model, and a
+    note on those the data cannot carry."""
+    in_model = {effect_of_param(machine, n).name for n in fit.model}
+    effects = [e for e in (catalogue(machine) if candidates is None
+                           else [resolve(machine, c) for c in candidates]) if e.name not in in_model]
+    notes = ()
+    if candidates is None and np.isnan(poses.t).any():   # a drift needs the time of every reading
+        timed = [e.name for e in effects if e.carrier == "time" or e.basis.kind == "e"]
+        effects = [e for e in effects if e.name not in timed]
+        if timed:
+            notes = (f"  not tried: {', '.join(timed)} (they need the time t of every reading; "
+                     "these data do not give it)",)
+    if not effects:
+        raise CompgenError("no candidate effect left to try: the model holds them all")
+    return effects, notes
+
+
+def _ranked(machine: Machine, fit: FitResult, effects: Sequence[Effect],
+            res: _Residual) -> tuple[dict[str, Row], Whitening]:
+    """Step 3: every candidate's numbers (``ranking.rank``). ρ̂ from the residual once the
+    best candidate (least squares) is added: the misfit of a missing effect is not noise;
+    then, if the noise is correlated, ranked again whitened."""
+    poses, r, Q, seg = res.poses, res.r, res.Q, res.seg
+    noise = Whitening(seg, np.zeros((len(poses), 3)), Q)
+    plain = products(machine, poses, effects, Q, r)
+    started = started_reversals(machine, poses, effects)
+    plain |= {e: (C.T @ C, Q.T @ C, C.T @ r) for e, C in started.items()}
+    ranked = rank(effects, fit.free, res.R, r, noise, plain)
+    best = max(ranked.values(), key=lambda row: (row.vis >= VISIBLE, row.share))
+    c = effect_columns(machine, poses, best.effect)
+    rest = r - c @ np.linalg.lstsq(c - Q @ (Q.T @ c), r, rcond=None)[0]
+    rho = ar1((rest - Q @ (Q.T @ rest)).reshape(-1, 3), seg)
+    if rho.any():
+        noise = Whitening(seg, rho, Q)
+        rw = noise.off(noise.white(r))
+        white = products(machine, poses, effects, noise.Q, rw, (seg, rho))
+        white |= {e: (Cw.T @ Cw, noise.Q.T @ Cw, Cw.T @ rw)
+                  for e, Cw in ((e, noise.white(C)) for e, C in started.items())}
+        ranked = rank(effects, fit.free, res.R, r, noise, plain, white)
+    return ranked, noise
+
+
+def _bias(fit: FitResult, res: _Residual, effects: Sequence[Effect], ranked: dict[str, Row]):
+    """Step 4: data holding a unit of candidate parameter j shift the fitted parameters by
+    (J⁺C)ᵢⱼ, first order; kept in shown units (µm or ″ per µm or ″ of j). Returns the
+    shifts, every parameter's shown unit, and each candidate parameter's RMS signature."""
+    units_of = {n: res.model.effects[res.model.names.index(n)].unit for n in fit.free}
+    bias = {n: {} for n in fit.free}
+    units = {n: shown(1.0, units_of[n])[1] for n in fit.free}
+    signature_um = {}
+    for e in effects:
+        row = ranked[e.name]
+        for j, pname in enumerate(e.params):
+            units[pname] = shown(1.0, e.unit)[1]
+            per_shown = shown(1.0, e.unit)[0]
+            signature_um[pname] = float(row.norms[j] / np.sqrt(len(res.poses))) * 1e3 / per_shown
+            for i, n in enumerate(fit.free):
+                bias[n][pname] = float(row.absorbed[i, j] * shown(1.0, units_of[n])[0] / per_shown)
+    return bias, units, signature_um
+
+
+def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out: list[Candidate],
+            ranked: dict[str, Row], noise: Whitening, model_effects: Sequence[Effect], alpha: float,
+            advising: Advisor | None) -> tuple[list[Candidate], dict]:
+    """Step 5: which significant candidates stay so once the best is added (a second
+    effect), which are the best's rivals (the data cannot tell them apart), and what would
+    tell them apart. Returns the candidates (equivalent rivals reordered) and the
+    ``Diagnosis`` fields."""
+    poses, r = res.poses, res.r
     after_best, rival_names, rivals_separated_by, rivals_open = (), (), (), {}
-    if unexplained:
-        significant = []
     if len(significant) > 1:
-        first = noise.white(_columns(machine, poses, resolve(machine, significant[0].effect)))
+        first = noise.white(effect_columns(machine, poses, resolve(machine, significant[0].effect)))
         others = [resolve(machine, c.effect) for c in significant[1:]]
         kept = still_significant(noise.Q, first, noise.white(r), (
-            (e, noise.white(_columns(machine, poses, e))) for e in others), alpha)
+            (e, noise.white(effect_columns(machine, poses, e))) for e in others), alpha)
         after_best = tuple(e.name for e in others if e.name in kept)
     if significant:
         best = ranked[significant[0].effect]
         rival_names = rivals((best.drop_w, best.k_eff), {
             c.effect: (ranked[c.effect].drop_w, ranked[c.effect].k_eff)
-            for c in out if c.visible and c.effect != best.effect.name}, rss_w / dof, alpha, bool(after_best))
+            for c in out if c.visible and c.effect != best.effect.name},
+            noise.rss(r) / res.dof, alpha, bool(after_best))
         if rival_names and advising is not None:
             group = [best, *(ranked[e] for e in rival_names)]
-            by_rival, rivals_separated_by, rivals_open = _telling_apart(
-                machine, model_effects, poses, group, rss / dof, advising)
+            by_rival, rivals_separated_by, rivals_open = telling_apart(
+                machine, model_effects, poses, group, res.rss / res.dof, advising)
             out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
         if rival_names and advising is not None and not rivals_separated_by:
             # equivalent everywhere: put first the one the location errors absorb least, so
@@ -380,65 +449,22 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
                 out.insert(out.index(next(c for c in out if c.effect == best.effect.name)), first)
                 rival_names = tuple(c.effect for c in out if c.effect in (best.effect.name, *rival_names)
                                     and c is not first)
+    return out, {"after_best": after_best, "rivals": rival_names, "rivals_separated_by": rivals_separated_by,
+                 "rivals_open": rivals_open}
 
-    # what each rival, added, takes back from the fitted parameters (first order: the part
-    # of it they absorbed, J⁺c·a): where rivals are equivalent, the choice moves these
+
+def _carries(fit: FitResult, res: _Residual, out: Sequence[Candidate], ranked: dict[str, Row],
+             rival_names: tuple[str, ...]) -> dict[str, dict[str, float]]:
+    """Step 6: what each rival, added, takes back from the fitted parameters (first order:
+    the part of it they absorbed, J⁺c·a): where rivals are equivalent, the choice moves these."""
+    units_of = {n: res.model.effects[res.model.names.index(n)].unit for n in fit.free}
     carries = {}
-    first = next((c.effect for c in out if c.significant), None)     # after the reordering above
+    first = next((c.effect for c in out if c.significant), None)     # after any reordering
     for name in ((first, *rival_names) if rival_names else ()):
         row = ranked[name]
         shift = -(row.absorbed @ row.amp)
         carries[name] = {n: float(shift[i] * shown(1.0, units_of[n])[0]) for i, n in enumerate(fit.free)}
-
-    return Diagnosis(
-        machine=machine.name, fit_file=fit_file, model=fit.model,
-        rms_um=float(np.sqrt(rss / r.size)) * 1e3, sigma_um=float(np.sqrt(rss / dof)) * 1e3,
-        readings=int(r.size), per_path=fit.residual["per_path"],
-        per_axis=_per_axis(machine, poses, r.reshape(-1, 3)),
-        candidates=tuple(out), bias=bias, bias_units=units, signature_um=signature_um,
-        tested=tested, alpha=alpha,
-        after_best=after_best, rivals=rival_names, rivals_separated_by=rivals_separated_by,
-        outliers=_outlier_rows(data, bad, size), noise=_noise_summary(seg, noise.rho, poses.path),
-        rivals_open=rivals_open, machine_ref=machine_ref or machine.source,
-        program_ext=advising.program_ext if advising is not None else "", device_noise_um=device,
-        repeats=said, misfit=misfit,
-        lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, carries=carries, notes=notes,
-        data_device=kind)
-
-
-def _beyond_starts(cc: np.ndarray, qc: np.ndarray, m: int) -> np.ndarray:
-    """The visibility of a reversal's own m columns beyond the model and its start sides (the
-    columns after them), from products: ‖c⊥‖/‖c‖ with c⊥ orthogonal to both. A reversal
-    whose side is the same throughout is its axis's zero offset: its constants and the
-    location errors take it whole, whatever its columns alone would show."""
-    P = cc - qc.T @ qc
-    S = P[:m, :m] - P[:m, m:] @ np.linalg.lstsq(P[m:, m:], P[m:, :m], rcond=None)[0]
-    norms = np.sqrt(np.diag(cc)[:m])
-    return np.where(norms > 0, np.sqrt(np.clip(np.diag(S), 0, None)) / np.where(norms > 0, norms, 1), 0.0)
-
-
-def _without_b(R: np.ndarray, qj: np.ndarray, cc: np.ndarray, m: int) -> np.ndarray:
-    """The Gram matrix of X = [J | c] less its part along a candidate's start sides B, from
-    products alone: J = Q_J R and C = [c | B] with qj = Q_Jᵀ C, cc = CᵀC."""
-    XX = np.block([[R.T @ R, R.T @ qj[:, :m]], [qj[:, :m].T @ R, cc[:m, :m]]])
-    XB = np.vstack([R.T @ qj[:, m:], cc[:m, m:]])
-    return XX - XB @ np.linalg.lstsq(cc[m:, m:], XB.T, rcond=None)[0]
-
-
-def _started(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> dict[str, np.ndarray]:
-    """The reversal candidates that come with start sides on these poses (data without the
-    axis's side), by name: their columns as ``_columns`` makes them."""
-    return {e.name: _columns(machine, poses, e) for e in effects
-            if e.basis.kind == "r" and StartSides(machine, e.params, poses).count}
-
-
-def _columns(machine: Machine, poses: Poses, e: Effect) -> np.ndarray:
-    """An effect's first-order columns (3n, m); for a reversal on data that do not say each
-    pose's side, followed by the start sides ``fit --add`` fits with it (``StartSides``): so
-    what diagnose tries is what fit would fit."""
-    c = columns(machine, poses, [e])
-    starts = StartSides(machine, e.params, poses).projector() if e.basis.kind == "r" else None
-    return c if starts is None else np.hstack([c, starts.basis(len(poses))])
+    return carries
 
 
 def _unexplained(misfit, significant: bool, share: float | None, outside: Line | None) -> bool:
@@ -459,86 +485,6 @@ def _outside_line(lines, device: float | None, misfit, alpha: float, best_sum_sq
     return next((line for line in lines if line.unit == "mm" and line.amplitude_um >= RESOLVES_UM
                  and line.p_value < alpha / max(len(lines), 1)
                  and line.sum_sq >= LINE_OVER_BEST * best_sum_sq and line.share >= LINE_SHARE), None)
-
-
-@dataclass(frozen=True)
-class _Row:
-    """One candidate's numbers: unwhitened (visibility, what the model absorbs, RMS after,
-    the condition of the model with it) and whitened (what the test and the ranking use)."""
-
-    effect: Effect
-    vis: float
-    drop: float
-    drop_w: float
-    share: float
-    k_eff: int
-    amp: np.ndarray
-    names: tuple[str, ...]
-    silent: bool
-    norms: np.ndarray
-    absorbed: np.ndarray
-    cond: float
-
-
-class _Noise:
-    """The whitening of one diagnosis: segments, ρ per reading and direction, and the Q of
-    the model's whitened Jacobian (QR). With ρ = 0 everywhere it is the identity."""
-
-    def __init__(self, seg: np.ndarray, rho: np.ndarray, Q: np.ndarray):
-        self.seg, self.rho = seg, rho
-        self.Q = np.linalg.qr(self.white(Q))[0] if rho.any() else Q     # whitening keeps the span
-
-    def white(self, x: np.ndarray) -> np.ndarray:
-        """(3n,) or (3n, k), readings in (n, 3) order, made white."""
-        if not self.rho.any():
-            return x
-        return whiten(x.reshape(len(self.seg), 3, *x.shape[1:]), self.seg, self.rho).reshape(x.shape)
-
-    def off(self, v: np.ndarray) -> np.ndarray:
-        """What the whitened model cannot absorb of whitened v."""
-        return v - self.Q @ (self.Q.T @ v)
-
-    def rss(self, r: np.ndarray) -> float:
-        rw = self.off(self.white(r))
-        return float(rw @ rw)
-
-
-def _rank(effects: Sequence[Effect], free: Sequence[str], R: np.ndarray, r: np.ndarray, noise: _Noise,
-          plain: dict, white: dict | None = None) -> dict[str, _Row]:
-    """Every candidate's numbers from its columns' products (``signature.products``):
-    ``plain`` with the model's Q and the residual, ``white`` the same made white (with
-    the whitened model's Q and residual) when the noise is correlated."""
-    J_norm = np.linalg.norm(R, axis=0)
-    rw = noise.off(noise.white(r))
-    rss_w = float(rw @ rw)
-    out = {}
-    for e in effects:
-        cc, qc, cr = plain[e.name]
-        m = len(e.params)           # columns beyond them: a reversal's start sides (``_columns``)
-        norms = np.sqrt(np.diag(cc))
-        vis_cols, drop, amp = explained(cc, qc, cr)
-        keep = vis_cols >= VISIBLE
-        if len(cr) > m:        # a reversal is seen only beyond the model and its start sides
-            vis_cols[:m] = _beyond_starts(cc, qc, m)
-            keep = (vis_cols >= VISIBLE) & bool((vis_cols[:m] >= VISIBLE).any())
-            _, drop, amp = explained(cc, qc, cr, keep)
-        drop_w = drop
-        if white is not None and keep.any():
-            _, drop_w, _ = explained(*white[e.name], keep)
-        qj = qc[len(qc) - len(R):]                    # Q's columns of J (start sides first)
-        absorbed = np.linalg.solve(R, qj[:, :m])      # J⁺c: what each parameter takes
-        vis_cols, amp, norms = vis_cols[:m], amp[:m], norms[:m]
-        size = max(float(np.linalg.norm(norms)), 1e-300)
-        share = np.sqrt(np.sum((absorbed * J_norm[:, None]) ** 2, axis=1)) / size
-        names = tuple(free[i] for i in np.argsort(-share) if share[i] >= ABSORBS)
-        # R of [J | c] is [[R, Qᵀc], [0, R of c⊥]]: fit --add's condition number, cheaply;
-        # with start sides B, that of [J | c] without its part along B, as fit projects them
-        joined = np.block([[R, qj], [np.zeros((m, R.shape[1])), gram_factor(cc - qc.T @ qc)]]) \
-            if len(cr) == m else gram_factor(_without_b(R, qj, cc, m))
-        out[e.name] = _Row(e, float(vis_cols.max()), drop, drop_w, drop_w / max(rss_w, 1e-300),
-                           int(keep.sum()), amp, names, bool(np.all(norms * 1e3 < SILENT_UM)),
-                           norms, absorbed, condition(joined))
-    return out
 
 
 def _outlier_rows(data: Sequence[RTestData], bad: np.ndarray, size: np.ndarray) -> tuple[dict, ...]:
@@ -585,97 +531,3 @@ def _per_axis(machine: Machine, poses: Poses, r: np.ndarray) -> dict:
             coef = np.linalg.lstsq(B, r_um, rcond=None)[0]
             out[axis.name] = {"trend": np.sqrt(((B @ coef) ** 2).mean(axis=0)).tolist()}
     return out
-
-
-def _separating(machine: Machine, model_effects: Sequence[Effect], poses: Poses, effects: Sequence[Effect],
-                advisor: Advisor) -> dict[str, tuple[Measurement, ...]]:
-    """For effects these data cannot tell from ``model_effects`` (or not whole): the
-    measurements the machine can make after which they could, shortest first, at most
-    ``ADVISED``: each column then visible (``SEPARATES``) and the model with the effect
-    separable as fit --add judges it.
-
-    R of stacked data is R of the stacked R factors, and the R factor of a subset of
-    columns is that of the same columns of R: the measured poses are reduced once, each
-    extra measurement adds only its own rows, and each effect is judged on small blocks.
-    """
-    both = [*model_effects, *effects]
-    p = sum(len(e.params) for e in model_effects)
-    R0 = r_factor(machine, poses, both)
-    found: dict[str, list[Measurement]] = {e.name: [] for e in effects}
-    for extra in sorted(advisor.candidates, key=lambda m: len(m.poses)):
-        R = r_factor(machine, extra.poses, both, R0)
-        col = p
-        for e in effects:
-            k = len(e.params)
-            if e.basis.kind == "r" and not both_sides(machine, e.carrier, poses, extra.poses):
-                col += k    # one side throughout is the axis's zero offset, not its backlash
-                continue
-            Re = np.linalg.qr(R[:, [*range(p), *range(col, col + k)]], mode="r")
-            vis = np.linalg.norm(Re[p:, p:], axis=0) / np.maximum(np.linalg.norm(Re[:, p:], axis=0), 1e-300)
-            if vis.min() >= SEPARATES and condition(Re) < COND_LIMIT:
-                found[e.name].append(extra)
-            col += k
-    return {k: advisor.runnable(v, most=ADVISED) for k, v in found.items()}
-
-
-def _telling_apart(machine: Machine, model_effects: Sequence[Effect], poses: Poses, group: Sequence[_Row],
-                   sigma2: float, advisor: Advisor
-                   ) -> tuple[dict[str, tuple[Measurement, ...]], tuple[Measurement, ...], dict]:
-    """Which measurements, not made yet and that the machine can make, tell the best
-    (``group[0]``) and its rivals apart: a pair is told apart when, at their fitted sizes,
-    they would differ by ``TELLS_APART`` σ̂² more than now (each hypothesis, were it true,
-    would leave that much misfit in a fit of the other; first order).
-
-    Returns, per rival, what tells it from the best (shortest first); the measurements that
-    tell any pair apart, those telling every pair apart first; and per measurement the
-    pairs it leaves open. The measurements come as a plan: each tells apart the most pairs
-    the ones before it leave open, until every pair is told apart or none is left that
-    would."""
-    effects = [row.effect for row in group]
-    amps = {row.effect.name: row.amp for row in group}
-    p = sum(len(e.params) for e in model_effects)
-    cols, at = {}, p
-    for e in effects:
-        cols[e.name] = list(range(at, at + len(e.params)))
-        at += len(e.params)
-
-    def misfit(R, a, b):        # a true, fitted with the model and b: what a leaves
-        Rs = np.linalg.qr(R[:, [*range(p), *cols[b], *cols[a]]], mode="r")
-        k = len(cols[a])
-        return float(np.sum((Rs[-k:, -k:] @ amps[a]) ** 2))
-
-    def apart(R, a, b):
-        return min(misfit(R, a, b), misfit(R, b, a))
-
-    both = [*model_effects, *effects]
-    R0 = r_factor(machine, poses, both)
-    pairs = list(combinations([e.name for e in effects], 2))
-    now = {pq: apart(R0, *pq) for pq in pairs}
-    split = {}
-    for extra in advisor.candidates:
-        R = r_factor(machine, extra.poses, both, R0)
-        gains = {pq: apart(R, *pq) - now[pq] for pq in pairs}
-        told = {pq for pq, g in gains.items() if g >= TELLS_APART * sigma2}
-        if told:
-            split[extra.label] = (extra, told, sum(gains.values()))
-    # a plan, greedily: each next measurement tells apart the most pairs still open (the
-    # shortest among equals); more data never bring two hypotheses closer, so what each
-    # tells apart alone, it tells apart in the plan too
-    remaining, plan = set(pairs), []
-    while remaining:
-        ranked = sorted((s for s in split.values() if s[0] not in plan and s[1] & remaining),
-                        key=lambda s: (-len(s[1] & remaining), len(s[0].poses), -s[2]))
-        step = advisor.runnable([s[0] for s in ranked], most=1)
-        if not step:
-            break
-        plan.append(step[0])
-        remaining -= split[step[0].label][1]
-    open_ = {m.label: tuple(pq for pq in pairs if pq not in split[m.label][1]) for m in plan}
-    ordered = tuple(plan)
-    best = effects[0].name
-    by_rival = {}
-    for e in effects[1:]:
-        pair = (best, e.name)
-        tells = sorted((s for s in split.values() if pair in s[1]), key=lambda s: (len(s[0].poses), -s[2]))
-        by_rival[e.name] = advisor.runnable([s[0] for s in tells], most=ADVISED)
-    return by_rival, ordered, {k: v for k, v in open_.items() if v}

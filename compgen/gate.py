@@ -4,14 +4,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import numpy as np
-
 from . import me
 from .diagnose import diagnose
 from .errors import CompgenError
 from .machine import Machine
 from .results import FitResult
-from .rtest import RTestData
+from .rtest import Measurements, RTestData
 
 # An R-test's sphere-centre repeatability is 0.5–1 µm and drift adds a few µm over a run
 # (docs/diagnose.md, "Noise of R-test sensors"): a fit leaving more than this has missed
@@ -23,7 +21,7 @@ SPREAD_PLAUSIBLE_UM = 0.5
 
 def unit_suspicion(data: Sequence[RTestData]) -> str | None:
     """Why the readings look like another unit than µm, or None."""
-    y = np.concatenate([d.deviation for d in data]) * 1e3
+    y = Measurements.concat(data).deviation * 1e3
     spread = float((y.max(axis=0) - y.min(axis=0)).max()) if y.size else 0.0
     if spread < SPREAD_PLAUSIBLE_UM:
         return (f"the readings spread over {spread:.3g} µm at most, far below any R-test's noise "

@@ -20,7 +20,7 @@ from .kinematics import Model, Poses, runs
 from .machine import Machine
 from .noise import ar1, ar1_covariance
 from .results import DataRef, Estimate, FitResult
-from .rtest import RTestData, refuse_twice
+from .rtest import Measurements, RTestData, refuse_twice
 from .sides import StartSides, both_sides
 from .significance import COND_LIMIT, condition
 from .units import parse_quantity, shown
@@ -57,8 +57,8 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
     free = [i for i, n in enumerate(names) if n not in fixed]
     if not free:
         raise CompgenError("every parameter is fixed: nothing to fit")
-    poses = Poses.concat([d.poses for d in data])
-    y = np.concatenate([d.deviation for d in data])
+    joined = Measurements.concat(data)
+    poses, y = joined.poses, joined.deviation
     readings, p = y.size, len(free)
     if readings <= p:
         raise CompgenError(f"{len(poses)} poses give {readings} readings for {p} parameters",
@@ -144,8 +144,8 @@ def fitted(machine: Machine, fit: FitResult, data: Sequence[RTestData]) -> np.nd
     """The readings (n, 3) mm the fit's model gives at the data's poses, with each path's
     start side where the data do not record it (``StartSides``, fitted to these readings as
     ``identify`` fits them; readings unweighted): what the fit's residual is taken from."""
-    poses = Poses.concat([d.poses for d in data])
-    y = np.concatenate([d.deviation for d in data])
+    joined = Measurements.concat(data)
+    poses, y = joined.poses, joined.deviation
     dev = Model(machine, fit.model).deviation(poses, np.array([fit.parameters[n].value for n in fit.model]))
     starts = StartSides(machine, fit.model, poses).projector()
     return dev if starts is None else y - starts.remove(y - dev)
@@ -167,9 +167,8 @@ class Weights:
         if not self.active:
             return
         prior = np.eye(3) * (self.PRIOR_UM * 1e-3) ** 2
-        self.base = np.concatenate([d.cov if d.cov is not None else np.broadcast_to(prior, (len(d), 3, 3))
-                                    for d in data])
-        self.group = np.concatenate([np.full(len(d), d.cov is not None) for d in data])
+        joined = Measurements.concat(data)
+        self.base, self.group = joined.covariance(prior), joined.cov_known
         self.factor = {g: 1.0 for g in np.unique(self.group).tolist()}
         self.estimated = len(self.factor) > 1      # two devices: each one's variance is estimated
         self.rounds = 0

@@ -26,7 +26,7 @@ from .identify import fitted  # noqa: E402
 from .kinematics import Poses  # noqa: E402
 from .machine import Machine  # noqa: E402
 from .results import FitResult  # noqa: E402
-from .rtest import RTestData  # noqa: E402
+from .rtest import Measurements, RTestData  # noqa: E402
 from .signature import columns  # noqa: E402
 from .spectrum import MIN_PITCH_MM  # noqa: E402
 from .units import shown  # noqa: E402
@@ -78,8 +78,8 @@ def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     if before is not None and [d.sha256 for d in before.data] != [d.sha256 for d in fit.data]:
         raise CompgenError("--before must be a fit of the same data files",
                            hint="compare fits made from the same R-test session")
-    poses = Poses.concat([d.poses for d in data])
-    measured = np.concatenate([d.deviation for d in data]) * 1e3
+    joined = Measurements.concat(data)
+    poses, measured = joined.poses, joined.deviation * 1e3
     model = fitted(machine, fit, data) * 1e3         # with the start sides it fitted, if any
     earlier = fitted(machine, before, data) * 1e3 if before else None
     label = f"model ({len(fit.model)} parameters)"

@@ -11,6 +11,7 @@ import hashlib
 import io
 import re
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +44,50 @@ class RTestData:
 
     def __len__(self) -> int:
         return len(self.poses)
+
+
+@dataclass(frozen=True, eq=False)
+class Measurements:
+    """Measurement sets taken together, in order: their poses and readings joined once, and
+    each reading's set. What every fit, diagnosis, comparison and check reads."""
+
+    sets: tuple[RTestData, ...]
+
+    @classmethod
+    def concat(cls, sets) -> Measurements:
+        """The sets in the order given (a ``Measurements`` passes through as it is)."""
+        return sets if isinstance(sets, Measurements) else cls(tuple(sets))
+
+    def __len__(self) -> int:
+        return sum(len(d) for d in self.sets)
+
+    @cached_property
+    def poses(self) -> Poses:
+        return Poses.concat([d.poses for d in self.sets])
+
+    @cached_property
+    def deviation(self) -> np.ndarray:
+        """(n, 3) mm, nest minus ball."""
+        return np.concatenate([d.deviation for d in self.sets])
+
+    @cached_property
+    def set_of(self) -> np.ndarray:
+        """(n,) the index of each reading's set."""
+        return np.repeat(np.arange(len(self.sets)), [len(d) for d in self.sets])
+
+    @property
+    def device(self) -> str:
+        return device_of(self.sets)
+
+    @cached_property
+    def cov_known(self) -> np.ndarray:
+        """(n,) whether each reading's covariance is known (a probe log's sphere centres)."""
+        return np.concatenate([np.full(len(d), d.cov is not None) for d in self.sets])
+
+    def covariance(self, prior: np.ndarray) -> np.ndarray:
+        """(n, 3, 3) mm²: each reading's own covariance where its set gives it, else ``prior``."""
+        return np.concatenate([d.cov if d.cov is not None else np.broadcast_to(prior, (len(d), 3, 3))
+                               for d in self.sets])
 
 
 def refuse_twice(sets) -> None:

@@ -7,15 +7,13 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import numpy as np
-
 from .. import me
 from ..effects import effect_of_param
 from ..emit.registry import controller
 from ..errors import CompgenError, one_line
 from ..machine import Machine
 from ..results import FitResult
-from ..rtest import device_of
+from ..rtest import Measurements, device_of
 from ..store import Store, now
 from ..units import shown
 from .drift import Entry, Flag, flags, limit_of, machine_params
@@ -102,7 +100,6 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
     differ, and the changes would be measured against another machine; ``machine_changed``
     checks anyway and says so."""
     from ..identify import beyond_setup
-    from ..kinematics import Poses
 
     name, serial = machine_key(machine, serial)
     changed = bool(calibration.machine_sha256) and calibration.machine_sha256 != machine.sha256
@@ -132,8 +129,8 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
         status = "pass" if abs(change) <= limit else ("fail" if abs(change) > k * std else "unsure")
         changes.append(Change(n, change, std, now_entry.units[n], limit, status,
                               effect_of_param(machine, n).words))
-    got = beyond_setup(machine, Poses.concat([d.poses for d in data]),
-                       np.concatenate([d.deviation for d in data]))
+    joined = Measurements.concat(data)
+    got = beyond_setup(machine, joined.poses, joined.deviation)
     paths = {}
     for p, stats in got["per_path"].items():
         if p in machine.tolerances:
