@@ -45,14 +45,14 @@ from .emit.registry import controller, for_program, read_edits, read_state
 from .errors import CompgenError
 from .files import STDOUT, read_text, write_all, write_atomically
 from .gate import gate_edit, unit_suspicion
-from .identify import identify, parse_fixed
+from .identify import identify
 from .machine_file import load_machine
 from .paths import generate
 from .probe import format_probe_log, probe_poses, simulate_touches
 from .report import report_html
 from .results import load_fit
 from .rtest import SIGNS, format_rtest, read_poses
-from .session import fit_machine, machine_ref, read_data, reload
+from .session import fit_machine, fit_request, machine_ref, read_data, reload
 from .sides import unknown_sides, unpredicted_sides
 from .simulate import read_truth, simulate
 
@@ -176,33 +176,11 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
     if record:
         from .history import taken_at
         taken = taken_at(taken)      # a bad --date is refused before fit.json is written
-    if more and not base:
-        raise CompgenError("--data adds to a fit's data: give --from FIT.json too",
-                           hint=f"without a fit: {me()} fit --machine M DATA.csv … -o fit.json")
-    if base:
-        if data:
-            raise CompgenError("with --from, the fit's own data are used; data to add go with --data",
-                               hint=f"{me()} fit --from {base} --data {data[0]} … -o NEW.json; for "
-                                    "other data alone, fit them with --machine")
-        start = load_fit(base)
-        machine, sets = reload(start, machine_file)
-        sign = sign or start.sign
-        sets += [read_data(p, machine, sign, warn) for p in more]
-        model = start.model
-        fixed = {n: e.value for n, e in start.parameters.items() if e.fixed}
-    else:
-        if not machine_file or not data:
-            raise CompgenError("give --machine and DATA files, or --from a fit.json")
-        machine = load_machine(machine_file)
-        sign = sign or SIGNS[0]
-        sets = [read_data(p, machine, sign, warn) for p in data]
-        model, fixed = location_model(machine), {}
-    if model_names:
-        model = [n.strip() for n in model_names.split(",") if n.strip()]
-    model = compose(machine, model, add, remove)
-    fixed = {n: v for n, v in fixed.items() if n in model} | parse_fixed(machine, fixes)
-    progress(f"fitting {len(model)} effects to {sum(len(s) for s in sets)} poses")
-    result = identify(machine, sets, model, fixed, method, sign, advisor=Advisor)
+    names = [n.strip() for n in model_names.split(",") if n.strip()] if model_names else None
+    asked = fit_request(machine_file, data, base, more, names, add, remove, fixes, sign, warn)
+    machine, sets = asked.machine, asked.sets
+    progress(f"fitting {len(asked.model)} effects to {sum(len(s) for s in sets)} poses")
+    result = identify(machine, sets, asked.model, asked.fixed, method, asked.sign, advisor=Advisor)
     write_atomically(output, result.to_json(Path(output).resolve().parent), force,
                      inputs=(machine.source, base, *(s.source for s in sets)))
     said(output, result.report() + f"\nwrote {output}")

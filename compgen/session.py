@@ -1,17 +1,21 @@
-"""Reloading what a fit was made from: its machine file and data, checked by checksum."""
+"""A fit's files: reloading what a fit was made from (its machine file and data, checked by
+checksum), and what a new fit or a refit fits (the refit policy)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from . import me
-from .effects import effect_of_param
+from .effects import compose, effect_of_param, location_model
 from .errors import CompgenError
+from .identify import parse_fixed
 from .machine import Machine
 from .machine_file import load_machine
 from .probe import MAGIC, PROBE_FAMILY, read_probe_log, sphere_centres
-from .results import FitResult
-from .rtest import RTestData, read_rtest
+from .results import FitResult, load_fit
+from .rtest import SIGNS, RTestData, read_rtest
 
 
 def read_data(path: str | Path, machine: Machine, sign: str = "nest-minus-ball", warn=None) -> RTestData:
@@ -71,3 +75,51 @@ def reload(fit: FitResult, machine_file: str | None = None) -> tuple[Machine, li
                                hint=f"refit with `{me()} fit`")
         data.append(d)
     return machine, data
+
+
+@dataclass(frozen=True)
+class FitRequest:
+    """What one fit fits: the machine, the data sets, the model's effects, the values held
+    fixed, and the sign the R-test data were read with."""
+
+    machine: Machine
+    sets: list[RTestData]
+    model: list[str]
+    fixed: dict[str, float]
+    sign: str
+
+
+def fit_request(machine_file: str | None = None, data: Sequence[str] = (), base: str | None = None,
+                more: Sequence[str] = (), model: Sequence[str] | None = None, add: Sequence[str] = (),
+                remove: Sequence[str] = (), fixes: Sequence[str] = (), sign: str | None = None,
+                warn: Callable[[str], None] | None = None) -> FitRequest:
+    """The refit policy. A new fit: ``machine_file`` and ``data``, the seed's location errors,
+    the contract's sign. A refit of the fit file ``base``: its machine and data (refused if
+    either changed), ``more`` data read with its sign, its model and the values it held
+    fixed that stay in the model. Then ``model`` replaces the model, ``add``/``remove``
+    compose it, and ``fixes`` ("NAME=VALUE") hold values fixed; ``warn`` receives what a
+    probe log's checks flag."""
+    if more and not base:
+        raise CompgenError("--data adds to a fit's data: give --from FIT.json too",
+                           hint=f"without a fit: {me()} fit --machine M DATA.csv … -o fit.json")
+    if base:
+        if data:
+            raise CompgenError("with --from, the fit's own data are used; data to add go with --data",
+                               hint=f"{me()} fit --from {base} --data {data[0]} … -o NEW.json; for "
+                                    "other data alone, fit them with --machine")
+        start = load_fit(base)
+        machine, sets = reload(start, machine_file)
+        sign = sign or start.sign
+        sets += [read_data(p, machine, sign, warn) for p in more]
+        names = list(start.model)
+        fixed = {n: e.value for n, e in start.parameters.items() if e.fixed}
+    else:
+        if not machine_file or not data:
+            raise CompgenError("give --machine and DATA files, or --from a fit.json")
+        machine = load_machine(machine_file)
+        sign = sign or SIGNS[0]
+        sets = [read_data(p, machine, sign, warn) for p in data]
+        names, fixed = location_model(machine), {}
+    names = compose(machine, list(model) if model is not None else names, add, remove)
+    fixed = {n: v for n, v in fixed.items() if n in names} | parse_fixed(machine, fixes)
+    return FitRequest(machine, sets, names, fixed, sign)
