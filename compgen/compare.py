@@ -105,13 +105,11 @@ def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, control
     ctl = controller(controller_name)
     joined = Measurements.concat(data)
     poses, y = joined.poses, joined.deviation
-    model = Model(machine, fit.model)
-    x = np.array([fit.parameters[n].value for n in fit.model])
-    residual = y - model.deviation(poses, x)
+    residual = y - fit.evaluate(machine, poses)
     p = plan(machine, fit, force=True)   # predict even what the limits would refuse to write
     not_held = ctl.not_held(machine, p)
     after = Poses(ctl.holds(machine, p).drive(machine, poses), poses.ball, poses.t, poses.path)
-    predicted = model.relative(after, x) + residual
+    predicted = Model(machine, fit.model).relative(after, fit.values) + residual
     before = beyond_setup(machine, poses, y)
     pred = beyond_setup(machine, after, predicted)
     measured = _measured(machine, fit, post, pred) if post else None

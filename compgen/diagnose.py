@@ -329,7 +329,7 @@ def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residu
     that of J without them, as fit has it."""
     poses = joined.poses
     model = Model(machine, fit.model)
-    x = np.array([fit.parameters[n].value for n in fit.model])
+    x = fit.values
     free = [model.names.index(n) for n in fit.free]
     r3 = joined.deviation - model.deviation(poses, x)
     starts = StartSides(machine, fit.model, poses).projector()

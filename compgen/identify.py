@@ -146,7 +146,7 @@ def fitted(machine: Machine, fit: FitResult, data: Sequence[RTestData]) -> np.nd
     ``identify`` fits them; readings unweighted): what the fit's residual is taken from."""
     joined = Measurements.concat(data)
     poses, y = joined.poses, joined.deviation
-    dev = Model(machine, fit.model).deviation(poses, np.array([fit.parameters[n].value for n in fit.model]))
+    dev = fit.evaluate(machine, poses)
     starts = StartSides(machine, fit.model, poses).projector()
     return dev if starts is None else y - starts.remove(y - dev)
 

@@ -12,6 +12,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,12 +20,16 @@ from . import me
 from .effects import effect_name
 from .errors import CompgenError
 from .files import read_json
+from .kinematics import Model, Poses
 from .units import LENGTH, shown, three, three_header, to_inside
 
 FORMAT = "compgen.fit/1"
 # The finest step any output of a fit prints (fit.json's repr aside): 1 nm and 1e-9 rad
 # (0.0002″), a thousandth of the finest a control's table holds (0.1 µm, 0.0001°)
 MARKER_QUANTUM = {"mm": 1e-6, "rad": 1e-9}
+
+if TYPE_CHECKING:
+    from .machine import Machine
 
 
 @dataclass(frozen=True)
@@ -84,6 +89,16 @@ class FitResult:
                                        for n, e in self.parameters.items()},
                           [d.sha256 for d in self.data]], sort_keys=True)
         return "fit:" + hashlib.sha256(key.encode()).hexdigest()[:6]
+
+    @property
+    def values(self) -> np.ndarray:
+        """The fitted values in model order, inside units (mm, rad)."""
+        return np.array([self.parameters[n].value for n in self.model])
+
+    def evaluate(self, machine: Machine, poses: Poses) -> np.ndarray:
+        """The readings (n, 3) mm, nest minus ball, the fitted model gives at ``poses`` (any
+        ball, any axes): what it predicts of a measurement, a path's start side aside."""
+        return Model(machine, self.model).deviation(poses, self.values)
 
     @property
     def condition_number(self) -> float:

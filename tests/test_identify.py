@@ -397,3 +397,16 @@ def test_the_library_refuses_the_same_readings_twice(seed_machine):
     data = read_rtest(vector("seed-table4-noiseless.csv"), seed_machine)
     with pytest.raises(CompgenError, match="holds the same readings as"):
         identify(seed_machine, [data, data])
+
+
+def test_a_fit_evaluates_itself_at_poses_it_was_not_fitted_to(seed_machine):
+    """FitResult.evaluate: a fit of the independent simulator's K4 readings (Table 4 × 30)
+    gives its K1 and K2 readings, never fitted, to the vector's own rounding (readings up
+    to 2.3 mm)."""
+    from dataclasses import replace
+    d = read_rtest(vector("seed-table4x30-noiseless.csv"), seed_machine)
+    k4 = d.poses.path == "K4"
+    fit = identify(seed_machine, [replace(d, poses=d.poses.take(k4), deviation=d.deviation[k4])])
+    got = fit.evaluate(seed_machine, d.poses.take(~k4))
+    assert np.abs(got - d.deviation[~k4]).max() < 0.001 * UM
+    assert np.abs(d.deviation[~k4]).max() > 2000 * UM
