@@ -22,7 +22,7 @@ from .files import read_text
 from .frames import table_axis_down
 from .kinematics import Poses, inverse
 from .machine import Machine, ProbeSetup
-from .rtest import BALL, READING_MAX_MM, RTestData, _read_table, axis_cells
+from .rtest import BALL, READING_MAX_MM, RTestData, axis_cells, read_table
 from .units import number
 
 MAGIC = "# compgen probe log v1"
@@ -116,7 +116,7 @@ def read_probe_log(path, machine: Machine) -> ProbeLog:
                            where=f"{where}:{key_lines['machine']}",
                            hint="give the machine file the log was measured on with --machine")
     rotary = [a.name for a in machine.rotary_axes]
-    table = _read_table(path, machine, ["pose", "X", "Y", "Z", *rotary, *DIRECTION])
+    table = read_table(path, machine, ["pose", "X", "Y", "Z", *rotary, *DIRECTION])
     lines = np.array(table.lines)
     pose = table.columns["pose"]
     bad = np.flatnonzero((pose < 1) | (pose != np.round(pose)))

@@ -115,7 +115,7 @@ def read_rtest(path: str | Path, machine: Machine, sign: str = "nest-minus-ball"
     """
     if sign not in SIGNS:
         raise CompgenError(f"sign must be one of {', '.join(SIGNS)}, not {sign!r}")
-    table = _read_table(path, machine, ["X", "Y", "Z", *(a.name for a in machine.rotary_axes),
+    table = read_table(path, machine, ["X", "Y", "Z", *(a.name for a in machine.rotary_axes),
                                         *DEVIATION])
     poses = table.poses(machine)
     deviation = np.column_stack([table.columns[c] for c in DEVIATION]) * 1e-3
@@ -143,7 +143,7 @@ def read_rtest(path: str | Path, machine: Machine, sign: str = "nest-minus-ball"
 def read_poses(path: str | Path, machine: Machine) -> Poses:
     """A pose list: rotary axes (deg) required; ``path`` and ``bx,by,bz`` optional. The linear
     axes follow the ball by inverse kinematics; X, Y, Z, if given, must agree with it."""
-    table = _read_table(path, machine, [a.name for a in machine.rotary_axes])
+    table = read_table(path, machine, [a.name for a in machine.rotary_axes])
     rotary = np.radians(np.column_stack([table.columns[a.name] for a in machine.rotary_axes]))
     ball = table.ball(machine)
     # a ball that cannot stand on the table, a pose the machine cannot take: not a prediction
@@ -168,7 +168,7 @@ def read_poses(path: str | Path, machine: Machine) -> Poses:
 
 
 @dataclass(frozen=True, eq=False)
-class _Table:
+class Table:
     where: str
     sha256: str
     columns: dict[str, np.ndarray]
@@ -200,7 +200,7 @@ def side_columns(machine: Machine) -> dict[str, str]:
     return {f"{a.name}_side": a.name for a in machine.rotary_axes}
 
 
-def _checked_sides(table: _Table) -> _Table:
+def _checked_sides(table: Table) -> Table:
     for name, v in table.columns.items():
         if name.endswith("_side"):
             bad = np.flatnonzero(np.abs(v) != 1)
@@ -219,7 +219,7 @@ def _cells(line: str, where: str) -> list[str]:
         raise CompgenError(f"not a CSV row ({exc})", where=where) from None
 
 
-def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Table:
+def read_table(path: str | Path, machine: Machine, required: list[str]) -> Table:
     """A CSV v1 table with every cell checked: numbers finite, rows whole, columns present."""
     where = str(path)
     text, raw = read_text(path, "data file", limit=MAX_DATA_BYTES)
@@ -246,7 +246,7 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
     fast = _fast_table(body, header, numeric, col)
     if fast is not None:
         values, labels = fast
-        return _checked_sides(_Table(where, digest, {name: values[:, j] for j, name in enumerate(numeric)},
+        return _checked_sides(Table(where, digest, {name: values[:, j] for j, name in enumerate(numeric)},
                                      labels, range(header_line + 1, header_line + 1 + len(labels))))
 
     lines = [(i, line) for i, line in enumerate(body.splitlines(), start=header_line + 1)
@@ -276,7 +276,7 @@ def _read_table(path: str | Path, machine: Machine, required: list[str]) -> _Tab
         labels.append(label)
         line_no.append(i)
     columns = {name: values[:, j] for j, name in enumerate(numeric)}
-    return _checked_sides(_Table(where, digest, columns, np.array(labels, dtype=object), line_no))
+    return _checked_sides(Table(where, digest, columns, np.array(labels, dtype=object), line_no))
 
 
 def _header(text: str) -> tuple[int, str | None, str]:
