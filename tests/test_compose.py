@@ -126,8 +126,8 @@ def test_linuxcnc_second_round_reads_the_configuration_through_its_ini(seed_mach
     from compgen.emit import linuxcnc
     from compgen.emit.linuxcnc_config import evaluate
     from compgen.emit.registry import read_state
-    module, tilt, c = linuxcnc._trt(seed_machine)
-    nominal = linuxcnc._nominal(seed_machine, tilt, c)
+    module, tilt, c = linuxcnc.trt_module(seed_machine)
+    nominal = linuxcnc.nominal_pins(seed_machine, tilt, c)
     (tmp_path / "machine.hal").write_text("\n".join(
         [f"net yrot => {module}.y-rot-point", "sets yrot [KINS]YROT",
          *(f"setp {module}.{n} {v:.6f}" for n, v in nominal.items() if n != "y-rot-point")]) + "\n")
@@ -167,7 +167,7 @@ def test_linuxcnc_second_round_reads_the_configuration_through_its_ini(seed_mach
 
 def _pin_names_of(tilt):
     from compgen.emit import linuxcnc
-    return linuxcnc._pin_names(tilt)
+    return linuxcnc.pin_names(tilt)
 
 
 @pytest.mark.parametrize("controller", ["itnc530", "sinumerik840d", "linuxcnc"])

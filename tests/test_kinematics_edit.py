@@ -303,8 +303,8 @@ def test_an_implausible_current_state_is_refused_with_its_file_and_line(seed_mac
     with pytest.raises(CompgenError, match=r"\$TC_CARR44\[1\] is assigned twice"):
         kinematics_edit(bc_machine, bc_fit, "sinumerik840d", twice, "c", "KIN", "0", DATE)
     from compgen.emit import linuxcnc
-    module, tilt, c = linuxcnc._trt(seed_machine)
-    nominal = linuxcnc._nominal(seed_machine, tilt, c)
+    module, tilt, c = linuxcnc.trt_module(seed_machine)
+    nominal = linuxcnc.nominal_pins(seed_machine, tilt, c)
     hal = "\n".join(f"setp {module}.{n} {v:.6f}" for n, v in nominal.items()) + "\n"
     off = hal.replace(f"setp {module}.x-rot-point {nominal['x-rot-point']:.6f}",
                       f"setp {module}.x-rot-point {nominal['x-rot-point'] + 1:.6f}")

@@ -76,9 +76,9 @@ def _as_linuxcnc(folder, source, name="xyzac"):
 
 def current_hal(machine) -> str:
     """The configuration's HAL file, pins nominal: what ``--current`` is given."""
-    module, tilt, _ = linuxcnc._trt(machine)
-    nominal = linuxcnc._nominal(machine, tilt, machine.rotary_axes[1])
-    pins = [f"setp {module}.{n} {nominal[n]:.6f}" for n in linuxcnc._pin_names(tilt) if n != "z-rot-point"]
+    module, tilt, _ = linuxcnc.trt_module(machine)
+    nominal = linuxcnc.nominal_pins(machine, tilt, machine.rotary_axes[1])
+    pins = [f"setp {module}.{n} {nominal[n]:.6f}" for n in linuxcnc.pin_names(tilt) if n != "z-rot-point"]
     return (HERE / "sim.hal.in").read_text().replace("@KINS@", module).replace(
         "@PINS@", "\n".join([*pins, f"sets zrot {nominal['z-rot-point']:.6f}"]))
 
@@ -141,7 +141,7 @@ def run_linuxcnc(folder, machine, program: str, edit: str, budget_s: float = RUN
     program line: the five joint positions then the five motor commands (with the tables'
     trims), the nest's tool length taken off Z (G43 adds it to the joint)."""
     assert shutil.which("linuxcnc"), "LinuxCNC is required here (COMPGEN_REQUIRE_LINUXCNC)"
-    module, tilt, _ = linuxcnc._trt(machine)
+    module, tilt, _ = linuxcnc.trt_module(machine)
     folder.mkdir(exist_ok=True)
     ini = (HERE / "sim.ini.in").read_text().replace("@DRIVER@", str(HERE / "driver.py")).replace(
         "@KINS@", module).replace("@TILT@", tilt.name)
@@ -249,7 +249,7 @@ def test_linuxcnc_runs_the_k4_program_where_compgen_puts_it(tmp_path):
 
 
 def test_compgens_edit_loaded_into_linuxcnc_removes_what_it_can_hold(machine, tmp_path):
-    kins = linuxcnc._trt(machine)[0][:5]
+    kins = linuxcnc.trt_module(machine)[0][:5]
     truth = TRUTH[kins]
     full = generate(machine, ["K4", "K1", "K2"])
     rng = np.random.default_rng(11)
@@ -315,8 +315,8 @@ def sample_copy(folder: Path, machine, halfile: bool = False) -> Path:
     the read-back test display in place of AXIS. The POSTGUI_HALFILE connects AXIS's panel
     only, and goes with it. ``halfile``: the same configuration with its HALCMD lines moved
     into a HAL file loaded as the second HALFILE."""
-    module, tilt, c = linuxcnc._trt(machine)
-    nominal = linuxcnc._nominal(machine, tilt, c)
+    module, tilt, c = linuxcnc.trt_module(machine)
+    nominal = linuxcnc.nominal_pins(machine, tilt, c)
     kins = module[:5]
     shutil.copytree(SAMPLES, folder)
     for f in folder.rglob("*"):
@@ -339,8 +339,8 @@ def sample_copy(folder: Path, machine, halfile: bool = False) -> Path:
 def read_back(ini: Path, machine) -> dict:
     """What LinuxCNC itself holds once it started ``ini``: the trt pins (halcmd getp) and
     the joints' commands and motor commands at ``READ_AT``."""
-    module, tilt, _ = linuxcnc._trt(machine)
-    pins = ",".join(f"{module}.{n}" for n in linuxcnc._pin_names(tilt))
+    module, tilt, _ = linuxcnc.trt_module(machine)
+    pins = ",".join(f"{module}.{n}" for n in linuxcnc.pin_names(tilt))
     done = launch(ini.parent, ini, {"COMPGEN_PINS": pins, "COMPGEN_POSITIONS": json.dumps(READ_AT)},
                   screen=True)
     result = ini.parent / "joints.txt"
@@ -356,8 +356,8 @@ def test_linuxcnc_starts_its_own_sample_with_compgens_configuration_and_holds_it
     compgen computes, and the joints' tables trim the motors as compgen's tables say. The
     same configuration with its HALCMD lines in a HAL file gives the same final state (on
     xyzac: each start takes some 20 s at the sample's speeds)."""
-    kins = linuxcnc._trt(machine)[0][:5]
-    module = linuxcnc._trt(machine)[0]
+    kins = linuxcnc.trt_module(machine)[0][:5]
+    module = linuxcnc.trt_module(machine)[0]
     truth = TRUTH[kins]
     fit = identify(machine, [simulate(machine, truth, generate(machine, ["K4", "K1", "K2"]), NOISE_UM,
                                       np.random.default_rng(5))], [*location_model(machine), *TABLES[kins]])

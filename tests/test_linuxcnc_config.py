@@ -24,8 +24,8 @@ TRUTH = {"XOC": 12 * UM, "YOC": -9 * UM, "YOA": 20 * UM, "ZOA": -15 * UM, "AOC":
 
 @pytest.fixture
 def trt(seed_machine):
-    module, tilt, c = linuxcnc._trt(seed_machine)
-    return module, linuxcnc._nominal(seed_machine, tilt, c)
+    module, tilt, c = linuxcnc.trt_module(seed_machine)
+    return module, linuxcnc.nominal_pins(seed_machine, tilt, c)
 
 
 def _config(tmp_path, ini: str, **files: str):

@@ -210,8 +210,8 @@ def test_linuxcnc_joint_tables_compose_through_the_ini(seed_machine, tmp_path):
     from compgen.emit import linuxcnc
     from compgen.emit.registry import read_state
     machine = seed_machine
-    module, tilt, c = linuxcnc._trt(machine)
-    nominal = linuxcnc._nominal(machine, tilt, c)
+    module, tilt, c = linuxcnc.trt_module(machine)
+    nominal = linuxcnc.nominal_pins(machine, tilt, c)
     (tmp_path / "machine.hal").write_text("".join(f"setp {module}.{n} {v:.6f}\n" for n, v in nominal.items()))
     (tmp_path / "machine.ini").write_text(f"[KINS]\nKINEMATICS = {module}\n[HAL]\nHALFILE = core_sim.hal\n"
                                           "HALFILE = machine.hal\n[JOINT_1]\nTYPE = LINEAR\n"

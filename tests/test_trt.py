@@ -64,8 +64,8 @@ def test_programs_put_the_nest_on_the_ball_under_either_convention(tmp_path, sou
     program's own X Y Z to the 0.1 µm it writes; the angles are the pose list's, mirrored
     when the pin is true."""
     m = _machine(tmp_path, source, conventional)
-    module, tilt, c = linuxcnc._trt(m)
-    pins = linuxcnc._nominal(m, tilt, c)
+    module, tilt, c = linuxcnc.trt_module(m)
+    pins = linuxcnc.nominal_pins(m, tilt, c)
     pins.setdefault("x-offset", 0.0)
     pins.setdefault("y-offset", 0.0)
     files = measure_program(m, generate(m, ["K4", "K1"]), "K4", "linuxcnc", "tcpm", "K4", "0", "d").files

@@ -72,7 +72,7 @@ COMP_NOTE = re.compile(r"^# compgen joint compensation for LinuxCNC: joint (\d+)
                        re.MULTILINE)
 
 
-def _trt(machine: Machine) -> tuple[str, object, object]:
+def trt_module(machine: Machine) -> tuple[str, object, object]:
     """The trt module for a two-axis table (A or B tilting, C on it), or a clear refusal."""
     axes = machine.rotary_axes
     if (len(axes) != 2 or any(a.side != "workpiece" for a in axes) or axes[1].direction != "z"
@@ -82,13 +82,16 @@ def _trt(machine: Machine) -> tuple[str, object, object]:
     return f"xyz{axes[0].name.lower()}c-trt-kins", axes[0], axes[1]
 
 
-def _pin_names(tilt) -> list[str]:
+def pin_names(tilt) -> list[str]:
+    """The trt module's geometry pins, in the order the edit writes them: C's rotation
+    point and the tilt's offset from it (the component along its own line has no pin)."""
     along = "xyz".index(tilt.direction)
     return ["x-rot-point", "y-rot-point", "z-rot-point"] + [
         f"{'xyz'[k]}-offset" for k in range(3) if k != along]
 
 
-def _nominal(machine: Machine, tilt, c) -> dict[str, float]:
+def nominal_pins(machine: Machine, tilt, c) -> dict[str, float]:
+    """The pins' values, mm, for the machine file's nominal pivots (no correction)."""
     pivot_c, pivot_t = pivot_of(machine, c.name), pivot_of(machine, tilt.name)
     return {"x-rot-point": pivot_c[0], "y-rot-point": pivot_c[1], "z-rot-point": pivot_c[2],
             **{f"{'xyz'[k]}-offset": (pivot_t - pivot_c)[k] for k in range(3)}}
@@ -166,7 +169,7 @@ def _joint_tables(machine: Machine, cfg: Configuration) -> dict[str, tuple[CompT
 
 
 def _joint_axis(machine: Machine, joint: int, where: str) -> str:
-    coordinates = _trt(machine)[0][:5].upper()
+    coordinates = trt_module(machine)[0][:5].upper()
     if not 0 <= joint < len(coordinates):
         raise CompgenError(f"joint {joint} has a COMP_FILE, and the trt module has joints 0-4", where=where)
     return coordinates[joint]
@@ -202,9 +205,9 @@ def pins(machine: Machine, p: Plan, current: Configuration | None, where: str
     old value), each pin the way the current configuration sets it (a netted pin through its
     signal); the current values or the machine file's nominal, plus the corrections; what
     the pins cannot express; and where the configuration sets each pin."""
-    module, tilt, c = _trt(machine)
-    names = _pin_names(tilt)
-    nominal = _nominal(machine, tilt, c)
+    module, tilt, c = trt_module(machine)
+    names = pin_names(tilt)
+    nominal = nominal_pins(machine, tilt, c)
     held, signal, line_of = nominal, {}, {}
     if current is not None:
         held, signal, line_of = held_pins(current, module)
@@ -238,9 +241,9 @@ def read_lines(text: str, machine: Machine, current: str | None,
     """The axis lines a trt edit sets, relative to ``current`` (default: nominal): ``text``
     is a configuration to start with (read from its INI), or a HAL file loaded after
     ``current``'s files, whose values reach the pins through their nets."""
-    module, tilt, c = _trt(machine)
+    module, tilt, c = trt_module(machine)
     cfg = configuration(current, "current")
-    before = held_pins(cfg, module)[0] if cfg is not None else _nominal(machine, tilt, c)
+    before = held_pins(cfg, module)[0] if cfg is not None else nominal_pins(machine, tilt, c)
     if is_bundle(text):
         now = held_pins(evaluate(text), module)[0]
     else:
@@ -254,7 +257,7 @@ def read_lines(text: str, machine: Machine, current: str | None,
 
 def joint_number(machine: Machine, axis: str) -> int:
     """The joint of ``axis`` in the trt module's default coordinates (XYZAC, XYZBC)."""
-    return _trt(machine)[0][:5].upper().index(axis)
+    return trt_module(machine)[0][:5].upper().index(axis)
 
 
 def joint_tables(machine: Machine, p: Plan) -> list[CompTable]:
@@ -419,7 +422,7 @@ class LinuxCNC(Controller):
                                "with 2.10): its trt kinematics turn the axes the unconventional way",
                                where=get.at("conventional_directions"), hint="set it false")
         try:
-            module = _trt(machine)[0]
+            module = trt_module(machine)[0]
         except CompgenError:
             module = ""
         if module == "xyzbc-trt-kins" and not conventional:
@@ -499,7 +502,7 @@ class LinuxCNC(Controller):
             raise CompgenError("the configuration to start with names its files as the INI does, relative to "
                                f"{cfg.folder}: write it there", where=ctx.folder,
                                hint=f"give -o {cfg.folder / (ctx.stem + '.ini')}")
-        values = {f"{_trt(machine)[0]}.{n}": v for (_, _, v, w), n in zip(rows, settings, strict=True)
+        values = {f"{trt_module(machine)[0]}.{n}": v for (_, _, v, w), n in zip(rows, settings, strict=True)
                   if float(v) != float(w)}
         joints = {joint_number(machine, suffix.split(".")[1]): f"{ctx.stem}{suffix}" for suffix in comps}
         files = configuration_files(cfg, values, joints, ctx.stem, header)
@@ -510,7 +513,7 @@ class LinuxCNC(Controller):
                                            f"{start}; start LinuxCNC with this file to undo the edit",
                                            cfg.texts[cfg.ini_path].rstrip("\n")]) + "\n"
         changed = sorted(f"{s.place} ({s.text} -> {values[pin]})" for n, s in settings.items()
-                         if (pin := f"{_trt(machine)[0]}.{n}") in values)
+                         if (pin := f"{trt_module(machine)[0]}.{n}") in values)
         notes.append(f"start LinuxCNC with {cfg.folder / start}: the INI's own lines, the values changed "
                      "where the configuration sets them (" + "; ".join(changed) + ")"
                      + ("; " + ", ".join(f"{ctx.stem}{k}" for k in files if k not in (".ini", "_RESTORE.ini")
