@@ -15,7 +15,6 @@ from compgen.emit.programs import measure_program
 from compgen.emit.registry import controller
 from compgen.frames import safe_height
 from compgen.machine_file import load_machine
-from compgen.motion import run
 from compgen.paths import generate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -35,7 +34,10 @@ def main() -> None:
                                               "RT", "0", "d")
                     text = emitted.files[controller(ctl).program_ext]
                     t0 = time.perf_counter()
-                    result = run(machine, controller(ctl).blocks(text))
+                    # as check-program runs it: the control's modulo rule and angle sense; LinuxCNC's
+                    # configuration, not the program, says the kinematics it runs under
+                    c = controller(ctl)
+                    result = c.check(machine, c.blocks(text, None if c.tcp_switchable else mode))
                     seconds = time.perf_counter() - t0
                     label = "all" if len(path) == 3 else ",".join(path)
                     print(f"{key:<8}{ctl:<15}{mode:<6}{label:<7}{result.blocks:>6}{result.seconds / 60:>7.1f}"
