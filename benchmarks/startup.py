@@ -118,7 +118,8 @@ def main() -> None:
                                     "-o", "f3.json", "--force"],
             "diagnose --json": [*cg, "diagnose", "--from", "fit.json", "--json"],
             # the example misses EXC:h2: the gate (run as every user runs it) would refuse the edit
-            "kinematics": [*cg, "kinematics", "--from", "fit.json", "-o", "KIN.txt", "--force", "--despite-gate"],
+            "kinematics": [*cg, "kinematics", "--from", "fit.json", "-o", "KIN.txt", "--force",
+                           "--despite-gate"],
             "measure-program": [*cg, "measure-program", "--machine", str(MACHINE), "--path", "all",
                                 "-o", "RTEST.H", "--force"],
             "compare": [*cg, "compare", "--from", "fit.json"],
