@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from compgen.identify import identify
-from compgen.kinematics import Model
-from compgen.machine_file import load_machine
-from compgen.paths import arc, generate, path_def
-from compgen.simulate import read_truth, simulate
+from compgen.configuration.machine_file import load_machine
+from compgen.data.simulate import read_truth, simulate
+from compgen.model.kinematics import Model
+from compgen.model.paths import arc, generate, path_def
+from compgen.statistics.identify import identify
 from compgen.units import shown
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -11,11 +11,11 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from compgen.emit.programs import measure_program
-from compgen.emit.registry import controller
-from compgen.frames import safe_height
-from compgen.machine_file import load_machine
-from compgen.paths import generate
+from compgen.configuration.machine_file import load_machine
+from compgen.controllers.programs import measure_program
+from compgen.controllers.registry import controller
+from compgen.model.frames import safe_height
+from compgen.model.paths import generate
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -14,13 +14,13 @@ from pathlib import Path
 
 import numpy as np
 
-from compgen.advice import Advisor
-from compgen.diagnose import diagnose
-from compgen.effects import catalogue
-from compgen.identify import identify
-from compgen.machine_file import load_machine
-from compgen.paths import generate
-from compgen.simulate import read_truth, simulate
+from compgen.configuration.machine_file import load_machine
+from compgen.controllers.advice import Advisor
+from compgen.data.simulate import read_truth, simulate
+from compgen.model.effects import catalogue
+from compgen.model.paths import generate
+from compgen.statistics.diagnose import diagnose
+from compgen.statistics.identify import identify
 
 ROOT = Path(__file__).resolve().parents[1]
 

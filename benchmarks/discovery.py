@@ -37,15 +37,15 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from conftest import ARCSEC, SEED_MACHINE, TABLE4, UM  # noqa: E402
 
-from compgen.advice import Advisor  # noqa: E402
-from compgen.diagnose import diagnose  # noqa: E402
-from compgen.effects import compose, location_model  # noqa: E402
-from compgen.identify import identify  # noqa: E402
-from compgen.kinematics import Model, Poses  # noqa: E402
-from compgen.machine_file import load_machine  # noqa: E402
-from compgen.paths import generate  # noqa: E402
-from compgen.rtest import RTestData  # noqa: E402
-from compgen.simulate import ar1_noise  # noqa: E402
+from compgen.configuration.machine_file import load_machine  # noqa: E402
+from compgen.controllers.advice import Advisor  # noqa: E402
+from compgen.data.rtest import RTestData  # noqa: E402
+from compgen.data.simulate import ar1_noise  # noqa: E402
+from compgen.model.effects import compose, location_model  # noqa: E402
+from compgen.model.kinematics import Model, Poses  # noqa: E402
+from compgen.model.paths import generate  # noqa: E402
+from compgen.statistics.diagnose import diagnose  # noqa: E402
+from compgen.statistics.identify import identify  # noqa: E402
 
 SIGMA_UM = 0.5
 UNMEASURED_BALLS = ([-150.0, 120.0, 180.0], [120.0, -100.0, 260.0])   # mm, table frame

@@ -451,7 +451,7 @@ def wing_inputs(work: Path, compgen: list[str]) -> dict[str, Path]:
     sys.path[:0] = [str(ROOT / "tests")]
     from test_linuxcnc import sample_copy  # the tests' copy of Debian's sample
 
-    from compgen.machine_file import load_machine
+    from compgen.configuration.machine_file import load_machine
 
     def run(*args):
         subprocess.run([*compgen, *map(str, args)], check=True, capture_output=True, cwd=work)

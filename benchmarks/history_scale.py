@@ -40,7 +40,7 @@ def main() -> None:
     ap.add_argument("-v", action="store_true", help="print the end of each command's output")
     n = ap.parse_args().fits
     sys.path.insert(0, str(ROOT))
-    from compgen.store import DEFAULT_FILE, open_store
+    from compgen.history.store import DEFAULT_FILE, open_store
 
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)

@@ -37,44 +37,48 @@ HOSTILE = [*PROGRAMS, "tests/test_hostile_programs.py"]            # what check-
 STATS = ["tests/test_diagnose_stats.py", "tests/test_startup.py", "tests/test_shapes.py",
          "tests/test_diagnose.py"]
 TESTS = {
-    "compgen/lines.py": ["tests/test_lines.py", *EDITS],
-    "compgen/identify.py": ["tests/test_identify.py", "tests/test_startup.py",
-                            "tests/test_probe.py"],        # two devices' variance components
-    "compgen/kinematics.py": ["tests/test_kinematics.py", "tests/test_effects.py", "tests/test_identify.py"],
+    "compgen/model/lines.py": ["tests/test_lines.py", *EDITS],
+    "compgen/statistics/identify.py": ["tests/test_identify.py", "tests/test_startup.py",
+                                       "tests/test_probe.py"],        # two devices' variance components
+    "compgen/model/kinematics.py": ["tests/test_kinematics.py", "tests/test_effects.py",
+                                    "tests/test_identify.py"],
     # the reversal sides: the start sides' constants are fitted by identify and diagnose
-    "compgen/sides.py": ["tests/test_kinematics.py", "tests/test_identify.py", "tests/test_diagnose.py",
-                         "tests/test_programs.py"],
+    "compgen/model/sides.py": ["tests/test_kinematics.py", "tests/test_identify.py", "tests/test_diagnose.py",
+                               "tests/test_programs.py"],
     "compgen/units.py": ["tests/test_units.py", "tests/test_edge.py"],
-    "compgen/correction.py": [*EDITS, "tests/test_edge.py"],
-    "compgen/emit/heidenhain.py": [*EDITS, "tests/test_tab.py", "tests/test_edge.py", *PROGRAMS,
-                                   "tests/test_probe_programs.py"],
-    "compgen/emit/tab.py": ["tests/test_tab.py", "tests/test_kinematics_edit.py"],
+    "compgen/controllers/correction.py": [*EDITS, "tests/test_edge.py"],
+    "compgen/controllers/heidenhain.py": [*EDITS, "tests/test_tab.py", "tests/test_edge.py", *PROGRAMS,
+                                          "tests/test_probe_programs.py"],
+    "compgen/controllers/tab.py": ["tests/test_tab.py", "tests/test_kinematics_edit.py"],
     # each control's probing programs, second rounds and configuration are its writer's too
-    "compgen/emit/sinumerik.py": [*EDITS, "tests/test_edge.py", *PROGRAMS, "tests/test_probe_programs.py",
-                                  "tests/test_table_rounds.py"],
-    "compgen/emit/linuxcnc.py": [*EDITS, "tests/test_edge.py", *PROGRAMS, "tests/test_probe_programs.py",
-                                 "tests/test_table_rounds.py", "tests/test_linuxcnc_config.py"],
-    "compgen/motion.py": [*HOSTILE, "tests/test_probe_programs.py", "tests/test_trt.py"],   # probes, senses
-    "compgen/emit/programs.py": [*HOSTILE, "tests/test_trt.py"],        # read back under trt's senses
-    "compgen/effects.py": ["tests/test_effects.py", "tests/test_kinematics.py", "tests/test_shapes.py"],
+    "compgen/controllers/sinumerik.py": [*EDITS, "tests/test_edge.py", *PROGRAMS,
+                                         "tests/test_probe_programs.py", "tests/test_table_rounds.py"],
+    "compgen/controllers/linuxcnc.py": [*EDITS, "tests/test_edge.py", *PROGRAMS,
+                                        "tests/test_probe_programs.py", "tests/test_table_rounds.py",
+                                        "tests/test_linuxcnc_config.py"],
+    # probes, angle senses
+    "compgen/setup/motion.py": [*HOSTILE, "tests/test_probe_programs.py", "tests/test_trt.py"],
+    "compgen/controllers/programs.py": [*HOSTILE, "tests/test_trt.py"],        # read back under trt's senses
+    "compgen/model/effects.py": ["tests/test_effects.py", "tests/test_kinematics.py", "tests/test_shapes.py"],
     # diagnose and its statistics: the closed-form tests first (quick to fail), the distributions
     # against scipy (test_startup), the declared shapes and the loop a user follows
-    "compgen/diagnose.py": [*STATS, "tests/test_edge.py", "tests/test_loop.py"],
-    "compgen/ranking.py": [*STATS, "tests/test_loop.py"],
-    "compgen/separation.py": [*STATS, "tests/test_loop.py"],
+    "compgen/statistics/diagnose.py": [*STATS, "tests/test_edge.py", "tests/test_loop.py"],
+    "compgen/statistics/ranking.py": [*STATS, "tests/test_loop.py"],
+    "compgen/statistics/separation.py": [*STATS, "tests/test_loop.py"],
     # the wings: probe logs, the history and its store, diagnose's spectrum and significance
-    "compgen/probe.py": ["tests/test_probe.py", "tests/test_probe_programs.py"],
-    "compgen/emit/probing.py": ["tests/test_probe_programs.py", "tests/test_probe.py"],
-    "compgen/store.py": ["tests/test_history.py"],
+    "compgen/data/probe.py": ["tests/test_probe.py", "tests/test_probe_programs.py"],
+    "compgen/controllers/probing.py": ["tests/test_probe_programs.py", "tests/test_probe.py"],
+    "compgen/history/store.py": ["tests/test_history.py"],
     "compgen/history/ledger.py": ["tests/test_history.py"],
     "compgen/history/drift.py": ["tests/test_history.py"],
     "compgen/history/checks.py": ["tests/test_history.py"],
     "compgen/history/words.py": ["tests/test_history.py"],
     "compgen/history/exchange.py": ["tests/test_history.py"],
-    "compgen/spectrum.py": [*STATS, "tests/test_loop.py"],
-    "compgen/significance.py": [*STATS, "tests/test_loop.py"],
-    "compgen/noise.py": ["tests/test_noise.py", "tests/test_identify.py", "tests/test_diagnose_stats.py",
-                         *(f"tests/test_diagnose.py::test_{t}" for t in (
+    "compgen/statistics/spectrum.py": [*STATS, "tests/test_loop.py"],
+    "compgen/statistics/significance.py": [*STATS, "tests/test_loop.py"],
+    "compgen/statistics/noise.py": ["tests/test_noise.py", "tests/test_identify.py",
+                                    "tests/test_diagnose_stats.py",
+                                    *(f"tests/test_diagnose.py::test_{t}" for t in (
         "outliers_are_listed_where_the_user_finds_them_and_flag_nothing",
         "correlated_noise_flags_nothing_because_it_is_whitened",
         "under_correlated_noise_a_real_effect_is_still_found"))],

@@ -47,10 +47,10 @@ def dense_session(folder: Path, density: int) -> Path:
     """The example session's machine, truth and noise, with ``density`` × the poses."""
     import numpy as np
 
-    from compgen.machine_file import load_machine
-    from compgen.paths import generate
-    from compgen.rtest import format_rtest
-    from compgen.simulate import read_truth, simulate
+    from compgen.configuration.machine_file import load_machine
+    from compgen.data.rtest import format_rtest
+    from compgen.data.simulate import read_truth, simulate
+    from compgen.model.paths import generate
 
     machine = load_machine(MACHINE)
     machine = replace(machine, paths={k: replace(p, n=p.n * density) for k, p in machine.paths.items()})
@@ -65,9 +65,10 @@ def library_peaks(csv: Path) -> tuple[float, float]:
     """tracemalloc peak (MiB) of the library's fit and of its diagnose on the same data."""
     code = (
         "import sys, tracemalloc, json\n"
-        "from compgen.machine_file import load_machine\nfrom compgen.rtest import read_rtest\n"
-        "from compgen.identify import identify\nfrom compgen.diagnose import diagnose\n"
-        "from compgen.advice import Advisor\n"
+        "from compgen.configuration.machine_file import load_machine\n"
+        "from compgen.data.rtest import read_rtest\n"
+        "from compgen.statistics.identify import identify\nfrom compgen.statistics.diagnose import diagnose\n"
+        "from compgen.controllers.advice import Advisor\n"
         f"m = load_machine({str(MACHINE)!r}); d = [read_rtest({str(csv)!r}, m)]\n"
         "tracemalloc.start(); fit = identify(m, d); a = tracemalloc.get_traced_memory()[1]\n"
         "tracemalloc.reset_peak(); diagnose(m, d, fit, advisor=Advisor)\n"
@@ -82,9 +83,10 @@ def blas_threads(csv: Path, repeats: int) -> dict[str, tuple[float, float]]:
     (wall s, CPU s) in one process, on the example session."""
     code = (
         "import json, statistics, time\nfrom threadpoolctl import threadpool_limits\n"
-        "from compgen.machine_file import load_machine\nfrom compgen.rtest import read_rtest\n"
-        "from compgen.identify import identify\nfrom compgen.diagnose import diagnose\n"
-        "from compgen.advice import Advisor\n"
+        "from compgen.configuration.machine_file import load_machine\n"
+        "from compgen.data.rtest import read_rtest\n"
+        "from compgen.statistics.identify import identify\nfrom compgen.statistics.diagnose import diagnose\n"
+        "from compgen.controllers.advice import Advisor\n"
         f"m = load_machine({str(MACHINE)!r}); d = [read_rtest({str(csv)!r}, m)]\n"
         "def once():\n    w, c = time.perf_counter(), time.process_time()\n"
         "    diagnose(m, d, identify(m, d), advisor=Advisor)\n"

@@ -30,10 +30,10 @@ PATHS = ["K4", "K1", "K2"]
 FLOOR = """
 import sys
 import numpy as np
-from compgen.effects import location_model
-from compgen.kinematics import Model
-from compgen.machine_file import load_machine
-from compgen.session import read_data
+from compgen.model.effects import location_model
+from compgen.model.kinematics import Model
+from compgen.configuration.machine_file import load_machine
+from compgen.configuration.session import read_data
 machine = load_machine(sys.argv[1])
 data = read_data(sys.argv[2], machine)
 Model(machine, location_model(machine)).relative(data.poses, np.full(11, 1e-5))
@@ -53,8 +53,8 @@ def pace(size: int, rate_hz: float) -> tuple[float, float]:
     """(feed deg/min, rate Hz) at which K4, K1, K2 give about ``size`` poses: ``rate_hz``,
     unless the feed that needs is more than FEED_MAX (small sizes: the axes could not turn
     that fast), then FEED_MAX at the rate that gives the size."""
-    from compgen.machine_file import load_machine
-    from compgen.paths import arc, path_def
+    from compgen.configuration.machine_file import load_machine
+    from compgen.model.paths import arc, path_def
 
     machine = load_machine(MACHINE)
     degrees = sum(arc(machine, path_def(machine, p)) for p in PATHS)

@@ -12,7 +12,7 @@ BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 def main() -> None:
     os.environ.update(dict.fromkeys(BLAS_THREADS, "1"))
-    from .cli import main as command_line
+    from .commands.cli import main as command_line
 
     command_line()
 

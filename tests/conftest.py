@@ -10,8 +10,8 @@ import numpy as np  # noqa: E402
 import pytest
 from click.testing import CliRunner
 
-from compgen.cli import main
-from compgen.machine_file import load_machine
+from compgen.commands.cli import main
+from compgen.configuration.machine_file import load_machine
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("COMPGEN_SHARED", ROOT.parent / "shared"))

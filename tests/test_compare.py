@@ -4,16 +4,16 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, ROOT, TABLE4, UM
 
-from compgen.compare import compare
-from compgen.correction import Held
-from compgen.effects import location_model
-from compgen.emit.kinematics import kinematics_edit
-from compgen.emit.registry import controller as controller_of
-from compgen.emit.registry import read_edits
-from compgen.identify import identify
-from compgen.lines import AxisLine
-from compgen.paths import generate
-from compgen.simulate import simulate
+from compgen.commands.compare import compare
+from compgen.controllers.correction import Held
+from compgen.controllers.kinematics import kinematics_edit
+from compgen.controllers.registry import controller as controller_of
+from compgen.controllers.registry import read_edits
+from compgen.data.simulate import simulate
+from compgen.model.effects import location_model
+from compgen.model.lines import AxisLine
+from compgen.model.paths import generate
+from compgen.statistics.identify import identify
 
 NOISE_UM = 0.5
 HIDDEN = {"EXC:h2c": 1.5 * UM, "EXC:h2s": 0.8 * UM}       # radial 2/rev of C: no kinematics edit holds it

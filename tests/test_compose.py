@@ -16,14 +16,14 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, OEM_TAB, ROOT, UM
 
-from compgen.correction import nominal_lines, plan
-from compgen.emit import heidenhain, sinumerik
-from compgen.emit.kinematics import kinematics_edit
-from compgen.emit.linuxcnc import SETP
+from compgen.controllers import heidenhain, sinumerik
+from compgen.controllers.correction import nominal_lines, plan
+from compgen.controllers.kinematics import kinematics_edit
+from compgen.controllers.linuxcnc import SETP
+from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
-from compgen.identify import identify
-from compgen.paths import generate
-from compgen.simulate import simulate
+from compgen.model.paths import generate
+from compgen.statistics.identify import identify
 from compgen.transforms import rot_exact
 
 SEED_A = {"YOA": 20 * UM, "ZOA": -15 * UM, "BOA": 8 * ARCSEC, "COA": -6 * ARCSEC,
@@ -123,9 +123,9 @@ def test_linuxcnc_second_round_reads_the_configuration_through_its_ini(seed_mach
     the HAL file written anew as A.machine.hal and the INI key changed where it stands.
     Edit B, given A.ini, lands where one edit of A + B lands; over the configuration
     without A it would undo A."""
-    from compgen.emit import linuxcnc
-    from compgen.emit.linuxcnc_config import evaluate
-    from compgen.emit.registry import read_state
+    from compgen.controllers import linuxcnc
+    from compgen.controllers.linuxcnc_config import evaluate
+    from compgen.controllers.registry import read_state
     module, tilt, c = linuxcnc.trt_module(seed_machine)
     nominal = linuxcnc.nominal_pins(seed_machine, tilt, c)
     (tmp_path / "machine.hal").write_text("\n".join(
@@ -166,7 +166,7 @@ def test_linuxcnc_second_round_reads_the_configuration_through_its_ini(seed_mach
 
 
 def _pin_names_of(tilt):
-    from compgen.emit import linuxcnc
+    from compgen.controllers import linuxcnc
     return linuxcnc.pin_names(tilt)
 
 
@@ -207,8 +207,8 @@ def test_an_edit_against_a_state_that_holds_part_of_it_writes_the_rest(seed_mach
 def test_the_rest_of_a_plan_subtracts_what_the_control_holds(seed_machine):
     """rest(): offsets, tilts and squareness the control already holds come off the plan,
     each by its own key; one the plan lacks goes back with the opposite sign."""
-    from compgen.correction import Held, rest
-    from compgen.effects import location_model
+    from compgen.controllers.correction import Held, rest
+    from compgen.model.effects import location_model
     truth = {"XOC": 9 * UM, "BOA": 4 * ARCSEC, "COX": 5 * ARCSEC}
     model = [*location_model(seed_machine), "COX"]
     fit = identify(seed_machine, [simulate(seed_machine, truth, generate(seed_machine, ["K4", "K1", "K2"]))],
@@ -271,8 +271,8 @@ def test_sinumerik_edit_reads_back_as_its_plan_from_any_record(bc_machine):
 
 
 def test_a_cec_file_reads_back_as_the_tables_it_was_written_from(bc_machine):
-    from compgen.correction import comp_tables
-    from compgen.effects import location_model
+    from compgen.controllers.correction import comp_tables
+    from compgen.model.effects import location_model
     truth = {"XOC": 3 * UM, "ECC:h2c": 6 * ARCSEC, "EYY:p1": 4 * UM}
     model = [*location_model(bc_machine), "ECC:h2c", "ECC:h2s", "EYY:p1"]
     fit = identify(bc_machine, [simulate(bc_machine, truth, generate(bc_machine, ["K4", "K1", "K2"]))], model)
@@ -286,7 +286,7 @@ def test_a_cec_file_reads_back_as_the_tables_it_was_written_from(bc_machine):
 
 
 def test_a_modulo_table_wraps_and_a_ball_on_the_axis_has_no_positioning_error(seed_machine, tmp_path):
-    from compgen.correction import CompTable, _positioning_error, apply_tables
+    from compgen.controllers.correction import CompTable, _positioning_error, apply_tables
     grid = np.linspace(0, 360, 37)
     t = CompTable("ECC:h1", "", "C", "C", 0.0, 360.0, tuple(np.sin(np.radians(grid)) * 1e-3), True, "deg")
     q = np.zeros((4, len(seed_machine.axes)))

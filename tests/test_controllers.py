@@ -8,19 +8,19 @@ import numpy as np
 import pytest
 from conftest import SEED_MACHINE, TABLE4, UM
 
-from compgen.checklist import checklist, markdown
-from compgen.compare import compare
-from compgen.correction import Held, Plan
-from compgen.emit.base import Controller, EditContext, EditFiles
-from compgen.emit.kinematics import kinematics_edit
-from compgen.emit.linuxcnc import LinuxCNC
-from compgen.emit.registry import CONTROLLERS, read_edits, register
-from compgen.identify import identify
-from compgen.lines import AxisLine
-from compgen.machine_file import load_machine
-from compgen.paths import generate
-from compgen.rtest import RTestData
-from compgen.simulate import simulate
+from compgen.commands.checklist import checklist, markdown
+from compgen.commands.compare import compare
+from compgen.configuration.machine_file import load_machine
+from compgen.controllers.base import Controller, EditContext, EditFiles
+from compgen.controllers.correction import Held, Plan
+from compgen.controllers.kinematics import kinematics_edit
+from compgen.controllers.linuxcnc import LinuxCNC
+from compgen.controllers.registry import CONTROLLERS, read_edits, register
+from compgen.data.rtest import RTestData
+from compgen.data.simulate import simulate
+from compgen.model.lines import AxisLine
+from compgen.model.paths import generate
+from compgen.statistics.identify import identify
 
 NOISE_UM = 0.5
 LINE = re.compile(r"^TOYLINE (\w) ((?:\S+ ){5}\S+)$", re.MULTILINE)

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from conftest import SEED_MACHINE
 
-from compgen import rtest
+from compgen.configuration.machine_file import load_machine
+from compgen.data import rtest
+from compgen.data.rtest import RTestData, format_rtest, read_rtest
 from compgen.errors import CompgenError
-from compgen.machine_file import load_machine
-from compgen.paths import generate
-from compgen.rtest import RTestData, format_rtest, read_rtest
+from compgen.model.paths import generate
 
 MACHINE = load_machine(SEED_MACHINE)
 

@@ -5,14 +5,14 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, TABLE4, UM
 
-from compgen.advice import Advisor
-from compgen.diagnose import diagnose
-from compgen.diagnose_text import report
-from compgen.effects import compose, location_model
-from compgen.identify import fitted, identify
-from compgen.paths import generate
-from compgen.rtest import RTestData
-from compgen.simulate import ar1_noise, simulate
+from compgen.controllers.advice import Advisor
+from compgen.data.rtest import RTestData
+from compgen.data.simulate import ar1_noise, simulate
+from compgen.model.effects import compose, location_model
+from compgen.model.paths import generate
+from compgen.statistics.diagnose import diagnose
+from compgen.statistics.diagnose_text import report
+from compgen.statistics.identify import fitted, identify
 
 NOISE_UM = 0.5
 RMS_AFTER_TOLERANCE = 0.25   # issue 3: after adding the effect, RMS within 25 % of the noise
@@ -71,7 +71,7 @@ def test_ambiguous_scale_is_reported_with_the_measurement_that_resolves_it(seed_
     advice = [m for m in found.rivals_separated_by if "half its radius" in m.label]
     assert advice
     # what the plots draw: alike on the measured poses, apart on the advised measurement
-    from compgen.plots import figures, rival_curves
+    from compgen.commands.plots import figures, rival_curves
     fit = identify(seed_machine, data)
     curves = rival_curves(seed_machine, poses, fit, found, found.rivals_separated_by[0])
     best, scale = curves[found.significant[0].effect], curves["EXX:p1"]
@@ -202,7 +202,7 @@ def test_correlated_noise_flags_nothing_because_it_is_whitened(seed_machine, pos
     assert all(0.6 < rho < 0.95 for rhos in found.noise.values() for rho in rhos), found.noise
     assert all(round(rho, 3) == rho for rhos in found.noise.values() for rho in rhos)    # as documented
     assert "AR(1)" in report(found)
-    import compgen.diagnose as module
+    import compgen.statistics.diagnose as module
     monkeypatch.setattr(module, "ar1", lambda r, seg: np.zeros_like(r))
     assert diagnose(seed_machine, data, fit, advisor=Advisor).significant
 
@@ -316,7 +316,7 @@ UNMEASURED_BALLS = ([-150.0, 120.0, 180.0], [120.0, -100.0, 260.0])   # mm, tabl
 def _periodic(machine, poses, axis, pitch_mm, amp_um, phase=0.3):
     """A machine compgen's model does not know: ``axis`` off by a sine of its position (a
     ball-screw period), made by moving the nominal machine, not through any effect."""
-    from compgen.kinematics import Model, Poses
+    from compgen.model.kinematics import Model, Poses
     q = poses.q.copy()
     i = machine.index(axis)
     q[:, i] += amp_um * 1e-3 * np.sin(2 * np.pi * q[:, i] / pitch_mm + phase)
@@ -325,7 +325,7 @@ def _periodic(machine, poses, axis, pitch_mm, amp_um, phase=0.3):
 
 
 def _outside_session(machine, poses, axis, pitch_mm, seed=3):
-    from compgen.kinematics import Model
+    from compgen.model.kinematics import Model
     y = Model(machine, list(TABLE4)).deviation(poses, np.array(list(TABLE4.values())))
     y = y + _periodic(machine, poses, axis, pitch_mm, 2.0)
     rng = np.random.default_rng(seed)
@@ -358,8 +358,8 @@ def test_an_effect_outside_the_catalogue_is_unexplained_never_found(seed_machine
 @pytest.mark.parametrize("axis, pitch", [("X", 5.0), ("Z", 12.5)])
 def test_declaring_the_shape_brings_the_residual_to_the_noise_and_predicts_unmeasured_balls(
         seed_machine, poses, axis, pitch):
-    from compgen.effects import location_model
-    from compgen.kinematics import Model
+    from compgen.model.effects import location_model
+    from compgen.model.kinematics import Model
     data = [_outside_session(seed_machine, poses, axis, pitch)]
     line = diagnose(seed_machine, data, identify(seed_machine, data)).lines[0]
     declared = f"E{axis}{axis}:w{line.period:.3f}"            # as diagnose prints it
@@ -380,7 +380,7 @@ def test_declaring_the_shape_brings_the_residual_to_the_noise_and_predicts_unmea
 def _repeated(machine, periodic=None, seed=3, noise=NOISE_UM):
     """K4, K1, K2 and K4 again (a repeated run): seed Table 4, white noise, and a periodic
     error of a linear axis (axis, pitch mm) the catalogue does not have."""
-    from compgen.kinematics import Model
+    from compgen.model.kinematics import Model
     p = generate(machine, ["K4", "K1", "K2", "K4"])
     y = Model(machine, list(TABLE4)).deviation(p, np.array(list(TABLE4.values())))
     if periodic:
@@ -415,9 +415,9 @@ def test_without_a_given_noise_a_repeated_run_says_it_and_an_outside_effect_is_u
 def test_repeats_are_poses_reached_the_same_way(seed_machine):
     """A backlash is not scatter: a pose counts as a repeat of another only reached from the
     same side on every axis; a dwell's samples are told as such; too few say nothing."""
-    from compgen.kinematics import Poses, runs
-    from compgen.noise import repeats
-    from compgen.sides import same_pose
+    from compgen.model.kinematics import Poses, runs
+    from compgen.model.sides import same_pose
+    from compgen.statistics.noise import repeats
     q = np.radians([[0, 0, 0, -10, 0], [0, 0, 0, -20, 0], [0, 0, 0, -10, 0], [0, 0, 0, -20, 0],
                     [0, 0, 0, -10, 0]])
     p = Poses(q, np.zeros((5, 3)), np.arange(5.0), np.array(["P"] * 5))
@@ -462,7 +462,7 @@ def test_the_residual_is_drawn_against_each_linear_axis_with_its_strongest_line(
     names the line diagnose found there (pitch 5.00… mm), as the text and JSON do."""
     import matplotlib.axes
 
-    from compgen.plots import figures
+    from compgen.commands.plots import figures
     data = [_outside_session(seed_machine, poses, "X", 5.0)]
     fit = identify(seed_machine, data)
     found = diagnose(seed_machine, data, fit)
@@ -480,8 +480,8 @@ def test_the_residual_is_drawn_against_each_linear_axis_with_its_strongest_line(
 def test_an_effect_declared_in_the_machine_file_is_tried_and_found(tmp_path, poses):
     from conftest import SEED_MACHINE
 
+    from compgen.configuration.machine_file import load_machine
     from compgen.errors import CompgenError
-    from compgen.machine_file import load_machine
     text = SEED_MACHINE.read_text().replace("[rtest]\n", "[rtest]\nnoise_um = 0.5\n", 1)
     (tmp_path / "m.toml").write_text(text + '\n[effects]\ndeclared = ["EXX:w5"]\n')
     machine = load_machine(tmp_path / "m.toml")
@@ -495,7 +495,7 @@ def test_an_effect_declared_in_the_machine_file_is_tried_and_found(tmp_path, pos
 
 
 def test_an_unexplained_misfit_does_not_reach_the_control(seed_machine, poses):
-    from compgen.gate import fit_gate
+    from compgen.statistics.gate import fit_gate
     data = [_outside_session(seed_machine, poses, "X", 5.0)]
     reasons = fit_gate(seed_machine, data, identify(seed_machine, data))
     shape = "periodic line no catalogue effect has (dX against X: pitch 5.00"
@@ -510,9 +510,9 @@ def test_a_faint_line_in_clean_data_does_not_stop_the_fit(seed):
     seeds are, with the share rule; 3 of 40 were without it)."""
     from conftest import BC_MACHINE
 
-    from compgen.gate import fit_gate
-    from compgen.kinematics import Model
-    from compgen.machine_file import load_machine
+    from compgen.configuration.machine_file import load_machine
+    from compgen.model.kinematics import Model
+    from compgen.statistics.gate import fit_gate
     machine = load_machine(BC_MACHINE)
     model = compose(machine, location_model(machine), ["ECC:h2", "EYY:p1"])
     truth = {n: 4e-6 if n.startswith("ECC") else 3e-3 if n.startswith("EYY") else 0.0
@@ -570,9 +570,9 @@ def test_backlash_of_a_tilting_axis_is_found_from_the_side_each_pose_was_reached
     1.5 µm left, AOC 1.6″ off, predictions 1.7 µm off.)"""
     from conftest import SEED_MACHINE, run
 
-    from compgen.kinematics import Poses
-    from compgen.rtest import format_rtest
-    from compgen.sides import unknown_sides
+    from compgen.data.rtest import format_rtest
+    from compgen.model.kinematics import Poses
+    from compgen.model.sides import unknown_sides
 
     truth = {"EAA:r1": 5 * ARCSEC}
     a = seed_machine.index("A")
@@ -630,7 +630,7 @@ def test_a_reversal_seen_only_through_its_start_sides_is_invisible(seed_machine)
     fits it: invisible (its column alone differed between K1 and K2: 0.37 visible), and fit
     refuses it."""
     from compgen.errors import CompgenError
-    from compgen.kinematics import Poses
+    from compgen.model.kinematics import Poses
     a = seed_machine.index("A")
 
     def drive(p):

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from compgen.significance import VISIBLE
-from compgen.significance import explained as _explained
-from compgen.significance import p_value as _p_value
-from compgen.significance import still_significant as _still_significant
+from compgen.statistics.significance import VISIBLE
+from compgen.statistics.significance import explained as _explained
+from compgen.statistics.significance import p_value as _p_value
+from compgen.statistics.significance import still_significant as _still_significant
 
 E = np.eye(6)
 
@@ -69,7 +69,7 @@ def test_still_significant_after_the_best():
 def test_still_significant_tests_against_the_joined_model(monkeypatch):
     """The F test after the best: residual and candidates taken off the model AND the added
     columns (projections done here), with n − model − added degrees of freedom."""
-    import compgen.significance as d
+    import compgen.statistics.significance as d
     rng = np.random.default_rng(2)
     n = 40
     Q = np.linalg.qr(rng.normal(size=(n, 3)))[0]
@@ -101,11 +101,11 @@ def test_a_column_that_moves_nothing_is_invisible():
 def test_products_a_block_at_a_time_equal_those_of_the_whole_columns(seed_machine, monkeypatch):
     """``signature.products`` (blocks of poses, whitening carried across them) against cᵀc,
     Qᵀc and cᵀr of each effect's whole columns, plain and made white with AR(1) ρ."""
-    from compgen import signature
-    from compgen.effects import catalogue
-    from compgen.kinematics import Model, runs
-    from compgen.noise import whiten
-    from compgen.paths import generate
+    from compgen.model.effects import catalogue
+    from compgen.model.kinematics import Model, runs
+    from compgen.model.paths import generate
+    from compgen.statistics import signature
+    from compgen.statistics.noise import whiten
     poses = generate(seed_machine, ["K4", "K1", "K2"])
     effects = [e for e in catalogue(seed_machine) if e.carrier != "time" and e.basis.kind != "e"][::7]
     J = Model(seed_machine, ["XOC", "YOC", "BOA"]).jacobian(poses).reshape(-1, 3)
@@ -129,7 +129,7 @@ def test_products_a_block_at_a_time_equal_those_of_the_whole_columns(seed_machin
 def test_the_scans_sums_are_the_least_squares_sines_sum_of_squares():
     """The scan's sum of squares at each frequency (from running phasors) is what the least-
     squares sine with a constant removes, fitted anew; with the model's columns taken out too."""
-    from compgen.spectrum import _drops, _fit
+    from compgen.statistics.spectrum import _drops, _fit
 
     rng = np.random.default_rng(4)
     x = np.sort(rng.uniform(0, 400, 90))                 # uneven, as poses are: cos and sin correlate
@@ -152,10 +152,10 @@ def test_the_scans_sums_are_the_least_squares_sines_sum_of_squares():
 def test_a_periodic_drift_in_a_dense_session_is_found_at_its_period_in_seconds():
     """13 000 poses (denser than the scan's 12 000: scanned on an even subset, refined and
     judged on all): a 2 µm sine in time of period 900 s is the time line, its period in s."""
-    from compgen.kinematics import Poses
-    from compgen.machine_file import load_machine
-    from compgen.paths import generate
-    from compgen.spectrum import SCAN_POSES, strongest_lines
+    from compgen.configuration.machine_file import load_machine
+    from compgen.model.kinematics import Poses
+    from compgen.model.paths import generate
+    from compgen.statistics.spectrum import SCAN_POSES, strongest_lines
 
     machine = load_machine("ac-trunnion-itnc530")
     k4 = generate(machine, ["K4"])
@@ -174,7 +174,7 @@ def test_a_periodic_drift_in_a_dense_session_is_found_at_its_period_in_seconds()
     assert line.amplitude_um == pytest.approx(2.0, rel=0.05) and line.p_value < 1e-6
     # with the model's columns (the residual orthogonal to them), scanned on the subset
     # with those columns made orthonormal there: the same line, every figure on all poses
-    from compgen.kinematics import Model
+    from compgen.model.kinematics import Model
     Q = np.linalg.qr(Model(machine, ["XOW", "YOW", "ZOW", "XOC", "YOC", "AOC", "BOC"])
                      .jacobian(poses).reshape(3 * n, -1))[0]
     rq = (r.reshape(-1) - Q @ (Q.T @ r.reshape(-1))).reshape(n, 3)
@@ -193,10 +193,10 @@ def test_each_line_is_the_documented_scan_judged_by_the_joint_least_squares():
     orders, span/60 s − 2 periods)."""
     from scipy import stats
 
-    from compgen.kinematics import Model, Poses
-    from compgen.machine_file import load_machine
-    from compgen.paths import generate
-    from compgen.spectrum import strongest_lines
+    from compgen.configuration.machine_file import load_machine
+    from compgen.model.kinematics import Model, Poses
+    from compgen.model.paths import generate
+    from compgen.statistics.spectrum import strongest_lines
 
     machine = load_machine("ac-trunnion-itnc530")
     g = generate(machine, ["K4", "K1", "K2"])
@@ -251,7 +251,7 @@ def test_a_rival_removes_within_the_noise_of_the_best_or_while_misfit_is_left_ni
     (it is not the whole story), one removing RIVAL = 0.9 of what the best removes is too."""
     from scipy import stats
 
-    from compgen.significance import RIVAL, rivals
+    from compgen.statistics.significance import RIVAL, rivals
     sigma2, alpha = 0.01, 0.01
     within = stats.chi2.isf(alpha, 2) * sigma2                   # 0.092
     best = (100.0, 2)
@@ -269,7 +269,7 @@ def test_lack_of_fit_is_the_chi2_test_of_each_path_and_direction_against_the_noi
     (1 − ρ²)/(1 + ρ²)."""
     from scipy import stats
 
-    from compgen.significance import lack_of_fit
+    from compgen.statistics.significance import lack_of_fit
     rng = np.random.default_rng(3)
     n, noise_um, share = 400, 1.0, 0.9
     groups = np.repeat(["K4", "K1"], n)
@@ -291,7 +291,7 @@ def test_a_sine_the_models_columns_hold_is_no_line():
     """Where the model's columns hold the cos/sin pair of a frequency (as a 1/rev term of a
     location error does), the pair's part the model cannot absorb is below SEEN of the
     pair: the scan gives it no sum of squares, however the residual looks there."""
-    from compgen.spectrum import SEEN, _drops
+    from compgen.statistics.spectrum import SEEN, _drops
 
     rng = np.random.default_rng(8)
     x = np.arange(200) * 37.0 / 20       # ten whole periods of 37: cos² and sin² sum alike
@@ -311,8 +311,8 @@ def test_a_line_along_a_linear_axis_is_outside_the_catalogue_by_each_of_its_rule
     removes and LINE_SHARE = 10 % of the residual; each rule alone keeps it out."""
     from dataclasses import replace
 
-    from compgen.diagnose import _outside_line
-    from compgen.spectrum import Line
+    from compgen.statistics.diagnose import _outside_line
+    from compgen.statistics.spectrum import Line
     line = Line("X", "dX", 5.0, "mm", 0.15, 0.15, 1e-6, 3.0)     # 0.15 µm, 15 %, 3.0 against 2 × 1.4
     others = [Line("C", "dY", 2.0, "/rev", 1.0, 0.9, 1e-9, 50.0)]      # a rotary line never counts
     assert _outside_line([line, *others], None, (), 0.01, 1.4) is line

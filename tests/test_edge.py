@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from conftest import ROOT, SEED_MACHINE, run
 
-from compgen.correction import plan
-from compgen.emit.registry import CONTROLLERS
+from compgen.configuration.session import reload
+from compgen.controllers.correction import plan
+from compgen.controllers.registry import CONTROLLERS
 from compgen.errors import CompgenError
-from compgen.results import load_fit
-from compgen.session import reload
+from compgen.statistics.results import load_fit
 
 # (replace this, with that) in the seed machine file → the one line that must come back
 BAD_MACHINE_EDITS = {

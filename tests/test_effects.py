@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 from conftest import SEED_MACHINE
 
-from compgen.effects import canonical, catalogue, location_model, resolve
+from compgen.configuration.machine_file import load_machine
 from compgen.errors import CompgenError
-from compgen.kinematics import Model, Poses
-from compgen.machine_file import load_machine
-from compgen.paths import generate
+from compgen.model.effects import canonical, catalogue, location_model, resolve
+from compgen.model.kinematics import Model, Poses
+from compgen.model.paths import generate
 
 SEED = load_machine(SEED_MACHINE)
 ULPS_AT_100_MM = 1e-13   # mm: a few units in the last place of a 100 mm coordinate
@@ -143,7 +143,7 @@ def test_a_compound_is_its_iso_components_turning_together():
 def test_tilting_axis_shapes_start_at_zero_and_gravity_turns_with_the_axis():
     """A sag g turning with A, EYA = g·sin A and EZA = g·(1 − cos A), is the compound
     EYA+EZA:h1 at phase −90°; every harmonic of a tilting axis is zero at A = 0."""
-    from compgen.kinematics import SLOT_INDEX, relative
+    from compgen.model.kinematics import SLOT_INDEX, relative
     poses = generate(SEED, ["K1"])
     A = poses.q[:, SEED.index("A")]
     g = 3e-3
@@ -165,7 +165,7 @@ def test_diagnose_signatures_are_the_models_first_order_columns():
     """For every catalogue effect (compounds, tilting harmonics, saturating growth among
     them), the analytic signatures diagnose ranks by equal the exact model's central
     differences at zero."""
-    from compgen.signature import columns as _columns
+    from compgen.statistics.signature import columns as _columns
     poses = generate(SEED, ["K4"])
     poses = Poses(poses.q, poses.ball, np.linspace(0, 3600, len(poses)), poses.path)
     for e in catalogue(SEED):
@@ -196,7 +196,7 @@ def test_a_radial_vector_turning_with_the_table_at_1_per_rev_is_a_ball_offset(se
 def test_words_and_causes_name_the_physics(seed_machine):
     """What a machine builder would say: a tilting axis's radial motion is gravity sag, a
     turning table's is its bearing; axial, radial and tilt are not swapped."""
-    from compgen.effects import resolve
+    from compgen.model.effects import resolve
     words = {n: resolve(seed_machine, n) for n in ("EYA+EZA:h1", "EZA:h1", "EXC+EYC:h2", "EZC:h1",
                                                    "EXC:h2", "EAC:h1", "EXX:p1", "EXX:w5")}
     assert "gravity sag" in words["EYA+EZA:h1"].cause and "gravity sag" in words["EZA:h1"].cause
@@ -211,7 +211,7 @@ def test_every_basis_has_the_shape_its_name_says():
     (a tilting axis's from angle 0), polynomials of position per metre and of hours, the
     saturating growth 1 − exp(−t/τ), a period along a linear axis in mm, the side of a
     reversal, a constant."""
-    from compgen.effects import POLY_SCALE_MM, TIME_SCALE_S, Basis
+    from compgen.model.effects import POLY_SCALE_MM, TIME_SCALE_S, Basis
     x = np.array([-0.7, 0.0, 0.3, 1.9])
     cases = {
         Basis("h", 3): np.column_stack([np.cos(3 * x), np.sin(3 * x)]),

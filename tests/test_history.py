@@ -20,18 +20,18 @@ import pytest
 from conftest import ROOT, UM, run
 
 from compgen import history as H
-from compgen.effects import location_model
-from compgen.emit.kinematics import corrected_by
-from compgen.emit.registry import controller
+from compgen.configuration.machine_file import load_machine
+from compgen.controllers.kinematics import corrected_by
+from compgen.controllers.registry import controller
+from compgen.data.rtest import format_rtest
+from compgen.data.simulate import read_truth, simulate
 from compgen.errors import CompgenError
-from compgen.gate import fit_gate
-from compgen.identify import identify
-from compgen.machine_file import load_machine
-from compgen.paths import generate
-from compgen.results import load_fit
-from compgen.rtest import format_rtest
-from compgen.simulate import read_truth, simulate
-from compgen.store import init, open_store
+from compgen.history.store import init, open_store
+from compgen.model.effects import location_model
+from compgen.model.paths import generate
+from compgen.statistics.gate import fit_gate
+from compgen.statistics.identify import identify
+from compgen.statistics.results import load_fit
 
 ARCSEC = math.pi / 648000
 YOC_PER_MONTH = 1.5 * UM          # the slow drift (the [drift] limit is 1 µm/month)
@@ -230,9 +230,9 @@ import sys
 import time
 from dataclasses import replace
 from compgen import history as H
-from compgen.machine_file import load_machine
-from compgen.results import load_fit
-from compgen.store import init, open_store
+from compgen.configuration.machine_file import load_machine
+from compgen.statistics.results import load_fit
+from compgen.history.store import init, open_store
 url, fit_file, worker = sys.argv[1], sys.argv[2], int(sys.argv[3])
 machine = load_machine("ac-trunnion-itnc530")
 base = load_fit(fit_file)
@@ -247,9 +247,9 @@ for m in range(20):           # every worker writes every machine: they meet on 
 KILLED = """
 import os, signal, sys
 from compgen import history as H
-from compgen.machine_file import load_machine
-from compgen.results import load_fit
-from compgen.store import Store, open_store
+from compgen.configuration.machine_file import load_machine
+from compgen.statistics.results import load_fit
+from compgen.history.store import Store, open_store
 url, fit_file = sys.argv[1], sys.argv[2]
 insert = Store.insert
 def dying(self, table, row, **how):
@@ -392,7 +392,7 @@ def test_another_stores_history_is_imported_only_when_asked_and_only_once(year, 
 
 
 def test_a_store_of_the_first_schema_is_migrated_and_keeps_its_rows(tmp_path, fit_file, monkeypatch):
-    import compgen.store as S
+    import compgen.history.store as S
     with open_store(tmp_path / "now.sqlite") as now:        # the rows as the first schema held them
         H.record_fit(now, load_fit(fit_file), load_machine("ac-trunnion-itnc530"), taken="2026-01-05")
         tables = H.export_all(now)["tables"]
@@ -533,7 +533,7 @@ def test_an_import_with_a_damaged_row_is_refused_and_leaves_the_store_as_it_was(
     ("host=h password='a b\\' c' dbname=d", "host=h password=*** dbname=d"),
 ])
 def test_a_password_is_never_shown_in_part(dsn, shown):
-    from compgen.store import redact
+    from compgen.history.store import redact
     assert redact(dsn) == shown and "ss@" not in redact(dsn) and "secret" not in redact(dsn)
 
 
@@ -544,7 +544,7 @@ def test_a_password_is_never_shown_in_part(dsn, shown):
     ("plain.sqlite", False),
 ])
 def test_a_keyword_dsn_is_read_by_libpq_never_taken_for_a_file(tmp_path, monkeypatch, dsn, postgres):
-    from compgen.store import _is_postgres
+    from compgen.history.store import _is_postgres
     monkeypatch.chdir(tmp_path)
     assert _is_postgres(dsn) == postgres
     rc, _, err = run("history", "list", "--db", "password=hunter2 nonsense=1")
@@ -630,9 +630,9 @@ def test_the_same_edit_twice_is_one_row_and_a_second_edit_from_a_fit_is_refused_
 ADD_SAME = """
 import sys, time
 from compgen import history as H
-from compgen.machine_file import load_machine
-from compgen.results import load_fit
-from compgen.store import open_store
+from compgen.configuration.machine_file import load_machine
+from compgen.statistics.results import load_fit
+from compgen.history.store import open_store
 from compgen.history import ledger
 look = ledger._fit_rows
 def slow(*args):                 # every writer looks, finds nothing, and only then inserts

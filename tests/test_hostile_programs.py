@@ -111,8 +111,8 @@ ISO_CAUSES = {"EZC:h1": "face runout", "EXC:h1": "bearing runout", "EAC:h1": "wo
 
 
 def test_effects_carry_their_iso_names_and_causes():
-    from compgen.effects import effect_of_param
-    from compgen.machine_file import load_machine
+    from compgen.configuration.machine_file import load_machine
+    from compgen.model.effects import effect_of_param
     m = load_machine(SEED_MACHINE)
     for name, words in ISO_WORDS.items():
         e = effect_of_param(m, f"{name}c" if ":h" in name else name)
@@ -124,7 +124,7 @@ def test_effects_carry_their_iso_names_and_causes():
 
 def test_the_linuxcnc_guard_reads_linuxcncs_position_parameters():
     """#5420-#5425 are the current X Y Z A B C (LinuxCNC's numbered parameters)."""
-    from compgen.emit.linuxcnc import program_blocks
+    from compgen.controllers.linuxcnc import program_blocks
     text = ("G21 G90 G94 G17\no100 if [[ABS[#5420] GT 0.0001] OR [ABS[#5421] GT 0.0001] OR "
             "[ABS[#5422] GT 0.0001] OR [ABS[#5423] GT 0.0001] OR [ABS[#5424] GT 0.0001] OR "
             "[ABS[#5425] GT 0.0001]]\n(abort, no)\no100 endif\nM2\n")
@@ -152,8 +152,8 @@ def test_measure_program_refuses_a_tcpm_feed_a_rotary_axis_cannot_turn(tmp_path)
 def test_measure_program_checks_the_clearance_above_the_poses_along_z(tmp_path):
     """Z's travel ends 10 mm above the highest pose: the poses fit, the 20 mm clearance
     above them does not."""
-    from compgen.machine_file import load_machine
-    from compgen.paths import generate
+    from compgen.configuration.machine_file import load_machine
+    from compgen.model.paths import generate
     machine = load_machine(SEED_MACHINE)
     top = generate(machine, ["K4"]).q[:, machine.index("Z")].max()
     m = _machine_with(tmp_path, "travel = [-300.0, 400.0]", f"travel = [-300.0, {top + 10:.3f}]")

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, ROOT, TABLE4, UM, vector
 
-from compgen.advice import Advisor
+from compgen.controllers.advice import Advisor
+from compgen.data.rtest import read_rtest
+from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
-from compgen.identify import identify
-from compgen.paths import generate
-from compgen.results import FitResult
-from compgen.rtest import read_rtest
-from compgen.simulate import simulate
+from compgen.model.paths import generate
+from compgen.statistics.identify import identify
+from compgen.statistics.results import FitResult
 
 TOL_TABLE4 = {"mm": 0.01 * UM, "rad": 0.01 * ARCSEC}    # issue 2: 0.01 µm / 0.01″
 LINEAR_BIAS_VISIBLE = {"mm": 0.2 * UM, "rad": 0.2 * ARCSEC}  # far above the exact fit's 1e-4
@@ -74,8 +74,8 @@ def test_k2_alone_cannot_separate_and_says_what_would(seed_machine, rng):
     """K2 turns C at A = 0: four combinations are invisible, with coefficients derived here
     from the geometry, and the separating measurements are ranked by the condition number
     computed here from the stacked, column-normalised Jacobians."""
-    from compgen.identify import COND_LIMIT
-    from compgen.kinematics import Model
+    from compgen.model.kinematics import Model
+    from compgen.statistics.identify import COND_LIMIT
     data = simulate(seed_machine, TABLE4, generate(seed_machine, ["K2"]), NOISE_UM, rng)
     with pytest.raises(CompgenError) as exc:
         identify(seed_machine, [data], advisor=Advisor)
@@ -120,8 +120,8 @@ def test_a_nearly_singular_problem_names_its_condition_and_the_pair(seed_machine
     """A Jacobian whose last two columns differ by 1e-4 of their size: the condition number
     (computed here) and the one combination, AOC against BOC, with equal and opposite
     amounts of the unit columns."""
-    from compgen.identify import check_identifiable
-    from compgen.kinematics import Model
+    from compgen.model.kinematics import Model
+    from compgen.statistics.identify import check_identifiable
     rng = np.random.default_rng(5)
     m = Model(seed_machine, list(TABLE4))
     J = rng.normal(size=(300, 11))
@@ -140,7 +140,7 @@ def test_a_nearly_singular_problem_names_its_condition_and_the_pair(seed_machine
 
 def test_a_parameter_that_moves_no_reading_is_named(seed_machine):
     """drift over a session whose readings all carry t = 0 moves nothing."""
-    from compgen.kinematics import Poses
+    from compgen.model.kinematics import Poses
     poses = generate(seed_machine, ["K4"])
     still = Poses(poses.q, poses.ball, np.zeros(len(poses)), poses.path)
     with pytest.raises(CompgenError, match="drift_X:t1 does not change any reading on these poses"):
@@ -149,8 +149,8 @@ def test_a_parameter_that_moves_no_reading_is_named(seed_machine):
 
 def test_residual_statistics_per_path_by_hand():
     """RMS, range and largest magnitude per path and direction (µm), on numbers done by hand."""
-    from compgen.identify import residual_stats
-    from compgen.kinematics import Poses
+    from compgen.model.kinematics import Poses
+    from compgen.statistics.identify import residual_stats
     r = np.array([[1.0, -2.0, 0.0], [3.0, 2.0, 0.0], [-4.0, 0.0, 1.0]]) * 1e-3    # mm
     poses = Poses(np.zeros((3, 5)), np.zeros((3, 3)), np.zeros(3), np.array(["K4", "K4", "K1"], dtype=object))
     s = residual_stats(poses, r, dof=4)
@@ -220,7 +220,7 @@ def test_fit_json_round_trips_exactly(seed_machine):
 def test_uncertainty_correlation_and_condition_equal_their_definitions(seed_machine):
     """White noise: σ̂²(JᵀJ)⁻¹ at the solution, its correlation, and the singular values of J
     with unit columns, computed here from the model's Jacobian."""
-    from compgen.kinematics import Model
+    from compgen.model.kinematics import Model
     data = simulate(seed_machine, TABLE4, generate(seed_machine, ["K4", "K1", "K2"]), NOISE_UM,
                     np.random.default_rng(11))
     fit = identify(seed_machine, [data])
@@ -244,8 +244,8 @@ def test_a_correlated_residual_gets_the_covariance_of_least_squares_under_ar1_no
     follows from reading to reading: fit says so, and each σ is the square root of
     (JᵀJ)⁻¹JᵀΣJ(JᵀJ)⁻¹ with Σ written out here entry by entry (σ² ρ^|i−j| within a run and
     direction, each one's own σ² and compgen's ρ̂) — larger than σ̂²(JᵀJ)⁻¹'s."""
-    from compgen.kinematics import Model, runs
-    from compgen.noise import ar1
+    from compgen.model.kinematics import Model, runs
+    from compgen.statistics.noise import ar1
     data = read_rtest(ROOT / "examples" / "seed-session.csv", seed_machine)
     fit = identify(seed_machine, [data])
     assert fit.residual["noise"] == "ar1"
@@ -285,8 +285,8 @@ def test_a_weak_pair_is_refused_and_only_what_separates_it_is_offered(seed_machi
     (condition computed here); K2 again, or higher, adds nothing and is not offered."""
     import dataclasses
 
-    from compgen.identify import COND_LIMIT, check_identifiable
-    from compgen.kinematics import Model
+    from compgen.model.kinematics import Model
+    from compgen.statistics.identify import COND_LIMIT, check_identifiable
     k2 = dataclasses.replace(seed_machine, paths={"K2": seed_machine.paths["K2"]})
     m = Model(k2, ["YOW", "COA"])
     J = m.jacobian(generate(k2, ["K2"])).reshape(-1, 2)
@@ -322,8 +322,8 @@ def test_a_small_part_of_a_combination_is_named(seed_machine):
     """BOC's column is AOC's plus a fifth of YOC's: the unseen combination has three parts,
     the smallest near 20 % of the largest, above the 15 % below which parts are left out.
     Applied to J, the amounts the message names (rounded to 0.01) cancel."""
-    from compgen.identify import check_identifiable
-    from compgen.kinematics import Model
+    from compgen.model.kinematics import Model
+    from compgen.statistics.identify import check_identifiable
     rng = np.random.default_rng(7)
     m = Model(seed_machine, list(TABLE4))
     J = rng.normal(size=(300, 11))
@@ -347,8 +347,8 @@ def test_singular_is_said_below_1e_12_of_the_largest_singular_value(seed_machine
     """Ten nearly parallel columns (one dominant singular value) and BOC = AOC + eps·noise:
     below 1e-12 of the largest singular value the problem is said to be singular (that
     is rounding), above it its condition number is given."""
-    from compgen.identify import check_identifiable
-    from compgen.kinematics import Model
+    from compgen.model.kinematics import Model
+    from compgen.statistics.identify import check_identifiable
     rng = np.random.default_rng(5)
     u = rng.normal(size=300)
     J = np.column_stack([u + 1e-3 * rng.normal(size=300) for _ in range(10)])
@@ -379,7 +379,7 @@ def test_a_reversal_on_one_way_paths_is_refused_with_what_would_show_it(seed_mac
 def test_the_exact_fit_stops_when_its_step_is_below_the_tolerance_within_max_iter(seed_machine, monkeypatch):
     """A fit that took n Gauss–Newton steps sees its (n+1)-th below the tolerance: it runs
     with MAX_ITER = n + 1 and is refused, naming the cap, with n."""
-    import compgen.identify as module
+    import compgen.statistics.identify as module
     big = {k: 30 * v for k, v in TABLE4.items()}        # far enough from linear to take steps
     data = [simulate(seed_machine, big, generate(seed_machine, ["K4", "K1", "K2"]))]
     n = identify(seed_machine, data).iterations

@@ -79,9 +79,9 @@ def test_the_graph_reader_sees_lazy_imports():
     """A function-local import is an arrow too (the reader must not miss the kind that
     made the old circle through machine.py)."""
     graph = _graph()
-    assert "compgen.emit.registry" in graph["compgen.machine_file"]
-    assert "compgen.emit.programs" in graph["compgen.advice"]
-    assert "compgen.plots" in graph["compgen.cli"]          # imported inside a command
+    assert "compgen.controllers.registry" in graph["compgen.configuration.machine_file"]
+    assert "compgen.controllers.programs" in graph["compgen.controllers.advice"]
+    assert "compgen.commands.plots" in graph["compgen.commands.cli"]      # imported inside a command
 
 
 def _reach(graph: dict[str, set[str]], start: str) -> set[str]:
@@ -99,10 +99,9 @@ def test_the_statistics_load_no_controller_program_motion_store_or_history():
     writes programs), so importing them, at the top or inside any function, reaches none
     of the layers above."""
     graph = _graph()
-    above = ("compgen.emit", "compgen.advice", "compgen.motion", "compgen.correction", "compgen.store",
-             "compgen.history", "compgen.cli", "compgen.plots", "compgen.report")
-    for statistics in ("compgen.identify", "compgen.diagnose", "compgen.noise", "compgen.significance",
-                       "compgen.spectrum", "compgen.signature"):
+    above = tuple(f"compgen.{folder}" for folder in ("setup", "controllers", "configuration", "history",
+                                                     "commands"))
+    for statistics in (m for m in graph if m.startswith("compgen.statistics")):
         up = sorted(m for m in _reach(graph, statistics) if m.startswith(above))
         assert not up, f"{statistics} reaches {up}"
 
@@ -110,53 +109,43 @@ def test_the_statistics_load_no_controller_program_motion_store_or_history():
 def test_the_graph_reader_skips_type_only_imports():
     """diagnose names ``advice.Measurement`` for its readers under ``if TYPE_CHECKING:``:
     no arrow; the reader sees the others."""
-    arrows = _graph()["compgen.diagnose"]
-    assert "compgen.advice" not in arrows and "compgen.spectrum" in arrows
+    arrows = _graph()["compgen.statistics.diagnose"]
+    assert "compgen.controllers.advice" not in arrows and "compgen.statistics.spectrum" in arrows
 
 
-# The package's floor plan, lowest first: a module imports only from its own layer or those
-# below (docs/layout.md draws it). The statistics take their advisor from their caller.
-LAYERS = [
-    ("base", {"compgen", "compgen.errors", "compgen.units", "compgen.files", "compgen.transforms",
-              "compgen.search"}),
-    ("model", {"compgen.machine", "compgen.effects", "compgen.kinematics", "compgen.lines", "compgen.paths",
-               "compgen.frames", "compgen.sides"}),
-    ("data", {"compgen.rtest", "compgen.probe", "compgen.simulate"}),
-    ("statistics", {"compgen.noise", "compgen.significance", "compgen.spectrum", "compgen.signature",
-                    "compgen.results", "compgen.identify", "compgen.ranking", "compgen.separation",
-                    "compgen.diagnose", "compgen.diagnose_text",
-                    "compgen.gate"}),
-    ("set-up", {"compgen.motion"}),
-    ("controllers", {"compgen.correction", "compgen.advice", "compgen.emit", "compgen.emit.base",
-                     "compgen.emit.registry", "compgen.emit.tab", "compgen.emit.heidenhain",
-                     "compgen.emit.sinumerik", "compgen.emit.linuxcnc", "compgen.emit.linuxcnc_config",
-                     "compgen.emit.linuxcnc_files",
-                     "compgen.emit.programs", "compgen.emit.probing", "compgen.emit.kinematics"}),
-    ("configuration", {"compgen.machine_file", "compgen.session"}),     # a machine file names its control
-    ("store", {"compgen.store", "compgen.history", "compgen.history.ledger", "compgen.history.drift",
-               "compgen.history.checks", "compgen.history.words", "compgen.history.exchange"}),
-    ("commands", {"compgen.compare", "compgen.report", "compgen.plots", "compgen.checklist", "compgen.cli",
-                  "compgen.cli_common", "compgen.cli_history",
-                  "compgen.__main__"}),
-]
+# The package's floor plan, lowest first: each layer is a folder of compgen (the modules at
+# its top are the base; ``python -m compgen`` runs the commands), and a module imports only
+# from its own layer or those below (docs/layout.md draws it). The statistics take their
+# advisor from their caller; a machine file names its control, so configuration sits above.
+LAYERS = ["base", "model", "data", "statistics", "setup", "controllers", "configuration", "history",
+          "commands"]
 
 
-def _arrows_up(graph: dict[str, set[str]], layer_of: dict[str, int]) -> list[str]:
-    return sorted(f"{m} ({LAYERS[layer_of[m]][0]}) -> {t} ({LAYERS[layer_of[t]][0]})"
-                  for m, targets in graph.items() for t in targets if layer_of[t] > layer_of[m])
+def _layer(module: str) -> str:
+    if module == "compgen.__main__":
+        return "commands"
+    parts = module.split(".")
+    return parts[1] if len(parts) > 2 or (len(parts) == 2 and parts[1] in LAYERS) else "base"
 
 
-def test_every_module_has_a_layer_and_no_import_points_up():
+def _arrows_up(graph: dict[str, set[str]]) -> list[str]:
+    rank = {name: k for k, name in enumerate(LAYERS)}
+    return sorted(f"{m} ({_layer(m)}) -> {t} ({_layer(t)})" for m, targets in graph.items() for t in targets
+                  if rank[_layer(t)] > rank[_layer(m)])
+
+
+def test_every_module_is_in_a_layer_folder_and_no_import_points_up():
     graph = _graph()
-    layer_of = {m: k for k, (_, members) in enumerate(LAYERS) for m in members}
-    assert set(graph) == set(layer_of), sorted(set(graph) ^ set(layer_of))
-    up = _arrows_up(graph, layer_of)
+    assert {_layer(m) for m in graph} == set(LAYERS)
+    assert sorted(p.name for p in PACKAGE.iterdir() if p.is_dir() and p.name != "__pycache__") == \
+        sorted(LAYERS[1:]), "a folder of compgen that is no layer"
+    up = _arrows_up(graph)
     assert not up, "\n".join(up)
 
 
 def test_the_layer_test_sees_an_arrow_up():
     """The statistics importing the advice (what they did before) is named."""
     graph = _graph()
-    layer_of = {m: k for k, (_, members) in enumerate(LAYERS) for m in members}
-    graph["compgen.identify"] = graph["compgen.identify"] | {"compgen.advice"}
-    assert _arrows_up(graph, layer_of) == ["compgen.identify (statistics) -> compgen.advice (controllers)"]
+    graph["compgen.statistics.identify"] |= {"compgen.controllers.advice"}
+    assert _arrows_up(graph) == [
+        "compgen.statistics.identify (statistics) -> compgen.controllers.advice (controllers)"]

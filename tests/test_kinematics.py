@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, TABLE4, UM, vector
 
-from compgen.effects import catalogue
-from compgen.kinematics import SLOT_INDEX, Model, Poses, SlotGains, inverse, relative, slot_gains
-from compgen.paths import generate
-from compgen.rtest import read_rtest
+from compgen.data.rtest import read_rtest
+from compgen.model.effects import catalogue
+from compgen.model.kinematics import SLOT_INDEX, Model, Poses, SlotGains, inverse, relative, slot_gains
+from compgen.model.paths import generate
 from compgen.transforms import rot_exact
 
 ATOL_VECTORS_UM = 1e-4   # contract: shared vectors (issue 2)
@@ -159,7 +159,7 @@ def test_the_side_of_a_reversal_by_hand():
     """±1 by the direction of the move that reached the pose, standing still keeps it; the
     poses before the first move take its direction (a program approaches a path's start
     so); 0 throughout a run that never moves the axis; runs end at a new label."""
-    from compgen.kinematics import motion_direction
+    from compgen.model.kinematics import motion_direction
     q = np.array([0.0, 1, 2, 2, 1, 0, 5, 5, 4, 3, 3, 3, 3, 4])
     run = np.array([0, 0, 0, 0, 0, 0, 1, 1, 1, 2, 2, 3, 3, 3])
     np.testing.assert_allclose(motion_direction(q, run), [1, 1, 1, 1, -1, -1, -1, -1, -1, 0, 0, 1, 1, 1])
@@ -169,9 +169,9 @@ def test_a_free_constant_stands_for_the_side_of_a_path_that_holds_the_axis(seed_
     """Without A_side: one constant for K2 (A held), fitted with the model (the readings'
     part along the effect's gain there is removed); none for K4 and K1, which move A; none
     where the data carry the side, none without a reversal in the model."""
-    from compgen.kinematics import Model
-    from compgen.paths import generate
-    from compgen.sides import StartSides
+    from compgen.model.kinematics import Model
+    from compgen.model.paths import generate
+    from compgen.model.sides import StartSides
     p = generate(seed_machine, ["K4", "K1", "K2"])
     blind = Poses(p.q, p.ball, p.t, p.path)
     starts = StartSides(seed_machine, ["XOC", "EAA:r1"], blind)
@@ -193,7 +193,7 @@ def test_a_free_constant_stands_for_the_side_of_a_path_that_holds_the_axis(seed_
 
 
 def test_runs_end_at_a_new_file_ball_or_label():
-    from compgen.kinematics import runs
+    from compgen.model.kinematics import runs
     p = Poses.concat([Poses(np.zeros((3, 5)), np.zeros((3, 3)), np.arange(3.0),
                             np.full(3, "K2", dtype=object))] * 2)
     assert runs(p).tolist() == [1, 1, 1, 2, 2, 2]                     # the time starts again
@@ -205,8 +205,8 @@ def test_the_nominal_reading_at_poses_inverse_solved_is_zero_as_walked(seed_mach
     """read_poses marks its poses as inverse's solution (``solved``): their nominal reading
     is taken as zero, not walked. Walking it anyway gives zero to rounding, at the seed
     ball and elsewhere, with the table turned every way."""
-    from compgen.kinematics import nominal
-    from compgen.rtest import read_poses
+    from compgen.data.rtest import read_poses
+    from compgen.model.kinematics import nominal
     m = seed_machine
     rng = np.random.default_rng(4)
     rows = "\n".join(f"P,{a:.4f},{c:.4f},{bx:.3f},{by:.3f},{bz:.3f}" for a, c, bx, by, bz in zip(

@@ -6,17 +6,17 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, ROOT, SEED_MACHINE, TABLE4, UM, run
 
-from compgen.correction import nominal_lines, plan
-from compgen.effects import location_model
-from compgen.emit import heidenhain, sinumerik
-from compgen.emit.kinematics import kinematics_edit
-from compgen.emit.registry import read_edits
+from compgen.controllers import heidenhain, sinumerik
+from compgen.controllers.correction import nominal_lines, plan
+from compgen.controllers.kinematics import kinematics_edit
+from compgen.controllers.registry import read_edits
+from compgen.data.rtest import RTestData
+from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
-from compgen.identify import identify
-from compgen.kinematics import Model, Poses
-from compgen.paths import generate
-from compgen.rtest import RTestData
-from compgen.simulate import simulate
+from compgen.model.effects import location_model
+from compgen.model.kinematics import Model, Poses
+from compgen.model.paths import generate
+from compgen.statistics.identify import identify
 
 CURRENT_TAB = (ROOT / "examples" / "itnc530-current.TAB").read_text()
 CURRENT_CARR = (ROOT / "examples" / "bc-tcarr-current.txt").read_text()
@@ -195,7 +195,7 @@ def test_every_controller_file_is_ascii(seed_machine, seed_fit, bc_machine, bc_f
 def test_sign_check_promises_what_the_loaded_edit_does(seed_machine, seed_fit, controller):
     """The expected reading changes printed with an edit, against the change the edit makes
     when its files are read back and loaded, pose by pose (µm, two decimals printed)."""
-    from compgen.emit.programs import read_program
+    from compgen.controllers.programs import read_program
     emitted = kinematics_edit(seed_machine, seed_fit, controller, CURRENT_TAB if controller == "itnc530"
                               else None, "c", "KIN", "0", DATE)
     main = emitted.files[".TAB" if controller == "itnc530" else ".hal"]
@@ -206,7 +206,7 @@ def test_sign_check_promises_what_the_loaded_edit_does(seed_machine, seed_fit, c
     assert len(listed) == len(rot)
     truth = Model(seed_machine, list(seed_fit.model))
     values = np.array([seed_fit.parameters[n].value for n in seed_fit.model])
-    from compgen.kinematics import inverse
+    from compgen.model.kinematics import inverse
     rotary = np.radians(rot)
     ball = np.broadcast_to(seed_machine.ball, (len(rot), 3))
     blank = (np.zeros(len(rot)), np.full(len(rot), "", dtype=object))
@@ -221,7 +221,7 @@ def test_sign_check_promises_what_the_loaded_edit_does(seed_machine, seed_fit, c
 
 def test_a_linuxcnc_edit_sets_a_netted_pin_through_its_signal(seed_machine, seed_fit):
     """setp on a pin the configuration nets stops LinuxCNC; compgen must write sets."""
-    from compgen.emit.linuxcnc import read_hal
+    from compgen.controllers.linuxcnc import read_hal
     hal = ("loadrt xyzac-trt-kins\nnet zrot => xyzac-trt-kins.z-rot-point\nsets zrot 29.8\n"
            "net tool-offset motion.tooloffset.z => xyzac-trt-kins.tool-offset\n"
            + "".join(f"setp xyzac-trt-kins.{p} {v}\n" for p, v in (
@@ -274,7 +274,7 @@ def test_a_sinumerik_edit_needs_the_fine_offsets_switched_on_and_within_their_li
     machine file says so, or the edit is refused with the key to set; a limit given is kept."""
     from conftest import BC_MACHINE
 
-    from compgen.machine_file import load_machine
+    from compgen.configuration.machine_file import load_machine
     text = BC_MACHINE.read_text()
     cases = {"unsaid": re.sub(r"(?m)^fine_correction = .*$", "", text),
              "off": text.replace("fine_correction = true", "fine_correction = false"),
@@ -285,7 +285,7 @@ def test_a_sinumerik_edit_needs_the_fine_offsets_switched_on_and_within_their_li
         machine = load_machine(tmp_path / f"{name}.toml")
         with pytest.raises(CompgenError, match=expect[name]):
             kinematics_edit(machine, bc_fit, "sinumerik840d", CURRENT_CARR, "c", "KIN", "0", DATE)
-    from compgen.checklist import checklist
+    from compgen.commands.checklist import checklist
     steps = checklist(load_machine(BC_MACHINE), tmp_path)
     assert any("SD42974" in s.note for s in steps)
 
@@ -302,7 +302,7 @@ def test_an_implausible_current_state_is_refused_with_its_file_and_line(seed_mac
     twice = CURRENT_CARR + "\n" + lines[k] + "\n"
     with pytest.raises(CompgenError, match=r"\$TC_CARR44\[1\] is assigned twice"):
         kinematics_edit(bc_machine, bc_fit, "sinumerik840d", twice, "c", "KIN", "0", DATE)
-    from compgen.emit import linuxcnc
+    from compgen.controllers import linuxcnc
     module, tilt, c = linuxcnc.trt_module(seed_machine)
     nominal = linuxcnc.nominal_pins(seed_machine, tilt, c)
     hal = "\n".join(f"setp {module}.{n} {v:.6f}" for n, v in nominal.items()) + "\n"

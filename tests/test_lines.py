@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, TABLE4, UM
 
-from compgen.lines import axis_lines
+from compgen.model.lines import axis_lines
 
 ZC = 29.794            # the C pivot above the A/C intersection, seed Table 3 (mm)
 SECOND_ORDER_MM = 1e-7   # what is left: Zc × angle² ≈ 30 mm × (6e-5)² ≈ 1e-7 mm

@@ -24,19 +24,19 @@ import numpy as np
 import pytest
 from conftest import BC_MACHINE, ROOT, SEED_MACHINE, UM
 
-from compgen.correction import nominal_lines
-from compgen.effects import location_model
-from compgen.emit import linuxcnc
-from compgen.emit.kinematics import kinematics_edit
-from compgen.emit.programs import measure_program
-from compgen.emit.registry import read_edits, read_state
-from compgen.identify import identify
-from compgen.kinematics import Model, Poses
-from compgen.lines import controller_inverse
-from compgen.machine_file import load_machine
-from compgen.paths import generate
-from compgen.rtest import RTestData
-from compgen.simulate import simulate
+from compgen.configuration.machine_file import load_machine
+from compgen.controllers import linuxcnc
+from compgen.controllers.correction import nominal_lines
+from compgen.controllers.kinematics import kinematics_edit
+from compgen.controllers.programs import measure_program
+from compgen.controllers.registry import read_edits, read_state
+from compgen.data.rtest import RTestData
+from compgen.data.simulate import simulate
+from compgen.model.effects import location_model
+from compgen.model.kinematics import Model, Poses
+from compgen.model.lines import controller_inverse
+from compgen.model.paths import generate
+from compgen.statistics.identify import identify
 
 HERE = ROOT / "tests" / "linuxcnc"
 JOINT_MM = 1e-6     # LinuxCNC's trt inverse vs compgen's, both in double precision

@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, SEED_MACHINE, UM
 
-from compgen.effects import location_model
-from compgen.emit import linuxcnc
-from compgen.emit.kinematics import kinematics_edit
-from compgen.emit.linuxcnc_config import evaluate
-from compgen.emit.registry import read_state
+from compgen.controllers import linuxcnc
+from compgen.controllers.kinematics import kinematics_edit
+from compgen.controllers.linuxcnc_config import evaluate
+from compgen.controllers.registry import read_state
+from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
-from compgen.identify import identify
-from compgen.paths import generate
-from compgen.simulate import simulate
+from compgen.model.effects import location_model
+from compgen.model.paths import generate
+from compgen.statistics.identify import identify
 
 SEED_MACHINE_TEXT = SEED_MACHINE.read_text()
 TRUTH = {"XOC": 12 * UM, "YOC": -9 * UM, "YOA": 20 * UM, "ZOA": -15 * UM, "AOC": 5 * ARCSEC}
@@ -258,7 +258,7 @@ def test_xyzbc_trt_at_pin_0_is_refused_from_linuxcnc_2_10(tmp_path, lines, says)
     nest would stand 2·sin B·dz off under TCP, so the machine file must say the version."""
     from conftest import BC_MACHINE
 
-    from compgen.machine_file import load_machine
+    from compgen.configuration.machine_file import load_machine
     text = re.sub(r"(?ms)^\[linuxcnc\].*?(?=^\[)", "[linuxcnc]\n" + lines + "\n", BC_MACHINE.read_text())
     (tmp_path / "m.toml").write_text(text)
     if says is None:
@@ -274,7 +274,7 @@ def test_the_command_writes_the_configuration_beside_the_ini(tmp_path, trt, seed
     without --force, one line and nothing written."""
     from conftest import run
 
-    from compgen.rtest import format_rtest
+    from compgen.data.rtest import format_rtest
     module, nominal = trt
     text = SEED_MACHINE_TEXT.replace('controller = "itnc530"', 'controller = "linuxcnc"')
     (tmp_path / "m.toml").write_text(text)

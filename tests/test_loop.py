@@ -13,8 +13,8 @@ import sys
 import pytest
 from conftest import ARCSEC, ROOT, TABLE4, UM
 
-from compgen.effects import effect_name, effect_of_param
-from compgen.machine_file import load_machine
+from compgen.configuration.machine_file import load_machine
+from compgen.model.effects import effect_name, effect_of_param
 
 NOISE_UM = 0.5
 SIGMA_AT_NOISE = 1.1                   # a final σ̂ within 10 % of the noise: nothing left

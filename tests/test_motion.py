@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 from conftest import BC_MACHINE, SEED_MACHINE, run
 
-from compgen import motion
-from compgen.emit.registry import controller
+from compgen.configuration.machine_file import load_machine
+from compgen.controllers.registry import controller
 from compgen.errors import CompgenError
-from compgen.frames import frames, safe_height
-from compgen.kinematics import inverse
-from compgen.machine_file import load_machine
-from compgen.motion import clearances
+from compgen.model.frames import frames, safe_height
+from compgen.model.kinematics import inverse
+from compgen.setup import motion
+from compgen.setup.motion import clearances
 
 PROGRAMS = [(m, c, mode, path) for m in ("seed", "bc") for c in ("itnc530", "sinumerik840d", "linuxcnc")
             for mode in ("tcpm", "axes") for path in ("K4", "K1,K2", "all")]
@@ -154,8 +154,8 @@ def test_the_safe_height_is_the_farthest_point_of_the_set_up(machines, dx, dy):
 def test_the_stem_points_down_the_table_at_every_pose(machines):
     """table_axis_down (where a probe's stem stands from its sphere) against the walk of the
     chains: a table point 1 mm lower on the stem moves the reading by minus that vector."""
-    from compgen.frames import table_axis_down
-    from compgen.kinematics import Model, Poses
+    from compgen.model.frames import table_axis_down
+    from compgen.model.kinematics import Model, Poses
     for key in ("seed", "bc"):
         m = load_machine(machines[key])
         rng = np.random.default_rng(2)
@@ -335,8 +335,8 @@ def test_the_motion_check_applies_the_set_ups_margin_to_every_collision_rule():
     solid was refused: the spindle tangent to the table face passed.)"""
     from dataclasses import replace
 
-    from compgen.emit.programs import measure_program
-    from compgen.paths import generate
+    from compgen.controllers.programs import measure_program
+    from compgen.model.paths import generate
     m = load_machine(SEED_MACHINE)
     ctl = controller(m.controller)
     text = measure_program(m, generate(m, ["K4"]), "K4", m.controller, "tcpm", "K4", "0", "d").files[".H"]
@@ -363,8 +363,8 @@ def test_no_sinumerik_program_turns_a_modulo_axis_the_long_way(path, back):
     after C357 would reach by turning −357° (MD30455 default). compgen writes each pose's way
     (ACP/ACN) and turns at the safe height the short way (DC): no block turns C more than
     half a turn, and the pose blocks turn it as the path goes."""
-    from compgen.emit.programs import measure_program
-    from compgen.paths import generate
+    from compgen.controllers.programs import measure_program
+    from compgen.model.paths import generate
     m = load_machine(BC_MACHINE)
     ctl = controller("sinumerik840d")
     assert ctl.modulo_axes(m) == ("C",)
@@ -479,7 +479,7 @@ def test_the_check_adds_the_programs_time_and_names_its_closest_approach():
 
 def test_address_words_are_read_once_each_and_a_feed_above_zero_is_a_feed():
     from compgen.errors import CompgenError
-    from compgen.motion import words
+    from compgen.setup.motion import words
     assert words(["X+1.5", "A-90", "F0.5"], 3) == {"X": 1.5, "A": -90.0, "F": 0.5}
     for bad in (["X+1", "X+2"], ["F0"], ["F-500"], ["Q7"]):
         with pytest.raises(CompgenError, match="line 3: "):
@@ -503,7 +503,7 @@ def test_address_words_are_read_once_each_and_a_feed_above_zero_is_a_feed():
     ("+", np.nan, 400.0, 40.0),            # from an unknown place: to the value, modulo 360
 ])
 def test_a_modulo_axis_turns_the_way_its_block_says(how, now, value, end):
-    from compgen.motion import Block, _turned
+    from compgen.setup.motion import Block, _turned
     b = Block(4, "C", "move", turn={"C": how})
     assert _turned(("C",), b, "C", value, now) == pytest.approx(end, abs=1e-6)
     assert _turned((), Block(4, "C", "move"), "C", value, now) == value       # not modulo: as written
@@ -513,8 +513,8 @@ def test_every_move_is_sampled_at_least_every_mm_and_half_degree_end_to_end():
     """``_paths`` on moves in machine axes and under TCP: n + 1 samples, n the
     larger of the millimetres and the half-degrees moved (rounded up), from start to end;
     TCP moves in TCP coordinates, each converted to its own machine poses."""
-    from compgen.frames import from_world
-    from compgen.motion import _paths, _Segment
+    from compgen.model.frames import from_world
+    from compgen.setup.motion import _paths, _Segment
     m = load_machine(SEED_MACHINE)
     linear = [m.index(c) for c in "XYZ"]
     rotary = [m.index(a.name) for a in m.rotary_axes]
@@ -539,7 +539,7 @@ def test_every_move_is_sampled_at_least_every_mm_and_half_degree_end_to_end():
 
 
 def test_a_finding_says_how_deep_a_part_enters_and_only_then():
-    from compgen.motion import Finding
+    from compgen.setup.motion import Finding
     assert Finding(5, "housing enters the table", "L X+1", "X+1.000", 0.4).text("P.H") == \
         "P.H:5: housing enters the table by 0.4 mm: L X+1 (at X+1.000)"
     assert Finding(5, "outside travel", "X reaches 999", "X+999.000").text("P.H") == \
@@ -550,7 +550,7 @@ def test_a_finding_says_how_deep_a_part_enters_and_only_then():
 def test_segment_distance_in_closed_form_for_parts_of_any_length(length):
     """``_to_segment`` against a brute force for a part (a segment along random axes) of the
     given length, to a point and to a segment, including parallel ones."""
-    from compgen.motion import _to_segment
+    from compgen.setup.motion import _to_segment
     rng = np.random.default_rng(int(length * 10))
     n = 100
     p0 = rng.uniform(-20, 20, (n, 3))
@@ -571,7 +571,7 @@ def test_segment_distance_in_closed_form_for_parts_of_any_length(length):
 
 
 def test_a_check_tells_its_first_finding_and_how_many_more():
-    from compgen.motion import Check, Finding
+    from compgen.setup.motion import Check, Finding
     one = Finding(3, "outside travel", "X reaches 999", "X+999.000")
     assert Check(1, 0.0, 1.0, "", (one,)).first("P.H") == one.text("P.H")
     assert Check(1, 0.0, 1.0, "", (one, one, one)).first("P.H") == one.text("P.H") + " (and 2 more)"
@@ -581,7 +581,7 @@ def test_a_part_near_a_solid_is_within_the_margin_not_inside_it():
     """The nest lowered over the table's centre until its housing is 0.5 mm above the face:
     a finding "within 0.5 mm of the table (margin …)", no depth; 0.5 mm lower it enters.
     (The moves after it stay down there: their findings are not this test's.)"""
-    from compgen.motion import clearances
+    from compgen.setup.motion import clearances
     m = load_machine(SEED_MACHINE)
     ctl = controller("itnc530")
     q = np.zeros((1, len(m.axes)))
@@ -604,7 +604,7 @@ def test_where_rounding_ends_and_a_limit_begins():
     where C stands is a turn (0.5e-6°: where it is); 1.5e-9 mm past either end of travel is
     outside (the end itself is in); 1.5e-9 mm of X Y Z travel is a move (1e-9: only turns,
     F in deg/min); a speed 1.5e-9 of itself over feed_max is over it."""
-    from compgen.motion import Block, _per_segment, _Segment, _turned, feed_minutes
+    from compgen.setup.motion import Block, _per_segment, _Segment, _turned, feed_minutes
     b = Block(4, "C", "move", turn={"C": "+"})
     assert _turned(("C",), b, "C", 90.0 + 1.5e-6, 90.0) == pytest.approx(90.0 + 1.5e-6, abs=1e-12)
     assert _turned(("C",), b, "C", 90.0 + 0.5e-6, 90.0) == 90.0
@@ -633,8 +633,8 @@ def test_where_rounding_ends_and_a_limit_begins():
 def test_a_probing_tip_may_touch_the_sphere_to_a_micrometre_not_enter_it(depth_um, enters):
     """While probing, the stylus tip touches the sphere: 0.5 µm inside is the touch (its
     rounding), 1.5 µm inside enters it (TOUCH_MM, 1 µm; pinned at half and 1.5 times)."""
-    from compgen.motion import Block, _check_collisions, _Segment
-    from compgen.probe import probe_poses
+    from compgen.data.probe import probe_poses
+    from compgen.setup.motion import Block, _check_collisions, _Segment
     m = load_machine(SEED_MACHINE)
     q = np.array(probe_poses(m, ["K4"]).q[0])                # the stylus tip at the sphere's centre
     reach = (m.probe.sphere_diameter + m.probe.stylus_diameter) / 2

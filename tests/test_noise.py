@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from compgen.noise import OUTLIER_MIN_UM, ar1, outliers, whiten
-from compgen.simulate import ar1_noise
+from compgen.data.simulate import ar1_noise
+from compgen.statistics.noise import OUTLIER_MIN_UM, ar1, outliers, whiten
 
 
 def test_segments_break_at_a_new_file_or_path():
-    from compgen.kinematics import Poses, runs
+    from compgen.model.kinematics import Poses, runs
     poses = Poses(np.zeros((6, 5)), np.zeros((6, 3)), np.full(6, np.nan),     # no time column
                   np.array(["K4", "K4", "K1", "K1", "K1", "K1"], dtype=object))
     seg = runs(poses, np.array([0, 0, 0, 0, 1, 1]))
@@ -88,7 +88,7 @@ def test_single_readings_have_no_neighbours_and_no_outliers():
 
 
 def test_a_random_walk_is_held_at_rho_max():
-    from compgen.noise import RHO_MAX
+    from compgen.statistics.noise import RHO_MAX
     walk = np.cumsum(np.random.default_rng(9).normal(size=(4000, 3)), axis=0)
     assert (ar1(walk, np.zeros(4000, int)) == RHO_MAX).all()
 
@@ -97,7 +97,7 @@ def test_the_ar1_covariance_is_the_sandwich_with_the_correlation_matrix_written_
     """(JᵀJ)⁻¹ JᵀΣJ (JᵀJ)⁻¹ with Σ built entry by entry, σ²·ρ^|i−j| within a run and
     direction, 0 across: two runs of different ρ in each direction, one direction white,
     runs long enough (900) that the recursion is taken in several blocks (ρ = 0.2)."""
-    from compgen.noise import ar1_covariance
+    from compgen.statistics.noise import ar1_covariance
     rng = np.random.default_rng(4)
     n, p = 1500, 4
     seg = np.repeat([0, 1], [900, 600])
@@ -158,9 +158,9 @@ def test_poses_repeat_only_with_the_same_ball_and_axes_to_the_csvs_resolution(se
     pose repeats one of the other session; K4 run twice at one ball repeats pose for pose,
     but its first; a ball or an X 2 µm off (beyond the CSV's 1e-6 mm) is another pose, 0.4 nm
     off the same."""
-    from compgen.kinematics import Poses, runs
-    from compgen.paths import generate
-    from compgen.sides import same_pose
+    from compgen.model.kinematics import Poses, runs
+    from compgen.model.paths import generate
+    from compgen.model.sides import same_pose
     k4 = generate(seed_machine, ["K4"])
     x = seed_machine.index("X")
     q = k4.q.copy()

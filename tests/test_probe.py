@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 from conftest import SEED_MACHINE, TABLE4, run, vector
 
-from compgen.identify import identify
-from compgen.machine_file import load_machine
-from compgen.probe import read_probe_log, sphere_centres
-from compgen.rtest import read_rtest
+from compgen.configuration.machine_file import load_machine
+from compgen.data.probe import read_probe_log, sphere_centres
+from compgen.data.rtest import read_rtest
+from compgen.statistics.identify import identify
 
 SEED_NAME = "A/C trunnion, iTNC 530 (seed report)"
 SEED_BALL = np.array([-217.504, -0.279, 211.537])
@@ -296,8 +296,8 @@ def _touches():
 
 def test_a_log_without_times_is_written_without_its_t_column_and_reads_back(tmp_path):
     """Poses with no times (a pose list without t): the log's header drops t with the rows."""
-    from compgen.kinematics import Poses
-    from compgen.probe import format_probe_log, need_probe, probe_poses, simulate_touches
+    from compgen.data.probe import format_probe_log, need_probe, probe_poses, simulate_touches
+    from compgen.model.kinematics import Poses
 
     machine = load_machine(SEED_MACHINE)
     timed = probe_poses(machine, ["K4"])

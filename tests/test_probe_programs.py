@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from conftest import BC_MACHINE, SEED_MACHINE, TABLE4, run
 
-from compgen.identify import identify
-from compgen.machine_file import load_machine
-from compgen.probe import read_probe_log, sphere_centres
+from compgen.configuration.machine_file import load_machine
+from compgen.data.probe import read_probe_log, sphere_centres
+from compgen.statistics.identify import identify
 
 EXT = {"itnc530": ".H", "sinumerik840d": ".MPF", "linuxcnc": ".ngc"}
 MACHINES = {"seed": SEED_MACHINE, "bc": BC_MACHINE}
@@ -171,9 +171,9 @@ def test_a_probing_move_stops_where_the_tip_meets_the_sphere(start, end, said):
     mm beyond contact along x (the tip's centre at rho = (sphere + tip) / 2 from the ball's
     centre at 0), y, z. A touch stops on the contact sphere; a move that does not touch is a
     finding that says why."""
-    from compgen.frames import table_point
-    from compgen.kinematics import inverse
-    from compgen.motion import Block, _touch
+    from compgen.model.frames import table_point
+    from compgen.model.kinematics import inverse
+    from compgen.setup.motion import Block, _touch
     m = load_machine(SEED_MACHINE)
     ball, rho = np.asarray(m.ball), (m.setup.ball_diameter + m.probe.stylus_diameter) / 2
     at = [ball + [rho + p[0], p[1], p[2]] for p in (start, end)]
@@ -194,9 +194,9 @@ def test_a_probing_move_stops_where_the_tip_meets_the_sphere(start, end, said):
 def test_a_grazing_probing_move_touches():
     """A move passing 0.3 µm inside the contact sphere touches it (near-tangent: the
     discriminant is tiny but positive)."""
-    from compgen.frames import table_point
-    from compgen.kinematics import inverse
-    from compgen.motion import Block, _touch
+    from compgen.model.frames import table_point
+    from compgen.model.kinematics import inverse
+    from compgen.setup.motion import Block, _touch
     m = load_machine(SEED_MACHINE)
     ball, rho = np.asarray(m.ball), (m.setup.ball_diameter + m.probe.stylus_diameter) / 2
     h = rho - 3e-4
@@ -267,8 +267,8 @@ def test_names_that_a_control_would_expand_in_its_log_stay_out_of_it(tmp_path):
     """A '#' in the machine's name is a parameter to LinuxCNC's LOG, '%' a format to FN 16:
     the name is left out of the log (compgen would refuse the log it came back in); a path
     label the log cannot carry is refused with one line."""
-    from compgen.emit.probing import probe_program
-    from compgen.probe import probe_poses
+    from compgen.controllers.probing import probe_program
+    from compgen.data.probe import probe_poses
 
     text = SEED_MACHINE.read_text()
     name = re.search(r'(?m)^name = "([^"]*)"', text)[1]
@@ -281,7 +281,7 @@ def test_names_that_a_control_would_expand_in_its_log_stay_out_of_it(tmp_path):
             files = probe_program(machine, probe_poses(machine, ["K4"]), "K4", ctl, "P", "0", "d").files
             assert "# machine =" not in "\n".join(files.values()), (odd, ctl)
     machine = load_machine(SEED_MACHINE)
-    from compgen.kinematics import Poses
+    from compgen.model.kinematics import Poses
     poses = probe_poses(machine, ["K4"])
     poses = Poses(poses.q, poses.ball, poses.t, np.full(len(poses), "K#4", dtype=object))
     with pytest.raises(Exception, match="path label 'K#4' cannot stand in the control's log"):

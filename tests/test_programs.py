@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from conftest import ROOT, SEED_MACHINE, run, vector
 
-from compgen.emit.programs import measure_program, read_program
-from compgen.emit.registry import CONTROLLERS
-from compgen.kinematics import Model, Poses
-from compgen.paths import generate
-from compgen.rtest import read_rtest
+from compgen.controllers.programs import measure_program, read_program
+from compgen.controllers.registry import CONTROLLERS
+from compgen.data.rtest import read_rtest
+from compgen.model.kinematics import Model, Poses
+from compgen.model.paths import generate
 
 FORMAT_MM = 5.01e-5      # four decimals in the program
 FORMAT_DEG = 5.01e-5
@@ -163,7 +163,7 @@ def test_every_program_stops_once_for_the_preset_check_before_the_nest_goes_down
 def _sides_as_run(machine, controller, text, mode):
     """Each rotary axis's direction of its last turn at every pose (a dwell follows each),
     from the program as the control reads it: its blocks, its modulo rule and its sense."""
-    from compgen import motion
+    from compgen.setup import motion
 
     ctl = CONTROLLERS[controller]
     modulo, sense = ctl.modulo_axes(machine), ctl.angle_sense(machine)
@@ -193,7 +193,7 @@ def test_the_pose_list_says_from_which_side_the_program_reaches_every_pose(contr
     an axis one way, hold it, or run there and back."""
     from conftest import BC_MACHINE
 
-    from compgen.machine_file import load_machine
+    from compgen.configuration.machine_file import load_machine
 
     machine = load_machine(SEED_MACHINE if which == "seed" else BC_MACHINE)
     if which == "bc" and controller == "linuxcnc":
@@ -225,7 +225,7 @@ def test_the_rotary_speed_at_the_programs_feed_is_checked_in_axes_mode(seed_mach
     refused, named, with the number; under TCPM a pose block only turns, at F deg/min."""
     from dataclasses import replace
 
-    from compgen.emit.programs import _check_feed
+    from compgen.controllers.programs import _check_feed
     from compgen.errors import CompgenError
     slow = replace(seed_machine, workpiece=tuple(replace(a, feed_max=20.0) if a.name == "C" else a
                                                  for a in seed_machine.workpiece))
@@ -246,9 +246,9 @@ def test_a_pose_block_that_only_turns_runs_at_f_deg_per_min_in_both_checks(seed_
     the motion check passed the same block at F deg/min."""
     from dataclasses import replace
 
-    from compgen import motion
-    from compgen.emit.programs import _check_feed
+    from compgen.controllers.programs import _check_feed
     from compgen.errors import CompgenError
+    from compgen.setup import motion
     slow = replace(seed_machine, workpiece=tuple(replace(a, feed_max=20.0) if a.name == "C" else a
                                                  for a in seed_machine.workpiece))
     _check_feed(slow, _two_poses(slow, 0.0, 0.5), 15.0, "P", "axes")            # 15 deg/min: fine
@@ -267,7 +267,7 @@ def test_a_pose_block_that_only_turns_runs_at_f_deg_per_min_in_both_checks(seed_
     ("a" * 24, 0, "A" * 24), ("7x-y", 0, "P7X_Y"), ("", 0, "RTEST"), ("a" * 19, 5, "A" * 19),
     ("a" * 25, 0, None), ("a" * 20, 5, None)])
 def test_program_names_are_kept_whole_within_what_the_controls_keep(text, room, expected):
-    from compgen.emit.programs import program_name
+    from compgen.controllers.programs import program_name
     from compgen.errors import CompgenError
     args = (text,) if room == 0 else (text, room)       # room 0: as the default gives it
     if expected is None:
@@ -310,7 +310,7 @@ def test_a_path_starting_at_the_end_of_travel_is_approached_from_inside(seed_mac
     a = np.radians(np.arange(-90.0, -79.0, 1.0))
     q = np.zeros((len(a), len(m.axes)))
     q[:, m.index("A")] = a
-    from compgen.kinematics import inverse
+    from compgen.model.kinematics import inverse
     q = inverse(m, q[:, [m.index(x.name) for x in m.rotary_axes]], np.asarray(m.ball))
     poses = Poses(q, np.tile(m.ball, (len(a), 1)), np.full(len(a), np.nan), np.array(["UP"] * len(a)))
     emitted = measure_program(m, poses, "UP", "itnc530", "tcpm", "RT", "0.1.0", DATE)

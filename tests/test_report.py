@@ -93,7 +93,7 @@ def test_checklist_ticks_from_artefacts_and_names_the_next_step(work):
 
 def test_templates_ship_inside_the_installed_package(tmp_path):
     """Run from outside the checkout: an installed wheel must carry compgen/templates."""
-    code = ("import compgen, compgen.emit as e, pathlib; "
+    code = ("import compgen, compgen.controllers as e, pathlib; "
             "print(pathlib.Path(compgen.__file__).parent); print(e.template_dir())")
     done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
                           env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"}, check=True)

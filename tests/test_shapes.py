@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 from conftest import SEED_MACHINE, TABLE4, run
 
-from compgen.correction import plan
-from compgen.diagnose import diagnose
-from compgen.effects import compose, effect_of_param, resolve
+from compgen.configuration.machine_file import load_machine
+from compgen.controllers.correction import plan
+from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
-from compgen.identify import identify
-from compgen.machine_file import load_machine
-from compgen.paths import generate
-from compgen.simulate import simulate
+from compgen.model.effects import compose, effect_of_param, resolve
+from compgen.model.paths import generate
+from compgen.statistics.diagnose import diagnose
+from compgen.statistics.identify import identify
 
 NOISE_UM = 0.5
 KNOTS = [-220.0, -110.0, 0.0, 110.0, 220.0]          # mm along X; the paths reach ±217.5 mm
@@ -132,7 +132,7 @@ def test_a_bad_shape_is_refused_with_its_file_and_key(tmp_path, shapes, says):
 
 def test_fit_add_and_diagnose_take_a_declared_shape_from_the_command_line(machine, tmp_path):
     """The shape lives in the machine file: fit.json names the file, diagnose reloads it."""
-    from compgen.rtest import format_rtest
+    from compgen.data.rtest import format_rtest
     path = tmp_path / "m.toml"
     path.write_text(SEED_MACHINE.read_text() + SHAPES)
     csv = tmp_path / "s.csv"
@@ -151,7 +151,7 @@ def test_kinematics_writes_a_declared_spline_into_the_compensation_table(machine
     the finest that spans X's travel in at most 37): the command that undoes the curve X
     stood off by (within 0.5 µm of minus that curve, held beyond the knots) — the fitted
     spline in X's sense — and a value that rounds to zero is written 0.000000, not -0.000000."""
-    from compgen.rtest import format_rtest
+    from compgen.data.rtest import format_rtest
     path = tmp_path / "m.toml"
     path.write_text(SEED_MACHINE.read_text() + SHAPES)
     csv = tmp_path / "s.csv"
@@ -162,7 +162,7 @@ def test_kinematics_writes_a_declared_spline_into_the_compensation_table(machine
     text = (tmp_path / "KIN.comp.csv").read_text()
     rows = [r.split(",") for r in text.splitlines() if r.startswith("EXX:s.screw,")]
     assert len(rows) == 33 and [float(r[2]) for r in rows[:2]] == [-400.0, -375.0] and "-0.000000" not in text
-    from compgen.results import load_fit
+    from compgen.statistics.results import load_fit
     fit = load_fit(tmp_path / "f.json")
     spline = [0.0] + [fit.parameters[f"EXX:s.screw.{i}"].value for i in range(2, 6)]
     x, comp = np.array([[float(r[2]), float(r[4])] for r in rows]).T

@@ -14,16 +14,16 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, BC_MACHINE, OEM_TAB, ROOT, SEED_MACHINE, UM
 
-from compgen.correction import plan
-from compgen.effects import location_model
-from compgen.emit.kinematics import kinematics_edit
-from compgen.identify import identify
-from compgen.kinematics import Model, Poses
-from compgen.lines import AxisLine, controller_inverse
-from compgen.machine_file import load_machine
-from compgen.paths import generate
-from compgen.rtest import RTestData
-from compgen.simulate import simulate
+from compgen.configuration.machine_file import load_machine
+from compgen.controllers.correction import plan
+from compgen.controllers.kinematics import kinematics_edit
+from compgen.data.rtest import RTestData
+from compgen.data.simulate import simulate
+from compgen.model.effects import location_model
+from compgen.model.kinematics import Model, Poses
+from compgen.model.lines import AxisLine, controller_inverse
+from compgen.model.paths import generate
+from compgen.statistics.identify import identify
 
 NOISE_UM = 0.5
 DEG = np.pi / 180

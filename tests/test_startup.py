@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from conftest import ROOT, SEED_MACHINE, run
 
-import compgen.kinematics as kinematics
-from compgen.identify import identify
-from compgen.rtest import read_rtest
+import compgen.model.kinematics as kinematics
+from compgen.data.rtest import read_rtest
+from compgen.statistics.identify import identify
 
 SESSION = ROOT / "examples" / "seed-session.csv"
 HEAVY = ("scipy", "jinja2", "matplotlib",       # each only in the commands that use it
-         "psycopg", "compgen.store", "compgen.history")
+         "psycopg", "compgen.history.store", "compgen.history")
 
 
 def _imported_by(statement: str) -> list[str]:
@@ -26,8 +26,9 @@ def _imported_by(statement: str) -> list[str]:
 
 
 def test_the_cli_and_the_fit_import_nothing_heavy():
-    assert _imported_by("import compgen.cli") == []
-    assert _imported_by("import compgen.diagnose, compgen.compare, compgen.report") == []
+    assert _imported_by("import compgen.commands.cli") == []
+    assert _imported_by("import compgen.statistics.diagnose, compgen.commands.compare, "
+                        "compgen.commands.report") == []
 
 
 def test_diagnose_needs_no_scipy(tmp_path):
@@ -35,7 +36,7 @@ def test_diagnose_needs_no_scipy(tmp_path):
     alone cost diagnose more start-up than numpy's)."""
     fit = tmp_path / "fit.json"
     assert run("fit", "--machine", SEED_MACHINE, SESSION, "-o", fit)[0] == 0
-    code = ("import sys; from compgen.cli import main\n"
+    code = ("import sys; from compgen.commands.cli import main\n"
             "try:\n    main(['diagnose', '--from', sys.argv[1], '--json'])\nexcept SystemExit:\n    pass\n"
             "sys.stderr.write('\\nscipy: ' + ' '.join(m for m in sys.modules if m.split('.')[0] == 'scipy'))")
     out = subprocess.run([sys.executable, "-c", code, str(fit)], capture_output=True, text=True)
@@ -93,7 +94,7 @@ def test_commands_run_with_one_blas_thread(tmp_path, asked):
 def test_the_p_value_is_the_f_distributions_tail():
     from scipy import stats
 
-    from compgen.significance import p_value as _p_value
+    from compgen.statistics.significance import p_value as _p_value
     for drop, k, rss, dof in [(3.0, 1, 700.0, 2158), (40.0, 2, 500.0, 2158), (1e-3, 2, 5.0, 100)]:
         F = (drop / k) / ((rss - drop) / (dof - k))
         want = min(1.0, stats.f.sf(F, k, dof - k) * 86)
@@ -105,7 +106,7 @@ def test_the_distributions_diagnose_uses_are_scipys():
     scipy's, from p near 1 to the smallest doubles, for the sizes diagnose meets."""
     from scipy import special, stats
 
-    from compgen.significance import chi2_isf, chi2_sf, f_sf
+    from compgen.statistics.significance import chi2_isf, chi2_sf, f_sf
     for k in (1, 2, 3, 4, 6, 9):
         for m in (3, 10, 50, 300, 2158, 20000, 200000):
             for F in (0.0, 1e-20, 1e-3, 0.3, 1.0, 2.0, 5.0, 20.0, 100.0, 1e3, 1e5):   # 1e-20: x rounds to 1

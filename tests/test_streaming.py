@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from conftest import SEED_MACHINE, run
 
-from compgen.paths import generate
-from compgen.rtest import read_rtest
+from compgen.data.rtest import read_rtest
+from compgen.model.paths import generate
 
 TRUTH = SEED_MACHINE.parents[1] / "examples" / "truth-table4.json"
 
@@ -60,9 +60,9 @@ def test_a_dense_sessions_plots_draw_thinned_series_and_count_every_reading(seed
     readings that are not drawn makes the two differ)."""
     import matplotlib.axes
 
-    from compgen import plots
-    from compgen.identify import fitted, identify
-    from compgen.simulate import simulate
+    from compgen.commands import plots
+    from compgen.data.simulate import simulate
+    from compgen.statistics.identify import fitted, identify
     poses = generate(seed_machine, ["K2"], rate_hz=100, feed=180)
     data = simulate(seed_machine, {"XOC": 2e-3}, poses, 0.5, np.random.default_rng(3))
     hidden = np.ones(len(poses), bool)

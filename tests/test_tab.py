@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, UM
 
-from compgen.correction import nominal_lines, plan
-from compgen.emit import heidenhain
-from compgen.emit.kinematics import kinematics_edit
-from compgen.emit.tab import TabTable
+from compgen.controllers import heidenhain
+from compgen.controllers.correction import nominal_lines, plan
+from compgen.controllers.kinematics import kinematics_edit
+from compgen.controllers.tab import TabTable
+from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
-from compgen.identify import identify
-from compgen.paths import generate
-from compgen.simulate import simulate
+from compgen.model.paths import generate
+from compgen.statistics.identify import identify
 
 TRUTH = {"YOA": 20.5 * UM, "ZOA": 32.5 * UM, "BOA": 12.3 * ARCSEC, "COA": -7.2 * ARCSEC,
          "XOC": 1.4 * UM, "YOC": -15.9 * UM, "AOC": -6.5 * ARCSEC, "BOC": -4.6 * ARCSEC}
@@ -211,7 +211,7 @@ SQUARE = {"COX": 5 * ARCSEC, "BOZ": -4 * ARCSEC}
 
 @pytest.fixture(scope="module")
 def square_fit(seed_machine):
-    from compgen.effects import location_model
+    from compgen.model.effects import location_model
     poses = generate(seed_machine, ["K4", "K1", "K2"])
     return identify(seed_machine, [simulate(seed_machine, TRUTH | SQUARE, poses)],
                     [*location_model(seed_machine), *SQUARE])
@@ -256,7 +256,7 @@ def test_since_is_what_the_control_holds_beyond_the_measured_state(seed_machine,
 
 def test_a_positioning_table_goes_to_the_comp_csv_with_the_values_that_cancel(seed_machine):
     """ECC:h2 (C's angle error 8″·cos 2C) on an iTNC 530: a table over C, -8″·cos 2C in deg."""
-    from compgen.effects import location_model
+    from compgen.model.effects import location_model
     poses = generate(seed_machine, ["K4", "K1", "K2"])
     truth = {"XOC": 2 * UM, "ECC:h2c": 8 * ARCSEC}
     fit = identify(seed_machine, [simulate(seed_machine, truth, poses)],
@@ -327,7 +327,7 @@ def test_a_table_with_cr_line_ends_is_edited_and_keeps_them(seed_machine, fit):
 def test_a_latin1_table_is_written_back_in_latin1(seed_machine, fit, tmp_path):
     from conftest import run
 
-    from compgen.rtest import format_rtest
+    from compgen.data.rtest import format_rtest
     data = simulate(seed_machine, TRUTH, generate(seed_machine, ["K4"]), 0.3, np.random.default_rng(3))
     (tmp_path / "k4.csv").write_text(format_rtest(seed_machine, data))
     rc, _, err = run("fit", "--machine", "ac-trunnion-itnc530", tmp_path / "k4.csv",

@@ -15,16 +15,16 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, ROOT, UM
 
-from compgen.correction import CompTable, compose_tables
-from compgen.effects import location_model
-from compgen.emit import sinumerik
-from compgen.emit.base import joined
-from compgen.emit.kinematics import kinematics_edit
-from compgen.emit.registry import read_edits
+from compgen.controllers import sinumerik
+from compgen.controllers.base import joined
+from compgen.controllers.correction import CompTable, compose_tables
+from compgen.controllers.kinematics import kinematics_edit
+from compgen.controllers.registry import read_edits
+from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
-from compgen.identify import identify
-from compgen.paths import generate
-from compgen.simulate import simulate
+from compgen.model.effects import location_model
+from compgen.model.paths import generate
+from compgen.statistics.identify import identify
 
 NOISE_UM = 0.5
 OEM_CARR = (ROOT / "examples" / "bc-tcarr-current.txt").read_text()
@@ -164,8 +164,8 @@ def test_the_second_round_on_the_command_line_takes_both_files_as_current(tmp_pa
 
     from conftest import run
 
-    from compgen.effects import effect_of_param
-    from compgen.machine_file import load_machine
+    from compgen.configuration.machine_file import load_machine
+    from compgen.model.effects import effect_of_param
     monkeypatch.chdir(tmp_path)
     machine = load_machine("bc-table-sinumerik840d")
     for name, truth in (("t1.json", TRUTH), ("t2.json", LATER)):
@@ -207,8 +207,8 @@ def test_linuxcnc_joint_tables_compose_through_the_ini(seed_machine, tmp_path):
     """LinuxCNC's second round reads the joints' COMP_FILEs the INI loads and writes each
     joint's table as the loaded one plus this round's; started with round 2's INI the
     machine is at the noise, and round 2's restore is round 1's configuration."""
-    from compgen.emit import linuxcnc
-    from compgen.emit.registry import read_state
+    from compgen.controllers import linuxcnc
+    from compgen.controllers.registry import read_state
     machine = seed_machine
     module, tilt, c = linuxcnc.trt_module(machine)
     nominal = linuxcnc.nominal_pins(machine, tilt, c)
@@ -267,8 +267,8 @@ def test_linuxcnc_joint_tables_compose_through_the_ini(seed_machine, tmp_path):
 
 
 def test_linuxcnc_type0_table_is_read_as_nominal_minus_actual(seed_machine, tmp_path):
-    from compgen.emit import linuxcnc
-    from compgen.emit.registry import read_state
+    from compgen.controllers import linuxcnc
+    from compgen.controllers.registry import read_state
     (tmp_path / "m.ini").write_text("[HAL]\nHALFILE = core_sim.hal\n[JOINT_4]\nCOMP_FILE = c.comp\n")
     (tmp_path / "c.comp").write_text("0 0.001 -0.001\n180 180.002 179.998\n360 360.001 359.999\nend\n7 7 7\n")
     (fwd, rev), = linuxcnc.loaded_joint_tables(seed_machine, read_state(str(tmp_path / "m.ini"))).values()
@@ -353,7 +353,7 @@ def test_the_records_coarse_offsets_are_checked_against_the_machine_file(bc_mach
 def test_the_machine_file_declares_the_records_coarse_offsets(tmp_path):
     from conftest import BC_MACHINE
 
-    from compgen.machine_file import load_machine
+    from compgen.configuration.machine_file import load_machine
     offsets = "offsets = { l2 = [0.0, 0.0, -120.5], l4 = [1, 2, 3] }\n"
     text = BC_MACHINE.read_text().replace("tcarr = 1 ", offsets + "tcarr = 1 ")
     (tmp_path / "m.toml").write_text(text)
@@ -371,7 +371,7 @@ def test_a_generated_table_has_at_most_37_points_on_the_finest_round_step(travel
     beyond the end (no round step divides 370 within 37 points but 20's multiples cover it)."""
     from types import SimpleNamespace
 
-    from compgen.correction import TABLE_POINTS, _grid
+    from compgen.controllers.correction import TABLE_POINTS, _grid
     grid = _grid(SimpleNamespace(full_turn=False, travel=travel, name="X"))
     assert len(grid) <= TABLE_POINTS == 37
     assert grid[1] - grid[0] == pytest.approx(step)
@@ -381,7 +381,7 @@ def test_a_generated_table_has_at_most_37_points_on_the_finest_round_step(travel
 def test_a_modulo_table_unrolled_over_the_travel_repeats_its_turn_on_the_same_step():
     """For a control that does not wrap a table's input: the turn's values at every position
     of the travel (clipped to ±span) on the table's own step, as the wrapped table gives them."""
-    from compgen.correction import unrolled
+    from compgen.controllers.correction import unrolled
     turn = CompTable("ECC", "", "C", "C", 30.0, 390.0, tuple(np.sin(np.radians(np.arange(30, 391, 10)) * 2)),
                      True, "deg")
     plain = unrolled(turn, (-400.0, 500.0), 2520.0)
@@ -399,7 +399,7 @@ def test_a_linuxcnc_joint_table_of_a_long_travel_turn_spans_the_travel_within_12
     README promises; 256 lines at most)."""
     from dataclasses import replace
 
-    from compgen.emit import linuxcnc
+    from compgen.controllers import linuxcnc
     model = [*(n for n in location_model(seed_machine) if n[1] == "O" and n[0] in "XYZ"), *TABLES]
     data = simulate(seed_machine, LINUX_TRUTH, generate(seed_machine, ["K4", "K1", "K2"]), NOISE_UM,
                     np.random.default_rng(3))
@@ -429,8 +429,8 @@ def test_uneven_positions_must_run_from_the_tables_start_to_its_stop(points, sta
 def test_a_periodic_error_goes_into_a_table_only_with_eight_points_a_pitch(seed_machine):
     """X's table on the seed machine (±400 mm) steps 25 mm: a 200 mm pitch has its 8 points
     a pitch, a 5 mm screw period (docs: `kinematics` lists it, no table) would alias."""
-    from compgen.correction import _compensable_by_table, _grid
-    from compgen.effects import resolve
+    from compgen.controllers.correction import _compensable_by_table, _grid
+    from compgen.model.effects import resolve
     step = float(np.diff(_grid(seed_machine.axis("X")))[0])
     assert step == 25.0
     assert _compensable_by_table(seed_machine, resolve(seed_machine, "EXX:w200"))
@@ -461,7 +461,7 @@ def test_composed_uneven_tables_keep_points_a_files_rounding_cannot_join():
 def test_a_cec_table_is_written_where_its_six_decimals_reach_its_stop(stop, count, written):
     """The step at 6 decimals times the steps must reach the stop within 1e-6 of its size
     (at least 1e-6): the control places value n at MIN + n·STEP."""
-    from compgen.emit.sinumerik import _cec_text
+    from compgen.controllers.sinumerik import _cec_text
     t = CompTable("EXX:t", "", "X", "X", 0.0, stop, (0.0,) * count, False, "mm")
     if written is None:
         with pytest.raises(CompgenError, match="does not divide"):

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from conftest import BC_MACHINE, SEED_MACHINE
 
-from compgen.emit import linuxcnc
-from compgen.emit.programs import measure_program, read_program
+from compgen.configuration.machine_file import load_machine
+from compgen.controllers import linuxcnc
+from compgen.controllers.programs import measure_program, read_program
 from compgen.errors import CompgenError
-from compgen.machine_file import load_machine
-from compgen.paths import generate
+from compgen.model.paths import generate
 
 
 def xyzac_forward(j, pins, con):

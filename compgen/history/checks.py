@@ -8,16 +8,16 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from .. import me
-from ..effects import effect_of_param
-from ..emit.registry import controller
+from ..controllers.registry import controller
+from ..data.rtest import Measurements, device_of
 from ..errors import CompgenError, one_line
-from ..machine import Machine
-from ..results import FitResult
-from ..rtest import Measurements, device_of
-from ..store import Store, now
+from ..model.effects import effect_of_param
+from ..model.machine import Machine
+from ..statistics.results import FitResult
 from ..units import shown
 from .drift import Entry, Flag, flags, limit_of, machine_params
 from .ledger import file_ref, lookup_machine, machine_key, session_and_fit
+from .store import Store, now
 
 
 @dataclass
@@ -99,7 +99,7 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
     other than the calibration's is refused: its nominal geometry, limits or tolerances may
     differ, and the changes would be measured against another machine; ``machine_changed``
     checks anyway and says so."""
-    from ..identify import beyond_setup
+    from ..statistics.identify import beyond_setup
 
     name, serial = machine_key(machine, serial)
     changed = bool(calibration.machine_sha256) and calibration.machine_sha256 != machine.sha256

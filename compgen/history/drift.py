@@ -12,13 +12,13 @@ from datetime import UTC, datetime
 import numpy as np
 
 from .. import me
-from ..effects import effect_of_param
 from ..errors import CompgenError, one_line
-from ..machine import Machine
-from ..results import FitResult
-from ..store import Store
+from ..model.effects import effect_of_param
+from ..model.machine import Machine
+from ..statistics.results import FitResult
 from ..units import shown
 from .ledger import DAYS_PER_MONTH, days, file_ref, machine_id, machine_key, taken_at, utc
+from .store import Store
 
 
 @dataclass

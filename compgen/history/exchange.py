@@ -9,12 +9,12 @@ import json
 import math
 
 from .. import me
-from ..emit.registry import CONTROLLERS
+from ..controllers.registry import CONTROLLERS
 from ..errors import CompgenError, one_line
-from ..machine import identifier
-from ..results import FitResult
-from ..store import Store, now
+from ..model.machine import identifier
+from ..statistics.results import FitResult
 from .ledger import content_key, lookup_machine, taken_at
+from .store import Store, now
 
 
 def export_rows(store: Store, machine_name: str | None = None) -> list[dict]:

@@ -11,11 +11,11 @@ from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime, timedelta
 
 from .. import me
+from ..data.rtest import device_of
 from ..errors import CompgenError
-from ..machine import Machine, identifier
-from ..results import FitResult
-from ..rtest import device_of
-from ..store import Store, now
+from ..model.machine import Machine, identifier
+from ..statistics.results import FitResult
+from .store import Store, now
 
 DAYS_PER_MONTH = 30.0
 

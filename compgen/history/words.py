@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from ..errors import one_line
-from ..store import Store
 from ..units import shown
 from .drift import Trend
+from .store import Store
 
 
 def machines_text(store: Store) -> str:

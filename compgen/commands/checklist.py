@@ -1,0 +1,162 @@
+"""The commissioning checklist, ticked from the artefacts found in a work folder.
+
+A step is ``done`` only when a file proves it (recognised by content, not by name), ``open``
+when none does yet, and ``by hand`` when no file can prove it (warm-up, sensor check, loading
+the edit, signing off): compgen never ticks those for the engineer.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from shlex import quote
+
+from .. import me
+from ..controllers.registry import comment_marks, controller
+from ..errors import CompgenError
+from ..model.machine import Machine
+
+DONE, OPEN, BY_HAND = "done", "open", "by hand"
+MAX_READ = 5_000_000   # bytes: larger files are not R-test artefacts
+
+
+@dataclass(frozen=True)
+class Step:
+    title: str
+    status: str
+    evidence: tuple[str, ...] = ()
+    command: str = ""
+    note: str = ""
+
+
+@dataclass
+class _Found:
+    programs: list[Path] = field(default_factory=list)
+    data: list[Path] = field(default_factory=list)
+    fits: list[tuple[Path, dict]] = field(default_factory=list)
+    diagnoses: list[Path] = field(default_factory=list)
+    edits: list[Path] = field(default_factory=list)
+    signchecks: list[Path] = field(default_factory=list)
+    compares: list[tuple[Path, dict]] = field(default_factory=list)
+
+
+def _scan(folder: Path) -> _Found:
+    found = _Found()
+    marks = re.escape(comment_marks())
+    for path in sorted(p for p in folder.rglob("*") if p.is_file() and p.stat().st_size < MAX_READ):
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (UnicodeDecodeError, OSError):
+            continue
+        head = text[:2000]
+        if re.search(rf"(?m)^(?:\d+ )?[{marks}] compgen \S+ R-test measurement program", head):
+            (found.signchecks if "path sign check" in head else found.programs).append(path)
+        elif re.search(rf"(?m)^[{marks}] compgen \S+ kinematics edit", head):
+            found.edits.append(path)
+        elif path.suffix.lower() == ".csv" and _is_rtest(head):
+            found.data.append(path)
+        elif path.suffix.lower() == ".json":
+            try:
+                doc = json.loads(text)
+            except (json.JSONDecodeError, RecursionError):   # a stray file is not compgen's
+                continue
+            kind = doc.get("format") if isinstance(doc, dict) else None
+            if kind == "compgen.fit/1":
+                found.fits.append((path, doc))
+            elif kind == "compgen.diagnose/1":
+                found.diagnoses.append(path)
+            elif kind == "compgen.compare/1":
+                found.compares.append((path, doc))
+    return found
+
+
+def _is_rtest(head: str) -> bool:
+    header = next((ln for ln in head.splitlines() if ln.strip() and not ln.startswith("#")), "")
+    return {"dX", "dY", "dZ"} <= {c.strip() for c in header.split(",")}
+
+
+def checklist(machine: Machine, folder: str | Path, comparison: dict | None = None) -> list[Step]:
+    """The steps, ticked from the files in ``folder`` (and from ``comparison``, a compare
+    result's dict, when the caller has just made one); every command it suggests writes
+    into ``folder``."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise CompgenError("no such folder", where=str(folder), hint="give the work folder with --dir")
+    f = _scan(folder)
+    m = quote(machine.source)
+    fit = max(f.fits, key=lambda x: x[0].stat().st_mtime, default=None)
+    fit_path = quote(str(fit[0])) if fit else quote(str(folder / "fit.json"))
+
+    def out(name: str) -> str:
+        return quote(str(folder / name))
+    edit_time = max((p.stat().st_mtime for p in f.edits), default=None)
+    post = [p for p in f.data if edit_time is not None and p.stat().st_mtime > edit_time]
+    fitted = [(p.parent / d["file"]).resolve() for p, doc in f.fits for d in doc.get("data", [])
+              if isinstance(d, dict) and isinstance(d.get("file"), str) and (p.parent / d["file"]).is_file()]
+    post = [p.resolve() for p in post]
+    pre = list(dict.fromkeys([p.resolve() for p in f.data if p.resolve() not in post]
+                             + [p for p in fitted if p not in post]))
+    measured = [doc for _, doc in f.compares if "measured_post" in doc]
+    if comparison and "measured_post" in comparison:
+        measured.append(comparison)
+    passed = measured and measured[-1]["measured_post"].get("as_predicted") and all(
+        v.startswith("PASS") for v in measured[-1]["measured_post"].get("verdicts", {}).values())
+    steps = [
+        Step("Warm-up: spindle and axes at working temperature", BY_HAND,
+             note="thermal drift over a K4 run can reach several µm"),
+        Step("R-test set-up: ball on the table, nest in the spindle, sensors checked", BY_HAND,
+             note=f"ball where [rtest] says: {machine.ball} mm; nest length gauge line to centre"),
+        Step("Measurement programs written", DONE if f.programs else OPEN, _names(f.programs),
+             f"{me()} measure-program --machine {m} --path all -o {out('RTEST' + _ext(machine))}"),
+        Step("Preset checked at the program's stop: the ball centred under the nest", BY_HAND,
+             note="every program stops once, the nest at its clearance above the ball, before it goes down"),
+        Step("K4, K1, K2 measured (R-test CSV with dX dY dZ)", DONE if pre else OPEN, _names(pre),
+             "run the program; export the readings as CSV v1 beside the pose list"),
+        Step("Fit", DONE if fit else OPEN, _names([fit[0]] if fit else []),
+             f"{me()} fit --machine {m} {' '.join(map(quote, _names(pre))) or 'DATA.csv'} "
+             f"-o {out('fit.json')}"),
+        Step("Diagnose: where the model fails", DONE if f.diagnoses else OPEN, _names(f.diagnoses),
+             f"{me()} diagnose --from {fit_path} --json > {out('diagnose.json')}"),
+        Step("Review confounded effects and fragile parameters", BY_HAND,
+             note="diagnose lists what these data cannot see and what would separate it"),
+        Step("Kinematics edit emitted (with backup step and sign check)", DONE if f.edits else OPEN,
+             _names(f.edits + f.signchecks),
+             f"{me()} kinematics --from {fit_path} --current CURRENT -o {out('KIN')}"),
+        Step("Backup taken, edit loaded, sign check run with the R-test", BY_HAND,
+             note="; ".join(n for n in ("the expected reading changes are in the edit's header",
+                                        controller(machine.controller).load_note) if n)),
+        Step("Re-measured after the edit", DONE if post else OPEN, _names(post),
+             "run the measurement program again; save the CSV after the edit file"),
+        Step("Compared: predicted against measured", DONE if measured else OPEN,
+             _names([p for p, d in f.compares if "measured_post" in d])
+             + (("this report's comparison",) if comparison and "measured_post" in comparison else ()),
+             f"{me()} compare --from {fit_path} --post POST.csv --json > {out('compare.json')}"),
+        Step("Sign-off", BY_HAND,
+             note="ready: improved as predicted, every path within tolerance" if passed else
+                  "not ready: no comparison yet, or a path out of tolerance or not as predicted"),
+    ]
+    return steps
+
+
+def _names(paths) -> tuple[str, ...]:
+    return tuple(str(p) for p in paths)
+
+
+def _ext(machine: Machine) -> str:
+    return controller(machine.controller).program_ext
+
+
+def markdown(machine: Machine, steps: list[Step]) -> str:
+    lines = [f"# Commissioning checklist: {machine.name}", ""]
+    nxt = next((s for s in steps if s.status == OPEN), None)
+    for i, s in enumerate(steps, 1):
+        box = {DONE: "[x]", OPEN: "[ ]", BY_HAND: "[ ] (by hand)"}[s.status]
+        lines.append(f"{i}. {box} {s.title}")
+        for e in s.evidence:
+            lines.append(f"   - found: `{e}`")
+        if s.note:
+            lines.append(f"   - {s.note}")
+    lines += ["", f"Next: `{nxt.command}`" if nxt else "Every step a file can prove is done."]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,564 @@
+"""The command line: a thin translator over the library. Nothing imports it."""
+
+
+from __future__ import annotations
+
+import json
+import shlex
+from datetime import date
+from functools import partial
+from pathlib import Path
+
+import click
+import numpy as np
+
+from .. import __version__, me
+from ..configuration.machine_file import load_machine
+from ..configuration.session import fit_machine, fit_request, machine_ref, read_data, reload
+from ..controllers.advice import Advisor
+from ..controllers.kinematics import corrected_by, kinematics_edit
+from ..controllers.probing import probe_program, with_sphere
+from ..controllers.programs import MODES, NAME_MAX, at_ball, measure_program, program_ball, program_name
+from ..controllers.registry import controller, for_program, read_edits, read_state
+from ..data.probe import format_probe_log, probe_poses, simulate_touches
+from ..data.rtest import SIGNS, format_rtest, read_poses
+from ..data.simulate import read_truth, simulate
+from ..errors import CompgenError
+from ..files import STDOUT, read_text, write_all, write_atomically
+from ..model.effects import catalogue, compose, location_model
+from ..model.paths import generate
+from ..model.sides import unknown_sides, unpredicted_sides
+from ..statistics.diagnose import diagnose
+from ..statistics.diagnose_text import report as diagnosis_text
+from ..statistics.gate import gate_edit, unit_suspicion
+from ..statistics.identify import identify
+from ..statistics.results import load_fit
+from .checklist import checklist, markdown
+from .cli_common import (
+    CONTROLLER_NAMES,
+    DATE,
+    DB,
+    FILE,
+    FORCE,
+    MACHINE,
+    OUTPUT,
+    RECORD,
+    Group,
+    encoded_like,
+    named_paths,
+    progress,
+    said,
+    sha256_of,
+    vec3,
+    warn,
+)
+from .cli_history import check_cmd, history_cmd, history_store, record_fit_file
+from .compare import compare
+from .report import report_html
+
+
+@click.group(cls=Group)
+@click.version_option(__version__, prog_name="compgen")
+def main():
+    """compgen: find where a five-axis machine's rotary axes really are, from R-test data."""
+
+
+@main.command("simulate")
+@MACHINE
+@click.option("--truth", type=FILE, required=True,
+              help='JSON {"parameters": {NAME: {"value": v, "unit": u}}}, or a fit.json.')
+@click.option("--paths", "path_names", default="K4,K1,K2", show_default=True,
+              help="Comma-separated path names from the machine file.")
+@click.option("--noise-um", type=float, default=0.0, show_default=True,
+              help="Noise σ per reading, µm (white unless --noise-rho).")
+@click.option("--noise-rho", type=float, default=0.0, show_default=True,
+              help="Correlation of the noise from one reading to the next, AR(1), 0 ≤ ρ < 1: "
+                   "drift of a real set-up.")
+@click.option("--seed", type=int, default=None, help="Random seed, for a repeatable noise draw.")
+@click.option("--ball", default=None, help="Ball centre in the table frame, mm: X,Y,Z "
+                                            "(default: the machine file's).")
+@click.option("--there-and-back", "back", is_flag=True, help="Run each path there and back.")
+@click.option("--rate-hz", type=float, default=None,
+              help="A continuous session: a reading every 1/RATE s while each path runs (an R-test "
+                   "sampling on the fly), instead of the path's n poses.")
+@click.option("--feed", type=float, default=None,
+              help="With --rate-hz: each path's pace, deg/min of its most-travelled rotary axis "
+                   "(default the path's own: n poses of seconds_per_pose).")
+@click.option("--edit", "edits", type=FILE, multiple=True,
+              help="A kinematics edit compgen wrote (table, change list, $TC_CARR program, CEC "
+                   "file): simulate the measurement after the control has loaded it. Repeatable.")
+@click.option("--current", type=FILE, multiple=True,
+              help="With a $TC_CARR program: the record's values before the edit (and the CEC tables "
+                   "then loaded, as a further --current).")
+@click.option("--device", type=click.Choice(["rtest", "probe"]), default="rtest", show_default=True,
+              help="probe: a touch-probe log v1 of the machine file's [probe] (its poses per path, "
+                   "its touches); --noise-um is then the trigger noise per touch.")
+@click.option("--stylus-error-um", type=float, default=0.0, show_default=True,
+              help="With --device probe: the stylus's real diameter minus the one the log states, µm.")
+@OUTPUT
+@FORCE
+def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, ball, back, rate_hz, feed,
+                 edits, current, device, stylus_error_um, output, force):
+    """Write the R-test CSV (or, with --device probe, the probe log) that a machine with the
+    TRUTH errors would give."""
+    machine = load_machine(machine_file)
+    errors = read_truth(truth, machine)
+    names = [p for p in path_names.split(",") if p.strip()]
+    if not names:
+        raise CompgenError("--paths names no path")
+    at = vec3(ball, "--ball") if ball is not None else None
+    if device == "probe":
+        if back or noise_rho or rate_hz is not None or feed is not None:
+            raise CompgenError("--there-and-back, --noise-rho, --rate-hz and --feed are for R-test sessions",
+                               hint="a probe touches each pose standing still")
+        poses = probe_poses(machine, names, at)
+    else:
+        if feed is not None and rate_hz is None:
+            raise CompgenError("--feed sets the pace of a continuous session", hint="give --rate-hz too")
+        poses = generate(machine, names, ball=at, back=back, rate_hz=rate_hz, feed=feed)
+    drive = None
+    if edits:
+        held = read_edits(machine, {e: read_state(e) for e in edits},
+                          read_state(current) if current else None)
+        drive = partial(held.drive, machine)
+    rng = np.random.default_rng(seed)
+    if device == "probe":
+        data = simulate(machine, errors, poses, 0.0, rng, drive)
+        tips, directions = simulate_touches(machine, poses, data.deviation, noise_um, rng, stylus_error_um)
+        comments = (f"compgen simulate --device probe: truth {truth}: " + (", ".join(errors) or "nominal"),
+                    *(f"after the edit {e}" for e in edits),
+                    f"trigger noise {noise_um} µm σ, stylus {stylus_error_um:+g} µm off its diameter, "
+                    f"seed {seed}")
+        text = format_probe_log(machine, machine.probe, poses, tips, directions, comments)
+    else:
+        data = simulate(machine, errors, poses, noise_um, rng, drive, noise_rho)
+        comments = (f"compgen simulate: machine {machine.name}", f"truth {truth}: "
+                    + ", ".join(errors) if errors else "truth: nominal machine",
+                    *(f"after the edit {e}" for e in edits),
+                    f"noise {noise_um} µm σ{f', AR(1) ρ = {noise_rho:g}' if noise_rho else ''}, seed {seed}",
+                    "dX dY dZ: nest minus ball, µm")
+        text = format_rtest(machine, data, comments)
+    write_atomically(output, text, force, inputs=(machine_file, truth, *edits, *current))
+    touches = f", {machine.probe.touches} touches each" if device == "probe" else ""
+    said(output, f"wrote {output}: {len(poses)} poses{touches} ({', '.join(names)})")
+
+
+@main.command("fit")
+@click.option("--machine", "machine_file", type=FILE, default=None,
+              help="Machine file (TOML); with --from, the fit's own by default.")
+@click.argument("data", nargs=-1, type=FILE)
+@click.option("--from", "base", type=FILE, default=None,
+              help="Start from this fit.json: its machine, data, model and fixed parameters.")
+@click.option("--data", "more", type=FILE, multiple=True, metavar="CSV",
+              help="With --from: R-test data to add to the fit's own (a follow-up measurement). "
+                   "Repeatable.")
+@click.option("--model", "model_names", default=None,
+              help="Comma-separated parameters to fit (default: ball offset and the location "
+                   "errors of every rotary axis, the seed's 11 on an A/C machine).")
+@click.option("--add", "add", multiple=True, metavar="EFFECT",
+              help="Add an effect to the model, e.g. --add ECC:h2 (see `compgen-cli effects`). Repeatable.")
+@click.option("--remove", "remove", multiple=True, metavar="EFFECT", help="Take an effect out. Repeatable.")
+@click.option("--fix", "fixes", multiple=True, metavar="NAME=VALUE",
+              help="Hold a parameter, e.g. --fix ZOW=0 or --fix BOA=12.3arcsec. Repeatable.")
+@click.option("--method", type=click.Choice(["exact", "linear"]), default="exact", show_default=True,
+              help="exact: first-order start then Gauss–Newton on the exact model; linear: the "
+                   "seed's first-order least squares only.")
+@click.option("--sign", type=click.Choice(SIGNS), default=None,
+              help="What the R-test device reports (default nest-minus-ball, or the --from fit's).")
+@OUTPUT
+@FORCE
+@RECORD
+@DATE
+@DB
+def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, method, sign, output, force,
+            record, taken, db):
+    """Identify location errors (and any added effects) from R-test DATA files (CSV v1)."""
+    if record:
+        from ..history import taken_at
+        taken = taken_at(taken)      # a bad --date is refused before fit.json is written
+    names = [n.strip() for n in model_names.split(",") if n.strip()] if model_names else None
+    asked = fit_request(machine_file, data, base, more, names, add, remove, fixes, sign, warn)
+    machine, sets = asked.machine, asked.sets
+    progress(f"fitting {len(asked.model)} effects to {sum(len(s) for s in sets)} poses")
+    result = identify(machine, sets, asked.model, asked.fixed, method, asked.sign, advisor=Advisor)
+    write_atomically(output, result.to_json(Path(output).resolve().parent), force,
+                     inputs=(machine.source, base, *(s.source for s in sets)))
+    said(output, result.report() + f"\nwrote {output}")
+    sides = unknown_sides(machine, result.model, *(s.poses for s in sets))
+    if sides:
+        warn(sides)
+    suspicion = unit_suspicion(sets)
+    if suspicion:
+        click.echo(f"compgen: warning: {suspicion}; kinematics will refuse this fit", err=True)
+    if record and output != STDOUT:
+        _, _, fid, reasons = record_fit_file(db, output, None, None, taken, None, "", ())
+        click.echo(f"recorded as calibration #{fid}" + (": NOT accepted as a reference" if reasons else ""))
+
+
+@main.command("diagnose")
+@click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
+@click.option("--json", "as_json", is_flag=True, help="Print the diagnosis as JSON.")
+@click.option("--candidates", default=None,
+              help="Comma-separated effects to try (default: the whole catalogue).")
+@click.option("--plots", "plots_dir", type=click.Path(file_okay=False), default=None,
+              help="Write PNG plots here: measured vs model per path, residual vs axis angle per path, "
+                   "and the rivals on the measurement that tells them apart.")
+@click.option("--before", type=FILE, default=None,
+              help="An earlier fit.json of the same data, drawn beside this one in the plots.")
+@click.option("--noise-um", "noise_um", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="The R-test's own noise, 1σ per reading, µm (default: the machine file's "
+                   "[rtest] noise_um). With it, the residual is tested against it per path and "
+                   "direction, and what no catalogue effect explains is called unexplained.")
+def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um):
+    """Where the model fails, and which effects would explain the misfit."""
+    fit = load_fit(base)
+    machine, sets = reload(fit)
+    names = [c.strip() for c in candidates.split(",") if c.strip()] if candidates else None
+    progress(f"trying {'the catalogue' if names is None else len(names)} effects against "
+              f"{sum(len(s) for s in sets)} poses")
+    result = diagnose(machine, sets, fit, names, fit_file=base, machine_ref=machine_ref(fit),
+                      noise_um=noise_um, advisor=Advisor)
+    named = compose(machine, fit.model, [c.effect for c in result.candidates if c.significant])
+    sides = unknown_sides(machine, named, *(s.poses for s in sets))
+    if sides:
+        warn(sides)
+    if plots_dir:
+        from .plots import write_plots  # matplotlib only when asked for
+        earlier = load_fit(before) if before else None
+        for path in write_plots(plots_dir, machine, sets, fit, earlier, result):
+            click.echo(f"wrote {path}", err=as_json)
+    click.echo(json.dumps(result.to_dict(), indent=2, ensure_ascii=False) if as_json
+               else diagnosis_text(result, base), nl=as_json)
+
+
+@main.command("predict")
+@click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
+@click.option("--poses", "poses_file", type=FILE, required=True,
+              help="A CSV of poses: rotary axes in deg; path, bx, by, bz (ball, mm) optional.")
+@OUTPUT
+@FORCE
+def predict_cmd(base, poses_file, output, force):
+    """Write what the fitted model predicts an R-test would read at other poses or balls."""
+    fit = load_fit(base)
+    machine = fit_machine(fit)
+    poses = read_poses(poses_file, machine)
+    values = {n: fit.parameters[n].value for n in fit.model}
+    data = simulate(machine, values, poses)
+    comments = (f"compgen predict: {fit.marker} ({base}) on machine {machine.name}",
+                f"poses {poses_file}; dX dY dZ: nest minus ball, µm, as the fitted model predicts them",
+                "the fit's set-up terms (ball offset) belong to its own set-up: compare with a "
+                "constant per set-up aside")
+    write_atomically(output, format_rtest(machine, data, comments), force, inputs=(base, poses_file))
+    said(output, f"wrote {output}: {len(poses)} poses predicted by {fit.marker}")
+    sides = unpredicted_sides(machine, fit.model, poses)
+    if sides:
+        warn(sides)
+
+
+@main.command("measure-program")
+@MACHINE
+@click.option("--path", "path_names", default=None,
+              help="K1, K2, K4 (or BK1…), a comma list, or 'all': paths of the machine file.")
+@click.option("--poses", "poses_file", type=FILE, default=None,
+              help="A CSV of poses (rotary axes in deg; path, bx, by, bz optional) instead of --path.")
+@click.option("--ball", default=None, help="With --path: the ball centre in the table frame, mm, "
+                                            "X,Y,Z (default: the machine file's).")
+@click.option("--there-and-back", "back", is_flag=True,
+              help="With --path: run each path there and back, so that every axis reverses "
+                   "(what a reversal error, backlash, needs to be seen).")
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
+@click.option("--mode", type=click.Choice(MODES), default="tcpm", show_default=True,
+              help="tcpm: the control's kinematics (FUNCTION TCPM / TRAORI); axes: compgen's.")
+@click.option("-o", "--output", type=FILE, default=None,
+              help="Program file; its pose list goes beside it as <stem>.poses.csv. Default: stdout.")
+@FORCE
+def measure_program_cmd(machine_file, path_names, poses_file, ball, back, controller_name, mode, output,
+                        force):
+    """Write an R-test measurement program for the control, checked against travel and feed."""
+    machine = load_machine(machine_file)
+    if bool(path_names) == bool(poses_file):
+        raise CompgenError("give either --path or --poses")
+    if (ball or back) and poses_file:
+        raise CompgenError("--ball and --there-and-back go with --path: a pose list gives its own "
+                           "poses and ball")
+    if poses_file:
+        poses, label = read_poses(poses_file, machine), Path(poses_file).stem
+    else:
+        names = named_paths(machine, path_names)
+        poses = generate(machine, names, ball=vec3(ball, "--ball") if ball is not None else None, back=back)
+        label = "+".join(names) + "_BACK" * back
+    ctl = controller(controller_name or machine.controller)
+    output = None if output == STDOUT else output      # -o - is stdout, as no -o
+    name = program_name(Path(output).stem if output else f"RTEST_{label}"[:NAME_MAX])
+    emitted = measure_program(machine, poses, label, ctl.name, mode, name, __version__,
+                              date.today().isoformat(), Path(output).stem if output else None)
+    program = emitted.files[ctl.program_ext]
+    if not output:
+        click.echo(program, nl=False)
+        click.echo("compgen: the pose list was not written" + "".join(f" (nor {name}{k}, which the program "
+                                                                      "shows its messages from)"
+                                                                      for k in sorted(emitted.named))
+                   + "; give -o FILE to get it beside the program", err=True)
+        return
+    out = Path(output)
+    files = emitted.paths(out, name, ctl.program_ext)
+    write_all(files, force, inputs=(machine_file, poses_file))
+    click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, {mode} mode, "
+               f"{ctl.words}", err=True)
+
+
+@main.command("probe-program")
+@MACHINE
+@click.option("--path", "path_names", required=True,
+              help="K1, K2, K4, a comma list, or 'all': paths of the machine file, each probed at "
+                   "[probe] poses of its poses.")
+@click.option("--ball", default=None, help="The sphere's centre in the table frame, mm, X,Y,Z (default: "
+                                            "the machine file's [rtest] ball).")
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
+@click.option("-o", "--output", type=FILE, required=True,
+              help="Program file; its pose list goes beside it as <stem>.poses.csv (HEIDENHAIN: and the "
+                   "F-PRINT format files <stem>_<path>.A).")
+@FORCE
+def probe_program_cmd(machine_file, path_names, ball, controller_name, output, force):
+    """Write a probing program: a touch probe on the calibration sphere at each pose, every
+    touch logged on the control as a probe log v1; checked with the probe in the set-up."""
+    machine = load_machine(machine_file)
+    names = named_paths(machine, path_names)
+    poses = probe_poses(machine, names, vec3(ball, "--ball") if ball is not None else None)
+    ctl = controller(controller_name or machine.controller)
+    out = Path(output)
+    name = program_name(out.stem, room=4)
+    emitted = probe_program(machine, poses, "+".join(names), ctl.name, name, __version__,
+                            date.today().isoformat())
+    files = emitted.paths(out, name, ctl.program_ext)
+    write_all(files, force, inputs=(machine_file,))
+    click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, "
+               f"{machine.probe.touches} touches "
+               f"each, {ctl.words}; check it: {me()} check-program --machine {shlex.quote(machine_file)} "
+               f"{shlex.quote(str(out))}"
+               + (" --mode axes" if not ctl.tcp_switchable else ""), err=True)
+
+
+@main.command("check-program")
+@MACHINE
+@click.argument("program", type=FILE)
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. Default: from the file's suffix.")
+@click.option("--ball", default=None,
+              help="The ball centre in the table frame, mm, X,Y,Z (default: the one the program's "
+                   "header names, else the machine file's).")
+@click.option("--mode", type=click.Choice(MODES), default=None,
+              help="LinuxCNC: the kinematics the configuration runs the program under (tcpm: trt "
+                   "kinematics; axes: identity). The other controls' programs switch TCP themselves.")
+@click.option("--json", "as_json", is_flag=True, help="Print the check as JSON.")
+def check_program_cmd(machine_file, program, controller_name, ball, mode, as_json):
+    """Simulate PROGRAM block by block against the R-test set-up, travel and feeds."""
+    machine = load_machine(machine_file)
+    ctl = controller(controller_name) if controller_name else for_program(Path(program).suffix, machine)
+    if mode is not None and ctl.tcp_switchable:
+        raise CompgenError(f"--mode is for controls whose configuration decides TCP; {ctl.words} programs "
+                           "switch it themselves", hint="leave --mode out")
+    text = read_text(program, "program", ansi_ok=True)[0]
+    header = None if ball is not None else program_ball(text)   # --ball overrides the header
+    at, source = ((vec3(ball, "--ball"), "--ball") if ball is not None else
+                  (header, "the program's header") if header is not None else
+                  (machine.ball, "the machine file"))
+    blocks = ctl.blocks(text, mode)
+    probing = any(b.probe for b in blocks)     # a probing program: the probe and its sphere
+    if probing:
+        machine = with_sphere(machine)
+    result = ctl.check(at_ball(machine, at), blocks, probe=machine.probe if probing else None)
+    if as_json:
+        click.echo(json.dumps({
+            "format": "compgen.check/1", "program": program, "controller": ctl.name,
+            "ok": not result.findings,
+            "ball_mm": list(at), "ball_from": source, "moves": result.blocks, "seconds": result.seconds,
+            "closest_mm": result.closest_mm, "closest_at": result.closest_at,
+            "findings": [{**f.__dict__, "text": f.text(program)} for f in result.findings]},
+            indent=2, ensure_ascii=False))
+        if result.findings:
+            raise SystemExit(1)
+        return
+    for finding in result.findings:
+        click.echo(finding.text(program))
+    where = f"ball at {', '.join(f'{v:g}' for v in at)} mm (from {source})"
+    if result.findings:
+        click.echo(f"{program}: checked with the {where}", err=True)
+        raise SystemExit(1)
+    click.echo(f"{program}: OK ({ctl.words}): {result.blocks} moves, about {result.seconds / 60:.1f} min; "
+               f"closest approach {result.closest_mm:.1f} mm ({result.closest_at}); {where}")
+
+
+@main.command("kinematics")
+@click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
+@click.option("--current", type=FILE, multiple=True,
+              help="The control's current state: the iTNC 530 description table (*.TAB); the SINUMERIK "
+                   "record's $TC_CARR lines, and its CEC tables' file as a second --current; "
+                   "LinuxCNC's INI (its HAL files and joint tables are read from it).")
+@click.option("--measured-with", "measured", type=FILE, multiple=True,
+              help="The control's state while the data were measured, if it is not --current "
+                   "(part of a correction already loaded): the edit writes the rest. Repeatable.")
+@click.option("-o", "--output", type=FILE, required=True,
+              help="Main file (the new table, the change list or the .MPF); the sign check and any "
+                   "tables go beside it with the same stem.")
+@FORCE
+@click.option("--despite-gate", "despite", is_flag=True,
+              help="Write the edit although the fit does not explain its data (said on the terminal, in the "
+                   "edit's header and in the history).")
+@click.option("--beyond-limits", "beyond", is_flag=True,
+              help="Write corrections larger than the machine file's [limits].")
+@RECORD
+@DATE
+@DB
+def kinematics_cmd(base, controller_name, current, measured, output, force, despite, beyond, record, taken,
+                   db):
+    """Write the controller's kinematics edit for a fit, with a sign check and a backup step."""
+    fit = load_fit(base)
+    machine, sets = reload(fit)
+    ctl = controller(controller_name or machine.controller)
+    for given in (current, measured):
+        if len(given) > 1 and not ctl.state_files:
+            raise CompgenError(f"{ctl.words} reads its state from one file; {len(given)} were given",
+                               hint=f"give --current (and --measured-with) once: {ctl.backup}")
+    text = read_state(current) if current else None
+    progress("checking that the fit explains its data")
+    reasons = gate_edit(machine, sets, fit, base, despite)
+    if reasons:
+        warn("writing an edit despite the fit gate: " + "; ".join(reasons))
+    out = Path(output)
+    name = program_name(out.stem, room=len("_SIGN"))
+    emitted = kinematics_edit(machine, fit, ctl.name, text, ", ".join(current), name, __version__,
+                              date.today().isoformat(), beyond,
+                              read_state(measured) if measured else None, out.stem, ", ".join(measured),
+                              str(out.absolute().parent), despite=tuple(reasons))
+    main_key = ctl.main_suffix(text)
+    files = emitted.paths(out, name, main_key)
+    if len(current) == 1 and main_key in emitted.files:   # the edited state keeps its encoding
+        files[out] = encoded_like(current[0], files[out])
+    written = {str(p): sha256_of(body) for p, body in files.items()}
+    recorded = None
+    if record:         # refused before anything is written: a fit's correction is recorded once
+        from ..history import Recorded, record_edit, record_fit, refuse_second_edit, taken_at
+        taken = taken_at(taken)      # before a store is opened (or made) for it
+        store = history_store(db)
+        try:
+            refuse_second_edit(store, fit, machine, written, None)
+        except Recorded as exc:
+            recorded = exc.message
+    write_all(files, force, inputs=(base, *current, *measured, machine.source, *(d.file for d in fit.data)))
+    click.echo("\n".join(emitted.notes))
+    click.echo("wrote " + ", ".join(str(p) for p in files))
+    if record and recorded is None:
+        record_fit(store, fit, machine, taken=taken, verdict=reasons, exist_ok=True)
+        try:
+            eid = record_edit(store, fit, machine, ctl.name, corrected_by(machine, fit, ctl), written,
+                              {p: sha256_of(read_text(p, "state file", ansi_ok=True)[1]) for p in current},
+                              taken=taken)
+            recorded = f"recorded the edit as #{eid}"
+        except Recorded as exc:
+            recorded = exc.message
+    if record:
+        click.echo(f"{recorded} in {store.where}")
+
+
+@main.command("compare")
+@click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
+@click.option("--post", "post_files", type=FILE, multiple=True,
+              help="R-test data measured after the edit (CSV v1). Repeatable.")
+@click.option("--json", "as_json", is_flag=True, help="Print the comparison as JSON.")
+def compare_cmd(base, controller_name, post_files, as_json):
+    """What the kinematics edit will achieve, and, with --post data, whether it did."""
+    fit = load_fit(base)
+    machine, sets = reload(fit)
+    post = [read_data(p, machine, fit.sign, warn) for p in post_files]
+    result = compare(machine, sets, fit, controller_name or machine.controller, post)
+    click.echo(json.dumps(result.to_dict(), indent=2, ensure_ascii=False) if as_json
+               else result.report(), nl=as_json)
+
+
+@main.command("checklist")
+@MACHINE
+@click.option("--dir", "folder", type=click.Path(file_okay=False), default=".", show_default=True,
+              help="Work folder whose artefacts tick the steps.")
+@click.option("--json", "as_json", is_flag=True, help="Print the checklist as JSON.")
+def checklist_cmd(machine_file, folder, as_json):
+    """The commissioning checklist as Markdown, ticked from the files in --dir."""
+    machine = load_machine(machine_file)
+    steps = checklist(machine, folder)
+    if as_json:
+        click.echo(json.dumps({"format": "compgen.checklist/1", "machine": machine.name,
+                               "steps": [s.__dict__ for s in steps]}, indent=2, ensure_ascii=False))
+        return
+    click.echo(markdown(machine, steps), nl=False)
+
+
+@main.command("report")
+@click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. For the predicted comparison. Default: the machine file's.")
+@click.option("--post", "post_files", type=FILE, multiple=True, help="R-test data after the edit.")
+@click.option("--before", type=FILE, default=None, help="An earlier fit of the same data, for the plots.")
+@click.option("--emitted", "emitted", type=FILE, multiple=True,
+              help="Files sent to the control, listed with their checksums. Repeatable.")
+@click.option("--dir", "folder", type=click.Path(file_okay=False), default=None,
+              help="Work folder for the checklist (default: the fit file's folder).")
+@click.option("--history", "with_history", is_flag=True,
+              help="Add the machine's history from the store (--db): trend plots and the last edits.")
+@DB
+@OUTPUT
+@FORCE
+def report_cmd(base, controller_name, post_files, before, emitted, folder, with_history, db, output, force):
+    """One self-contained HTML report: fit, diagnose, plots, comparison, files, checklist."""
+    from .plots import figures  # matplotlib only when asked for
+    fit = load_fit(base)
+    machine, sets = reload(fit)
+    for path in emitted:
+        read_text(path, "file", ansi_ok=True)   # a missing file fails before anything is drawn
+    post = [read_data(p, machine, fit.sign, warn) for p in post_files]
+    progress("1/3 diagnose")
+    found = diagnose(machine, sets, fit, fit_file=base, advisor=Advisor)
+    progress("2/3 compare")
+    comparison = compare(machine, sets, fit, controller_name or machine.controller, post)
+    progress("3/3 plots")
+    images = figures(machine, sets, fit, load_fit(before) if before else None, found)
+    steps = checklist(machine, folder or Path(base).parent, comparison.to_dict())
+    past = png = None
+    if with_history:
+        from ..history import trend
+        from .plots import trend_png
+        past = trend(history_store(db, create=False), machine)
+        png = trend_png(past)
+    html = report_html(machine, fit, found, images, comparison, emitted, steps, __version__,
+                       date.today().isoformat(), past, png)
+    write_atomically(output, html, force, inputs=(base, before, *post_files, *emitted))
+    said(output, f"wrote {output}")
+
+
+@main.command("effects")
+@MACHINE
+@click.option("--json", "as_json", is_flag=True, help="Print the catalogue as JSON.")
+def effects_cmd(machine_file, as_json):
+    """List every effect the machine can carry, with the names `fit --model` accepts."""
+    machine = load_machine(machine_file)
+    default = set(location_model(machine))
+    if as_json:
+        click.echo(json.dumps({"format": "compgen.effects/1", "machine": machine.name, "effects": [
+            {"effect": e.name, "parameters": list(e.params), "unit": e.unit, "words": e.words,
+             "cause": e.cause, "default": e.name in default} for e in catalogue(machine)]},
+            indent=2, ensure_ascii=False))
+        return
+    for e in catalogue(machine):
+        mark = "*" if e.name in default else " "
+        click.echo(f"{mark} {e.name:<14}{', '.join(e.params):<27} {e.words}")
+    click.echo("\n* in the default model")
+
+
+
+main.add_command(history_cmd)
+main.add_command(check_cmd)

@@ -1,0 +1,147 @@
+"""What every command shares: one line for every refusal (exit 2), the options, small
+readers of option values. The commands are cli.py's and cli_history.py's."""
+
+
+from __future__ import annotations
+
+import os
+import sys
+
+import click
+
+from .. import called_as, me
+from ..controllers.registry import CONTROLLERS
+from ..errors import CompgenError, one_line
+from ..files import STDOUT, new_command, read_text
+from ..model.machine import identifier
+from ..units import number
+
+
+class Failed(click.ClickException):
+    exit_code = 2
+
+    def show(self, file=None):
+        click.echo(f"compgen: error: {one_line(self.message)}", err=True)
+
+
+class Internal(Failed):
+    exit_code = 3
+
+
+class Group(click.Group):
+    """Turns every CompgenError into one line on stderr and exit code 2."""
+
+    def main(self, *args, **kwargs):
+        # usage lines and hints name compgen so that, pasted into bash, it is compgen that runs
+        called_as(sys.argv[0], sys.executable)
+        kwargs["prog_name"] = me() if kwargs.get("prog_name") in (None, "compgen") else kwargs["prog_name"]
+        standalone = kwargs.pop("standalone_mode", True)
+        try:
+            return super().main(*args, standalone_mode=False, **kwargs)
+        except click.UsageError as exc:    # one line too, with the way to the usage
+            if not standalone:
+                raise
+            command = f"{exc.ctx.command_path} --help" if exc.ctx else f"{me()} --help"
+            click.echo(f"compgen: error: {one_line(exc.format_message())} (see {command})", err=True)
+            sys.exit(exc.exit_code)
+        except click.ClickException as exc:
+            if not standalone:
+                raise
+            exc.show()
+            sys.exit(exc.exit_code)
+        except click.Abort:
+            if not standalone:
+                raise
+            click.echo("Aborted!", err=True)
+            sys.exit(1)
+
+    def invoke(self, ctx):
+        new_command()
+        try:
+            done = super().invoke(ctx)
+            sys.stdout.flush()           # a full disk or a closed pipe shows here, not at exit
+            return done
+        except BrokenPipeError:          # `compgen effects | head -1`: ordinary use, quietly done
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            raise SystemExit(0) from None
+        except CompgenError as exc:
+            raise Failed(str(exc)) from None
+        except OSError as exc:           # the system's refusal (a full disk, no permission): not a bug
+            raise Failed(f"{exc.filename or 'standard output'}: {exc.strerror or exc}") from None
+        except (click.exceptions.Exit, click.ClickException, click.Abort, SystemExit, KeyboardInterrupt):
+            raise
+        except Exception as exc:     # a bug of compgen's: one line, and the way to the details
+            if os.environ.get("COMPGEN_DEBUG"):
+                raise
+            raise Internal(f"internal error ({type(exc).__name__}: {exc}); this is a bug in compgen. "
+                            "Run again with COMPGEN_DEBUG=1 for the traceback and report it") from None
+
+
+def said(output: str, text: str) -> None:
+    """What a command says once it has written ``output``: on stdout, unless the output
+    itself went there (-o -)."""
+    click.echo(text, err=output == STDOUT)
+
+
+def warn(message: str) -> None:
+    click.echo(f"compgen: warning: {message}", err=True)
+
+
+def progress(message: str) -> None:
+    """One line on stderr before work that can take seconds, for a person at a terminal
+    (a pipe or a script gets nothing)."""
+    if sys.stderr.isatty():
+        click.echo(f"compgen: {message} ...", err=True)
+
+
+FILE = click.Path(dir_okay=False)
+CONTROLLER_NAMES = " | ".join(CONTROLLERS)
+MACHINE = click.option("--machine", "machine_file", type=FILE, required=True,
+                       help="Machine file (TOML), or a bundled machine by name: ac-trunnion-itnc530, "
+                            "bc-table-sinumerik840d.")
+OUTPUT = click.option("-o", "--output", type=FILE, required=True, help="File to write.")
+FORCE = click.option("--force", is_flag=True, help="Overwrite an existing output file.")
+DB = click.option("--db", default=None, metavar="STORE",
+                  help="The history store: an SQLite file (default: $COMPGEN_DB, else "
+                       "compgen-history.sqlite here) or postgresql://user@host/db.")
+SERIAL = click.option("--serial", default=None, help="The machine's serial (default: the machine file's).",
+                      callback=lambda _c, _p, v: v and identifier("serial", v, "--serial"))
+RECORD = click.option("--record", is_flag=True, help="Also record it in the machine's history (--db).")
+DATE = click.option("--date", "taken", default=None,
+                    help="With --record: when the data were measured or the edit written (ISO 8601; "
+                         "default now).")
+
+
+def encoded_like(source: str, body: str) -> str | bytes:
+    """A file edited from a user's ANSI (Latin-1) file goes back in Latin-1: a control's
+    export stays what the control reads. UTF-8 (and ASCII) files stay UTF-8."""
+    raw = read_text(source, "state file", ansi_ok=True)[1]
+    try:
+        raw.decode("utf-8")
+        return body
+    except UnicodeDecodeError:
+        try:
+            return body.encode("latin-1")
+        except UnicodeEncodeError as exc:
+            raise CompgenError(f"the edit holds {body[exc.start]!r}, which the Latin-1 file {source} "
+                               "cannot hold", hint="report this: compgen writes ASCII into tables") from None
+
+
+def sha256_of(body: str | bytes) -> str:
+    import hashlib
+    return hashlib.sha256(body.encode() if isinstance(body, str) else body).hexdigest()
+
+
+def named_paths(machine, text: str) -> list[str]:
+    """--path: a comma list of the machine file's paths, or 'all'."""
+    if text.strip().lower() == "all":
+        return list(machine.paths)
+    return [p.strip() for p in text.split(",") if p.strip()]
+
+
+def vec3(text: str, option: str) -> list[float]:
+    parts = text.split(",")
+    if len(parts) != 3:
+        raise CompgenError(f"{option} takes three numbers X,Y,Z in mm, not {text!r}")
+    return [number(x, f"{option} {'XYZ'[k]}", "") for k, x in enumerate(parts)]
+

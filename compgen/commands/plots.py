@@ -1,0 +1,224 @@
+"""PNG plots of a fit: measured vs model along each path (as the seed's figures 7–9), and
+residual against each axis's position (rotary: angle; linear: where a scale or screw error
+shows its pitch), with the residual's strongest line against it; an earlier fit of the same
+data drawn beside."""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")   # files only: no display on a machine-side laptop or CI
+# a machine's name, a path label or a serial is text, never mathtext: "$x_1$" in a name is
+# drawn as written (a lone "$" would otherwise stop the plot); compgen's own labels use none
+matplotlib.rcParams["text.parse_math"] = False
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ..controllers.advice import Measurement  # noqa: E402
+from ..data.rtest import Measurements, RTestData  # noqa: E402
+from ..errors import CompgenError, one_line  # noqa: E402
+from ..model.effects import effect_of_param, resolve  # noqa: E402
+from ..model.kinematics import Poses  # noqa: E402
+from ..model.machine import Machine  # noqa: E402
+from ..statistics.diagnose import Diagnosis  # noqa: E402
+from ..statistics.identify import fitted  # noqa: E402
+from ..statistics.results import FitResult  # noqa: E402
+from ..statistics.signature import columns  # noqa: E402
+from ..statistics.spectrum import MIN_PITCH_MM  # noqa: E402
+from ..units import shown  # noqa: E402
+
+DIRECTIONS = ("dX", "dY", "dZ")
+# rivals may lie on each other: each is drawn in its own colour, line style and marker
+STYLES = ("-", "--", ":", "-.")
+MARKERS = ("o", "s", "^", "v", "D", "x")
+ON_EACH_OTHER_UM = 0.01   # two curves closer than this everywhere are said to coincide
+DRAWN = 4000              # points a series draws at most: a dense session's are thinned evenly (the
+                          # figures' numbers, RMS and fits, always use every reading)
+
+
+def _drawn(index: np.ndarray) -> np.ndarray:
+    """The poses of ``index`` a series draws: all, or every k-th where there are more than
+    ``DRAWN`` (a plot of 289 000 dots shows what one of 4000 shows, 70 times slower)."""
+    return index[::-(-len(index) // DRAWN)] if len(index) > DRAWN else index
+
+
+def _thinned(n: int) -> str:
+    return f" (every {-(-n // DRAWN)}th of {n} readings drawn)" if n > DRAWN else ""
+
+
+def write_plots(folder: str | Path, machine: Machine, data: Sequence[RTestData], fit: FitResult,
+                before: FitResult | None = None, found: Diagnosis | None = None) -> list[Path]:
+    """Write the plots into ``folder`` (made if missing); returns the files written."""
+    folder = Path(folder)
+    images = figures(machine, data, fit, before, found)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CompgenError(f"cannot make the plot folder: {exc.strerror}", where=str(folder)) from None
+    written = []
+    for name, png in images.items():
+        path = folder / name
+        tmp = path.with_name(f".{path.name}.tmp")
+        tmp.write_bytes(png)
+        tmp.replace(path)
+        written.append(path)
+    return written
+
+
+def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
+            before: FitResult | None = None, found: Diagnosis | None = None) -> dict[str, bytes]:
+    """PNG images by file name: measured vs model per path, residual vs each axis per path
+    (a linear axis where the data move it ``MIN_PITCH_MM`` or more; the title names the
+    strongest line ``found`` saw against it), and, when ``found`` has rivals, what each
+    would leave on the measurement that tells them apart."""
+    if before is not None and [d.sha256 for d in before.data] != [d.sha256 for d in fit.data]:
+        raise CompgenError("--before must be a fit of the same data files",
+                           hint="compare fits made from the same R-test session")
+    joined = Measurements.concat(data)
+    poses, measured = joined.poses, joined.deviation * 1e3
+    model = fitted(machine, fit, data) * 1e3         # with the start sides it fitted, if any
+    earlier = fitted(machine, before, data) * 1e3 if before else None
+    label = f"model ({len(fit.model)} parameters)"
+    images = {}
+    for path in dict.fromkeys(poses.path):
+        sel = np.flatnonzero(poses.path == path)
+        shown_at = _drawn(np.arange(len(sel)))
+        at = sel[shown_at]
+        fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
+        for k, ax in enumerate(axes):
+            ax.plot(shown_at, measured[at, k], ".", ms=3, color="0.25", label="measured")
+            if earlier is not None:
+                ax.plot(shown_at, earlier[at, k], "--", color="tab:orange",
+                        label=f"before ({len(before.model)} parameters)")
+            ax.plot(shown_at, model[at, k], "-", color="tab:blue", label=label)
+            ax.set_ylabel(f"{DIRECTIONS[k]} (µm)")
+            ax.grid(alpha=0.3)
+        name = one_line(machine.name)
+        axes[0].set_title(f"{path or 'data'}: measured vs model, {name}{_thinned(len(sel))}",
+                          fontsize=10)
+        axes[0].legend(loc="best", fontsize=8)
+        axes[-1].set_xlabel("pose")
+        images[f"measured-vs-model-{_safe(path)}.png"] = _png(fig)
+    paths = list(dict.fromkeys(poses.path))
+    everywhere = _drawn(np.arange(len(poses)))
+    thinned = _thinned(max(np.sum(poses.path == p) for p in paths))
+    for axis in machine.axes:     # rotary: per revolution; linear: scale and screw periods
+        where = poses.q[:, machine.index(axis.name)]
+        where = np.degrees(where) if axis.rotary else where
+        if not axis.rotary and np.ptp(where) < MIN_PITCH_MM:
+            continue
+        fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
+        for k, ax in enumerate(axes):
+            if earlier is not None:
+                ax.plot(where[everywhere], measured[everywhere, k] - earlier[everywhere, k], ".", ms=2,
+                        color="0.7", label=f"before: RMS {before.residual['rms_um']:.2f} µm")
+            for i, path in enumerate(paths):        # a path that holds the axis still is a column
+                sel = np.flatnonzero(poses.path == path)
+                res = measured[sel, k] - model[sel, k]
+                at = _drawn(np.arange(len(sel)))
+                ax.plot(where[sel[at]], res[at], ".", ms=2, color=f"C{i % 10}",
+                        label=f"{path or 'data'}: RMS {np.sqrt((res**2).mean()):.2f} µm")
+            ax.set_ylabel(f"{DIRECTIONS[k]} (µm)")
+            ax.grid(alpha=0.3)
+        line = next((x for x in (found.lines if found is not None else ()) if x.against == axis.name), None)
+        axes[0].set_title(f"residual against {axis.name} per path, {one_line(machine.name)}{thinned}"
+                          + (f"\nstrongest line: {line.text()}" if line is not None else ""), fontsize=9)
+        axes[0].legend(loc="best", fontsize=8)
+        axes[-1].set_xlabel(f"{axis.name} ({'deg' if axis.rotary else 'mm'})")
+        images[f"residual-vs-{axis.name}.png"] = _png(fig)
+    if found is not None and found.rivals and found.rivals_separated_by:
+        images["rivals.png"] = _rivals(machine, poses, fit, found, measured - model)
+    return images
+
+
+def _rivals(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosis, residual: np.ndarray) -> bytes:
+    extra = found.rivals_separated_by[0]
+    curves = rival_curves(machine, poses, fit, found, extra)
+    labels = {}
+    for name, (_, after) in curves.items():   # say so where two lie on each other there
+        same = [o for o in labels if np.abs(curves[o][1] - after).max() < ON_EACH_OTHER_UM]
+        labels[name] = name + (f" (= {', '.join(same)} on {extra.label})" if same else "")
+    fig, axes = plt.subplots(3, 2, figsize=(12, 7), sharex="col", gridspec_kw={"width_ratios": [3, 1]})
+    for k in range(3):
+        at = _drawn(np.arange(len(residual)))
+        axes[k, 0].plot(at, residual[at, k], ".", ms=2, color="0.6", label="residual")
+        for i, (name, (now, after)) in enumerate(curves.items()):
+            for ax, curve in ((axes[k, 0], now), (axes[k, 1], after)):
+                at = _drawn(np.arange(len(curve)))
+                ax.plot(at, curve[at, k], STYLES[i % len(STYLES)], lw=1.2 + 0.6 * (len(curves) - 1 - i),
+                        color=f"C{i}", marker=MARKERS[i % len(MARKERS)], ms=3,
+                        markevery=(i * 3, 4 + 2 * len(curves)), label=labels[name])
+        axes[k, 0].set_ylabel(f"{DIRECTIONS[k]} (µm)")
+        for ax in axes[k]:
+            ax.grid(alpha=0.3)
+    axes[0, 0].set_title("measured: the rivals explain the misfit alike", fontsize=10)
+    axes[0, 1].set_title(f"{extra.label}:\nwhat each would leave", fontsize=9)
+    axes[0, 0].legend(loc="best", fontsize=7)
+    axes[-1, 0].set_xlabel("pose (measured)")
+    axes[-1, 1].set_xlabel("pose (to measure)")
+    return _png(fig)
+
+
+def rival_curves(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosis,
+                 extra: Measurement) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """For the best candidate and each rival at its fitted size: the misfit (µm, (n, 3)) the
+    fit's model leaves of it on the measured poses, and the misfit it would leave on
+    ``extra`` once that is measured too (first order): alike on the first, apart on the
+    second when ``extra`` tells them apart."""
+    model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
+    both = Poses.concat([poses, extra.poses])
+    J = columns(machine, both, model_effects)
+    Q_now = np.linalg.qr(J[:3 * len(poses)])[0]
+    Q_both = np.linalg.qr(J)[0]
+    out = {}
+    for c in found.candidates:
+        if c.effect not in (found.significant[0].effect, *found.rivals):
+            continue
+        e = resolve(machine, c.effect)
+        v = columns(machine, both, [e]) @ (np.array(c.amplitude) / shown(1.0, e.unit)[0])
+        now = v[:3 * len(poses)] - Q_now @ (Q_now.T @ v[:3 * len(poses)])
+        after = (v - Q_both @ (Q_both.T @ v))[3 * len(poses):]
+        out[c.effect] = (now.reshape(-1, 3) * 1e3, after.reshape(-1, 3) * 1e3)
+    return out
+
+
+def _safe(label: str) -> str:
+    return "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in label) or "data"
+
+
+def _png(fig) -> bytes:
+    buffer = io.BytesIO()
+    fig.tight_layout()
+    fig.savefig(buffer, format="png", dpi=110)
+    plt.close(fig)
+    return buffer.getvalue()
+
+
+def trend_png(t) -> bytes:
+    """A machine's history (``history.Trend``): each location error's machine value over
+    time with its ±2σ band; edits as vertical lines, flagged fits circled in red."""
+    from datetime import datetime
+
+    n = len(t.params)
+    fig, axes = plt.subplots(n, 1, figsize=(8, 1.8 * n + 0.6), sharex=True, squeeze=False)
+    for ax, name in zip(axes[:, 0], t.params, strict=True):
+        rows = [e for e in t.entries if name in e.values]
+        when = [datetime.fromisoformat(e.taken) for e in rows]
+        v = np.array([shown(e.machine_value(name), e.units[name])[0] for e in rows])
+        s = np.array([shown(e.std[name], e.units[name])[0] for e in rows])
+        unit = shown(1.0, rows[0].units[name])[1] if rows else ""
+        ax.fill_between(when, v - 2 * s, v + 2 * s, alpha=0.25, step=None, label="±2σ")
+        ax.plot(when, v, "o-", ms=3)
+        for e in t.edits:
+            ax.axvline(datetime.fromisoformat(e["taken"]), color="k", ls="--", lw=0.8)
+        bad = [i for i, e in enumerate(rows) if any(f.param == name and f.taken == e.taken for f in t.flags)]
+        if bad:
+            ax.plot([when[i] for i in bad], v[bad], "o", ms=10, mfc="none", mec="red")
+        ax.set_ylabel(f"{name} ({unit})")
+    axes[0, 0].set_title(f"{one_line(t.machine)}: machine values over time (dashed: edits; red: flagged)")
+    fig.autofmt_xdate()
+    return _png(fig)

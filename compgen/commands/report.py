@@ -1,0 +1,50 @@
+"""One self-contained HTML report: fit, diagnosis, plots, comparison, files, checklist."""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+from collections.abc import Sequence
+from pathlib import Path
+
+from ..controllers import template_dir
+from ..model.machine import Machine
+from ..statistics.diagnose import Diagnosis
+from ..statistics.results import FitResult
+from ..units import shown
+from .checklist import Step
+from .compare import Comparison
+
+
+def report_html(machine: Machine, fit: FitResult, diagnosis: Diagnosis, images: dict[str, bytes],
+                comparison: Comparison | None, emitted: Sequence[str], steps: Sequence[Step],
+                version: str, date: str, history=None, history_png: bytes | None = None) -> str:
+    """The report; with ``history`` (a ``history.Trend``) and its plot, the machine's history too."""
+    from jinja2 import Environment, FileSystemLoader, StrictUndefined, select_autoescape
+
+    env = Environment(loader=FileSystemLoader(template_dir()), undefined=StrictUndefined,
+                      autoescape=select_autoescape(["html", "j2"]), trim_blocks=True, lstrip_blocks=True)
+    params = []
+    for name, e in fit.parameters.items():
+        v, unit = shown(e.value, e.unit)
+        s, _ = shown(e.std, e.unit)
+        params.append({"name": name, "value": f"{v:+.3f}", "unit": unit,
+                       "std": "fixed" if e.fixed else f"± {s:.3f}",
+                       "words": fit.descriptions.get(name, "")})
+    n = len(fit.free)
+    corr = [[{"text": f"{fit.correlation[i, j]:+.2f}".replace("-0.00", "+0.00"),
+              "strong": i != j and abs(fit.correlation[i, j]) >= 0.9} for j in range(n)] for i in range(n)]
+    compare_rows = comparison.rows() if comparison is not None else []
+    files = []
+    for path in emitted:
+        raw = Path(path).read_bytes()
+        files.append({"name": Path(path).name, "sha256": hashlib.sha256(raw).hexdigest(),
+                      "bytes": len(raw)})
+    return env.get_template("report/report.html.j2").render(
+        machine=machine, fit=fit, params=params, corr=corr, names=list(fit.free),
+        diagnosis=diagnosis, visible=[c for c in diagnosis.candidates if c.visible][:8],
+        hidden=[c for c in diagnosis.candidates if not c.visible and (not c.silent or c.separated_by)],
+        images={k: base64.b64encode(v).decode("ascii") for k, v in images.items()},
+        comparison=comparison, compare_rows=compare_rows, files=files, steps=steps, version=version,
+        date=date, history={"trend": history, "png": base64.b64encode(history_png).decode("ascii")}
+        if history is not None and history_png else None)

@@ -1,0 +1,143 @@
+"""The measurements compgen may advise, and only those the machine can make.
+
+A measurement is a path of the machine file with the ball somewhere (as now, higher, lower,
+nearer the table's axis or farther out), run one way or there and back. Before one is
+offered it is checked exactly as ``measure-program`` checks the program it would write:
+travel (with the clearance and the safe height), rotary steps and speeds, and the motion
+check against the set-up with the ball where it would stand. What fails is not offered.
+Data from a touch probe get probing programs (``probe-program``: a probe cannot run a path
+there and back, and probes a path at ``[probe] poses`` of its poses).
+"""
+
+from __future__ import annotations
+
+import shlex
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..data.probe import probe_poses
+from ..errors import CompgenError
+from ..model.kinematics import Poses, motion_direction, runs
+from ..model.machine import Machine
+from ..model.paths import generate
+from .probing import probe_program
+from .programs import measure_program
+from .registry import controller
+
+# Where the ball may go for a further measurement: (label, file-name tag, ball scale in
+# x, y; dz mm; there and back). A tilt of an axis scales with radius and height, an offset
+# or an axial error motion does not; a reversal shows only where an axis turns back.
+PLACES = (
+    ("", "", 1.0, 0.0, False),
+    (" there and back", "BACK", 1.0, 0.0, True),
+    (" with the ball 100 mm higher", "UP100", 1.0, 100.0, False),
+    (" with the ball 100 mm lower", "DOWN100", 1.0, -100.0, False),
+    (" with the ball at half its radius", "HALFR", 0.5, 0.0, False),
+    (" with the ball 50 mm higher", "UP50", 1.0, 50.0, False),
+    (" with the ball 50 mm lower", "DOWN50", 1.0, -50.0, False),
+    (" with the ball at 1.5 times its radius", "R150", 1.5, 0.0, False),
+)
+MODE = "tcpm"      # measure-program's default: the command printed does not name a mode
+
+
+@dataclass(frozen=True, eq=False)
+class Measurement:
+    """A measurement that could be added: a path of the machine file with the ball at
+    ``ball`` (mm, table frame, as a CSV's bx, by, bz), run there and back or not, and its
+    poses. ``name`` is the file stem its program and data are advised under."""
+
+    label: str
+    path: str
+    ball: tuple[float, float, float]
+    poses: Poses
+    back: bool = False
+    name: str = ""
+    device: str = "rtest"        # "probe": made with a touch probe (probe-program)
+
+    def to_dict(self) -> dict:
+        return {"label": self.label, "path": self.path, "ball": [round(v, 4) for v in self.ball],
+                "there_and_back": self.back, "name": self.name}
+
+    def options(self) -> str:
+        """The options of ``measure-program`` that write it."""
+        ball = ",".join(f"{v:.4f}".rstrip("0").rstrip(".") for v in self.ball)   # as to_dict's
+        return f"--path {self.path} --ball {ball}" + " --there-and-back" * self.back
+
+    def command(self, me: str, machine_ref: str, program_ext: str) -> str:
+        """The whole ``measure-program`` (or ``probe-program``) command, as it runs pasted
+        into bash."""
+        verb = "probe-program" if self.device == "probe" else "measure-program"
+        return (f"{me} {verb} --machine {shlex.quote(machine_ref)} {self.options()} "
+                f"-o {self.name}{program_ext}")
+
+
+class Advisor:
+    """The measurements of one machine not yet made in ``measured``, each checked at most
+    once (a check writes the whole program in memory and moves the machine through it)."""
+
+    def __init__(self, machine: Machine, measured: Poses | None = None, device: str = "rtest"):
+        self.machine = machine
+        self.program_ext = controller(machine.controller).program_ext    # of the commands advised
+        self.candidates = _candidates(machine, measured, device)
+        self._why: dict[str, str | None] = {}
+
+    def why_not(self, m: Measurement) -> str | None:
+        """Why ``measure-program`` would refuse ``m`` on this machine, or None."""
+        if m.label not in self._why:
+            self._why[m.label] = _refusal(self.machine, m)
+        return self._why[m.label]
+
+    def runnable(self, ms, most: int | None = None) -> tuple[Measurement, ...]:
+        """Those of ``ms`` the machine can make, in their order; at most ``most``."""
+        out = []
+        for m in ms:
+            if most is not None and len(out) >= most:
+                break
+            if self.why_not(m) is None:
+                out.append(m)
+        return tuple(out)
+
+
+def _refusal(machine: Machine, m: Measurement) -> str | None:
+    try:
+        if m.device == "probe":
+            probe_program(machine, m.poses, m.path, machine.controller, "ADVICE", "", "")
+        else:
+            measure_program(machine, m.poses, m.path, machine.controller, MODE, "ADVICE", "", "")
+    except CompgenError as exc:
+        return str(exc)
+    return None
+
+
+def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest") -> list[Measurement]:
+    """Every place for every path, less what would leave the travel and what ``measured``
+    holds already (same path, same ball; there and back where the axes turned back)."""
+    ball = np.asarray(machine.ball, dtype=float)
+    done, turned = set(), set()
+    if measured is not None:
+        # path and ball hold within a run: one look per run, not per pose
+        run = runs(measured)
+        first = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+        where_ = [(str(measured.path[i]), tuple(np.round(measured.ball[i], 3))) for i in first]
+        done = set(where_)
+        for a in machine.rotary_axes:
+            d = motion_direction(measured.q[:, machine.index(a.name)], run)
+            back = np.add.reduceat(d > 0, first) & np.add.reduceat(d < 0, first)     # both ways in a run
+            turned |= {w for w, both in zip(where_, back, strict=True) if both}
+    out = []
+    for where, tag, scale, dz, back in PLACES:
+        if back and device == "probe":
+            continue
+        at = ball * [scale, scale, 1.0] + [0.0, 0.0, dz]
+        for name in machine.paths:
+            if (name, tuple(np.round(at, 3))) in (turned if back else done):
+                continue
+            try:
+                poses = (probe_poses(machine, [name], at) if device == "probe" else
+                         generate(machine, [name], ball=at, back=back))
+            except CompgenError:
+                continue
+            out.append(Measurement(f"{name}{where}", name, tuple(float(v) for v in at), poses, back,
+                                   f"{name}_{tag}" if tag else name, device))
+    return out

@@ -1,0 +1,141 @@
+"""A kinematics edit for any control: the correction plan, the control's own files (its
+module writes them), the sign-check program and the notes every edit carries."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import CompgenError
+from ..model.effects import effect_of_param
+from ..model.kinematics import Model, Poses, inverse
+from ..model.lines import controller_inverse
+from ..model.machine import Machine
+from ..statistics.results import FitResult
+from . import Emitted, ascii_text
+from .base import Controller, EditContext
+from .correction import Plan, lines_text, plan, rest
+from .programs import measure_program, program_name
+from .registry import controller
+
+SIGN_SEEN_UM = 1.0     # a change of the reading an R-test shows for certain at a sign-check pose
+
+
+def sign_check(machine: Machine, p: Plan, ctl: Controller, name: str, version: str,
+               date: str) -> tuple[Emitted, list[str]]:
+    """A short program that turns each rotary axis alone (with the files it names), and the
+    reading change the edit should cause at each pose (after minus before, µm): a wrong sign
+    shows in a minute."""
+    rows, labels = [], []
+    for a in machine.rotary_axes:
+        lo, hi = a.travel
+        for ang in (0.0, 90.0, 180.0, 270.0) if a.full_turn else (max(lo, -90.0), 0.0, min(hi, 90.0)):
+            rot = [np.radians(ang) if b.name == a.name else 0.0 for b in machine.rotary_axes]
+            if rot in rows:            # the zero pose is shared by every axis's sweep
+                continue
+            rows.append(rot)
+            labels.append(f"S{len(rows)}_{a.name}{ang:+.0f}")
+    rot = np.array(rows)
+    ball = np.broadcast_to(machine.ball, (len(rot), 3))
+    q_before = inverse(machine, rot, ball)
+    q_after = controller_inverse(machine, ctl.holds(machine, p).lines, rot, ball)
+    truth = Model(machine, list(p.fit_params))
+    values = np.array(list(p.fit_params.values()))
+    path = np.array(labels, dtype=object)
+    at_poses = Poses(q_before, ball, np.zeros(len(rot)), path)
+    before = truth.relative(at_poses, values)
+    after = truth.relative(Poses(q_after, ball, np.zeros(len(rot)), path), values)
+    change = (after - before) * 1e3
+    # a pose whose reading the edit does not change tests nothing: left out, unless none would
+    seen = np.abs(change).max(axis=1) >= SIGN_SEEN_UM
+    keep = seen if seen.any() else np.ones(len(change), bool)
+    expect = [f"{lab}: dX {c[0]:+.2f}  dY {c[1]:+.2f}  dZ {c[2]:+.2f} um"
+              for lab, c, k in zip(labels, change, keep, strict=True) if k]
+    if not seen.any():
+        expect.append(f"the edit changes no reading by {SIGN_SEEN_UM:g} um or more: this check cannot "
+                      "show its sign")
+    program = measure_program(machine, at_poses.take(np.flatnonzero(keep)), "sign check", ctl.name, "tcpm",
+                              name, version, date,
+                              notes=("expected change of the reading after the edit:", *expect))
+    return program, expect
+
+
+def corrected_by(machine: Machine, fit: FitResult, ctl: Controller) -> dict[str, float]:
+    """The location errors an edit of ``fit`` corrects on ``ctl`` (name → mm or rad): after
+    it is loaded the control should measure each of them less by as much. Offsets of the
+    rotary axes always; their tilts where the control holds tilts; squareness where it
+    holds it; never the ball's or the nest's set-up."""
+    out = {}
+    for n in fit.model:
+        e = effect_of_param(machine, n)
+        if e.basis.kind != "const" or e.carrier in ("ball", "nest"):
+            continue
+        rotary = machine.axis(e.carrier).rotary
+        held = (fit.parameters[n].unit == "mm" or ctl.holds_tilts) if rotary else bool(ctl.squareness_as)
+        if held:
+            out[n] = fit.parameters[n].value
+    return out
+
+
+def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, current: str | None,
+                    current_where: str, name: str, version: str, date: str, force: bool = False,
+                    measured: str | None = None, stem: str | None = None,
+                    measured_where: str = "--measured-with", folder: str = "",
+                    despite: tuple[str, ...] = ()) -> Emitted:
+    """The files of a kinematics edit for one control, with the sign check and notes.
+
+    ``measured`` is the control's state while the data were measured, when it differs from
+    ``current`` (part of a correction already loaded, say): the edit then writes the rest.
+    ``stem``: the file stem its files are written under, where one file names another;
+    ``folder``: the folder they are written to; ``despite``: the fit gate's reasons, where the
+    edit is written although the fit does not explain its data (its header says so).
+    """
+    ctl = controller(controller_name)
+    for text in (current, measured):
+        if text is not None and re.search(rf"\b{fit.marker}\b", text):
+            raise CompgenError(f"the current state already carries this fit's correction ({fit.marker}): "
+                               "applying it again would double it",
+                               hint="measure again and fit the new data; or give the state the data "
+                                    "were measured in with --measured-with")
+    p = plan(machine, fit, force)
+    if measured is not None:
+        if current is None:
+            raise CompgenError("the state the data were measured in only counts against --current",
+                               hint="give --current as well")
+        # the state measured with passes every check --current does, and is this control's:
+        # an edit over it is written (and dropped) before anything is read from it
+        ctl.edit(machine, p, measured, measured_where, EditContext(name, (), (), (), version, date))
+        p = rest(machine, p, ctl.since(machine, measured, current, current_where), force)
+        then, now = (ctl.loaded_tables(machine, s, current_where) for s in (measured, current))
+        if then != now:       # the tables are composed over --current: the data must have seen them
+            raise CompgenError("the compensation tables of --current differ from those the data were "
+                               "measured with: compgen adds this round's tables to the ones loaded while "
+                               "measuring", hint="measure again with the tables now loaded, or give the "
+                                                 "same tables in both")
+    sign_name = program_name(f"{name}_SIGN")
+    signcheck, expect = sign_check(machine, p, ctl, sign_name, version, date)
+    # the sign check and the files it names by its name (NAME_SIGN_MSG.A)
+    named = {f"_SIGN{k}": v for k, v in signcheck.files.items() if k in signcheck.named}
+    header = (f"compgen {version} kinematics edit, {date}",
+              f"machine: {ascii_text(machine.name)}; controller: {ctl.words}",
+              f"from {fit.marker}: machine file {ascii_text(Path(fit.machine['file']).name)}, data "
+              + ", ".join(ascii_text(Path(d.file).name) for d in fit.data),
+              *(f"WRITTEN DESPITE THE FIT GATE: {ascii_text(r)}" for r in despite),
+              "corrections add to the kinematics active while the R-test ran under TCPM/TRAORI",
+              "BACKUP FIRST: " + ctl.backup,
+              f"then run the sign check {sign_name}: see its expected changes")
+    words = lines_text(p)
+    ctx = EditContext(name, header, tuple(words), tuple(expect), version, date, fit.marker, stem or name,
+                      tuple((n, e.std) for n, e in fit.parameters.items()), folder)
+    edit = ctl.edit(machine, p, current, current_where, ctx)
+    notes = [*words]
+    if p.setup:
+        notes.append("left out, set-up not machine: " + ", ".join(p.setup))
+    notes += edit.notes
+    if p.not_compensable:
+        notes.append(f"not compensable on {ctl.words} by compgen: " + ", ".join(p.not_compensable))
+    notes += ["sign check, expected change of the reading after the edit:", *expect]
+    return Emitted({**edit.files, f"_SIGN{ctl.program_ext}": signcheck.files[ctl.program_ext], **named},
+                   tuple(notes), frozenset(named))

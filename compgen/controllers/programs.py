@@ -1,0 +1,363 @@
+"""R-test measurement programs (K1/K2/K4 or any pose list) for HEIDENHAIN and SINUMERIK.
+
+``mode="tcpm"`` programs the ball centre in workpiece coordinates under FUNCTION TCPM /
+TRAORI, so the control's own kinematics moves the linear axes: this tests the control.
+``mode="axes"`` programs machine-axis positions from compgen's inverse kinematics: this
+tests compgen's nominal model. Either way the machine goes to the inverse-kinematics poses,
+and those are checked against travel, step size and feed before anything is written.
+
+References: ``shared/research/controllers.md`` §2 (Klartext), §3.8 (SINUMERIK), §7.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import replace
+
+import numpy as np
+
+from ..data.rtest import BALL, axis_cells, side_columns
+from ..errors import CompgenError
+from ..model.frames import safe_height, world
+from ..model.kinematics import Poses, inverse
+from ..model.machine import Machine, check_ball, check_travel
+from ..model.sides import APPROACH_DEG, program_sides
+from ..setup import motion
+from ..units import number
+from . import Emitted, ascii_text, render
+from .registry import controller
+
+MODES = ("tcpm", "axes")
+LINEAR_DECIMALS = 4       # 0.1 µm
+ANGLE_DECIMALS = 4        # 0.0001°
+
+
+NAME_MAX = 24      # characters of a program name every control here keeps
+# The header line that carries the program's set-up: check-program reads the ball from it
+BALL_HEADER = "ball centre in the table frame:"
+_BALL_LINE = re.compile(re.escape(BALL_HEADER) + r" X([-+]?\d+(?:\.\d+)?) Y([-+]?\d+(?:\.\d+)?) "
+                        r"Z([-+]?\d+(?:\.\d+)?) mm")
+
+
+def program_ball(text: str) -> tuple[float, float, float] | None:
+    """The ball a compgen program was written for (mm, table frame), from its header; None
+    for a program without that line. Two different balls in one header are refused, and so
+    is a header line naming the ball that does not read as one: it is not replaced by the
+    machine file's ball without a word."""
+    for k, line in enumerate(text.splitlines(), start=1):
+        if BALL_HEADER in line and _BALL_LINE.search(line) is None:
+            said = line.split(BALL_HEADER, 1)[1].strip()
+            raise CompgenError(f"line {k}: the header names the ball as {said!r}, not as X… Y… Z… mm: which "
+                               "ball the program was written for is unknown",
+                               hint="give it with --ball X,Y,Z, or the program compgen wrote")
+    found = {tuple(float(v) for v in m.groups()) for m in _BALL_LINE.finditer(text)}
+    if len(found) > 1:
+        raise CompgenError(f"the program's header names {len(found)} ball positions",
+                           hint="give the one it was written for with --ball X,Y,Z")
+    return found.pop() if found else None
+
+
+def at_ball(machine: Machine, ball) -> Machine:
+    """The machine with its R-test ball at ``ball`` (mm, table frame), for everything that
+    checks a program: the datum, the safe height and the set-up's solids."""
+    ball = tuple(float(v) for v in ball)
+    check_ball(machine.setup, ball, "")
+    return machine if ball == tuple(machine.ball) else replace(machine, ball=ball)
+
+
+def program_name(text: str, room: int = 0) -> str:
+    """A name every control accepts: upper-case letters, digits, underscore, a letter first.
+    A name longer than the controls keep (less ``room`` for a suffix compgen adds) is
+    refused, not cut: two cut names could be one program and one pose list."""
+    name = re.sub(r"[^A-Z0-9_]", "_", text.upper()) or "RTEST"
+    name = name if name[0].isalpha() else f"P{name}"
+    if len(name) > NAME_MAX - room:
+        raise CompgenError(f"program name {name} is {len(name)} characters; the control keeps "
+                           f"{NAME_MAX - room}", hint="give a shorter output file name")
+    return name
+
+
+def measure_program(machine: Machine, poses: Poses, label: str, controller_name: str, mode: str,
+                    name: str, version: str, date: str, list_name: str | None = None,
+                    notes: tuple[str, ...] = ()) -> Emitted:
+    """The program text and its pose list (CSV v1 without readings), checked for safety.
+    ``list_name`` is the pose list's file stem, as the user gave it (default ``name``);
+    ``notes``: more lines for the program's header.
+
+    Each path label is a segment with its own approach and retract along machine Z, so a
+    program may chain paths whose ends are far apart.
+    """
+    ctl = controller(controller_name)
+    if mode not in MODES:
+        raise CompgenError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
+    setup = machine.program
+    if setup is None:
+        raise CompgenError(f"machine file {machine.source} has no [program] section",
+                           hint="add tool, feed, dwell and clearance (see the bundled machines)")
+    ctl.check_setup(machine)
+    balls = np.unique(np.round(np.asarray(poses.ball, float), 6), axis=0)
+    if len(balls) > 1:
+        raise CompgenError(f"a program measures one ball position; these poses hold {len(balls)}",
+                           hint="write one program per ball position")
+    machine = at_ball(machine, balls[0])   # datum, safe height and motion check: the ball where it is
+    linear = [machine.index(c) for c in "XYZ"]
+    rotary = [machine.index(a.name) for a in machine.rotary_axes]
+    # the machine executes the angles as written (0.0001 deg): solve X Y Z at exactly those,
+    # or a 300 mm lever would put the nest up to 0.3 µm off the ball
+    angles = np.radians(np.round(np.degrees(poses.q[:, rotary]), ANGLE_DECIMALS))
+    q = inverse(machine, angles, poses.ball)
+    # the program runs the poses in the pose list's order (the R-test's readings come in it),
+    # one segment, with its own approach and retract, per run of one path label
+    segments = np.split(np.arange(len(poses)), np.flatnonzero(poses.path[1:] != poses.path[:-1]) + 1)
+    run = np.repeat(np.arange(len(segments)), list(map(len, segments)))
+    poses = Poses(q, poses.ball, poses.t, poses.path, program_sides(machine, q, run))
+    lift = np.zeros(len(machine.axes))
+    lift[linear[2]] = setup.clearance
+    check_travel(machine, poses.q, label)
+    check_travel(machine, poses.q + lift, f"{label} (clearance {setup.clearance:g} mm above)")
+    for seg in segments:
+        part = poses.take(seg)
+        _check_steps(machine, part, str(part.path[0]) or label)
+        _check_feed(machine, part, setup.feed, str(part.path[0]) or label, mode)
+    safe = safe_height(machine)
+    up = np.zeros(len(machine.axes))
+    up[linear[2]] = safe
+    check_travel(machine, up[None], f"the safe height Z {safe:g} above the rotary axes")
+    steps = _steps(machine, poses, segments, mode, ctl.tcp_switchable, safe, setup.clearance, label)
+    fmt = ctl.number
+    before: dict[str, float] = {}
+    for step in steps:
+        step["words"] = " ".join(ctl.axis_word(n, v, before.get(n), step["kind"] == "feed",
+                                               ANGLE_DECIMALS if n in ROT else LINEAR_DECIMALS, machine)
+                                 for n, v in step.get("axes", {}).items())
+        before.update(step.get("axes", {}))
+    span = {c: (poses.q[:, j].min(), poses.q[:, j].max()) for c, j in zip("XYZ", linear, strict=True)}
+    ball = poses.ball[0]
+    header = [
+        f"compgen {version} R-test measurement program, {date}",
+        f"machine: {ascii_text(machine.name)}; controller: {ctl.words}",
+        (f"mode TCPM: {ctl.tcp_words}, the control's kinematics moves X Y Z (tests the control)"
+         if mode == "tcpm" else
+         "mode AXES: X Y Z from compgen's inverse kinematics (tests compgen's nominal model)"),
+        f"path {ascii_text(label)}: {len(poses)} poses; pose list "
+        f"{ascii_text(list_name or name)}.poses.csv, same order",
+        f"{BALL_HEADER} "
+        + " ".join(f"{c}{fmt(v, LINEAR_DECIMALS)}" for c, v in zip("XYZ", ball, strict=True))
+        + f" mm; nest on tool {setup.tool}",
+        "active preset: the machine file's origin (nominal intersection of the rotary axes)",
+        f"feed {setup.feed:g} mm/min; dwell {setup.dwell:g} s per pose; clearance "
+        f"{setup.clearance:g} mm; safe height Z {safe:g} mm above the rotary axes (from the set-up)",
+        "travel checked: " + ", ".join(f"{c} {lo:.3f}..{hi:.3f}" for c, (lo, hi) in span.items())
+        + " mm; " + ", ".join(f"{a.name} {np.degrees(poses.q[:, j].min()):.3f}.."
+                              f"{np.degrees(poses.q[:, j].max()):.3f}"
+                              for a, j in zip(machine.rotary_axes, rotary, strict=True)) + " deg",
+        "rotary axes turn only at the safe height; the nest moves onto and off the ball along its axis",
+        "first run: single block, feed override low, nest and ball clear of clamps",
+        *(ascii_text(n) for n in notes),
+    ]
+    text = render(f"{ctl.family}/program{ctl.program_ext}.j2", name=name, header=header, mode=mode,
+                  tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}",
+                  dwell=f"{setup.dwell:g}" if setup.dwell else "",
+                  work_offset=setup.work_offset, max_step=f"{machine.limits.max_step_deg:g}",
+                  steps=steps, rotary=[a.name for a in machine.rotary_axes])
+    result = ctl.check(machine, ctl.blocks(text, mode))
+    if result.findings:     # compgen's own safety net: nothing unsafe leaves this function
+        at = ", ".join(f"{v:g}" for v in ball)
+        raise CompgenError(f"the machine cannot run {label} with the ball at {at} mm: {result.first(name)}",
+                           hint="put the ball higher on its stem or nearer the rotary axes, or choose "
+                                "another path; the set-up's solids are the machine file's [rtest]")
+    messages = ctl.message_files(name, [s["note"] for s in steps if s["kind"] == "stop"])
+    return Emitted({ctl.program_ext: text, ".poses.csv": pose_list(machine, poses), **messages},
+                   named=frozenset(messages))
+
+
+ROT = set("ABC")
+# The programs trust the active preset; before the nest first goes down, the operator sees
+# that the ball is where the preset puts it (one line, no ";" or parentheses, under the 124
+# characters a SINUMERIK message shows: every control shows it as a message)
+PRESET_CHECK = ("PRESET CHECK: the nest is {clearance} mm above the ball centre and the ball must be "
+                "centred under it. Start to go on")
+TURN_STEP_DEG = 2.0     # rotary steps at the safe height under TCP: the nest keeps within 0.1 mm
+
+
+def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool, safe: float,
+           clearance: float, label: str) -> list[dict]:
+    """The program as steps any control's template lays out: rapid and feed moves (axis →
+    mm or deg), TCP on and off, dwells, pose markers.
+
+    Rotary axes turn only with the nest at ``safe`` above their intersection; the nest goes
+    onto and off the ball along its own axis. A control that switches TCP in the program
+    does all this with TCP off, in machine axes; one whose TCP is its configuration
+    (LinuxCNC's trt kinematics) gets every point in TCP coordinates, with turns in small
+    steps so that the nest stays where it is.
+    """
+    linear = [machine.index(c) for c in "XYZ"]
+    rotary = [machine.index(a.name) for a in machine.rotary_axes]
+    names = [a.name for a in machine.rotary_axes]
+    tcp_always = mode == "tcpm" and not switchable
+    steps: list[dict] = []
+    state = {"q": None}
+
+    def at(q, rapid=True, note="", pose=None, tcp=tcp_always):
+        """A move to the machine pose ``q`` (nest centre), written in the active frame (TCP
+        coordinates are filled in below, all at once)."""
+        axes = {**dict(zip("XYZ", q[linear], strict=True)),
+                **{n: np.degrees(q[i]) for n, i in zip(names, rotary, strict=True)}}
+        steps.append({"kind": "rapid" if rapid else "feed", "axes": axes, "note": note, "pose": pose,
+                      "q": q if tcp else None})
+        state["q"] = q
+
+    def lifted(q, z):
+        out = q.copy()
+        out[linear[2]] = z
+        return out
+
+    def turn_to(target):
+        """At the safe height: turn the rotary axes to ``target``'s, the nest kept in place."""
+        q = state["q"]
+        delta = np.degrees(np.abs(target[rotary] - q[rotary])).max()
+        n = int(np.ceil(delta / TURN_STEP_DEG)) if tcp_always else 1     # 0: already there
+        for k in range(1, n + 1):
+            step = q.copy()
+            step[rotary] = q[rotary] + (target[rotary] - q[rotary]) * k / n
+            at(step, note="turn at the safe height" if k == n else "")
+
+    start = np.zeros(len(machine.axes))
+    start[linear[2]] = safe
+    if tcp_always:   # TCP coordinates equal machine ones only with the rotary axes at zero
+        steps.append({"kind": "require_zero", "axes": {}})
+    steps.append({"kind": "rapid", "axes": {"Z": safe}, "note": "nest up along its axis to the safe height"})
+    state["q"] = start.copy()
+    state["q"][linear[:2]] = np.nan
+    if tcp_always:
+        at(start, note="above the rotary axes")
+    for seg in segments:
+        first, last = poses.q[seg[0]], poses.q[seg[-1]]
+        steps.append({"kind": "comment", "note": f"---- {ascii_text(str(poses.path[seg[0]]) or label)}: "
+                                                 f"poses {seg[0] + 1} to {seg[-1] + 1}"})
+        # every rotary axis reaches the first pose from the side the pose list declares
+        # (sides.program_sides): where each axis's backlash is at every pose is known
+        before = first.copy()
+        before[rotary] -= poses.side[seg[0], rotary] * np.radians(APPROACH_DEG)
+        for target, note in ((before, f"approach from {APPROACH_DEG:g} deg before"), (first, "")):
+            if not np.isnan(state["q"][linear[:2]]).any():
+                turn_to(target)
+            else:                        # XY not yet known: turn in place at the safe height
+                steps.append({"kind": "rapid", "axes": {n: np.degrees(target[i]) for n, i in
+                                                        zip(names, rotary, strict=True)},
+                              "note": note or "turn at the safe height"})
+                state["q"] = state["q"].copy()
+                state["q"][rotary] = target[rotary]
+        at(lifted(first, safe), note="above the first pose")
+        at(lifted(first, first[linear[2]] + clearance))
+        if seg is segments[0]:      # the preset and the ball, seen before the nest goes down
+            steps.append({"kind": "stop", "note": PRESET_CHECK.format(clearance=f"{clearance:g}")})
+        at(first, rapid=False, note="nest onto the ball, along its axis")
+        if mode == "tcpm" and switchable:
+            steps.append({"kind": "tcp_on"})
+        for i in seg:
+            q = poses.q[i]
+            at(q, rapid=False, pose=f"pose {i + 1} {ascii_text(str(poses.path[i]))}",
+               tcp=mode == "tcpm")    # the ball centre in TCP coordinates
+            steps.append({"kind": "dwell"})
+        if mode == "tcpm" and switchable:
+            steps.append({"kind": "tcp_off"})
+        at(lifted(last, last[linear[2]] + clearance), rapid=False, note="nest off the ball, along its axis")
+        at(lifted(last, safe))
+        if tcp_always:
+            above = last.copy()
+            above[linear] = start[linear]
+            at(above, note="above the rotary axes")
+    if tcp_always:
+        zero = state["q"].copy()
+        zero[rotary] = 0.0
+        turn_to(zero)
+    tcp = [s for s in steps if s.get("q") is not None]
+    if tcp:
+        xyz = world(machine, np.array([s["q"] for s in tcp]))
+        for s, w in zip(tcp, xyz, strict=True):
+            s["axes"].update(zip("XYZ", w, strict=True))
+    return steps
+
+
+def pose_list(machine: Machine, poses: Poses) -> str:
+    """CSV v1 columns without readings: add dX dY dZ from the R-test and it is fit input.
+    Each rotary axis's side at each pose (``A_side``: the direction it last moved, as the
+    program runs the poses) tells fit where its backlash was."""
+    sides = {name: machine.index(axis) for name, axis in side_columns(machine).items()}
+    head = ["path", *machine.axis_names, *BALL, *sides]
+    lines = [",".join(head)]
+    for i in range(len(poses)):
+        lines.append(",".join([ascii_text(str(poses.path[i])), *axis_cells(machine, poses.q[i]),
+                               *(f"{v:.6f}" for v in poses.ball[i]),
+                               *(f"{poses.side[i, j]:+.0f}" for j in sides.values())]))
+    return "\n".join(lines) + "\n"
+
+
+def _check_steps(machine: Machine, poses: Poses, label: str) -> None:
+    limit = machine.limits.max_step_deg
+    for a in machine.rotary_axes:
+        step = np.abs(np.diff(np.degrees(poses.q[:, machine.index(a.name)])))
+        if step.size and step.max() > limit:
+            i = int(step.argmax())
+            raise CompgenError(f"{label}: {a.name} jumps {step[i]:.2f} deg between poses {i + 1} and "
+                               f"{i + 2}, more than max_step_deg = {limit:g}",
+                               hint="add intermediate poses, or raise [limits] max_step_deg")
+
+
+def _check_feed(machine: Machine, poses: Poses, feed: float, label: str, mode: str) -> None:
+    """The axes' speeds between poses at the program's feed. In TCPM mode a pose block keeps
+    the nest where it is in the workpiece and only turns: F is then deg/min (U9), whatever
+    the linear axes do beneath; in axes mode F is along X Y Z, and a turn rides on it."""
+    for a in machine.axes:
+        if not a.rotary and feed > a.feed_max:
+            raise CompgenError(f"[program] feed {feed:g} mm/min exceeds {a.name}'s feed_max {a.feed_max:g}")
+    if mode == "tcpm":
+        for a in machine.rotary_axes:
+            if feed > a.feed_max:
+                raise CompgenError(f"[program] feed {feed:g} (deg/min where a TCPM pose block only turns) "
+                                   f"exceeds {a.name}'s feed_max {a.feed_max:g}", hint="lower [program] feed")
+        return
+    linear = [machine.index(c) for c in "XYZ"]
+    rotary = [machine.index(a.name) for a in machine.rotary_axes]
+    turns = np.abs(np.diff(np.degrees(poses.q[:, rotary]), axis=0))
+    minutes = motion.feed_minutes(np.linalg.norm(np.diff(poses.q[:, linear], axis=0), axis=1),
+                                  turns.max(axis=1, initial=0.0), feed)
+    for k, a in enumerate(machine.rotary_axes):
+        with np.errstate(divide="ignore", invalid="ignore"):    # no move at all: no speed
+            speed = np.where(turns[:, k] > 0, turns[:, k] / minutes, 0.0)
+        if speed.size and speed.max() > a.feed_max * motion.OVER_FEED:
+            i = int(speed.argmax())
+            raise CompgenError(f"{label}: at feed {feed:g} mm/min, {a.name} would turn at "
+                               f"{speed[i]:.0f} deg/min between poses {i + 1} and {i + 2}, above "
+                               f"its feed_max {a.feed_max:g}", hint="lower [program] feed, or measure in "
+                               "tcpm mode (a pose block then only turns, at F deg/min)")
+
+
+def read_program(text: str, machine: Machine, controller_name: str) -> tuple[str, np.ndarray, np.ndarray]:
+    """Parse an emitted program back: (mode, X Y Z per pose (n, 3) mm, rotary (n, r) deg).
+
+    In TCPM mode X Y Z are workpiece coordinates; in axes mode machine-axis positions.
+    """
+    ctl = controller(controller_name)
+    tcpm = ctl.tcpm_on.search(text) is not None
+    xyz, rot, numbers = [], [], []
+    names = [a.name for a in machine.rotary_axes]
+    for line in text.splitlines():
+        m = ctl.pose_line.match(line)
+        if not m:
+            continue
+        sense = ctl.angle_sense(machine)
+        words = {w[0]: sense.get(w[0], 1) * number(re.sub(r"^=(?:ACP|ACN|DC)\((.*)\)$", r"\1", w[1:]),
+                                                   f"pose {m[5]}'s {w[0]}", "program")
+                 for w in m[4].split()}
+        if sorted(words) != sorted(names):
+            raise CompgenError(f"pose {m[5]} names rotary axes {sorted(words)}, the machine {names}")
+        xyz.append([number(m[i], f"pose {m[5]}'s {'XYZ'[i - 1]}", "program") for i in (1, 2, 3)])
+        rot.append([words[a] for a in names])
+        numbers.append(int(m[5]))
+    if not xyz:
+        raise CompgenError("no pose blocks found: not a compgen measurement program")
+    if numbers != list(range(1, len(numbers) + 1)):
+        raise CompgenError("pose numbers are not 1, 2, 3, …: the program was edited")
+    return ("tcpm" if tcpm else "axes"), np.array(xyz), np.array(rot)

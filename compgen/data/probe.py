@@ -1,0 +1,419 @@
+"""Touch-probe logs on a calibration sphere (``docs/probe-log.md``): reading, each pose's
+sphere centre with its covariance, and the checks a metrologist expects before a centre
+is used.
+
+A touch's tip centre lies on the sphere of radius ρ = (sphere + stylus diameter)/2 about
+the true centre. Each pose's centre is the least-squares point on that known radius; the
+trigger noise is pooled over every touch of the log (one probe, one stylus), so a pose's
+covariance s²(JᵀJ)⁻¹ has the log's degrees of freedom, not its own two or three. The
+centre then stands where the nest would have read the ball: its reading, nest minus
+ball, is the commanded (nominal) centre minus the probed one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import CompgenError, one_line
+from ..files import read_text
+from ..model.frames import table_axis_down
+from ..model.kinematics import Poses, inverse
+from ..model.machine import Machine, ProbeSetup
+from ..units import number
+from .rtest import BALL, READING_MAX_MM, RTestData, axis_cells, read_table
+
+MAGIC = "# compgen probe log v1"
+PROBE_FAMILY = "# compgen probe log"
+DIRECTION = ("nx", "ny", "nz")
+MIN_TOUCHES = 4              # a centre on a known radius needs three; one more shows the noise
+FLAT = 0.1                   # touch directions spreading less than this (rms) out of a plane: no centre
+RADIAL_COS = 0.5             # a touch moving more than 60° off the centre did not come radially
+OUTLIER_K, OUTLIER_UM = 5.0, 2.0     # a touch this many σ and µm off its pose's sphere: a bad trigger
+RADIUS_K, RADIUS_UM = 4.0, 2.0       # the touches' sphere this many σ and µm off ρ: a wrong stylus
+ITERATIONS = 8
+NOISELESS_MM = 5e-5           # triggers scattering less (0.05 µm): a simulation; exact repeats are real
+TOUCH_S = 3.0                # s from one touch to the next, as a simulated log times them
+
+
+@dataclass(frozen=True, eq=False)
+class ProbeLog:
+    """A probe log as read: one row per touch, mm and rad, with its CSV line."""
+
+    source: str
+    sha256: str
+    keys: dict[str, str]
+    key_lines: dict[str, int]
+    path: np.ndarray          # (m,) label of each touch
+    pose: np.ndarray          # (m,) pose number
+    rotary: np.ndarray        # (m, r) rad, machine.rotary_axes order
+    tip: np.ndarray           # (m, 3) stylus tip centre at the trigger, machine frame
+    direction: np.ndarray     # (m, 3) unit direction of motion at the trigger
+    t: np.ndarray             # (m,) s, NaN where not recorded
+    ball: np.ndarray          # (m, 3) nominal sphere centre, table frame
+    lines: np.ndarray         # (m,) CSV line of each touch
+
+    @property
+    def radius(self) -> float:
+        """ρ, mm: the tip centre's distance from the sphere's centre at a touch."""
+        return (number(self.keys["sphere_diameter"], "sphere_diameter", self.source)
+                + number(self.keys["stylus_diameter"], "stylus_diameter", self.source)) / 2
+
+
+@dataclass(frozen=True, eq=False)
+class Centres:
+    """The sphere centre of every pose (machine frame, mm) and what backs it."""
+
+    data: RTestData           # the centres as readings: nominal minus probed, with covariance
+    centre: np.ndarray        # (n, 3) mm
+    sigma_um: float           # pooled trigger noise, 1σ per touch
+    dof: int
+    radius_offset_um: float   # the touches' sphere minus ρ, pooled, and its σ
+    radius_sigma_um: float
+    warnings: tuple[str, ...]
+
+
+def is_probe_log(text: str) -> bool:
+    """The first line is the version line, exactly (``v10`` is not ``v1``)."""
+    return text.lstrip("\ufeff").split("\n", 1)[0].rstrip() == MAGIC
+
+
+def read_probe_log(path, machine: Machine) -> ProbeLog:
+    """A probe log v1 for ``machine``, every cell checked; a problem names file and line."""
+    where = str(path)
+    text, _ = read_text(path, "probe log")
+    if not is_probe_log(text):
+        first = one_line(text.lstrip("\ufeff").split("\n", 1)[0].rstrip()[:60])
+        raise CompgenError(f"not a probe log v1: its first line is {first!r}, not {MAGIC!r}",
+                           where=f"{where}:1",
+                           hint="a probing program compgen wrote starts its log with that line; a newer "
+                                "version needs the compgen that wrote it")
+    keys, key_lines = {}, {}
+    for i, line in enumerate(text.splitlines(), start=1):
+        s = line.strip()
+        if s and not s.startswith("#"):
+            break
+        name, eq, value = s.lstrip("#").partition("=")
+        name = name.strip()
+        if eq and i > 1:
+            if name in keys:       # which of two values the probe had is not for compgen to guess
+                raise CompgenError(f"the log's set-up gives {name} twice (line {key_lines[name]} and "
+                                   f"line {i})", where=f"{where}:{i}",
+                                   hint="keep the one the probe was calibrated with")
+            keys[name], key_lines[name] = value.strip(), i
+    for key in ("sphere_diameter", "stylus_diameter"):
+        if key not in keys:
+            raise CompgenError(f"the log's set-up does not give {key} (mm)", where=where,
+                               hint=f"add a comment line '# {key} = VALUE' before the header")
+        v = number(keys[key], key, f"{where}:{key_lines[key]}")
+        if not 0 < v < 1000:
+            raise CompgenError(f"{key} {keys[key]!r} is not a diameter in mm",
+                               where=f"{where}:{key_lines[key]}")
+    if "machine" in keys and keys["machine"] != machine.name:
+        raise CompgenError(f"the log was written for machine {keys['machine']!r}, not {machine.name!r}",
+                           where=f"{where}:{key_lines['machine']}",
+                           hint="give the machine file the log was measured on with --machine")
+    rotary = [a.name for a in machine.rotary_axes]
+    table = read_table(path, machine, ["pose", "X", "Y", "Z", *rotary, *DIRECTION])
+    lines = np.array(table.lines)
+    pose = table.columns["pose"]
+    bad = np.flatnonzero((pose < 1) | (pose != np.round(pose)))
+    if bad.size:
+        raise CompgenError(f"pose {pose[bad[0]]:g} is not a whole number from 1",
+                           where=f"{where}:{lines[bad[0]]}")
+    direction = np.column_stack([table.columns[c] for c in DIRECTION])
+    norm = np.linalg.norm(direction, axis=1)
+    bad = np.flatnonzero(np.abs(norm - 1) > 1e-3)
+    if bad.size:
+        raise CompgenError(f"nx, ny, nz has length {norm[bad[0]]:.4g}, not 1: not a direction",
+                           where=f"{where}:{lines[bad[0]]}", hint="give the unit vector the tip moved along")
+    return ProbeLog(where, table.sha256, keys, key_lines, table.labels, pose.astype(int),
+                    np.radians(np.column_stack([table.columns[a] for a in rotary])),
+                    np.column_stack([table.columns[c] for c in "XYZ"]), direction / norm[:, None],
+                    table.columns.get("t", np.full(len(pose), np.nan)), table.ball(machine), lines)
+
+
+def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
+    """Each pose's centre on the known radius, its covariance from the pooled touch
+    residuals, and every check; a failed check is refused naming the pose and line."""
+    where, rho = log.source, log.radius
+    groups = _poses(log)
+    centres, normals, residuals, warnings = [], [], [], []
+    counts = np.array([len(g) for g in groups])
+    usual = int(np.median(counts))
+    for g in groups:
+        if len(g) < MIN_TOUCHES:
+            raise CompgenError(f"{_at(log, g)} has {len(g)} touch{'es' * (len(g) != 1)}; a sphere centre "
+                               f"needs {MIN_TOUCHES} not in one plane", where=f"{where}:{log.lines[g[0]]}",
+                               hint="re-probe the pose, or delete its lines")
+    fitted = _centres(log, groups, rho)
+    for g, (c, u, weakest) in zip(groups, fitted, strict=True):
+        at = _at(log, g)
+        if np.ptp(log.rotary[g], axis=0).max() > math.radians(1e-4):
+            raise CompgenError(f"the touches of {at} are at different rotary positions",
+                               where=f"{where}:{log.lines[g[np.argmax(np.ptp(log.rotary[g], axis=1))]]}",
+                               hint="every touch of one pose shares its rotary axes; number the poses apart")
+        p = log.tip[g]
+        # on a known radius, touches in one plane still fix the centre (four side touches
+        # without the top one) unless they all look at it from one plane through it: the
+        # directions, not the points, must span space
+        if weakest < FLAT:
+            raise CompgenError(f"the {len(g)} touches of {at} all come from about one plane through the "
+                               f"centre (out of it by {weakest:.2f} rms of a unit direction): the centre is "
+                               "not fixed across it",
+                               where=f"{where}:{log.lines[g[0]]}",
+                               hint="probe it from above as well as around (compgen probe-program does)")
+        off = np.einsum("ij,ij->i", u, log.direction[g])
+        if off.min() < RADIAL_COS:
+            k = int(np.argmin(off))
+            raise CompgenError(f"touch of {at} moved {math.degrees(math.acos(np.clip(off[k], -1, 1))):.0f}° "
+                               "off the line to the fitted centre: not a radial touch of this sphere",
+                               where=f"{where}:{log.lines[g[k]]}",
+                               hint="check nx, ny, nz (the direction the tip moved) and that the line "
+                                    "belongs to this pose")
+        if len(g) < usual:
+            warnings.append(f"{where}:{log.lines[g[0]]}: {at} has {len(g)} touches where the others have "
+                            f"{usual}: a touch is missing (its centre is fitted from the rest)")
+        centres.append(c)
+        normals.append(u)
+        residuals.append(np.linalg.norm(p - c, axis=1) - rho)
+    dof = int(counts.sum() - 3 * len(groups))      # ≥ 1 a pose: each has MIN_TOUCHES ≥ 4
+    r_all = np.concatenate(residuals)
+    s2 = float(r_all @ r_all) / dof
+    # a bad trigger would inflate the pooled σ it is judged by: judge by a robust scale
+    robust = 1.4826 * float(np.median(np.abs(r_all))) * math.sqrt(counts.sum() / dof)
+    scale = max(robust, 1e-7)
+    inverse_info = [np.linalg.inv(u.T @ u) for u in normals]     # (JᵀJ)⁻¹ of each pose
+    for g, u, r, G in zip(groups, normals, residuals, inverse_info, strict=True):
+        h = np.einsum("ij,jk,ik->i", u, G, u)
+        room = 1 - h
+        deleted = np.where(room > 1e-6, r / np.maximum(room, 1e-6), 0.0)
+        z = np.where(room > 1e-6, np.abs(r) / (scale * np.sqrt(np.maximum(room, 1e-6))), 0.0)
+        k = int(np.argmax(z))
+        if z[k] > OUTLIER_K and abs(deleted[k]) * 1e3 > OUTLIER_UM:
+            raise CompgenError(f"a touch of {_at(log, g)} lies {deleted[k] * 1e3:+.1f} µm off the sphere its "
+                               f"other touches fit ({z[k]:.0f}σ of the log's {scale * 1e3:.2f} µm trigger "
+                               "noise): a "
+                               "chip on the sphere or a bad trigger", where=f"{where}:{log.lines[g[k]]}",
+                               hint="clean the sphere and re-probe the pose, or delete the line")
+    # one stylus for the whole log: its radius error is common to every pose
+    num = den = 0.0
+    for u, r, G in zip(normals, residuals, inverse_info, strict=True):
+        ones = np.ones(len(u))
+        perp = ones - u @ (G @ (u.T @ ones))
+        num, den = num + perp @ r, den + perp @ perp
+    radius_offset = num / den
+    radius_sigma = math.sqrt(s2 / den)
+    if abs(radius_offset) * 1e3 > RADIUS_UM and abs(radius_offset) > RADIUS_K * radius_sigma:
+        key = "stylus_diameter"
+        raise CompgenError(f"the touches lie on a sphere {radius_offset * 1e3:+.1f} ± "
+                           f"{radius_sigma * 1e3:.1f} µm "
+                           f"off the calibrated radius (sphere + stylus)/2 = {rho:.4f} mm",
+                           where=f"{where}:{log.key_lines[key]}",
+                           hint=f"the stylus diameter in the log ({log.keys[key]} mm) or the sphere's is not "
+                                "what "
+                                "the probe has: calibrate the stylus on the control and probe again")
+    copy = _copies(log, groups)
+    scatter = math.sqrt(max(float(r_all @ r_all) - num * num / den, 0.0) / max(dof - 1, 1))
+    if copy and scatter > NOISELESS_MM:        # the triggers' scatter, the stylus's common error taken out
+        i, j = copy
+        raise CompgenError(f"this pose's touches repeat those from line {log.lines[j]} in every number, "
+                           f"though the log's triggers scatter {scatter * 1e3:.2f} µm: a pose logged twice "
+                           "(or copied) would count as two", where=f"{where}:{log.lines[i]}",
+                           hint="delete the repeated pose's lines")
+    centre = np.array(centres)
+    cov = s2 * np.array(inverse_info)
+    first = np.array([g[0] for g in groups])
+    rotary = log.rotary[first]
+    ball = log.ball[first]
+    q = inverse(machine, rotary, ball)
+    linear = [machine.index(c) for c in "XYZ"]
+    reading = q[:, linear] - centre
+    far = np.flatnonzero(np.abs(reading).max(axis=1) > READING_MAX_MM)
+    if far.size:
+        k = far[0]
+        raise CompgenError(f"the sphere of {_at(log, groups[k])} is {np.abs(reading[k]).max():.3f} mm from "
+                           "where the "
+                           "machine file puts it", where=f"{where}:{log.lines[groups[k][0]]}",
+                           hint="the machine file's ball position does not match the sphere: give its "
+                                "place in [rtest] ball, or per row in bx, by, bz")
+    t = np.array([np.nanmin(log.t[g]) if not np.isnan(log.t[g]).all() else np.nan for g in groups])
+    poses = Poses(q, ball, t, log.path[first])
+    data = RTestData(poses, reading, log.source, log.sha256, tuple(int(log.lines[i]) for i in first),
+                     device="probe", cov=cov)
+    return Centres(data, centre, math.sqrt(s2) * 1e3, dof, radius_offset * 1e3, radius_sigma * 1e3,
+                   tuple(warnings))
+
+
+def _poses(log: ProbeLog) -> list[np.ndarray]:
+    """The touch indices of each (path, pose), in order of first appearance; a pose whose
+    touches are not together in the log is refused (two poses numbered alike)."""
+    keys = list(zip(log.path.tolist(), log.pose.tolist(), strict=True))
+    order = dict.fromkeys(keys)
+    groups = {k: [] for k in order}
+    for i, k in enumerate(keys):
+        groups[k].append(i)
+    for k, g in groups.items():
+        if g[-1] - g[0] + 1 != len(g):
+            gap = next(i for i in range(g[0], g[-1]) if keys[i] != k)
+            raise CompgenError(f"the touches of {k[0] or 'path'} pose {k[1]} are not together: another "
+                               "pose's "
+                               "touch is among them", where=f"{log.source}:{log.lines[gap]}",
+                               hint="number each pose once, or give it another path label")
+    return [np.array(g) for g in groups.values()]
+
+
+def _copies(log: ProbeLog, groups: list[np.ndarray]) -> tuple[int, int] | None:
+    """A touch logged twice, or a pose copied under another number, would count as more
+    touches than were made (one pose copied 4000 times outweighs the rest of the log). A
+    touch repeating another of its own pose in every number is refused here (their
+    directions differ). A pose whose every touch repeats another pose's is returned (its
+    first line, the other's), for the caller to refuse when the log shows trigger noise:
+    one touch may repeat another by chance (a control reports a touch from above at the X
+    and Y it commanded, 0.1 µm digits), a whole pose does not; a noise-free simulation
+    repeats a pose exactly."""
+    touch = [log.tip[i].tobytes() + log.direction[i].tobytes() for i in range(len(log.lines))]
+    poses: dict[bytes, int] = {}
+    across = None
+    for g in groups:
+        mine: dict[bytes, int] = {}
+        for i in g:
+            if touch[i] in mine:
+                raise CompgenError(f"this touch of {_at(log, g)} repeats line {log.lines[mine[touch[i]]]} in "
+                                   "every number: a touch logged twice counts twice",
+                                   where=f"{log.source}:{log.lines[i]}", hint="delete the repeated line")
+            mine[touch[i]] = int(i)
+        whole = b"".join(touch[i] for i in g)
+        if whole in poses and across is None:
+            across = (int(g[0]), poses[whole])
+        poses.setdefault(whole, int(g[0]))
+    return across
+
+
+def _at(log: ProbeLog, g: np.ndarray) -> str:
+    label = log.path[g[0]]
+    return f"{label + ' ' if label else ''}pose {log.pose[g[0]]}"
+
+
+def _centres(log: ProbeLog, groups: list[np.ndarray],
+             rho: float) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Each pose's centre at distance ρ from its tip centres (least squares, Gauss-Newton
+    started where each touch says it is, one radius along its direction of motion), the
+    unit vectors from its touches to it, and how well they span space (the smallest
+    singular value over √m). Poses with as many touches are solved together: a 20 MB log
+    in seconds."""
+    out: list = [None] * len(groups)
+    by_count: dict[int, list[int]] = {}
+    for k, g in enumerate(groups):
+        by_count.setdefault(len(g), []).append(k)
+    for m, ks in by_count.items():
+        idx = np.array([groups[k] for k in ks])
+        p = log.tip[idx]                                            # (k, m, 3)
+        c = (p + rho * log.direction[idx]).mean(axis=1)
+        for _ in range(ITERATIONS):
+            d = c[:, None, :] - p
+            dist = np.linalg.norm(d, axis=2)
+            u = d / dist[..., None]
+            step = (np.linalg.pinv(u) @ (rho - dist)[..., None])[..., 0]
+            c = c + step
+            if np.abs(step).max() < 1e-10:
+                break
+        d = c[:, None, :] - p
+        u = d / np.linalg.norm(d, axis=2)[..., None]
+        weakest = np.linalg.svd(u, compute_uv=False)[:, 2] / math.sqrt(m)
+        for j, k in enumerate(ks):
+            out[k] = (c[j], u[j], float(weakest[j]))
+    return out
+
+
+# ---------------------------------------------------------------------------- touching plan
+
+def probe_poses(machine: Machine, names, ball=None) -> Poses:
+    """The poses a probing program stops at: each named path's poses thinned to the
+    machine file's ``[probe] poses``, evenly spread, first and last kept. (A touch takes
+    seconds: a path's hundreds of R-test poses would take hours.)"""
+    from ..model.paths import generate
+
+    setup = need_probe(machine)
+    if not names:
+        raise CompgenError("no path is named", hint=f"name one or more of {', '.join(machine.paths)} "
+                                                     "(comma-separated), or all")
+    out = []
+    for name in names:
+        p = generate(machine, [name], ball=ball)
+        keep = np.unique(np.round(np.linspace(0, len(p) - 1, min(setup.poses, len(p)))).astype(int))
+        out.append(p.take(keep))
+    return Poses.concat(out)
+
+
+def need_probe(machine: Machine) -> ProbeSetup:
+    if machine.probe is None:
+        raise CompgenError(f"machine file {machine.source} has no [probe] section",
+                           hint="add the probe's tool, length, sphere_diameter and stylus_diameter "
+                                "(see the bundled machines)")
+    if any(a.rotary for a in machine.tool):
+        raise CompgenError("probing with a rotary head is not supported: the probe's touches are planned "
+                           "for a spindle that does not tilt", hint="measure this machine with an R-test")
+    return machine.probe
+
+
+def simulate_touches(machine: Machine, poses: Poses, reading: np.ndarray, noise_um: float = 0.0,
+                     rng: np.random.Generator | None = None, stylus_error_um: float = 0.0):
+    """Tip centres and directions (n, m, 3) of probing ``poses`` where the sphere's
+    readings (nest minus ball, mm, as ``simulate`` gives them) are ``reading``: each touch
+    radial, its trigger off the true radius by noise of σ ``noise_um``; the stylus's real
+    diameter ``stylus_error_um`` larger than calibrated."""
+    setup = need_probe(machine)
+    rng = rng or np.random.default_rng()
+    linear = [machine.index(c) for c in "XYZ"]
+    centre = poses.q[:, linear] - reading
+    u = touch_directions(machine, poses, setup)
+    rho = (setup.sphere_diameter + setup.stylus_diameter + stylus_error_um * 1e-3) / 2
+    radius = rho + rng.normal(0.0, noise_um * 1e-3, u.shape[:2])
+    return centre[:, None, :] + radius[..., None] * u, -u
+
+def touch_directions(machine: Machine, poses: Poses, setup: ProbeSetup) -> np.ndarray:
+    """(n, m, 3): for each pose, the unit vectors from the sphere's centre to where the
+    probe touches it (machine frame). One touch from above, the rest around at
+    ``elevation`` above the horizontal, turned so that the stem, wherever the rotary axes
+    point it, lies midway between two of them."""
+    stem = table_axis_down(machine, poses.q)
+    around = setup.touches - 1
+    el = math.radians(setup.elevation)
+    azimuth0 = np.arctan2(stem[:, 1], stem[:, 0]) + math.pi / around
+    flat = np.hypot(stem[:, 0], stem[:, 1]) < 1e-9            # stem straight down: any turn will do
+    azimuth0 = np.where(flat, 0.0, azimuth0)
+    k = np.arange(around)
+    az = azimuth0[:, None] + 2 * math.pi * k[None, :] / around
+    side = np.stack([math.cos(el) * np.cos(az), math.cos(el) * np.sin(az), np.full(az.shape, math.sin(el))],
+                    axis=-1)
+    top = np.broadcast_to([0.0, 0.0, 1.0], (len(poses), 1, 3))
+    return np.concatenate([top, side], axis=1)
+
+
+def format_probe_log(machine: Machine, setup: ProbeSetup, poses: Poses, tips: np.ndarray,
+                     directions: np.ndarray, comments: tuple[str, ...] = ()) -> str:
+    """A probe log v1: ``tips`` and ``directions`` (n, m, 3) per pose and touch."""
+    rotary = [machine.index(a.name) for a in machine.rotary_axes]
+    names = [a.name for a in machine.rotary_axes]
+    out = [MAGIC, *(f"# {one_line(c)}" for c in comments),
+           f"# sphere_diameter = {setup.sphere_diameter:.4f}",
+           f"# stylus_diameter = {setup.stylus_diameter:.4f}",
+           f"# machine = {machine.name}",
+           ",".join(["path", "pose", "t", *names, "X", "Y", "Z", *DIRECTION, *BALL])]
+    timed = not np.isnan(poses.t).any()
+    if not timed:
+        out[-1] = out[-1].replace(",t,", ",")
+    number = {}
+    for i in range(len(poses)):
+        label = str(poses.path[i])
+        number[label] = number.get(label, 0) + 1
+        angles = axis_cells(machine, poses.q[i])
+        for j in range(tips.shape[1]):
+            out.append(",".join([label, str(number[label]), *([f"{poses.t[i] + TOUCH_S * j:.3f}"] * timed),
+                                 *(angles[r] for r in rotary), *(f"{v:.5f}" for v in tips[i, j]),
+                                 *(f"{v:.6f}" for v in directions[i, j]),
+                                 *(f"{v:.4f}" for v in poses.ball[i])]))
+    return "\n".join(out) + "\n"

@@ -1,0 +1,66 @@
+"""The nominal chain's frames where a program puts the machine: the table frame, the nest
+centre and the tool axis in it, the TCP coordinates a control is given, and the height at
+which nothing of the set-up can be touched. Geometry of the set-up, no program: what the
+motion check, the program writers and the probe's simulation share."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..transforms import apply
+from .kinematics import Poses, chain_transform, inverse
+from .machine import Machine
+
+
+def safe_height(machine: Machine) -> float:
+    """The height of the nest centre above the rotary axes' intersection at which nothing
+    of the set-up can be touched at any orientation: every solid lies within R of the
+    intersection, and the housing reaches ``nest_below`` and its radius below the centre."""
+    s = machine.setup
+    table = frames(machine, np.zeros((1, len(machine.axes))))[0][0]
+    normal = table[:3, 2]
+    reach = np.linalg.norm(apply(table, np.asarray(machine.ball))) + s.ball_diameter / 2
+    for z in (s.table_top, s.table_top - s.table_thickness):
+        # the rim's farthest point: |c + R·u|² = |c|² + R² + 2R c·u, greatest for the unit u
+        # in the table's plane along c's part in that plane
+        c = table[:3, 3] + z * normal
+        across = np.linalg.norm(c - (c @ normal) * normal)
+        reach = max(reach, np.sqrt(c @ c + s.table_radius**2 + 2 * s.table_radius * across))
+    return float(np.ceil(reach + s.nest_below + s.nest_radius + s.margin))
+
+
+def frames(machine: Machine, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The nominal table frame (n, 4, 4), and in it the nest centre and the tool axis (n, 3)."""
+    poses = Poses.at(q, np.zeros(3))
+    zero = np.zeros((len(q), 6))
+    table = chain_transform(machine, machine.workpiece, poses, {}, zero)
+    tool = chain_transform(machine, machine.tool, poses, {}, zero)
+    R = table[:, :3, :3]
+    return (table, np.einsum("nji,nj->ni", R, tool[:, :3, 3] - table[:, :3, 3]),
+            np.einsum("nji,nj->ni", R, tool[:, :3, 2]))
+
+
+def table_axis_down(machine: Machine, q: np.ndarray) -> np.ndarray:
+    """(n, 3): the table frame's −z in the machine frame at poses ``q``: where a stem
+    standing on the table points from the ball."""
+    return -frames(machine, q)[0][:, :3, 2]
+
+
+def table_point(machine: Machine, q: np.ndarray) -> np.ndarray:
+    """The table-frame point under the nest centre at poses ``q`` (n, k), mm."""
+    return frames(machine, q)[1]
+
+
+def world(machine: Machine, q: np.ndarray) -> np.ndarray:
+    """The TCP coordinates of poses ``q``: the linear axes that put the nest on the same
+    table point with the rotary axes at zero (what compgen writes under TCPM/TRAORI/trt)."""
+    rot = np.zeros((len(q), len(machine.rotary_axes)))
+    linear = [machine.index(c) for c in "XYZ"]
+    return inverse(machine, rot, table_point(machine, q))[:, linear]
+
+
+def from_world(machine: Machine, xyz: np.ndarray, rot_rad: np.ndarray) -> np.ndarray:
+    """Poses that put the nest on the table point with TCP coordinates ``xyz`` at ``rot_rad``."""
+    q0 = np.zeros((len(xyz), len(machine.axes)))
+    q0[:, [machine.index(c) for c in "XYZ"]] = xyz
+    return inverse(machine, rot_rad, table_point(machine, q0))

@@ -1,0 +1,193 @@
+"""Which side each pose reached each rotary axis from: what a reversal (backlash) effect
+needs. The sides the data record, the side each pose takes from its path's moves where
+they do not (``StartSides``: one free constant for a path that holds an axis), the
+sides compgen's programs approach from, and whether an axis was seen from both."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from functools import partial
+
+import numpy as np
+
+from .effects import Effect, effect_of_param
+from .kinematics import Poses, SlotGains, effect_gains, last_moves, motion_direction, runs
+from .machine import Machine
+
+
+class StartSides:
+    """The side of each run that holds an axis, where the data do not record it (no
+    ``A_side`` column): for every reversal (backlash) effect among ``names`` and every run
+    that never moves its axis, one free constant — the effect's value there, ± half the
+    reversal as the unknown approach left it. They are fitted beside the parameters
+    (projected out, ``projector``: the estimates and their uncertainties are the joint
+    fit's, the constants themselves are not reported), so a path that holds the axis leaves
+    no offset of its own behind, where it would look like drift."""
+
+    def __init__(self, machine: Machine, names: Iterable[str], poses: Poses):
+        self.machine, self.poses = machine, poses
+        run = runs(poses)
+        self.labels: list[tuple[str, str]] = []            # (axis, path) per constant
+        per_run: dict[int, list[tuple[Effect, np.ndarray]]] = {}
+        for e in dict.fromkeys(effect_of_param(machine, n) for n in names):
+            if e.basis.kind != "r":
+                continue
+            j = machine.index(e.carrier)
+            at = np.flatnonzero(np.isnan(poses.side[:, j]) & (motion_direction(poses.q[:, j], run) == 0))
+            for idx in np.split(at, np.flatnonzero(np.diff(run[at])) + 1) if at.size else ():
+                per_run.setdefault(int(run[idx[0]]), []).append((e, idx))
+                self.labels.append((e.carrier, str(poses.path[idx[0]])))
+        self.blocks = [per_run[k] for k in sorted(per_run)]
+
+    @property
+    def count(self) -> int:
+        return len(self.labels)
+
+    def projector(self, whiten=None) -> _Projector | None:
+        """Removes from readings (n, 3) or their Jacobian (n, 3, p) what the constants would
+        fit; ``whiten(idx, a)``, if given, whitens the rows ``idx`` of an (m, 3, …) array as
+        the fit whitens its readings. None where there is no constant."""
+        if not self.blocks:
+            return None
+        parts = []
+        for block in self.blocks:
+            idx = np.unique(np.concatenate([i for _, i in block]))
+            gains, made = SlotGains(self.machine, self.poses.take(idx)), {}
+            G = np.stack([effect_gains(gains, e, np.isin(idx, i).astype(float), made)[:, :, 0]
+                          for e, i in block], axis=-1)                  # (m, 3, c)
+            Gw = G if whiten is None else whiten(idx, G)
+            Q, R = np.linalg.qr(Gw.reshape(-1, G.shape[-1]))
+            parts.append((idx, G, Q, R))
+        return _Projector(parts)
+
+
+class _Projector:
+    def __init__(self, parts):
+        self.parts = parts
+
+    def __call__(self, v: np.ndarray) -> np.ndarray:
+        """``v`` (n, 3, …) whitened, less its part along the constants' columns (in place)."""
+        for idx, _, Q, _ in self.parts:
+            b = v[idx].reshape(len(idx) * 3, -1)
+            v[idx] = (b - Q @ (Q.T @ b)).reshape(v[idx].shape)
+        return v
+
+    def basis(self, n: int) -> np.ndarray:
+        """The constants' orthonormal columns over all ``n`` readings, (3n, k) in (n, 3) order."""
+        out = np.zeros((n, 3, sum(Q.shape[1] for *_, Q, _ in self.parts)))
+        k = 0
+        for idx, _, Q, _ in self.parts:
+            out[idx, :, k:k + Q.shape[1]] = Q.reshape(len(idx), 3, -1)
+            k += Q.shape[1]
+        return out.reshape(3 * n, -1)
+
+    def remove(self, raw: np.ndarray, white: np.ndarray | None = None) -> np.ndarray:
+        """The raw residual (n, 3) less the constants fitted to it (to ``white``, its whitened
+        form, where readings are weighted): what the joint fit leaves."""
+        out = raw.copy()
+        white = raw if white is None else white
+        for idx, G, Q, R in self.parts:
+            c = np.linalg.lstsq(R, Q.T @ white[idx].ravel(), rcond=None)[0]
+            out[idx] -= G @ c
+        return out
+
+
+def same_pose(machine: Machine, poses: Poses, run: np.ndarray) -> np.ndarray:
+    """A number per pose, equal for poses that repeat one another: the same commanded axes
+    (to 1e-6 mm and 1e-6 deg, the CSV's resolution) and ball, every axis reached from the same
+    side, so that no backlash counts as a repeat's scatter: the recorded side, else the move
+    of its run (``run``, as ``runs`` numbers them) that reached it; a pose that no move of its
+    run has reached yet repeats only poses of its own run."""
+    scale = np.array([180.0 / np.pi if a.rotary else 1.0 for a in machine.axes])
+    side = poses.side.copy()
+    starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+    for j in range(len(machine.axes)):
+        unknown = np.isnan(side[:, j])
+        if not unknown.any():
+            continue
+        reached = np.empty(len(poses))
+        for a, b in zip(starts, [*starts[1:], len(poses)], strict=True):
+            reached[a:b] = last_moves(np.sign(np.diff(poses.q[a:b, j])), np.nan)
+        side[:, j] = np.where(unknown, np.where(np.isnan(reached), 2.0 + run, reached), side[:, j])
+    key = np.column_stack([np.round(poses.q * scale * 1e6), np.round(poses.ball * 1e6), side])
+    key = np.ascontiguousarray(key.astype(np.int64))
+    # each row as one opaque value: unique of a 1-D array is a third of unique over rows
+    rows = key.view(np.dtype((np.void, key.dtype.itemsize * key.shape[1]))).ravel()
+    return np.unique(rows, return_inverse=True)[1].ravel()
+
+
+def program_sides(machine: Machine, q: np.ndarray, run: np.ndarray) -> np.ndarray:
+    """(n, k): the side of each rotary axis's backlash at each pose as compgen's programs
+    take the poses (NaN for linear axes): a path's first pose is approached in the direction
+    the axis first moves in the path (+ where it never moves; the other way where that
+    approach would leave the travel), every later pose by the move that reached it
+    (standing still keeps the side)."""
+    out = np.full(q.shape, np.nan)
+    starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+    for a in machine.rotary_axes:
+        j = machine.index(a.name)
+        lo, hi = np.radians(a.travel)
+        for s, e in zip(starts, [*starts[1:], len(q)], strict=True):
+            step = np.sign(np.diff(q[s:e, j]))
+            moved = np.flatnonzero(step)
+            first = step[moved[0]] if moved.size else 1.0
+            if not lo <= q[s, j] - first * np.radians(APPROACH_DEG) <= hi:
+                first = -first
+            out[s:e, j] = last_moves(step, first)
+    return out
+
+
+def unknown_sides(machine: Machine, names: Iterable[str], *poses: Poses) -> str | None:
+    """What a reversal (backlash) effect among the parameters ``names`` cannot use in these
+    poses (each data set's, looked at where it is), said once: the axes whose side the data
+    do not give at some pose (no ``A_side`` column), and the free constants that stand in
+    for it (``StartSides``), or None."""
+    reversals = [n for n in names if effect_of_param(machine, n).basis.kind == "r"]
+    axes = sorted({e.carrier for e in map(partial(effect_of_param, machine), reversals)
+                   if any(np.isnan(p.side[:, machine.index(e.carrier)]).any() for p in poses)})
+    if not axes:
+        return None
+    held = [lab for p in poses for lab in StartSides(machine, reversals, p).labels]
+    cols = ", ".join(f"{a}_side" for a in axes)
+    where = "; ".join(f"{a}: {', '.join(dict.fromkeys(path or '(no label)' for b, path in held if b == a))}"
+                      for a in axes if any(b == a for b, _ in held))
+    count = f"{len(held)} constant{'s' if len(held) != 1 else ''} ({where})" if held else "none here"
+    return (f"the data do not say from which side {' and '.join(axes)} reached each pose (no {cols} "
+            f"column): each pose takes the side of the move that reached it (a path's first poses, "
+            f"that of its first move), and a path that holds the axis gets a free constant for its "
+            f"side — {count}. Measure with compgen's programs (their pose lists carry {cols}), or "
+            f"add the column")
+
+
+def unpredicted_sides(machine: Machine, names: Iterable[str], poses: Poses) -> str | None:
+    """What ``predict`` cannot say at poses with no recorded side: paths that hold an axis
+    are predicted without the model's reversal of it (its sign there is the unknown
+    approach's), or None."""
+    starts = StartSides(machine, names, poses)
+    if not starts.count:
+        return None
+    at = np.unique(np.concatenate([i for block in starts.blocks for _, i in block]))
+    axes = " and ".join(dict.fromkeys(a for a, _ in starts.labels))
+    paths = ", ".join(dict.fromkeys(p or "(no label)" for _, p in starts.labels))
+    return (f"the pose list does not say from which side {axes} reached each pose: {len(at)} poses of "
+            f"paths that hold it ({paths}) are predicted without the reversal (backlash) the fit "
+            f"holds, whose sign there only the approach decides. compgen's pose lists "
+            f"(measure-program) carry the sides")
+
+
+def both_sides(machine: Machine, axis: str, *poses: Poses) -> bool:
+    """Whether ``axis`` reaches poses from both directions in these poses together (where
+    the data do not say, a path that turns the axis back within it shows both)."""
+    j = machine.index(axis)
+    seen = set()
+    for p in poses:
+        side = p.side[:, j]
+        seen |= set(np.unique(side[~np.isnan(side)]).tolist())
+        unknown = np.isnan(side)
+        if unknown.any():
+            d = motion_direction(p.q[:, j], runs(p))[unknown]
+            seen |= set(np.unique(d[d != 0]).tolist())
+    return {1.0, -1.0} <= seen
+
+
+APPROACH_DEG = 1.0       # a program's approach to a path's first pose: far beyond any backlash

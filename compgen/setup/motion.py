@@ -1,0 +1,576 @@
+"""What a program makes the machine do, block by block, against the R-test set-up.
+
+Each controller module turns its program text into ``Block``s with the control's own
+meaning of each word (machine or workpiece coordinates, TCP on or off, tool and length
+compensation, dwell, feed). This module moves the machine model through them, sampled at
+≤ 1 mm and ≤ 0.5°, and reports what would hit: the nest housing or the spindle entering the
+ball, its stem or the table; an axis leaving its travel (between blocks too); a feed above
+an axis's ``feed_max``; motion without the tool called and its length compensated.
+
+Geometry (table frame, mm): the ball a sphere; the stem a cylinder from the table top to the
+ball; the table a disc about the last rotary axis; the nest housing and the spindle spheres
+along the tool axis (a capsule each, conservative at their ends). The nest may surround
+the ball and stem where it measures: while its axis passes within ``nest_range`` of the
+ball's centre (the measuring poses and the straight approach along the nest's axis).
+
+Positions are compgen's: the preset at the nominal intersection of the rotary axes, X Y Z
+of the nest centre with the tool length compensated. A block in machine coordinates (M91,
+SUPA, G53) cannot be placed against the set-up, since no machine file says where the
+machine datum lies; it is a finding.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import CompgenError
+from ..model.frames import frames, from_world, safe_height, world
+from ..model.machine import Machine, ProbeSetup
+from ..search import golden_least
+
+STEP_MM, STEP_DEG = 1.0, 0.5
+SEARCH_MM = 0.01         # the closest point along housing and spindle axes, found to this
+TOUCH_MM = 1e-3          # a probing stylus tip this far into the sphere: rounding, not a crash
+ONLY_TURNS_MM = 1e-9     # X Y Z travel at or below this (rounding): the block only turns
+OVER_FEED = 1 + 1e-9     # a speed this much over feed_max is rounding of the feed, not over it
+
+
+@dataclass(frozen=True)
+class Block:
+    """One line as the control executes it. ``target`` maps axis letters to the written
+    values (mm, deg) of a move; ``on`` is the state a tcp or length block switches to."""
+
+    line: int
+    text: str
+    kind: str                    # move, dwell, tcp, tool, length, require, stop, units, offset, end
+    target: dict = field(default_factory=dict)
+    rapid: bool = False
+    feed: float | None = None    # mm/min (deg/min for a block that only turns)
+    machine_coords: bool = False
+    seconds: float = 0.0
+    on: bool = False             # tcp / length: switched on (True) or off
+    turn: dict = field(default_factory=dict)   # modulo axis letter → "+", "-" or "short"
+    name: str = ""               # offset: the work offset the block selects (G54, ...)
+    probe: bool = False          # a probing move: it stops where the stylus touches the sphere
+
+
+@dataclass(frozen=True)
+class Finding:
+    line: int
+    rule: str
+    detail: str
+    axes: str
+    depth_mm: float = 0.0        # how far a part enters a solid; 0: the finding is not a collision
+
+    def text(self, where: str) -> str:
+        depth = f" by {self.depth_mm:.1f} mm" if self.depth_mm > 0 else ""
+        return f"{where}:{self.line}: {self.rule}{depth}: {self.detail} (at {self.axes})"
+
+
+@dataclass(frozen=True)
+class Check:
+    blocks: int
+    seconds: float
+    closest_mm: float            # smallest clearance outside the measuring exemption
+    closest_at: str
+    findings: tuple[Finding, ...]
+
+    def first(self, where: str) -> str:
+        """The first finding's text, and how many more there are."""
+        more = len(self.findings) - 1
+        return self.findings[0].text(where) + (f" (and {more} more)" if more else "")
+
+
+WORD = re.compile(r"^([A-Z])([+-]?(?:\d{1,7}(?:\.\d{0,9})?|\.\d{1,9}))$", re.ASCII)
+SECONDS = re.compile(r"\d{1,5}(?:\.\d{0,6})?", re.ASCII)     # a dwell, as compgen writes it
+
+
+def words(tokens: list[str], line: int, allowed: str = "XYZABCF") -> dict[str, float]:
+    """Address words (``X+1.5``, ``A-90``, ``F500``) of a block; anything else is refused:
+    a malformed or over-long number, a word twice, a feed that is not positive."""
+    out = {}
+    for t in tokens:
+        m = WORD.match(t)
+        if not m or m[1] not in allowed or m[1] in out:
+            raise CompgenError(f"line {line}: {_cut(t)!r} is not a word this check reads in a move",
+                               hint="check-program reads the blocks compgen writes; edit nothing else in")
+        out[m[1]] = float(m[2])
+    if "F" in out and not out["F"] > 0:
+        raise CompgenError(f"line {line}: F{out['F']:g}: a feed must be above zero", hint="write the feed in "
+                           "mm/min (deg/min for a block that only turns)")
+    return out
+
+
+def dwell(text: str, line: int, raw: str) -> Block:
+    """A dwell block of ``text`` seconds, as compgen writes it, or a refusal."""
+    if not SECONDS.fullmatch(text):
+        raise unknown(line, raw)
+    return Block(line, raw, "dwell", seconds=float(text))
+
+
+def gcode_move(raw: str, line: int, tokens: list[str], modal: str | None, feed: float | None,
+               machine_word: str, skip: tuple[str, ...] = ()) -> tuple[Block, str, float | None]:
+    """A G-code move block (modal G0/G1, modal F); ``machine_word`` (SUPA, G53) marks a
+    block in machine coordinates. Returns the block and the modal state after it."""
+    modal = next((t for t in reversed(tokens) if t in ("G0", "G1")), modal)
+    w = words([t for t in tokens if t not in ("G0", "G1", machine_word, *skip)], line)
+    feed = w.pop("F", feed)
+    if not w or modal is None:
+        raise unknown(line, raw)
+    return (Block(line, raw, "move", target=w, rapid=modal == "G0", feed=feed,
+                  machine_coords=machine_word in tokens), modal, feed)
+
+
+def _cut(text: str, most: int = 60) -> str:
+    """A user's text in a message: no longer than a line can show."""
+    return text if len(text) <= most else text[:most] + "..."
+
+
+def unknown(line: int, text: str) -> CompgenError:
+    return CompgenError(f"line {line}: {_cut(text.strip())!r} is not a block this check knows",
+                        hint="check-program reads the blocks compgen writes; a program with other "
+                             "blocks cannot be shown safe")
+
+
+def tooling(machine: Machine,
+            probe: ProbeSetup | None = None) -> dict[str, tuple[float, float, float, float]]:
+    """The parts of what the spindle holds, along the tool axis from the tool point (nest or
+    stylus tip centre), mm: part → (from, to, radius, margin kept to the set-up). A probe's
+    stylus comes within a few mm of the sphere by design: its parts keep ``[probe] margin``."""
+    s = machine.setup
+    if probe is None:
+        return {"housing": (-s.nest_below, machine.probe_length, s.nest_radius, s.margin),
+                "spindle": (machine.probe_length, machine.probe_length + s.spindle_length, s.spindle_radius,
+                            s.margin)}
+    tip = probe.stylus_diameter / 2
+    return {"stylus tip": (0.0, 0.0, tip, probe.margin),
+            "stylus": (tip, probe.stylus_length, probe.shaft_diameter / 2, probe.margin),
+            "probe body": (probe.stylus_length, probe.length, probe.body_diameter / 2, s.margin),
+            "spindle": (probe.length, probe.length + s.spindle_length, s.spindle_radius, s.margin)}
+
+
+def clearances(machine: Machine, q: np.ndarray,
+               probe: ProbeSetup | None = None) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Per pose: the clearance (mm, negative = inside) of each pair (housing or spindle
+    against ball, stem, table), and whether the nest is measuring there (its axis within
+    ``nest_range`` of the ball's centre, the nest on the ball or above it).
+
+    Housing and spindle are capsules about the tool axis. Ball and stem (a point and a
+    segment, each with a radius) are at the least distance of two segments, in closed form;
+    the table is a convex solid, so the signed distance from it is convex along the axis:
+    its least value over the part is found by golden-section search, to ``SEARCH_MM``."""
+    s = machine.setup
+    _, nest, axis = frames(machine, q)                                      # table frame
+    ball = np.asarray(machine.ball)
+    rb = s.ball_diameter / 2
+    stem_top = ball[2] - rb
+    top, bottom = s.table_top, s.table_top - s.table_thickness
+
+    def to_table(p):
+        radial, z = np.hypot(p[..., 0], p[..., 1]), p[..., 2]
+        dz = np.maximum(np.maximum(z - top, bottom - z), 0.0)
+        dr = np.maximum(radial - s.table_radius, 0.0)
+        depth = np.minimum(np.minimum(top - z, z - bottom), s.table_radius - radial)
+        return np.where((dz == 0) & (dr == 0), -depth, np.hypot(dz, dr))
+
+    stem = (np.array([ball[0], ball[1], top]), np.array([ball[0], ball[1], stem_top]))
+    out = {}
+    for part, (lo, hi, radius, _) in tooling(machine, probe).items():
+        start, end = nest + lo * axis, nest + hi * axis
+        out[f"{part} / ball"] = _to_segment(start, end, ball, ball) - rb - radius
+        out[f"{part} / stem"] = _to_segment(start, end, *stem) - s.stem_diameter / 2 - radius
+        out[f"{part} / table"] = _least_along(to_table, nest, axis, lo, hi) - radius
+    off_axis = np.linalg.norm(np.cross(ball - nest, axis), axis=1)
+    above = np.einsum("ni,ni->n", nest - ball, axis) > -s.nest_range
+    return out, (off_axis <= s.nest_range) & above
+
+
+def _to_segment(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """Per row, the distance between the segments p0–p1 (n, 3) and q0–q1 (3,; a point if
+    q0 = q1), in closed form (Ericson, Real-Time Collision Detection, 5.1.9): the closest
+    pair's parameters, each clamped to its segment in turn."""
+    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+    a, e = np.einsum("ni,ni->n", d1, d1), float(d2 @ d2)
+    b, c, f = d1 @ d2, np.einsum("ni,ni->n", d1, r), r @ d2
+    denom = a * e - b * b
+    a_ = np.where(a > 0, a, 1.0)          # p a point (a stylus tip): u = 0 wherever it is divided
+    if e == 0:                                               # q is a point
+        u, t = np.clip(-c / a_, 0, 1), np.zeros_like(a)
+    else:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # parallel (denom 0): any point of p's segment will do before t is clamped
+            u = np.where(denom > 1e-12 * a * e, np.clip((b * f - c * e) / denom, 0, 1), 0.0)
+        t = (b * u + f) / e
+        u = np.where(t < 0, np.clip(-c / a_, 0, 1), np.where(t > 1, np.clip((b - c) / a_, 0, 1), u))
+        t = np.clip(t, 0, 1)
+    return np.linalg.norm(r + u[:, None] * d1 - t[:, None] * d2, axis=1)
+
+
+def _least_along(dist, nest: np.ndarray, axis: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """The least of a convex ``dist`` over the points ``nest + t·axis``, lo ≤ t ≤ hi, per pose."""
+    n = len(nest)
+    return golden_least(lambda t: dist(nest + t[:, None] * axis), np.full(n, lo), np.full(n, hi),
+                        SEARCH_MM)[1]
+
+
+@dataclass
+class _Segment:
+    block: Block
+    tcp: bool
+    start: np.ndarray        # machine pose (axes mode) or TCP xyz + rotary (rad)
+    end: np.ndarray
+    blind: bool              # some axis came from an unknown place
+    probing: bool = False    # a probing move, or the retract from its touch
+    path: np.ndarray | None = None
+
+
+def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
+        sense: dict[str, int] | None = None, probe: ProbeSetup | None = None) -> Check:
+    """Move the machine model through ``blocks`` and check every sample. The blocks are
+    walked once to find each move's ends (TCP moves in TCP coordinates); the samples of
+    all moves are then converted and checked together. ``modulo``: the rotary axes the
+    control positions modulo 360° (``Controller.modulo_axes``); ``sense``: per rotary axis,
+    ±1, how the control's words turn it against the machine file (``Controller.angle_sense``).
+    ``probe``: the program holds probing moves made with this probe (the machine's set-up
+    ball is its sphere); each stops where the stylus tip meets the sphere."""
+    sense = sense or {}
+
+    def sensed(letter: str, v: float) -> float:     # a word's angle as the machine file turns it
+        return -v if sense.get(letter) == -1 else v
+
+    k = len(machine.axes)
+    linear = [machine.index(c) for c in "XYZ"]
+    rotary = [machine.index(a.name) for a in machine.rotary_axes]
+    letters = {a.name: machine.index(a.name) for a in machine.axes}
+    q = np.full(k, np.nan)         # machine pose; under TCP, valid only where ``w`` is None
+    w = None                       # TCP coordinates while TCP is on and known
+    tcp = tool = length = False
+    seconds, findings, segments = 0.0, [], []
+    safe = safe_height(machine)
+
+    def settle():                  # the machine pose behind the TCP coordinates
+        nonlocal q
+        if w is not None:
+            q = from_world(machine, w[None, :3], w[None, 3:])[0]
+
+    _frame(machine, blocks)
+    for b in blocks:
+        if b.kind == "require":      # the program stops unless these axes are at these values
+            settle()
+            w = None
+            missing = sorted(set(b.target) - set(letters))
+            if missing:
+                raise CompgenError(f"line {b.line}: the guard reads {', '.join(missing)}, which this machine "
+                                   "lacks", hint="the program was written for another machine")
+            for letter, v in b.target.items():
+                q[letters[letter]] = np.radians(sensed(letter, v)) if letters[letter] in rotary else v
+        elif b.kind == "tcp":
+            settle()
+            w, tcp = None, b.on
+        elif b.kind == "tool":
+            tool = True
+        elif b.kind == "length":
+            length = b.on
+        elif b.kind == "dwell":
+            seconds += b.seconds
+        if b.kind != "move":
+            continue
+        if b.machine_coords:
+            findings.append(Finding(b.line, "machine coordinates", "the machine file does not say where the "
+                                    "machine datum lies against the set-up: this move cannot be checked",
+                                    b.text.strip()))
+            continue
+        if not (tool and length):
+            findings.append(Finding(b.line, "no tool call or length compensation", "the nest's length is not "
+                                    "active: every position would be off by its length", b.text.strip()))
+            break
+        unknown_axes = sorted(set(b.target) - set(letters))
+        if unknown_axes:
+            raise CompgenError(f"line {b.line} moves {', '.join(unknown_axes)}, which this machine lacks")
+        # with the rotary axes at zero, TCP coordinates are machine coordinates
+        zero_turn = w is None and not np.isnan(q[rotary]).any() and not q[rotary].any()
+        if tcp and not (zero_turn and np.isnan(q[linear]).any()):
+            if b.probe:
+                raise CompgenError(f"line {b.line}: a probing move under TCP is not checked",
+                                   hint="probing programs run in machine axes (compgen probe-program)")
+            if w is None:
+                if np.isnan(q).any():
+                    findings.append(Finding(b.line, "TCP before positioning", "TCP is on before every axis "
+                                            "has been positioned", b.text.strip()))
+                    break
+                w = np.concatenate([world(machine, q[None])[0], q[rotary]])
+            end = w.copy()
+            for letter, v in b.target.items():
+                i = letters[letter]
+                if i in linear:
+                    end[linear.index(i)] = v
+                else:
+                    now = w[3 + rotary.index(i)]
+                    v = _turned(modulo, b, letter, sensed(letter, v), np.degrees(now))
+                    end[3 + rotary.index(i)] = np.radians(v)
+            segments.append(_Segment(b, True, w, end, False))
+            w = end
+            continue
+        settle()
+        w = None
+        end = q.copy()
+        for letter, v in b.target.items():
+            i = letters[letter]
+            end[i] = (np.radians(_turned(modulo, b, letter, sensed(letter, v), np.degrees(q[i])))
+                      if i in rotary else v)
+        if b.probe:
+            end = _touch(machine, probe, b, q, end, findings)
+            if end is None:
+                break
+        after_touch = bool(segments) and segments[-1].block.probe
+        segments.append(_Segment(b, False, q, end, bool((np.isnan(q) & ~np.isnan(end)).any()),
+                                 probing=b.probe or after_touch))
+        q = end
+    _paths(machine, segments, linear, rotary)
+    closest = (np.inf, "")
+    checkable = []
+    moved, fastest, outside = _per_segment(machine, segments)
+    for seg, per_axis, top_step, out in zip(segments, moved, fastest, outside, strict=True):
+        b, path = seg.block, seg.path
+        delta = np.nan_to_num(path[-1] - path[0])
+        if seg.tcp:
+            travel_mm = float(np.linalg.norm(seg.end[:3] - seg.start[:3]))
+        else:
+            travel_mm = float(np.linalg.norm(delta[linear]))
+        turn_deg = float(np.degrees(np.abs(delta[rotary])).max())      # a machine has a rotary axis
+        seconds += _seconds(machine, b, path, per_axis, top_step, travel_mm, turn_deg, findings)
+        if out.any():
+            _check_travel(machine, b, path, out, findings)
+        # an axis whose start is unknown (the program's first moves) is safe only where
+        # nothing can be touched: at the safe height
+        if seg.blind or np.isnan(path).any():
+            z = path[:, linear[2]]
+            if np.isnan(z).any() or z.min() < safe:
+                findings.append(Finding(b.line, "axes positioned from an unknown place below the safe height",
+                                        f"the nest is below Z {safe:g} before every axis has been positioned "
+                                        "there", b.text.strip()))
+            # the moves after it start from known places: they are checked all the same
+        else:
+            checkable.append(seg)
+    if checkable:
+        closest = _check_collisions(machine, checkable, findings, probe)
+    findings.sort(key=lambda f: f.line)
+    return Check(len(segments), seconds, closest[0], closest[1], tuple(findings))
+
+
+def _touch(machine: Machine, probe: ProbeSetup | None, b: Block, q: np.ndarray, end: np.ndarray,
+           findings: list) -> np.ndarray | None:
+    """Where a probing move stops: the first point where the stylus tip meets the sphere
+    (the set-up's ball) on the way from ``q`` to ``end``; None, with a finding, if it never
+    does (the control stops the program with an error) or starts inside it."""
+    if probe is None:
+        raise CompgenError(f"line {b.line}: a probing move, and the machine file has no [probe]",
+                           hint="describe the probe in [probe] (see the bundled machines)")
+    if np.isnan(q).any():
+        findings.append(Finding(b.line, "probing from an unknown place", "an axis has not been positioned "
+                                "before the probing move", b.text.strip()))
+        return None
+    _, ends, _ = frames(machine, np.array([q, end]))
+    ball = np.asarray(machine.ball)
+    rho = (machine.setup.ball_diameter + probe.stylus_diameter) / 2
+    p0, d = ends[0] - ball, ends[1] - ends[0]
+    a, half_b, c = d @ d, p0 @ d, p0 @ p0 - rho**2
+    disc = half_b**2 - a * c
+    t = (-half_b - np.sqrt(disc)) / a if a > 0 and disc >= 0 else np.nan    # NaN: its line passes by
+    if c < 0 or not 0 <= t <= 1:
+        what = ("starts inside the sphere" if c < 0 else
+                f"ends {np.sqrt(max(c + 2 * half_b + a, 0.0) + rho**2) - rho:.2f} mm short of it" if t > 1
+                else "misses it")
+        findings.append(Finding(b.line, "probing move does not touch the sphere",
+                                f"the stylus tip {what}; the "
+                                "control stops the program with an error", b.text.strip()))
+        return None
+    return q + t * (end - q)
+
+
+def _frame(machine: Machine, blocks: list[Block]) -> None:
+    """What a program must say for its moves to mean what the check takes them to: its unit
+    (mm) before the first move, the machine file's work offset, an end, nothing after it."""
+    units = ended = moves = False
+    for b in blocks:
+        if ended:
+            raise CompgenError(f"line {b.line}: {b.text.strip()!r} after the program's end", hint="a control "
+                               "does not run it; a program with blocks after its end was edited")
+        if b.kind == "units":
+            units = True
+        elif b.kind == "end":
+            ended = True
+        elif b.kind == "offset" and b.name != machine.program.work_offset:
+            raise CompgenError(f"line {b.line}: {b.text.strip()!r} selects {b.name}; the machine file's work "
+                               f"offset is {machine.program.work_offset}", hint="compgen's positions are in "
+                               "the machine file's work offset ([program] work_offset)")
+        elif b.kind == "move":
+            moves = True
+            if not units:
+                raise CompgenError(f"line {b.line}: a move before the program says its unit (mm)",
+                                   hint="check-program reads programs in millimetres that say so, as compgen "
+                                        "writes them")
+    if not moves:
+        raise CompgenError("the program has no move: there is nothing to check",
+                           hint="give the program compgen wrote")
+    if not ended:
+        raise CompgenError("the program has no end block (END PGM, M30 or M2): it may have been cut short",
+                           hint="give the whole program")
+
+
+def _turned(modulo: tuple[str, ...], b: Block, letter: str, value: float, now: float) -> float:
+    """Where a rotary axis ends (deg, unwrapped) for the written ``value``. An axis the
+    control positions modulo 360° goes to ``value`` mod 360 the way the block says — "+" and
+    "-" turn that way, "short" the shorter way — from where it is (``now``, NaN: unknown, then
+    to the value itself). A plain word on such an axis turns the way the control's machine
+    data say: not modelled, refused."""
+    if letter not in modulo:
+        if letter in b.turn:
+            raise CompgenError(f"line {b.line}: {b.text.strip()!r} turns {letter} as a modulo axis; the "
+                               f"machine file does not declare {letter} modulo",
+                               hint="declare it in the control's section of the machine file (modulo), "
+                                    "or write a plain position")
+        return value
+    ahead = (value - now) % 360.0
+    if min(ahead, 360.0 - ahead) < 1e-6:    # where it is (to rounding): no turn
+        ahead = 0.0
+    if letter not in b.turn:
+        if ahead == 0.0:                   # where it is: no turn, whichever way the data say
+            return now
+        raise CompgenError(f"line {b.line}: {b.text.strip()!r}: {letter} is a 360° modulo axis, and a plain "
+                           f"position turns it the way the control's machine data say: not checked",
+                           hint="write the direction in the block (e.g. SINUMERIK ACP, ACN or DC)")
+    if np.isnan(now):
+        return value % 360.0
+    how = b.turn[letter]
+    if how == "+":
+        return now + ahead
+    if how == "-":
+        return now - (360.0 - ahead) % 360.0
+    return now + (ahead - 360.0 if ahead > 180.0 else ahead)
+
+
+def _paths(machine: Machine, segments: list[_Segment], linear, rotary) -> None:
+    """Every move's samples (≤ 1 mm, ≤ 0.5°) as machine poses; TCP moves interpolate in TCP
+    coordinates and are converted together."""
+    tcp_parts, where = [], []
+    for seg in segments:
+        if seg.tcp:
+            d = seg.end - seg.start
+            n = _samples(np.abs(d[:3]).max(), np.degrees(np.abs(d[3:])).max())
+            tcp_parts.append(seg.start + np.linspace(0, 1, n + 1)[:, None] * d)
+            where.append(seg)
+        else:
+            q0 = seg.start
+            delta = np.where(np.isnan(q0), 0.0, seg.end - q0)
+            n = _samples(np.abs(delta[linear]).max(), np.degrees(np.abs(delta[rotary])).max())
+            f = np.linspace(0, 1, n + 1)[:, None]
+            seg.path = np.where(np.isnan(q0), seg.end, q0 + f * delta)
+    if tcp_parts:
+        allw = np.concatenate(tcp_parts)
+        q = from_world(machine, allw[:, :3], allw[:, 3:])
+        start = 0
+        for seg, part in zip(where, tcp_parts, strict=True):
+            seg.path = q[start:start + len(part)]
+            start += len(part)
+
+
+def _samples(mm: float, deg: float) -> int:
+    return max(1, int(np.ceil(max(mm / STEP_MM, deg / STEP_DEG))))
+
+
+def _axes_text(machine: Machine, q: np.ndarray) -> str:
+    return " ".join(f"{a.name}{np.degrees(v) if a.rotary else v:+.3f}"
+                    for a, v in zip(machine.axes, q, strict=True))
+
+
+def _per_segment(machine: Machine, segments: list[_Segment]) -> tuple[np.ndarray, np.ndarray, list]:
+    """For every move at once (mm and deg): each axis's distance moved and its largest step
+    between samples, and per move, which of its samples leave which axis's travel."""
+    k = len(machine.axes)
+    if not segments:
+        return np.zeros((0, k)), np.zeros((0, k)), []
+    scale = np.array([180 / np.pi if a.rotary else 1.0 for a in machine.axes])
+    paths = np.concatenate([seg.path for seg in segments]) * scale
+    starts = np.cumsum([0] + [len(seg.path) for seg in segments[:-1]])
+    step = np.nan_to_num(np.abs(np.diff(paths, axis=0)))
+    step[starts[1:] - 1] = 0.0                   # from one move's end to the next's start
+    # every path has two samples or more (``_samples``): each move owns one step or more
+    moved, fastest = np.add.reduceat(step, starts, axis=0), np.maximum.reduceat(step, starts, axis=0)
+    lo, hi = np.array([a.travel for a in machine.axes]).T
+    bad = (paths < lo - 1e-9) | (paths > hi + 1e-9)      # a limit itself, to rounding, is in travel
+    return moved, fastest, np.split(bad, starts[1:])
+
+
+def feed_minutes(travel_mm, turn_deg, feed: float):
+    """Minutes a fed move takes at F: along the nest's path in its active frame (mm), or,
+    where the block only turns, F as deg/min on the axis turning furthest (``turn_deg``):
+    LinuxCNC's meaning and, unconfirmed (U9), the others'. Elementwise over arrays: the
+    motion check and measure-program's feed check judge a block by this one rule."""
+    return np.where(np.asarray(travel_mm) > ONLY_TURNS_MM, travel_mm, turn_deg) / feed
+
+
+def _seconds(machine: Machine, b: Block, path: np.ndarray, per_axis: np.ndarray, top_step: np.ndarray,
+             travel_mm: float, turn_deg: float, findings: list) -> float:
+    """Time of a move, and a finding where an axis would exceed its feed_max."""
+    limits = np.array([a.feed_max for a in machine.axes])
+    if b.rapid or b.feed is None:
+        return float((per_axis / limits).max() * 60.0) if per_axis.any() else 0.0
+    minutes = float(feed_minutes(travel_mm, turn_deg, b.feed))
+    if minutes <= 0:
+        return 0.0
+    speed = top_step * ((len(path) - 1) / minutes)
+    over = np.flatnonzero(speed > limits * OVER_FEED)
+    if over.size:
+        i = over[int(np.argmax(speed[over] / limits[over]))]
+        unit = "deg" if machine.axes[i].rotary else "mm"
+        findings.append(Finding(b.line, "feed above feed_max", f"{machine.axes[i].name} would move at "
+                                f"{speed[i]:.0f} {unit}/min, its feed_max is {limits[i]:g}",
+                                _axes_text(machine, path[-1])))
+    return float(minutes * 60.0)
+
+
+def _check_travel(machine: Machine, b: Block, path: np.ndarray, out: np.ndarray, findings: list) -> None:
+    """The first axis that leaves its travel in a move (``out``: per sample and axis)."""
+    i = int(np.flatnonzero(out.any(axis=0))[0])
+    j = int(np.flatnonzero(out[:, i])[0])
+    a = machine.axes[i]
+    v = np.degrees(path[j, i]) if a.rotary else path[j, i]
+    findings.append(Finding(b.line, "outside travel", f"{a.name} reaches {v:.3f}, travel "
+                            f"{a.travel[0]:g}..{a.travel[1]:g}", _axes_text(machine, path[j])))
+
+
+def _check_collisions(machine: Machine, segments: list[_Segment], findings: list,
+                      probe: ProbeSetup | None = None):
+    """Clearances of all samples at once; the closest approach of each pair in each block
+    that comes nearer than its part's margin (or into it) is a finding. Returns the closest
+    approach outside the exemptions: the nest where it measures; the stylus tip on the
+    sphere while it probes and retracts (there it may touch, not enter)."""
+    parts = tooling(machine, probe)
+    paths = np.concatenate([seg.path for seg in segments])
+    owner = np.concatenate([np.full(len(seg.path), i) for i, seg in enumerate(segments)])
+    probing = np.concatenate([np.full(len(seg.path), seg.probing) for seg in segments])
+    pairs, measuring = clearances(machine, paths, probe)
+    closest = (np.inf, "")
+    for pair, c in pairs.items():
+        margin = np.full(len(c), parts[pair.split(" / ")[0]][3])
+        if probe is None and pair in ("housing / ball", "housing / stem"):
+            c = np.where(measuring, np.inf, c)
+        if pair == "stylus tip / ball":       # probing, the tip touches: only entering counts
+            c = np.where(probing & (c >= -TOUCH_MM), np.inf, c)
+        j = int(np.argmin(c))
+        if c[j] < closest[0]:
+            closest = (float(c[j]), f"{pair}, line {segments[owner[j]].block.line}")
+        near = c < margin
+        for i in np.unique(owner[near]):
+            j = int(np.flatnonzero((owner == i) & near)[np.argmin(c[(owner == i) & near])])
+            b = segments[i].block
+            part, thing = pair.split(" / ")
+            what = (f"{part} enters the {thing}" if c[j] < 0 else
+                    f"{part} within {c[j]:.1f} mm of the {thing} (margin {margin[j]:g} mm)")
+            findings.append(Finding(b.line, what, b.text.strip(), _axes_text(machine, paths[j]),
+                                    max(float(-c[j]), 0.0)))
+    return closest

@@ -1,0 +1,525 @@
+"""Where the model fails, and which physical effect would explain it.
+
+For every catalogue effect not in the model: its first-order signature c on the measured
+poses (``signature.py``), the part c⊥ that the model's parameters cannot absorb, the
+residual sum of squares it would remove, an F test, and Bonferroni's correction for the
+number of effects tried (``significance.py``). An effect whose signature the model absorbs
+entirely (‖c⊥‖/‖c‖ below ``VISIBLE``), or that ``fit --add`` would refuse on these data
+(one rule: ``significance.condition``), is never "found": it is reported with the
+measurement that would separate it, and only measurements the machine can make are named
+(an advisor the caller passes in: ``advice.Advisor``, which writes and checks their
+programs). The words are ``diagnose_text.py``'s.
+
+References: ``docs/diagnose.md`` (visibility, bias, F and score tests).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..data.rtest import Measurements, RTestData
+from ..errors import CompgenError
+from ..model.effects import Effect, catalogue, effect_of_param, resolve
+from ..model.kinematics import Model, Poses, runs
+from ..model.machine import Machine
+from ..model.sides import StartSides, same_pose
+from ..units import shown
+from .noise import Repeats, ar1, outliers, repeats
+from .ranking import Row, Whitening, effect_columns, rank, started_reversals
+from .results import FitResult
+from .separation import separating, telling_apart
+from .signature import products
+from .significance import ALPHA, COND_LIMIT, VISIBLE, lack_of_fit, p_value, rivals, still_significant
+from .spectrum import Line, strongest_lines
+
+if TYPE_CHECKING:        # the type only: advice writes programs, a layer above
+    from ..controllers.advice import Advisor, Measurement
+
+# Where the residual exceeds the R-test's own noise, the best candidate must remove this
+# share of the excess to be named: a catalogue curve that fits a little of an effect outside
+# the catalogue by chance (a 5 mm screw period removed ~10 % as EXC:h3) is not its cause
+SHARE_OF_EXCESS = 1 / 3
+# Without the R-test's noise: a periodic line along a linear axis (no catalogue effect has
+# that shape) removing this many times what the best candidate removes is what is missing
+LINE_OVER_BEST = 2.0
+# ... and removing at least this share of the residual: a line the scan over a continuum of
+# pitches finds in white noise removes ~1 % (3 of 40 clean B/C sessions were called
+# unexplained for such lines); a missing periodic error is most of the misfit
+LINE_SHARE = 0.1
+RESOLVES_UM = 0.1     # an R-test's sensors resolve about this: a smaller line is not a finding
+
+
+@dataclass(frozen=True)
+class Candidate:
+    effect: str
+    description: str
+    cause: str
+    visibility: float
+    rms_after_um: float
+    p_value: float          # Bonferroni-adjusted
+    significant: bool
+    confounded_with: tuple[str, ...]
+    amplitude: tuple[float, ...]     # first-order estimate, in its shown unit
+    unit: str
+    separated_by: tuple[Measurement, ...] = ()
+    silent: bool = False    # moves no reading at all on these poses (no lever arm)
+    share: float = 0.0      # of the (whitened) residual sum of squares it removes: the ranking
+    condition: float = 0.0  # of the model with it added, as fit --add computes it
+
+    @property
+    def visible(self) -> bool:
+        return self.visibility >= VISIBLE
+
+    @property
+    def separable(self) -> bool:
+        """``fit --add`` accepts it with these data (the same rule, the same limit)."""
+        return self.condition < COND_LIMIT
+
+
+@dataclass(frozen=True, eq=False)
+class Diagnosis:
+    machine: str
+    fit_file: str
+    model: tuple[str, ...]
+    rms_um: float
+    sigma_um: float
+    readings: int
+    per_path: dict
+    per_axis: dict
+    candidates: tuple[Candidate, ...]   # visible best first, then the invisible
+    bias: dict[str, dict[str, float]]   # parameter → {candidate parameter: shift per unit}
+    bias_units: dict[str, str]          # shown unit of every parameter and candidate parameter
+    signature_um: dict[str, float]      # RMS displacement over the poses per unit, µm
+    tested: int
+    after_best: tuple[str, ...] = ()    # still significant once the best candidate is added
+    rivals: tuple[str, ...] = ()        # explain almost as much as the best: not told apart
+    rivals_separated_by: tuple[Measurement, ...] = ()
+    alpha: float = ALPHA
+    notes: tuple[str, ...] = field(default_factory=tuple)
+    outliers: tuple[dict, ...] = ()     # {"file", "line", "path", "size_um"}: left out of the tests
+    noise: dict = field(default_factory=dict)   # path → AR(1) ρ̂ per direction used by the tests
+    rivals_open: dict = field(default_factory=dict)   # label → pairs of rivals it leaves apart
+    machine_ref: str = ""   # how a command names the machine file (--machine)
+    program_ext: str = ""   # the suffix of the machine's control's programs
+    device_noise_um: float | None = None   # the R-test's own noise, when given; a probe's, from its touches
+    repeats: Repeats | None = None         # device_noise_um estimated from readings that repeat a pose
+    data_device: str = "rtest"             # "probe": the data are sphere centres from probe logs
+    misfit: tuple[dict, ...] = ()   # (path, direction) whose residual exceeds that noise, worst first
+    lines: tuple[Line, ...] = ()    # the residual's strongest periodic line against each coordinate
+    best_share_of_excess: float | None = None   # of the residual beyond the noise, the best removes
+    best_sum_sq: float = 0.0        # the residual sum of squares the best significant candidate removes, mm²
+    # for rivals: what adding each puts into the fitted parameters, first order, shown units
+    carries: dict[str, dict[str, float]] = field(default_factory=dict)
+
+    @property
+    def unexplained(self) -> bool:
+        """No catalogue effect accounts for the misfit (``_unexplained``)."""
+        return _unexplained(self.misfit, bool(self.significant), self.best_share_of_excess, self.outside_line)
+
+    @property
+    def outside_line(self) -> Line | None:
+        return _outside_line(self.lines, self.device_noise_um, self.misfit, self.alpha, self.best_sum_sq)
+
+    @property
+    def noise_from(self) -> str | None:
+        """Where ``device_noise_um`` comes from: "given" (machine file or --noise-um), the
+        probe's "touches", or "repeats" of poses in the data."""
+        if self.device_noise_um is None:
+            return None
+        return "touches" if self.data_device == "probe" else "repeats" if self.repeats else "given"
+
+    @property
+    def explained_to_noise(self) -> bool:
+        return not self.significant and not self.misfit and not self.unexplained
+
+    @property
+    def significant(self) -> tuple[Candidate, ...]:
+        return tuple(c for c in self.candidates if c.significant)
+
+    @property
+    def next_measurement(self) -> tuple[Measurement | None, tuple[str, ...]]:
+        """The one measurement that would show the most effects these data cannot see
+        (shortest first among equals), and those effects."""
+        shows: dict[str, list[str]] = {}
+        by_label = {}
+        for c in self.candidates:
+            if not c.visible or (c.significant and not c.separable):
+                for m in c.separated_by:
+                    shows.setdefault(m.label, []).append(c.effect)
+                    by_label[m.label] = m
+        if not shows:
+            return None, ()
+        best = max(shows, key=lambda k: (len(shows[k]), -len(by_label[k].poses)))
+        return by_label[best], tuple(shows[best])
+
+    @property
+    def found(self) -> str | None:
+        """The effect named as missing: significant, first, with no rival, one that ``fit
+        --add`` accepts on these data, and not a small part of an unexplained misfit."""
+        best = self.significant[0] if self.significant else None
+        named = best is not None and not self.rivals and best.separable and not self.unexplained
+        return best.effect if named else None
+
+    def to_dict(self) -> dict:
+        return {
+            "format": "compgen.diagnose/1", "machine": self.machine, "fit": self.fit_file,
+            "model": list(self.model), "rms_um": self.rms_um, "sigma_um": self.sigma_um,
+            "readings": self.readings, "tested": self.tested, "alpha": self.alpha,
+            "explained_to_noise": self.explained_to_noise,
+            "device_noise_um": self.device_noise_um,
+            "device_noise_from": self.noise_from,
+            "repeats": self.repeats and {**asdict(self.repeats), "words": self.repeats.words()},
+            "misfit": list(self.misfit),
+            "unexplained": self.unexplained,
+            "best_share_of_excess": self.best_share_of_excess,
+            "residual_lines": [line.to_dict() for line in self.lines],
+            "rivals_carry": {"units": {n: self.bias_units[n] for n in self.model if n in self.bias_units},
+                             "shift_by_choice": self.carries},
+            "still_significant_after_best": list(self.after_best),
+            "rivals_of_best": list(self.rivals),
+            "found": self.found,
+            "rivals_equivalent": bool(self.rivals and not self.rivals_separated_by),
+            "next_measurement": None if self.next_measurement[0] is None else {
+                **self.next_measurement[0].to_dict(), "would_show": list(self.next_measurement[1])},
+            "rivals_separated_by": [{**m.to_dict(), "leaves_open": [list(p) for p in self.rivals_open.get(
+                m.label, ())]} for m in self.rivals_separated_by],
+            "outliers": list(self.outliers),
+            "noise_ar1_rho": self.noise,
+            "per_path": self.per_path, "per_axis": self.per_axis,
+            "candidates": [{
+                "effect": c.effect, "significant": c.significant, "visible": c.visible,
+                "visibility": c.visibility, "rms_after_um": c.rms_after_um,
+                "p_value": c.p_value, "share_explained": c.share, "separable": c.separable,
+                "condition_with_it": c.condition if np.isfinite(c.condition) else None,
+                "confounded_with": list(c.confounded_with),
+                "separated_by": [m.to_dict() for m in c.separated_by], "silent": c.silent,
+                "amplitude": list(c.amplitude),
+                "amplitude_unit": c.unit, "description": c.description, "cause": c.cause}
+                for c in self.candidates],
+            "bias_sensitivity": {"units": self.bias_units, "shift_per_unit": self.bias,
+                                 "signature_rms_um_per_unit": self.signature_um},
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class _Residual:
+    """The fit's residual on its data without the outlying readings (step 1): the poses, the
+    runs they form, the residual r (3n,) beyond the model's span and its start sides, and
+    the Q (start sides first) and R of the model's Jacobian."""
+
+    poses: Poses
+    seg: np.ndarray
+    r: np.ndarray
+    r3: np.ndarray      # (n, 3) the residual as the fit left it (before Q's projection)
+    Q: np.ndarray
+    R: np.ndarray
+    bad: np.ndarray
+    size: np.ndarray
+    model: Model
+
+    @property
+    def rss(self) -> float:
+        return float(self.r @ self.r)
+
+    @property
+    def dof(self) -> int:
+        return self.r.size - self.Q.shape[1]
+
+
+def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
+             candidates: Sequence[str] | None = None, alpha: float = ALPHA,
+             fit_file: str = "", advisor: Callable[..., Advisor] | None = None, machine_ref: str = "",
+             noise_um: float | None = None) -> Diagnosis:
+    """Rank the effects not in ``fit``'s model by how much of its residual they explain.
+
+    Outlying readings are listed and left out; the tests are made on the readings made white
+    by their segments' AR(1) correlation (``noise.py``), estimated from the residual once the
+    best candidate is added (the misfit of a missing effect is not noise). With an
+    ``advisor`` (``advisor(machine, poses, device)``: ``advice.Advisor``), the measurements
+    that would separate what these data cannot are searched for among those the machine can
+    make; ``machine_ref`` is how the commands printed name the machine file. ``noise_um``
+    is the R-test's own noise (default: the machine file's ``[rtest] noise_um``): with it,
+    the residual is tested against it per path and direction, and what no catalogue effect
+    accounts for is called unexplained."""
+    joined = Measurements.concat(data)
+    kind = joined.device
+    device = noise_um if noise_um is not None else machine.noise_um
+    if kind == "probe" and noise_um is None:   # a probe's centres carry their noise from the touches
+        cov = joined.covariance(np.zeros((3, 3)))
+        device = float(np.sqrt(np.einsum("nii->", cov) / (3 * len(cov)))) * 1e3
+    res = _residual(machine, joined, fit)
+    poses, r, rss, dof = res.poses, res.r, res.rss, res.dof
+    # no noise given: what the data repeat says it, where they repeat enough
+    said = repeats(same_pose(machine, poses, res.seg), res.r3, res.seg) if device is None else None
+    device = said.sigma_um if said is not None else device
+
+    effects, notes = _to_try(machine, fit, candidates, poses)
+    ranked, noise = _ranked(machine, fit, effects, res)
+    rss_w = noise.rss(r)
+    tested = sum(1 for row in ranked.values() if row.k_eff)
+    out = []
+    for e in effects:
+        row = ranked[e.name]
+        p = p_value(row.drop_w, row.k_eff, rss_w, dof, tested) if row.k_eff else 1.0
+        out.append(Candidate(
+            effect=e.name, description=e.words, cause=e.cause, visibility=row.vis,
+            rms_after_um=float(np.sqrt(max(rss - row.drop, 0.0) / r.size)) * 1e3, p_value=p,
+            significant=bool(row.k_eff and p < alpha), confounded_with=row.names,
+            amplitude=tuple(shown(a, e.unit)[0] for a in row.amp), unit=shown(1.0, e.unit)[1],
+            silent=row.silent, share=row.share, condition=row.cond))
+    out.sort(key=lambda c: (not c.visible, -c.share))
+    model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
+    advising = advisor(machine, poses, kind) if advisor is not None else None
+    # seen, but not to be added as a whole: a part of it the model absorbs (fit --add
+    # refuses it), so the measurement that shows that part is what to advise
+    unseen = [c for c in out if not c.visible or (c.significant and not c.separable)]
+    if advising is not None and unseen:
+        seen = separating(machine, model_effects, poses, [resolve(machine, c.effect) for c in unseen],
+                          advising)
+        out = [replace(c, separated_by=seen[c.effect]) if c.effect in seen else c for c in out]
+    bias, units, signature_um = _bias(fit, res, effects, ranked)
+
+    significant = [c for c in out if c.significant]
+    misfit, share = (), None
+    if device is not None:
+        misfit = tuple(lack_of_fit(r.reshape(-1, 3), poses.path, device, noise.rho, dof / r.size, alpha))
+        excess = rss - dof * (device * 1e-3) ** 2
+        if significant and excess > 0:
+            share = min(1.0, ranked[significant[0].effect].drop / excess)
+    lines = strongest_lines(machine, poses, r.reshape(-1, 3), res.Q)
+    best_sum_sq = ranked[significant[0].effect].drop if significant else 0.0
+    unexplained = _unexplained(misfit, bool(significant), share,
+                               _outside_line(lines, device, misfit, alpha, best_sum_sq))
+
+    # rivals of a curve that fits a little of an unexplained misfit by chance: not pursued
+    out, rival = _rivals(machine, res, [] if unexplained else significant, out, ranked, noise,
+                         model_effects, alpha, advising)
+    return Diagnosis(
+        machine=machine.name, fit_file=fit_file, model=fit.model,
+        rms_um=float(np.sqrt(rss / r.size)) * 1e3, sigma_um=float(np.sqrt(rss / dof)) * 1e3,
+        readings=int(r.size), per_path=fit.residual["per_path"],
+        per_axis=_per_axis(machine, poses, r.reshape(-1, 3)),
+        candidates=tuple(out), bias=bias, bias_units=units, signature_um=signature_um,
+        tested=tested, alpha=alpha, **rival,
+        carries=_carries(fit, res, out, ranked, rival["rivals"]),
+        outliers=_outlier_rows(data, res.bad, res.size), noise=_noise_summary(res.seg, noise.rho, poses.path),
+        machine_ref=machine_ref or machine.source,
+        program_ext=advising.program_ext if advising is not None else "", device_noise_um=device,
+        repeats=said, misfit=misfit,
+        lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, notes=notes,
+        data_device=kind)
+
+
+def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residual:
+    """Step 1: the fit's residual, each path's start side fitted as fit fits it, outlying
+    readings (``noise.outliers``) left out. Only Q and R of the model's Jacobian are kept:
+    J's column norms are R's. Free start sides (``StartSides``) come first in Q, and R is
+    that of J without them, as fit has it."""
+    poses = joined.poses
+    model = Model(machine, fit.model)
+    x = fit.values
+    free = [model.names.index(n) for n in fit.free]
+    r3 = joined.deviation - model.deviation(poses, x)
+    starts = StartSides(machine, fit.model, poses).projector()
+    if starts is not None:
+        r3 = starts.remove(r3)
+    seg = runs(poses, joined.set_of)
+    bad, size = outliers(r3 * 1e3, seg)
+    if bad.size:
+        keep = np.ones(len(poses), bool)
+        keep[bad] = False
+        poses, r3, seg = poses.take(keep), r3[keep], seg[keep]
+        starts = StartSides(machine, fit.model, poses).projector()
+    r = r3.ravel()
+    J = model.jacobian(poses, x)[:, :, free]        # indexed by a list: a copy, projected in place
+    Q, R = np.linalg.qr((J if starts is None else starts(J)).reshape(r.size, -1))
+    if starts is not None:
+        Q = np.hstack([starts.basis(len(poses)), Q])
+    return _Residual(poses, seg, r - Q @ (Q.T @ r), r3, Q, R, bad, size, model)
+
+
+def _to_try(machine: Machine, fit: FitResult, candidates: Sequence[str] | None,
+            poses: Poses) -> tuple[list[Effect], tuple[str, ...]]:
+    """Step 2: the effects to try (the catalogue's, or those named) not in the model, and a
+    note on those the data cannot carry."""
+    in_model = {effect_of_param(machine, n).name for n in fit.model}
+    effects = [e for e in (catalogue(machine) if candidates is None
+                           else [resolve(machine, c) for c in candidates]) if e.name not in in_model]
+    notes = ()
+    if candidates is None and np.isnan(poses.t).any():   # a drift needs the time of every reading
+        timed = [e.name for e in effects if e.carrier == "time" or e.basis.kind == "e"]
+        effects = [e for e in effects if e.name not in timed]
+        if timed:
+            notes = (f"  not tried: {', '.join(timed)} (they need the time t of every reading; "
+                     "these data do not give it)",)
+    if not effects:
+        raise CompgenError("no candidate effect left to try: the model holds them all")
+    return effects, notes
+
+
+def _ranked(machine: Machine, fit: FitResult, effects: Sequence[Effect],
+            res: _Residual) -> tuple[dict[str, Row], Whitening]:
+    """Step 3: every candidate's numbers (``ranking.rank``). ρ̂ from the residual once the
+    best candidate (least squares) is added: the misfit of a missing effect is not noise;
+    then, if the noise is correlated, ranked again whitened."""
+    poses, r, Q, seg = res.poses, res.r, res.Q, res.seg
+    noise = Whitening(seg, np.zeros((len(poses), 3)), Q)
+    plain = products(machine, poses, effects, Q, r)
+    started = started_reversals(machine, poses, effects)
+    plain |= {e: (C.T @ C, Q.T @ C, C.T @ r) for e, C in started.items()}
+    ranked = rank(effects, fit.free, res.R, r, noise, plain)
+    best = max(ranked.values(), key=lambda row: (row.vis >= VISIBLE, row.share))
+    c = effect_columns(machine, poses, best.effect)
+    rest = r - c @ np.linalg.lstsq(c - Q @ (Q.T @ c), r, rcond=None)[0]
+    rho = ar1((rest - Q @ (Q.T @ rest)).reshape(-1, 3), seg)
+    if rho.any():
+        noise = Whitening(seg, rho, Q)
+        rw = noise.off(noise.white(r))
+        white = products(machine, poses, effects, noise.Q, rw, (seg, rho))
+        white |= {e: (Cw.T @ Cw, noise.Q.T @ Cw, Cw.T @ rw)
+                  for e, Cw in ((e, noise.white(C)) for e, C in started.items())}
+        ranked = rank(effects, fit.free, res.R, r, noise, plain, white)
+    return ranked, noise
+
+
+def _bias(fit: FitResult, res: _Residual, effects: Sequence[Effect], ranked: dict[str, Row]):
+    """Step 4: data holding a unit of candidate parameter j shift the fitted parameters by
+    (J⁺C)ᵢⱼ, first order; kept in shown units (µm or ″ per µm or ″ of j). Returns the
+    shifts, every parameter's shown unit, and each candidate parameter's RMS signature."""
+    units_of = {n: res.model.effects[res.model.names.index(n)].unit for n in fit.free}
+    bias = {n: {} for n in fit.free}
+    units = {n: shown(1.0, units_of[n])[1] for n in fit.free}
+    signature_um = {}
+    for e in effects:
+        row = ranked[e.name]
+        for j, pname in enumerate(e.params):
+            units[pname] = shown(1.0, e.unit)[1]
+            per_shown = shown(1.0, e.unit)[0]
+            signature_um[pname] = float(row.norms[j] / np.sqrt(len(res.poses))) * 1e3 / per_shown
+            for i, n in enumerate(fit.free):
+                bias[n][pname] = float(row.absorbed[i, j] * shown(1.0, units_of[n])[0] / per_shown)
+    return bias, units, signature_um
+
+
+def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out: list[Candidate],
+            ranked: dict[str, Row], noise: Whitening, model_effects: Sequence[Effect], alpha: float,
+            advising: Advisor | None) -> tuple[list[Candidate], dict]:
+    """Step 5: which significant candidates stay so once the best is added (a second
+    effect), which are the best's rivals (the data cannot tell them apart), and what would
+    tell them apart. Returns the candidates (equivalent rivals reordered) and the
+    ``Diagnosis`` fields."""
+    poses, r = res.poses, res.r
+    after_best, rival_names, rivals_separated_by, rivals_open = (), (), (), {}
+    if len(significant) > 1:
+        first = noise.white(effect_columns(machine, poses, resolve(machine, significant[0].effect)))
+        others = [resolve(machine, c.effect) for c in significant[1:]]
+        kept = still_significant(noise.Q, first, noise.white(r), (
+            (e, noise.white(effect_columns(machine, poses, e))) for e in others), alpha)
+        after_best = tuple(e.name for e in others if e.name in kept)
+    if significant:
+        best = ranked[significant[0].effect]
+        rival_names = rivals((best.drop_w, best.k_eff), {
+            c.effect: (ranked[c.effect].drop_w, ranked[c.effect].k_eff)
+            for c in out if c.visible and c.effect != best.effect.name},
+            noise.rss(r) / res.dof, alpha, bool(after_best))
+        if rival_names and advising is not None:
+            group = [best, *(ranked[e] for e in rival_names)]
+            by_rival, rivals_separated_by, rivals_open = telling_apart(
+                machine, model_effects, poses, group, res.rss / res.dof, advising)
+            out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
+        if rival_names and advising is not None and not rivals_separated_by:
+            # equivalent everywhere: put first the one the location errors absorb least, so
+            # that adding it leaves them where an effect without that absorbed part has them
+            group = [c for c in out if c.significant and c.effect in (best.effect.name, *rival_names)]
+            first = max(group, key=lambda c: c.visibility)
+            if first.effect != best.effect.name:
+                out.remove(first)
+                out.insert(out.index(next(c for c in out if c.effect == best.effect.name)), first)
+                rival_names = tuple(c.effect for c in out if c.effect in (best.effect.name, *rival_names)
+                                    and c is not first)
+    return out, {"after_best": after_best, "rivals": rival_names, "rivals_separated_by": rivals_separated_by,
+                 "rivals_open": rivals_open}
+
+
+def _carries(fit: FitResult, res: _Residual, out: Sequence[Candidate], ranked: dict[str, Row],
+             rival_names: tuple[str, ...]) -> dict[str, dict[str, float]]:
+    """Step 6: what each rival, added, takes back from the fitted parameters (first order:
+    the part of it they absorbed, J⁺c·a): where rivals are equivalent, the choice moves these."""
+    units_of = {n: res.model.effects[res.model.names.index(n)].unit for n in fit.free}
+    carries = {}
+    first = next((c.effect for c in out if c.significant), None)     # after any reordering
+    for name in ((first, *rival_names) if rival_names else ()):
+        row = ranked[name]
+        shift = -(row.absorbed @ row.amp)
+        carries[name] = {n: float(shift[i] * shown(1.0, units_of[n])[0]) for i, n in enumerate(fit.free)}
+    return carries
+
+
+def _unexplained(misfit, significant: bool, share: float | None, outside: Line | None) -> bool:
+    """No catalogue effect accounts for the misfit: the residual exceeds the R-test's noise
+    and none is significant, or the best removes less than ``SHARE_OF_EXCESS`` of the
+    excess; or a periodic line along a linear axis outweighs every candidate."""
+    by_noise = bool(misfit) and (not significant or (share or 0.0) < SHARE_OF_EXCESS)
+    return by_noise or outside is not None
+
+
+def _outside_line(lines, device: float | None, misfit, alpha: float, best_sum_sq: float) -> Line | None:
+    """The strongest periodic line along a linear axis (no catalogue effect has that shape)
+    that an R-test resolves, significant over all lines, removing ``LINE_OVER_BEST`` times
+    what the best candidate removes and ``LINE_SHARE`` of the residual; judged only where
+    the residual is not within the R-test's noise, or that noise is not known."""
+    if device is not None and not misfit:
+        return None
+    return next((line for line in lines if line.unit == "mm" and line.amplitude_um >= RESOLVES_UM
+                 and line.p_value < alpha / max(len(lines), 1)
+                 and line.sum_sq >= LINE_OVER_BEST * best_sum_sq and line.share >= LINE_SHARE), None)
+
+
+def _outlier_rows(data: Sequence[RTestData], bad: np.ndarray, size: np.ndarray) -> tuple[dict, ...]:
+    """Each outlying reading where a user finds it: its file and CSV line (header = 1)."""
+    start = np.cumsum([0, *(len(d) for d in data)])
+    rows = []
+    for i, s in zip(bad, size, strict=True):
+        f = int(np.searchsorted(start, i, side="right") - 1)
+        d, k = data[f], int(i - start[f])
+        rows.append({"file": d.source or f"data set {f + 1}", "line": d.lines[k] if d.lines else None,
+                     "path": str(d.poses.path[k]), "size_um": round(float(s), 3)})
+    return tuple(rows)
+
+
+def _noise_summary(seg: np.ndarray, rho: np.ndarray, path: np.ndarray) -> dict:
+    """The largest ρ̂ of each path label, per direction (one path may span several files)."""
+    out: dict[str, list[float]] = {}
+    for s in np.unique(seg):
+        at = np.flatnonzero(seg == s)
+        label = str(path[at[0]]) or "(unlabelled)"
+        out[label] = np.maximum(out.get(label, [0.0] * 3), rho[at[0]]).round(3).tolist()
+    return out
+
+
+def _per_axis(machine: Machine, poses: Poses, r: np.ndarray) -> dict:
+    """Residual structure against each axis: harmonic amplitudes for a full-turn axis,
+    the RMS of a quadratic trend otherwise; µm per direction."""
+    out = {}
+    r_um = r * 1e3
+    for axis in machine.axes:
+        q = poses.q[:, machine.index(axis.name)]
+        if np.ptp(q) < 1e-9:
+            continue
+        if axis.full_turn:
+            terms = {}
+            for k in range(1, 5):
+                B = np.column_stack([np.cos(k * q), np.sin(k * q)])
+                coef = np.linalg.lstsq(B, r_um, rcond=None)[0]
+                terms[f"{k}/rev"] = np.hypot(coef[0], coef[1]).tolist()
+            out[axis.name] = terms
+        else:
+            u = (q - q.mean()) / np.ptp(q)
+            B = np.column_stack([u, u**2 - (u**2).mean()])
+            coef = np.linalg.lstsq(B, r_um, rcond=None)[0]
+            out[axis.name] = {"trend": np.sqrt(((B @ coef) ** 2).mean(axis=0)).tolist()}
+    return out

@@ -1,0 +1,229 @@
+"""diagnose's words: the report a person reads, each command in it as it runs pasted into bash."""
+
+from __future__ import annotations
+
+import shlex
+from itertools import combinations
+from typing import TYPE_CHECKING
+
+from .. import me
+from ..model.effects import effect_name
+from ..units import three, three_header
+from .diagnose import Diagnosis
+
+if TYPE_CHECKING:        # the type only: advice writes programs, a layer above
+    from ..controllers.advice import Measurement
+
+
+def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
+    """The diagnosis as text: residual, candidates, rivals, what these data cannot see, and
+    the next command for each."""
+    fit, after = shlex.quote(fit_path), shlex.quote(next_name(fit_path))
+    lines = [f"compgen diagnose: {d.machine}", f"  fit {d.fit_file}: {len(d.model)} "
+             f"parameters; residual RMS {d.rms_um:.3f} µm (σ̂ {d.sigma_um:.3f} µm) over "
+             f"{d.readings} readings", "",
+             f"  {'residual per path (µm)':<24}{three_header(('RMS dX', 'dY', 'dZ'))}"]
+    for name, p in d.per_path.items():
+        lines.append(f"    {name:<22}{three(p['rms_um'])}")
+    if d.outliers:
+        lines += ["", f"  {len(d.outliers)} outlying reading{'s' if len(d.outliers) > 1 else ''} "
+                      "(a step from their neighbours), left out of the tests below; check them, "
+                      "and delete their rows to leave them out of the fit too:"]
+        lines += [f"    {o['file']}:{o['line'] or '?'}  path {o['path'] or '(unlabelled)'}  "
+                  f"{o['size_um']:.1f} µm" for o in d.outliers]
+    if any(any(v) for v in d.noise.values()):
+        lines += ["", "  the noise is correlated from reading to reading: AR(1) ρ̂ per path (dX dY dZ): "
+                  + "; ".join(f"{k} {' '.join(f'{v:.2f}' for v in p)}" for k, p in d.noise.items()),
+                  "  the tests below are made on readings made white with it (generalised least squares)"]
+    lines += ["", "  residual against axis position (µm, amplitude in dX dY dZ)"]
+    for axis, a in d.per_axis.items():
+        for term, amp in a.items():
+            lines.append(f"    {axis:<3}{term:<19}{three(amp)}")
+    visible = [c for c in d.candidates if c.visible]
+    lines += ["", f"  candidate effects, most residual removed first ({d.tested} tried; F test, "
+                  f"Bonferroni-corrected, α = {d.alpha:g}):"]
+    for i, c in enumerate(visible[:top], 1):
+        amp = " ".join(f"{a:+.2f}" for a in c.amplitude)
+        verdict = "SIGNIFICANT" if c.significant else "not significant"
+        p = f"p = {c.p_value:.2g}" if c.p_value > 0 else "p < 1e-300"
+        lines.append(f"  {i:>2}. {c.effect:<12} RMS → {c.rms_after_um:.3f} µm   {p}  {verdict}")
+        lines.append(f"      {c.description} (≈ {amp} {c.unit}); likely cause: {c.cause}")
+        if c.confounded_with:
+            lines.append(f"      partly absorbed by {', '.join(c.confounded_with)}")
+        if d.rivals and (c.effect in d.rivals or c is d.significant[0]):
+            lines.append("      not told apart from the others marked so: see below")
+        elif c.significant and d.unexplained:
+            lines.append("      it fits a part of the unexplained misfit (see below): not advised on its own")
+        elif c.significant and c.separable:
+            lines.append(f"      add it: {me()} fit --from {fit} --add {c.effect} -o {after}")
+        elif c.significant:
+            lines.append(f"      seen, but not separable whole on these data (fit --add would refuse "
+                         f"it: condition {c.condition:.3g}); "
+                         + (f"measure {c.separated_by[0].label} first: {_measure(d, c.separated_by[0])}"
+                            if c.separated_by else
+                            "no set-up this machine can measure separates it"))
+    if d.rivals:
+        best = d.significant[0].effect
+        verb = "explains" if len(d.rivals) == 1 else "explain"
+        lines += ["", f"  Not told apart: {', '.join(d.rivals)} {verb} these data as well as "
+                      f"{best}, within their noise; no one of them is named as found."]
+        if d.rivals_separated_by:
+            plan = d.rivals_separated_by
+            told = set().union(*(_told(d, m) for m in plan))
+            left = [p for p in combinations((d.significant[0].effect, *d.rivals), 2) if p not in told]
+            lines.append(f"  To tell them apart, measure {'this' if len(plan) == 1 else 'these'}: "
+                         + ("together they tell every pair apart" if not left else
+                            "together they leave " + ", ".join(" / ".join(p) for p in left) + " open"))
+            for i, m in enumerate(plan, 1):
+                lines.append(f"   {i}. {m.label} (tells apart "
+                             + ", ".join(" / ".join(p) for p in sorted(_told(d, m))) + ")")
+                lines.append(f"      {_measure(d, m)}")
+            lines += _then(plan, fit, after)
+        else:
+            lines += ["  No path or ball position of the machine file tells them apart: for every "
+                      "set-up compgen can measure, at its size here"
+                      + (" (a probe's [probe] poses per path)" if d.data_device == "probe" else "")
+                      + ", they predict readings closer than the noise tells apart (or the same: they "
+                      "differ by what the location errors absorb). Any one of them models the misfit: "
+                      f"{me()} fit --from {fit} --add {best} -o {after};",
+                      "  which of them is the physical cause stays open (it needs another "
+                      "reference), and the location errors written to a control depend on the "
+                      "choice:", *_carries(d)]
+    lines += _lines_text(d)
+    if d.unexplained:
+        lines += _unexplained(d, fit, after)
+    elif not d.significant:
+        lines += ["", "  No candidate is significant: the model explains these data to the "
+                  + (f"{_device(d)} noise ({d.device_noise_um:.3g} µm)." if d.device_noise_um is not None else
+                     f"noise level (their own scatter, σ̂ {d.sigma_um:.2f} µm). The R-test's noise is not "
+                     "given: set [rtest] noise_um in the machine file, or --noise-um, to test the "
+                     "residual against it.")]
+    elif len(d.significant) > 1:
+        best = d.significant[0].effect
+        lines += ["", f"  Effects share misfit: once {best} is added, "
+                      + (f"still significant: {', '.join(d.after_best)}." if d.after_best
+                         else "no other candidate stays significant.")
+                      + " Add one effect at a time and diagnose again."]
+    hidden = [c for c in d.candidates if not c.visible and (not c.silent or c.separated_by)]
+    if hidden:
+        lines += ["", "  not visible in these data (never reported as found; the fit absorbs them):"]
+        for c in hidden:
+            where = (f"would be seen with {' or '.join(m.label for m in c.separated_by[:3])}"
+                     if c.separated_by
+                     else "no path or ball position this machine can measure separates it: it "
+                          "needs an independent reference")
+            what = "moves no reading here" if c.silent else f"absorbed by {', '.join(c.confounded_with)}"
+            lines.append(f"    {c.effect:<12} {c.description}: {what}; {where}")
+        m, shows = d.next_measurement
+        if m is not None:
+            lines.append(f"  to look for them, {m.label} would show the most ({len(shows)}: "
+                         f"{', '.join(shows[:6])}{', …' if len(shows) > 6 else ''}):")
+            lines.append(f"    {m.label}: {_measure(d, m)}")
+            lines += _then([m], fit, after)
+    silent = [c.effect for c in d.candidates if c.silent and not c.separated_by]
+    if silent:
+        lines += ["", "  no effect on any reading here (no lever arm to the nest or ball in this "
+                      "machine file): " + ", ".join(silent)]
+    lines += ["", "  fragile parameters: largest shift per µm (RMS over the poses) of an effect "
+                  "not in the model"]
+    for name, row in d.bias.items():
+        per_um = {k: v / d.signature_um[k] for k, v in row.items() if d.signature_um[k] > 0}
+        worst = max(per_um, key=lambda k: abs(per_um[k]), default=None)
+        if worst is not None:
+            lines.append(f"    {name:<6} {per_um[worst]:+6.2f} {d.bias_units[name]} per µm of "
+                         f"{effect_name(worst)}")
+    return "\n".join([*lines, *d.notes]) + "\n"
+
+CARRIES_SHOWN = 0.2     # µm or ″: smaller shifts of a location error are not listed
+
+
+def _carries(d: Diagnosis) -> list[str]:
+    """What each equivalent choice puts into the fitted parameters, against the first."""
+    if not d.carries:
+        return []
+    first = next(iter(d.carries))
+    out = [f"  what each, added, moves in the fitted values (first order; the first, {first}, is the one "
+           "the location errors absorb least):"]
+    for name, shift in d.carries.items():
+        big = [(n, v) for n, v in shift.items() if abs(v) >= CARRIES_SHOWN]
+        out.append(f"    {name:<12} " + (", ".join(f"{n} {v:+.2f} {d.bias_units.get(n, '')}" for n, v in big)
+                                         or f"nothing above {CARRIES_SHOWN:g} µm or ″"))
+    return out
+
+
+def _lines_text(d: Diagnosis) -> list[str]:
+    """The residual's strongest periodic line against each coordinate."""
+    if not d.lines:
+        return []
+    return ["", "  strongest periodic line of the residual against each axis and time:",
+            *(f"    {line.text()}" for line in d.lines)]
+
+
+def _unexplained(d: Diagnosis, fit: str, after: str) -> list[str]:
+    """What no catalogue effect accounts for: where, its shape, and how a user who knows the
+    cause declares it."""
+    if d.misfit:
+        out = ["", f"  UNEXPLAINED: the residual exceeds the {_device(d)} noise ({d.device_noise_um:.3g} µm) "
+                   "and "
+                   "no catalogue effect accounts for it:"]
+        out += [f"    {m['direction']} of {m['path']}: RMS {m['rms_um']:.2f} µm (p = {m['p_value']:.2g})"
+                for m in d.misfit[:6]]
+    else:
+        out = ["", "  UNEXPLAINED: a periodic line along a linear axis, a shape no catalogue effect has, "
+                   "outweighs every candidate"]
+    if d.significant:
+        share = (f"only {d.best_share_of_excess:.0%} of the residual beyond the noise"
+                 if d.best_share_of_excess is not None else "less than that line")
+        out.append(f"  the best candidate, {d.significant[0].effect}, removes {share}: it is not named as "
+                   "found.")
+    worst = {m["direction"] for m in d.misfit}
+    shape = d.outside_line or next((line for line in d.lines if line.direction in worst
+                                    and line.p_value < d.alpha), None)
+    if shape is None:
+        out.append("  no periodic line against an axis or time stands out: look at the residual plots "
+                   "(--plots) per path and axis")
+        return out
+    out.append(f"  its shape: {shape.text()}")
+    if shape.unit == "mm":
+        name = f"E{shape.direction[1]}{shape.against}:w{shape.period:.3f}"
+        out += [f"  if its cause is known (a ball-screw or scale period of {shape.against}, say), declare it "
+                "and fit again:", f"    {me()} fit --from {fit} --add {name} -o {after}",
+                f"  or list it in the machine file (diagnose then tries it): [effects] declared = "
+                f"[\"{name}\"]"]
+    return out
+
+
+def next_name(path: str) -> str:
+    """The name of the next fit in the loop: fit.json → fit+1.json."""
+    stem = path[:-5] if path.endswith(".json") else path
+    return f"{stem}+1.json"
+
+
+def _measure(d: Diagnosis, m: Measurement) -> str:
+    return m.command(me(), d.machine_ref, d.program_ext)
+
+
+def _told(d: Diagnosis, m: Measurement) -> set[tuple[str, str]]:
+    """The pairs of rivals ``m`` tells apart on its own."""
+    group = (d.significant[0].effect, *d.rivals)
+    return set(combinations(group, 2)) - set(map(tuple, d.rivals_open.get(m.label, ())))
+
+
+def _device(d: Diagnosis) -> str:
+    if d.data_device == "probe":
+        return "probe's (from its touches)"
+    return f"repeats' ({d.repeats.words()})" if d.repeats else "R-test's"
+
+
+def _then(ms, fit: str, after: str) -> list[str]:
+    """What follows measurements: their readings into CSV files, added to the fit's data."""
+    names = [m.name for m in ms]
+    if ms and ms[0].device == "probe":
+        logs = ", ".join(f"{n}.log" for n in names)
+        return [f"  run {'it' if len(ms) == 1 else 'them'}; copy the probe log each writes on the control "
+                f"(<program>_LOG) off as {logs}, then fit together with these data and diagnose again:",
+                f"    {me()} fit --from {fit} " + " ".join(f"--data {n}.log" for n in names) + f" -o {after}"]
+    csv = ", ".join(f"{n}.csv" for n in names)
+    return [f"  run {'it' if len(ms) == 1 else 'them'}; save the R-test's readings as {csv} (the pose "
+            "list beside each program, with dX dY dZ), then fit together with these data and diagnose again:",
+            f"    {me()} fit --from {fit} " + " ".join(f"--data {n}.csv" for n in names) + f" -o {after}"]

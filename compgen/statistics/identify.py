@@ -1,0 +1,411 @@
+"""Identification: first-order least squares (the seed's method), then Gauss–Newton on the
+exact model, with uncertainties from the residual and the Jacobian, and an identifiability
+check that refuses what the data cannot separate.
+
+References: seed report §3 (eq. 26); ``shared/research/identification.md`` §1.9 and §3.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from .. import __version__
+from ..data.rtest import Measurements, RTestData, refuse_twice
+from ..errors import CompgenError
+from ..model.effects import canonical, effect_of_param, location_model
+from ..model.kinematics import Model, Poses, runs
+from ..model.machine import Machine
+from ..model.sides import StartSides, both_sides
+from ..units import parse_quantity, shown
+from .noise import ar1, ar1_covariance
+from .results import DataRef, Estimate, FitResult
+from .significance import COND_LIMIT, condition
+
+MAX_ITER = 30
+STEP_TOL_SHOWN = 1e-7     # µm or arcsec: Gauss–Newton has converged below this step
+
+
+def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] | None = None,
+             fixed: Mapping[str, float] | None = None, method: str = "exact",
+             sign: str = "nest-minus-ball", advisor=None) -> FitResult:
+    """Identify the parameters of ``model`` from R-test data.
+
+    Parameters
+    ----------
+    model : parameter names; default the seed's 11 generalised (``location_model``)
+    fixed : name → value (mm, rad) held fixed; names not in ``model`` are added to it
+    method : ``"exact"`` (first-order start, then Gauss–Newton on the exact model) or
+        ``"linear"`` (first-order only, as the seed)
+    advisor : what makes the measurements a machine can add, ``advisor(machine, measured)``
+        with ``.candidates`` and ``.runnable(ms, most)`` (``advice.Advisor``, which writes and
+        checks their programs: the controllers' layer, so the caller passes it in). With it, a
+        refusal names those that would separate what these data cannot.
+    """
+    if method not in ("exact", "linear"):
+        raise CompgenError(f"method must be 'exact' or 'linear', not {method!r}")
+    if not data:
+        raise CompgenError("no data to fit")
+    refuse_twice(data)
+    fixed = dict(fixed or {})
+    names = list(model or location_model(machine))
+    names += [n for n in fixed if n not in names]
+    m = Model(machine, names)
+    free = [i for i, n in enumerate(names) if n not in fixed]
+    if not free:
+        raise CompgenError("every parameter is fixed: nothing to fit")
+    joined = Measurements.concat(data)
+    poses, y = joined.poses, joined.deviation
+    readings, p = y.size, len(free)
+    if readings <= p:
+        raise CompgenError(f"{len(poses)} poses give {readings} readings for {p} parameters",
+                           hint="measure more poses: a K4 path has 241")
+
+    x = np.array([fixed.get(n, 0.0) for n in names])
+    weights = Weights(data)
+    # where the data do not say which side a path started on, one free constant per path
+    # (``StartSides``), projected out of readings and Jacobian alike: the joint fit's
+    # estimates without carrying the constants (Frisch–Waugh–Lovell)
+    starts = StartSides(machine, names, poses)
+    project = starts.projector(weights.apply_at) or (lambda v: v)
+    if readings <= p + starts.count:
+        raise CompgenError(f"{len(poses)} poses give {readings} readings for {p} parameters and "
+                           f"{starts.count} free start sides", hint="measure more poses: a K4 path has 241")
+
+    buffer = np.empty((len(names), len(poses), 3))
+
+    def linearise(x):
+        """The raw residual (n, 3) mm, and the whitened residual and Jacobian of the free
+        parameters (flat), from one walk of the model's chains. The Jacobian lives in
+        ``buffer``: each call overwrites the last one's, which is never used again."""
+        dev, J = m.linearise(poses, x, out=buffer)
+        raw = y - dev
+        J = project(weights.apply(J if len(free) == len(names) else J[:, :, free]))
+        return Step(raw, project(np.array(weights.apply(raw))).ravel(),     # a copy: raw stays raw
+                    Normal(np.moveaxis(J, 2, 0).reshape(p, readings).T))
+
+    def solve(x, at):
+        # first order about here (seed eq. 26): y − dev(x) ≈ J Δa
+        x = x.copy()
+        x[free] += at.normal.solve(at.r)
+        at, iterations = linearise(x), 0
+        if method == "exact":
+            x, at, iterations = _gauss_newton(linearise, x, at, free, m)
+        return x, at, iterations
+
+    at = linearise(x)
+    check_identifiable(machine, m, free, at.normal, poses, advisor)
+    x, at, iterations = solve(x, at)
+    # devices of unknown relative noise: their variances are estimated with the fit
+    while weights.estimated and weights.rescale(at.r, at.normal):
+        x, at, more = solve(x, linearise(x))
+        iterations += more
+
+    raw, r, normal = at
+    if starts.count:            # the residual the joint fit leaves, constants fitted
+        raw = project.remove(raw, weights.apply(raw))
+    dof = readings - p - starts.count
+    sigma2 = float(r @ r) / dof
+    # readings taken close together (an R-test sampling at 100 Hz, or a set-up drifting
+    # between poses) are not independent: the noise's AR(1) ρ of each run and direction
+    # from the residual (``noise.ar1``: zero unless significant), and where it is not zero
+    # the estimates' covariance under that noise; white noise keeps σ²(JᵀJ)⁻¹
+    seg = runs(poses, np.concatenate([np.full(len(d), k) for k, d in enumerate(data)]))
+    rho = ar1(r.reshape(-1, 3), seg)
+    if rho.any():
+        cov = ar1_covariance(normal.J.T.reshape(p, len(poses), 3), r.reshape(-1, 3), seg, rho, dof)
+    else:
+        cov = normal.inverse() * sigma2
+    std = np.sqrt(np.diag(cov))
+    corr = cov / np.outer(std, std) if np.all(std > 0) else np.eye(p)
+    sv = normal.singular_values()
+
+    params = {}
+    for i, n in enumerate(names):
+        e = m.effects[i]
+        k = free.index(i) if i in free else None
+        params[n] = Estimate(float(x[i]), 0.0 if k is None else float(std[k]), e.unit, k is None)
+    return FitResult(
+        machine={"name": machine.name, "file": machine.bundled or _absolute(machine.source),
+                 "sha256": machine.sha256, **({"bundled": True} if machine.bundled else {})},
+        data=tuple(DataRef(_absolute(d.source), d.sha256, len(d), _counts(d.poses.path), d.device)
+                   for d in data),
+        model=tuple(names), parameters=params, free=tuple(names[i] for i in free),
+        correlation=np.clip(corr, -1.0, 1.0), singular_values=sv,
+        residual=residual_stats(poses, raw, dof, rho),
+        method=method, iterations=iterations, sign=sign, version=__version__,
+        descriptions={n: e.words for n, e in zip(names, m.effects, strict=True)})
+
+
+def fitted(machine: Machine, fit: FitResult, data: Sequence[RTestData]) -> np.ndarray:
+    """The readings (n, 3) mm the fit's model gives at the data's poses, with each path's
+    start side where the data do not record it (``StartSides``, fitted to these readings as
+    ``identify`` fits them; readings unweighted): what the fit's residual is taken from."""
+    joined = Measurements.concat(data)
+    poses, y = joined.poses, joined.deviation
+    dev = fit.evaluate(machine, poses)
+    starts = StartSides(machine, fit.model, poses).projector()
+    return dev if starts is None else y - starts.remove(y - dev)
+
+
+class Weights:
+    """How each reading counts. R-test readings alone: equally (ordinary least squares, the
+    seed's). Sphere centres from a probe log carry their own covariance, so every reading
+    is whitened by it; R-test readings fitted beside them get a variance of their own,
+    estimated with the fit from each device's share of the residual (variance component
+    estimation), since neither device's noise is known against the other's beforehand."""
+
+    ROUNDS = 10
+    PRIOR_UM = 1.0      # an R-test reading's σ before it is estimated
+
+    def __init__(self, data: Sequence[RTestData]):
+        self.active = any(d.cov is not None for d in data)
+        self.estimated = False
+        if not self.active:
+            return
+        prior = np.eye(3) * (self.PRIOR_UM * 1e-3) ** 2
+        joined = Measurements.concat(data)
+        self.base, self.group = joined.covariance(prior), joined.cov_known
+        self.factor = {g: 1.0 for g in np.unique(self.group).tolist()}
+        self.estimated = len(self.factor) > 1      # two devices: each one's variance is estimated
+        self.rounds = 0
+        self._whiten()
+
+    def _whiten(self) -> None:
+        scale = np.array([self.factor[g] for g in self.group.tolist()])
+        self.L = np.linalg.inv(np.linalg.cholesky(self.base * scale[:, None, None]))
+
+    def apply(self, a: np.ndarray) -> np.ndarray:
+        """Readings (n, 3) or their Jacobian (n, 3, p), whitened."""
+        if not self.active:
+            return a
+        return np.einsum("nij,nj...->ni...", self.L, a)
+
+    def apply_at(self, idx: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """``apply`` for the rows ``idx`` of the readings only: ``a`` is (len(idx), 3, …)."""
+        if not self.active:
+            return a
+        return np.einsum("nij,nj...->ni...", self.L[idx], a)
+
+    def rescale(self, r: np.ndarray, normal: Normal) -> bool:
+        """New variance factors from the residual (whitened, flat) and the Jacobian's normal
+        equations; True if they moved by more than 1 % and the fit should be redone."""
+        if not self.estimated or self.rounds >= self.ROUNDS:
+            return False
+        self.rounds += 1
+        # each reading's leverage: the diagonal of J (JᵀJ)⁻¹ Jᵀ
+        leverage = np.einsum("ij,ij->i", normal.J @ normal.inverse(), normal.J).reshape(-1, 3).sum(axis=1)
+        rr = (r.reshape(-1, 3) ** 2).sum(axis=1)
+        moved = False
+        for g in self.factor:
+            at = self.group == g
+            redundancy = 3 * at.sum() - leverage[at].sum()
+            if redundancy <= 0:
+                return False
+            f = self.factor[g] * rr[at].sum() / redundancy
+            moved |= abs(f / self.factor[g] - 1) > 0.01
+            self.factor[g] = f
+        self._whiten()
+        return moved
+
+
+class Normal:
+    """A Jacobian J (readings, p; best column-major) and its normal equations, formed once:
+    a dense session's J is 10⁶ rows of a few columns, where an SVD or QR costs seconds and
+    JᵀJ milliseconds. Columns are scaled to unit norm first, so the Gram matrix's condition
+    is that of the scaled J squared — at most COND_LIMIT² where a fit goes on (a solve
+    exact to ~1e-12) — and a Gauss–Newton step corrects what little a solve leaves. The
+    exact singular values come from J itself only on the way to a refusal."""
+
+    def __init__(self, J: np.ndarray):
+        self.J = J
+        self.norm = np.sqrt(np.einsum("ij,ij->j", J, J))
+        self.scale = np.where(self.norm > 0, self.norm, 1.0)      # a dead column stays 0
+        self.G = (J.T @ J) / np.outer(self.scale, self.scale)
+
+    def solve(self, r: np.ndarray) -> np.ndarray:
+        """The least-squares step: argmin |J dx − r|."""
+        return np.linalg.solve(self.G, (self.J.T @ r) / self.scale) / self.scale
+
+    def inverse(self) -> np.ndarray:
+        """(JᵀJ)⁻¹."""
+        return np.linalg.inv(self.G) / np.outer(self.scale, self.scale)
+
+    def singular_values(self) -> np.ndarray:
+        """Singular values of J with unit-norm columns, largest first, from JᵀJ: exact to
+        ~1e-8 of the largest (an SVD of J itself, for a refusal, in ``check_identifiable``)."""
+        return np.sqrt(np.clip(np.linalg.eigvalsh(self.G), 0.0, None))[::-1]
+
+
+class Step(NamedTuple):
+    """The fit at one point: the raw residual (n, 3) mm, the whitened residual (flat) and
+    the normal equations of the whitened Jacobian of the free parameters."""
+
+    raw: np.ndarray
+    r: np.ndarray
+    normal: Normal
+
+
+def _gauss_newton(linearise, x, at, free, m):
+    """Gauss–Newton on the exact model, with step halving.
+
+    Each iteration walks the model's chains once (``Model.linearise``: the exact residual
+    and the exact analytic Jacobian together), so it converges quadratically: R-test errors
+    are µm and µrad, the first-order start is within ~1e-5 of the answer and two steps
+    later the step is below STEP_TOL_SHOWN. The result satisfies the exact model's normal
+    equations (J*ᵀr = 0) to that step, and the covariance uses J* there. (A
+    Levenberg–Marquardt safeguard was never needed: the problem is mildly non-linear and
+    well started by the first-order solution.)
+    """
+    cost = float(at.r @ at.r)
+    for it in range(1, MAX_ITER + 1):
+        dx = at.normal.solve(at.r)
+        step = max(abs(shown(v, m.effects[i].unit)[0]) for i, v in zip(free, dx, strict=True))
+        if step < STEP_TOL_SHOWN:
+            return x, at, it - 1
+        for _ in range(30):
+            trial = x.copy()
+            trial[free] += dx
+            at_trial = linearise(trial)
+            new = float(at_trial.r @ at_trial.r)
+            if new <= cost * (1 + 1e-12):
+                break
+            dx /= 2
+        x, at, cost = trial, at_trial, new
+    raise CompgenError(f"the exact fit did not converge in {MAX_ITER} iterations",
+                       hint="the errors may be too large for this model; try --method linear "
+                            "to see the first-order estimate")
+
+
+def check_identifiable(machine: Machine, m: Model, free: list[int], J: np.ndarray | Normal,
+                       measured: Poses | None = None, advisor=None) -> None:
+    """Refuse a rank-deficient or badly conditioned problem, naming what cannot be separated
+    and, with an ``advisor`` (``identify``'s), which of the machine's paths, or a second ball
+    position, not ``measured`` already, would separate it."""
+    normal = J if isinstance(J, Normal) else Normal(J)
+    J, norm = normal.J, normal.norm
+    names = [m.names[i] for i in free]
+    dead = [names[k] for k in np.flatnonzero(norm == 0)]
+    if dead:
+        reversal = any(m.effects[free[k]].basis.kind == "r" for k in np.flatnonzero(norm == 0))
+        raise CompgenError(f"{', '.join(dead)} do{'es' if len(dead) == 1 else ''} not change any "
+                           f"reading on these poses", hint="fix it with --fix NAME=0 or measure a "
+                           + ("path there and back (measure-program --there-and-back): a reversal "
+                              "shows only where its axis turns back" if reversal else
+                              "path that moves its axis"))
+    s = normal.singular_values()
+    if s[-1] >= 1.01 * s[0] / COND_LIMIT:     # clear of the limit: JᵀJ's rounding cannot matter
+        return
+    _, s, Vt = np.linalg.svd(J / norm, full_matrices=False)
+    weak = np.flatnonzero(s < s[0] / COND_LIMIT)
+    if not weak.size:
+        return
+    combos = []
+    for v in _sparse_basis(Vt[weak]) / norm:   # physical directions the readings do not see
+        big = np.flatnonzero(np.abs(v * norm) >= 0.15 * np.abs(v * norm).max())
+        scale = 1.0 / shown(v[big[0]], m.effects[free[big[0]]].unit)[0]    # the first named: +1
+        combos.append(" together with ".join(
+            f"{names[j]} by {shown(v[j] * scale, m.effects[free[j]].unit)[0]:+.2f} "
+            f"{shown(1, m.effects[free[j]].unit)[1]}" for j in big))
+    # below 1e-12 of the largest, a singular value is rounding: the problem is singular
+    cond = "singular" if s[-1] <= s[0] * 1e-12 else f"condition number {s[0] / s[-1]:.3g}"
+    raise CompgenError(
+        f"these data cannot separate the parameters ({cond}): moving "
+        + "; or ".join(combos) + " changes the readings by less than 1/"
+        + f"{COND_LIMIT:g} of the best-seen combination",
+        hint=("" if advisor is None else _separating_measurements(machine, m, free, J, measured, advisor(
+            machine, measured)) + "; or ") + "hold one parameter of each combination with --fix NAME=VALUE")
+
+
+def _sparse_basis(V: np.ndarray) -> np.ndarray:
+    """Rows spanning the same space as the orthonormal rows ``V``, each with as few
+    parameters as elimination allows (reduced row echelon form, largest pivot first): a
+    space of several unseen combinations has no preferred orthonormal basis (an exactly
+    singular one is rotated by rounding), while the pairs a machine builder recognises —
+    YOW with COA, BOA with BOC — are each one row here."""
+    V = V.copy()
+    for row in range(len(V)):
+        col = int(np.argmax(np.abs(V[row:]).max(axis=0)))
+        pivot = row + int(np.argmax(np.abs(V[row:, col])))
+        V[[row, pivot]] = V[[pivot, row]]
+        V[row] /= V[row, col]
+        others = np.arange(len(V)) != row
+        V[others] -= np.outer(V[others, col], V[row])
+    V[np.abs(V) < 1e-9] = 0.0
+    return V
+
+
+def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.ndarray,
+                             measured: Poses | None, advisor) -> str:
+    options = []
+    # a reversal seen from one side only is its axis's zero offset, not its backlash
+    reversals = {m.effects[j].carrier for j in free if m.effects[j].basis.kind == "r"}
+    for i, extra in enumerate(advisor.candidates):    # the ball as it stands first, then moved
+        if measured is not None and not all(both_sides(machine, a, measured, extra.poses) for a in reversals):
+            continue
+        cond = condition(np.vstack([J, m.jacobian(extra.poses)[:, :, free].reshape(-1, len(free))]))
+        if cond < COND_LIMIT:
+            options.append((round(cond), i, extra.label, extra))
+    runnable = advisor.runnable([o[-1] for o in sorted(options, key=lambda o: o[:2])], most=3)
+    if not runnable:
+        return "no single path or ball position of the machine file separates them"
+    cond = {o[2]: o[0] for o in options}
+    best = ", ".join(f"{m.label} (condition {cond[m.label]:.0f})" for m in runnable)
+    return f"adding one of these measurements would: {best}"
+
+
+def residual_stats(poses: Poses, r: np.ndarray, dof: int, rho: np.ndarray | None = None) -> dict:
+    """RMS and ISO 10791-6 style range per path and per direction, µm; r (n, 3) mm. With
+    the noise's AR(1) ρ of each reading (n, 3), the largest of each path's runs too, and
+    which noise the uncertainties assume."""
+    r_um = r * 1e3
+    per_path = {}
+    for label in dict.fromkeys(poses.path):
+        at = poses.path == label
+        rp = r_um[at]
+        per_path[label or "(unlabelled)"] = {
+            "n": int(len(rp)), "rms_um": np.sqrt((rp**2).mean(axis=0)).tolist(),
+            "range_um": (rp.max(axis=0) - rp.min(axis=0)).tolist(),
+            "max_abs_um": np.abs(rp).max(axis=0).tolist(),
+            **({"ar1_rho": rho[at].max(axis=0).round(3).tolist()} if rho is not None else {})}
+    return {**({"noise": "ar1" if rho.any() else "white"} if rho is not None else {}),
+            "rms_um": float(np.sqrt((r_um**2).mean())),
+            "sigma_um": float(np.sqrt((r_um**2).sum() / dof)),
+            "readings": int(r.size), "dof": int(dof),
+            "per_direction_rms_um": dict(zip(("dX", "dY", "dZ"),
+                                             np.sqrt((r_um**2).mean(axis=0)).tolist(), strict=True)),
+            "per_path": per_path}
+
+
+def _absolute(path: str) -> str:
+    """Where later commands (diagnose, kinematics) find the file again, whatever their cwd."""
+    return str(Path(path).resolve()) if path else path
+
+
+def _counts(labels: np.ndarray) -> dict[str, int]:
+    return {str(k) or "(unlabelled)": int((labels == k).sum()) for k in dict.fromkeys(labels)}
+
+
+def parse_fixed(machine: Machine, items: Sequence[str]) -> dict[str, float]:
+    """``["ZOW=0", "BOA=12.3arcsec"]`` → {name: value in mm or rad}."""
+    out = {}
+    for item in items:
+        name, eq, value = item.partition("=")
+        if not eq:
+            raise CompgenError(f"--fix takes NAME=VALUE, not {item!r}", hint="e.g. --fix ZOW=0")
+        effect = effect_of_param(machine, name.strip())
+        out[canonical(name)] = parse_quantity(value, effect.unit, where=f"--fix {item}")
+    return out
+
+
+SETUP = ("XOW", "YOW", "ZOW")      # the ball's offset: what every set-up has anew
+
+
+def beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
+    """RMS and per-path figures of ``reading`` (n, 3) mm beyond the set-up terms alone:
+    what an edit leaves, or a check measures, whatever the ball's offset."""
+    fit = identify(machine, [RTestData(poses, reading)], list(SETUP))
+    return {"rms_um": fit.residual["rms_um"], "per_path": fit.residual["per_path"]}

@@ -1,0 +1,121 @@
+"""The measurements, among those the machine can make, that would separate what a
+diagnosis's data cannot: an effect the model absorbs (or part of it), and rivals the data
+cannot tell apart. The advisor (``advice.Advisor``) is given by the caller: it writes and
+motion-checks each measurement's program, a layer above the statistics."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from itertools import combinations
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..model.effects import Effect
+from ..model.kinematics import Poses
+from ..model.machine import Machine
+from ..model.sides import both_sides
+from .ranking import Row
+from .signature import r_factor
+from .significance import COND_LIMIT, condition
+
+if TYPE_CHECKING:        # the type only: advice writes programs, a layer above
+    from ..controllers.advice import Advisor, Measurement
+
+SEPARATES = 0.05      # visibility an extra measurement must give to count as separating
+TELLS_APART = 25.0    # σ̂² of misfit a measurement must add between two rivals (5 σ)
+ADVISED = 3           # measurements named per effect, shortest first (each written and motion-checked)
+
+
+def separating(machine: Machine, model_effects: Sequence[Effect], poses: Poses, effects: Sequence[Effect],
+                advisor: Advisor) -> dict[str, tuple[Measurement, ...]]:
+    """For effects these data cannot tell from ``model_effects`` (or not whole): the
+    measurements the machine can make after which they could, shortest first, at most
+    ``ADVISED``: each column then visible (``SEPARATES``) and the model with the effect
+    separable as fit --add judges it.
+
+    R of stacked data is R of the stacked R factors, and the R factor of a subset of
+    columns is that of the same columns of R: the measured poses are reduced once, each
+    extra measurement adds only its own rows, and each effect is judged on small blocks.
+    """
+    both = [*model_effects, *effects]
+    p = sum(len(e.params) for e in model_effects)
+    R0 = r_factor(machine, poses, both)
+    found: dict[str, list[Measurement]] = {e.name: [] for e in effects}
+    for extra in sorted(advisor.candidates, key=lambda m: len(m.poses)):
+        R = r_factor(machine, extra.poses, both, R0)
+        col = p
+        for e in effects:
+            k = len(e.params)
+            if e.basis.kind == "r" and not both_sides(machine, e.carrier, poses, extra.poses):
+                col += k    # one side throughout is the axis's zero offset, not its backlash
+                continue
+            Re = np.linalg.qr(R[:, [*range(p), *range(col, col + k)]], mode="r")
+            vis = np.linalg.norm(Re[p:, p:], axis=0) / np.maximum(np.linalg.norm(Re[:, p:], axis=0), 1e-300)
+            if vis.min() >= SEPARATES and condition(Re) < COND_LIMIT:
+                found[e.name].append(extra)
+            col += k
+    return {k: advisor.runnable(v, most=ADVISED) for k, v in found.items()}
+
+
+def telling_apart(machine: Machine, model_effects: Sequence[Effect], poses: Poses, group: Sequence[Row],
+                   sigma2: float, advisor: Advisor
+                   ) -> tuple[dict[str, tuple[Measurement, ...]], tuple[Measurement, ...], dict]:
+    """Which measurements, not made yet and that the machine can make, tell the best
+    (``group[0]``) and its rivals apart: a pair is told apart when, at their fitted sizes,
+    they would differ by ``TELLS_APART`` σ̂² more than now (each hypothesis, were it true,
+    would leave that much misfit in a fit of the other; first order).
+
+    Returns, per rival, what tells it from the best (shortest first); the measurements that
+    tell any pair apart, those telling every pair apart first; and per measurement the
+    pairs it leaves open. The measurements come as a plan: each tells apart the most pairs
+    the ones before it leave open, until every pair is told apart or none is left that
+    would."""
+    effects = [row.effect for row in group]
+    amps = {row.effect.name: row.amp for row in group}
+    p = sum(len(e.params) for e in model_effects)
+    cols, at = {}, p
+    for e in effects:
+        cols[e.name] = list(range(at, at + len(e.params)))
+        at += len(e.params)
+
+    def misfit(R, a, b):        # a true, fitted with the model and b: what a leaves
+        Rs = np.linalg.qr(R[:, [*range(p), *cols[b], *cols[a]]], mode="r")
+        k = len(cols[a])
+        return float(np.sum((Rs[-k:, -k:] @ amps[a]) ** 2))
+
+    def apart(R, a, b):
+        return min(misfit(R, a, b), misfit(R, b, a))
+
+    both = [*model_effects, *effects]
+    R0 = r_factor(machine, poses, both)
+    pairs = list(combinations([e.name for e in effects], 2))
+    now = {pq: apart(R0, *pq) for pq in pairs}
+    split = {}
+    for extra in advisor.candidates:
+        R = r_factor(machine, extra.poses, both, R0)
+        gains = {pq: apart(R, *pq) - now[pq] for pq in pairs}
+        told = {pq for pq, g in gains.items() if g >= TELLS_APART * sigma2}
+        if told:
+            split[extra.label] = (extra, told, sum(gains.values()))
+    # a plan, greedily: each next measurement tells apart the most pairs still open (the
+    # shortest among equals); more data never bring two hypotheses closer, so what each
+    # tells apart alone, it tells apart in the plan too
+    remaining, plan = set(pairs), []
+    while remaining:
+        ranked = sorted((s for s in split.values() if s[0] not in plan and s[1] & remaining),
+                        key=lambda s: (-len(s[1] & remaining), len(s[0].poses), -s[2]))
+        step = advisor.runnable([s[0] for s in ranked], most=1)
+        if not step:
+            break
+        plan.append(step[0])
+        remaining -= split[step[0].label][1]
+    open_ = {m.label: tuple(pq for pq in pairs if pq not in split[m.label][1]) for m in plan}
+    ordered = tuple(plan)
+    best = effects[0].name
+    by_rival = {}
+    for e in effects[1:]:
+        pair = (best, e.name)
+        tells = sorted((s for s in split.values() if pair in s[1]), key=lambda s: (len(s[0].poses), -s[2]))
+        by_rival[e.name] = advisor.runnable([s[0] for s in tells], most=ADVISED)
+    return by_rival, ordered, {k: v for k, v in open_.items() if v}
