@@ -20,7 +20,7 @@ from .ledger import file_ref, lookup_machine, machine_key, session_and_fit
 from .store import Store, now
 
 
-@dataclass
+@dataclass(frozen=True)
 class Change:
     param: str
     change: float          # machine value now minus at the calibration (mm, rad)
@@ -38,7 +38,7 @@ class Change:
                 f"{self.status.upper():<7}{self.words}")
 
 
-@dataclass
+@dataclass(frozen=True)
 class CheckResult:
     machine: str
     serial: str

@@ -21,7 +21,7 @@ from .ledger import DAYS_PER_MONTH, days, file_ref, machine_id, machine_key, tak
 from .store import Store
 
 
-@dataclass
+@dataclass(frozen=True)
 class Entry:
     """One fit of a machine's history with the corrections written before it."""
 
@@ -43,7 +43,7 @@ class Entry:
         return self.values[name] + self.corrected.get(name, 0.0)
 
 
-@dataclass
+@dataclass(frozen=True)
 class Flag:
     kind: str             # "step" or "drift"
     param: str
@@ -62,7 +62,7 @@ class Flag:
                 f"(since {self.since[:10]})")
 
 
-@dataclass
+@dataclass(frozen=True)
 class Trend:
     machine: str
     serial: str
