@@ -234,14 +234,15 @@ def test_every_basis_has_the_shape_its_name_says():
 
 def test_the_catalogue_offers_the_orders_it_says():
     """Per symbol of the seed machine, the orders catalogue() offers: harmonics 1-4 of the
-    turning C, 1-2 of the tilting A, compounds both ways, polynomials 1-3 (a straightness
-    from 2: its order 1 is a squareness), drift in hours 1-2 and τ 5, 15, 45 min."""
+    turning C and of the tilting A (an encoder's 4/rev shows over A's tilt), compounds both
+    ways, polynomials 1-3 (a straightness from 2: its order 1 is a squareness), drift in
+    hours 1-2 and τ 5, 15, 45 min."""
     names = {e.name for e in catalogue(SEED)}
     have = lambda prefix: sorted(n[len(prefix):] for n in names if n.startswith(prefix))  # noqa: E731
     assert have("ECC:") == ["h1", "h2", "h3", "h4", "r1"]
-    assert have("ECA:") == ["h1", "h2", "p1", "p2", "p3"]
+    assert have("ECA:") == ["h1", "h2", "h3", "h4", "p1", "p2", "p3"]
     assert have("EXC+EYC:") == ["h-1", "h-2", "h-3", "h-4", "h1", "h2", "h3", "h4"]
-    assert have("EYA+EZA:") == ["h-1", "h-2", "h1", "h2"]
+    assert have("EYA+EZA:") == ["h-1", "h-2", "h-3", "h-4", "h1", "h2", "h3", "h4"]
     assert have("EXX:") == ["p1", "p2", "p3", "r1"] and have("EYX:") == ["p2", "p3"]
     assert have("drift_X:") == ["e15", "e45", "e5", "t1", "t2"]
     assert have("XOC:") == ["e15", "e45", "e5"] and "XOC" in names

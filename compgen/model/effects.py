@@ -66,8 +66,10 @@ TRANSLATIONS, ROTATIONS = "xyz", "abc"
 ROT_OF = dict(zip(TRANSLATIONS, ROTATIONS, strict=True))  # rotation about a direction
 POLY_SCALE_MM = 1000.0       # linear-axis polynomials run in q / 1 m
 TIME_SCALE_S = 3600.0        # drift polynomials run in t / 1 h
-MAX_ORDER = {"h": 4, "p": 3, "t": 2}  # the candidate list offered by catalogue()
-MAX_ORDER_TILTING = 2        # harmonics of a tilting axis over its part of a turn
+# the candidate list offered by catalogue(), for every axis: a tilting axis's harmonics too
+# (an encoder's 4/rev shows over any tilt range of a quarter turn; where the travel is too
+# short to see an order, visibility says so and it is never named)
+MAX_ORDER = {"h": 4, "p": 3, "t": 2}
 TAUS_MIN = (5, 15, 45)       # saturating thermal growth offered: time constants, min
 SHAPE_NAME = r"[a-z][a-z0-9_]{0,31}"   # a declared shape's name ([effects.shapes.NAME])
 
@@ -384,7 +386,7 @@ def catalogue(machine: Machine) -> tuple[Effect, ...]:
     """Every effect this machine can carry, orders up to ``MAX_ORDER``, and those its machine
     file declares: the candidate list."""
     out, table = [], _symbols(machine)
-    for symbol, (carrier, _, direction, kinds, _, _, first) in table.items():
+    for symbol, (_, _, direction, kinds, _, _, first) in table.items():
         for kind in kinds:
             if kind == "const":
                 orders: list = [None]
@@ -393,10 +395,7 @@ def catalogue(machine: Machine) -> tuple[Effect, ...]:
             elif kind == "r":
                 orders = [1]
             else:
-                top = MAX_ORDER[kind]
-                if kind == "h" and not machine.axis(carrier).full_turn:
-                    top = MAX_ORDER_TILTING
-                orders = list(range(first, top + 1))
+                orders = list(range(first, MAX_ORDER[kind] + 1))
                 if len(direction) == 2:
                     orders += [-k for k in orders]
             out.extend(resolve(machine, symbol if k is None else f"{symbol}:{kind}{k}", table)

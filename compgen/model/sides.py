@@ -148,15 +148,23 @@ def unknown_sides(machine: Machine, names: Iterable[str], *poses: Poses) -> str 
     if not axes:
         return None
     held = [lab for p in poses for lab in StartSides(machine, reversals, p).labels]
-    cols = ", ".join(f"{a}_side" for a in axes)
     where = "; ".join(f"{a}: {', '.join(dict.fromkeys(path or '(no label)' for b, path in held if b == a))}"
                       for a in axes if any(b == a for b, _ in held))
     count = f"{len(held)} constant{'s' if len(held) != 1 else ''} ({where})" if held else "none here"
-    return (f"the data do not say from which side {' and '.join(axes)} reached each pose (no {cols} "
-            f"column): each pose takes the side of the move that reached it (a path's first poses, "
+    # only a rotary axis's side has a column: compgen's reader takes it and its pose lists carry it
+    rotary = [a for a in axes if a in {r.name for r in machine.rotary_axes}]
+    linear = [a for a in axes if a not in rotary]
+    cols = ", ".join(f"{a}_side" for a in rotary)
+    asks = [f"measure with compgen's programs (their pose lists carry {cols}), or add the column"] \
+        if rotary else []
+    if linear:
+        asks.append(f"no column records the side of {' or '.join(linear)} (a linear axis: compgen reads "
+                    "none and its pose lists carry none), so its reversal rests on each path's moves")
+    return (f"the data do not say from which side {' and '.join(axes)} reached each pose"
+            + (f" (no {cols} column)" if rotary else "")
+            + ": each pose takes the side of the move that reached it (a path's first poses, "
             f"that of its first move), and a path that holds the axis gets a free constant for its "
-            f"side — {count}. Measure with compgen's programs (their pose lists carry {cols}), or "
-            f"add the column")
+            f"side — {count}. " + "; ".join(asks)[:1].upper() + "; ".join(asks)[1:])
 
 
 def unpredicted_sides(machine: Machine, names: Iterable[str], poses: Poses) -> str | None:

@@ -409,9 +409,9 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out:
             ranked: dict[str, Row], noise: Whitening, model_effects: Sequence[Effect], alpha: float,
             advising: Advisor | None) -> tuple[list[Candidate], dict]:
     """Step 5: which significant candidates stay so once the best is added (a second
-    effect), which are the best's rivals (the data cannot tell them apart), and what would
-    tell them apart. Returns the candidates (equivalent rivals reordered) and the
-    ``Diagnosis`` fields."""
+    effect, never a rival: the data tell it from the best), which are the best's rivals (the
+    data cannot tell them apart), and what would tell them apart. Returns the candidates
+    (equivalent rivals reordered) and the ``Diagnosis`` fields."""
     poses, r = res.poses, res.r
     after_best, rival_names, rivals_separated_by, rivals_open = (), (), (), {}
     if len(significant) > 1:
@@ -426,6 +426,7 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out:
             c.effect: (ranked[c.effect].drop_w, ranked[c.effect].k_eff)
             for c in out if c.visible and c.effect != best.effect.name},
             noise.rss(r) / res.dof, alpha, bool(after_best))
+        rival_names = tuple(n for n in rival_names if n not in after_best)
         if rival_names and advising is not None:
             group = [best, *(ranked[e] for e in rival_names)]
             by_rival, rivals_separated_by, rivals_open = telling_apart(
@@ -433,7 +434,10 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out:
             out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
         if rival_names and advising is not None and not rivals_separated_by:
             # equivalent everywhere: put first the one the location errors absorb least, so
-            # that adding it leaves them where an effect without that absorbed part has them
+            # that adding it leaves them where an effect without that absorbed part has them.
+            # (Not the one that moves them least: that keeps the bias of the fit without it,
+            # and a compound the model absorbs a part of would come last.) No order makes the
+            # choice right: what each carries is printed, and a fit's σ holds the spread.
             group = [c for c in out if c.significant and c.effect in (best.effect.name, *rival_names)]
             first = max(group, key=lambda c: c.visibility)
             if first.effect != best.effect.name:
@@ -445,6 +449,12 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out:
                  "rivals_open": rivals_open}
 
 
+def _shift(row: Row) -> np.ndarray:
+    """What a candidate, added, moves the fitted parameters by (first order: the part of it
+    they absorbed, J⁺c·a), inside units in the order of the fit's free parameters."""
+    return -(row.absorbed @ row.amp)
+
+
 def _carries(fit: FitResult, res: _Residual, out: Sequence[Candidate], ranked: dict[str, Row],
              rival_names: tuple[str, ...]) -> dict[str, dict[str, float]]:
     """Step 6: what each rival, added, takes back from the fitted parameters (first order:
@@ -453,8 +463,7 @@ def _carries(fit: FitResult, res: _Residual, out: Sequence[Candidate], ranked: d
     carries = {}
     first = next((c.effect for c in out if c.significant), None)     # after any reordering
     for name in ((first, *rival_names) if rival_names else ()):
-        row = ranked[name]
-        shift = -(row.absorbed @ row.amp)
+        shift = _shift(ranked[name])
         carries[name] = {n: float(shift[i] * shown(1.0, units_of[n])[0]) for i, n in enumerate(fit.free)}
     return carries
 

@@ -117,13 +117,20 @@ def rank(effects: Sequence[Effect], free: Sequence[str], R: np.ndarray, r: np.nd
         norms = np.sqrt(np.diag(cc))
         vis_cols, drop, amp = explained(cc, qc, cr)
         keep = vis_cols >= VISIBLE
+        starts = np.zeros(len(cr), bool)
         if len(cr) > m:        # a reversal is seen only beyond the model and its start sides
             vis_cols[:m] = beyond_starts(cc, qc, m)
             keep = (vis_cols >= VISIBLE) & bool((vis_cols[:m] >= VISIBLE).any())
             _, drop, amp = explained(cc, qc, cr, keep)
+            starts[m:] = keep[m:]
         drop_w = drop
         if white is not None and keep.any():
             _, drop_w, _ = explained(*white[e.name], keep)
+        if starts.any():
+            # tested on its own columns: what the start sides' free constants remove alone (a
+            # set-up or a drift that steps from path to path) is no reversal of the axis
+            drop_w -= explained(*(white[e.name] if white is not None else (cc, qc, cr)), starts)[1]
+            drop_w = max(drop_w, 0.0)
         qj = qc[len(qc) - len(R):]                    # Q's columns of J (start sides first)
         absorbed = np.linalg.solve(R, qj[:, :m])      # J⁺c: what each parameter takes
         vis_cols, amp, norms = vis_cols[:m], amp[:m], norms[:m]
@@ -135,6 +142,6 @@ def rank(effects: Sequence[Effect], free: Sequence[str], R: np.ndarray, r: np.nd
         joined = np.block([[R, qj], [np.zeros((m, R.shape[1])), gram_factor(cc - qc.T @ qc)]]) \
             if len(cr) == m else gram_factor(without_b(R, qj, cc, m))
         out[e.name] = Row(e, float(vis_cols.max()), drop, drop_w, drop_w / max(rss_w, 1e-300),
-                           int(keep.sum()), amp, names, bool(np.all(norms * 1e3 < SILENT_UM)),
+                           int(keep[:m].sum()), amp, names, bool(np.all(norms * 1e3 < SILENT_UM)),
                            norms, absorbed, condition(joined))
     return out
