@@ -65,6 +65,7 @@ TESTS = {
     "compgen/statistics/diagnose.py": [*STATS, "tests/test_edge.py", "tests/test_loop.py"],
     "compgen/statistics/ranking.py": [*STATS, "tests/test_loop.py"],
     "compgen/statistics/separation.py": [*STATS, "tests/test_loop.py"],
+    "compgen/statistics/choice.py": ["tests/test_diagnose.py", "tests/test_schemas.py"],
     # the wings: probe logs, the history and its store, diagnose's spectrum and significance
     "compgen/data/probe.py": ["tests/test_probe.py", "tests/test_probe_programs.py"],
     "compgen/controllers/probing.py": ["tests/test_probe_programs.py", "tests/test_probe.py"],

@@ -7,6 +7,9 @@ import jsonschema
 import pytest
 from conftest import ROOT, SEED_MACHINE, run
 
+from compgen.errors import CompgenError
+from compgen.statistics.results import FitResult
+
 SCHEMAS = ROOT / "docs" / "schemas"
 SESSION = ROOT / "examples" / "seed-session.csv"
 
@@ -31,6 +34,20 @@ def test_fit_json_meets_its_schema_and_a_damaged_one_does_not(fitted):
                    {**doc, "parameters": {"XOC": {"value": 1.0, "unit": "um", "std": 0.1}}}):
         with pytest.raises(jsonschema.ValidationError):
             _validate(damage, "fit")
+
+
+def test_a_fit_with_choices_meets_the_schema_and_a_bad_choice_does_not(fitted):
+    """fit.json's choices (what a fit cannot tell apart, already in the σ): as written, and
+    damaged."""
+    doc = json.loads((fitted / "fit.json").read_text())
+    choice = {"effect": "EYA+EZA:h-1", "equivalents": ["EZA:h1"], "half_range": {"ZOW": 0.0015}}
+    _validate({**doc, "choices": [choice]}, "fit")
+    for bad in ({**choice, "equivalents": []}, {**choice, "half_range": {"ZOW": "big"}},
+                {k: v for k, v in choice.items() if k != "effect"}):
+        with pytest.raises(jsonschema.ValidationError):
+            _validate({**doc, "choices": [bad]}, "fit")
+        with pytest.raises(CompgenError, match="a choice must hold"):
+            FitResult.from_dict({**doc, "choices": [bad]})
 
 
 def test_diagnose_json_meets_its_schema(fitted):

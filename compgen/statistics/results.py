@@ -72,6 +72,9 @@ class FitResult:
     sign: str
     version: str
     descriptions: dict[str, str] = field(default_factory=dict)
+    # effects these data cannot tell from others of the catalogue: {"effect", "equivalents",
+    # "half_range": {parameter: mm or rad}}, already in the parameters' std (``choice.py``)
+    choices: tuple[dict, ...] = ()
 
     def __post_init__(self):
         for a in (self.correlation, self.singular_values):
@@ -132,6 +135,7 @@ class FitResult:
                                 "condition_number": self.condition_number,
                                 "normalisation": "columns scaled to unit norm"},
             "residual": self.residual,
+            **({"choices": list(self.choices)} if self.choices else {}),
         }
 
     def to_json(self, folder: str | Path | None = None) -> str:
@@ -172,7 +176,8 @@ class FitResult:
                 residual=_residual(d["residual"], where), method=d["method"], iterations=int(d["iterations"]),
                 sign=d["sign"], version=d["compgen_version"],
                 descriptions={n: p["description"] for n, p in d["parameters"].items()
-                              if "description" in p})
+                              if "description" in p},
+                choices=tuple(_choice(c, f"{where}: choices") for c in d.get("choices", ())))
         except (KeyError, TypeError, ValueError) as exc:
             raise CompgenError(f"fit file is incomplete or damaged ({exc!r})", where=where) from None
 
@@ -203,6 +208,12 @@ class FitResult:
             lines += [f"  the residual follows from reading to reading (AR(1) ρ̂ up to {rho:.2f}, in "
                       f"{where}): a drift of the set-up,", "  or an effect the model lacks (diagnose "
                       "tells); the uncertainties are least squares' under that noise"]
+        for c in self.choices:
+            moved = sorted(c["half_range"].items(), key=lambda kv: -abs(kv[1]) / self.parameters[kv[0]].std)
+            lines += ["", f"  {c['effect']} cannot be told from {', '.join(c['equivalents'])} on these data:",
+                      "  the σ above holds what the choice moves (half the range over them):",
+                      "    " + ", ".join(f"{n} {shown(v, self.parameters[n].unit)[0]:.2f} "
+                                         f"{shown(v, self.parameters[n].unit)[1]}" for n, v in moved[:6])]
         lines += ["", f"  condition number {self.condition_number:.1f} (columns scaled to unit "
                       f"norm; above 100 the estimates are fragile)"]
         pairs = [(abs(self.correlation[i, j]), self.free[i], self.free[j], self.correlation[i, j])
@@ -244,3 +255,15 @@ def _estimate(p: dict, where: str) -> Estimate:
 
 def load_fit(path: str | Path) -> FitResult:
     return FitResult.from_dict(read_json(path, "fit file"), str(path))
+
+
+def _choice(c, where: str) -> dict:
+    """A choice as fit.json holds it, checked."""
+    if not (isinstance(c, dict) and isinstance(c.get("effect"), str)
+            and isinstance(c.get("equivalents"), list) and c["equivalents"]
+            and all(isinstance(e, str) for e in c["equivalents"]) and isinstance(c.get("half_range"), dict)
+            and all(isinstance(v, (int, float)) and math.isfinite(v) for v in c["half_range"].values())):
+        raise CompgenError("a choice must hold effect, equivalents and half_range", where=where,
+                           hint="give the fit.json compgen fit wrote")
+    return {"effect": c["effect"], "equivalents": list(c["equivalents"]),
+            "half_range": {str(k): float(v) for k, v in c["half_range"].items()}}

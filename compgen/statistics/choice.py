@@ -1,0 +1,80 @@
+"""What a fit cannot choose. An effect added to the model that these data cannot tell from
+others of the catalogue (in its place, each removes the same misfit within the noise) leaves
+the other parameters depending on the choice: a sag of A as EZA:h1 or as EYA+EZA:h-1 moves
+ZOW and ZOA by tens of their σ. Each equivalent is fitted in its place, and half the range
+of each parameter over the choices joins its σ: the reported uncertainty holds whichever of
+them is the physical cause (the first-order rule of diagnose's rivals, χ²(k, α)·σ̂²)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+from ..data.rtest import RTestData
+from ..model.effects import compose, effect_name, location_model
+from ..model.machine import Machine
+from .diagnose import diagnose
+from .identify import identify
+from .results import FitResult
+from .significance import ALPHA, chi2_isf
+
+
+@dataclass(frozen=True)
+class Choice:
+    """An effect of the model, the catalogue effects these data cannot tell from it, and half
+    the range of each other parameter over the fits with each in its place (mm, rad)."""
+
+    effect: str
+    equivalents: tuple[str, ...]
+    half_range: dict[str, float]
+
+    def to_dict(self) -> dict:
+        return {"effect": self.effect, "equivalents": list(self.equivalents), "half_range": self.half_range}
+
+
+def choices(machine: Machine, data: Sequence[RTestData], fit: FitResult, alpha: float = ALPHA,
+            noise_um: float | None = None) -> tuple[Choice, ...]:
+    """For every effect of ``fit``'s model beyond the location errors: the candidates that,
+    with it left out, remove as much of the misfit within the noise (visible, significant),
+    each fitted in its place. An effect no other matches gives no choice."""
+    location = set(location_model(machine))
+    fixed = {n: e.value for n, e in fit.parameters.items() if e.fixed}
+    out = []
+    for effect in dict.fromkeys(effect_name(n) for n in fit.free if n not in location):
+        rest = compose(machine, fit.model, remove=[effect])
+        kept = {n: v for n, v in fixed.items() if n in rest}
+        base = identify(machine, data, rest, kept, fit.method, fit.sign)
+        found = diagnose(machine, data, base, alpha=alpha, noise_um=noise_um)
+        by_name = {c.effect: c for c in found.candidates}
+        own = by_name.get(effect)
+        if own is None or not own.significant:
+            continue
+        dof = found.readings - len(base.free)
+        band = chi2_isf(alpha, len([n for n in fit.model if effect_name(n) == effect]))
+        same = tuple(c.effect for c in found.candidates if c.effect != effect and c.visible
+                     and c.significant and c.separable and (own.share - c.share) * dof < band)
+        if not same:
+            continue
+        values = [{n: e.value for n, e in fit.parameters.items()}]
+        for other in same:
+            alt = identify(machine, data, compose(machine, rest, [other]), kept, fit.method, fit.sign)
+            values.append({n: e.value for n, e in alt.parameters.items()})
+        shared = [n for n in rest if n in fit.free]
+        out.append(Choice(effect, same, {n: (max(v[n] for v in values) - min(v[n] for v in values)) / 2
+                                         for n in shared}))
+    return tuple(out)
+
+
+def with_choices(machine: Machine, data: Sequence[RTestData], fit: FitResult, alpha: float = ALPHA,
+                 noise_um: float | None = None) -> FitResult:
+    """``fit`` with each parameter's σ widened by what the choices it cannot make move it
+    (``choices``; independent choices add in quadrature), the choices recorded."""
+    made = choices(machine, data, fit, alpha, noise_um)
+    if not made:
+        return fit
+    params = {}
+    for n, e in fit.parameters.items():
+        extra = math.sqrt(sum(c.half_range.get(n, 0.0) ** 2 for c in made))
+        params[n] = replace(e, std=math.hypot(e.std, extra)) if extra and not e.fixed else e
+    return replace(fit, parameters=params, choices=tuple(c.to_dict() for c in made))
