@@ -76,6 +76,8 @@ CASES = {
     "X periodic, pitch 6.35 mm, 2 µm (outside the catalogue)": ({}, ("X", 6.35, "EXX:w")),
     "Y periodic, pitch 10 mm, 2 µm (outside the catalogue)": ({}, ("Y", 10.0, "EYY:w")),
     "Z periodic, pitch 4.2 mm, 2 µm (outside the catalogue)": ({}, ("Z", 4.2, "EZZ:w")),
+    # the set-up in time: the ball rising along its stem as it warms after mounting (table frame)
+    "stem warming: the ball rises 3 µm, τ = 15 min": ({"ZOW:e15": 3 * UM}, "ZOW:e15"),
     # an A encoder's 4/rev: on a tilting axis too, every order of the catalogue is tried
     "A encoder 4/rev, 4″": ({"EAA:h4c": 4 * ARCSEC}, "EAA:h4"),
     # three at once: a candidate still significant once the best is added is a second effect

@@ -246,6 +246,7 @@ def test_the_catalogue_offers_the_orders_it_says():
     assert have("EXX:") == ["p1", "p2", "p3", "r1"] and have("EYX:") == ["p2", "p3"]
     assert have("drift_X:") == ["e15", "e45", "e5", "t1", "t2"]
     assert have("XOC:") == ["e15", "e45", "e5"] and "XOC" in names
+    assert have("ZOW:") == ["e15", "e45", "e5"] and "ZOW" in names      # the ball's stem warming
 
 
 @pytest.mark.parametrize("name, ok", [("EXX:w0.5", True), ("EXX:w10000", True), ("EXX:w0.4", False),

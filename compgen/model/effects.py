@@ -181,8 +181,11 @@ def _symbols(machine: Machine) -> dict[str, tuple[str, str, str, tuple[str, ...]
     out: dict = {}
     for d in TRANSLATIONS:
         D = d.upper()
-        out[f"{D}OW"] = ("ball", "loc", d, ("const",), f"ball centre offset in {D} (table frame)",
-                         "ball not where the machine file says: set-up, not a machine error", 0)
+        # with a time constant: the set-up in time (the ball's stem or clamp warming after
+        # mounting), moving in the table frame, not the machine's (drift_X/Y/Z)
+        out[f"{D}OW"] = ("ball", "loc", d, ("const", "e"), f"ball centre offset in {D} (table frame)",
+                         "ball not where the machine file says: set-up, not a machine error; "
+                         "growing with time: the ball's stem or clamp warming after mounting", 0)
         out[f"nest_{D}"] = ("nest", "loc", d, ("const",), f"R-test nest offset in {D}",
                             "nest centre off the spindle axis or wrong probe length", 0)
         out[f"drift_{D}"] = ("time", "loc", d, ("t", "e"), f"thermal drift of tool to table in {D}",
