@@ -45,7 +45,7 @@ from compgen.data.simulate import ar1_noise  # noqa: E402
 from compgen.model.effects import compose, effect_name, location_model  # noqa: E402
 from compgen.model.kinematics import Model, Poses  # noqa: E402
 from compgen.model.paths import generate  # noqa: E402
-from compgen.statistics.choice import with_choices  # noqa: E402
+from compgen.statistics.budget import with_budget  # noqa: E402
 from compgen.statistics.diagnose import diagnose  # noqa: E402
 from compgen.statistics.identify import identify  # noqa: E402
 
@@ -169,7 +169,7 @@ def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
     fit, found = last
     if tuple(model) != fit.model:      # named or added in the last round: the user refits
         fit = identify(machine, data, model)
-    fit = with_choices(machine, data, fit, noise_um=SIGMA_UM)     # σ holding what the data cannot choose
+    fit = with_budget(machine, data, fit, noise_um=SIGMA_UM)     # σ holding its whole budget
     model_now = Model(machine, fit.model)
     x = np.array([fit.parameters[n].value for n in fit.model])
     worst = 0.0

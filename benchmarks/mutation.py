@@ -66,6 +66,7 @@ TESTS = {
     "compgen/statistics/ranking.py": [*STATS, "tests/test_loop.py"],
     "compgen/statistics/separation.py": [*STATS, "tests/test_loop.py"],
     "compgen/statistics/choice.py": ["tests/test_diagnose.py", "tests/test_schemas.py"],
+    "compgen/statistics/budget.py": ["tests/test_budget.py"],
     # the wings: probe logs, the history and its store, diagnose's spectrum and significance
     "compgen/data/probe.py": ["tests/test_probe.py", "tests/test_probe_programs.py"],
     "compgen/controllers/probing.py": ["tests/test_probe_programs.py", "tests/test_probe.py"],

@@ -28,7 +28,7 @@ from ..files import STDOUT, read_text, write_all, write_atomically
 from ..model.effects import catalogue, compose, location_model
 from ..model.paths import generate
 from ..model.sides import unknown_sides, unpredicted_sides
-from ..statistics.choice import with_choices
+from ..statistics.budget import with_budget
 from ..statistics.diagnose import diagnose
 from ..statistics.diagnose_text import report as diagnosis_text
 from ..statistics.gate import gate_edit, unit_suspicion
@@ -182,7 +182,7 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
     machine, sets = asked.machine, asked.sets
     progress(f"fitting {len(asked.model)} effects to {sum(len(s) for s in sets)} poses")
     result = identify(machine, sets, asked.model, asked.fixed, method, asked.sign, advisor=Advisor)
-    result = with_choices(machine, sets, result)      # σ that hold what these data cannot choose
+    result = with_budget(machine, sets, result)    # σ holding the choices and the device's calibration
     write_atomically(output, result.to_json(Path(output).resolve().parent), force,
                      inputs=(machine.source, base, *(s.source for s in sets)))
     said(output, result.report() + f"\nwrote {output}")

@@ -95,7 +95,7 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
     rtest = get.sub("rtest")
     ball = rtest.vec3("ball")
     fields = set(Setup.__dataclass_fields__)
-    rtest.only(fields | {"ball", "probe_length", "noise_um"})
+    rtest.only(fields | {"ball", "probe_length", "noise_um", "gain_u"})
     solids = {k: rtest.number(k) if k == "table_top" else _positive(rtest, k)
               for k in fields if k in rtest.doc}
     solids.setdefault("table_radius", math.hypot(ball[0], ball[1]) + 50.0)
@@ -107,6 +107,7 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
         ball=ball, probe_length=_positive(rtest, "probe_length"), setup=setup,
         source=source, sha256=sha256,
         noise_um=_positive(rtest, "noise_um") if "noise_um" in rtest.doc else None,
+        gain_u=_gain_u(rtest) if "gain_u" in rtest.doc else 0.0,
     )
     paths = {}
     for name in get.table("paths", optional=True):
@@ -185,6 +186,18 @@ def _probe(g: _Getter) -> ProbeSetup:
     tool = g.doc.get("tool", "1")
     tool = identifier("tool", str(tool) if isinstance(tool, int) else tool, g.at("tool"))
     return ProbeSetup(tool=tool, **values)
+
+
+GAIN_U_MAX = 0.05     # 5 %: a sensor whose gain is known no better is not calibrated
+
+
+def _gain_u(g: _Getter) -> float:
+    v = _positive(g, "gain_u", zero_ok=True)
+    if v > GAIN_U_MAX:
+        raise CompgenError(f"gain_u is a fraction (0.002 for 0.2 %); {v:g} is more than {GAIN_U_MAX:g}",
+                           where=g.at("gain_u"), hint="give the relative standard uncertainty of the "
+                                                      "sensors' gain from the R-test's calibration")
+    return v
 
 
 def _positive(g: _Getter, key: str, zero_ok: bool = False) -> float:

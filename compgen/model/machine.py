@@ -212,6 +212,7 @@ class Machine:
     linuxcnc: dict | None = None    # the trt kinematics' switches ([linuxcnc])
     tolerances: dict[str, float] = field(default_factory=dict)   # path → max range, µm
     noise_um: float | None = None   # the R-test's own noise, 1σ per reading ([rtest] noise_um)
+    gain_u: float = 0.0             # its sensors' gain, relative standard uncertainty ([rtest] gain_u)
     declared: tuple[str, ...] = ()  # effects the user declares beyond the catalogue ([effects])
     shapes: dict[str, Shape] = field(default_factory=dict)   # their shapes ([effects.shapes.NAME])
     source: str = ""

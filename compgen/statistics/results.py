@@ -75,6 +75,9 @@ class FitResult:
     # effects these data cannot tell from others of the catalogue: {"effect", "equivalents",
     # "half_range": {parameter: mm or rad}}, already in the parameters' std (``choice.py``)
     choices: tuple[dict, ...] = ()
+    # the R-test's calibration in the σ: {"gain_u": relative, "std": {parameter: mm or rad}}
+    # (``budget.py``), already in the parameters' std
+    device_budget: dict = field(default_factory=dict)
 
     def __post_init__(self):
         for a in (self.correlation, self.singular_values):
@@ -136,6 +139,7 @@ class FitResult:
                                 "normalisation": "columns scaled to unit norm"},
             "residual": self.residual,
             **({"choices": list(self.choices)} if self.choices else {}),
+            **({"device_budget": self.device_budget} if self.device_budget else {}),
         }
 
     def to_json(self, folder: str | Path | None = None) -> str:
@@ -177,7 +181,8 @@ class FitResult:
                 sign=d["sign"], version=d["compgen_version"],
                 descriptions={n: p["description"] for n, p in d["parameters"].items()
                               if "description" in p},
-                choices=tuple(_choice(c, f"{where}: choices") for c in d.get("choices", ())))
+                choices=tuple(_choice(c, f"{where}: choices") for c in d.get("choices", ())),
+                device_budget=_device_budget(d.get("device_budget", {}), f"{where}: device_budget"))
         except (KeyError, TypeError, ValueError) as exc:
             raise CompgenError(f"fit file is incomplete or damaged ({exc!r})", where=where) from None
 
@@ -214,6 +219,13 @@ class FitResult:
                       "  the σ above holds what the choice moves (half the range over them):",
                       "    " + ", ".join(f"{n} {shown(v, self.parameters[n].unit)[0]:.2f} "
                                          f"{shown(v, self.parameters[n].unit)[1]}" for n, v in moved[:6])]
+        if self.device_budget:
+            big = sorted(self.device_budget["std"].items(),
+                         key=lambda kv: -kv[1] / self.parameters[kv[0]].std)
+            lines += ["", f"  the σ above holds the R-test's sensor gains as its calibration allows "
+                          f"(± {100 * self.device_budget['gain_u']:g} %, [rtest] gain_u); their share:",
+                      "    " + ", ".join(f"{n} {shown(v, self.parameters[n].unit)[0]:.3f} "
+                                         f"{shown(v, self.parameters[n].unit)[1]}" for n, v in big[:6])]
         lines += ["", f"  condition number {self.condition_number:.1f} (columns scaled to unit "
                       f"norm; above 100 the estimates are fragile)"]
         pairs = [(abs(self.correlation[i, j]), self.free[i], self.free[j], self.correlation[i, j])
@@ -267,3 +279,15 @@ def _choice(c, where: str) -> dict:
                            hint="give the fit.json compgen fit wrote")
     return {"effect": c["effect"], "equivalents": list(c["equivalents"]),
             "half_range": {str(k): float(v) for k, v in c["half_range"].items()}}
+
+
+def _device_budget(b, where: str) -> dict:
+    """A device budget as fit.json holds it, checked."""
+    if b == {}:
+        return {}
+    if not (isinstance(b, dict) and isinstance(b.get("gain_u"), (int, float)) and 0 <= b["gain_u"] < 1
+            and isinstance(b.get("std"), dict)
+            and all(isinstance(v, (int, float)) and math.isfinite(v) and v >= 0 for v in b["std"].values())):
+        raise CompgenError("a device budget must hold gain_u and std", where=where,
+                           hint="give the fit.json compgen fit wrote")
+    return {"gain_u": float(b["gain_u"]), "std": {str(k): float(v) for k, v in b["std"].items()}}
