@@ -62,8 +62,15 @@ def test_still_significant_after_the_best():
             self.name = name
 
     sig = [(Effect("other"), other), (Effect("null"), null)]
-    assert _still_significant(Q, best, r, sig, 0.01) == {"other"}
-    assert _still_significant(Q, np.column_stack([best, other]), r, [(Effect("null"), null)], 0.01) == set()
+    assert _still_significant(Q, best, r, _prods(Q, best, r, sig), 0.01) == {"other"}
+    both = np.column_stack([best, other])
+    assert _still_significant(Q, both, r, _prods(Q, both, r, [(Effect("null"), null)]), 0.01) == set()
+
+
+def _prods(Q, added, r, signatures):
+    """What signature.products gives of each candidate's columns c: cᵀc, [Q | added]ᵀc, cᵀr."""
+    X = np.column_stack([Q, added])
+    return {e.name: (c.T @ c, X.T @ c, c.T @ r) for e, c in signatures}
 
 
 def test_still_significant_tests_against_the_joined_model(monkeypatch):
@@ -76,12 +83,13 @@ def test_still_significant_tests_against_the_joined_model(monkeypatch):
     added = rng.normal(size=(n, 2)) + Q @ rng.normal(size=(3, 2))    # not orthogonal to Q
     cand = rng.normal(size=(n, 1))
     r = rng.normal(size=n)
+    r -= Q @ (Q.T @ r)             # the residual of the model: orthogonal to it
     seen = []
     monkeypatch.setattr(d, "p_value", lambda *args: seen.append(args) or 1.0)
 
     class Effect:
         name = "cand"
-    d.still_significant(Q, added, r, [(Effect(), cand)], 0.01)
+    d.still_significant(Q, added, r, _prods(Q, added, r, [(Effect(), cand)]), 0.01)
     A = np.column_stack([Q, added])
     P = A @ np.linalg.pinv(A)                    # projector onto the joined model
     r1, c1 = r - P @ r, cand - P @ cand

@@ -415,10 +415,22 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out:
     poses, r = res.poses, res.r
     after_best, rival_names, rivals_separated_by, rivals_open = (), (), (), {}
     if len(significant) > 1:
+        # the others' products with the model, the best and the residual from one walk of
+        # the poses (their columns would take a walk each); a reversal with start sides,
+        # whose columns carry them, made whole
         first = noise.white(effect_columns(machine, poses, resolve(machine, significant[0].effect)))
         others = [resolve(machine, c.effect) for c in significant[1:]]
-        kept = still_significant(noise.Q, first, noise.white(r), (
-            (e, noise.white(effect_columns(machine, poses, e))) for e in others), alpha)
+        rw = noise.white(r)
+        rw = rw - noise.Q @ (noise.Q.T @ rw)
+        X = np.hstack([noise.Q, first])
+        started = {e.name for e in others
+                   if e.basis.kind == "r" and StartSides(machine, e.params, poses).count}
+        prods = products(machine, poses, [e for e in others if e.name not in started], X, rw,
+                         (res.seg, noise.rho) if noise.rho.any() else None)
+        for name in started:
+            C = noise.white(effect_columns(machine, poses, resolve(machine, name)))
+            prods[name] = (C.T @ C, X.T @ C, C.T @ rw)
+        kept = still_significant(noise.Q, first, rw, prods, alpha)
         after_best = tuple(e.name for e in others if e.name in kept)
     if significant:
         best = ranked[significant[0].effect]

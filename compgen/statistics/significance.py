@@ -134,18 +134,28 @@ def chi2_isf(alpha: float, k: int) -> float:
     return (lo + hi) / 2
 
 
-def still_significant(Q: np.ndarray, added: np.ndarray, r: np.ndarray, signatures,
-                       alpha: float) -> set[str]:
-    """Which effects of ``signatures`` ((effect, columns) pairs) stay significant once the
-    model (orthonormal columns ``Q``) is joined by the columns ``added``, first order;
-    Bonferroni over all of them. Only the added columns are orthogonalised anew."""
-    Qa, _ = np.linalg.qr(added - Q @ (Q.T @ added))
-    r1 = r - Q @ (Q.T @ r) - Qa @ (Qa.T @ r)       # what the joined model cannot absorb of r
-    rss, dof = float(r1 @ r1), r.size - Q.shape[1] - added.shape[1]
+def still_significant(Q: np.ndarray, added: np.ndarray, r: np.ndarray, prods: dict,
+                                alpha: float) -> set[str]:
+    """Which effects stay significant once the model (orthonormal columns ``Q``) is joined by
+    the columns ``added``, first order; Bonferroni over all of them. Each effect is given by
+    its products with ``[Q | added]`` and the residual, name → (cᵀc, [Q | added]ᵀc, cᵀr),
+    ``r`` orthogonal to Q: what one walk of the poses makes for every effect
+    (``signature.products``), where the columns themselves would cost a walk each. Only the
+    added columns are orthogonalised anew: Qₐ = (added − QQᵀadded)Rₐ⁻¹, so
+    Qₐᵀc = Rₐ⁻ᵀ(addedᵀc − (Qᵀadded)ᵀQᵀc)."""
+    p = Q.shape[1]
+    QB = Q.T @ added
+    Bp = added - Q @ QB
+    Qa, Ra = np.linalg.qr(Bp)
+    ar = Qa.T @ r
+    rss = float(r @ r - ar @ ar)
+    dof = r.size - p - added.shape[1]
     drops = []
-    for e, c in signatures:
-        vis_cols, drop, _ = explained(c.T @ c, np.vstack([Q.T @ c, Qa.T @ c]), c.T @ r1)
-        drops.append((e.name, drop, int((vis_cols >= VISIBLE).sum())))
+    for name, (cc, xc, cr) in prods.items():
+        qc, bc = xc[:p], xc[p:]
+        ac = np.linalg.solve(Ra.T, bc - QB.T @ qc)
+        vis_cols, drop, _ = explained(cc, np.vstack([qc, ac]), cr - ac.T @ ar)
+        drops.append((name, drop, int((vis_cols >= VISIBLE).sum())))
     return {name for name, drop, k in drops if k and p_value(drop, k, rss, dof, len(drops)) < alpha}
 
 
