@@ -680,6 +680,8 @@ def test_a_linear_axis_side_is_never_asked_for_as_a_column(seed_machine):
     said = unknown_sides(seed_machine, ["EXX:r1", "ECC:r1"], poses)
     assert "C_side" in said and "X_side" not in said and "no column records the side of X" in said
     assert "X_side" not in unknown_sides(seed_machine, ["EXX:r1"], poses)
+    # Y moves in every path: each side comes from the moves, no constant, nothing to say
+    assert unknown_sides(seed_machine, ["EYY:r1"], poses) is None
 
 
 def test_an_encoder_4_per_rev_of_a_tilting_axis_is_tried_and_found(seed_machine, poses):

@@ -145,9 +145,14 @@ def unknown_sides(machine: Machine, names: Iterable[str], *poses: Poses) -> str 
     reversals = [n for n in names if effect_of_param(machine, n).basis.kind == "r"]
     axes = sorted({e.carrier for e in map(partial(effect_of_param, machine), reversals)
                    if any(np.isnan(p.side[:, machine.index(e.carrier)]).any() for p in poses)})
+    held = [lab for p in poses for lab in StartSides(machine, reversals, p).labels]
+    # a linear axis's side no column can give: worth a word only where a path holds the
+    # axis and a free constant stands in for it (elsewhere the moves say every side)
+    rotary_names = {r.name for r in machine.rotary_axes}
+    axes = [a for a in axes if a in rotary_names or any(b == a for b, _ in held)]
     if not axes:
         return None
-    held = [lab for p in poses for lab in StartSides(machine, reversals, p).labels]
+    held = [(b, path) for b, path in held if b in axes]
     where = "; ".join(f"{a}: {', '.join(dict.fromkeys(path or '(no label)' for b, path in held if b == a))}"
                       for a in axes if any(b == a for b, _ in held))
     count = f"{len(held)} constant{'s' if len(held) != 1 else ''} ({where})" if held else "none here"
