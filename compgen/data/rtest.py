@@ -82,7 +82,7 @@ class Measurements:
     @cached_property
     def cov_known(self) -> np.ndarray:
         """(n,) whether each reading's covariance is known (a probe log's sphere centres)."""
-        return np.concatenate([np.full(len(d), d.cov is not None) for d in self.sets])
+        return np.array([d.cov is not None for d in self.sets], bool)[self.set_of]
 
     def covariance(self, prior: np.ndarray) -> np.ndarray:
         """(n, 3, 3) mm²: each reading's own covariance where its set gives it, else ``prior``."""

@@ -148,17 +148,16 @@ def unknown_sides(machine: Machine, names: Iterable[str], *poses: Poses) -> str 
     held = [lab for p in poses for lab in StartSides(machine, reversals, p).labels]
     # a linear axis's side no column can give: worth a word only where a path holds the
     # axis and a free constant stands in for it (elsewhere the moves say every side)
-    rotary_names = {r.name for r in machine.rotary_axes}
-    axes = [a for a in axes if a in rotary_names or any(b == a for b, _ in held)]
+    # only a rotary axis's side has a column: compgen's reader takes it and its pose lists carry it
+    rotary = [a for a in axes if a in {r.name for r in machine.rotary_axes}]
+    linear = [a for a in axes if a not in rotary and any(b == a for b, _ in held)]
+    axes = rotary + linear
     if not axes:
         return None
     held = [(b, path) for b, path in held if b in axes]
     where = "; ".join(f"{a}: {', '.join(dict.fromkeys(path or '(no label)' for b, path in held if b == a))}"
                       for a in axes if any(b == a for b, _ in held))
     count = f"{len(held)} constant{'s' if len(held) != 1 else ''} ({where})" if held else "none here"
-    # only a rotary axis's side has a column: compgen's reader takes it and its pose lists carry it
-    rotary = [a for a in axes if a in {r.name for r in machine.rotary_axes}]
-    linear = [a for a in axes if a not in rotary]
     cols = ", ".join(f"{a}_side" for a in rotary)
     asks = [f"measure with compgen's programs (their pose lists carry {cols}), or add the column"] \
         if rotary else []

@@ -8,9 +8,7 @@ reported; one beyond it is the device out of calibration, which no budget covers
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
-from dataclasses import replace
 
 import numpy as np
 
@@ -28,7 +26,7 @@ def gain_sensitivity(machine: Machine, data: Sequence[RTestData], fit: FitResult
     R-test's X, Y and Z sensor (readings of a probe log are sphere centres: no gain)."""
     joined = Measurements.concat(data)
     poses = joined.poses
-    rtest = np.concatenate([np.full(len(d), d.device == "rtest") for d in joined.sets])
+    rtest = np.array([d.device == "rtest" for d in joined.sets], bool)[joined.set_of]
     model = Model(machine, fit.model)
     free = [model.names.index(n) for n in fit.free]
     J = model.jacobian(poses, fit.values)[:, :, free]
@@ -56,6 +54,4 @@ def with_budget(machine: Machine, data: Sequence[RTestData], fit: FitResult, alp
         return fit
     s = gain_sensitivity(machine, data, fit)
     extra = {n: float(machine.gain_u * np.linalg.norm(s[:, i])) for i, n in enumerate(fit.free)}
-    params = {n: replace(e, std=math.hypot(e.std, extra[n])) if n in extra else e
-              for n, e in fit.parameters.items()}
-    return replace(fit, parameters=params, device_budget={"gain_u": machine.gain_u, "std": extra})
+    return fit.widened(extra, device_budget={"gain_u": machine.gain_u, "std": extra})

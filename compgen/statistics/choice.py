@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from ..data.rtest import RTestData
 from ..model.effects import compose, effect_name, location_model
@@ -73,8 +73,5 @@ def with_choices(machine: Machine, data: Sequence[RTestData], fit: FitResult, al
     made = choices(machine, data, fit, alpha, noise_um)
     if not made:
         return fit
-    params = {}
-    for n, e in fit.parameters.items():
-        extra = math.sqrt(sum(c.half_range.get(n, 0.0) ** 2 for c in made))
-        params[n] = replace(e, std=math.hypot(e.std, extra)) if extra and not e.fixed else e
-    return replace(fit, parameters=params, choices=tuple(c.to_dict() for c in made))
+    extra = {n: math.sqrt(sum(c.half_range.get(n, 0.0) ** 2 for c in made)) for n in fit.parameters}
+    return fit.widened(extra, choices=tuple(c.to_dict() for c in made))

@@ -219,7 +219,6 @@ class _Residual:
     R: np.ndarray
     bad: np.ndarray
     size: np.ndarray
-    model: Model
 
     @property
     def rss(self) -> float:
@@ -258,7 +257,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     device = said.sigma_um if said is not None else device
 
     effects, notes = _to_try(machine, fit, candidates, poses)
-    ranked, noise = _ranked(machine, fit, effects, res)
+    ranked, noise, started = _ranked(machine, fit, effects, res)
     rss_w = noise.rss(r)
     tested = sum(1 for row in ranked.values() if row.k_eff)
     out = []
@@ -296,7 +295,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
                                _outside_line(lines, device, misfit, alpha, best_sum_sq))
 
     # rivals of a curve that fits a little of an unexplained misfit by chance: not pursued
-    out, rival = _rivals(machine, res, [] if unexplained else significant, out, ranked, noise,
+    out, rival = _rivals(machine, res, [] if unexplained else significant, out, ranked, noise, started,
                          model_effects, alpha, advising)
     return Diagnosis(
         machine=machine.name, fit_file=fit_file, model=fit.model,
@@ -305,7 +304,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         per_axis=_per_axis(machine, poses, r.reshape(-1, 3)),
         candidates=tuple(out), bias=bias, bias_units=units, signature_um=signature_um,
         tested=tested, alpha=alpha, **rival,
-        carries=_carries(fit, res, out, ranked, rival["rivals"]),
+        carries=_carries(fit, out, ranked, rival["rivals"]),
         outliers=_outlier_rows(data, res.bad, res.size), noise=_noise_summary(res.seg, noise.rho, poses.path),
         machine_ref=machine_ref or machine.source,
         program_ext=advising.program_ext if advising is not None else "", device_noise_um=device,
@@ -339,7 +338,7 @@ def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residu
     Q, R = np.linalg.qr((J if starts is None else starts(J)).reshape(r.size, -1))
     if starts is not None:
         Q = np.hstack([starts.basis(len(poses)), Q])
-    return _Residual(poses, seg, r - Q @ (Q.T @ r), r3, Q, R, bad, size, model)
+    return _Residual(poses, seg, r - Q @ (Q.T @ r), r3, Q, R, bad, size)
 
 
 def _to_try(machine: Machine, fit: FitResult, candidates: Sequence[str] | None,
@@ -362,7 +361,7 @@ def _to_try(machine: Machine, fit: FitResult, candidates: Sequence[str] | None,
 
 
 def _ranked(machine: Machine, fit: FitResult, effects: Sequence[Effect],
-            res: _Residual) -> tuple[dict[str, Row], Whitening]:
+            res: _Residual) -> tuple[dict[str, Row], Whitening, dict[str, np.ndarray]]:
     """Step 3: every candidate's numbers (``ranking.rank``). ρ̂ from the residual once the
     best candidate (least squares) is added: the misfit of a missing effect is not noise;
     then, if the noise is correlated, ranked again whitened."""
@@ -383,16 +382,15 @@ def _ranked(machine: Machine, fit: FitResult, effects: Sequence[Effect],
         white |= {e: (Cw.T @ Cw, noise.Q.T @ Cw, Cw.T @ rw)
                   for e, Cw in ((e, noise.white(C)) for e, C in started.items())}
         ranked = rank(effects, fit.free, res.R, r, noise, plain, white)
-    return ranked, noise
+    return ranked, noise, started
 
 
 def _bias(fit: FitResult, res: _Residual, effects: Sequence[Effect], ranked: dict[str, Row]):
     """Step 4: data holding a unit of candidate parameter j shift the fitted parameters by
     (J⁺C)ᵢⱼ, first order; kept in shown units (µm or ″ per µm or ″ of j). Returns the
     shifts, every parameter's shown unit, and each candidate parameter's RMS signature."""
-    units_of = {n: res.model.effects[res.model.names.index(n)].unit for n in fit.free}
     bias = {n: {} for n in fit.free}
-    units = {n: shown(1.0, units_of[n])[1] for n in fit.free}
+    units = {n: shown(1.0, fit.parameters[n].unit)[1] for n in fit.free}
     signature_um = {}
     for e in effects:
         row = ranked[e.name]
@@ -401,35 +399,38 @@ def _bias(fit: FitResult, res: _Residual, effects: Sequence[Effect], ranked: dic
             per_shown = shown(1.0, e.unit)[0]
             signature_um[pname] = float(row.norms[j] / np.sqrt(len(res.poses))) * 1e3 / per_shown
             for i, n in enumerate(fit.free):
-                bias[n][pname] = float(row.absorbed[i, j] * shown(1.0, units_of[n])[0] / per_shown)
+                bias[n][pname] = float(row.absorbed[i, j] * shown(1.0, fit.parameters[n].unit)[0]
+                                       / per_shown)
     return bias, units, signature_um
 
 
 def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out: list[Candidate],
-            ranked: dict[str, Row], noise: Whitening, model_effects: Sequence[Effect], alpha: float,
+            ranked: dict[str, Row], noise: Whitening, started: dict[str, np.ndarray],
+            model_effects: Sequence[Effect], alpha: float,
             advising: Advisor | None) -> tuple[list[Candidate], dict]:
     """Step 5: which significant candidates stay so once the best is added (a second
     effect, never a rival: the data tell it from the best), which are the best's rivals (the
     data cannot tell them apart), and what would tell them apart. Returns the candidates
-    (equivalent rivals reordered) and the ``Diagnosis`` fields."""
+    (equivalent rivals reordered) and the ``Diagnosis`` fields. ``started``: the columns of
+    the reversals with start sides, as step 3 made them."""
     poses, r = res.poses, res.r
     after_best, rival_names, rivals_separated_by, rivals_open = (), (), (), {}
     if len(significant) > 1:
         # the others' products with the model, the best and the residual from one walk of
         # the poses (their columns would take a walk each); a reversal with start sides,
-        # whose columns carry them, made whole
-        first = noise.white(effect_columns(machine, poses, resolve(machine, significant[0].effect)))
+        # whose columns carry them, from the columns step 3 made
+        best = significant[0].effect
+        first = noise.white(started[best] if best in started
+                            else effect_columns(machine, poses, resolve(machine, best)))
         others = [resolve(machine, c.effect) for c in significant[1:]]
-        rw = noise.white(r)
-        rw = rw - noise.Q @ (noise.Q.T @ rw)
+        rw = noise.off(noise.white(r))
         X = np.hstack([noise.Q, first])
-        started = {e.name for e in others
-                   if e.basis.kind == "r" and StartSides(machine, e.params, poses).count}
         prods = products(machine, poses, [e for e in others if e.name not in started], X, rw,
                          (res.seg, noise.rho) if noise.rho.any() else None)
-        for name in started:
-            C = noise.white(effect_columns(machine, poses, resolve(machine, name)))
-            prods[name] = (C.T @ C, X.T @ C, C.T @ rw)
+        for e in others:
+            if e.name in started:
+                C = noise.white(started[e.name])
+                prods[e.name] = (C.T @ C, X.T @ C, C.T @ rw)
         kept = still_significant(noise.Q, first, rw, prods, alpha)
         after_best = tuple(e.name for e in others if e.name in kept)
     if significant:
@@ -461,22 +462,17 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out:
                  "rivals_open": rivals_open}
 
 
-def _shift(row: Row) -> np.ndarray:
-    """What a candidate, added, moves the fitted parameters by (first order: the part of it
-    they absorbed, J⁺c·a), inside units in the order of the fit's free parameters."""
-    return -(row.absorbed @ row.amp)
-
-
-def _carries(fit: FitResult, res: _Residual, out: Sequence[Candidate], ranked: dict[str, Row],
+def _carries(fit: FitResult, out: Sequence[Candidate], ranked: dict[str, Row],
              rival_names: tuple[str, ...]) -> dict[str, dict[str, float]]:
     """Step 6: what each rival, added, takes back from the fitted parameters (first order:
     the part of it they absorbed, J⁺c·a): where rivals are equivalent, the choice moves these."""
-    units_of = {n: res.model.effects[res.model.names.index(n)].unit for n in fit.free}
     carries = {}
     first = next((c.effect for c in out if c.significant), None)     # after any reordering
     for name in ((first, *rival_names) if rival_names else ()):
-        shift = _shift(ranked[name])
-        carries[name] = {n: float(shift[i] * shown(1.0, units_of[n])[0]) for i, n in enumerate(fit.free)}
+        row = ranked[name]
+        shift = -(row.absorbed @ row.amp)
+        carries[name] = {n: float(shift[i] * shown(1.0, fit.parameters[n].unit)[0])
+                         for i, n in enumerate(fit.free)}
     return carries
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -105,6 +105,14 @@ class FitResult:
         """The readings (n, 3) mm, nest minus ball, the fitted model gives at ``poses`` (any
         ball, any axes): what it predicts of a measurement, a path's start side aside."""
         return Model(machine, self.model).deviation(poses, self.values)
+
+    def widened(self, extra: dict[str, float], **why) -> FitResult:
+        """This fit with ``extra`` (parameter → mm or rad: a further standard uncertainty)
+        added in quadrature to each fitted parameter's σ, and ``why`` (the fields that say
+        where it comes from)."""
+        params = {n: replace(e, std=math.hypot(e.std, extra[n])) if extra.get(n) and not e.fixed else e
+                  for n, e in self.parameters.items()}
+        return replace(self, parameters=params, **why)
 
     @property
     def condition_number(self) -> float:
