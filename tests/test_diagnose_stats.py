@@ -109,19 +109,24 @@ def test_a_column_that_moves_nothing_is_invisible():
 def test_products_a_block_at_a_time_equal_those_of_the_whole_columns(seed_machine, monkeypatch):
     """``signature.products`` (blocks of poses, whitening carried across them) against cᵀc,
     Qᵀc and cᵀr of each effect's whole columns, plain and made white with AR(1) ρ."""
-    from compgen.model.effects import catalogue
+    from compgen.model.effects import Basis, Effect, catalogue
     from compgen.model.kinematics import Model, runs
     from compgen.model.paths import generate
     from compgen.statistics import signature
     from compgen.statistics.noise import whiten
     poses = generate(seed_machine, ["K4", "K1", "K2"])
-    effects = [e for e in catalogue(seed_machine) if e.carrier != "time" and e.basis.kind != "e"][::7]
+    every = [e for e in catalogue(seed_machine) if e.carrier != "time" and e.basis.kind != "e"]
+    # a spline of five knots: more parameters than the band of products gives (its own product)
+    shape = Effect("EXC", "C", "comp", "x", Basis("s", label="bow", at=(-3.0, -1.0, 0.0, 1.0, 3.0)), "test")
+    effects = [*every[::7], *(e for e in every if len(e.direction) == 2)][:40] + [shape]
+    assert len(shape.params) > signature.BAND and any(len(e.direction) == 2 for e in effects)
     J = Model(seed_machine, ["XOC", "YOC", "BOA"]).jacobian(poses).reshape(-1, 3)
     Q = np.linalg.qr(J)[0]
     r = np.random.default_rng(2).normal(size=J.shape[0])
     seg = runs(poses)
     rho = np.where(seg[:, None] == seg[0], 0.9, 0.4) * np.ones((len(poses), 3))
-    monkeypatch.setattr(signature, "BLOCK", 100)          # several blocks, edges inside runs
+    monkeypatch.setattr(signature, "BLOCK", 100)          # several blocks, edges inside runs,
+    monkeypatch.setattr(signature, "CHUNK", 37)           # chunks of a block, one shorter
     for noise in (None, (seg, rho)):
         got = signature.products(seed_machine, poses, effects, Q, r, noise)
         for e, c in signature.signatures(seed_machine, poses, effects):
@@ -328,3 +333,22 @@ def test_a_line_along_a_linear_axis_is_outside_the_catalogue_by_each_of_its_rule
                     replace(line, p_value=0.006), replace(line, unit="s")):
         assert _outside_line([changed, *others], None, (), 0.01, 1.4) is None, changed
     assert _outside_line([line], 0.5, (), 0.01, 1.4) is None            # within a known noise: not judged
+
+
+def test_tall_qr_is_householders_qr_and_falls_back_where_cholesky_cannot():
+    """Q, R of a tall J with columns from mm to rad scales: QR = J, QᵀQ = I, R upper with
+    the diagonal of numpy's up to sign; a rank-deficient J (two equal columns) and one
+    conditioned beyond the Cholesky route still give J = QR."""
+    from compgen.statistics.significance import tall_qr
+    rng = np.random.default_rng(5)
+    J = rng.normal(size=(3000, 9)) * np.logspace(-3, 3, 9)
+    Q, R = tall_qr(J)
+    np.testing.assert_allclose(Q @ R, J, rtol=0, atol=1e-13 * np.abs(J).max())
+    np.testing.assert_allclose(Q.T @ Q, np.eye(9), rtol=0, atol=1e-13)
+    assert np.allclose(np.tril(R, -1), 0) and (np.diag(R) > 0).all()
+    np.testing.assert_allclose(np.abs(np.diag(R)), np.abs(np.diag(np.linalg.qr(J)[1])), rtol=1e-10)
+    for bad in (np.column_stack([J, J[:, 0]]),                       # rank deficient
+                np.column_stack([J[:, :2], J[:, 0] + 1e-9 * J[:, 1]])):   # cond ~1e9
+        Q, R = tall_qr(bad)
+        np.testing.assert_allclose(Q @ R, bad, rtol=0, atol=1e-12 * np.abs(bad).max())
+        np.testing.assert_allclose(Q.T @ Q, np.eye(bad.shape[1]), rtol=0, atol=1e-12)

@@ -214,6 +214,7 @@ def launch(folder: Path, ini: Path, more_env: dict[str, str], budget_s: float = 
             stdout, _ = launcher.communicate(timeout=30)
             pytest.fail(f"LinuxCNC did not finish within {budget_s} s; it said: {(stdout or '')[-2000:]}")
         launcher.wait(timeout=30)            # reaped: the launcher was one of the run's processes
+    shutil.rmtree(sockets, ignore_errors=True)   # a folder a start: 186 were left in /tmp
     return subprocess.CompletedProcess(command, launcher.returncode, stdout or "")
 
 

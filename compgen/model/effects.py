@@ -168,7 +168,10 @@ class Effect:
         """(direction, (n, len(params)) values) of each direction the effect moves: one,
         or the two of a compound, whose vector r·(cos, sin)(kθ + φ) is c·(cos kθ, sin kθ) +
         s·(−sin kθ, cos kθ)."""
-        b = self.basis.values(x)
+        return self.split(self.basis.values(x))
+
+    def split(self, b: np.ndarray) -> list[tuple[str, np.ndarray]]:
+        """``parts`` from the basis values ``b`` (n, len(terms)) at the coordinate."""
         if len(self.direction) == 1:
             return [(self.direction, b)]
         cos, sin = b[..., 0], self.sense * b[..., 1]

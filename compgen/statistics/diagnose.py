@@ -33,7 +33,7 @@ from .ranking import Row, Whitening, effect_columns, rank, started_reversals
 from .results import FitResult
 from .separation import separating, telling_apart
 from .signature import products
-from .significance import ALPHA, COND_LIMIT, VISIBLE, lack_of_fit, p_value, rivals, still_significant
+from .significance import ALPHA, COND_LIMIT, VISIBLE, lack_of_fit, p_value, rivals, still_significant, tall_qr
 from .spectrum import Line, strongest_lines
 
 if TYPE_CHECKING:        # the type only: advice writes programs, a layer above
@@ -257,7 +257,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     device = said.sigma_um if said is not None else device
 
     effects, notes = _to_try(machine, fit, candidates, poses)
-    ranked, noise, started = _ranked(machine, fit, effects, res)
+    ranked, noise, made = _ranked(machine, fit, effects, res)
     rss_w = noise.rss(r)
     tested = sum(1 for row in ranked.values() if row.k_eff)
     out = []
@@ -295,7 +295,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
                                _outside_line(lines, device, misfit, alpha, best_sum_sq))
 
     # rivals of a curve that fits a little of an unexplained misfit by chance: not pursued
-    out, rival = _rivals(machine, res, [] if unexplained else significant, out, ranked, noise, started,
+    out, rival = _rivals(machine, res, [] if unexplained else significant, out, ranked, noise, made,
                          model_effects, alpha, advising)
     return Diagnosis(
         machine=machine.name, fit_file=fit_file, model=fit.model,
@@ -335,7 +335,7 @@ def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residu
         starts = StartSides(machine, fit.model, poses).projector()
     r = r3.ravel()
     J = model.jacobian(poses, x)[:, :, free]        # indexed by a list: a copy, projected in place
-    Q, R = np.linalg.qr((J if starts is None else starts(J)).reshape(r.size, -1))
+    Q, R = tall_qr((J if starts is None else starts(J)).reshape(r.size, -1))
     if starts is not None:
         Q = np.hstack([starts.basis(len(poses)), Q])
     return _Residual(poses, seg, r - Q @ (Q.T @ r), r3, Q, R, bad, size)
@@ -364,25 +364,28 @@ def _ranked(machine: Machine, fit: FitResult, effects: Sequence[Effect],
             res: _Residual) -> tuple[dict[str, Row], Whitening, dict[str, np.ndarray]]:
     """Step 3: every candidate's numbers (``ranking.rank``). ρ̂ from the residual once the
     best candidate (least squares) is added: the misfit of a missing effect is not noise;
-    then, if the noise is correlated, ranked again whitened."""
+    then, if the noise is correlated, ranked again whitened. Returns the numbers, the
+    whitening and the columns made on the way (the reversals with start sides, the best)."""
     poses, r, Q, seg = res.poses, res.r, res.Q, res.seg
     noise = Whitening(seg, np.zeros((len(poses), 3)), Q)
-    plain = products(machine, poses, effects, Q, r)
     started = started_reversals(machine, poses, effects)
+    walked = [e for e in effects if e.name not in started]     # the others: from one walk
+    plain = products(machine, poses, walked, Q, r)
     plain |= {e: (C.T @ C, Q.T @ C, C.T @ r) for e, C in started.items()}
     ranked = rank(effects, fit.free, res.R, r, noise, plain)
     best = max(ranked.values(), key=lambda row: (row.vis >= VISIBLE, row.share))
-    c = effect_columns(machine, poses, best.effect)
+    c = started.get(best.effect.name)
+    c = effect_columns(machine, poses, best.effect) if c is None else c
     rest = r - c @ np.linalg.lstsq(c - Q @ (Q.T @ c), r, rcond=None)[0]
     rho = ar1((rest - Q @ (Q.T @ rest)).reshape(-1, 3), seg)
     if rho.any():
         noise = Whitening(seg, rho, Q)
         rw = noise.off(noise.white(r))
-        white = products(machine, poses, effects, noise.Q, rw, (seg, rho))
+        white = products(machine, poses, walked, noise.Q, rw, (seg, rho))
         white |= {e: (Cw.T @ Cw, noise.Q.T @ Cw, Cw.T @ rw)
                   for e, Cw in ((e, noise.white(C)) for e, C in started.items())}
         ranked = rank(effects, fit.free, res.R, r, noise, plain, white)
-    return ranked, noise, started
+    return ranked, noise, started | {best.effect.name: c}
 
 
 def _bias(fit: FitResult, res: _Residual, effects: Sequence[Effect], ranked: dict[str, Row]):
@@ -405,14 +408,14 @@ def _bias(fit: FitResult, res: _Residual, effects: Sequence[Effect], ranked: dic
 
 
 def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out: list[Candidate],
-            ranked: dict[str, Row], noise: Whitening, started: dict[str, np.ndarray],
+            ranked: dict[str, Row], noise: Whitening, made: dict[str, np.ndarray],
             model_effects: Sequence[Effect], alpha: float,
             advising: Advisor | None) -> tuple[list[Candidate], dict]:
     """Step 5: which significant candidates stay so once the best is added (a second
     effect, never a rival: the data tell it from the best), which are the best's rivals (the
     data cannot tell them apart), and what would tell them apart. Returns the candidates
-    (equivalent rivals reordered) and the ``Diagnosis`` fields. ``started``: the columns of
-    the reversals with start sides, as step 3 made them."""
+    (equivalent rivals reordered) and the ``Diagnosis`` fields. ``made``: the columns step 3
+    made (the reversals with start sides, and its best)."""
     poses, r = res.poses, res.r
     after_best, rival_names, rivals_separated_by, rivals_open = (), (), (), {}
     if len(significant) > 1:
@@ -420,16 +423,16 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out:
         # the poses (their columns would take a walk each); a reversal with start sides,
         # whose columns carry them, from the columns step 3 made
         best = significant[0].effect
-        first = noise.white(started[best] if best in started
+        first = noise.white(made[best] if best in made
                             else effect_columns(machine, poses, resolve(machine, best)))
         others = [resolve(machine, c.effect) for c in significant[1:]]
         rw = noise.off(noise.white(r))
         X = np.hstack([noise.Q, first])
-        prods = products(machine, poses, [e for e in others if e.name not in started], X, rw,
+        prods = products(machine, poses, [e for e in others if e.name not in made], X, rw,
                          (res.seg, noise.rho) if noise.rho.any() else None)
         for e in others:
-            if e.name in started:
-                C = noise.white(started[e.name])
+            if e.name in made:
+                C = noise.white(made[e.name])
                 prods[e.name] = (C.T @ C, X.T @ C, C.T @ rw)
         kept = still_significant(noise.Q, first, rw, prods, alpha)
         after_best = tuple(e.name for e in others if e.name in kept)

@@ -30,9 +30,10 @@ REPEATS_MIN = 30        # readings beyond the first of each repeated pose, befor
 
 def _previous(x: np.ndarray, seg: np.ndarray) -> np.ndarray:
     """x shifted one reading later within each segment; zero at a segment's first reading."""
-    prev = np.zeros_like(x)
-    same = seg[1:] == seg[:-1]
-    prev[1:][same] = x[:-1][same]
+    prev = np.empty_like(x)
+    prev[1:] = x[:-1]                    # a whole copy, then the few segments' starts: a
+    prev[0] = 0.0                        # boolean mask over every reading copies twice
+    prev[1:][seg[1:] != seg[:-1]] = 0.0
     return prev
 
 
@@ -119,8 +120,12 @@ def outliers(r_um: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]
         ok[ok] = seg[src[ok]] == seg[ok]
         near[ok, k] = r_um[src[ok]]
     alone = np.isnan(near).all(axis=(1, 2))
+    whole = ~np.isnan(near).any(axis=(1, 2))    # all but a segment's ends: the middle two of
+    edge = ~alone & ~whole                      # 2N sorted, 1/10 of nanmedian's time (masked)
     step = np.zeros_like(r_um)
-    step[~alone] = r_um[~alone] - np.nanmedian(near[~alone], axis=1)
+    middle = np.sort(near[whole], axis=1)[:, NEIGHBOURS - 1:NEIGHBOURS + 1]
+    step[whole] = r_um[whole] - (middle[:, 0] + middle[:, 1]) / 2
+    step[edge] = r_um[edge] - np.nanmedian(near[edge], axis=1)
     scale = 1.4826 * np.median(np.abs(step[~alone]), axis=0) if (~alone).any() else np.zeros(3)
     z = np.abs(step) / np.maximum(scale, 1e-9)
     size = np.linalg.norm(step, axis=1)
