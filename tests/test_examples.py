@@ -26,7 +26,7 @@ def test_discovery_example_finds_the_hidden_effect_and_reaches_the_noise(tmp_pat
     assert "1. EXC:h2" in done.stdout                           # the hidden effect, named first
     assert "residual RMS 0.770 µm" in done.stdout               # before: 11 parameters
     assert "residual RMS 0.501 µm" in done.stdout               # after: at the 0.5 µm noise
-    assert "explains these data to the noise level" in done.stdout
+    assert "explains these data to the R-test's noise (0.5 µm)" in done.stdout   # tested against it
 
 
 def test_probe_example_runs_from_program_to_edit(tmp_path):

@@ -159,9 +159,13 @@ class Diagnosis:
     @property
     def found(self) -> str | None:
         """The effect named as missing: significant, first, with no rival, one that ``fit
-        --add`` accepts on these data, and not a small part of an unexplained misfit."""
+        --add`` accepts on these data, and not a small part of an unexplained misfit, which
+        needs the device's noise: without it the residual is judged only against σ̂ of the
+        data themselves, and an effect outside the catalogue would pass for the best
+        candidate (an A encoder's 4/rev was named EZA:h2)."""
         best = self.significant[0] if self.significant else None
-        named = best is not None and not self.rivals and best.separable and not self.unexplained
+        named = (best is not None and not self.rivals and best.separable and not self.unexplained
+                 and self.device_noise_um is not None)
         return best.effect if named else None
 
     def to_dict(self) -> dict:

@@ -89,6 +89,12 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
                       "  which of them is the physical cause stays open (it needs another "
                       "reference), and the location errors written to a control depend on the "
                       "choice:", *_carries(d)]
+    if d.significant and not d.rivals and not d.unexplained and d.device_noise_um is None:
+        lines += ["", f"  Not named as found: the R-test's noise is not given, so whether "
+                      f"{d.significant[0].effect} leaves no more than noise cannot be tested (σ̂ is "
+                      "these data's own scatter, which an effect outside the catalogue inflates too). "
+                      "Set [rtest] noise_um in the machine file (the device's calibration), or "
+                      "--noise-um, and diagnose again."]
     lines += _lines_text(d)
     if d.unexplained:
         lines += _unexplained(d, fit, after)
