@@ -235,7 +235,7 @@ def test_a_turning_radial_motion_is_named_after_the_follow_ups_it_advises(seed_m
         m = found.rivals_separated_by[0]
         advice = found.to_dict()["rivals_separated_by"][0]
         assert advice == {"label": m.label, "path": m.path, "ball": [round(v, 4) for v in m.ball],
-                          "there_and_back": m.back, "name": m.name,
+                          "there_and_back": m.back, "name": m.name, "right_after": m.again,
                           "leaves_open": [list(p) for p in found.rivals_open.get(m.label, ())]}
         command = m.options().split()                  # what the text tells the user to run
         assert command[command.index("--ball") + 1] == ",".join(f"{v:g}" for v in advice["ball"])
@@ -765,3 +765,33 @@ def test_nothing_is_named_found_without_the_devices_noise(seed_machine):
     assert "Not named as found: the R-test's noise is not given" in text and "--add EXC:h2" in text
     told = diagnose(seed_machine, data, base, noise_um=NOISE_UM)
     assert told.found == "EXC:h2" and "Not named as found" not in report(told)
+
+
+def test_drifts_are_told_apart_by_time_never_by_a_ball_position(seed_machine, poses):
+    """YOC and AOC both drifting with τ = 15 min: the data of one session cannot tell AOC's τ
+    of 15 from 45 min, and no ball position would (a drift differs only in when the
+    readings were made): what tells them apart is a path measured again right after, its
+    clock running on. Followed as a user would, the two drifts are named with their τ (they
+    were AOC:e45, YOC:e45, AOC:e5, YOC:e5 when advice moved only the ball), and the
+    location errors hold the truth within 3 σ."""
+    truth = {"YOC:e15": 3 * UM, "AOC:e15": 6 * ARCSEC}
+    data, model, named, rng = [_session(seed_machine, poses, truth)], location_model(seed_machine), [], 8
+    for _ in range(5):
+        found = diagnose(seed_machine, data, identify(seed_machine, data, model), noise_um=NOISE_UM,
+                         advisor=Advisor)
+        if found.found:
+            named.append(found.found)
+            model = compose(seed_machine, model, [found.found])
+        elif found.rivals:
+            m = found.rivals_separated_by[0]
+            assert m.label.endswith("again, right after these data"), m.label
+            assert m.poses.t.min() > data[-1].poses.t.max()             # measured after them
+            rng += 1
+            data.append(_session(seed_machine, m.poses, truth, seed=rng))
+        else:
+            break
+    assert named == ["AOC:e15", "YOC:e15"], named
+    fit = identify(seed_machine, data, model)
+    off = {n: abs(fit.parameters[n].value - {**TABLE4, **truth}[n]) / fit.parameters[n].std
+           for n in location_model(seed_machine)}
+    assert max(off.values()) < 3, off

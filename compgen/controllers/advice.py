@@ -20,7 +20,7 @@ from ..data.probe import probe_poses
 from ..errors import CompgenError
 from ..model.kinematics import Poses, motion_direction, runs
 from ..model.machine import Machine
-from ..model.paths import generate
+from ..model.paths import GAP_S, generate
 from .probing import probe_program
 from .programs import measure_program
 from .registry import controller
@@ -54,10 +54,11 @@ class Measurement:
     back: bool = False
     name: str = ""
     device: str = "rtest"        # "probe": made with a touch probe (probe-program)
+    again: bool = False          # a repeat of what was measured, right after it: for time
 
     def to_dict(self) -> dict:
         return {"label": self.label, "path": self.path, "ball": [round(v, 4) for v in self.ball],
-                "there_and_back": self.back, "name": self.name}
+                "there_and_back": self.back, "name": self.name, "right_after": self.again}
 
     def options(self) -> str:
         """The options of ``measure-program`` that write it."""
@@ -112,9 +113,17 @@ def _refusal(machine: Machine, m: Measurement) -> str | None:
 
 def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest") -> list[Measurement]:
     """Every place for every path, less what would leave the travel and what ``measured``
-    holds already (same path, same ball; there and back where the axes turned back)."""
+    holds already (same path, same ball; there and back where the axes turned back).
+
+    Where ``measured`` gives the time of its readings, each measurement is made after them
+    (its clock running on, as the R-test's does when the next program follows), and what
+    was measured already is offered again as a repeat: a drift is told by time, never by
+    another ball position (a τ of 5 and of 45 min differ only in when the readings were
+    made)."""
     ball = np.asarray(machine.ball, dtype=float)
     done, turned = set(), set()
+    timed = measured is not None and len(measured) > 0 and not np.isnan(measured.t).any()
+    start = float(measured.t.max()) + GAP_S if timed else 0.0
     if measured is not None:
         # path and ball hold within a run: one look per run, not per pose
         run = runs(measured)
@@ -131,13 +140,18 @@ def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest")
             continue
         at = ball * [scale, scale, 1.0] + [0.0, 0.0, dz]
         for name in machine.paths:
-            if (name, tuple(np.round(at, 3))) in (turned if back else done):
+            again = (name, tuple(np.round(at, 3))) in (turned if back else done)
+            if again and (back or not timed):     # a repeat: the path as it ran, in time
                 continue
             try:
                 poses = (probe_poses(machine, [name], at) if device == "probe" else
                          generate(machine, [name], ball=at, back=back))
             except CompgenError:
                 continue
-            out.append(Measurement(f"{name}{where}", name, tuple(float(v) for v in at), poses, back,
-                                   f"{name}_{tag}" if tag else name, device))
+            poses = Poses(poses.q, poses.ball, poses.t - poses.t[0] + start, poses.path, poses.side)
+            label, stem = f"{name}{where}", f"{name}_{tag}" if tag else name
+            if again:
+                label, stem = f"{label} again, right after these data", f"{stem}_AGAIN"
+            out.append(Measurement(label, name, tuple(float(v) for v in at), poses, back, stem, device,
+                                   again))
     return out
