@@ -126,9 +126,9 @@ def test_products_a_block_at_a_time_equal_those_of_the_whole_columns(seed_machin
     seg = runs(poses)
     rho = np.where(seg[:, None] == seg[0], 0.9, 0.4) * np.ones((len(poses), 3))
     monkeypatch.setattr(signature, "BLOCK", 100)          # several blocks, edges inside runs,
-    monkeypatch.setattr(signature, "CHUNK", 37)           # chunks of a block, one shorter
+    monkeypatch.setattr(signature, "CHUNK_BYTES", 1)      # chunks of 64 poses: a block's last shorter
     for noise in (None, (seg, rho)):
-        got = signature.products(seed_machine, poses, effects, Q, r, noise)
+        got = signature.products(seed_machine, poses, effects, (Q[:, :2], Q[:, 2:]), r, noise)
         for e, c in signature.signatures(seed_machine, poses, effects):
             if noise is not None:
                 c = whiten(c.reshape(len(poses), 3, -1), seg, rho).reshape(c.shape)

@@ -431,13 +431,12 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out:
                             else effect_columns(machine, poses, resolve(machine, best)))
         others = [resolve(machine, c.effect) for c in significant[1:]]
         rw = noise.off(noise.white(r))
-        X = np.hstack([noise.Q, first])
-        prods = products(machine, poses, [e for e in others if e.name not in made], X, rw,
+        prods = products(machine, poses, [e for e in others if e.name not in made], (noise.Q, first), rw,
                          (res.seg, noise.rho) if noise.rho.any() else None)
         for e in others:
             if e.name in made:
                 C = noise.white(made[e.name])
-                prods[e.name] = (C.T @ C, X.T @ C, C.T @ rw)
+                prods[e.name] = (C.T @ C, np.vstack([noise.Q.T @ C, first.T @ C]), C.T @ rw)
         kept = still_significant(noise.Q, first, rw, prods, alpha)
         after_best = tuple(e.name for e in others if e.name in kept)
     if significant:

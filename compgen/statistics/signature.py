@@ -9,11 +9,12 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..model.effects import Effect
-from ..model.kinematics import BLOCK, Poses, SlotGains, coordinate, effect_gains
+from ..model.kinematics import Poses, SlotGains, coordinate, effect_gains
 from ..model.machine import Machine
 from .noise import whiten
 
-CHUNK = 2048          # poses whose columns of every candidate are held at once (4096 × 3 × ~400 × 8 B)
+CHUNK_BYTES = 8 << 20  # the columns of every candidate held at once: ~800 poses of ~400 columns
+BLOCK = 4096           # poses a walk of the chain serves: its slots' gains (~250 × 96 kB) held
 BAND = 3              # cᵀc of effects of up to BAND parameters from C's rows' products with the next ones
 
 
@@ -41,12 +42,14 @@ def r_factor(machine: Machine, poses: Poses, effects: Sequence[Effect],
     return R
 
 
-def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.ndarray, r: np.ndarray,
+def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.ndarray | Sequence[np.ndarray],
+             r: np.ndarray,
              noise: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, tuple]:
     """Each effect's first-order signature c, reduced to what diagnose needs of it: cᵀc
     (k × k), Qᵀc (p × k) and cᵀr (k), over blocks of poses: a dense session's columns are
     millions of rows, made a block at a time (the chain walked once a block, for every
-    effect) and never held whole. ``Q`` (3n, p) and ``r`` (3n,) are in (n, 3) reading
+    effect) and never held whole. ``Q`` (3n, p), or blocks of it side by side ([Q | more]
+    without a copy of Q: 240 MB at 720 000 readings), and ``r`` (3n,) are in (n, 3) reading
     order. With ``noise`` = (segments, ρ (n, 3)), the columns are made white first
     (Prais–Winsten, carried from one block to the next), as Q and r must already be.
 
@@ -62,15 +65,17 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
             coords[where(e)] = coordinate(machine, e, poses)
     edges = np.cumsum([0, *(len(e.params) for e in effects)])
     K = int(edges[-1])
-    qc, cr = np.zeros((Q.shape[1], K)), np.zeros(K)
+    Qs = [Q] if isinstance(Q, np.ndarray) else list(Q)     # [Q | more] without copying Q
+    qc, cr = np.zeros((sum(q.shape[1] for q in Qs), K)), np.zeros(K)
+    chunk = max(64, CHUNK_BYTES // (24 * max(K, 1)))
     band = np.zeros((BAND, K))          # Σ cᵢ·cᵢ₊d: cᵀc of every effect of up to BAND params
     wide = {i: 0.0 for i, e in enumerate(effects) if len(e.params) > BAND}   # the others' own
     carry = None
     n = len(poses)
     for a in range(0, n, BLOCK):
         gains, made = SlotGains(machine, poses.take(slice(a, min(a + BLOCK, n)))), {}
-        for b in range(a, min(a + BLOCK, n), CHUNK):     # columns a chunk at a time: memory
-            at = slice(b, min(b + CHUNK, n, a + BLOCK))
+        for b in range(a, min(a + BLOCK, n), chunk):     # columns a chunk at a time: memory
+            at = slice(b, min(b + chunk, n, a + BLOCK))
             local = slice(at.start - a, at.stop - a)
             C = np.empty((K, at.stop - at.start, 3))     # an effect's columns side by side
             values: dict = {}
@@ -94,7 +99,7 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
                                          .transpose(2, 0, 1))
             C = C.reshape(K, -1)
             rows = slice(3 * at.start, 3 * at.stop)
-            qc += (C @ Q[rows]).T
+            qc += np.vstack([(C @ q[rows]).T for q in Qs])
             cr += C @ r[rows]
             for d in range(BAND):
                 band[d, :K - d] += np.einsum("ij,ij->i", C[:K - d], C[d:])
