@@ -795,3 +795,40 @@ def test_drifts_are_told_apart_by_time_never_by_a_ball_position(seed_machine, po
     off = {n: abs(fit.parameters[n].value - {**TABLE4, **truth}[n]) / fit.parameters[n].std
            for n in location_model(seed_machine)}
     assert max(off.values()) < 3, off
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.8])
+def test_the_best_carried_from_a_screen_changes_no_number(seed_machine, poses, monkeypatch, rho):
+    """On a dense session the first pass carries the best found on every k-th pose, and the
+    step that tests what stays significant after it takes its products from that pass. The
+    diagnosis is the same as without the screen; where the noise is white a pass over every
+    reading is saved (a pass over every 4th made instead); a screen that guesses wrong
+    (forced here) costs the pass back and changes nothing."""
+    from compgen.statistics import diagnose as module
+    rng = np.random.default_rng(12)
+    hidden = {"EXC:h2c": 1.5 * UM, "EXC:h2s": 0.8 * UM}      # one best, clear of the next
+    data = [_with_noise(seed_machine, poses, hidden, _ar1_mm(len(poses), rho, rng))]
+    fit = identify(seed_machine, data)
+    walked = []                       # poses of each pass of the candidates' products
+    real = module.products
+    monkeypatch.setattr(module, "products", lambda *a, **k: walked.append(len(a[1])) or real(*a, **k))
+
+    def run(screen, guess=None):
+        walked.clear()
+        monkeypatch.setattr(module, "SCREEN_POSES", screen)
+        if guess is not None:
+            monkeypatch.setattr(module, "_screened", lambda *a: guess)
+        return diagnose(seed_machine, data, fit, noise_um=NOISE_UM).to_dict(), list(walked)
+
+    plain, passes = run(10**9)
+    assert len(plain["candidates"]) > 100 and sum(c["significant"] for c in plain["candidates"]) > 1
+    screened, with_screen = run(200)                  # 723 poses: the best on every 4th
+    assert screened == plain
+    n = len(poses)
+    if rho:     # the pass made white carries the best: the screen is one pass over every 4th
+        assert with_screen == [181, *passes]
+    else:
+        assert passes == [n, n] and with_screen == [181, n]
+    wrong = next(e for e in module.catalogue(seed_machine) if e.name == "EZA:p1")
+    forced, with_wrong = run(200, wrong)
+    assert forced == plain and with_wrong == passes

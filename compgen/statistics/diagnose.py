@@ -51,6 +51,9 @@ LINE_OVER_BEST = 2.0
 # unexplained for such lines); a missing periodic error is most of the misfit
 LINE_SHARE = 0.1
 RESOLVES_UM = 0.1     # an R-test's sensors resolve about this: a smaller line is not a finding
+# Beyond this many poses the first pass carries the best it expects, found on about this
+# many of them: step 5 then needs no pass of its own (5 of 27 s at 720 000 readings)
+SCREEN_POSES = 20_000
 
 
 @dataclass(frozen=True)
@@ -261,7 +264,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     device = said.sigma_um if said is not None else device
 
     effects, notes = _to_try(machine, fit, candidates, poses)
-    ranked, noise, made = _ranked(machine, fit, effects, res)
+    ranked, noise, made, carried = _ranked(machine, fit, effects, res)
     rss_w = noise.rss(r)
     tested = sum(1 for row in ranked.values() if row.k_eff)
     out = []
@@ -299,7 +302,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
                                _outside_line(lines, device, misfit, alpha, best_sum_sq))
 
     # rivals of a curve that fits a little of an unexplained misfit by chance: not pursued
-    out, rival = _rivals(machine, res, [] if unexplained else significant, out, ranked, noise, made,
+    out, rival = _rivals(machine, res, [] if unexplained else significant, out, ranked, noise, made, carried,
                          model_effects, alpha, advising)
     return Diagnosis(
         machine=machine.name, fit_file=fit_file, model=fit.model,
@@ -365,31 +368,70 @@ def _to_try(machine: Machine, fit: FitResult, candidates: Sequence[str] | None,
 
 
 def _ranked(machine: Machine, fit: FitResult, effects: Sequence[Effect],
-            res: _Residual) -> tuple[dict[str, Row], Whitening, dict[str, np.ndarray]]:
+            res: _Residual) -> tuple[dict[str, Row], Whitening, dict[str, np.ndarray], tuple]:
     """Step 3: every candidate's numbers (``ranking.rank``). ρ̂ from the residual once the
     best candidate (least squares) is added: the misfit of a missing effect is not noise;
     then, if the noise is correlated, ranked again whitened. Returns the numbers, the
-    whitening and the columns made on the way (the reversals with start sides, the best)."""
+    whitening, the columns made on the way (the reversals with start sides, the best), and
+    (best, products) where the last pass carried the best's columns beside the model's:
+    what step 5 needs of the others, without a pass of its own.
+
+    The first pass carries the best it expects: on a dense session (beyond
+    ``SCREEN_POSES``), the best on every k-th pose; where that is not the best of all
+    poses, step 5 makes its own pass (only time is lost)."""
     poses, r, Q, seg = res.poses, res.r, res.Q, res.seg
     noise = Whitening(seg, np.zeros((len(poses), 3)), Q)
     started = started_reversals(machine, poses, effects)
     walked = [e for e in effects if e.name not in started]     # the others: from one walk
-    plain = products(machine, poses, walked, Q, r)
+    made = dict(started)
+    guess = _screened(machine, fit, effects, res, walked, started)
+    if guess is not None and guess.name not in made:
+        made[guess.name] = effect_columns(machine, poses, guess)
+    carry = () if guess is None else (made[guess.name],)
+    p = Q.shape[1]
+    both = products(machine, poses, walked, (Q, *carry), r)
+    plain = {e: (cc, qx[:p], cr) for e, (cc, qx, cr) in both.items()}
     plain |= {e: (C.T @ C, Q.T @ C, C.T @ r) for e, C in started.items()}
     ranked = rank(effects, fit.free, res.R, r, noise, plain)
     best = max(ranked.values(), key=lambda row: (row.vis >= VISIBLE, row.share))
-    c = started.get(best.effect.name)
+    c = made.get(best.effect.name)
     c = effect_columns(machine, poses, best.effect) if c is None else c
+    carried = (best.effect.name, both) if guess is not None and guess.name == best.effect.name else ()
     rest = r - c @ np.linalg.lstsq(c - Q @ (Q.T @ c), r, rcond=None)[0]
     rho = ar1((rest - Q @ (Q.T @ rest)).reshape(-1, 3), seg)
     if rho.any():
         noise = Whitening(seg, rho, Q)
         rw = noise.off(noise.white(r))
-        white = products(machine, poses, walked, noise.Q, rw, (seg, rho))
+        both = products(machine, poses, walked, (noise.Q, noise.white(c)), rw, (seg, rho))
+        white = {e: (cc, qx[:p], cr) for e, (cc, qx, cr) in both.items()}
         white |= {e: (Cw.T @ Cw, noise.Q.T @ Cw, Cw.T @ rw)
                   for e, Cw in ((e, noise.white(C)) for e, C in started.items())}
         ranked = rank(effects, fit.free, res.R, r, noise, plain, white)
-    return ranked, noise, started | {best.effect.name: c}
+        carried = (best.effect.name, both)
+    return ranked, noise, started | {best.effect.name: c}, carried
+
+
+def _screened(machine: Machine, fit: FitResult, effects: Sequence[Effect], res: _Residual,
+              walked: Sequence[Effect], started: dict[str, np.ndarray]) -> Effect | None:
+    """The best candidate on every k-th pose of a session beyond ``SCREEN_POSES`` (about
+    ``SCREEN_POSES`` of them), or None on a smaller one: what the first pass carries."""
+    n = len(res.poses)
+    if n <= SCREEN_POSES:
+        return None
+    every = -(-n // SCREEN_POSES)
+    at = np.arange(0, n, every)
+    rows = (3 * at[:, None] + np.arange(3)).ravel()
+    Qs, R2 = tall_qr(res.Q[rows])
+    rs = res.r[rows] - Qs @ (Qs.T @ res.r[rows])
+    sub = products(machine, res.poses.take(at), walked, Qs, rs)
+    sub |= {e: (C[rows].T @ C[rows], Qs.T @ C[rows], C[rows].T @ rs) for e, C in started.items()}
+    s = res.Q.shape[1] - res.R.shape[0]          # Q's start sides come first: J's R beyond them
+    try:
+        ranked = rank(effects, fit.free, R2[s:, s:] @ res.R, rs,
+                      Whitening(res.seg[at], np.zeros((len(at), 3)), Qs), sub)
+    except np.linalg.LinAlgError:               # the subset cannot hold the model: no guess
+        return None
+    return max(ranked.values(), key=lambda row: (row.vis >= VISIBLE, row.share)).effect
 
 
 def _bias(fit: FitResult, res: _Residual, effects: Sequence[Effect], ranked: dict[str, Row]):
@@ -412,14 +454,15 @@ def _bias(fit: FitResult, res: _Residual, effects: Sequence[Effect], ranked: dic
 
 
 def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out: list[Candidate],
-            ranked: dict[str, Row], noise: Whitening, made: dict[str, np.ndarray],
+            ranked: dict[str, Row], noise: Whitening, made: dict[str, np.ndarray], carried: tuple,
             model_effects: Sequence[Effect], alpha: float,
             advising: Advisor | None) -> tuple[list[Candidate], dict]:
     """Step 5: which significant candidates stay so once the best is added (a second
     effect, never a rival: the data tell it from the best), which are the best's rivals (the
     data cannot tell them apart), and what would tell them apart. Returns the candidates
     (equivalent rivals reordered) and the ``Diagnosis`` fields. ``made``: the columns step 3
-    made (the reversals with start sides, and its best)."""
+    made (the reversals with start sides, and its best); ``carried``: (best, products) of
+    step 3's last pass, its columns beside the model's, if it carried them."""
     poses, r = res.poses, res.r
     after_best, rival_names, rivals_separated_by, rivals_open = (), (), (), {}
     if len(significant) > 1:
@@ -431,8 +474,10 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out:
                             else effect_columns(machine, poses, resolve(machine, best)))
         others = [resolve(machine, c.effect) for c in significant[1:]]
         rw = noise.off(noise.white(r))
-        prods = products(machine, poses, [e for e in others if e.name not in made], (noise.Q, first), rw,
-                         (res.seg, noise.rho) if noise.rho.any() else None)
+        walked = [e for e in others if e.name not in made]
+        prods = ({e.name: carried[1][e.name] for e in walked} if carried and carried[0] == best else
+                 products(machine, poses, walked, (noise.Q, first), rw,
+                          (res.seg, noise.rho) if noise.rho.any() else None))
         for e in others:
             if e.name in made:
                 C = noise.white(made[e.name])
