@@ -832,3 +832,25 @@ def test_the_best_carried_from_a_screen_changes_no_number(seed_machine, poses, m
     wrong = next(e for e in module.catalogue(seed_machine) if e.name == "EZA:p1")
     forced, with_wrong = run(200, wrong)
     assert forced == plain and with_wrong == passes
+
+
+def test_a_drift_fitted_across_files_whose_clocks_overlap_is_said(seed_machine, poses):
+    """A drift is a function of one session's clock: a second file whose t starts at 0
+    again (a device that restarts its clock) is taken as read at the session's start, and
+    the fit's request says so; a file that continues the clock, or a model with no drift,
+    says nothing."""
+    from compgen.configuration.session import one_clock
+    first = _session(seed_machine, poses, {})
+    again = generate(seed_machine, ["K2"])
+    restarted = _session(seed_machine, again, {}, seed=8)
+    later = _session(seed_machine, _at_times(again, again.t + poses.t.max() + 20), {}, seed=8)
+    model = compose(seed_machine, location_model(seed_machine), ["YOC:e15"])
+    said = one_clock(seed_machine, model, [first, restarted])
+    assert said and "YOC:e15" in said and "starts at t = 0 s" in said
+    assert one_clock(seed_machine, model, [first, later]) is None
+    assert one_clock(seed_machine, location_model(seed_machine), [first, restarted]) is None
+
+
+def _at_times(p, t):
+    from compgen.model.kinematics import Poses
+    return Poses(p.q, p.ball, t, p.path, p.side)

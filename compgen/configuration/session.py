@@ -7,6 +7,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from .. import me
 from ..data.probe import MAGIC, PROBE_FAMILY, read_probe_log, sphere_centres
 from ..data.rtest import SIGNS, RTestData, read_rtest
@@ -122,4 +124,25 @@ def fit_request(machine_file: str | None = None, data: Sequence[str] = (), base:
         names, fixed = location_model(machine), {}
     names = compose(machine, list(model) if model is not None else names, add, remove)
     fixed = {n: v for n, v in fixed.items() if n in names} | parse_fixed(machine, fixes)
+    if warn is not None:
+        clock = one_clock(machine, names, sets)
+        if clock:
+            warn(clock)
     return FitRequest(machine, sets, names, fixed, sign)
+
+
+def one_clock(machine: Machine, names: Sequence[str], sets: Sequence[RTestData]) -> str | None:
+    """What to say when a model with a drift is fitted to files whose times overlap: a drift
+    is a function of one session's clock, and a file whose t starts again at 0 (a device
+    that restarts its clock) would be taken as read at the session's start."""
+    timed = sorted({e.name for e in (effect_of_param(machine, n) for n in names)
+                    if e.carrier == "time" or e.basis.kind == "e"})
+    spans = [(float(np.nanmin(s.poses.t)), float(np.nanmax(s.poses.t)), s.source) for s in sets
+             if len(s.poses) and not np.isnan(s.poses.t).all()]
+    late = [(b, a) for a, b in zip(spans, spans[1:], strict=False) if b[0] <= a[1]]
+    if not timed or not late:
+        return None
+    (start, _, later), (_, end, earlier) = late[0]
+    return (f"{', '.join(timed)} drift with the session's clock, but {later} starts at t = {start:g} s, "
+            f"before {earlier} ends (t = {end:g} s): its readings are taken as made then. If the "
+            "R-test restarted its clock, give t continuing the earlier file's")
