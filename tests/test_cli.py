@@ -326,3 +326,32 @@ def test_measure_program_dash_output_is_stdout_as_without_o(tmp_path):
     code, out, err = run("measure-program", "--machine", SEED_MACHINE, "--path", "K2", "-o", "-")
     assert code == 0 and "BEGIN PGM RTEST_K2 MM" in out and "pose list RTEST_K2.poses.csv" in out, out[:300]
     assert "the pose list was not written" in err
+
+
+def test_a_follow_up_simulated_on_the_sessions_clock_fits_a_drift_without_a_warning(tmp_path):
+    """``simulate --start-s`` puts a follow-up's readings on the session's clock (as an
+    R-test running on does): fitted with a drift, nothing is said; the same follow-up with
+    its clock restarted at 0 is said. A start that is no time is refused in one line."""
+    truth = ROOT / "examples" / "truth-table4.json"
+    first, again, late = tmp_path / "a.csv", tmp_path / "b.csv", tmp_path / "c.csv"
+    code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "--noise-um", "0.5",
+                       "--seed", "1", "-o", first)
+    assert code == 0, err
+    end = max(float(line.split(",")[1]) for line in first.read_text().splitlines()
+              if line.startswith("K"))
+    for out, start in ((again, 0.0), (late, end + 20)):
+        code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "--paths", "K2",
+                           "--noise-um", "0.5", "--seed", "2", "--start-s", start, "-o", out)
+        assert code == 0, err
+    rows = [line.split(",") for line in late.read_text().splitlines() if line.startswith("K2")]
+    assert float(rows[0][1]) == pytest.approx(end + 20, abs=1e-3)
+    assert run("fit", "--machine", SEED_MACHINE, first, "-o", tmp_path / "f.json")[0] == 0
+    for data, said in ((again, True), (late, False)):
+        code, _, err = run("fit", "--from", tmp_path / "f.json", "--data", data, "--add", "YOC:e15",
+                           "-o", tmp_path / "g.json", "--force")
+        assert code == 0, err
+        assert ("drift with the session's clock" in err) == said, err
+    for bad in ("-5", "nan", "inf"):
+        code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "--start-s", bad,
+                           "-o", tmp_path / "x.csv")
+        assert code == 2 and err.count("\n") == 1 and "--start-s" in err and not (tmp_path / "x.csv").exists()

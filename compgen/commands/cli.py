@@ -26,6 +26,7 @@ from ..data.simulate import read_truth, simulate
 from ..errors import CompgenError
 from ..files import STDOUT, read_text, write_all, write_atomically
 from ..model.effects import catalogue, compose, location_model
+from ..model.kinematics import Poses
 from ..model.paths import generate
 from ..model.sides import unknown_sides, unpredicted_sides
 from ..statistics.budget import with_budget
@@ -96,10 +97,13 @@ def main():
                    "its touches); --noise-um is then the trigger noise per touch.")
 @click.option("--stylus-error-um", type=float, default=0.0, show_default=True,
               help="With --device probe: the stylus's real diameter minus the one the log states, µm.")
+@click.option("--start-s", "start_s", type=float, default=0.0, show_default=True,
+              help="Time of the first reading, s on the session's clock: a follow-up measured right "
+                   "after an earlier file, its clock running on (a drift needs one clock).")
 @OUTPUT
 @FORCE
 def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, ball, back, rate_hz, feed,
-                 edits, current, device, stylus_error_um, output, force):
+                 edits, current, device, stylus_error_um, start_s, output, force):
     """Write the R-test CSV (or, with --device probe, the probe log) that a machine with the
     TRUTH errors would give."""
     machine = load_machine(machine_file)
@@ -108,15 +112,18 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
     if not names:
         raise CompgenError("--paths names no path")
     at = vec3(ball, "--ball") if ball is not None else None
+    if not (np.isfinite(start_s) and start_s >= 0):
+        raise CompgenError(f"--start-s is the time of the first reading, a number ≥ 0 s, not {start_s:g}")
     if device == "probe":
         if back or noise_rho or rate_hz is not None or feed is not None:
             raise CompgenError("--there-and-back, --noise-rho, --rate-hz and --feed are for R-test sessions",
                                hint="a probe touches each pose standing still")
         poses = probe_poses(machine, names, at)
+        poses = Poses(poses.q, poses.ball, poses.t + start_s, poses.path, poses.side)
     else:
         if feed is not None and rate_hz is None:
             raise CompgenError("--feed sets the pace of a continuous session", hint="give --rate-hz too")
-        poses = generate(machine, names, ball=at, back=back, rate_hz=rate_hz, feed=feed)
+        poses = generate(machine, names, ball=at, start_s=start_s, back=back, rate_hz=rate_hz, feed=feed)
     drive = None
     if edits:
         held = read_edits(machine, {e: read_state(e) for e in edits},
