@@ -69,7 +69,7 @@ def machine(request, tmp_path_factory):
 def _as_linuxcnc(folder, source, name="xyzac"):
     path = folder / f"{name}.toml"
     path.write_text(re.sub(r'controller = "\w+"', 'controller = "linuxcnc"', source.read_text())
-                    .replace("dwell = 1.0", "dwell = 0.05").replace("feed = 500.0", "feed = 2000.0")
+                    .replace("dwell = 1.0", "dwell = 0.1").replace("feed = 500.0", "feed = 2000.0")
                     .replace('tool = "RTEST"', 'tool = "7"'))
     return path
 

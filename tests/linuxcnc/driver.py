@@ -46,7 +46,8 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
             # unchanged since the last sample. The status buffer's line and velocity lag HAL
             # by a cycle or so, and a starved real-time thread can hold HAL's values for a
             # poll mid-move: so each line keeps the sample of its longest run at rest (the
-            # 1 s dwell after a pose, hundreds of polls), never a brief one at its edges
+            # dwell after a pose: 50 polls at the tests' 0.1 s, 500 at a machine's 1 s), never a
+            # brief one at its edges
             now = [hal.get_value(f"joint.{j}.{pin}")
                    for pin in ("pos-cmd", "motor-pos-cmd") for j in range(5)]
             still = still + 1 if now == last else 0
