@@ -843,14 +843,9 @@ def test_a_drift_fitted_across_files_whose_clocks_overlap_is_said(seed_machine, 
     first = _session(seed_machine, poses, {})
     again = generate(seed_machine, ["K2"])
     restarted = _session(seed_machine, again, {}, seed=8)
-    later = _session(seed_machine, _at_times(again, again.t + poses.t.max() + 20), {}, seed=8)
+    later = _session(seed_machine, again.starting_at(poses.t.max() + 20), {}, seed=8)
     model = compose(seed_machine, location_model(seed_machine), ["YOC:e15"])
     said = one_clock(seed_machine, model, [first, restarted])
     assert said and "YOC:e15" in said and "starts at t = 0 s" in said
     assert one_clock(seed_machine, model, [first, later]) is None
     assert one_clock(seed_machine, location_model(seed_machine), [first, restarted]) is None
-
-
-def _at_times(p, t):
-    from compgen.model.kinematics import Poses
-    return Poses(p.q, p.ball, t, p.path, p.side)

@@ -26,7 +26,6 @@ from ..data.simulate import read_truth, simulate
 from ..errors import CompgenError
 from ..files import STDOUT, read_text, write_all, write_atomically
 from ..model.effects import catalogue, compose, location_model
-from ..model.kinematics import Poses
 from ..model.paths import generate
 from ..model.sides import unknown_sides, unpredicted_sides
 from ..statistics.budget import with_budget
@@ -118,8 +117,7 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
         if back or noise_rho or rate_hz is not None or feed is not None:
             raise CompgenError("--there-and-back, --noise-rho, --rate-hz and --feed are for R-test sessions",
                                hint="a probe touches each pose standing still")
-        poses = probe_poses(machine, names, at)
-        poses = Poses(poses.q, poses.ball, poses.t + start_s, poses.path, poses.side)
+        poses = probe_poses(machine, names, at).starting_at(start_s)
     else:
         if feed is not None and rate_hz is None:
             raise CompgenError("--feed sets the pace of a continuous session", hint="give --rate-hz too")

@@ -148,7 +148,7 @@ def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest")
                          generate(machine, [name], ball=at, back=back))
             except CompgenError:
                 continue
-            poses = Poses(poses.q, poses.ball, poses.t - poses.t[0] + start, poses.path, poses.side)
+            poses = poses.starting_at(start)
             label, stem = f"{name}{where}", f"{name}_{tag}" if tag else name
             if again:
                 label, stem = f"{label} again, right after these data", f"{stem}_AGAIN"

@@ -78,6 +78,11 @@ class Poses:
             object.__setattr__(out, field, a)
         return out
 
+    def starting_at(self, t0: float) -> Poses:
+        """These poses with their clock moved so that the first is read at ``t0`` s: a
+        measurement made after others, the R-test's clock running on."""
+        return Poses(self.q, self.ball, self.t - self.t[0] + t0, self.path, self.side)
+
     @staticmethod
     def at(q: np.ndarray, ball) -> Poses:
         """Poses with no time and no path label: ``ball`` (3,) or (n, 3) mm."""
@@ -366,14 +371,27 @@ def effect_gains(gains: SlotGains, effect: Effect, x: np.ndarray, made: dict | N
     """What a unit of each of ``effect``'s parameters does to every reading, first order:
     (n, 3, len(params)) mm per unit, its basis values at the coordinate ``x`` times the
     gain of its slot. ``made`` keeps the gains of slots already asked for."""
+    out = np.empty((len(effect.params), len(x), 3))
+    fill_gains(out, gains, effect, effect.basis.values(x), made)
+    return out.transpose(1, 2, 0)
+
+
+def fill_gains(out: np.ndarray, gains: SlotGains, effect: Effect, b: np.ndarray, made: dict | None = None,
+               rows: slice = slice(None)) -> None:
+    """``effect_gains`` written into ``out`` (len(params), n, 3), from the basis values ``b``
+    (n, len(params)) at its coordinate, for the ``rows`` of the poses ``gains`` walked: the
+    candidates' columns side by side, a basis's values shared (``signature.products``).
+    Multiplied into ``out``: a temporary and an add cost three times as much."""
     made = {} if made is None else made
-    c = 0.0
-    for d, b in effect.parts(x):
+    for i, (d, v) in enumerate(effect.split(b)):
         key = (effect.carrier, effect.slot, d)
         if key not in made:
             made[key] = gains(key)
-        c = c + made[key][:, :, None] * b[:, None, :]
-    return np.broadcast_to(c, (len(x), 3, len(effect.params)))
+        term = (v.T[:, :, None], made[key][None, rows])
+        if i == 0:
+            np.multiply(*term, out=out)
+        else:                       # a compound's second direction
+            out += np.multiply(*term)
 
 
 def slot_gains(machine: Machine, poses: Poses, keys) -> dict[tuple[str, str, str], np.ndarray]:

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..model.effects import Effect
-from ..model.kinematics import Poses, SlotGains, coordinate, effect_gains
+from ..model.kinematics import Poses, SlotGains, coordinate, effect_gains, fill_gains
 from ..model.machine import Machine
 from .noise import whiten
 
@@ -83,15 +83,7 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
                 key = (where(e), e.basis)
                 if key not in values:
                     values[key] = e.basis.values(coords[where(e)][at])
-                for i, (d, v) in enumerate(e.split(values[key])):
-                    slot = (e.carrier, e.slot, d)
-                    if slot not in made:
-                        made[slot] = gains(slot)
-                    term = (v.T[:, :, None], made[slot][None, local])
-                    if i == 0:          # into C: a temporary and an add cost three times this
-                        np.multiply(*term, out=C[lo:hi])
-                    else:               # a compound's second direction
-                        C[lo:hi] += np.multiply(*term)
+                fill_gains(C[lo:hi], gains, e, values[key], made, local)
             if noise is not None:
                 seg, rho = noise
                 before, carry = carry, (C[:, -1].T.copy(), seg[at.stop - 1])
