@@ -18,6 +18,7 @@ SHARED = Path(os.environ.get("COMPGEN_SHARED", ROOT.parent / "shared"))
 VECTORS = SHARED / "vectors"
 SEED_MACHINE = ROOT / "machines" / "ac-trunnion-itnc530.toml"
 BC_MACHINE = ROOT / "machines" / "bc-table-sinumerik840d.toml"
+HEAD_MACHINE = ROOT / "machines" / "bc-swivel-head-table.toml"
 UM, ARCSEC = 1e-3, np.pi / 648000
 
 # Seed report, Table 4 (the truth in shared/vectors/seed-table4-noiseless.csv), inside units
@@ -74,6 +75,11 @@ def seed_machine():
 @pytest.fixture(scope="session")
 def bc_machine():
     return load_machine(BC_MACHINE)
+
+
+@pytest.fixture(scope="session")
+def head_machine():
+    return load_machine(HEAD_MACHINE)
 
 
 @pytest.fixture

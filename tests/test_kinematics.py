@@ -88,7 +88,7 @@ def test_first_order_gains_equal_seed_table2(seed_machine):
                                    atol=ATOL_GAIN * (1 if name[0] in "XYZ" else 1e3), err_msg=name)
 
 
-@pytest.mark.parametrize("machine_name", ["seed_machine", "bc_machine"])
+@pytest.mark.parametrize("machine_name", ["seed_machine", "bc_machine", "head_machine"])
 def test_inverse_puts_nest_on_ball(machine_name, request, rng):
     machine = request.getfixturevalue(machine_name)
     rot = np.radians(rng.uniform(-90, 90, (50, len(machine.rotary_axes))))
@@ -112,7 +112,7 @@ def test_rot_exact_matches_scipy(rng):
                                rtol=0, atol=1e-15)
 
 
-@pytest.mark.parametrize("machine_name", ["seed_machine", "bc_machine"])
+@pytest.mark.parametrize("machine_name", ["seed_machine", "bc_machine", "head_machine"])
 @pytest.mark.parametrize("loaded", [False, True], ids=["nominal", "loaded"])
 def test_analytic_slot_gains_equal_central_differences_of_the_exact_model(machine_name, loaded, request):
     """Every slot of the catalogue, on both machines (both chain layouts, linear axes on

@@ -19,7 +19,7 @@ from ..controllers.advice import Advisor
 from ..controllers.kinematics import corrected_by, kinematics_edit
 from ..controllers.probing import probe_program, with_sphere
 from ..controllers.programs import MODES, NAME_MAX, at_ball, measure_program, program_ball, program_name
-from ..controllers.registry import controller, for_program, read_edits, read_state
+from ..controllers.registry import for_machine, for_program, read_edits, read_state
 from ..data.probe import format_probe_log, probe_poses, simulate_touches
 from ..data.rtest import SIGNS, format_rtest, read_poses
 from ..data.simulate import read_truth, simulate
@@ -295,7 +295,7 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, contro
         names = named_paths(machine, path_names)
         poses = generate(machine, names, ball=vec3(ball, "--ball") if ball is not None else None, back=back)
         label = "+".join(names) + "_BACK" * back
-    ctl = controller(controller_name or machine.controller)
+    ctl = for_machine(controller_name or machine.controller, machine)
     output = None if output == STDOUT else output      # -o - is stdout, as no -o
     name = program_name(Path(output).stem if output else f"RTEST_{label}"[:NAME_MAX])
     emitted = measure_program(machine, poses, label, ctl.name, mode, name, __version__,
@@ -332,9 +332,9 @@ def probe_program_cmd(machine_file, path_names, ball, controller_name, output, f
     """Write a probing program: a touch probe on the calibration sphere at each pose, every
     touch logged on the control as a probe log v1; checked with the probe in the set-up."""
     machine = load_machine(machine_file)
+    ctl = for_machine(controller_name or machine.controller, machine)
     names = named_paths(machine, path_names)
     poses = probe_poses(machine, names, vec3(ball, "--ball") if ball is not None else None)
-    ctl = controller(controller_name or machine.controller)
     out = Path(output)
     name = program_name(out.stem, room=4)
     emitted = probe_program(machine, poses, "+".join(names), ctl.name, name, __version__,
@@ -363,7 +363,8 @@ def probe_program_cmd(machine_file, path_names, ball, controller_name, output, f
 def check_program_cmd(machine_file, program, controller_name, ball, mode, as_json):
     """Simulate PROGRAM block by block against the R-test set-up, travel and feeds."""
     machine = load_machine(machine_file)
-    ctl = controller(controller_name) if controller_name else for_program(Path(program).suffix, machine)
+    ctl = (for_machine(controller_name, machine) if controller_name
+           else for_program(Path(program).suffix, machine))
     if mode is not None and ctl.tcp_switchable:
         raise CompgenError(f"--mode is for controls whose configuration decides TCP; {ctl.words} programs "
                            "switch it themselves", hint="leave --mode out")
@@ -426,7 +427,7 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
     """Write the controller's kinematics edit for a fit, with a sign check and a backup step."""
     fit = load_fit(base)
     machine, sets = reload(fit)
-    ctl = controller(controller_name or machine.controller)
+    ctl = for_machine(controller_name or machine.controller, machine)
     for given in (current, measured):
         if len(given) > 1 and not ctl.state_files:
             raise CompgenError(f"{ctl.words} reads its state from one file; {len(given)} were given",

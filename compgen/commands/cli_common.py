@@ -98,7 +98,7 @@ FILE = click.Path(dir_okay=False)
 CONTROLLER_NAMES = " | ".join(CONTROLLERS)
 MACHINE = click.option("--machine", "machine_file", type=FILE, required=True,
                        help="Machine file (TOML), or a bundled machine by name: ac-trunnion-itnc530, "
-                            "bc-table-sinumerik840d.")
+                            "bc-table-sinumerik840d, bc-swivel-head-table, bc-fork-head.")
 OUTPUT = click.option("-o", "--output", type=FILE, required=True, help="File to write.")
 FORCE = click.option("--force", is_flag=True, help="Overwrite an existing output file.")
 DB = click.option("--db", default=None, metavar="STORE",

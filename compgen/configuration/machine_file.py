@@ -80,7 +80,10 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
     if controller not in CONTROLLERS:
         raise CompgenError(f"unknown controller {controller!r}", where=f"{source}: controller",
                            hint=f"use one of {', '.join(CONTROLLERS)}")
-    chains = {side: tuple(_axis(get.sub(side, i), side) for i in range(len(get.list(side))))
+    # a machine whose head does all the turning has no [[workpiece]] axis: the ball stands
+    # in the machine frame
+    chains = {side: tuple(_axis(get.sub(side, i), side)
+                          for i in range(len(get.list(side)) if side == "tool" or side in get.doc else 0))
               for side in ("workpiece", "tool")}
     axes = chains["workpiece"] + chains["tool"]
     names = [a.name for a in axes]
@@ -92,6 +95,12 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
                            f"{linear_dirs}", where=source)
     if not any(a.rotary for a in axes):
         raise CompgenError("the machine has no rotary axis", where=source)
+    tool = chains["tool"]
+    head = next((i for i, a in enumerate(tool) if a.rotary), len(tool))
+    if any(not a.rotary for a in tool[head:]):
+        raise CompgenError(f"a linear axis follows the head {tool[head].name} in the [[tool]] chain: compgen "
+                           "models heads carried by the linear axes", where=f"{source}: tool",
+                           hint="list the tool side's linear axes first, then its rotary axes")
     rtest = get.sub("rtest")
     ball = rtest.vec3("ball")
     fields = set(Setup.__dataclass_fields__)

@@ -18,7 +18,7 @@ from . import Emitted, ascii_text
 from .base import Controller, EditContext
 from .correction import Plan, lines_text, plan, rest
 from .programs import measure_program, program_name
-from .registry import controller
+from .registry import for_machine
 
 SIGN_SEEN_UM = 1.0     # a change of the reading an R-test shows for certain at a sign-check pose
 
@@ -92,7 +92,7 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
     ``folder``: the folder they are written to; ``despite``: the fit gate's reasons, where the
     edit is written although the fit does not explain its data (its header says so).
     """
-    ctl = controller(controller_name)
+    ctl = for_machine(controller_name, machine)
     for text in (current, measured):
         if text is not None and re.search(rf"\b{fit.marker}\b", text):
             raise CompgenError(f"the current state already carries this fit's correction ({fit.marker}): "

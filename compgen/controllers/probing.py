@@ -32,7 +32,7 @@ from ..model.kinematics import Poses, inverse
 from ..model.machine import Machine, check_travel
 from . import Emitted, ascii_text, render
 from .programs import ANGLE_DECIMALS, BALL_HEADER, LINEAR_DECIMALS, at_ball, pose_list
-from .registry import controller
+from .registry import for_machine
 
 
 def with_sphere(machine: Machine) -> Machine:
@@ -45,7 +45,7 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
                   version: str, date: str) -> Emitted:
     """The probing program (and, for HEIDENHAIN, its F-PRINT format files), checked with the
     probe in the set-up. ``poses``: one ball position, the rotary axes of each pose."""
-    ctl = controller(controller_name)
+    ctl = for_machine(controller_name, machine)
     setup = need_probe(machine)
     balls = np.unique(np.round(np.asarray(poses.ball, float), 6), axis=0)
     if len(balls) > 1:

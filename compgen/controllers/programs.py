@@ -25,7 +25,7 @@ from ..model.sides import APPROACH_DEG, program_sides
 from ..setup import motion
 from ..units import number
 from . import Emitted, ascii_text, render
-from .registry import controller
+from .registry import for_machine
 
 MODES = ("tcpm", "axes")
 LINEAR_DECIMALS = 4       # 0.1 µm
@@ -87,7 +87,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     Each path label is a segment with its own approach and retract along machine Z, so a
     program may chain paths whose ends are far apart.
     """
-    ctl = controller(controller_name)
+    ctl = for_machine(controller_name, machine)
     if mode not in MODES:
         raise CompgenError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
     setup = machine.program
@@ -339,7 +339,7 @@ def read_program(text: str, machine: Machine, controller_name: str) -> tuple[str
 
     In TCPM mode X Y Z are workpiece coordinates; in axes mode machine-axis positions.
     """
-    ctl = controller(controller_name)
+    ctl = for_machine(controller_name, machine)
     tcpm = ctl.tcpm_on.search(text) is not None
     xyz, rot, numbers = [], [], []
     names = [a.name for a in machine.rotary_axes]

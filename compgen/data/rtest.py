@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import CompgenError, one_line
 from ..files import MAX_DATA_BYTES, read_text
-from ..model.kinematics import Poses, inverse, nominal, solved
+from ..model.kinematics import Poses, head_offset, inverse, nominal, solved
 from ..model.machine import IDENTIFIERS, Machine, check_ball, check_travel, identifier
 from ..units import NUMBER
 
@@ -156,8 +156,7 @@ def read_poses(path: str | Path, machine: Machine) -> Poses:
     check_travel(machine, q, table.where, table.lines)
     if all(c in table.columns for c in "XYZ"):
         given = np.column_stack([table.columns[c] for c in "XYZ"])
-        linear = [machine.index(c) for c in "XYZ"]
-        off = np.linalg.norm(given - q[:, linear], axis=1)
+        off = np.linalg.norm(given - commanded(machine, q)[:, :3], axis=1)
         bad = np.flatnonzero(off > NOMINAL_TOLERANCE_MM)
         if bad.size:
             raise CompgenError(f"X, Y, Z are {off[bad[0]]:.3f} mm from where the nest meets the ball",
@@ -190,6 +189,7 @@ class Table:
     def poses(self, machine: Machine) -> Poses:
         q = np.column_stack([self.columns[a.name] if not a.rotary else np.radians(self.columns[a.name])
                              for a in machine.axes])
+        q[:, :3] -= head_offset(machine, q[:, 3:])     # X, Y, Z are the nest's position
         return Poses(q, self.ball(machine), self.columns.get("t", np.full(len(q), np.nan)), self.labels,
                      self.side(machine))
 
@@ -340,9 +340,18 @@ def _fast_table(body: str, header: list[str], numeric: list[str],
     return values, np.array(names, dtype=object)[which.ravel()]
 
 
+def commanded(machine: Machine, q: np.ndarray) -> np.ndarray:
+    """Poses (n, k) as CSV v1 gives them: X, Y, Z the nominal nest centre (under TCPM, where
+    the ball is), which a head's turn moves from the linear axes' position; mm and rad."""
+    out = np.array(q, float)
+    out[:, :3] += head_offset(machine, out[:, 3:])
+    return out
+
+
 def axis_cells(machine: Machine, q: np.ndarray) -> list[str]:
     """One pose's axis positions as CSV v1 cells: mm and deg, to 1 nm and 1e-6 deg."""
-    return [f"{np.degrees(v) if a.rotary else v:.6f}" for a, v in zip(machine.axes, q, strict=True)]
+    return [f"{np.degrees(v) if a.rotary else v:.6f}"
+            for a, v in zip(machine.axes, commanded(machine, q[None])[0], strict=True)]
 
 
 ROWS_AT_ONCE = 20_000     # rows formatted by one %: a few MB of text at a time
@@ -366,7 +375,7 @@ def format_rtest(machine: Machine, data: RTestData, comments: tuple[str, ...] = 
     # one format for a row's numbers (what axis_cells writes, then µm, then the ball); the
     # labels are identifiers (no comma, no quote), so the row needs no CSV quoting
     scale = np.array([180.0 / np.pi if a.rotary else 1.0 for a in machine.axes])
-    numbers = [p.q * scale, data.deviation * 1e3, *([] if ball_default else [p.ball]),
+    numbers = [commanded(machine, p.q) * scale, data.deviation * 1e3, *([] if ball_default else [p.ball]),
                p.side[:, list(sides.values())]]
     if timed:
         numbers.insert(0, p.t[:, None])

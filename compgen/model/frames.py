@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..transforms import apply
-from .kinematics import Poses, chain_transform, inverse
+from .kinematics import Poses, chain_transform, inverse, nest_centre
 from .machine import Machine
 
 
@@ -36,7 +36,7 @@ def frames(machine: Machine, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
     table = chain_transform(machine, machine.workpiece, poses, {}, zero)
     tool = chain_transform(machine, machine.tool, poses, {}, zero)
     R = table[:, :3, :3]
-    return (table, np.einsum("nji,nj->ni", R, tool[:, :3, 3] - table[:, :3, 3]),
+    return (table, np.einsum("nji,nj->ni", R, nest_centre(machine, tool) - table[:, :3, 3]),
             np.einsum("nji,nj->ni", R, tool[:, :3, 2]))
 
 

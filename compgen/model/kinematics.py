@@ -200,6 +200,27 @@ def _known_nominal(machine: Machine, poses: Poses) -> np.ndarray | None:
     return held[1] if held is not None and held[0] is machine else None
 
 
+def nest_centre(machine: Machine, tool: np.ndarray) -> np.ndarray:
+    """The nest centre (n, 3) mm in the machine frame, from the tool chain's transform
+    ``tool`` (n, 4, 4) (``chain_transform``): its frames start at the gauge line."""
+    if not machine.heads:     # the linear axes' position, exactly
+        return tool[:, :3, 3]
+    return (tool[:, :3, 3] + tool[:, :3, :3] @ machine.nest_point) + [0.0, 0.0, machine.probe_length]
+
+
+def head_offset(machine: Machine, rotary_rad: np.ndarray) -> np.ndarray:
+    """Where a head's turn puts the nominal nest centre from the linear axes' position,
+    (n, 3) mm at the rotary positions (n, r): what a control adds under TCPM to X, Y, Z
+    (the nest's position, the R-test CSV's columns) to drive the axes. Zero without a head."""
+    n = len(rotary_rad)
+    if not machine.heads:
+        return np.zeros((n, 3))
+    q = np.zeros((n, len(machine.axes)))
+    q[:, [machine.index(a.name) for a in machine.rotary_axes]] = rotary_rad
+    zero = np.zeros((n, 6))
+    return nest_centre(machine, chain_transform(machine, machine.tool, Poses.at(q, np.zeros(3)), {}, zero))
+
+
 def solved(machine: Machine, poses: Poses) -> Poses:
     """``poses`` whose axes ``inverse`` solved on this machine: the nominal machine puts the
     nest on the ball there (to rounding, ~1e-13 mm), so their nominal reading is zero and
@@ -300,7 +321,7 @@ def _walk(machine: Machine, poses: Poses, slots: Mapping, lines: Mapping[str, tu
     gauge = np.array([0.0, 0.0, machine.probe_length])
     ends, frames = {}, {}
     for chain, start, sign, carrier, point in ((machine.workpiece, np.zeros(3), -1.0, "ball", poses.ball),
-                                               (machine.tool, gauge, 1.0, "nest", -gauge)):
+                                               (machine.tool, gauge, 1.0, "nest", machine.nest_point)):
         R, o = np.broadcast_to(np.eye(3), (n, 3, 3)), np.broadcast_to(start, (n, 3))
         held = []
         for axis in chain:
@@ -348,23 +369,26 @@ class SlotGains:
         e = UNIT["xyz"[k % 3]]
         if carrier == "time":
             return np.broadcast_to(e * (k < 3), (self.n, 3)).copy()
+        out = np.zeros((self.n, 3))        # a slot this carrier does not have (a ball's tilt)
         for sign, marks, R, o, P in self.frames[carrier]:
             for mark in marks:
                 kind, at = mark[:2]
                 if at != slot:
                     continue
+                # a head's location errors act twice, placing its line and undoing it
+                # after the turn (scale -1): their gains add
                 if kind == "t" and k < 3:
-                    return sign * R[:, :, k]
-                if kind == "r" and k >= 3 and k != mark[3]:
+                    out += (sign * mark[2] if len(mark) > 2 else sign) * R[:, :, k]
+                elif kind == "r" and k >= 3 and k != mark[3]:
                     w = mark[2]
                     axis = _rotate(R, _left_jacobian(w, e)) if w.any() else R[:, :, k - 3]
-                    return sign * _cross(axis, P - o)
-                if kind == "turn" and k == mark[2]:
-                    return sign * _cross(R[:, :, k - 3], P - o)
-                if kind == "line" and k >= 3:
+                    out += (sign * mark[4] if len(mark) > 4 else sign) * _cross(axis, P - o)
+                elif kind == "turn" and k == mark[2]:
+                    out += sign * _cross(R[:, :, k - 3], P - o)
+                elif kind == "line" and k >= 3:
                     _, _, w, run, line = mark
-                    return sign * run[:, None] * _rotate(R, _cross(_left_jacobian(w, e), line))
-        return np.zeros((self.n, 3))       # a slot this carrier does not have (a ball's tilt)
+                    out += sign * run[:, None] * _rotate(R, _cross(_left_jacobian(w, e), line))
+        return out
 
 
 def effect_gains(gains: SlotGains, effect: Effect, x: np.ndarray, made: dict | None = None) -> np.ndarray:
@@ -457,6 +481,14 @@ def _factors(axis: Axis, q: np.ndarray, loc: np.ndarray, comp: np.ndarray, motio
                 place = trans(t) @ rot_exact(r)
                 turn = ("m", place @ _matrix(turn) @ np.linalg.inv(place))
             out.append((turn, [("turn", "comp", own)]))
+            if axis.side == "tool":
+                # a head's location errors place the line it turns about (at its pivot),
+                # not its frame: undone after the turn, they move nothing at the zero pose.
+                # As a frame (a table's, seed eq. 2) they would shift the nest as the
+                # ball's offset and the table's lines do, and could not be told apart
+                r, t = -loc[:, 3:], -loc[:, :3]
+                out += [(("w", r) if r.any() else None, [("r", "loc", r, -1, -1.0)]),
+                        (("t", t) if t.any() else None, [("t", "loc", -1.0)])]
         return out
     # squareness tilts the line of motion; the carriage itself turns only by its own
     # angular error motions

@@ -238,6 +238,19 @@ class Machine:
     def rotary_axes(self) -> tuple[Axis, ...]:
         return tuple(a for a in self.axes if a.rotary)
 
+    @cached_property
+    def heads(self) -> tuple[Axis, ...]:
+        """The rotary axes that turn the tool (a swivel or fork head), base outwards."""
+        return tuple(a for a in self.tool if a.rotary)
+
+    @cached_property
+    def nest_point(self) -> np.ndarray:
+        """The nest centre in the tool chain's last frame, mm: ``probe_length`` below the
+        gauge line, and below every head's pivot by its offset (the pivot length), so that
+        at the zero pose the nest centre is at the linear axes' position."""
+        return -(np.array([0.0, 0.0, self.probe_length])
+                 + np.sum([np.asarray(a.offset, float) for a in self.heads], axis=0, initial=0.0))
+
     def axis(self, name: str) -> Axis:
         for a in self.axes:
             if a.name == name:
