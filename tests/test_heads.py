@@ -8,12 +8,14 @@ from conftest import ARCSEC, ROOT, UM, run
 from scipy.spatial.transform import Rotation
 
 from compgen.configuration.machine_file import load_machine
+from compgen.controllers.advice import Advisor
 from compgen.data.rtest import commanded, format_rtest
 from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
-from compgen.model.effects import location_model
+from compgen.model.effects import catalogue, location_model
 from compgen.model.kinematics import Model
 from compgen.model.paths import generate
+from compgen.statistics.diagnose import diagnose
 from compgen.statistics.identify import identify
 
 FORK = ROOT / "machines" / "bc-fork-head.toml"
@@ -156,3 +158,24 @@ def test_a_linear_axis_carried_by_a_head_is_refused(tmp_path):
     path.write_text(text.replace(z, "").replace("[rtest]", z + "[rtest]"))
     with pytest.raises(CompgenError, match="a linear axis follows the head C"):
         load_machine(path)
+
+
+def test_a_heads_catalogue_names_its_sag(head_machine, seed_machine):
+    words = {e.name: e.cause for e in catalogue(head_machine)}
+    assert "the head's sag under its weight" in words["EZB+EXB:h2"]
+    assert "sag" in words["EBB:h1"] and "trunnion" not in words["EXB:h1"]
+    seed = {e.name: e.cause for e in catalogue(seed_machine)}
+    assert "trunnion" in seed["EYA:h1"] and "head" not in seed["EBA:h1"] + seed["EYA:h1"]
+
+
+def test_a_heads_sag_is_not_told_from_its_angle_at_one_nest_length(head_machine):
+    """The head's weight bends the tool across its axis (sin 2B across, 1 − cos 2B along it):
+    at one nest length exactly what an angular error of B at 1/rev does through the nest's
+    lever. diagnose names neither found, and says which two it cannot tell apart."""
+    poses = generate(head_machine, list(head_machine.paths))
+    sag = {**TRUTH, "EXB:h2s": 5 * UM, "EZB:h2c": 5 * UM}
+    data = [simulate(head_machine, sag, poses, NOISE_UM, np.random.default_rng(3))]
+    found = diagnose(head_machine, data, identify(head_machine, data), noise_um=NOISE_UM, advisor=Advisor)
+    assert found.found is None
+    assert {"EBB:h1", "EZB+EXB:h2"} <= {found.significant[0].effect, *(found.rivals or ())}, (
+        [c.effect for c in found.significant[:3]], found.rivals)

@@ -69,7 +69,8 @@ def machine(request, tmp_path_factory):
 def _as_linuxcnc(folder, source, name="xyzac"):
     path = folder / f"{name}.toml"
     path.write_text(re.sub(r'controller = "\w+"', 'controller = "linuxcnc"', source.read_text())
-                    .replace("dwell = 1.0", "dwell = 0.1").replace("feed = 500.0", "feed = 2000.0")
+                    .replace("dwell = 1.0", "dwell = 0.1").replace("feed = 500.0", "feed = 4000.0")
+                    .replace("feed_max = 20000.0", "feed_max = 30000.0")     # sim.ini's 500 mm/s
                     .replace('tool = "RTEST"', 'tool = "7"'))
     return path
 
