@@ -179,3 +179,20 @@ def test_a_heads_sag_is_not_told_from_its_angle_at_one_nest_length(head_machine)
     assert found.found is None
     assert {"EBB:h1", "EZB+EXB:h2"} <= {found.significant[0].effect, *(found.rivals or ())}, (
         [c.effect for c in found.significant[:3]], found.rivals)
+
+
+def test_what_an_edit_would_leave_says_no_edit_is_written_for_a_head(head_machine, tmp_path):
+    """compare and the report predict what correcting the location errors would leave; for a
+    head they say that no edit is written for it (the user enters the values by hand)."""
+    data = tmp_path / "d.csv"
+    data.write_text(format_rtest(head_machine, simulate(head_machine, TRUTH, generate(head_machine, ["K2"]),
+                                                        NOISE_UM, np.random.default_rng(1))))
+    fit = tmp_path / "fit.json"
+    code, _, err = run("fit", "--machine", "bc-swivel-head-table", "--model", "XOW,YOW,ZOW,XOC,YOC", data,
+                       "-o", fit)
+    assert code == 0, err
+    code, out, err = run("compare", "--from", fit)
+    assert code == 0 and "assumes: no edit is written for a head yet" in out, err
+    code, _, err = run("report", "--from", fit, "-o", tmp_path / "r.html")
+    assert code == 0, err
+    assert "Assumes: no edit is written for a head yet" in (tmp_path / "r.html").read_text()
