@@ -16,6 +16,7 @@ from compgen.model.effects import catalogue, location_model
 from compgen.model.kinematics import Model
 from compgen.model.paths import generate
 from compgen.statistics.diagnose import diagnose
+from compgen.statistics.diagnose_text import report
 from compgen.statistics.identify import identify
 
 FORK = ROOT / "machines" / "bc-fork-head.toml"
@@ -179,6 +180,10 @@ def test_a_heads_sag_is_not_told_from_its_angle_at_one_nest_length(head_machine)
     assert found.found is None
     assert {"EBB:h1", "EZB+EXB:h2"} <= {found.significant[0].effect, *(found.rivals or ())}, (
         [c.effect for c in found.significant[:3]], found.rivals)
+    # no program is written for a head: no measurement is advised, and none is said not to help
+    text = report(found)
+    assert "does not write measuring programs for a head yet" in text and "was not searched" in text
+    assert "No path or ball position" not in text and not found.rivals_separated_by
 
 
 def test_what_an_edit_would_leave_says_no_edit_is_written_for_a_head(head_machine, tmp_path):

@@ -80,7 +80,10 @@ class Advisor:
     def __init__(self, machine: Machine, measured: Poses | None = None, device: str = "rtest"):
         self.machine = machine
         self.program_ext = controller(machine.controller).program_ext    # of the commands advised
-        self.candidates = _candidates(machine, measured, device)
+        # why nothing can be advised on this machine (its programs are not written), if so
+        self.unable = ("compgen does not write measuring programs for a head yet, so it advises no "
+                       "measurement" if machine.heads else "")
+        self.candidates = [] if self.unable else _candidates(machine, measured, device)
         self._why: dict[str, str | None] = {}
 
     def why_not(self, m: Measurement) -> str | None:

@@ -280,6 +280,8 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     out.sort(key=lambda c: (not c.visible, -c.share))
     model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
     advising = advisor(machine, poses, kind) if advisor is not None else None
+    if advising is not None and advising.unable:      # said, never taken for "none would tell"
+        notes, advising = (*notes, f"  {advising.unable}."), None
     # seen, but not to be added as a whole: a part of it the model absorbs (fit --add
     # refuses it), so the measurement that shows that part is what to advise
     unseen = [c for c in out if not c.visible or (c.significant and not c.separable)]
@@ -496,7 +498,7 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out:
             by_rival, rivals_separated_by, rivals_open = telling_apart(
                 machine, model_effects, poses, group, res.rss / res.dof, advising)
             out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
-        if rival_names and advising is not None and not rivals_separated_by:
+        if rival_names and not rivals_separated_by:
             # equivalent everywhere: put first the one the location errors absorb least, so
             # that adding it leaves them where an effect without that absorbed part has them.
             # (Not the one that moves them least: that keeps the bias of the fit without it,

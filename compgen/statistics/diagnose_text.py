@@ -79,6 +79,10 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
                              + ", ".join(" / ".join(p) for p in sorted(_told(d, m))) + ")")
                 lines.append(f"      {_measure(d, m)}")
             lines += _then(plan, fit, after)
+        elif not d.program_ext:          # no measurement was searched for (see the notes)
+            lines += ["  Which measurement would tell them apart was not searched. Any one of them models "
+                      f"the misfit: {me()} fit --from {fit} --add {best} -o {after}; the location errors "
+                      "written to a control depend on the choice:", *_carries(d)]
         else:
             lines += ["  No path or ball position of the machine file tells them apart: for every "
                       "set-up compgen can measure, at its size here"

@@ -340,6 +340,8 @@ def _sparse_basis(V: np.ndarray) -> np.ndarray:
 
 def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.ndarray,
                              measured: Poses | None, advisor) -> str:
+    if advisor.unable:
+        return advisor.unable
     options = []
     # a reversal seen from one side only is its axis's zero offset, not its backlash
     reversals = {m.effects[j].carrier for j in free if m.effects[j].basis.kind == "r"}
