@@ -201,3 +201,12 @@ def test_what_an_edit_would_leave_says_no_edit_is_written_for_a_head(head_machin
     code, _, err = run("report", "--from", fit, "-o", tmp_path / "r.html")
     assert code == 0, err
     assert "Assumes: no edit is written for a head yet" in (tmp_path / "r.html").read_text()
+
+
+def test_the_checklist_prints_no_command_a_head_would_refuse(head_machine, tmp_path):
+    """Its steps for a program and an edit are by hand, and say why; none names a command or
+    a file compgen would write for a head."""
+    code, out, err = run("checklist", "--machine", "bc-swivel-head-table", "--dir", tmp_path, "--json")
+    assert code == 0, err
+    assert "measure-program" not in out and "kinematics --" not in out and "edit's header" not in out
+    assert out.count("does not write") == 2 and "diagnose --from" in out

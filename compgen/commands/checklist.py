@@ -31,6 +31,13 @@ class Step:
     note: str = ""
 
 
+# a head's steps that compgen does not write for yet: no command is printed that would refuse
+HEAD_PROGRAMS = ("compgen does not write programs for a head yet: write one for the machine file's "
+                 "paths (under TCPM, the nest on the ball)")
+HEAD_EDIT = ("compgen does not write edits for a head yet: enter the fitted location errors in the "
+             "control's kinematics by hand, and keep its backup")
+
+
 @dataclass
 class _Found:
     programs: list[Path] = field(default_factory=list)
@@ -108,10 +115,12 @@ def checklist(machine: Machine, folder: str | Path, comparison: dict | None = No
              note="thermal drift over a K4 run can reach several µm"),
         Step("R-test set-up: ball on the table, nest in the spindle, sensors checked", BY_HAND,
              note=f"ball where [rtest] says: {machine.ball} mm; nest length gauge line to centre"),
+        Step("Measurement programs written", BY_HAND, note=HEAD_PROGRAMS) if machine.heads else
         Step("Measurement programs written", DONE if f.programs else OPEN, _names(f.programs),
              f"{me()} measure-program --machine {m} --path all -o {out('RTEST' + _ext(machine))}"),
         Step("Preset checked at the program's stop: the ball centred under the nest", BY_HAND,
-             note="every program stops once, the nest at its clearance above the ball, before it goes down"),
+             note="before the first pose" if machine.heads else
+             "every program stops once, the nest at its clearance above the ball, before it goes down"),
         Step("K4, K1, K2 measured (R-test CSV with dX dY dZ)", DONE if pre else OPEN, _names(pre),
              "run the program; export the readings as CSV v1 beside the pose list"),
         Step("Fit", DONE if fit else OPEN, _names([fit[0]] if fit else []),
@@ -121,12 +130,15 @@ def checklist(machine: Machine, folder: str | Path, comparison: dict | None = No
              f"{me()} diagnose --from {fit_path} --json > {out('diagnose.json')}"),
         Step("Review confounded effects and fragile parameters", BY_HAND,
              note="diagnose lists what these data cannot see and what would separate it"),
+        Step("Kinematics edit emitted (with backup step and sign check)", BY_HAND, note=HEAD_EDIT)
+        if machine.heads else
         Step("Kinematics edit emitted (with backup step and sign check)", DONE if f.edits else OPEN,
              _names(f.edits + f.signchecks),
              f"{me()} kinematics --from {fit_path} --current CURRENT -o {out('KIN')}"),
         Step("Backup taken, edit loaded, sign check run with the R-test", BY_HAND,
-             note="; ".join(n for n in ("the expected reading changes are in the edit's header",
-                                        controller(machine.controller).load_note) if n)),
+             note="" if machine.heads else
+             "; ".join(n for n in ("the expected reading changes are in the edit's header",
+                                   controller(machine.controller).load_note) if n)),
         Step("Re-measured after the edit", DONE if post else OPEN, _names(post),
              "run the measurement program again; save the CSV after the edit file"),
         Step("Compared: predicted against measured", DONE if measured else OPEN,
