@@ -4,7 +4,8 @@ compgen's kinematics edit, loaded into LinuxCNC, is shown to remove the errors i
 
 Both trt kinematics run: xyzac-trt-kins (the seed machine) and xyzbc-trt-kins (the B/C
 table), each with a configuration that sets one pin through a signal, so the edit must
-respect the configuration's nets. CI installs LinuxCNC and sets COMPGEN_REQUIRE_LINUXCNC;
+respect the configuration's nets. maxkins (a B head over a C table) runs the reference
+swivel head's K4 poses: its joints are held to compgen's chain for heads. CI installs LinuxCNC and sets COMPGEN_REQUIRE_LINUXCNC;
 elsewhere the test is skipped when LinuxCNC is not installed.
 """
 
@@ -33,7 +34,7 @@ from compgen.controllers.registry import read_edits, read_state
 from compgen.data.rtest import RTestData
 from compgen.data.simulate import simulate
 from compgen.model.effects import location_model
-from compgen.model.kinematics import Model, Poses
+from compgen.model.kinematics import Model, Poses, inverse
 from compgen.model.lines import controller_inverse
 from compgen.model.paths import generate
 from compgen.statistics.identify import identify
@@ -394,3 +395,61 @@ def test_linuxcnc_starts_its_own_sample_with_compgens_configuration_and_holds_it
     if "halfile" in states:
         assert states["halcmd"][0] == states["halfile"][0]
         np.testing.assert_array_equal(states["halcmd"][1], states["halfile"][1])
+
+
+MAXKINS_HAL = "\n".join([
+    "# maxkins maps joints 0-8 to X Y Z A B C U V W: joint 3 (A) is looped back unused",
+    "loadrt [KINS]KINEMATICS",
+    "loadrt [EMCMOT]EMCMOT servo_period_nsec=[EMCMOT]SERVO_PERIOD num_joints=[KINS]JOINTS",
+    "addf motion-command-handler servo-thread",
+    "addf motion-controller servo-thread",
+    *(f"net j{j} joint.{j}.motor-pos-cmd => joint.{j}.motor-pos-fb" for j in range(6)),
+    "net estop-loop iocontrol.0.user-enable-out => iocontrol.0.emc-enable-in",
+    "net tool-prep-loop iocontrol.0.tool-prepare => iocontrol.0.tool-prepared",
+    "net tool-change-loop iocontrol.0.tool-change => iocontrol.0.tool-changed",
+    "setp maxkins.pivot-length {pivot}", ""])
+
+
+def test_maxkins_turns_a_swivel_head_over_a_c_table_as_compgens_chain_does(tmp_path, head_machine):
+    """LinuxCNC's own maxkins (Debian's: a B head over a C table, no pins but the pivot
+    length), given K4's poses of the reference swivel head in its world coordinates (the
+    ball's place in the table frame, where the nest stays) with pivot-length the pivot-to-
+    nest distance and no tool length: its joints are the axes compgen's chain puts there,
+    with B and C written against the machine file's senses (maxkins turns both the other
+    way: its own header says so of B). What a LinuxCNC edit for a head must hold."""
+    poses = _every(head_machine)
+    pivot = -head_machine.nest_point[2]            # 270 mm: 150 pivot length + 120 nest
+    ball = poses.ball[0]
+    B, C = (np.degrees(poses.q[:, head_machine.index(a)]) for a in "BC")
+    at = f"X{ball[0]:.4f} Y{ball[1]:.4f} Z{ball[2]:.4f}"
+    moves = [f"G1 {at} B{-b:.6f} C{-c:.6f} F4000 ; pose {i + 1}\nG4 P0.1"
+             for i, (b, c) in enumerate(zip(B, C, strict=True))]
+    program = "\n".join(["G21 G90 G94 G17 G49", f"G0 X{ball[0]:.4f} Y{ball[1]:.4f} Z{ball[2] + 50:.4f} B0 C0",
+                         *moves, "G0 Z300", "M2", ""])
+    folder = tmp_path / "maxkins"
+    folder.mkdir()
+    ini = (HERE / "sim.ini.in").read_text().replace("@DRIVER@", str(HERE / "driver.py")).replace(
+        "@KINS@", "maxkins").replace("@TILT@", "B").replace("JOINTS = 5", "JOINTS = 6")
+    ini = ini.replace("[HAL]\nHALFILE = sim.hal\nHALFILE = edit.hal", "[HAL]\nHALFILE = sim.hal")
+    joint4 = ini[ini.index("[JOINT_4]"):]
+    ini += "\n" + joint4.replace("[JOINT_4]", "[JOINT_5]")
+    (folder / "sim.ini").write_text(ini)
+    (folder / "sim.hal").write_text(MAXKINS_HAL.format(pivot=f"{pivot:.6f}"))
+    (folder / "sim.tbl").write_text("T1 P1 Z0 ;\n")
+    (folder / "sim.var").write_text("")
+    (folder / "prog.ngc").write_text(program)
+    launcher = launch(folder, folder / "sim.ini", {"COMPGEN_NGC": str(folder / "prog.ngc"),
+                                                     "COMPGEN_READ_JOINTS": "0 1 2 4 5"})
+    text = (folder / "joints.txt").read_text() if (folder / "joints.txt").exists() else ""
+    assert text.rstrip().endswith("done"), (text[-500:], launcher.stdout[-1500:])
+    joints = {int(w[0]): np.array([float(v) for v in w[1:6]])
+              for w in (ln.split() for ln in text.splitlines()) if w[0].isdigit()}
+    got = _at_poses(joints, program)
+    # compgen's axes at the angles as the program rounds them (1e-6 deg: 5e-6 mm at 270 mm)
+    B, C = np.round(B, 6), np.round(C, 6)
+    want = np.column_stack([inverse(head_machine, np.radians(np.column_stack([C, B])), ball)[:, :3], -B, -C])
+    np.testing.assert_allclose(got[:, :3], want[:, :3], rtol=0, atol=JOINT_MM)
+    np.testing.assert_allclose(got[:, 3:], want[:, 3:], rtol=0, atol=1e-9)
+    assert np.abs(got[:, 0] - ball[0]).max() > 100        # the head's turn moved X by up to 234 mm
+    print(f"maxkins: {len(got)} K4 poses, joints as compgen's axes within "
+          f"{np.abs(got[:, :3] - want[:, :3]).max() * 1e3:.2g} um")

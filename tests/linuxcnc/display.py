@@ -32,4 +32,4 @@ class Display:
         c.mode(linuxcnc.MODE_MANUAL)
         c.teleop_enable(0)
         c.home(-1)
-        self.wait(lambda: all(s.homed[:5]))
+        self.wait(lambda: all(s.homed[:s.joints]))

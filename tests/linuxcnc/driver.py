@@ -1,7 +1,8 @@
 #!/usr/bin/python3
 """The 'display' of the test configuration: switch on, home, run $COMPGEN_NGC in AUTO,
 and write the settled joint positions per program line to $COMPGEN_JOINTS: the joints'
-commanded positions, then their motor commands (with the joint compensation tables' trims)."""
+commanded positions, then their motor commands (with the joint compensation tables' trims),
+of the joints $COMPGEN_READ_JOINTS names (default 0 to 4)."""
 import os
 import time
 
@@ -10,6 +11,7 @@ import linuxcnc
 from display import Display
 
 display = Display("compgen-driver")
+read = [int(j) for j in os.environ.get("COMPGEN_READ_JOINTS", "0 1 2 3 4").split()]
 s, c, wait = display.s, display.c, display.wait
 
 with open(os.environ["COMPGEN_JOINTS"], "w") as out:
@@ -49,7 +51,7 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
             # dwell after a pose: 50 polls at the tests' 0.1 s, 500 at a machine's 1 s), never a
             # brief one at its edges
             now = [hal.get_value(f"joint.{j}.{pin}")
-                   for pin in ("pos-cmd", "motor-pos-cmd") for j in range(5)]
+                   for pin in ("pos-cmd", "motor-pos-cmd") for j in read]
             still = still + 1 if now == last else 0
             if s.current_vel == 0 and still and still >= longest.get(s.motion_line, 0):
                 settled[s.motion_line], longest[s.motion_line] = now, still
