@@ -12,7 +12,7 @@ from compgen.controllers.advice import Advisor
 from compgen.data.rtest import commanded, format_rtest
 from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
-from compgen.model.effects import catalogue, location_model
+from compgen.model.effects import catalogue, compose, location_model
 from compgen.model.kinematics import Model
 from compgen.model.paths import generate
 from compgen.statistics.diagnose import diagnose
@@ -167,6 +167,10 @@ def test_a_heads_catalogue_names_its_sag(head_machine, seed_machine):
     assert "sag" in words["EBB:h1"] and "trunnion" not in words["EXB:h1"]
     seed = {e.name: e.cause for e in catalogue(seed_machine)}
     assert "trunnion" in seed["EYA:h1"] and "head" not in seed["EBA:h1"] + seed["EYA:h1"]
+    assert seed["EXC:h2"] == "bearing runout, eccentric table"
+    fork = {e.name: e.cause for e in catalogue(load_machine(FORK))}      # its C turns, never tilts
+    assert fork["EXC:h2"] == "bearing runout, eccentric head" and "sag" not in fork["ECC:h1"]
+    assert "sag" in fork["EZB+EXB:h2"]
 
 
 def test_a_heads_sag_is_not_told_from_its_angle_at_one_nest_length(head_machine):
@@ -210,3 +214,18 @@ def test_the_checklist_prints_no_command_a_head_would_refuse(head_machine, tmp_p
     assert code == 0, err
     assert "measure-program" not in out and "kinematics --" not in out and "edit's header" not in out
     assert out.count("does not write") == 2 and "diagnose --from" in out
+
+
+def test_a_hidden_2_per_rev_of_c_is_named_found_on_both_heads(case):
+    """C's radial motion at 2/rev, hidden (3 and −2 µm): diagnose names it found; added, the
+    fit reaches the noise with every location error within 4 σ of the truth."""
+    machine, _, _ = case
+    poses = generate(machine, list(machine.paths))
+    hidden = {**TRUTH, "EXC:h2c": 3 * UM, "EXC:h2s": -2 * UM}
+    data = [simulate(machine, hidden, poses, NOISE_UM, np.random.default_rng(2))]
+    found = diagnose(machine, data, identify(machine, data), noise_um=NOISE_UM, advisor=Advisor)
+    assert found.found == "EXC:h2", ([c.effect for c in found.significant[:3]], found.rivals)
+    fit = identify(machine, data, compose(machine, location_model(machine), ["EXC:h2"]))
+    assert fit.residual["sigma_um"] == pytest.approx(NOISE_UM, rel=0.1)
+    off = {n: abs(fit.parameters[n].value - v) / fit.parameters[n].std for n, v in TRUTH.items()}
+    assert max(off.values()) < 4, off

@@ -5,8 +5,9 @@ compgen's kinematics edit, loaded into LinuxCNC, is shown to remove the errors i
 Both trt kinematics run: xyzac-trt-kins (the seed machine) and xyzbc-trt-kins (the B/C
 table), each with a configuration that sets one pin through a signal, so the edit must
 respect the configuration's nets. maxkins (a B head over a C table) runs the reference
-swivel head's K4 poses: its joints are held to compgen's chain for heads. CI installs LinuxCNC and sets COMPGEN_REQUIRE_LINUXCNC;
-elsewhere the test is skipped when LinuxCNC is not installed.
+swivel head's K4 poses: its joints are held to compgen's chain for heads. CI installs
+LinuxCNC and sets COMPGEN_REQUIRE_LINUXCNC; elsewhere the test is skipped when LinuxCNC is
+not installed.
 """
 
 import contextlib

@@ -201,6 +201,7 @@ def _symbols(machine: Machine) -> dict[str, tuple[str, str, str, tuple[str, ...]
 def _axis_symbols(axis: Axis) -> dict:
     L, d, out = axis.name, axis.direction, {}
     head = axis.rotary and axis.side == "tool"
+    tilting = head and d != "z"       # a head that tilts the tool: its weight bends it across
     kinds = ("h",) if axis.full_turn else ("p", "h") if axis.rotary else ("p",)
     for e in TRANSLATIONS + ROTATIONS:
         E = e.upper()
@@ -217,14 +218,14 @@ def _axis_symbols(axis: Axis) -> dict:
                 cause = "encoder eccentricity (1/rev), worm or scale error (2/rev and up)" + (
                     # the tool's weight across its axis bends it as an angle at the pivot
                     # would turn it: one nest length cannot tell the two apart
-                    "; a head's sag under its weight (1/rev, as the nest's lever sees it)" if head else "")
+                    "; a head's sag under its weight (1/rev, as the nest's lever sees it)" if tilting else "")
             elif e == d:
                 words, cause = f"axial error motion of {L}", "bearing or face runout"
             elif e in TRANSLATIONS:
                 words, cause = f"radial error motion of {L} in {E}", (
-                    "bearing runout, eccentric table" if axis.full_turn and not head else
                     "the head's sag under its weight as it tilts (2/rev: sin 2θ across, 1 − cos 2θ along); "
-                    "bearing runout" if head else
+                    "bearing runout" if tilting else
+                    f"bearing runout, eccentric {'head' if head else 'table'}" if axis.full_turn else
                     "gravity sag of the trunnion and table as the axis tilts (1/rev: sin and 1 − cos); "
                     "bearing runout")
             else:
@@ -251,7 +252,7 @@ def _axis_symbols(axis: Axis) -> dict:
         for pair, kind in (((u, w), "radial"), ((ROT_OF[u], ROT_OF[w]), "tilt")):
             out["+".join(f"E{e.upper()}{L}" for e in pair)] = (
                 L, "comp", "".join(pair), ("h",), f"{kind} error motion of {L}, a vector turning",
-                ("the head's sag under its weight (2/rev), bearing runout" if head and not axis.full_turn else
+                ("the head's sag under its weight (2/rev), bearing runout" if tilting else
                  "bearing runout or wobble (1/rev: eccentric, 2/rev: oval)" if axis.full_turn else
                  "gravity sag of the trunnion and table turning with the axis (1/rev), bearing runout")
                 if kind == "radial" else
