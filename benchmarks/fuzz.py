@@ -13,9 +13,10 @@ judged against what it must do:
   or swapped, a number in another format): a refusal as above, or an acceptance.
 
 Besides the written cases, every valid input (the R-test CSV, the machine file, a pose
-list, the three controls' states, the three controls' programs) gets ``--generated``
-variants each: a line deleted, duplicated or swapped, a number written another way, a
-control character inside a number (which must be refused).
+list, the three controls' states, the three controls' programs, the wings' files, a head's
+machine file and a session measured on it) gets ``--generated`` variants each: a line
+deleted, duplicated or swapped, a number written another way, a control character inside a
+number (which must be refused).
 
 Counted: tracebacks (or exit 3, an internal error), silent accepts (exit 0 where a refusal
 was due), injected lines, hangs, and wrong refusals of good input. Outside CI: a benchmark.
@@ -39,6 +40,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 SEED = ROOT / "machines" / "ac-trunnion-itnc530.toml"
+HEAD = ROOT / "machines" / "bc-swivel-head-table.toml"
 SESSION = ROOT / "examples" / "seed-session.csv"
 TAB = ROOT / "examples" / "itnc530-current.TAB"
 EVIL = "G0 Z-500 INJECTED"          # what an injection would make a block of
@@ -435,6 +437,11 @@ def derived_cases(rng: random.Random, programs: dict[str, Path], per_surface: in
         ("ini", "xyzac-trt.ini", (wings["trt"] / "xyzac-trt.ini").read_text(),
          ["kinematics", "--from", "{dir}/fit.json", "--controller", "linuxcnc", "--current",
           "{dir}/xyzac-trt.ini", "-o", "{dir}/KIN.ini"], ["KIN.ini"]),
+        # a head's machine file (its chain's new rules) and a session measured on it, fitted
+        ("head", "m.toml", HEAD.read_text(),
+         ["fit", "--machine", "{dir}/m.toml", str(wings["head"]), "-o", "{dir}/out.json"], ["out.json"]),
+        ("head-csv", "data.csv", wings["head"].read_text(),
+         ["fit", "--machine", str(HEAD), "{dir}/data.csv", "-o", "{dir}/out.json"], ["out.json"]),
     ]
     for kind, name, text, args, outputs in surfaces:
         for what, variant, expect in _variants(text, rng, per_surface):
@@ -475,9 +482,13 @@ def wing_inputs(work: Path, compgen: list[str]) -> dict[str, Path]:
     run("kinematics", "--from", "bcfit1.json", "--current", ROOT / "examples" / "bc-tcarr-current.txt",
         "-o", "A.MPF")
     sample_copy(work / "trt", load_machine(str(SEED)))
+    (work / "ht.json").write_text(json.dumps({"parameters": {
+        "XOB": {"value": 0.01, "unit": "mm"}, "COB": {"value": 4e-5, "unit": "rad"},
+        "YOC": {"value": -0.008, "unit": "mm"}}}))
+    run("simulate", "--machine", HEAD, "--truth", "ht.json", "--noise-um", "0.5", "-o", "head.csv")
     return {"probe": work / "probe.log", "export": work / "h.json", "target": work / "target.sqlite",
             "cec": work / "A_CEC.INI", "carr": work / "A.MPF", "bcfit": work / "bcfit2.json",
-            "trt": work / "trt"}
+            "trt": work / "trt", "head": work / "head.csv"}
 
 
 def run_case(case: Case, work: Path, compgen: list[str]) -> tuple[Case, str, str]:
@@ -542,7 +553,7 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--show", action="store_true", help="print every case's outcome")
-    ap.add_argument("--generated", type=int, default=60, help="hostile variants per valid input (13 inputs)")
+    ap.add_argument("--generated", type=int, default=60, help="hostile variants per valid input (15 inputs)")
     args = ap.parse_args()
     compgen = [sys.executable, "-m", "compgen"]
     work = Path(tempfile.mkdtemp(prefix="compgen-fuzz-"))
