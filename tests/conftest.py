@@ -82,6 +82,17 @@ def head_machine():
     return load_machine(HEAD_MACHINE)
 
 
+def as_maxkins(folder: Path) -> Path:
+    """The reference swivel head on LinuxCNC's maxkins, with a quick [program] (the file's
+    path, written in ``folder``)."""
+    path = folder / "maxkins.toml"
+    path.write_text(HEAD_MACHINE.read_text().replace('controller = "tnc640"', 'controller = "linuxcnc"')
+                    .replace("[limits]", '[program]\ntool = "7"\nfeed = 4000.0\ndwell = 0.1\n'
+                             'clearance = 20.0\n\n[linuxcnc]\nconventional_directions = false\n'
+                             'version = "2.9"\n\n[limits]'))
+    return path
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(20261124)

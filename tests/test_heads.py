@@ -4,7 +4,7 @@ bound, and no controller file written for them yet."""
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, ROOT, UM, run
+from conftest import ARCSEC, ROOT, UM, as_maxkins, run
 from scipy.spatial.transform import Rotation
 
 from compgen.configuration.machine_file import load_machine
@@ -144,7 +144,7 @@ def test_no_controller_file_is_written_for_a_head_yet(command, tmp_path, head_ma
     assert code == 0
     (tmp_path / "k.tab").write_text("BEGIN k.tab\n")
     code, out, err = run(*(a.format(out=tmp_path, fit=fit) for a in command))
-    assert code != 0 and "does not write controller files for a head yet" in err and "Traceback" not in err
+    assert code != 0 and "for a head yet" in err and "Traceback" not in err
     assert len(err.strip().splitlines()) <= 2, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.csv", "fit.json", "k.tab"]
 
@@ -229,3 +229,27 @@ def test_a_hidden_2_per_rev_of_c_is_named_found_on_both_heads(case):
     assert fit.residual["sigma_um"] == pytest.approx(NOISE_UM, rel=0.1)
     off = {n: abs(fit.parameters[n].value - v) / fit.parameters[n].std for n, v in TRUTH.items()}
     assert max(off.values()) < 4, off
+
+
+def test_linuxcnc_maxkins_programs_are_written_and_checked_with_the_heads_body(tmp_path):
+    """On LinuxCNC's maxkins compgen writes the swivel head's K4 (the test with the real
+    module is in test_linuxcnc.py): the nest goes onto and off the ball along its tilted
+    axis, the head's turns keep it where it is, check-program passes what was written and
+    refuses a G43 length (under maxkins it would act along world Z). K1 takes the head to
+    90° with the ball 80 mm above the table: its body would enter the table, and the
+    program is refused, naming it; without the body's size no program is written."""
+    path = as_maxkins(tmp_path)
+    code, out, err = run("measure-program", "--machine", path, "--path", "K4", "-o", tmp_path / "K4.ngc")
+    assert code == 0, err
+    program = (tmp_path / "K4.ngc").read_text()
+    assert "maxkins.pivot-length must hold 270.0000 mm" in program and "\nG49 " in program
+    code, out, err = run("check-program", "--machine", path, "--mode", "tcpm", tmp_path / "K4.ngc")
+    assert code == 0 and "OK" in out, err
+    (tmp_path / "bad.ngc").write_text(program.replace("\nG49 ", "\nG43 H7 "))
+    code, _, err = run("check-program", "--machine", path, "--mode", "tcpm", tmp_path / "bad.ngc")
+    assert code == 2 and "acts along world Z" in err, err
+    code, _, err = run("measure-program", "--machine", path, "--path", "K1", "-o", tmp_path / "K1.ngc")
+    assert code == 2 and "head B enters the table" in err, err
+    path.write_text(path.read_text().replace("head_radius = 120.0", ""))
+    code, _, err = run("measure-program", "--machine", path, "--path", "K4", "-o", tmp_path / "K4b.ngc")
+    assert code == 2 and "head_radius" in err and not (tmp_path / "K4b.ngc").exists(), err

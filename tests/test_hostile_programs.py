@@ -158,7 +158,7 @@ def test_measure_program_checks_the_clearance_above_the_poses_along_z(tmp_path):
     top = generate(machine, ["K4"]).q[:, machine.index("Z")].max()
     m = _machine_with(tmp_path, "travel = [-300.0, 400.0]", f"travel = [-300.0, {top + 10:.3f}]")
     code, _, err = run("measure-program", "--machine", m, "--path", "K4", "-o", tmp_path / "X.H")
-    assert code == 2 and "(clearance 20 mm above)" in err and "puts Z at" in err, err
+    assert code == 2 and "(clearance 20 mm off the ball)" in err and "puts Z at" in err, err
 
 
 @pytest.mark.parametrize("ball", ["X-0,5 Y0 Z100 mm", "X1e2 Y0 Z100 mm", "X10 Y0 mm", "X10 Y0 Z100 inch"])

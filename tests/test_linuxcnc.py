@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import BC_MACHINE, ROOT, SEED_MACHINE, UM
+from conftest import BC_MACHINE, ROOT, SEED_MACHINE, UM, as_maxkins
 
 from compgen.configuration.machine_file import load_machine
 from compgen.controllers import linuxcnc
@@ -222,34 +222,19 @@ def launch(folder: Path, ini: Path, more_env: dict[str, str], budget_s: float = 
 
 
 def _at_poses(joints: dict[int, np.ndarray], program: str) -> np.ndarray:
-    """Joints at each pose block. A block that moves nothing (the first pose repeats the
+    """Joints at each pose block: where the machine rests in the pose's dwell (the status
+    names the dwell's line there; the pose's own line may show at rest for no poll at all),
+    else at the pose's line. A block that moves nothing (the first pose repeats the
     approach) gets no motion line of its own: the machine is where the last one left it."""
-    lines = [i for i, ln in enumerate(program.splitlines(), start=1) if re.search(r"; pose \d+", ln)]
+    text = program.splitlines()
+    lines = [i for i, ln in enumerate(text, start=1) if re.search(r"; pose \d+", ln)]
     seen = np.array(sorted(joints))
-    return np.array([joints[seen[seen <= line].max()] for line in lines])
+    return np.array([joints[line + 1] if line + 1 in joints and text[line].startswith("G4")
+                     else joints[seen[seen <= line].max()] for line in lines])
 
 
 def _every(machine, step=6):
     return generate(machine, ["K4"]).take(np.arange(0, 241, step))
-
-
-def test_linuxcnc_runs_the_k4_program_where_compgen_puts_it(tmp_path):
-    """The seed machine's K4 program on xyzac-trt-kins at its nominal pins: LinuxCNC's joints
-    are the pose list's. (xyzbc-trt-kins runs compgen's programs in the edit test below, and
-    its forward kinematics is held to compgen's programs in test_trt.py: one start each is
-    what the suite's five minutes allow.)"""
-    machine = load_machine(_as_linuxcnc(tmp_path, SEED_MACHINE))
-    poses = _every(machine)
-    emitted = measure_program(machine, poses, "K4", "linuxcnc", "tcpm", "K4", "0", "d")
-    program, listed = emitted.files[".ngc"], emitted.files[".poses.csv"]
-    t0 = time.perf_counter()
-    joints = run_linuxcnc(tmp_path / "run", machine, program, "")
-    seconds = time.perf_counter() - t0
-    got = _at_poses(joints, program)[:, :5]
-    want = np.loadtxt(listed.splitlines()[1:], delimiter=",", usecols=(1, 2, 3, 4, 5))
-    np.testing.assert_allclose(got[:, :3], want[:, :3], rtol=0, atol=JOINT_MM)
-    np.testing.assert_allclose(got[:, 3:], want[:, 3:], rtol=0, atol=1e-9)
-    print(f"LinuxCNC ran {len(got)} K4 poses in {seconds:.1f} s")
 
 
 def test_compgens_edit_loaded_into_linuxcnc_removes_what_it_can_hold(machine, tmp_path):
@@ -267,9 +252,14 @@ def test_compgens_edit_loaded_into_linuxcnc_removes_what_it_can_hold(machine, tm
     assert len(INI_LINE.findall(hal)) == len(tables) == 2           # C's table and A's or Y's
     subset = np.arange(0, 241, 6)                      # K4 comes first in ``full``
     poses = full.take(subset)
-    program = measure_program(machine, poses, "K4", "linuxcnc", "tcpm", "K4", "0", "d").files[".ngc"]
+    emitted = measure_program(machine, poses, "K4", "linuxcnc", "tcpm", "K4", "0", "d")
+    program, listed = emitted.files[".ngc"], emitted.files[".poses.csv"]
     joints = run_linuxcnc(tmp_path / "edit", machine, program, hal, tables=tables)
     at = _at_poses(joints, program)
+    # the rotary joints at every pose are the pose list's angles (the program's, as written);
+    # the linear ones are where the edited pins put the nest on the ball (below)
+    np.testing.assert_allclose(at[:, 3:5], np.loadtxt(listed.splitlines()[1:], delimiter=",", usecols=(4, 5)),
+                               rtol=0, atol=1e-9)
     q, motor = at[:, :5], at[:, 5:]
     q[:, 3:], motor[:, 3:] = np.radians(q[:, 3:]), np.radians(motor[:, 3:])
     # LinuxCNC drives exactly as compgen's model of that controller says it will: the pins
@@ -411,32 +401,27 @@ MAXKINS_HAL = "\n".join([
     "setp maxkins.pivot-length {pivot}", ""])
 
 
-def test_maxkins_turns_a_swivel_head_over_a_c_table_as_compgens_chain_does(tmp_path, head_machine):
-    """LinuxCNC's own maxkins (Debian's: a B head over a C table, no pins but the pivot
-    length), given K4's poses of the reference swivel head in its world coordinates (the
-    ball's place in the table frame, where the nest stays) with pivot-length the pivot-to-
-    nest distance and no tool length: its joints are the axes compgen's chain puts there,
-    with B and C written against the machine file's senses (maxkins turns both the other
-    way: its own header says so of B). What a LinuxCNC edit for a head must hold."""
-    poses = _every(head_machine)
-    pivot = -head_machine.nest_point[2]            # 270 mm: 150 pivot length + 120 nest
-    ball = poses.ball[0]
-    B, C = (np.degrees(poses.q[:, head_machine.index(a)]) for a in "BC")
-    at = f"X{ball[0]:.4f} Y{ball[1]:.4f} Z{ball[2]:.4f}"
-    moves = [f"G1 {at} B{-b:.6f} C{-c:.6f} F4000 ; pose {i + 1}\nG4 P0.1"
-             for i, (b, c) in enumerate(zip(B, C, strict=True))]
-    program = "\n".join(["G21 G90 G94 G17 G49", f"G0 X{ball[0]:.4f} Y{ball[1]:.4f} Z{ball[2] + 50:.4f} B0 C0",
-                         *moves, "G0 Z300", "M2", ""])
-    folder = tmp_path / "maxkins"
+def test_maxkins_runs_compgens_program_for_a_swivel_head_where_compgen_puts_it(tmp_path):
+    """LinuxCNC's own maxkins (Debian's: a B head over a C table, one pin, pivot-length)
+    runs compgen's K4 program for the reference swivel head, pivot-length set to
+    what the program's header says (the pivot to the nest: the nest's length is in it):
+    at every pose its joints are the axes compgen's chain for heads puts there, with B and
+    C turned the other way from the machine file, as maxkins turns them."""
+    machine = load_machine(as_maxkins(tmp_path))
+    poses = _every(machine)
+    emitted = measure_program(machine, poses, "K4", "linuxcnc", "tcpm", "HEAD", "0", "d")
+    program, listed = emitted.files[".ngc"], emitted.files[".poses.csv"]
+    pivot = re.search(r"maxkins.pivot-length must hold (\S+) mm", program)[1]
+    assert float(pivot) == pytest.approx(270.0)          # 150 pivot length + 120 nest
+    folder = tmp_path / "run"
     folder.mkdir()
     ini = (HERE / "sim.ini.in").read_text().replace("@DRIVER@", str(HERE / "driver.py")).replace(
         "@KINS@", "maxkins").replace("@TILT@", "B").replace("JOINTS = 5", "JOINTS = 6")
     ini = ini.replace("[HAL]\nHALFILE = sim.hal\nHALFILE = edit.hal", "[HAL]\nHALFILE = sim.hal")
-    joint4 = ini[ini.index("[JOINT_4]"):]
-    ini += "\n" + joint4.replace("[JOINT_4]", "[JOINT_5]")
+    ini += "\n" + ini[ini.index("[JOINT_4]"):].replace("[JOINT_4]", "[JOINT_5]")
     (folder / "sim.ini").write_text(ini)
-    (folder / "sim.hal").write_text(MAXKINS_HAL.format(pivot=f"{pivot:.6f}"))
-    (folder / "sim.tbl").write_text("T1 P1 Z0 ;\n")
+    (folder / "sim.hal").write_text(MAXKINS_HAL.format(pivot=pivot))
+    (folder / "sim.tbl").write_text("T7 P1 Z0 ;R-test nest, its length in maxkins.pivot-length\n")
     (folder / "sim.var").write_text("")
     (folder / "prog.ngc").write_text(program)
     launcher = launch(folder, folder / "sim.ini", {"COMPGEN_NGC": str(folder / "prog.ngc"),
@@ -446,11 +431,11 @@ def test_maxkins_turns_a_swivel_head_over_a_c_table_as_compgens_chain_does(tmp_p
     joints = {int(w[0]): np.array([float(v) for v in w[1:6]])
               for w in (ln.split() for ln in text.splitlines()) if w[0].isdigit()}
     got = _at_poses(joints, program)
-    # compgen's axes at the angles as the program rounds them (1e-6 deg: 5e-6 mm at 270 mm)
-    B, C = np.round(B, 6), np.round(C, 6)
-    want = np.column_stack([inverse(head_machine, np.radians(np.column_stack([C, B])), ball)[:, :3], -B, -C])
+    # the pose list's angles are the program's (as written, 1e-4 deg); compgen's axes there
+    rotary = np.loadtxt(listed.splitlines()[1:], delimiter=",", usecols=(4, 5))      # C, B
+    want = inverse(machine, np.radians(rotary), poses.ball)
     np.testing.assert_allclose(got[:, :3], want[:, :3], rtol=0, atol=JOINT_MM)
-    np.testing.assert_allclose(got[:, 3:], want[:, 3:], rtol=0, atol=1e-9)
-    assert np.abs(got[:, 0] - ball[0]).max() > 100        # the head's turn moved X by up to 234 mm
-    print(f"maxkins: {len(got)} K4 poses, joints as compgen's axes within "
-          f"{np.abs(got[:, :3] - want[:, :3]).max() * 1e3:.2g} um")
+    np.testing.assert_allclose(got[:, 3:], -rotary[:, ::-1], rtol=0, atol=1e-9)       # joints B, C
+    assert np.abs(got[:, 0] - 150).max() > 100        # the head's turn moved X by up to 234 mm
+    print(f"maxkins ran {len(got)} poses of compgen's program; joints within "
+          f"{np.abs(got[:, :3] - want[:, :3]).max() * 1e3:.2g} um of compgen's axes")

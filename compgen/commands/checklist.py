@@ -115,11 +115,13 @@ def checklist(machine: Machine, folder: str | Path, comparison: dict | None = No
              note="thermal drift over a K4 run can reach several µm"),
         Step("R-test set-up: ball on the table, nest in the spindle, sensors checked", BY_HAND,
              note=f"ball where [rtest] says: {machine.ball} mm; nest length gauge line to centre"),
-        Step("Measurement programs written", BY_HAND, note=HEAD_PROGRAMS) if machine.heads else
+        Step("Measurement programs written", BY_HAND, note=HEAD_PROGRAMS)
+        if machine.heads and not controller(machine.controller).programs_for_head(machine) else
         Step("Measurement programs written", DONE if f.programs else OPEN, _names(f.programs),
              f"{me()} measure-program --machine {m} --path all -o {out('RTEST' + _ext(machine))}"),
         Step("Preset checked at the program's stop: the ball centred under the nest", BY_HAND,
-             note="before the first pose" if machine.heads else
+             note="every program stops once, the nest off the ball along its axis, before it goes onto it"
+             if machine.heads else
              "every program stops once, the nest at its clearance above the ball, before it goes down"),
         Step("K4, K1, K2 measured (R-test CSV with dX dY dZ)", DONE if pre else OPEN, _names(pre),
              "run the program; export the readings as CSV v1 beside the pose list"),

@@ -427,7 +427,7 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
     """Write the controller's kinematics edit for a fit, with a sign check and a backup step."""
     fit = load_fit(base)
     machine, sets = reload(fit)
-    ctl = for_machine(controller_name or machine.controller, machine)
+    ctl = for_machine(controller_name or machine.controller, machine, edit=True)
     for given in (current, measured):
         if len(given) > 1 and not ctl.state_files:
             raise CompgenError(f"{ctl.words} reads its state from one file; {len(given)} were given",

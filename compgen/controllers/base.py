@@ -117,6 +117,15 @@ class Controller:
         its modulo rule and its sense of the rotary axes (``motion.run``)."""
         return run(machine, blocks, self.modulo_axes(machine), self.angle_sense(machine), probe=probe)
 
+    def program_context(self, machine: Machine) -> dict:
+        """What this control's program template needs of ``machine`` beyond the steps."""
+        return {}
+
+    def programs_for_head(self, machine: Machine) -> bool:
+        """Whether compgen writes this control's programs for ``machine``, whose head turns
+        the tool (only where the control's kinematics for it was run: none by default)."""
+        return False
+
     def check_setup(self, machine: Machine) -> None:
         """Refuse a [program] set-up this control cannot run (e.g. a tool it cannot call)."""
 

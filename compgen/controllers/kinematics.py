@@ -92,7 +92,7 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
     ``folder``: the folder they are written to; ``despite``: the fit gate's reasons, where the
     edit is written although the fit does not explain its data (its header says so).
     """
-    ctl = for_machine(controller_name, machine)
+    ctl = for_machine(controller_name, machine, edit=True)
     for text in (current, measured):
         if text is not None and re.search(rf"\b{fit.marker}\b", text):
             raise CompgenError(f"the current state already carries this fit's correction ({fit.marker}): "

@@ -74,6 +74,21 @@ def trt_module(machine: Machine) -> tuple[str, object, object]:
     return f"xyz{axes[0].name.lower()}c-trt-kins", axes[0], axes[1]
 
 
+def maxkins_pivot(machine: Machine) -> float | None:
+    """The pivot-length LinuxCNC's maxkins needs for ``machine`` (mm: the pivot to the nest
+    centre, the nest's length in it), or None where maxkins is not its kinematics: a B head
+    pivoting on the tool axis over a C table turning about the machine origin. What maxkins
+    holds was run (tests/test_linuxcnc.py): its world coordinates are the table frame and
+    it turns B and C the other way from the machine file."""
+    heads, tables = machine.heads, [a for a in machine.rotary_axes if a.side == "workpiece"]
+    if not (len(heads) == len(tables) == 1 and heads[0].direction == "y" and tables[0].direction == "z"):
+        return None
+    b, c = heads[0], tables[0]
+    if any(b.offset[:2]) or any(c.offset) or b.sense != 1 or c.sense != 1:
+        return None
+    return machine.probe_length + b.offset[2]
+
+
 def pin_names(tilt) -> list[str]:
     """The trt module's geometry pins, in the order the edit writes them: C's rotation
     point and the tilt's offset from it (the component along its own line has no pin)."""
@@ -321,9 +336,14 @@ def read_comp(text: str, machine: Machine, where: str) -> CompTable:
 POSITION = {"5420": "X", "5421": "Y", "5422": "Z", "5423": "A", "5424": "B", "5425": "C"}
 
 
-def program_blocks(text: str, tcp: bool) -> list[Block]:
+MAXKINS = re.compile(r"^; LinuxCNC: maxkins\b", re.MULTILINE)    # a program written for it
+
+
+def program_blocks(text: str, tcp: bool, maxkins: bool = False) -> list[Block]:
     """A G-code program as LinuxCNC executes it (the blocks compgen writes); ``tcp``: the
-    trt kinematics are active (the configuration's choice: the program cannot say it)."""
+    trt kinematics are active (the configuration's choice: the program cannot say it).
+    Under ``maxkins`` the nest's length is the kinematics' pivot-length: G49 leaves it
+    there, and a G43 length would act along world Z whatever B is."""
     out, modal, feed = [Block(0, "kinematics", "tcp", on=tcp)], None, None
     lines = text.splitlines()
     guard_at = None
@@ -354,8 +374,12 @@ def program_blocks(text: str, tcp: bool) -> list[Block]:
             out.append(Block(k, raw, "require", target={POSITION[p]: 0.0 for p in parts}))
         elif re.fullmatch(r"T\d+ M6", b):
             out.append(Block(k, raw, "tool"))
+        elif maxkins and re.fullmatch(r"G43 H\d+", b):
+            raise CompgenError(f"line {k}: {raw.strip()!r}: under maxkins a G43 length acts along world Z "
+                               "whatever B is", hint="the nest's length belongs in maxkins.pivot-length; "
+                                                    "give the program compgen wrote (G49)")
         elif re.fullmatch(r"G43 H\d+", b) or b == "G49":
-            out.append(Block(k, raw, "length", on=b != "G49"))
+            out.append(Block(k, raw, "length", on=b != "G49" or maxkins))
         elif (d := re.fullmatch(r"G4 P(\S+)", b)) is not None:
             out.append(dwell(d[1], k, raw))
         elif re.fullmatch(r"\((LOGOPEN,[\w.-]+|LOG,[^()]*|LOGCLOSE)\)", b):    # the probe log: no motion
@@ -430,8 +454,17 @@ class LinuxCNC(Controller):
         return {"conventional_directions": conventional, "version": version}
 
     def angle_sense(self, machine: Machine) -> dict[str, int]:
+        if maxkins_pivot(machine) is not None:      # maxkins turns B and C the other way
+            return {a.name: -1 for a in machine.rotary_axes}
         flip = -1 if (machine.linuxcnc or {}).get("conventional_directions") else 1
         return {a.name: flip for a in machine.rotary_axes}
+
+    def programs_for_head(self, machine: Machine) -> bool:
+        return maxkins_pivot(machine) is not None
+
+    def program_context(self, machine: Machine) -> dict:
+        pivot = maxkins_pivot(machine)
+        return {"maxkins": pivot is not None and f"{pivot:.4f}"}
 
     def blocks(self, text: str, mode: str | None = None) -> list[Block]:
         written = ("tcpm" if self.tcpm_on.search(text) else
@@ -444,7 +477,7 @@ class LinuxCNC(Controller):
             raise CompgenError(f"the program was written for mode {written.upper()} (its header) and is to "
                                f"run under {mode.upper()}: its positions mean other things there",
                                hint=f"write it again with compgen measure-program --mode {mode}")
-        return program_blocks(text, mode == "tcpm")
+        return program_blocks(text, mode == "tcpm", MAXKINS.search(text) is not None)
 
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:
@@ -547,6 +580,11 @@ class LinuxCNC(Controller):
                                where=f"{machine.source}: [linuxcnc] conventional_directions",
                                hint="set conventional_directions = false (before LinuxCNC 2.10, or the "
                                     "module's conventional-directions pin at its default 0) or true (pin 1)")
+        if maxkins_pivot(machine) is not None and machine.linuxcnc.get("conventional_directions"):
+            raise CompgenError("maxkins was run without a conventional-directions pin (Debian's 2.9 has "
+                               "none); a newer one turns B the other way at 1",
+                               where=f"{machine.source}: [linuxcnc] conventional_directions",
+                               hint="set it false, with the pin at its default 0")
         self.check_tool(machine.program.tool, "[program] tool", machine.source)
 
     def read(self, machine: Machine, text: str, current: str | None, held: Held, where: str) -> Held:

@@ -18,8 +18,8 @@ import numpy as np
 
 from ..data.rtest import BALL, axis_cells, side_columns
 from ..errors import CompgenError
-from ..model.frames import safe_height, world
-from ..model.kinematics import Poses, inverse
+from ..model.frames import along_tool, at_height, safe_height, world
+from ..model.kinematics import Poses, head_offset, inverse
 from ..model.machine import Machine, check_ball, check_travel
 from ..model.sides import APPROACH_DEG, program_sides
 from ..setup import motion
@@ -90,6 +90,9 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     ctl = for_machine(controller_name, machine)
     if mode not in MODES:
         raise CompgenError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
+    if machine.heads and mode != "tcpm":
+        raise CompgenError("a head's programs are written for its control's kinematics only (mode tcpm): "
+                           "in axes the nest swings about the pivot between poses", hint="leave --mode out")
     setup = machine.program
     if setup is None:
         raise CompgenError(f"machine file {machine.source} has no [program] section",
@@ -111,10 +114,9 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     segments = np.split(np.arange(len(poses)), np.flatnonzero(poses.path[1:] != poses.path[:-1]) + 1)
     run = np.repeat(np.arange(len(segments)), list(map(len, segments)))
     poses = Poses(q, poses.ball, poses.t, poses.path, program_sides(machine, q, run))
-    lift = np.zeros(len(machine.axes))
-    lift[linear[2]] = setup.clearance
     check_travel(machine, poses.q, label)
-    check_travel(machine, poses.q + lift, f"{label} (clearance {setup.clearance:g} mm above)")
+    check_travel(machine, along_tool(machine, poses.q, setup.clearance),
+                 f"{label} (clearance {setup.clearance:g} mm off the ball)")
     for seg in segments:
         part = poses.take(seg)
         _check_steps(machine, part, str(part.path[0]) or label)
@@ -159,7 +161,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
                   tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}",
                   dwell=f"{setup.dwell:g}" if setup.dwell else "",
                   work_offset=setup.work_offset, max_step=f"{machine.limits.max_step_deg:g}",
-                  steps=steps, rotary=[a.name for a in machine.rotary_axes])
+                  steps=steps, rotary=[a.name for a in machine.rotary_axes], **ctl.program_context(machine))
     result = ctl.check(machine, ctl.blocks(text, mode))
     if result.findings:     # compgen's own safety net: nothing unsafe leaves this function
         at = ", ".join(f"{v:g}" for v in ball)
@@ -177,6 +179,8 @@ ROT = set("ABC")
 # characters a SINUMERIK message shows: every control shows it as a message)
 PRESET_CHECK = ("PRESET CHECK: the nest is {clearance} mm above the ball centre and the ball must be "
                 "centred under it. Start to go on")
+HEAD_PRESET_CHECK = ("PRESET CHECK: the nest is {clearance} mm off the ball centre along its axis, the "
+                     "ball centred on that axis. Start to go on")
 TURN_STEP_DEG = 2.0     # rotary steps at the safe height under TCP: the nest keeps within 0.1 mm
 
 
@@ -207,19 +211,29 @@ def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool
                       "q": q if tcp else None})
         state["q"] = q
 
-    def lifted(q, z):
-        out = q.copy()
-        out[linear[2]] = z
-        return out
+    def lifted(q, z):               # the nest at height z, the rotary axes held
+        return at_height(machine, q[None], z)[0]
+
+    def off(q):                     # the nest off the ball along its own axis
+        return along_tool(machine, q[None], approach)[0]
+
+    # a head tilts the nest's axis: off the ball along it, the housing's end must clear the
+    # ball before the nest moves across its axis (a tool that never tilts only goes up)
+    s = machine.setup
+    approach = max(clearance, s.nest_below + s.ball_diameter / 2 + s.nest_radius + s.margin) \
+        if machine.heads else clearance
 
     def turn_to(target):
         """At the safe height: turn the rotary axes to ``target``'s, the nest kept in place."""
         q = state["q"]
         delta = np.degrees(np.abs(target[rotary] - q[rotary])).max()
         n = int(np.ceil(delta / TURN_STEP_DEG)) if tcp_always else 1     # 0: already there
+        nest = q[linear] + head_offset(machine, q[None, rotary])[0]
         for k in range(1, n + 1):
             step = q.copy()
             step[rotary] = q[rotary] + (target[rotary] - q[rotary]) * k / n
+            if tcp_always:          # the nest stays: a head's turn is taken off its axes
+                step[linear] = nest - head_offset(machine, step[None, rotary])[0]
             at(step, note="turn at the safe height" if k == n else "")
 
     start = np.zeros(len(machine.axes))
@@ -248,10 +262,11 @@ def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool
                               "note": note or "turn at the safe height"})
                 state["q"] = state["q"].copy()
                 state["q"][rotary] = target[rotary]
-        at(lifted(first, safe), note="above the first pose")
-        at(lifted(first, first[linear[2]] + clearance))
+        at(lifted(off(first), safe), note="above the first pose")
+        at(off(first))
         if seg is segments[0]:      # the preset and the ball, seen before the nest goes down
-            steps.append({"kind": "stop", "note": PRESET_CHECK.format(clearance=f"{clearance:g}")})
+            steps.append({"kind": "stop", "note": (HEAD_PRESET_CHECK if machine.heads else PRESET_CHECK)
+                          .format(clearance=f"{approach:g}")})
         at(first, rapid=False, note="nest onto the ball, along its axis")
         if mode == "tcpm" and switchable:
             steps.append({"kind": "tcp_on"})
@@ -262,8 +277,8 @@ def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool
             steps.append({"kind": "dwell"})
         if mode == "tcpm" and switchable:
             steps.append({"kind": "tcp_off"})
-        at(lifted(last, last[linear[2]] + clearance), rapid=False, note="nest off the ball, along its axis")
-        at(lifted(last, safe))
+        at(off(last), rapid=False, note="nest off the ball, along its axis")
+        at(lifted(off(last), safe))
         if tcp_always:
             above = last.copy()
             above[linear] = start[linear]

@@ -30,16 +30,20 @@ def controller(name: str) -> Controller:
     return CONTROLLERS[name]
 
 
-def for_machine(name: str, machine: Machine) -> Controller:
-    """The controller ``name``, to write or read ``machine``'s programs and edits: refused
-    for a machine whose head turns the tool, whose files compgen does not write yet (its
-    model, fit and diagnosis hold; a table-table control's files would be wrong for it)."""
-    if machine.heads:
-        raise CompgenError(f"compgen does not write controller files for a head yet: {machine.name}'s "
-                           f"{', '.join(a.name for a in machine.heads)} turns the tool",
-                           where=machine.source, hint="fit, diagnose and report hold for it; write its "
-                           "programs and kinematics by hand from the fitted values")
-    return controller(name)
+def for_machine(name: str, machine: Machine, edit: bool = False) -> Controller:
+    """The controller ``name``, to write or read ``machine``'s programs (or, with ``edit``,
+    its kinematics edits): refused for a machine whose head turns the tool where compgen
+    does not write that control's files for it (a table-table control's would be wrong);
+    a head's edits are not written for any control yet."""
+    ctl = controller(name)
+    if machine.heads and (edit or not ctl.programs_for_head(machine)):
+        what = "kinematics edits" if edit else f"{ctl.words} programs"
+        heads = ", ".join(a.name for a in machine.heads)
+        raise CompgenError(f"compgen does not write {what} for a head yet: {machine.name}'s {heads} turns "
+                           "the tool", where=machine.source,
+                           hint="fit, diagnose and report hold for it; write its "
+                                + ("kinematics" if edit else "programs") + " by hand from the fitted values")
+    return ctl
 
 
 def for_program(path_suffix: str, machine: Machine) -> Controller:
@@ -76,7 +80,7 @@ def comment_marks() -> str:
 def read_edits(machine: Machine, texts: Mapping[str, str], current: str | None) -> Held:
     """What a control holds after loading the edit files ``texts`` (where → text), each
     read by the controller that wrote it; ``current`` is the state before, where needed."""
-    for_machine(machine.controller, machine)
+    for_machine(machine.controller, machine, edit=True)
     held = Held(nominal_lines(machine), {}, ())
     for where, text in texts.items():
         ctl = next((c for c in CONTROLLERS.values() if c.reads(text)), None)

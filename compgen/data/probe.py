@@ -353,7 +353,7 @@ def need_probe(machine: Machine) -> ProbeSetup:
         raise CompgenError(f"machine file {machine.source} has no [probe] section",
                            hint="add the probe's tool, length, sphere_diameter and stylus_diameter "
                                 "(see the bundled machines)")
-    if any(a.rotary for a in machine.tool):
+    if machine.heads:
         raise CompgenError("probing with a rotary head is not supported: the probe's touches are planned "
                            "for a spindle that does not tilt", hint="measure this machine with an R-test")
     return machine.probe

@@ -8,14 +8,15 @@ from __future__ import annotations
 import numpy as np
 
 from ..transforms import apply
-from .kinematics import Poses, chain_transform, inverse, nest_centre
+from .kinematics import Poses, chain_transform, head_offset, inverse, nest_centre
 from .machine import Machine
 
 
 def safe_height(machine: Machine) -> float:
     """The height of the nest centre above the rotary axes' intersection at which nothing
     of the set-up can be touched at any orientation: every solid lies within R of the
-    intersection, and the housing reaches ``nest_below`` and its radius below the centre."""
+    intersection, and the housing reaches ``nest_below`` and its radius below the centre
+    (with a head, whatever of the tool reaches lowest as the head turns about the nest)."""
     s = machine.setup
     table = frames(machine, np.zeros((1, len(machine.axes))))[0][0]
     normal = table[:3, 2]
@@ -26,7 +27,23 @@ def safe_height(machine: Machine) -> float:
         c = table[:3, 3] + z * normal
         across = np.linalg.norm(c - (c @ normal) * normal)
         reach = max(reach, np.sqrt(c @ c + s.table_radius**2 + 2 * s.table_radius * across))
-    return float(np.ceil(reach + s.nest_below + s.nest_radius + s.margin))
+    return float(np.ceil(reach + _below_nest(machine) + s.margin))
+
+
+def _below_nest(machine: Machine) -> float:
+    """How far below the nest centre the tool reaches at any orientation it takes: the
+    housing's end and radius for a tool that never tilts (a table-table machine); a head
+    tilts it through its travel (under TCP about the nest), so every part along the tool axis
+    — housing, spindle, the head's body about its pivot — reaches ``t·cos θ`` below, θ up to
+    the tilt the head's travel allows."""
+    s = machine.setup
+    tilt = min(np.pi, sum(np.radians(max(map(abs, a.travel))) for a in machine.heads if a.direction != "z"))
+    c = np.cos(tilt)
+    pivots = np.linalg.norm(head_pivots(machine, np.zeros((1, len(machine.axes))))[0], axis=1)
+    parts = [(-s.nest_below, machine.probe_length, s.nest_radius),
+             (machine.probe_length, machine.probe_length + s.spindle_length, s.spindle_radius),
+             *((d, d, s.head_radius) for d in pivots)]
+    return max(r - min(lo, hi, lo * c, hi * c) for lo, hi, r in parts)
 
 
 def frames(machine: Machine, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -38,6 +55,41 @@ def frames(machine: Machine, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
     R = table[:, :3, :3]
     return (table, np.einsum("nji,nj->ni", R, nest_centre(machine, tool) - table[:, :3, 3]),
             np.einsum("nji,nj->ni", R, tool[:, :3, 2]))
+
+
+def along_tool(machine: Machine, q: np.ndarray, d: float) -> np.ndarray:
+    """Poses ``q`` (n, k) with the nest moved ``d`` mm along the tool axis, away from the
+    table (the rotary axes held): machine Z where no head tilts the tool."""
+    zero = np.zeros((len(q), 6))
+    axis = chain_transform(machine, machine.tool, Poses.at(q, np.zeros(3)), {}, zero)[:, :3, 2]
+    out = np.array(q, float)
+    out[:, [machine.index(c) for c in "XYZ"]] += d * axis
+    return out
+
+
+def at_height(machine: Machine, q: np.ndarray, z: float) -> np.ndarray:
+    """Poses ``q`` (n, k) with the nest centre at height ``z`` mm of the machine frame (the
+    rotary axes held): Z itself where no head turns the nest away from the axes' position."""
+    out = np.array(q, float)
+    rotary = [machine.index(a.name) for a in machine.rotary_axes]
+    out[:, machine.index("Z")] = z - head_offset(machine, out[:, rotary])[:, 2]
+    return out
+
+
+def head_pivots(machine: Machine, q: np.ndarray) -> np.ndarray:
+    """Each head's pivot at poses ``q`` (n, k), in the table frame: (n, heads, 3) mm, where
+    its body stands (``[rtest] head_radius`` about it)."""
+    poses = Poses.at(q, np.zeros(3))
+    zero = np.zeros((len(q), 6))
+    table = chain_transform(machine, machine.workpiece, poses, {}, zero)
+    gauge = np.array([0.0, 0.0, machine.probe_length])   # the tool chain's frames start there
+    out = []
+    for i, axis in enumerate(machine.tool):
+        if axis.rotary:
+            before = chain_transform(machine, machine.tool[:i], poses, {}, zero)
+            pivot = gauge + before[:, :3, 3] + np.einsum("nij,j->ni", before[:, :3, :3], axis.offset)
+            out.append(np.einsum("nji,nj->ni", table[:, :3, :3], pivot - table[:, :3, 3]))
+    return np.stack(out, axis=1) if out else np.zeros((len(q), 0, 3))
 
 
 def table_axis_down(machine: Machine, q: np.ndarray) -> np.ndarray:

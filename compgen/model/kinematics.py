@@ -361,6 +361,7 @@ class SlotGains:
 
     def __init__(self, machine: Machine, poses: Poses, slots: Mapping | None = None):
         self.n = len(poses)
+        self.twice = bool(machine.heads)
         self.relative, self.frames = _walk(machine, poses, slots or {}, record=True)
 
     def __call__(self, key: tuple[str, str, str]) -> np.ndarray:
@@ -369,26 +370,32 @@ class SlotGains:
         e = UNIT["xyz"[k % 3]]
         if carrier == "time":
             return np.broadcast_to(e * (k < 3), (self.n, 3)).copy()
-        out = np.zeros((self.n, 3))        # a slot this carrier does not have (a ball's tilt)
+        total = None
         for sign, marks, R, o, P in self.frames[carrier]:
             for mark in marks:
                 kind, at = mark[:2]
                 if at != slot:
                     continue
-                # a head's location errors act twice, placing its line and undoing it
-                # after the turn (scale -1): their gains add
+                term = None
                 if kind == "t" and k < 3:
-                    out += (sign * mark[2] if len(mark) > 2 else sign) * R[:, :, k]
+                    term = (sign * mark[2] if len(mark) > 2 else sign) * R[:, :, k]
                 elif kind == "r" and k >= 3 and k != mark[3]:
                     w = mark[2]
                     axis = _rotate(R, _left_jacobian(w, e)) if w.any() else R[:, :, k - 3]
-                    out += (sign * mark[4] if len(mark) > 4 else sign) * _cross(axis, P - o)
+                    term = (sign * mark[4] if len(mark) > 4 else sign) * _cross(axis, P - o)
                 elif kind == "turn" and k == mark[2]:
-                    out += sign * _cross(R[:, :, k - 3], P - o)
+                    term = sign * _cross(R[:, :, k - 3], P - o)
                 elif kind == "line" and k >= 3:
                     _, _, w, run, line = mark
-                    out += sign * run[:, None] * _rotate(R, _cross(_left_jacobian(w, e), line))
-        return out
+                    term = sign * run[:, None] * _rotate(R, _cross(_left_jacobian(w, e), line))
+                if term is None:
+                    continue
+                if not self.twice:       # one factor holds each slot
+                    return term
+                # a head's location errors act twice, placing its line and undoing it after
+                # the turn (scale -1): their gains add
+                total = term if total is None else total + term
+        return total if total is not None else np.zeros((self.n, 3))   # a ball's tilt: none
 
 
 def effect_gains(gains: SlotGains, effect: Effect, x: np.ndarray, made: dict | None = None) -> np.ndarray:

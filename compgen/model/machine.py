@@ -149,6 +149,7 @@ class Setup:
     nest_below: float = 5.0       # the housing reaches this far below the nest centre
     spindle_radius: float = 60.0  # spindle and holder, from the gauge line up
     spindle_length: float = 250.0
+    head_radius: float = 0.0      # a head's body, a sphere about each head's pivot (heads only)
     nest_range: float = 1.0
     margin: float = 5.0           # kept between the set-up and the nest at the safe height
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import CompgenError
-from ..model.frames import frames, from_world, safe_height, world
+from ..model.frames import frames, from_world, head_pivots, safe_height, world
 from ..model.machine import Machine, ProbeSetup
 from ..search import golden_least
 
@@ -183,6 +183,16 @@ def clearances(machine: Machine, q: np.ndarray,
         out[f"{part} / ball"] = _to_segment(start, end, ball, ball) - rb - radius
         out[f"{part} / stem"] = _to_segment(start, end, *stem) - s.stem_diameter / 2 - radius
         out[f"{part} / table"] = _least_along(to_table, nest, axis, lo, hi) - radius
+    if machine.heads:       # the head's body about each pivot: it swings as the head turns
+        if not s.head_radius:
+            raise CompgenError("the head's body is not in the machine file: the motion check cannot see "
+                               "what the head sweeps", where=f"{machine.source}: [rtest] head_radius",
+                               hint="give head_radius, mm: a sphere about its pivot that holds its body")
+        for k, pivot in enumerate(np.moveaxis(head_pivots(machine, q), 1, 0)):
+            part = f"head {machine.heads[k].name}"
+            out[f"{part} / ball"] = np.linalg.norm(pivot - ball, axis=1) - rb - s.head_radius
+            out[f"{part} / stem"] = _to_segment(pivot, pivot, *stem) - s.stem_diameter / 2 - s.head_radius
+            out[f"{part} / table"] = to_table(pivot) - s.head_radius
     off_axis = np.linalg.norm(np.cross(ball - nest, axis), axis=1)
     above = np.einsum("ni,ni->n", nest - ball, axis) > -s.nest_range
     return out, (off_axis <= s.nest_range) & above
@@ -556,7 +566,8 @@ def _check_collisions(machine: Machine, segments: list[_Segment], findings: list
     pairs, measuring = clearances(machine, paths, probe)
     closest = (np.inf, "")
     for pair, c in pairs.items():
-        margin = np.full(len(c), parts[pair.split(" / ")[0]][3])
+        part = pair.split(" / ")[0]     # a head's body keeps the set-up's margin
+        margin = np.full(len(c), parts[part][3] if part in parts else machine.setup.margin)
         if probe is None and pair in ("housing / ball", "housing / stem"):
             c = np.where(measuring, np.inf, c)
         if pair == "stylus tip / ball":       # probing, the tip touches: only entering counts
