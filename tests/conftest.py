@@ -1,4 +1,5 @@
 import os
+import re
 from pathlib import Path
 
 from compgen.__main__ import BLAS_THREADS
@@ -86,10 +87,12 @@ def as_maxkins(folder: Path) -> Path:
     """The reference swivel head on LinuxCNC's maxkins, with a quick [program] (the file's
     path, written in ``folder``)."""
     path = folder / "maxkins.toml"
-    path.write_text(HEAD_MACHINE.read_text().replace('controller = "tnc640"', 'controller = "linuxcnc"')
-                    .replace("[limits]", '[program]\ntool = "7"\nfeed = 4000.0\ndwell = 0.1\n'
+    text = re.sub(r"feed_max = [0-9.]+", "feed_max = 60000.0", HEAD_MACHINE.read_text())  # the sim's axes
+    path.write_text(text.replace('controller = "tnc640"', 'controller = "linuxcnc"')
+                    .replace("[limits]", '[program]\ntool = "7"\nfeed = 8000.0\ndwell = 0.1\n'
                              'clearance = 20.0\n\n[linuxcnc]\nconventional_directions = false\n'
-                             'version = "2.9"\n\n[limits]'))
+                             'version = "2.9"\n\n[limits]')
+                    .replace("max_step_deg = 10.0", "max_step_deg = 20.0"))
     return path
 
 
