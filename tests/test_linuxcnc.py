@@ -224,15 +224,23 @@ def launch(folder: Path, ini: Path, more_env: dict[str, str], budget_s: float = 
 
 
 def _at_poses(joints: dict[int, np.ndarray], program: str) -> np.ndarray:
-    """Joints at each pose block: where the machine rests in the pose's dwell (the status
-    names the dwell's line there; the pose's own line may show at rest for no poll at all),
-    else at the pose's line. A block that moves nothing (the first pose repeats the
-    approach) gets no motion line of its own: the machine is where the last one left it."""
+    """Joints at each pose block, read where the machine rests at that pose: of the samples
+    at rest the driver kept for the pose's dwell line, its own line and the last line before
+    it (a block that moves nothing, the first pose repeating the approach, has no motion line
+    of its own), the one whose tilting and C joints are the angles the pose's line writes.
+    The status's line can lag or lead the motion by a block (a CI run read a pose from the
+    line before): the program's own words say which sample is the pose's, never compgen's
+    model. None matching, the last line's (and the test's comparison fails)."""
     text = program.splitlines()
-    lines = [i for i, ln in enumerate(text, start=1) if re.search(r"; pose \d+", ln)]
     seen = np.array(sorted(joints))
-    return np.array([joints[line + 1] if line + 1 in joints and text[line].startswith("G4")
-                     else joints[seen[seen <= line].max()] for line in lines])
+    out = []
+    for line, raw in ((i, ln) for i, ln in enumerate(text, start=1) if re.search(r"; pose \d+", ln)):
+        words = dict(re.findall(r"\b([A-C])(-?[0-9.]+)", raw.split(";")[0]))
+        angles = [float(words[a]) for a in sorted(words, key=lambda a: a == "C")]    # tilt, C
+        near = [c for c in (line + 1, line, seen[seen <= line].max()) if c in joints]
+        out.append(next((joints[c] for c in near if np.allclose(joints[c][3:5], angles, rtol=0, atol=1e-6)),
+                        joints[near[-1]]))
+    return np.array(out)
 
 
 def _every(machine, step=12):
