@@ -116,7 +116,7 @@ def checklist(machine: Machine, folder: str | Path, comparison: dict | None = No
         Step("R-test set-up: ball on the table, nest in the spindle, sensors checked", BY_HAND,
              note=f"ball where [rtest] says: {machine.ball} mm; nest length gauge line to centre"),
         Step("Measurement programs written", BY_HAND, note=HEAD_PROGRAMS)
-        if machine.heads and not controller(machine.controller).programs_for_head(machine) else
+        if not controller(machine.controller).writes_programs(machine) else
         Step("Measurement programs written", DONE if f.programs else OPEN, _names(f.programs),
              f"{me()} measure-program --machine {m} --path all -o {out('RTEST' + _ext(machine))}"),
         Step("Preset checked at the program's stop: the ball centred under the nest", BY_HAND,

@@ -81,9 +81,9 @@ class Advisor:
         self.machine = machine
         self.program_ext = controller(machine.controller).program_ext    # of the commands advised
         # why nothing can be advised on this machine (its programs are not written), if so
-        self.unable = ("compgen does not write measuring programs for a head yet on this control, so it "
-                       "advises no measurement" if machine.heads
-                       and not controller(machine.controller).programs_for_head(machine) else "")
+        self.unable = ("" if controller(machine.controller).writes_programs(machine) else
+                       "compgen does not write measuring programs for a head yet on this control, so it "
+                       "advises no measurement")
         self.candidates = [] if self.unable else _candidates(machine, measured, device)
         self._why: dict[str, str | None] = {}
 

@@ -126,6 +126,11 @@ class Controller:
         the tool (only where the control's kinematics for it was run: none by default)."""
         return False
 
+    def writes_programs(self, machine: Machine) -> bool:
+        """Whether compgen writes this control's programs for ``machine``: every table-table
+        machine; a head only where ``programs_for_head`` says so."""
+        return not machine.heads or self.programs_for_head(machine)
+
     def check_setup(self, machine: Machine) -> None:
         """Refuse a [program] set-up this control cannot run (e.g. a tool it cannot call)."""
 

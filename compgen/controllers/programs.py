@@ -228,7 +228,7 @@ def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool
         q = state["q"]
         delta = np.degrees(np.abs(target[rotary] - q[rotary])).max()
         n = int(np.ceil(delta / TURN_STEP_DEG)) if tcp_always else 1     # 0: already there
-        nest = q[linear] + head_offset(machine, q[None, rotary])[0]
+        nest = q[linear] + head_offset(machine, q[None, rotary])[0] if tcp_always else None
         for k in range(1, n + 1):
             step = q.copy()
             step[rotary] = q[rotary] + (target[rotary] - q[rotary]) * k / n

@@ -36,7 +36,7 @@ def for_machine(name: str, machine: Machine, edit: bool = False) -> Controller:
     does not write that control's files for it (a table-table control's would be wrong);
     a head's edits are not written for any control yet."""
     ctl = controller(name)
-    if machine.heads and (edit or not ctl.programs_for_head(machine)):
+    if machine.heads and (edit or not ctl.writes_programs(machine)):
         what = "kinematics edits" if edit else f"{ctl.words} programs"
         heads = ", ".join(a.name for a in machine.heads)
         raise CompgenError(f"compgen does not write {what} for a head yet: {machine.name}'s {heads} turns "

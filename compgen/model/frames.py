@@ -82,12 +82,11 @@ def head_pivots(machine: Machine, q: np.ndarray) -> np.ndarray:
     poses = Poses.at(q, np.zeros(3))
     zero = np.zeros((len(q), 6))
     table = chain_transform(machine, machine.workpiece, poses, {}, zero)
-    gauge = np.array([0.0, 0.0, machine.probe_length])   # the tool chain's frames start there
     out = []
     for i, axis in enumerate(machine.tool):
         if axis.rotary:
             before = chain_transform(machine, machine.tool[:i], poses, {}, zero)
-            pivot = gauge + before[:, :3, 3] + np.einsum("nij,j->ni", before[:, :3, :3], axis.offset)
+            pivot = machine.gauge + before[:, :3, 3] + np.einsum("nij,j->ni", before[:, :3, :3], axis.offset)
             out.append(np.einsum("nji,nj->ni", table[:, :3, :3], pivot - table[:, :3, 3]))
     return np.stack(out, axis=1) if out else np.zeros((len(q), 0, 3))
 

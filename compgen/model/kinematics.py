@@ -205,7 +205,7 @@ def nest_centre(machine: Machine, tool: np.ndarray) -> np.ndarray:
     ``tool`` (n, 4, 4) (``chain_transform``): its frames start at the gauge line."""
     if not machine.heads:     # the linear axes' position, exactly
         return tool[:, :3, 3]
-    return (tool[:, :3, 3] + tool[:, :3, :3] @ machine.nest_point) + [0.0, 0.0, machine.probe_length]
+    return (tool[:, :3, 3] + tool[:, :3, :3] @ machine.nest_point) + machine.gauge
 
 
 def head_offset(machine: Machine, rotary_rad: np.ndarray) -> np.ndarray:
@@ -318,7 +318,7 @@ def _walk(machine: Machine, poses: Poses, slots: Mapping, lines: Mapping[str, tu
     # the tool side's frames sit at the spindle gauge line, probe_length above the nest
     # centre (q is the nest centre: the tool length compensated), so an angular error of a
     # tool-side carriage turns the nest with the tool length as its lever
-    gauge = np.array([0.0, 0.0, machine.probe_length])
+    gauge = machine.gauge
     ends, frames = {}, {}
     for chain, start, sign, carrier, point in ((machine.workpiece, np.zeros(3), -1.0, "ball", poses.ball),
                                                (machine.tool, gauge, 1.0, "nest", machine.nest_point)):

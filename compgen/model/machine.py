@@ -245,12 +245,18 @@ class Machine:
         return tuple(a for a in self.tool if a.rotary)
 
     @cached_property
+    def gauge(self) -> np.ndarray:
+        """The spindle's gauge line on the tool axis with every axis at zero, mm: where the
+        tool chain's frames start (the nest centre is at the origin)."""
+        return _frozen(np.array([0.0, 0.0, self.probe_length]))
+
+    @cached_property
     def nest_point(self) -> np.ndarray:
         """The nest centre in the tool chain's last frame, mm: ``probe_length`` below the
         gauge line, and below every head's pivot by its offset (the pivot length), so that
         at the zero pose the nest centre is at the linear axes' position."""
-        return -(np.array([0.0, 0.0, self.probe_length])
-                 + np.sum([np.asarray(a.offset, float) for a in self.heads], axis=0, initial=0.0))
+        heads = np.sum([np.asarray(a.offset, float) for a in self.heads], axis=0, initial=0.0)
+        return _frozen(-(self.gauge + heads))
 
     def axis(self, name: str) -> Axis:
         for a in self.axes:
@@ -261,6 +267,12 @@ class Machine:
 
     def index(self, name: str) -> int:
         return self.axis_names.index(self.axis(name).name)
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    """``a`` made read-only: a machine's cached arrays are shared by every caller."""
+    a.setflags(write=False)
+    return a
 
 
 def check_ball(setup: Setup, ball, where: str) -> None:
