@@ -20,6 +20,7 @@ VECTORS = SHARED / "vectors"
 SEED_MACHINE = ROOT / "machines" / "ac-trunnion-itnc530.toml"
 BC_MACHINE = ROOT / "machines" / "bc-table-sinumerik840d.toml"
 HEAD_MACHINE = ROOT / "machines" / "bc-swivel-head-table.toml"
+FORK_MACHINE = ROOT / "machines" / "bc-fork-head.toml"
 UM, ARCSEC = 1e-3, np.pi / 648000
 
 # Seed report, Table 4 (the truth in shared/vectors/seed-table4-noiseless.csv), inside units
@@ -83,11 +84,12 @@ def head_machine():
     return load_machine(HEAD_MACHINE)
 
 
-def as_maxkins(folder: Path) -> Path:
-    """The reference swivel head on LinuxCNC's maxkins, with a quick [program] (the file's
-    path, written in ``folder``)."""
-    path = folder / "maxkins.toml"
-    text = re.sub(r"feed_max = [0-9.]+", "feed_max = 60000.0", HEAD_MACHINE.read_text())  # the sim's axes
+def on_linuxcnc(folder: Path, source: Path = None) -> Path:
+    """A reference head (the swivel head by default: maxkins; the fork head: 5axiskins) on
+    LinuxCNC, with a quick [program] (the file's path, written in ``folder``)."""
+    source = source or HEAD_MACHINE
+    path = folder / f"linuxcnc-{source.stem}.toml"
+    text = re.sub(r"feed_max = [0-9.]+", "feed_max = 60000.0", source.read_text())  # the sim's axes
     path.write_text(text.replace('controller = "tnc640"', 'controller = "linuxcnc"')
                     .replace("[limits]", '[program]\ntool = "7"\nfeed = 8000.0\ndwell = 0.1\n'
                              'clearance = 20.0\n\n[linuxcnc]\nconventional_directions = false\n'

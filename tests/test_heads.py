@@ -1,25 +1,33 @@
 """Machines whose head turns the tool (issue 40's reference machines): compgen's chain against
 the geometry written out by hand from the machine's description, fits at the Cramér-Rao
-bound, and no controller file written for them yet."""
+bound; programs and edits on LinuxCNC's head modules, none on other controls yet."""
+
+import re
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, ROOT, UM, as_maxkins, run
+from conftest import ARCSEC, FORK_MACHINE, UM, on_linuxcnc, run
 from scipy.spatial.transform import Rotation
 
+from compgen.commands.compare import compare
 from compgen.configuration.machine_file import load_machine
+from compgen.controllers import linuxcnc
 from compgen.controllers.advice import Advisor
-from compgen.data.rtest import commanded, format_rtest
+from compgen.controllers.kinematics import corrected_by
+from compgen.controllers.registry import controller
+from compgen.data.rtest import commanded, format_rtest, read_rtest
 from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
 from compgen.model.effects import catalogue, compose, location_model
-from compgen.model.kinematics import Model
+from compgen.model.kinematics import Model, Poses
+from compgen.model.lines import controller_inverse
 from compgen.model.paths import generate
 from compgen.statistics.diagnose import diagnose
 from compgen.statistics.diagnose_text import report
-from compgen.statistics.identify import identify
+from compgen.statistics.identify import beyond_setup, identify
+from compgen.statistics.results import load_fit
 
-FORK = ROOT / "machines" / "bc-fork-head.toml"
+FORK = FORK_MACHINE
 GAUGE, PIVOT = 120.0, 150.0       # the files' probe_length and the head's pivot length, mm
 NOISE_UM = 0.5
 TRUTH = {"XOW": 3 * UM, "YOW": -5 * UM, "ZOW": 4 * UM, "XOC": 6 * UM, "YOC": -8 * UM, "AOC": 5 * ARCSEC,
@@ -151,7 +159,7 @@ def test_no_controller_file_is_written_for_a_head_yet(command, tmp_path, head_ma
 
 def test_a_linear_axis_carried_by_a_head_is_refused(tmp_path):
     """The fork head with its Z carried by the head (after C and B in [[tool]])."""
-    z = ('[[tool]]\naxis = "Z"\ntype = "linear"\ndirection = "z"\ntravel = [-300.0, 700.0]\n'
+    z = ('[[tool]]\naxis = "Z"\ntype = "linear"\ndirection = "z"\ntravel = [-300.0, 1000.0]\n'
          'feed_max = 30000.0\n\n')
     text = FORK.read_text()
     assert z in text
@@ -231,25 +239,82 @@ def test_a_hidden_2_per_rev_of_c_is_named_found_on_both_heads(case):
     assert max(off.values()) < 4, off
 
 
-def test_linuxcnc_maxkins_programs_are_written_and_checked_with_the_heads_body(tmp_path):
-    """On LinuxCNC's maxkins compgen writes the swivel head's K4 (the test with the real
-    module is in test_linuxcnc.py): the nest goes onto and off the ball along its tilted
-    axis, the head's turns keep it where it is, check-program passes what was written and
-    refuses a G43 length (under maxkins it would act along world Z). K1 takes the head to
-    90° with the ball 80 mm above the table: its body would enter the table, and the
-    program is refused, naming it; without the body's size no program is written."""
-    path = as_maxkins(tmp_path)
+@pytest.mark.parametrize("source, module", [(None, "maxkins"), (FORK_MACHINE, "5axiskins")])
+def test_linuxcnc_head_programs_are_written_and_checked_with_the_heads_body(tmp_path, source, module):
+    """On LinuxCNC's maxkins (the swivel head) and 5axiskins (the fork) compgen writes K4
+    (the tests with the real modules are in test_linuxcnc.py): the nest goes onto and off
+    the ball along its tilted axis, the head's turns keep it where it is, and the program
+    stops unless the module's pivot-length pin holds the pivot to the nest. check-program
+    passes what was written; it refuses a G43 length (it would act along world Z), a guard
+    for another pin value and a program without the guard. K1 takes the head to 90° with
+    the ball 80 mm above the table: its body would enter the table, and the program is
+    refused, naming it; without the body's size no program is written."""
+    path = on_linuxcnc(tmp_path, source)
+    machine_head = load_machine(path).heads[0].name        # its body is about the first head's pivot
     code, out, err = run("measure-program", "--machine", path, "--path", "K4", "-o", tmp_path / "K4.ngc")
     assert code == 0, err
     program = (tmp_path / "K4.ngc").read_text()
-    assert "maxkins.pivot-length must hold 270.0000 mm" in program and "\nG49 " in program
+    guard = f"o101 if [ABS[#<_hal[{module}.pivot-length]> - 270.0000] GT 0.1000]"
+    assert "\nG49 ;" in program and "\nM66 E0 L0 ;" in program and f"\n{guard}\n(abort," in program
+    assert program.index("\nG49") < program.index("M66 E0 L0") < program.index(guard) < program.index("\nG0 ")
     code, out, err = run("check-program", "--machine", path, "--mode", "tcpm", tmp_path / "K4.ngc")
     assert code == 0 and "OK" in out, err
-    (tmp_path / "bad.ngc").write_text(program.replace("\nG49 ", "\nG43 H7 "))
-    code, _, err = run("check-program", "--machine", path, "--mode", "tcpm", tmp_path / "bad.ngc")
-    assert code == 2 and "acts along world Z" in err, err
+    for bad, says in [(program.replace("\nG49 ", "\nG43 H7 "), "acts along world Z"),
+                      (program.replace("- 270.0000]", "- 250.0000]"), "must stop unless"),
+                      (program.replace("GT 0.1000]", "GT 5.0000]"), "must stop unless"),
+                      (re.sub(r"o101 if.*\n.*\no101 endif\n", "", program), "no pin guard")]:
+        (tmp_path / "bad.ngc").write_text(bad)
+        code, _, err = run("check-program", "--machine", path, "--mode", "tcpm", tmp_path / "bad.ngc")
+        assert code == 2 and says in err, err
     code, _, err = run("measure-program", "--machine", path, "--path", "K1", "-o", tmp_path / "K1.ngc")
-    assert code == 2 and "head B enters the table" in err, err
+    assert code == 2 and f"head {machine_head} enters the table" in err, err
     path.write_text(path.read_text().replace("head_radius = 120.0", ""))
     code, _, err = run("measure-program", "--machine", path, "--path", "K4", "-o", tmp_path / "K4b.ngc")
     assert code == 2 and "head_radius" in err and not (tmp_path / "K4b.ngc").exists(), err
+
+
+@pytest.mark.parametrize("source, module", [(None, "maxkins"), (FORK_MACHINE, "5axiskins")])
+def test_linuxcnc_edits_a_head_modules_pin_and_compare_predicts_what_it_leaves(tmp_path, source, module):
+    """On LinuxCNC's head modules the edit sets the one pin, pivot-length, by the B line's
+    offset along the tool (ZOB; the run with the real modules is in test_linuxcnc.py), and
+    names every other location error as not expressible; compare predicts the K4 misfit the
+    B line's X offset leaves, as the true machine driven by the edited control would read it
+    (written out here from the truth, apart from compare's plan); the edit's sign check
+    turns B to ±45° (at 90° the head's body would enter the table). A head on a control
+    compgen does not edit for is still refused in one line."""
+    path = on_linuxcnc(tmp_path, source)
+    machine = load_machine(path)
+    truth = {"XOW": 4 * UM, "YOW": -6 * UM, "ZOW": 9 * UM, "ZOB": 30 * UM, "XOB": 12 * UM}
+    poses = generate(machine, ["K4", "K2"])
+    data = tmp_path / "d.csv"
+    session = simulate(machine, truth, poses, NOISE_UM, np.random.default_rng(5))
+    data.write_text(format_rtest(machine, session))
+    fit = tmp_path / "fit.json"
+    code, _, err = run("fit", "--machine", path, data, "-o", fit)
+    assert code == 0, err
+    code, out, err = run("kinematics", "--from", fit, "-o", tmp_path / "KIN.hal")
+    assert code == 0, err
+    hal = (tmp_path / "KIN.hal").read_text()
+    pin = float(re.search(rf"(?m)^setp {module}\.pivot-length (\S+)   # was 270\.000000$", hal)[1])
+    assert pin - 270 == pytest.approx(truth["ZOB"], abs=0.5 * UM)
+    rest = hal.split("NOT EXPRESSIBLE")[1]
+    assert re.search(r"B offset \+1[12]\.\d\d um along X", rest) and "along Z" not in rest
+    assert "S5_B-45:" in hal and "S6_B+45:" in hal
+    # compare predicts the K4 misfit XOB leaves (B turns in K4; at K2's fixed B it is a
+    # constant): as the truth's machine reads it, driven where the edited control drives it
+    # (the pin's ZOB held, nothing else), and the fit's noise
+    k4 = poses.take(np.flatnonzero(poses.path == "K4"))
+    fitted = load_fit(fit)
+    assert set(corrected_by(machine, fitted, controller("linuxcnc"))) == {"ZOB"}     # what history records
+    got = compare(machine, [read_rtest(data, machine)], fitted, "linuxcnc")
+    assert not any("no edit is written" in a for a in got.assumes), got.assumes
+    q = controller_inverse(machine, linuxcnc.head_lines(machine, pin - 270), k4.q[:, [
+        machine.index(a.name) for a in machine.rotary_axes]], k4.ball)
+    true = Model(machine, list(truth))
+    after = true.relative(Poses(q, k4.ball, k4.t, k4.path), np.array(list(truth.values())))
+    expect = float(np.sqrt(np.mean(np.square(beyond_setup(machine, k4, after)["per_path"]["K4"]["rms_um"]))))
+    predicted = float(np.sqrt(np.mean(np.square(got.predicted_post["per_path"]["K4"]["rms_um"]))))
+    assert expect > 4 * NOISE_UM
+    assert predicted == pytest.approx(np.hypot(expect, NOISE_UM), rel=0.1), (predicted, expect)
+    code, _, err = run("kinematics", "--from", fit, "--controller", "tnc640", "-o", tmp_path / "T")
+    assert code == 2 and "does not write kinematics edits for a head yet" in err, err

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import BC_MACHINE, ROOT, SEED_MACHINE, UM, as_maxkins
+from conftest import BC_MACHINE, FORK_MACHINE, ROOT, SEED_MACHINE, UM, on_linuxcnc
 
 from compgen.configuration.machine_file import load_machine
 from compgen.controllers import linuxcnc
@@ -35,7 +35,7 @@ from compgen.controllers.registry import read_edits, read_state
 from compgen.data.rtest import RTestData
 from compgen.data.simulate import simulate
 from compgen.model.effects import location_model
-from compgen.model.kinematics import Model, Poses, inverse
+from compgen.model.kinematics import Model, Poses
 from compgen.model.lines import controller_inverse
 from compgen.model.paths import generate
 from compgen.statistics.identify import identify
@@ -396,54 +396,126 @@ def test_linuxcnc_starts_its_own_sample_with_compgens_configuration_and_holds_it
         print(f"LinuxCNC {kins} sample ({variant}): pins {pins}")
 
 
-MAXKINS_HAL = "\n".join([
-    "# maxkins maps joints 0-8 to X Y Z A B C U V W: joint 3 (A) is looped back unused",
+HEAD_HAL = "\n".join([
     "loadrt [KINS]KINEMATICS",
     "loadrt [EMCMOT]EMCMOT servo_period_nsec=[EMCMOT]SERVO_PERIOD num_joints=[KINS]JOINTS",
     "addf motion-command-handler servo-thread",
     "addf motion-controller servo-thread",
-    *(f"net j{j} joint.{j}.motor-pos-cmd => joint.{j}.motor-pos-fb" for j in range(6)),
+    "{loops}",
     "net estop-loop iocontrol.0.user-enable-out => iocontrol.0.emc-enable-in",
     "net tool-prep-loop iocontrol.0.tool-prepare => iocontrol.0.tool-prepared",
     "net tool-change-loop iocontrol.0.tool-change => iocontrol.0.tool-changed",
-    "setp maxkins.pivot-length {pivot}", ""])
+    "setp {module}.pivot-length {pivot}", ""])
+# each module's joints, as Debian's 2.9 maps them: maxkins X Y Z A B C U V W to joints 0-8
+# (joint 3, A, looped back unused); 5axiskins its required X Y Z B C W to 0-5 (W unused by
+# compgen): the coordinates the INI names, the joints read
+HEAD_JOINTS = {"maxkins": ("XYZBC", "0 1 2 4 5"), "5axiskins": ("XYZBCW", "0 1 2 3 4")}
 
 
-def test_maxkins_runs_compgens_program_for_a_swivel_head_where_compgen_puts_it(tmp_path):
-    """LinuxCNC's own maxkins (Debian's: a B head over a C table, one pin, pivot-length)
-    runs compgen's K4 program for the reference swivel head, pivot-length set to
-    what the program's header says (the pivot to the nest: the nest's length is in it):
-    at every pose its joints are the axes compgen's chain for heads puts there, with B and
-    C turned the other way from the machine file, as maxkins turns them."""
-    machine = load_machine(as_maxkins(tmp_path))
-    poses = _every(machine)
-    emitted = measure_program(machine, poses, "K4", "linuxcnc", "tcpm", "HEAD", "0", "d")
-    program, listed = emitted.files[".ngc"], emitted.files[".poses.csv"]
-    pivot = re.search(r"maxkins.pivot-length must hold (\S+) mm", program)[1]
-    assert float(pivot) == pytest.approx(270.0)          # 150 pivot length + 120 nest
-    folder = tmp_path / "run"
+def _head_configuration(folder: Path, machine, pin: str) -> Path:
+    """A configuration of ``machine``'s head module (its INI's path): loop-back joints, the
+    pivot-length pin set to ``pin`` in its HAL file, HAL_PIN_VARS as compgen's programs need."""
+    name = linuxcnc.head_module(machine)[0].module
+    coordinates = HEAD_JOINTS[name][0]
     folder.mkdir()
     ini = (HERE / "sim.ini.in").read_text().replace("@DRIVER@", str(HERE / "driver.py")).replace(
-        "@KINS@", "maxkins").replace("@TILT@", "B").replace("JOINTS = 5", "JOINTS = 6")
-    ini = ini.replace("[HAL]\nHALFILE = sim.hal\nHALFILE = edit.hal", "[HAL]\nHALFILE = sim.hal")
+        "@KINS@", name).replace("COORDINATES = XYZ@TILT@C", f"COORDINATES = {coordinates}").replace(
+        "@TILT@", "B").replace("JOINTS = 5", "JOINTS = 6")
+    ini = ini.replace("[HAL]\nHALFILE = sim.hal\nHALFILE = edit.hal", "[HAL]\nHALFILE = sim.hal").replace(
+        "[RS274NGC]\n", "[RS274NGC]\nHAL_PIN_VARS = 1\n")
     ini += "\n" + ini[ini.index("[JOINT_4]"):].replace("[JOINT_4]", "[JOINT_5]")
+    if name == "5axiskins":                          # W (joint 5) is linear, with an axis of its own
+        ini = ini.replace("[JOINT_5]\nTYPE = ANGULAR", "[JOINT_5]\nTYPE = LINEAR")
+        ini += "\n" + ini[ini.index("[AXIS_X]"):ini.index("[AXIS_Y]")].replace("[AXIS_X]", "[AXIS_W]")
     (folder / "sim.ini").write_text(ini)
-    (folder / "sim.hal").write_text(MAXKINS_HAL.format(pivot=pivot))
-    (folder / "sim.tbl").write_text("T7 P1 Z0 ;R-test nest, its length in maxkins.pivot-length\n")
+    loops = "\n".join(f"net j{j} joint.{j}.motor-pos-cmd => joint.{j}.motor-pos-fb" for j in range(6))
+    (folder / "sim.hal").write_text(HEAD_HAL.format(loops=loops, module=name, pivot=pin))
+    (folder / "sim.tbl").write_text(f"T7 P1 Z0 ;R-test nest, its length in {name}.pivot-length\n")
     (folder / "sim.var").write_text("")
+    return folder / "sim.ini"
+
+
+def _run_head(ini: Path, machine, program: str) -> tuple[dict, list[str]]:
+    """Start LinuxCNC with ``ini`` and run ``program``: the joints (X Y Z, tilt, C) at each
+    line where they rested, and the operator's messages."""
+    folder = ini.parent
     (folder / "prog.ngc").write_text(program)
-    launcher = launch(folder, folder / "sim.ini", {"COMPGEN_NGC": str(folder / "prog.ngc"),
-                                                     "COMPGEN_READ_JOINTS": "0 1 2 4 5"})
+    read = HEAD_JOINTS[linuxcnc.head_module(machine)[0].module][1]
+    launcher = launch(folder, ini, {"COMPGEN_NGC": str(folder / "prog.ngc"), "COMPGEN_READ_JOINTS": read})
     text = (folder / "joints.txt").read_text() if (folder / "joints.txt").exists() else ""
     assert text.rstrip().endswith("done"), (text[-500:], launcher.stdout[-1500:])
     joints = {int(w[0]): np.array([float(v) for v in w[1:6]])
               for w in (ln.split() for ln in text.splitlines()) if w[0].isdigit()}
+    return joints, re.findall(r"(?m)^message (.*)$", text)
+
+
+# what a head module's pin holds (the B line 30 µm farther from the nest along the tool) and
+# the ball's set-up
+HEAD_TRUTH = {"XOW": 4 * UM, "YOW": -6 * UM, "ZOW": 9 * UM, "ZOB": 30 * UM}
+
+
+@pytest.mark.parametrize("source", [None, FORK_MACHINE], ids=["maxkins", "5axiskins"])
+def test_a_head_modules_edit_runs_compgens_program_where_compgen_puts_it(tmp_path, source):
+    """LinuxCNC's own head modules (Debian's maxkins: a B head over a C table; 5axiskins: a
+    C head carrying a B fork; one geometry pin each, pivot-length). A session of the
+    reference swivel head or fork with its B line 30 µm off along the tool is fitted, and
+    compgen's edit of the configuration (pivot-length at the machine file's 270 mm, the pivot
+    to the nest) is started: LinuxCNC holds the pin compgen wrote, and runs compgen's K4
+    program, which checks the pin (HAL_PIN_VARS), with its joints where compgen's model of
+    the edited control puts the axes — B (and maxkins's C) turned the other way from the
+    machine file, as the module turns them. The true machine driven there reads set-up and
+    noise only. With the pin 20 mm off (maxkins: one run is enough, the guard is the same
+    words), the program stops at its guard before anything moves and says why."""
+    machine = load_machine(on_linuxcnc(tmp_path, source))
+    module = linuxcnc.head_module(machine)[0]
+    name, sense = module.module, dict(module.sense)
+    poses = _every(machine)
+    emitted = measure_program(machine, poses, "K4", "linuxcnc", "tcpm", "HEAD", "0", "d")
+    program, listed = emitted.files[".ngc"], emitted.files[".poses.csv"]
+    guard = linuxcnc.PIN_GUARD.search(program)
+    assert guard[1] == name and float(guard[2]) == pytest.approx(270.0)      # 150 pivot + 120 nest
+    if name == "maxkins":
+        joints, said = _run_head(_head_configuration(tmp_path / "short", machine, "250.0"), machine, program)
+        at = program[:guard.start()].count("\n") + 1                       # the guard's line
+        assert said and "pivot-length is more than 0.1000 mm from 270.0000 mm" in said[-1], said
+        assert all(line <= at + 2 for line in joints), sorted(joints)       # nothing after the guard
+        assert all(np.allclose(j, 0, atol=1e-9) for j in joints.values()), joints
+    rng = np.random.default_rng(7)
+    pre = simulate(machine, HEAD_TRUTH, generate(machine, ["K4", "K2"]), NOISE_UM, rng)
+    fit = identify(machine, [pre], location_model(machine))
+    ini = _head_configuration(tmp_path / "run", machine, guard[2])
+    out = kinematics_edit(machine, fit, "linuxcnc", read_state(str(ini)), str(ini), "KIN", "0", "d",
+                          stem="KIN", folder=str(ini.parent))
+    for suffix, text in out.files.items():
+        (ini.parent / f"KIN{suffix}").write_text(text)
+    assert sorted(out.files) == [".ini", ".sim.hal", "_RESTORE.ini", "_SIGN.ngc"]   # the pin set where it was
+    pin = float(re.search(rf"(?m)^setp {name}\.pivot-length (\S+)", out.files[".sim.hal"])[1])
+    assert pin - 270 == pytest.approx(fit.parameters["ZOB"].value, abs=1e-6)
+    assert abs(pin - 270 - HEAD_TRUTH["ZOB"]) < 3 * fit.parameters["ZOB"].std
+    joints, said = _run_head(ini.parent / "KIN.ini", machine, program)
+    assert [m[:13] for m in said] == ["PRESET CHECK:"], said           # the preset stop, nothing else
     got = _at_poses(joints, program)
-    # the pose list's angles are the program's (as written, 1e-4 deg); compgen's axes there
-    rotary = np.loadtxt(listed.splitlines()[1:], delimiter=",", usecols=(4, 5))      # C, B
-    want = inverse(machine, np.radians(rotary), poses.ball)
+    # the pose list's angles are the program's (as written, 1e-4 deg); the linear joints are
+    # where compgen's model of the edited control puts the axes there
+    header = listed.splitlines()[0].split(",")
+    rotary = np.loadtxt(listed.splitlines()[1:], delimiter=",", usecols=(4, 5))
+    held = linuxcnc.head_lines(machine, pin - 270)
+    want = controller_inverse(machine, held, np.radians(rotary), poses.ball)
     np.testing.assert_allclose(got[:, :3], want[:, :3], rtol=0, atol=JOINT_MM)
-    np.testing.assert_allclose(got[:, 3:], -rotary[:, ::-1], rtol=0, atol=1e-9)       # joints B, C
-    assert np.abs(got[:, 0] - 150).max() > 100        # the head's turn moved X by up to 234 mm
-    print(f"maxkins ran {len(got)} poses of compgen's program; joints within "
-          f"{np.abs(got[:, :3] - want[:, :3]).max() * 1e3:.2g} um of compgen's axes")
+    columns = [header.index(a) - 4 for a in "BC"]                           # the joints read: B, C
+    np.testing.assert_allclose(got[:, 3:], rotary[:, columns] * [sense["B"], sense["C"]], rtol=0, atol=1e-9)
+    assert np.abs(got[:, :3] - got[0, :3]).max() > 100       # the head's turn moved the axes by > 100 mm
+    # the true machine at LinuxCNC's joints reads set-up and noise only
+    q = np.concatenate([got[:, :3], np.radians(rotary)], axis=1)
+    q = q[:, [["X", "Y", "Z", *header[4:6]].index(a) for a in machine.axis_names]]
+    true = Model(machine, list(HEAD_TRUTH))
+    reading = true.relative(Poses(q, poses.ball, poses.t, poses.path), np.array(list(HEAD_TRUTH.values())))
+    reading = reading + rng.normal(0, NOISE_UM * 1e-3, reading.shape)
+    setup = ["XOW", "YOW", "ZOW"]
+    before = identify(machine, [RTestData(poses, pre.deviation[:241][np.arange(0, 241, 12)])], setup)
+    after = identify(machine, [RTestData(poses, reading)], setup)
+    print(f"{name}: pivot-length 270 -> {pin:.6f} mm; K4 misfit beyond set-up "
+          f"{before.residual['rms_um']:.2f} -> {after.residual['rms_um']:.2f} um; joints within "
+          f"{np.abs(got[:, :3] - want[:, :3]).max() * 1e3:.2g} um of compgen's model")
+    assert before.residual["rms_um"] > 10 * NOISE_UM
+    assert after.residual["rms_um"] == pytest.approx(NOISE_UM, rel=0.3)

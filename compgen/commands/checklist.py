@@ -133,7 +133,7 @@ def checklist(machine: Machine, folder: str | Path, comparison: dict | None = No
         Step("Review confounded effects and fragile parameters", BY_HAND,
              note="diagnose lists what these data cannot see and what would separate it"),
         Step("Kinematics edit emitted (with backup step and sign check)", BY_HAND, note=HEAD_EDIT)
-        if machine.heads else
+        if machine.heads and not controller(machine.controller).edits_head(machine) else
         Step("Kinematics edit emitted (with backup step and sign check)", DONE if f.edits else OPEN,
              _names(f.edits + f.signchecks),
              f"{me()} kinematics --from {fit_path} --current CURRENT -o {out('KIN')}"),

@@ -116,7 +116,7 @@ def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, control
     by_hand = ctl.tables_by_hand and p.tables
     assumes = ((f"the compensation values of the edit's .comp.csv ({', '.join(p.tables)}) are entered "
                 f"into the {ctl.words}'s compensation tables by hand",) if by_hand else ())
-    if machine.heads:      # the edit is compgen's model of the control, not a file it writes
+    if machine.heads and not ctl.edits_head(machine):   # compgen's model of the control, no file
         assumes += (f"no edit is written for a head yet: the prediction is for the fitted location errors "
                     f"entered by hand into the {ctl.words}'s kinematics, as compgen models it for a table",)
     return Comparison(ctl.name, before, pred, tuple(not_held), tuple(p.setup), measured,

@@ -126,6 +126,19 @@ class Controller:
         the tool (only where the control's kinematics for it was run: none by default)."""
         return False
 
+    def corrects(self, machine: Machine, e) -> bool:
+        """Whether an edit of this control corrects the constant effect ``e``
+        (``model.effects.Effect``) of ``machine``: a rotary axis's offsets always, its tilts
+        where the control holds tilts, the linear axes' squareness where it holds it."""
+        if machine.axis(e.carrier).rotary:
+            return e.unit == "mm" or self.holds_tilts
+        return bool(self.squareness_as)
+
+    def edits_head(self, machine: Machine) -> bool:
+        """Whether compgen writes this control's kinematics edits for ``machine``, whose head
+        turns the tool (only where the control's kinematics for it was run: none by default)."""
+        return False
+
     def writes_programs(self, machine: Machine) -> bool:
         """Whether compgen writes this control's programs for ``machine``: every table-table
         machine; a head only where ``programs_for_head`` says so."""

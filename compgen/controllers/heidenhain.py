@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import me
 from ..errors import CompgenError
 from ..model.effects import ROT_OF, ROTATIONS, TRANSLATIONS
 from ..model.lines import AxisLine
@@ -305,7 +306,7 @@ def program_blocks(text: str) -> list[Block]:
         if (d := re.fullmatch(r"(BEGIN|END) PGM (\S+) (\S+)", b)) is not None:
             if d[3] != "MM":       # compgen's positions are mm; an INCH program reads them as inches
                 raise CompgenError(f"line {k}: {b!r}: only programs in MM are checked", where=None,
-                                   hint="write the program with compgen measure-program")
+                                   hint=f"write the program with {me()} measure-program")
             if d[1] == "BEGIN":
                 name = d[2]
                 out.append(Block(k, raw, "units"))
@@ -329,7 +330,7 @@ def program_blocks(text: str) -> list[Block]:
             # spatial angles. Neither is what this check models.
             raise CompgenError(f"line {k}: {b!r}: only {TCPM!r} is modelled (F CONT: the feed of the "
                                "axes programmed; AXIS POS: rotary words are axis positions)",
-                               hint="write the program with compgen measure-program")
+                               hint=f"write the program with {me()} measure-program")
         elif (d := re.fullmatch(r"CYCL DEF 7\.[123] [XYZ]([+-]?\d{1,7}(?:\.\d{0,9})?)", b)) is not None:
             if float(d[1]) != 0:
                 raise CompgenError(f"line {k}: a datum shift moves the preset compgen's positions are in")

@@ -31,7 +31,10 @@ def sign_check(machine: Machine, p: Plan, ctl: Controller, name: str, version: s
     rows, labels = [], []
     for a in machine.rotary_axes:
         lo, hi = a.travel
-        for ang in (0.0, 90.0, 180.0, 270.0) if a.full_turn else (max(lo, -90.0), 0.0, min(hi, 90.0)):
+        # a head tilted to 90° takes its body towards the table (the reference heads' enter it
+        # with the ball 80 mm up): half that shows a pivot's error along the tool as well
+        tilt = 45.0 if a.side == "tool" and not a.full_turn else 90.0
+        for ang in (0.0, 90.0, 180.0, 270.0) if a.full_turn else (max(lo, -tilt), 0.0, min(hi, tilt)):
             rot = [np.radians(ang) if b.name == a.name else 0.0 for b in machine.rotary_axes]
             if rot in rows:            # the zero pose is shared by every axis's sweep
                 continue
@@ -72,9 +75,7 @@ def corrected_by(machine: Machine, fit: FitResult, ctl: Controller) -> dict[str,
         e = effect_of_param(machine, n)
         if e.basis.kind != "const" or e.carrier in ("ball", "nest"):
             continue
-        rotary = machine.axis(e.carrier).rotary
-        held = (fit.parameters[n].unit == "mm" or ctl.holds_tilts) if rotary else bool(ctl.squareness_as)
-        if held:
+        if ctl.corrects(machine, e):
             out[n] = fit.parameters[n].value
     return out
 

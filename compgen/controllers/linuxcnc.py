@@ -18,11 +18,12 @@ coordinates (X Y Z, the tilting axis, C: joints 0–4), as LinuxCNC prints them 
 from __future__ import annotations
 
 import re
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from .. import me
 from ..errors import CompgenError
 from ..model.lines import AxisLine
 from ..model.machine import Machine
@@ -74,19 +75,88 @@ def trt_module(machine: Machine) -> tuple[str, object, object]:
     return f"xyz{axes[0].name.lower()}c-trt-kins", axes[0], axes[1]
 
 
-def maxkins_pivot(machine: Machine) -> float | None:
-    """The pivot-length LinuxCNC's maxkins needs for ``machine`` (mm: the pivot to the nest
-    centre, the nest's length in it), or None where maxkins is not its kinematics: a B head
-    pivoting on the tool axis over a C table turning about the machine origin. What maxkins
-    holds was run (tests/test_linuxcnc.py): its world coordinates are the table frame and
-    it turns B and C the other way from the machine file."""
+@dataclass(frozen=True)
+class HeadModule:
+    """A LinuxCNC kinematics module that turns the tool: its name, what machine it is for,
+    and how it turns each rotary axis against the machine file (what it holds was run with
+    the real module: tests/test_linuxcnc.py). Its one geometry pin, pivot-length, holds the
+    pivot to the controlled point: compgen's programs put the nest there (G49)."""
+    module: str
+    what: str
+    active: str                           # when the control runs it
+    head: tuple[tuple[str, str], ...]     # the head's axes, base outwards: (name, direction)
+    table: tuple[tuple[str, str], ...]    # the table's rotary axes
+    sense: tuple[tuple[str, int], ...]    # ±1 a rotary axis: its turn in the module's words
+
+
+# Debian's 2.9: maxkins.c (a B head over a C table, always active; X Y Z in the table frame)
+# and 5axiskins.c (a bridge mill's C head carrying B, through switchkins type 0). Both tilt
+# B the other way from a right-handed turn of the tool; maxkins turns its table's C the
+# other way too, 5axiskins its head's C as the tool turns.
+HEAD_MODULES = (
+    HeadModule("maxkins", "a B head over a C table", "always active",
+               head=(("B", "y"),), table=(("C", "z"),), sense=(("B", -1), ("C", -1))),
+    HeadModule("5axiskins", "a C head carrying a B fork",
+               "at motion.switchkins-type 0 (its start without sparm=identityfirst)",
+               head=(("C", "z"), ("B", "y")), table=(), sense=(("B", -1), ("C", 1))),
+)
+
+
+def head_module(machine: Machine) -> tuple[HeadModule, float] | None:
+    """LinuxCNC's module for ``machine``'s head and the pivot-length it needs (mm: the pivot
+    to the nest centre, the nest's length in it), or None where no module fits: every head
+    axis pivoting on the tool axis at one point, a table axis turning about the origin, each
+    turning right-handed in the machine file."""
     heads, tables = machine.heads, [a for a in machine.rotary_axes if a.side == "workpiece"]
-    if not (len(heads) == len(tables) == 1 and heads[0].direction == "y" and tables[0].direction == "z"):
-        return None
-    b, c = heads[0], tables[0]
-    if any(b.offset[:2]) or any(c.offset) or b.sense != 1 or c.sense != 1:
-        return None
-    return machine.probe_length + b.offset[2]
+    for m in HEAD_MODULES:
+        if ([(a.name, a.direction) for a in heads] != list(m.head)
+                or [(a.name, a.direction) for a in tables] != list(m.table)
+                or any(a.sense != 1 for a in machine.rotary_axes)
+                or any(any(c.offset) for c in tables) or any(heads[0].offset[:2])
+                or any(any(a.offset) for a in heads[1:])):
+            continue
+        return m, machine.probe_length + heads[0].offset[2]
+    return None
+
+
+def pin_tolerance(machine: Machine) -> float:
+    """How far (mm) a head module's pivot-length may stand from the machine file's for its
+    programs to run: what an edit may change it by, the machine file's [limits] offset_um
+    (the motion check's clearances are millimetres)."""
+    return float(f"{machine.limits.offset_um * 1e-3:.4f}")
+
+
+def module_pins(machine: Machine) -> tuple[str, list[str], dict[str, float]]:
+    """The kinematics module compgen edits for ``machine`` (a head module, else trt), its
+    geometry pins in the order the edit writes them, and their nominal values (mm)."""
+    head = head_module(machine)
+    if head is not None:
+        return head[0].module, ["pivot-length"], {"pivot-length": head[1]}
+    module, tilt, c = trt_module(machine)
+    return module, pin_names(tilt), nominal_pins(machine, tilt, c)
+
+
+def head_correction(machine: Machine, p: Plan) -> tuple[float, list[str]]:
+    """What a head module's one pin holds of ``p``: the heads' line offsets along the tool
+    axis at the pivot (mm; the true pivot that much farther from the nest lengthens the
+    pivot-length by it), and in words all else, which no pin of the module holds."""
+    heads = {a.name for a in machine.heads}
+    along = sum(float(p.lines[h].offset[2]) for h in heads)
+    other = [f"{n} offset {line.offset[i] * 1e3:+.2f} um along {'XYZ'[i]}" for n, line in p.lines.items()
+             for i in range(3) if line.offset[i] != 0 and not (n in heads and i == 2)]
+    other += [f"{n} tilt {line.tilt[i] / ARCSEC:+.2f} arcsec about {'XYZ'[i]}"
+              for n, line in p.lines.items() for i in range(3) if line.tilt[i] != 0]
+    return along, [*other, *p.squareness, *p.tables, *p.not_compensable]
+
+
+def head_lines(machine: Machine, along: float) -> dict[str, AxisLine]:
+    """The axis lines a head module holds with its pivot-length ``along`` mm from nominal:
+    the tilting head's line that much farther from the nest, every other line nominal."""
+    lines = nominal_lines(machine)
+    tilt = next(a for a in machine.heads if a.direction != "z")
+    line = lines[tilt.name]
+    return {**lines, tilt.name: AxisLine(tilt.name, line.nominal, line.pivot, np.array([0.0, 0.0, along]),
+                                         np.zeros(3))}
 
 
 def pin_names(tilt) -> list[str]:
@@ -147,6 +217,10 @@ def loaded_joint_tables(machine: Machine, state: str | None) -> dict[str, tuple[
 
 def _joint_tables(machine: Machine, cfg: Configuration) -> dict[str, tuple[CompTable, CompTable]]:
     out: dict[str, tuple[CompTable, CompTable]] = {}
+    if head_module(machine) is not None and cfg.joints:
+        raise CompgenError("the INI loads joint compensation tables (COMP_FILE): compgen does not compose "
+                           "them for a head module yet", where=str(next(iter(cfg.joints.values()))[0].place),
+                           hint="give the configuration without them, or edit the pin by hand")
     for joint, (comp, kind, text) in cfg.joints.items():
         where = f"{comp.place} ({comp.value})"
         axis = _joint_axis(machine, joint, str(comp.place))
@@ -212,9 +286,7 @@ def pins(machine: Machine, p: Plan, current: Configuration | None, where: str
     old value), each pin the way the current configuration sets it (a netted pin through its
     signal); the current values or the machine file's nominal, plus the corrections; what
     the pins cannot express; and where the configuration sets each pin."""
-    module, tilt, c = trt_module(machine)
-    names = pin_names(tilt)
-    nominal = nominal_pins(machine, tilt, c)
+    module, names, nominal = module_pins(machine)
     held, signal, line_of = nominal, {}, {}
     if current is not None:
         held, signal, line_of = held_pins(current, module)
@@ -230,13 +302,19 @@ def pins(machine: Machine, p: Plan, current: Configuration | None, where: str
                                    f"{machine.limits.offset_um:g} µm", where=str(line_of[n].place),
                                    hint="is this the configuration of the measured machine? If it is, "
                                         "correct the machine file's offsets or raise [limits]")
-    delta_r = p.lines[c.name].offset
-    delta_d = p.lines[tilt.name].offset - delta_r
-    new = {n: held[n] + (delta_r if n.endswith("rot-point") else delta_d)["xyz".index(n[0])] for n in names}
-    other = [f"{n} tilt {line.tilt[i] / ARCSEC:+.2f} arcsec about {'XYZ'[i]}"
-             for n, line in p.lines.items() for i in range(3) if line.tilt[i] != 0]
-    in_joints = {t.effect for t in joint_tables(machine, p)}
-    other += [*p.squareness, *(e for e in p.tables if e not in in_joints), *p.not_compensable]
+    if head_module(machine) is not None:
+        along, other = head_correction(machine, p)
+        new = {"pivot-length": held["pivot-length"] + along}
+    else:
+        _, tilt, c = trt_module(machine)
+        delta_r = p.lines[c.name].offset
+        delta_d = p.lines[tilt.name].offset - delta_r
+        new = {n: held[n] + (delta_r if n.endswith("rot-point") else delta_d)["xyz".index(n[0])]
+               for n in names}
+        other = [f"{n} tilt {line.tilt[i] / ARCSEC:+.2f} arcsec about {'XYZ'[i]}"
+                 for n, line in p.lines.items() for i in range(3) if line.tilt[i] != 0]
+        in_joints = {t.effect for t in joint_tables(machine, p)}
+        other += [*p.squareness, *(e for e in p.tables if e not in in_joints), *p.not_compensable]
     was = {n: line_of[n].text if current is not None else fmt_plain(held[n], 6) for n in names}
     rows = [("sets", signal[n], fmt_plain(new[n], 6), was[n]) if n in signal else
             ("setp", f"{module}.{n}", fmt_plain(new[n], 6), was[n]) for n in names]
@@ -248,13 +326,16 @@ def read_lines(text: str, machine: Machine, current: str | None,
     """The axis lines a trt edit sets, relative to ``current`` (default: nominal): ``text``
     is a configuration to start with (read from its INI), or a HAL file loaded after
     ``current``'s files, whose values reach the pins through their nets."""
-    module, tilt, c = trt_module(machine)
+    module, _, nominal = module_pins(machine)
     cfg = configuration(current, "current")
-    before = held_pins(cfg, module)[0] if cfg is not None else nominal_pins(machine, tilt, c)
+    before = held_pins(cfg, module)[0] if cfg is not None else nominal
     if is_bundle(text):
         now = held_pins(evaluate(text), module)[0]
     else:
         now = {**before, **held_pins(then(cfg, text, "edit") if cfg else hal_file(text, "edit"), module)[0]}
+    if head_module(machine) is not None:
+        return head_lines(machine, now["pivot-length"] - before["pivot-length"])
+    _, tilt, c = trt_module(machine)
     r = np.array([now[f"{a}-rot-point"] - before[f"{a}-rot-point"] for a in "xyz"])
     d = np.array([now.get(f"{a}-offset", 0.0) - before.get(f"{a}-offset", 0.0) for a in "xyz"])
     zero = np.zeros(3)
@@ -272,6 +353,8 @@ def joint_tables(machine: Machine, p: Plan) -> list[CompTable]:
     joint's trim. A full-turn axis's turn repeats over ±``TURNS_DEG`` within its travel
     (LinuxCNC does not wrap a joint's table)."""
     out = []
+    if head_module(machine) is not None:
+        return out                     # its joints' tables: not written for a head yet
     for t in comp_tables(machine, p):
         if t.input != t.output:
             continue                   # a cross table: no joint's own error
@@ -336,14 +419,16 @@ def read_comp(text: str, machine: Machine, where: str) -> CompTable:
 POSITION = {"5420": "X", "5421": "Y", "5422": "Z", "5423": "A", "5424": "B", "5425": "C"}
 
 
-MAXKINS = re.compile(r"^; LinuxCNC: maxkins\b", re.MULTILINE)    # a program written for it
+HEAD_PROGRAM = re.compile(r"^; LinuxCNC: (\S+kins) \(", re.MULTILINE)    # a program written for a head
+PIN_GUARD = re.compile(r"o101 if \[ABS\[#<_hal\[(\S+kins)\.pivot-length\]> - (\S+)\] GT (\S+)\]")
 
 
-def program_blocks(text: str, tcp: bool, maxkins: bool = False) -> list[Block]:
+def program_blocks(text: str, tcp: bool, head: str | None = None) -> list[Block]:
     """A G-code program as LinuxCNC executes it (the blocks compgen writes); ``tcp``: the
     trt kinematics are active (the configuration's choice: the program cannot say it).
-    Under ``maxkins`` the nest's length is the kinematics' pivot-length: G49 leaves it
-    there, and a G43 length would act along world Z whatever B is."""
+    Under a ``head`` module (maxkins, 5axiskins) the nest's length is the kinematics'
+    pivot-length: G49 leaves it there, a G43 length would act along world Z whatever B is,
+    and the program's guard stops unless the pin holds the length (a ``pin`` block)."""
     out, modal, feed = [Block(0, "kinematics", "tcp", on=tcp)], None, None
     lines = text.splitlines()
     guard_at = None
@@ -372,14 +457,26 @@ def program_blocks(text: str, tcp: bool, maxkins: bool = False) -> list[Block]:
                                    "lets the program run from anywhere: give the program compgen wrote")
             guard_at = k
             out.append(Block(k, raw, "require", target={POSITION[p]: 0.0 for p in parts}))
+        elif (d := PIN_GUARD.fullmatch(b)) is not None:
+            # the pin guard: stop unless the head module's pivot-length holds the program's
+            after = [ln.split(";", 1)[0].strip() for ln in lines[k:k + 2]]
+            if (len(after) < 2 or not re.fullmatch(r"\(abort,[^)]*\)", after[0]) or after[1] != "o101 endif"
+                    or not NUMBER.fullmatch(d[2]) or not NUMBER.fullmatch(d[3])):
+                raise CompgenError(f"line {k}: {raw.strip()!r} is not compgen's pin guard (the condition, "
+                                   "then an (abort, ...) line and o101 endif)",
+                                   hint="give the program compgen wrote")
+            guard_at = k
+            out.append(Block(k, raw, "pin", target={f"{d[1]}.pivot-length": (float(d[2]), float(d[3]))}))
+        elif b == "M66 E0 L0":               # waits for motion: the guard reads the pin as it is
+            out.append(Block(k, raw, "sync"))
         elif re.fullmatch(r"T\d+ M6", b):
             out.append(Block(k, raw, "tool"))
-        elif maxkins and re.fullmatch(r"G43 H\d+", b):
-            raise CompgenError(f"line {k}: {raw.strip()!r}: under maxkins a G43 length acts along world Z "
-                               "whatever B is", hint="the nest's length belongs in maxkins.pivot-length; "
+        elif head and re.fullmatch(r"G43 H\d+", b):
+            raise CompgenError(f"line {k}: {raw.strip()!r}: under {head} a G43 length acts along world Z "
+                               "whatever B is", hint=f"the nest's length belongs in {head}.pivot-length; "
                                                     "give the program compgen wrote (G49)")
         elif re.fullmatch(r"G43 H\d+", b) or b == "G49":
-            out.append(Block(k, raw, "length", on=b != "G49" or maxkins))
+            out.append(Block(k, raw, "length", on=b != "G49" or head is not None))
         elif (d := re.fullmatch(r"G4 P(\S+)", b)) is not None:
             out.append(dwell(d[1], k, raw))
         elif re.fullmatch(r"\((LOGOPEN,[\w.-]+|LOG,[^()]*|LOGCLOSE)\)", b):    # the probe log: no motion
@@ -454,17 +551,41 @@ class LinuxCNC(Controller):
         return {"conventional_directions": conventional, "version": version}
 
     def angle_sense(self, machine: Machine) -> dict[str, int]:
-        if maxkins_pivot(machine) is not None:      # maxkins turns B and C the other way
-            return {a.name: -1 for a in machine.rotary_axes}
+        if (head := head_module(machine)) is not None:     # as the module turns them
+            return dict(head[0].sense)
         flip = -1 if (machine.linuxcnc or {}).get("conventional_directions") else 1
         return {a.name: flip for a in machine.rotary_axes}
 
     def programs_for_head(self, machine: Machine) -> bool:
-        return maxkins_pivot(machine) is not None
+        return head_module(machine) is not None
 
     def program_context(self, machine: Machine) -> dict:
-        pivot = maxkins_pivot(machine)
-        return {"maxkins": pivot is not None and f"{pivot:.4f}"}
+        head = head_module(machine)
+        mirrored = head and [a for a, v in head[0].sense if v == -1]
+        return {"head": head and {"module": head[0].module, "what": head[0].what, "active": head[0].active,
+                                  "pivot": f"{head[1]:.4f}", "within": f"{pin_tolerance(machine):.4f}",
+                                  "mirrored": " and ".join(mirrored)
+                                  + (" are" if len(mirrored) > 1 else " is"),
+                                  "them": "them" if len(mirrored) > 1 else "it"}}
+
+    def check(self, machine: Machine, blocks: list[Block], probe=None):
+        """The motion check, where a head module's program checks the module's pin: compgen
+        models the machine with the machine file's pivot, so the guard must stop the
+        program unless the pin holds that (else the check would be of another machine)."""
+        head = head_module(machine)
+        pins = [b for b in blocks if b.kind == "pin"]
+        want = head and {f"{head[0].module}.pivot-length": (float(f"{head[1]:.4f}"), pin_tolerance(machine))}
+        if head and (not pins or any(b.target != want for b in pins)):
+            got = "; ".join(f"line {b.line}: {b.text.strip()}" for b in pins) or "no pin guard"
+            raise CompgenError(f"a program for this machine must stop unless {head[0].module}.pivot-length "
+                               f"holds {head[1]:.4f} mm, the machine file's pivot to the nest, to "
+                               f"{pin_tolerance(machine):.4f} mm ({got})",
+                               hint=f"write it again with {me()} measure-program for this machine file")
+        if pins and not head:
+            raise CompgenError(f"line {pins[0].line}: the program was written for a head on "
+                               f"{next(iter(pins[0].target)).split('.')[0]}, which this machine file is not",
+                               hint="check it against the machine file it was written for")
+        return super().check(machine, blocks, probe)
 
     def blocks(self, text: str, mode: str | None = None) -> list[Block]:
         written = ("tcpm" if self.tcpm_on.search(text) else
@@ -476,8 +597,28 @@ class LinuxCNC(Controller):
         if mode != written:
             raise CompgenError(f"the program was written for mode {written.upper()} (its header) and is to "
                                f"run under {mode.upper()}: its positions mean other things there",
-                               hint=f"write it again with compgen measure-program --mode {mode}")
-        return program_blocks(text, mode == "tcpm", MAXKINS.search(text) is not None)
+                               hint=f"write it again with {me()} measure-program --mode {mode}")
+        head = HEAD_PROGRAM.search(text)
+        return program_blocks(text, mode == "tcpm", head and head[1])
+
+    def edits_head(self, machine: Machine) -> bool:
+        return head_module(machine) is not None
+
+    def corrects(self, machine: Machine, e) -> bool:
+        if head_module(machine) is None:
+            return super().corrects(machine, e)
+        # the one pin: a head's line offset along the tool axis at the pivot (ZOB)
+        return e.carrier in {a.name for a in machine.heads} and e.direction == "z"
+
+    def holds(self, machine: Machine, p: Plan) -> Held:
+        if head_module(machine) is None:
+            return super().holds(machine, p)
+        return Held(head_lines(machine, head_correction(machine, p)[0]), {}, ())
+
+    def not_held(self, machine: Machine, p: Plan) -> list[str]:
+        if head_module(machine) is None:
+            return super().not_held(machine, p)
+        return head_correction(machine, p)[1]
 
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:
@@ -489,17 +630,21 @@ class LinuxCNC(Controller):
         ini_lines = [ini for ini, _ in comps.values()]
         sign = [f"sign check {ctx.name}_SIGN{self.program_ext}, expected change of the reading:", *ctx.expect]
         notes = [f"{cmd} {target} {v}  (was {w})" for cmd, target, v, w in rows]
+        head = head_module(machine)
+        what = head and head[0].what
         if other:
-            notes.append("not expressible in LinuxCNC's trt kinematics and joint tables: " + ", ".join(other))
+            notes.append(f"not expressible in LinuxCNC's {module}" + (" (its one pin, pivot-length)"
+                                                                      if head else " and joint tables")
+                         + ": " + ", ".join(other))
         tool = f"{module}.tool-offset"
-        if state is not None and tool not in state.net:
+        if head is None and state is not None and tool not in state.net:
             notes.append(f"{tool} is not netted: net it to motion.tooloffset.z, or the table turns about the "
                          "spindle nose instead of the nest (G43 lengths)")
         if cfg is not None:
             return self._configuration_edit(machine, cfg, ctx, rows, settings, comps, loaded,
                                             [*ctx.header, *ctx.lines, *sign], notes)
-        text = render("linuxcnc/kinematics.hal.j2", header=ctx.header, module=module, lines=ctx.lines,
-                      rows=rows, other=other, ini=ini_lines, sign=sign, restore=False)
+        text = render("linuxcnc/kinematics.hal.j2", header=ctx.header, module=module, head=what,
+                      lines=ctx.lines, rows=rows, other=other, ini=ini_lines, sign=sign, restore=False)
         notes.append(f"load it: put these values where the configuration sets the pins. A HALFILE added "
                      "after the others is overwritten by the INI's HALCMD lines and POSTGUI_HALFILE where "
                      f"they set a pin (as LinuxCNC's own trt samples do): give the INI as --current and "
@@ -511,10 +656,11 @@ class LinuxCNC(Controller):
                       "round's correction alone (give the INI to add to them)"]
         restore_ini = [f"[JOINT_{joint_number(machine, a)}] no COMP_FILE (remove the line the edit set)"
                        for a in sorted({t.input for t in joint_tables(machine, p)})]
-        restore = render("linuxcnc/kinematics.hal.j2", module=module, lines=[], other=[], ini=restore_ini,
+        restore = render("linuxcnc/kinematics.hal.j2", module=module, head=what, lines=[], other=[],
+                         ini=restore_ini,
                          rows=[(cmd, target, w, w) for cmd, target, _, w in rows], restore=True, sign=[],
-                         header=[f"compgen {ctx.version}: restores the trt pins as they were read",
-                                 *ctx.header[1:3], f"load it in place of {ctx.stem}.hal"])
+                         header=[f"compgen {ctx.version}: restores the {module if head else 'trt'} pins as "
+                                 "they were read", *ctx.header[1:3], f"load it in place of {ctx.stem}.hal"])
         return EditFiles({".hal": text, "_RESTORE.hal": restore,
                           **{k: body for k, (_, body) in comps.items()}}, tuple(notes))
 
@@ -527,7 +673,8 @@ class LinuxCNC(Controller):
             raise CompgenError("the configuration to start with names its files as the INI does, relative to "
                                f"{cfg.folder}: write it there", where=ctx.folder,
                                hint=f"give -o {cfg.folder / (ctx.stem + '.ini')}")
-        values = {f"{trt_module(machine)[0]}.{n}": v for (_, _, v, w), n in zip(rows, settings, strict=True)
+        module = module_pins(machine)[0]
+        values = {f"{module}.{n}": v for (_, _, v, w), n in zip(rows, settings, strict=True)
                   if float(v) != float(w)}
         joints = {joint_number(machine, suffix.split(".")[1]): f"{ctx.stem}{suffix}" for suffix in comps}
         files = configuration_files(cfg, values, joints, ctx.stem, header)
@@ -538,7 +685,7 @@ class LinuxCNC(Controller):
                                            f"{start}; start LinuxCNC with this file to undo the edit",
                                            cfg.texts[cfg.ini_path].rstrip("\n")]) + "\n"
         changed = sorted(f"{s.place} ({s.text} -> {values[pin]})" for n, s in settings.items()
-                         if (pin := f"{trt_module(machine)[0]}.{n}") in values)
+                         if (pin := f"{module}.{n}") in values)
         notes.append(f"start LinuxCNC with {cfg.folder / start}: the INI's own lines, the values changed "
                      "where the configuration sets them (" + "; ".join(changed) + ")"
                      + ("; " + ", ".join(f"{ctx.stem}{k}" for k in files if k not in (".ini", "_RESTORE.ini")
@@ -580,9 +727,9 @@ class LinuxCNC(Controller):
                                where=f"{machine.source}: [linuxcnc] conventional_directions",
                                hint="set conventional_directions = false (before LinuxCNC 2.10, or the "
                                     "module's conventional-directions pin at its default 0) or true (pin 1)")
-        if maxkins_pivot(machine) is not None and machine.linuxcnc.get("conventional_directions"):
-            raise CompgenError("maxkins was run without a conventional-directions pin (Debian's 2.9 has "
-                               "none); a newer one turns B the other way at 1",
+        if (head := head_module(machine)) is not None and machine.linuxcnc.get("conventional_directions"):
+            raise CompgenError(f"{head[0].module} was run without a conventional-directions pin (Debian's "
+                               "2.9 has none); a newer one turns B the other way at 1",
                                where=f"{machine.source}: [linuxcnc] conventional_directions",
                                hint="set it false, with the pin at its default 0")
         self.check_tool(machine.program.tool, "[program] tool", machine.source)

@@ -33,10 +33,9 @@ def controller(name: str) -> Controller:
 def for_machine(name: str, machine: Machine, edit: bool = False) -> Controller:
     """The controller ``name``, to write or read ``machine``'s programs (or, with ``edit``,
     its kinematics edits): refused for a machine whose head turns the tool where compgen
-    does not write that control's files for it (a table-table control's would be wrong);
-    a head's edits are not written for any control yet."""
+    does not write that control's files for it (a table-table control's would be wrong)."""
     ctl = controller(name)
-    if machine.heads and (edit or not ctl.writes_programs(machine)):
+    if machine.heads and not (ctl.edits_head(machine) if edit else ctl.writes_programs(machine)):
         what = "kinematics edits" if edit else f"{ctl.words} programs"
         heads = ", ".join(a.name for a in machine.heads)
         raise CompgenError(f"compgen does not write {what} for a head yet: {machine.name}'s {heads} turns "

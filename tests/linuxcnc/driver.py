@@ -13,6 +13,17 @@ from display import Display
 display = Display("compgen-driver")
 read = [int(j) for j in os.environ.get("COMPGEN_READ_JOINTS", "0 1 2 3 4").split()]
 s, c, wait = display.s, display.c, display.wait
+errors = linuxcnc.error_channel()     # the operator's messages: an (abort, ...) says why it stopped
+messages = []
+
+
+def heard() -> bool:
+    """Keep the operator's message LinuxCNC sent, if any: whether there was one."""
+    message = errors.poll()
+    if message:
+        messages.append(" ".join(str(message[1]).split()))
+    return bool(message)
+
 
 with open(os.environ["COMPGEN_JOINTS"], "w") as out:
     try:
@@ -31,12 +42,14 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
         wait(lambda: s.task_mode == linuxcnc.MODE_AUTO)
         c.program_open(os.environ["COMPGEN_NGC"])
         c.auto(linuxcnc.AUTO_RUN, 0)
-        wait(lambda: s.interp_state != linuxcnc.INTERP_IDLE, 10)
+        # running, or stopped at once by the program's own guard (its message says so)
+        wait(lambda: heard() or s.interp_state != linuxcnc.INTERP_IDLE, 10)
         settled, last, stops = {}, None, 0
         still, longest = 0, {}     # polls the joints have held; each line's longest such run
         end = time.time() + 600
         while time.time() < end:
             s.poll()
+            heard()
             if s.interp_state == linuxcnc.INTERP_IDLE and s.queue == 0:
                 break
             if s.paused:           # the program's preset check (M0): the operator goes on
@@ -59,6 +72,7 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
             time.sleep(0.002)
         for line in sorted(settled):
             out.write(f"{line} " + " ".join(f"{v:.9f}" for v in settled[line]) + "\n")
+        out.writelines(f"message {m}\n" for m in messages)
         out.write(f"stops {stops}\ndone\n")
     except Exception as exc:   # the test reads this line and fails with it
         out.write(f"error {exc!r}\n")
