@@ -6,15 +6,16 @@ import re
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, FORK_MACHINE, UM, on_linuxcnc, run
+from conftest import ARCSEC, FORK_MACHINE, ROOT, UM, on_linuxcnc, run
 from scipy.spatial.transform import Rotation
 
 from compgen.commands.compare import compare
 from compgen.configuration.machine_file import load_machine
 from compgen.controllers import linuxcnc
 from compgen.controllers.advice import Advisor
-from compgen.controllers.kinematics import corrected_by
-from compgen.controllers.registry import controller
+from compgen.controllers.correction import plan
+from compgen.controllers.kinematics import corrected_by, kinematics_edit
+from compgen.controllers.registry import controller, read_edits
 from compgen.data.rtest import commanded, format_rtest, read_rtest
 from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
@@ -136,13 +137,10 @@ def test_a_session_is_fitted_at_the_cramer_rao_bound(case):
 @pytest.mark.parametrize("command", [
     ("measure-program", "--machine", "bc-swivel-head-table", "--path", "K2", "-o", "{out}/m.h"),
     ("probe-program", "--machine", "bc-swivel-head-table", "--path", "K2", "-o", "{out}/p.h"),
-    ("kinematics", "--from", "{fit}", "-o", "{out}/k.tab"),
-    ("simulate", "--machine", "bc-swivel-head-table", "--truth", "{fit}", "--edit", "{out}/k.tab",
-     "-o", "{out}/s.csv"),
 ], ids=lambda c: c[0])
 def test_no_controller_file_is_written_for_a_head_yet(command, tmp_path, head_machine):
-    """A table-table control's programs and edits would be wrong for a head: refused in one
-    line, before any gate or file, naming the head."""
+    """A table-table control's programs would be wrong for a head: refused in one line,
+    before any file, naming the head (its edits: below, on LinuxCNC)."""
     poses = generate(head_machine, ["K2"])
     data = simulate(head_machine, TRUTH, poses, 0.0)
     fit = tmp_path / "fit.json"
@@ -200,14 +198,22 @@ def test_a_heads_sag_is_not_told_from_its_angle_at_one_nest_length(head_machine)
 
 def test_what_an_edit_would_leave_says_no_edit_is_written_for_a_head(head_machine, tmp_path):
     """compare and the report predict what correcting the location errors would leave; for a
-    head they say that no edit is written for it (the user enters the values by hand)."""
+    head on a control compgen writes no edit for (LinuxCNC, the head fitting no module: its
+    B pivot 5 mm off the tool axis) they say so (the user enters the values by hand)."""
+    path = on_linuxcnc(tmp_path)
+    path.write_text(path.read_text().replace("offset = [0.0, 0.0, 150.0]", "offset = [5.0, 0.0, 150.0]"))
+    machine = load_machine(path)
     data = tmp_path / "d.csv"
-    data.write_text(format_rtest(head_machine, simulate(head_machine, TRUTH, generate(head_machine, ["K2"]),
-                                                        NOISE_UM, np.random.default_rng(1))))
+    data.write_text(format_rtest(machine, simulate(machine, TRUTH, generate(machine, ["K2"]), NOISE_UM,
+                                                   np.random.default_rng(1))))
     fit = tmp_path / "fit.json"
-    code, _, err = run("fit", "--machine", "bc-swivel-head-table", "--model", "XOW,YOW,ZOW,XOC,YOC", data,
-                       "-o", fit)
+    code, _, err = run("fit", "--machine", path, "--model", "XOW,YOW,ZOW,XOC,YOC", data, "-o", fit)
     assert code == 0, err
+    code, out, err = run("compare", "--from", fit, "--controller", "tnc640")
+    assert code == 0 and "no edit is written" not in out, err          # HEIDENHAIN: pairs around B
+    code, _, err = run("kinematics", "--from", fit, "-o", tmp_path / "k.hal")
+    assert code == 2 and "does not write kinematics edits for a head yet" in err and "Traceback" not in err
+    assert not (tmp_path / "k.hal").exists() and len(err.strip().splitlines()) <= 2, err
     code, out, err = run("compare", "--from", fit)
     assert code == 0 and "assumes: no edit is written for a head yet" in out, err
     code, _, err = run("report", "--from", fit, "-o", tmp_path / "r.html")
@@ -216,12 +222,19 @@ def test_what_an_edit_would_leave_says_no_edit_is_written_for_a_head(head_machin
 
 
 def test_the_checklist_prints_no_command_a_head_would_refuse(head_machine, tmp_path):
-    """Its steps for a program and an edit are by hand, and say why; none names a command or
-    a file compgen would write for a head."""
+    """On the TNC 640 its program step is by hand, and says why; the edit step names the
+    command as the TNC 640 takes it (no --current: its kinematics are in the configuration
+    editor). On LinuxCNC, where the head fits no module, both steps are by hand."""
     code, out, err = run("checklist", "--machine", "bc-swivel-head-table", "--dir", tmp_path, "--json")
     assert code == 0, err
+    assert "measure-program" not in out and "kinematics --from" in out and "--current" not in out
+    assert out.count("does not write") == 1 and "diagnose --from" in out
+    path = on_linuxcnc(tmp_path)
+    path.write_text(path.read_text().replace("offset = [0.0, 0.0, 150.0]", "offset = [5.0, 0.0, 150.0]"))
+    code, out, err = run("checklist", "--machine", path, "--dir", tmp_path, "--json")
+    assert code == 0, err
     assert "measure-program" not in out and "kinematics --" not in out and "edit's header" not in out
-    assert out.count("does not write") == 2 and "diagnose --from" in out
+    assert out.count("does not write") == 2
 
 
 def test_a_hidden_2_per_rev_of_c_is_named_found_on_both_heads(case):
@@ -280,8 +293,7 @@ def test_linuxcnc_edits_a_head_modules_pin_and_compare_predicts_what_it_leaves(t
     names every other location error as not expressible; compare predicts the K4 misfit the
     B line's X offset leaves, as the true machine driven by the edited control would read it
     (written out here from the truth, apart from compare's plan); the edit's sign check
-    turns B to ±45° (at 90° the head's body would enter the table). A head on a control
-    compgen does not edit for is still refused in one line."""
+    turns B to ±45° (at 90° the head's body would enter the table)."""
     path = on_linuxcnc(tmp_path, source)
     machine = load_machine(path)
     truth = {"XOW": 4 * UM, "YOW": -6 * UM, "ZOW": 9 * UM, "ZOB": 30 * UM, "XOB": 12 * UM}
@@ -316,5 +328,135 @@ def test_linuxcnc_edits_a_head_modules_pin_and_compare_predicts_what_it_leaves(t
     predicted = float(np.sqrt(np.mean(np.square(got.predicted_post["per_path"]["K4"]["rms_um"]))))
     assert expect > 4 * NOISE_UM
     assert predicted == pytest.approx(np.hypot(expect, NOISE_UM), rel=0.1), (predicted, expect)
-    code, _, err = run("kinematics", "--from", fit, "--controller", "tnc640", "-o", tmp_path / "T")
-    assert code == 2 and "does not write kinematics edits for a head yet" in err, err
+
+
+def _on_sinumerik(folder, source, vectors: str):
+    """A reference head on SINUMERIK with its $TC_CARR record (fine offsets on)."""
+    path = folder / f"sinumerik-{source.stem}.toml"
+    path.write_text(source.read_text().replace('controller = "tnc640"', 'controller = "sinumerik840d"')
+                    .replace("[limits]", "[sinumerik]\ntcarr = 1\nfine_correction = true\n"
+                                         f"vectors = {vectors}\n\n[limits]"))
+    return load_machine(path)
+
+
+def _record(v1, v2) -> str:
+    """A $TC_CARR record as the control holds it: fine offsets 0, the axis vectors."""
+    fine = [41, 42, 43, 44, 45, 46, 55, 56, 57, 58, 59, 60]
+    return "\n".join([*(f"$TC_CARR{n}[1]={x}" for n, x in zip(range(7, 13), [*v1, *v2], strict=True)),
+                      *(f"$TC_CARR{n}[1]=0" for n in fine)]) + "\n"
+
+
+@pytest.mark.parametrize("case", ["fork", "swivel"])
+def test_sinumerik_edits_of_a_head_against_hand_computed_records(tmp_path, case):
+    """The fork is a kind T record (rotary axis 1 = C, carrying axis 2 = B), the swivel head
+    over its C table a kind M (axis 1 the head's B, axis 2 the table's C). Their fine offsets
+    are computed here by hand from the Commissioning Manual's definitions (03/2013 p.502):
+    T: l3 tool adapter -> pivot 2, l2 pivot 2 -> pivot 1, l1 = -(l2 + l3); M: l2 tool adapter
+    -> pivot 1, l1 = -l2, l3 machine reference point -> pivot 2, l4 = -l3. A location error
+    moves its axis's pivot by its offsets and turns its vector by its tilt (the table's C
+    vector held reversed). The edit writes exactly those, reads back as the fitted lines,
+    and names its sign check's poses to be measured by hand (no SINUMERIK program is written
+    for a head)."""
+    sec = 1 / 3600
+    if case == "fork":
+        machine = _on_sinumerik(tmp_path, FORK_MACHINE, "{ C = [0.0, 0.0, 1.0], B = [0.0, 1.0, 0.0] }")
+        truth = {"XOC": 5 * UM, "YOC": -7 * UM, "AOC": 8 * ARCSEC, "XOB": 10 * UM, "ZOB": 20 * UM,
+                 "COB": 6 * ARCSEC}
+        held = ([0, 0, 1], [0, 1, 0])
+        t1, t2 = np.array([5, -7, 0]) * UM, np.array([10, 0, 20]) * UM          # pivot 1 (C), 2 (B)
+        fine = {"l3": t2, "l2": t1 - t2, "l1": -t1}
+        v1 = [0, -np.sin(np.radians(8 * sec)), np.cos(np.radians(8 * sec))]       # C turned 8" about X
+        v2 = [-np.sin(np.radians(6 * sec)), np.cos(np.radians(6 * sec)), 0]       # B turned 6" about Z
+    else:
+        machine = _on_sinumerik(tmp_path, ROOT / "machines" / "bc-swivel-head-table.toml",
+                                "{ B = [0.0, 1.0, 0.0], C = [0.0, 0.0, -1.0] }")
+        truth = {"XOB": 10 * UM, "ZOB": 20 * UM, "AOB": 5 * ARCSEC, "XOC": 5 * UM, "YOC": -7 * UM,
+                 "BOC": 7 * ARCSEC}
+        held = ([0, 1, 0], [0, 0, -1])
+        t1, t2 = np.array([10, 0, 20]) * UM, np.array([5, -7, 0]) * UM          # pivot 1 (B), 2 (C)
+        fine = {"l2": t1, "l1": -t1, "l3": t2, "l4": -t2}
+        v1 = [0, np.cos(np.radians(5 * sec)), np.sin(np.radians(5 * sec))]        # B turned 5" about X
+        v2 = [-np.sin(np.radians(7 * sec)), 0, -np.cos(np.radians(7 * sec))]      # C 7" about Y, reversed
+    assert machine.sinumerik["kind"] == ("T" if case == "fork" else "M")
+    data = [simulate(machine, truth, generate(machine, ["K4", "K2"]), 0.0, np.random.default_rng(0))]
+    fit = identify(machine, data, location_model(machine))
+    out = kinematics_edit(machine, fit, "sinumerik840d", _record(*held), "current", "KIN", "0", "d")
+    got = {int(m[1]): float(m[2]) for m in re.finditer(r"(?m)^\$TC_CARR(\d+)\[1\]=(\S+)$", out.files[".MPF"])}
+    index = {"l1": (41, 42, 43), "l2": (44, 45, 46), "l3": (55, 56, 57), "l4": (58, 59, 60)}
+    want = {n: float(v[k]) for vec, v in fine.items() for k, n in enumerate(index[vec])}
+    want |= {n: x for n, x in zip(range(7, 13), [*v1, *v2], strict=True)}
+    assert set(got) == set(want), sorted(set(got) ^ set(want))
+    for n in want:                                     # 5 decimals of a mm, 10 of a vector
+        assert got[n] == pytest.approx(want[n], abs=6e-6 if n > 12 else 1e-9), (n, got[n], want[n])
+    assert f"kind {machine.sinumerik['kind']}" in out.files[".MPF"] and "_SIGN.MPF" not in out.files
+    assert "measure these poses with the R-test" in out.files[".MPF"]
+    held_now = read_edits(machine, {"KIN.MPF": out.files[".MPF"]}, _record(*held))
+    fitted = plan(machine, fit).lines
+    for a in machine.rotary_axes:
+        np.testing.assert_allclose(held_now.lines[a.name].offset, fitted[a.name].offset, atol=6e-6)
+        np.testing.assert_allclose(held_now.lines[a.name].tilt, fitted[a.name].tilt, atol=1e-9)
+
+
+SWIVEL_TAB = """BEGIN KINEMATIC_BC.TAB MM
+NR  KEY       AXIS  COORD        DOC
+0   Trans     Z     +150         tool reference point to the B pivot
+1   MachAxis  B
+2   MachAxis  Z
+3   MachAxis  Y
+4   MachAxis  X
+5   MachBase
+6   MachAxis  C
+[END]
+"""
+
+
+@pytest.mark.parametrize("case", ["swivel-itnc530", "fork-tnc640"])
+def test_heidenhain_edits_of_a_head_against_hand_computed_rows(tmp_path, case):
+    """A head's location errors go into HEIDENHAIN's chain as a table's do (Technical Manual
+    p.684): error rows before its MachAxis, their inverse after it, the DOC naming each by its
+    ISO symbol (U18: the manual's example reads the tool side's Trans rows as the table
+    side's). The rows are written out here by hand from the fitted truth: the swivel head's
+    description table (iTNC 530) and the fork's change list (TNC 640). A table whose rows put
+    the B head 1 mm from where the machine file does is refused; no HEIDENHAIN program is
+    written for a head: the sign check's poses are named."""
+    sec = 1 / 3600
+    if case == "swivel-itnc530":
+        machine = load_machine(ROOT / "machines" / "bc-swivel-head-table.toml")
+        ctl, current = "itnc530", SWIVEL_TAB
+    else:
+        machine = load_machine(FORK_MACHINE)
+        ctl, current = "tnc640", None
+    truth = {"XOB": 10 * UM, "ZOB": 20 * UM, "AOB": 5 * ARCSEC, "XOC": 5 * UM, "YOC": -7 * UM,
+             "BOC": 7 * ARCSEC}
+    by_hand = {"B": [("X0B", "X", 0.010), ("Z0B", "Z", 0.020), ("A0B", "A", 5 * sec), ("C0B", "C", 0.0)],
+               "C": [("X0C", "X", 0.005), ("Y0C", "Y", -0.007), ("A0C", "A", 0.0), ("B0C", "B", 7 * sec)]}
+    data = [simulate(machine, truth, generate(machine, ["K4", "K2"]), 0.0, np.random.default_rng(0))]
+    fit = identify(machine, data, location_model(machine))
+    out = kinematics_edit(machine, fit, ctl, current, "current.TAB", "KIN", "0", "d")
+    assert not any(k.startswith("_SIGN") for k in out.files) and any("by hand" in n for n in out.notes)
+    if current is not None:        # the table: each axis's pairs around it, the OEM's rows kept
+        want = [("Trans", "Z", 150.0, "tool")]
+        for key, axis in [("MachAxis", "B"), ("MachAxis", "Z"), ("MachAxis", "Y"), ("MachAxis", "X"),
+                          ("MachBase", None), ("MachAxis", "C")]:
+            pairs = by_hand.get(axis, [])
+            want += [("Trans", a, v, doc) for doc, a, v in pairs] + [(key, axis, None, None)]
+            want += [("Trans", a, -v, f"-{doc}") for doc, a, v in reversed(pairs)]
+        rows = [ln.split() for ln in out.files[".TAB"].splitlines()[2:-1]]
+        got = [(r[1], r[2] if r[1] != "MachBase" else None, float(r[3]) if r[1] == "Trans" else None,
+                r[4] if r[1] == "Trans" else None) for r in rows]
+        assert [g[:2] + g[3:] for g in got] == [w[:2] + w[3:] for w in want], got
+        assert np.allclose([g[2] for g in got if g[2] is not None], [w[2] for w in want if w[2] is not None],
+                           rtol=0, atol=1e-7)
+        far = current.replace("+150  ", "+151  ")
+        with pytest.raises(CompgenError, match="puts the head's B axis at .* tool reference point"):
+            kinematics_edit(machine, fit, ctl, far, "far.TAB", "KIN", "0", "d")
+    text = out.files[".txt"]       # the change list
+    assert "UNCONFIRMED U18" in text
+    for doc, a, v in (row for pairs in by_hand.values() for row in pairs):
+        line = re.search(rf"(?m)^\s+{doc}\s+Trans\s+{a}\s+(\S+) (mm|deg)", text)
+        assert line and float(line[1]) == pytest.approx(v, abs=1e-7), (doc, line and line[0])
+    held = read_edits(machine, {"KIN.txt": text}, None)
+    fitted = plan(machine, fit).lines
+    for a in machine.rotary_axes:
+        np.testing.assert_allclose(held.lines[a.name].offset, fitted[a.name].offset, atol=6e-6)
+        np.testing.assert_allclose(held.lines[a.name].tilt, fitted[a.name].tilt, atol=1e-8)

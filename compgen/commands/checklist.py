@@ -136,9 +136,11 @@ def checklist(machine: Machine, folder: str | Path, comparison: dict | None = No
         if machine.heads and not controller(machine.controller).edits_head(machine) else
         Step("Kinematics edit emitted (with backup step and sign check)", DONE if f.edits else OPEN,
              _names(f.edits + f.signchecks),
-             f"{me()} kinematics --from {fit_path} --current CURRENT -o {out('KIN')}"),
+             f"{me()} kinematics --from {fit_path}"
+             + (" --current CURRENT" if controller(machine.controller).takes_current else "")
+             + f" -o {out('KIN')}"),
         Step("Backup taken, edit loaded, sign check run with the R-test", BY_HAND,
-             note="" if machine.heads else
+             note="" if machine.heads and not controller(machine.controller).edits_head(machine) else
              "; ".join(n for n in ("the expected reading changes are in the edit's header",
                                    controller(machine.controller).load_note) if n)),
         Step("Re-measured after the edit", DONE if post else OPEN, _names(post),

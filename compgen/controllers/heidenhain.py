@@ -23,7 +23,7 @@ from ..transforms import rot_axis
 from ..units import number
 from . import fmt_signed, render
 from .base import Controller, EditContext, EditFiles
-from .correction import Held, Plan, comp_tables, nominal_lines, pivot_of
+from .correction import CompTable, Held, Plan, nominal_lines, pivot_of
 from .tab import MM_PER, TabTable
 
 MM_DECIMALS = 5          # 0.01 µm
@@ -205,7 +205,38 @@ def check_pivots(table: TabTable, machine: Machine, where: str) -> str | None:
                                       "machine file's offsets")
     if not after_base:
         return "pivot check not made: the table has no MachBase row"
+    _check_head_pivots(table, machine, where)
     return None if checked else "pivot check not made: no MachAxis row of a rotary axis follows MachBase"
+
+
+def _check_head_pivots(table: TabTable, machine: Machine, where: str) -> None:
+    """A head's axes must sit where the machine file puts them: the chain starts at the tool
+    reference point (the gauge line), and its ``Trans`` rows up to each head's ``MachAxis``
+    (before ``MachBase``) compose to that head's pivot above it (the head offsets, base
+    outwards, summed: the manual's example p.670, ``Trans Z 250.051`` from the tool reference
+    point to its B head; U18)."""
+    pivots, at = {}, np.zeros(3)
+    for a in machine.heads:
+        at = at + np.asarray(a.offset, float)
+        pivots[a.name] = at
+    frame = np.eye(4)
+    for r in table.rows:
+        if r.get("KEY") == "MachBase":
+            return
+        if r.get("KEY") == "Trans" and r.get("AXIS") in ("X", "Y", "Z"):
+            step = np.eye(4)
+            step["XYZ".index(r["AXIS"]), 3] = table.mm(r["COORD"], r["AXIS"])
+            frame = frame @ step
+        elif r.get("KEY") == "Trans" and r.get("AXIS") in ("A", "B", "C"):
+            frame = frame @ rot_axis("xyz"["ABC".index(r["AXIS"])], np.radians(float(r["COORD"])))
+        elif r.get("KEY") == "MachAxis" and r.get("AXIS") in pivots:
+            got, want = frame[:3, 3], pivots[r["AXIS"]]
+            if np.abs(got - want).max() * 1e3 > machine.limits.offset_um:
+                shown = [", ".join(f"{v:.4f}" for v in x) for x in (got, want)]
+                raise CompgenError(f"the table puts the head's {r['AXIS']} axis at ({shown[0]}) mm from the "
+                                   f"tool reference point, the machine file at ({shown[1]}) mm", where=where,
+                                   hint="is this the table of the measured machine? If it is, correct the "
+                                        "machine file's head offsets")
 
 
 def _iso_rows(text: str) -> list[tuple[str, str, float]]:
@@ -392,10 +423,19 @@ class Heidenhain(Controller):
     def blocks(self, text: str, mode: str | None = None) -> list[Block]:
         return program_blocks(text)
 
+    def edits_head(self, machine: Machine) -> bool:
+        # pairs around a head's MachAxis as around a table's (U18)
+        return True
+
+    def tables(self, machine: Machine, p: Plan) -> list[CompTable]:
+        # a head's own error motions are not written to compensation tables yet
+        heads = {a.name for a in machine.heads}
+        return [t for t in super().tables(machine, p) if t.input not in heads and t.output not in heads]
+
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:
         rows = rows_of(machine, p)
-        tables = comp_tables(machine, p)
+        tables = self.tables(machine, p)
         files, notes = {}, []
         if current is not None:
             table = TabTable.parse(current, where)
@@ -410,7 +450,7 @@ class Heidenhain(Controller):
             lines=ctx.lines, expect=ctx.expect,
             tables=[{"effect": t.effect, "words": t.words, "output": t.output, "unit": t.unit,
                      "range": f"{t.input} {t.start:g}..{t.stop:g} step {t.step:g}"} for t in tables],
-            other=p.not_compensable, setup=p.setup)
+            other=p.not_compensable, setup=p.setup, head=bool(machine.heads))
         if tables:
             files[".comp.csv"] = _comp_csv(tables)
         return EditFiles(files, tuple(notes))
@@ -454,6 +494,7 @@ class TNC640(Heidenhain):
     name = "tnc640"
     words = "HEIDENHAIN TNC 640"
     backup = "save the machine configuration, or Cycle 450 SAVE KINEMATICS"
+    takes_current = False     # its kinematics live in the configuration editor, not in a file
 
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:

@@ -24,10 +24,11 @@ SIGN_SEEN_UM = 1.0     # a change of the reading an R-test shows for certain at 
 
 
 def sign_check(machine: Machine, p: Plan, ctl: Controller, name: str, version: str,
-               date: str) -> tuple[Emitted, list[str]]:
+               date: str) -> tuple[Emitted | None, list[str]]:
     """A short program that turns each rotary axis alone (with the files it names), and the
     reading change the edit should cause at each pose (after minus before, µm): a wrong sign
-    shows in a minute."""
+    shows in a minute. No program where compgen writes none of this control's for the
+    machine (a head): the poses are named, to be run by hand."""
     rows, labels = [], []
     for a in machine.rotary_axes:
         lo, hi = a.travel
@@ -59,6 +60,10 @@ def sign_check(machine: Machine, p: Plan, ctl: Controller, name: str, version: s
     if not seen.any():
         expect.append(f"the edit changes no reading by {SIGN_SEEN_UM:g} um or more: this check cannot "
                       "show its sign")
+    if not ctl.writes_programs(machine):     # a head compgen writes no program of this control for
+        expect.append(f"compgen writes no {ctl.words} program for this head: move to these poses by hand "
+                      "(the nest on the ball under TCPM, the other rotary axes at 0)")
+        return None, expect
     program = measure_program(machine, at_poses.take(np.flatnonzero(keep)), "sign check", ctl.name, "tcpm",
                               name, version, date,
                               notes=("expected change of the reading after the edit:", *expect))
@@ -118,7 +123,7 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
     sign_name = program_name(f"{name}_SIGN")
     signcheck, expect = sign_check(machine, p, ctl, sign_name, version, date)
     # the sign check and the files it names by its name (NAME_SIGN_MSG.A)
-    named = {f"_SIGN{k}": v for k, v in signcheck.files.items() if k in signcheck.named}
+    named = {f"_SIGN{k}": v for k, v in signcheck.files.items() if k in signcheck.named} if signcheck else {}
     header = (f"compgen {version} kinematics edit, {date}",
               f"machine: {ascii_text(machine.name)}; controller: {ctl.words}",
               f"from {fit.marker}: machine file {ascii_text(Path(fit.machine['file']).name)}, data "
@@ -126,7 +131,8 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
               *(f"WRITTEN DESPITE THE FIT GATE: {ascii_text(r)}" for r in despite),
               "corrections add to the kinematics active while the R-test ran under TCPM/TRAORI",
               "BACKUP FIRST: " + ctl.backup,
-              f"then run the sign check {sign_name}: see its expected changes")
+              f"then run the sign check {sign_name}: see its expected changes" if signcheck else
+              "then make the sign check by hand at the poses named: see their expected changes")
     words = lines_text(p)
     ctx = EditContext(name, header, tuple(words), tuple(expect), version, date, fit.marker, stem or name,
                       tuple((n, e.std) for n, e in fit.parameters.items()), folder)
@@ -138,5 +144,5 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
     if p.not_compensable:
         notes.append(f"not compensable on {ctl.words} by compgen: " + ", ".join(p.not_compensable))
     notes += ["sign check, expected change of the reading after the edit:", *expect]
-    return Emitted({**edit.files, f"_SIGN{ctl.program_ext}": signcheck.files[ctl.program_ext], **named},
-                   tuple(notes), frozenset(named))
+    sign = {f"_SIGN{ctl.program_ext}": signcheck.files[ctl.program_ext]} if signcheck else {}
+    return Emitted({**edit.files, **sign, **named}, tuple(notes), frozenset(named))

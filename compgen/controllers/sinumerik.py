@@ -36,7 +36,15 @@ MM_DECIMALS = 5
 VECTOR_DECIMALS = 10
 CARR = re.compile(r"^\s*\$TC_CARR(\d+)\[(\d+)\]\s*=\s*(\S+?)\s*(?:;.*)?$")
 CEC = re.compile(r"^\$AN_CEC(_[A-Z_]+)?\[(\d+)(?:,(\d+))?\]=\(?([^);\s]+)\)?")
-FINE = {"l2": (44, 45, 46), "l3": (55, 56, 57), "l4": (58, 59, 60)}
+FINE = {"l1": (41, 42, 43), "l2": (44, 45, 46), "l3": (55, 56, 57), "l4": (58, 59, 60)}
+# Which offset vectors each kinematic type ($TC_CARR23) chains, and what they join
+# (Commissioning Manual 03/2013 p.502): rotary axis 1 carries axis 2; a mixed machine's axis 1
+# turns the tool. A pivot is any point of its axis's line.
+#   P, table: l2 machine reference point -> pivot 1, l3 pivot 1 -> pivot 2, l4 = -(l2 + l3)
+#   T, head:  l3 tool adapter -> pivot 2, l2 pivot 2 -> pivot 1, l1 = -(l2 + l3)
+#   M, mixed: l2 tool adapter -> pivot 1 (head), l1 = -l2; l3 machine reference point ->
+#             pivot 2 (table), l4 = -l3
+CHAIN = {"P": ("l2", "l3", "l4"), "T": ("l1", "l2", "l3"), "M": ("l1", "l2", "l3", "l4")}
 # the coarse (base) offsets the OEM set: l1 $TC_CARR1-3, l2 4-6, l3 15-17, l4 18-20
 COARSE = {"l1": (1, 2, 3), "l2": (4, 5, 6), "l3": (15, 16, 17), "l4": (18, 19, 20)}
 VECTOR = {1: (7, 8, 9), 2: (10, 11, 12)}
@@ -96,7 +104,7 @@ def check_current(text: str, where: str, machine: Machine) -> None:
                                    f"{machine.limits.offset_um:g} µm", where=at,
                                    hint="is this the record of the measured machine? If it is, correct "
                                         "[sinumerik] offsets")
-    for i, a in enumerate(machine.rotary_axes, start=1):
+    for i, a in enumerate(carr_axes(machine), start=1):
         if not all(n in lines for n in VECTOR[i]):
             continue
         now = np.array([lines[n][0] for n in VECTOR[i]])
@@ -121,24 +129,45 @@ def check_current(text: str, where: str, machine: Machine) -> None:
                                where=at)
 
 
+def carr_axes(machine: Machine) -> list:
+    """The machine's rotary axes in the record's order: rotary axis 1 carries axis 2 (table
+    or head, base outwards); on a mixed machine axis 1 is the head's."""
+    heads = list(machine.heads)
+    tables = [a for a in machine.rotary_axes if a.side == "workpiece"]
+    return heads + tables if heads and tables else heads or tables
+
+
+def fine_deltas(kind: str, t1: np.ndarray, t2: np.ndarray) -> dict[str, np.ndarray]:
+    """How each offset vector of a ``kind`` record changes (mm) when pivot 1 moves by ``t1``
+    and pivot 2 by ``t2`` (``CHAIN``: each vector joins two points, closures follow)."""
+    if kind == "P":
+        return {"l2": t1, "l3": t2 - t1, "l4": -t2}
+    if kind == "T":
+        return {"l3": t2, "l2": t1 - t2, "l1": -t1}
+    return {"l2": t1, "l1": -t1, "l3": t2, "l4": -t2}
+
+
 def carr_values(machine: Machine, p: Plan, current: dict[int, float]) -> tuple[dict[int, float], list[str]]:
-    """New ``$TC_CARR`` values: fine offsets l2, l3, l4 plus the corrections; direction
-    vectors v1, v2 as exact unit vectors with the sign the control holds."""
+    """New ``$TC_CARR`` values: the fine offsets of the vectors the record's kind chains, plus
+    the corrections; direction vectors v1, v2 as exact unit vectors with the sign the control
+    holds."""
     cfg = machine.sinumerik
-    axes = list(machine.rotary_axes)
-    if len(axes) != 2 or cfg["kind"] != "P":
-        raise CompgenError("compgen writes $TC_CARR for two table axes (kind P) only",
-                           hint="this machine's kinematics is not a table-table one")
-    t1, t2 = (p.lines[a.name].offset for a in axes)
-    delta = {"l2": t1, "l3": t2 - t1, "l4": -t2}
-    missing = [n for idx in (*FINE.values(), *VECTOR.values()) for n in idx if n not in current]
+    axes = carr_axes(machine)
+    kind = cfg["kind"]
+    if len(axes) != 2 or (kind == "M" and len(machine.heads) != 1):
+        raise CompgenError(f"compgen writes $TC_CARR for two rotary axes only (kind {kind})",
+                           hint="this machine's kinematics is not one $TC_CARR record of two axes")
+    delta = fine_deltas(kind, *(p.lines[a.name].offset for a in axes))
+    fine = {vec: FINE[vec] for vec in CHAIN[kind]}
+    missing = [n for idx in (*fine.values(), *VECTOR.values()) for n in idx if n not in current]
     if missing:
         raise CompgenError(f"--current lacks $TC_CARR{missing[0]}[{cfg['tcarr']}] (and "
                            f"{len(missing) - 1} more)",
-                           hint="give every fine offset (44-46, 55-60) and vector (7-12) of the "
-                                "record as the control holds them")
+                           hint="give every fine offset (" + ", ".join(f"{i[0]}-{i[-1]}"
+                                                                       for i in fine.values())
+                                + ") and vector (7-12) of the record as the control holds them")
     new, diff = {}, []
-    for vec, idx in FINE.items():
+    for vec, idx in fine.items():
         for k, n in enumerate(idx):
             new[n] = current[n] + delta[vec][k]
             diff.append(f"$TC_CARR{n} ({vec}.{'xyz'[k]} fine) {fmt_plain(current[n], MM_DECIMALS)} -> "
@@ -160,16 +189,25 @@ def read_lines(text: str, machine: Machine, current: dict[int, float],
                lines: dict[str, AxisLine]) -> dict[str, AxisLine]:
     """The rotary axis lines an emitted ``$TC_CARR`` program sets, relative to ``current``."""
     new = read_carr(text, "program", machine.sinumerik["tcarr"])
-    t1 = np.array([new[n] - current[n] for n in FINE["l2"]])
-    t2 = t1 + np.array([new[n] - current[n] for n in FINE["l3"]])
-    closure = np.array([new[n] - current[n] for n in FINE["l4"]])
-    if np.abs(closure + t2).max() > 1.5 * 10.0 ** -MM_DECIMALS:   # three values, each rounded
-        raise CompgenError("l4 fine offsets do not close the chain l4 = -(l2 + l3)")
+    kind = machine.sinumerik["kind"]
+    d = {vec: np.array([new[n] - current[n] for n in FINE[vec]]) for vec in CHAIN[kind]}
+    if kind == "P":
+        t1 = d["l2"]
+        t2 = t1 + d["l3"]
+    elif kind == "T":
+        t2 = d["l3"]
+        t1 = t2 + d["l2"]
+    else:
+        t1, t2 = d["l2"], d["l3"]
+    closes = fine_deltas(kind, t1, t2)
+    for vec in CHAIN[kind]:               # three values each, each rounded
+        if np.abs(closes[vec] - d[vec]).max() > 1.5 * 10.0 ** -MM_DECIMALS:
+            raise CompgenError(f"the {vec} fine offsets do not close the chain of a kind {kind} record")
     out = dict(lines)
-    for i, (a, t) in enumerate(zip(machine.rotary_axes, (t1, t2), strict=True), start=1):
-        d = np.array([new[n] for n in VECTOR[i]])
+    for i, (a, t) in enumerate(zip(carr_axes(machine), (t1, t2), strict=True), start=1):
+        dv = np.array([new[n] for n in VECTOR[i]])
         was = np.array([current[n] for n in VECTOR[i]])
-        out[a.name] = AxisLine(a.name, a.direction, lines[a.name].pivot, t, _turn(was, d))
+        out[a.name] = AxisLine(a.name, a.direction, lines[a.name].pivot, t, _turn(was, dv))
     return out
 
 
@@ -431,6 +469,16 @@ class Sinumerik840D(Controller):
     def main_suffix(self, current: str | None) -> str:
         return ".MPF"
 
+    def edits_head(self, machine: Machine) -> bool:
+        # a T or M record of two axes: its offset vectors join the head's pivots (CHAIN)
+        return machine.sinumerik is not None and len(carr_axes(machine)) == 2 and len(machine.heads) <= 2
+
+    def tables(self, machine: Machine, p: Plan) -> list[CompTable]:
+        # a head's own error motions are not written to CEC tables yet (not named held)
+        heads = {a.name for a in machine.heads}
+        return [self._plain(machine, t) for t in super().tables(machine, p)
+                if t.input not in heads and t.output not in heads]
+
     def check_setup(self, machine: Machine) -> None:
         turning = [a.name for a in machine.rotary_axes if a.full_turn]
         if turning and (machine.sinumerik is None or machine.sinumerik.get("modulo") is None):
@@ -488,7 +536,9 @@ class Sinumerik840D(Controller):
                                "the control would refuse it",
                                hint="move the excess into the base offsets with the OEM, then edit again")
         loaded = self.loaded_tables(machine, current, where)
-        new = [self._plain(machine, t) for t in comp_tables(machine, p) + squareness_tables(machine, p)]
+        heads = {a.name for a in machine.heads}
+        new = [self._plain(machine, t) for t in comp_tables(machine, p) + squareness_tables(machine, p)
+               if t.input not in heads and t.output not in heads]
         tables = compose_tables(loaded, new)
         for t in tables:
             if t.modulo and t.input not in (machine.sinumerik.get("modulo") or ()):
@@ -501,10 +551,13 @@ class Sinumerik840D(Controller):
         def carr(values):      # vectors are unitless, offsets mm
             return [(n, fmt_plain(v, VECTOR_DECIMALS if n <= 12 else MM_DECIMALS)) for n, v in values.items()]
 
+        chain = ", ".join(f"{v} ({FINE[v][0]}-{FINE[v][-1]})" for v in CHAIN[machine.sinumerik["kind"]])
         files = {".MPF": render("sinumerik/kinematics.MPF.j2", name=ctx.name, header=ctx.header, record=rec,
-                                values=carr(new_carr), lines=ctx.lines, expect=ctx.expect)}
+                                values=carr(new_carr), lines=ctx.lines, expect=ctx.expect, chain=chain,
+                                kind=machine.sinumerik["kind"], by_hand=not self.writes_programs(machine))}
         files["_RESTORE.MPF"] = render(
             "sinumerik/kinematics.MPF.j2", name=f"{ctx.name}_RESTORE", record=rec, lines=[], expect=[],
+            chain=chain, kind=machine.sinumerik["kind"],
             header=[f"compgen {ctx.version}: restores record {rec} as it was", *ctx.header[1:3]],
             values=[(n, was[n][1]) for n in new_carr])          # each value as it was written
         notes = ["$TC_CARR changes:", *diff,
@@ -549,9 +602,6 @@ class Sinumerik840D(Controller):
 
     def loaded_tables(self, machine: Machine, state: str, where: str) -> list[CompTable]:
         return read_cec(state, machine, where) if "$AN_CEC" in state else []
-
-    def tables(self, machine: Machine, p: Plan) -> list[CompTable]:
-        return [self._plain(machine, t) for t in super().tables(machine, p)]
 
     @staticmethod
     def _plain(machine: Machine, t: CompTable) -> CompTable:
