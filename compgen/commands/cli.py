@@ -312,7 +312,7 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, contro
     files = emitted.paths(out, name, ctl.program_ext)
     write_all(files, force, inputs=(machine_file, poses_file))
     click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, {mode} mode, "
-               f"{ctl.words}", err=True)
+               f"{ctl.label(machine)}", err=True)
 
 
 @main.command("probe-program")
@@ -395,8 +395,9 @@ def check_program_cmd(machine_file, program, controller_name, ball, mode, as_jso
     if result.findings:
         click.echo(f"{program}: checked with the {where}", err=True)
         raise SystemExit(1)
-    click.echo(f"{program}: OK ({ctl.words}): {result.blocks} moves, about {result.seconds / 60:.1f} min; "
-               f"closest approach {result.closest_mm:.1f} mm ({result.closest_at}); {where}")
+    click.echo(f"{program}: OK ({ctl.label(machine)}): {result.blocks} moves, about "
+               f"{result.seconds / 60:.1f} min; closest approach {result.closest_mm:.1f} mm "
+               f"({result.closest_at}); {where}")
 
 
 @main.command("kinematics")

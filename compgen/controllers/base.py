@@ -134,6 +134,10 @@ class Controller:
             return e.unit == "mm" or self.holds_tilts
         return bool(self.squareness_as)
 
+    def label(self, machine: Machine) -> str:
+        """The control as its files and messages for ``machine`` name it."""
+        return self.words
+
     def edits_head(self, machine: Machine) -> bool:
         """Whether compgen writes this control's kinematics edits for ``machine``, whose head
         turns the tool (only where the control's kinematics for it was run: none by default)."""

@@ -125,7 +125,7 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
     # the sign check and the files it names by its name (NAME_SIGN_MSG.A)
     named = {f"_SIGN{k}": v for k, v in signcheck.files.items() if k in signcheck.named} if signcheck else {}
     header = (f"compgen {version} kinematics edit, {date}",
-              f"machine: {ascii_text(machine.name)}; controller: {ctl.words}",
+              f"machine: {ascii_text(machine.name)}; controller: {ctl.label(machine)}",
               f"from {fit.marker}: machine file {ascii_text(Path(fit.machine['file']).name)}, data "
               + ", ".join(ascii_text(Path(d.file).name) for d in fit.data),
               *(f"WRITTEN DESPITE THE FIT GATE: {ascii_text(r)}" for r in despite),

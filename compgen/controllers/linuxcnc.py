@@ -604,6 +604,10 @@ class LinuxCNC(Controller):
     def edits_head(self, machine: Machine) -> bool:
         return head_module(machine) is not None
 
+    def label(self, machine: Machine) -> str:
+        head = head_module(machine)
+        return self.words if head is None else f"LinuxCNC ({head[0].module})"
+
     def corrects(self, machine: Machine, e) -> bool:
         if head_module(machine) is None:
             return super().corrects(machine, e)

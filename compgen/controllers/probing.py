@@ -113,7 +113,7 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
     log_name = name[:20] + "_LOG"
     header = [
         f"compgen {version} probing program, {date}",
-        f"machine: {ascii_text(machine.name)}; controller: {ctl.words}",
+        f"machine: {ascii_text(machine.name)}; controller: {ctl.label(machine)}",
         "mode AXES: X Y Z from compgen's inverse kinematics; no TCP",
         f"path {ascii_text(label)}: {len(poses)} poses, {setup.touches} touches each; the log: {log_name}",
         f"{BALL_HEADER} " + " ".join(f"{c}{ctl.number(v, LINEAR_DECIMALS)}"
