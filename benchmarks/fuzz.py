@@ -14,9 +14,9 @@ judged against what it must do:
 
 Besides the written cases, every valid input (the R-test CSV, the machine file, a pose
 list, the three controls' states, the three controls' programs, the wings' files, a head's
-machine file and a session measured on it) gets ``--generated`` variants each: a line
-deleted, duplicated or swapped, a number written another way, a control character inside a
-number (which must be refused).
+machine file, a session measured on it, its iTNC 530 table and its maxkins program) gets
+``--generated`` variants each: a line deleted, duplicated or swapped, a number written
+another way, a control character inside a number (which must be refused).
 
 Counted: tracebacks (or exit 3, an internal error), silent accepts (exit 0 where a refusal
 was due), injected lines, hangs, and wrong refusals of good input. Outside CI: a benchmark.
@@ -41,6 +41,17 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 SEED = ROOT / "machines" / "ac-trunnion-itnc530.toml"
 HEAD = ROOT / "machines" / "bc-swivel-head-table.toml"
+HEAD_TAB = """BEGIN KINEMATIC_BC.TAB MM
+NR  KEY       AXIS  COORD        DOC
+0   Trans     Z     +150         tool reference point to the B pivot
+1   MachAxis  B
+2   MachAxis  Z
+3   MachAxis  Y
+4   MachAxis  X
+5   MachBase
+6   MachAxis  C
+[END]
+"""
 SESSION = ROOT / "examples" / "seed-session.csv"
 TAB = ROOT / "examples" / "itnc530-current.TAB"
 EVIL = "G0 Z-500 INJECTED"          # what an injection would make a block of
@@ -442,6 +453,13 @@ def derived_cases(rng: random.Random, programs: dict[str, Path], per_surface: in
          ["fit", "--machine", "{dir}/m.toml", str(wings["head"]), "-o", "{dir}/out.json"], ["out.json"]),
         ("head-csv", "data.csv", wings["head"].read_text(),
          ["fit", "--machine", str(HEAD), "{dir}/data.csv", "-o", "{dir}/out.json"], ["out.json"]),
+        # a head's edit over an iTNC 530 table (rows from the tool reference point to its B),
+        # and a head's program under LinuxCNC's maxkins (its pin guard)
+        ("head-tab", "state.txt", HEAD_TAB,
+         ["kinematics", "--from", str(wings["hfit"]), "--controller", "itnc530", "--current",
+          "{dir}/state.txt", "-o", "{dir}/K.out"], ["K.out"]),
+        ("head-program", "K4.ngc", wings["hprogram"].read_text(),
+         ["check-program", "--machine", str(wings["maxkins"]), "--mode", "tcpm", "{dir}/K4.ngc"], []),
     ]
     for kind, name, text, args, outputs in surfaces:
         for what, variant, expect in _variants(text, rng, per_surface):
@@ -486,7 +504,12 @@ def wing_inputs(work: Path, compgen: list[str]) -> dict[str, Path]:
         "XOB": {"value": 0.01, "unit": "mm"}, "COB": {"value": 4e-5, "unit": "rad"},
         "YOC": {"value": -0.008, "unit": "mm"}}}))
     run("simulate", "--machine", HEAD, "--truth", "ht.json", "--noise-um", "0.5", "-o", "head.csv")
-    return {"probe": work / "probe.log", "export": work / "h.json", "target": work / "target.sqlite",
+    run("fit", "--machine", HEAD, "head.csv", "-o", "hfit.json")
+    from conftest import on_linuxcnc
+    maxkins = on_linuxcnc(work)
+    run("measure-program", "--machine", maxkins, "--path", "K4", "-o", "HK4.ngc")
+    return {"hfit": work / "hfit.json", "maxkins": maxkins, "hprogram": work / "HK4.ngc",
+            "probe": work / "probe.log", "export": work / "h.json", "target": work / "target.sqlite",
             "cec": work / "A_CEC.INI", "carr": work / "A.MPF", "bcfit": work / "bcfit2.json",
             "trt": work / "trt", "head": work / "head.csv"}
 
