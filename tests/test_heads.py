@@ -540,7 +540,8 @@ def test_two_rounds_on_a_head_from_a_non_zero_state_reach_the_noise(tmp_path, ca
         out = kinematics_edit(machine, fit, controller, state, "current", "KIN", "0", "d")
         state = out.files[{"linuxcnc": ".hal", "sinumerik840d": ".MPF", "itnc530": ".TAB"}[controller]]
     after = identify(machine, [measure(state)], setup)
-    print(f"{case}: misfit beyond set-up {before.residual['rms_um']:.2f} -> {after.residual['rms_um']:.2f} um")
+    was, now = before.residual["rms_um"], after.residual["rms_um"]
+    print(f"{case}: misfit beyond set-up {was:.2f} -> {now:.2f} um")
     assert before.residual["rms_um"] > 6 * NOISE_UM, before.residual["rms_um"]
     assert after.residual["rms_um"] == pytest.approx(NOISE_UM, rel=0.15), (before.residual["rms_um"],
                                                                             after.residual["rms_um"])
