@@ -41,17 +41,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 SEED = ROOT / "machines" / "ac-trunnion-itnc530.toml"
 HEAD = ROOT / "machines" / "bc-swivel-head-table.toml"
-HEAD_TAB = """BEGIN KINEMATIC_BC.TAB MM
-NR  KEY       AXIS  COORD        DOC
-0   Trans     Z     +150         tool reference point to the B pivot
-1   MachAxis  B
-2   MachAxis  Z
-3   MachAxis  Y
-4   MachAxis  X
-5   MachBase
-6   MachAxis  C
-[END]
-"""
+HEAD_TAB = (ROOT / "examples" / "swivel-head-itnc530.TAB").read_text()
 SESSION = ROOT / "examples" / "seed-session.csv"
 TAB = ROOT / "examples" / "itnc530-current.TAB"
 EVIL = "G0 Z-500 INJECTED"          # what an injection would make a block of

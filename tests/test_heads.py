@@ -397,17 +397,7 @@ def test_sinumerik_edits_of_a_head_against_hand_computed_records(tmp_path, case)
         np.testing.assert_allclose(held_now.lines[a.name].tilt, fitted[a.name].tilt, atol=1e-9)
 
 
-SWIVEL_TAB = """BEGIN KINEMATIC_BC.TAB MM
-NR  KEY       AXIS  COORD        DOC
-0   Trans     Z     +150         tool reference point to the B pivot
-1   MachAxis  B
-2   MachAxis  Z
-3   MachAxis  Y
-4   MachAxis  X
-5   MachBase
-6   MachAxis  C
-[END]
-"""
+SWIVEL_TAB = (ROOT / "examples" / "swivel-head-itnc530.TAB").read_text()   # the OEM's rows
 
 
 @pytest.mark.parametrize("case", ["swivel-itnc530", "fork-tnc640"])
