@@ -422,7 +422,11 @@ def test_the_measurement_a_failed_check_advises_runs_as_printed(year, tmp_path):
         crashed = _check(store, year, "2026-06-20T10:00", 102)
     advice = next(a for a in crashed.advice if a.startswith("re-calibrate"))
     command = re.search(r"\((\S+(?: -m compgen)? measure-program [^)]*)\)", advice)[1]
-    done = subprocess.run(["bash", "-c", command], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    # the advice names compgen as this process was called (in-process, whatever an earlier
+    # test left: compgen-cli by default): a user who typed that has the venv on PATH
+    env = {**os.environ, "PATH": os.path.dirname(sys.executable) + os.pathsep + os.environ["PATH"]}
+    done = subprocess.run(["bash", "-c", command], cwd=tmp_path, capture_output=True, text=True, timeout=120,
+                          env=env)
     assert done.returncode == 0 and (tmp_path / "calibration.H").exists(), (command, done.stderr)
     rc, out, err = run("check-program", "--machine", "ac-trunnion-itnc530", tmp_path / "calibration.H")
     assert rc == 0, out + err
