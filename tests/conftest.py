@@ -98,6 +98,20 @@ def on_linuxcnc(folder: Path, source: Path = None) -> Path:
     return path
 
 
+def measured_under(machine, truth: dict, lines: dict, poses, rng, noise_um: float, squareness=None):
+    """An R-test session of the machine whose truth is ``truth`` (name -> inside units), its
+    control holding the axis ``lines`` (and ``squareness``): the axes where that control drives
+    them under TCPM, read by the true machine, with ``noise_um`` of white noise."""
+    from compgen.data.rtest import RTestData
+    from compgen.model.kinematics import Model, Poses
+    from compgen.model.lines import controller_inverse
+    rot = poses.q[:, [machine.index(a.name) for a in machine.rotary_axes]]
+    q = controller_inverse(machine, lines, rot, poses.ball, squareness)
+    reading = Model(machine, list(truth)).relative(Poses(q, poses.ball, poses.t, poses.path),
+                                                    np.array(list(truth.values())))
+    return RTestData(poses, reading + rng.normal(0, noise_um * 1e-3, reading.shape))
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(20261124)

@@ -6,7 +6,7 @@ import re
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, FORK_MACHINE, ROOT, UM, on_linuxcnc, run
+from conftest import ARCSEC, FORK_MACHINE, ROOT, UM, measured_under, on_linuxcnc, run
 from scipy.spatial.transform import Rotation
 
 from compgen.commands.compare import compare
@@ -16,7 +16,7 @@ from compgen.controllers.advice import Advisor
 from compgen.controllers.correction import plan
 from compgen.controllers.kinematics import corrected_by, kinematics_edit
 from compgen.controllers.registry import controller, read_edits
-from compgen.data.rtest import RTestData, commanded, format_rtest, read_rtest
+from compgen.data.rtest import commanded, format_rtest, read_rtest
 from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
 from compgen.model.effects import catalogue, compose, location_model
@@ -514,11 +514,7 @@ def test_two_rounds_on_a_head_from_a_non_zero_state_reach_the_noise(tmp_path, ca
     rng = np.random.default_rng(3)
 
     def measure(text):
-        rot = poses.q[:, [machine.index(a.name) for a in machine.rotary_axes]]
-        q = controller_inverse(machine, held(text), rot, poses.ball)
-        reading = Model(machine, list(truth)).relative(Poses(q, poses.ball, poses.t, poses.path),
-                                                        np.array(list(truth.values())))
-        return RTestData(poses, reading + rng.normal(0, NOISE_UM * 1e-3, reading.shape))
+        return measured_under(machine, truth, held(text), poses, rng, NOISE_UM)
 
     setup = ["XOW", "YOW", "ZOW"]
     assert any(np.abs(line.offset).max() > 0 for line in held(state).values())

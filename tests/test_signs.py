@@ -12,16 +12,15 @@ import re
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, BC_MACHINE, OEM_TAB, ROOT, SEED_MACHINE, UM
+from conftest import ARCSEC, BC_MACHINE, OEM_TAB, ROOT, SEED_MACHINE, UM, measured_under
 
 from compgen.configuration.machine_file import load_machine
 from compgen.controllers.correction import plan
 from compgen.controllers.kinematics import kinematics_edit
-from compgen.data.rtest import RTestData
 from compgen.data.simulate import simulate
 from compgen.model.effects import location_model
 from compgen.model.kinematics import Model, Poses
-from compgen.model.lines import AxisLine, controller_inverse
+from compgen.model.lines import AxisLine
 from compgen.model.paths import generate
 from compgen.statistics.identify import identify
 
@@ -175,11 +174,7 @@ def _held_lines(machine, read):
 
 
 def _measure(machine, truth, held, squareness, poses, rng):
-    rot = poses.q[:, [machine.index(a.name) for a in machine.rotary_axes]]
-    q = controller_inverse(machine, held, rot, poses.ball, squareness)
-    reading = Model(machine, list(truth)).relative(Poses(q, poses.ball, poses.t, poses.path),
-                                                    np.array(list(truth.values())))
-    return RTestData(poses, reading + rng.normal(0, NOISE_UM * 1e-3, reading.shape))
+    return measured_under(machine, truth, held, poses, rng, NOISE_UM, squareness)
 
 
 def _truth(machine, controller):

@@ -190,9 +190,12 @@ class Controller:
     takes_current = True      # its edit reads the control's state as --current (a file it holds)
 
     def tables(self, machine: Machine, p: Plan) -> list[CompTable]:
-        """The compensation tables its edit loads, as the control applies them."""
-        return comp_tables(machine, p) + (squareness_tables(machine, p) if self.squareness_as == "tables"
-                                          else [])
+        """The compensation tables its edit loads, as the control applies them (none of a
+        head's own error motions yet: they stay not compensated)."""
+        heads = {a.name for a in machine.heads}
+        return [t for t in comp_tables(machine, p) + (squareness_tables(machine, p)
+                                                       if self.squareness_as == "tables" else [])
+                if t.input not in heads and t.output not in heads]
 
     def holds(self, machine: Machine, p: Plan) -> Held:
         """What the control holds once compgen's edit of ``p`` is loaded: the one function

@@ -23,7 +23,7 @@ from ..transforms import rot_axis
 from ..units import number
 from . import fmt_signed, render
 from .base import Controller, EditContext, EditFiles
-from .correction import CompTable, Held, Plan, nominal_lines, pivot_of
+from .correction import Held, Plan, nominal_lines, pivot_of
 from .tab import MM_PER, TabTable
 
 MM_DECIMALS = 5          # 0.01 µm
@@ -188,12 +188,8 @@ def check_pivots(table: TabTable, machine: Machine, where: str) -> str | None:
     for r in table.rows:
         if r.get("KEY") == "MachBase":
             after_base = True
-        elif after_base and r.get("KEY") == "Trans" and r.get("AXIS") in ("X", "Y", "Z"):
-            step = np.eye(4)
-            step["XYZ".index(r["AXIS"]), 3] = table.mm(r["COORD"], r["AXIS"])
-            frame = frame @ step
-        elif after_base and r.get("KEY") == "Trans" and r.get("AXIS") in ("A", "B", "C"):
-            frame = frame @ rot_axis("xyz"["ABC".index(r["AXIS"])], np.radians(float(r["COORD"])))
+        elif after_base and r.get("KEY") == "Trans":
+            frame = frame @ _trans(table, r)
         elif after_base and r.get("KEY") == "MachAxis" and r.get("AXIS") in rotary:
             at, want = frame[:3, 3], pivot_of(machine, r["AXIS"])
             checked += 1
@@ -223,12 +219,8 @@ def _check_head_pivots(table: TabTable, machine: Machine, where: str) -> None:
     for r in table.rows:
         if r.get("KEY") == "MachBase":
             return
-        if r.get("KEY") == "Trans" and r.get("AXIS") in ("X", "Y", "Z"):
-            step = np.eye(4)
-            step["XYZ".index(r["AXIS"]), 3] = table.mm(r["COORD"], r["AXIS"])
-            frame = frame @ step
-        elif r.get("KEY") == "Trans" and r.get("AXIS") in ("A", "B", "C"):
-            frame = frame @ rot_axis("xyz"["ABC".index(r["AXIS"])], np.radians(float(r["COORD"])))
+        if r.get("KEY") == "Trans":
+            frame = frame @ _trans(table, r)
         elif r.get("KEY") == "MachAxis" and r.get("AXIS") in pivots:
             got, want = frame[:3, 3], pivots[r["AXIS"]]
             if np.abs(got - want).max() * 1e3 > machine.limits.offset_um:
@@ -237,6 +229,17 @@ def _check_head_pivots(table: TabTable, machine: Machine, where: str) -> None:
                                    f"tool reference point, the machine file at ({shown[1]}) mm", where=where,
                                    hint="is this the table of the measured machine? If it is, correct the "
                                         "machine file's head offsets")
+
+
+def _trans(table: TabTable, r: dict) -> np.ndarray:
+    """The 4×4 step of a ``Trans`` row: along X, Y or Z by its COORD in mm (the table's unit
+    converted), about A, B or C by it in degrees; any other axis, none."""
+    step = np.eye(4)
+    if r.get("AXIS") in ("X", "Y", "Z"):
+        step["XYZ".index(r["AXIS"]), 3] = table.mm(r["COORD"], r["AXIS"])
+    elif r.get("AXIS") in ("A", "B", "C"):
+        step = rot_axis("xyz"["ABC".index(r["AXIS"])], np.radians(float(r["COORD"])))
+    return step
 
 
 def _iso_rows(text: str) -> list[tuple[str, str, float]]:
@@ -426,11 +429,6 @@ class Heidenhain(Controller):
     def edits_head(self, machine: Machine) -> bool:
         # pairs around a head's MachAxis as around a table's (U18)
         return True
-
-    def tables(self, machine: Machine, p: Plan) -> list[CompTable]:
-        # a head's own error motions are not written to compensation tables yet
-        heads = {a.name for a in machine.heads}
-        return [t for t in super().tables(machine, p) if t.input not in heads and t.output not in heads]
 
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:

@@ -144,9 +144,13 @@ def head_correction(machine: Machine, p: Plan) -> tuple[float, list[str]]:
     along = sum(float(p.lines[h].offset[2]) for h in heads)
     other = [f"{n} offset {line.offset[i] * 1e3:+.2f} um along {'XYZ'[i]}" for n, line in p.lines.items()
              for i in range(3) if line.offset[i] != 0 and not (n in heads and i == 2)]
-    other += [f"{n} tilt {line.tilt[i] / ARCSEC:+.2f} arcsec about {'XYZ'[i]}"
-              for n, line in p.lines.items() for i in range(3) if line.tilt[i] != 0]
-    return along, [*other, *p.squareness, *p.tables, *p.not_compensable]
+    return along, [*other, *_tilts(p), *p.squareness, *p.tables, *p.not_compensable]
+
+
+def _tilts(p: Plan) -> list[str]:
+    """The axis lines' tilts of ``p`` in words: no LinuxCNC pin holds a tilt."""
+    return [f"{n} tilt {line.tilt[i] / ARCSEC:+.2f} arcsec about {'XYZ'[i]}"
+            for n, line in p.lines.items() for i in range(3) if line.tilt[i] != 0]
 
 
 def head_lines(machine: Machine, along: float) -> dict[str, AxisLine]:
@@ -311,10 +315,8 @@ def pins(machine: Machine, p: Plan, current: Configuration | None, where: str
         delta_d = p.lines[tilt.name].offset - delta_r
         new = {n: held[n] + (delta_r if n.endswith("rot-point") else delta_d)["xyz".index(n[0])]
                for n in names}
-        other = [f"{n} tilt {line.tilt[i] / ARCSEC:+.2f} arcsec about {'XYZ'[i]}"
-                 for n, line in p.lines.items() for i in range(3) if line.tilt[i] != 0]
         in_joints = {t.effect for t in joint_tables(machine, p)}
-        other += [*p.squareness, *(e for e in p.tables if e not in in_joints), *p.not_compensable]
+        other = [*_tilts(p), *p.squareness, *(e for e in p.tables if e not in in_joints), *p.not_compensable]
     was = {n: line_of[n].text if current is not None else fmt_plain(held[n], 6) for n in names}
     rows = [("sets", signal[n], fmt_plain(new[n], 6), was[n]) if n in signal else
             ("setp", f"{module}.{n}", fmt_plain(new[n], 6), was[n]) for n in names]

@@ -25,10 +25,8 @@ from .correction import (
     CompTable,
     Held,
     Plan,
-    comp_tables,
     compose_tables,
     nominal_lines,
-    squareness_tables,
     unrolled,
 )
 
@@ -474,10 +472,7 @@ class Sinumerik840D(Controller):
         return machine.sinumerik is not None and len(carr_axes(machine)) == 2 and len(machine.heads) <= 2
 
     def tables(self, machine: Machine, p: Plan) -> list[CompTable]:
-        # a head's own error motions are not written to CEC tables yet (not named held)
-        heads = {a.name for a in machine.heads}
-        return [self._plain(machine, t) for t in super().tables(machine, p)
-                if t.input not in heads and t.output not in heads]
+        return [self._plain(machine, t) for t in super().tables(machine, p)]
 
     def check_setup(self, machine: Machine) -> None:
         turning = [a.name for a in machine.rotary_axes if a.full_turn]
@@ -536,9 +531,7 @@ class Sinumerik840D(Controller):
                                "the control would refuse it",
                                hint="move the excess into the base offsets with the OEM, then edit again")
         loaded = self.loaded_tables(machine, current, where)
-        heads = {a.name for a in machine.heads}
-        new = [self._plain(machine, t) for t in comp_tables(machine, p) + squareness_tables(machine, p)
-               if t.input not in heads and t.output not in heads]
+        new = self.tables(machine, p)
         tables = compose_tables(loaded, new)
         for t in tables:
             if t.modulo and t.input not in (machine.sinumerik.get("modulo") or ()):
