@@ -123,6 +123,28 @@ def run(*args):
     return result.exit_code, result.stdout, result.stderr
 
 
+def rs274(folder: Path, program: str, tool: str, coordinates: str = "XYZAC"):
+    """LinuxCNC's stand-alone interpreter on ``folder/program`` with the one-line tool table
+    ``tool``: its canonical calls (canon.txt) and the finished run. Its own HOME: rs274
+    re-creates $HOME/.tool.mmap, the tool table a running LinuxCNC reads from, and emptied it
+    under the LinuxCNC test running beside it ("Requested tool 7 not found in the tool table")."""
+    import shutil
+    import subprocess
+    if shutil.which("rs274") is None:
+        if os.environ.get("COMPGEN_REQUIRE_LINUXCNC"):
+            pytest.fail("rs274 (LinuxCNC's interpreter) is required here")
+        pytest.skip("rs274 is not installed (apt-get install linuxcnc-uspace)")
+    (folder / "t.tbl").write_text(tool + "\n")
+    (folder / "v.var").write_text("")
+    (folder / "rs.ini").write_text("[RS274NGC]\nPARAMETER_FILE = v.var\n[TRAJ]\nLINEAR_UNITS = mm\n"
+                                   f"ANGULAR_UNITS = degree\nCOORDINATES = {coordinates}\n")
+    done = subprocess.run(["rs274", "-i", "rs.ini", "-t", "t.tbl", "-v", "v.var", "-g", program,
+                           "canon.txt"], cwd=folder, capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "HOME": str(folder)})
+    canon = folder / "canon.txt"
+    return (canon.read_text() if canon.exists() else ""), done
+
+
 def vector(name: str) -> Path:
     """A shared test vector; CI sets COMPGEN_REQUIRE_SHARED so a missing one fails there."""
     path = VECTORS / name

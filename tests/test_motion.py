@@ -2,14 +2,11 @@
 every program compgen writes passes; crafted defects are refused; LinuxCNC's own
 interpreter (rs274) reads compgen's programs to the same positions as the simulator."""
 
-import os
 import re
-import shutil
-import subprocess
 
 import numpy as np
 import pytest
-from conftest import BC_MACHINE, SEED_MACHINE, run
+from conftest import BC_MACHINE, SEED_MACHINE, rs274, run
 
 from compgen.configuration.machine_file import load_machine
 from compgen.controllers.registry import controller
@@ -171,18 +168,8 @@ def test_the_stem_points_down_the_table_at_every_pose(machines):
 
 @pytest.mark.parametrize("mode", ["tcpm", "axes"])
 def test_linuxcnc_reads_compgens_program_to_the_simulators_positions(machines, tmp_path, mode):
-    if shutil.which("rs274") is None:
-        if os.environ.get("COMPGEN_REQUIRE_LINUXCNC"):
-            pytest.fail("rs274 (LinuxCNC's interpreter) is required here")
-        pytest.skip("rs274 is not installed (apt-get install linuxcnc-uspace)")
     program = _write(tmp_path, machines["seed"], "linuxcnc", mode, "K4,K1")
-    (tmp_path / "t.tbl").write_text("T99 P1 Z184.67 ;nest\n")
-    (tmp_path / "v.var").write_text("")
-    (tmp_path / "rs.ini").write_text("[RS274NGC]\nPARAMETER_FILE = v.var\n[TRAJ]\nLINEAR_UNITS = mm\n"
-                                     "ANGULAR_UNITS = degree\nCOORDINATES = XYZAC\n")
-    done = subprocess.run(["rs274", "-i", "rs.ini", "-t", "t.tbl", "-v", "v.var", "-g", program.name,
-                           "canon.txt"], cwd=tmp_path, capture_output=True, text=True, timeout=120)
-    canon = (tmp_path / "canon.txt").read_text()
+    canon, done = rs274(tmp_path, program.name, "T99 P1 Z184.67 ;nest")
     assert "STRAIGHT" in canon, done.stdout + done.stderr
     theirs = np.array([[float(v) for v in m[1].split(",")] for m in
                        re.finditer(r"STRAIGHT_(?:TRAVERSE|FEED)\(([^)]*)\)", canon)])[:, [0, 1, 2, 3, 5]]

@@ -1,15 +1,12 @@
 """Probing programs: written for every control, checked with the probe in the set-up,
 LinuxCNC's run through its own interpreter (rs274), and the log it writes read back."""
 
-import os
 import re
 import shlex
-import shutil
-import subprocess
 
 import numpy as np
 import pytest
-from conftest import BC_MACHINE, SEED_MACHINE, TABLE4, run
+from conftest import BC_MACHINE, SEED_MACHINE, TABLE4, rs274, run
 
 from compgen.configuration.machine_file import load_machine
 from compgen.data.probe import read_probe_log, sphere_centres
@@ -74,22 +71,11 @@ def test_linuxcnc_runs_the_probing_program_and_its_log_is_a_probe_log(tmp_path, 
     probe log v1 that compgen fits back to the nominal machine: with the sphere where the
     machine file has it, and 100 mm lower (as diagnose advises a probe user): the log says
     where it stood (bx, by, bz)."""
-    if shutil.which("rs274") is None:
-        if os.environ.get("COMPGEN_REQUIRE_LINUXCNC"):
-            pytest.fail("rs274 (LinuxCNC's interpreter) is required here")
-        pytest.skip("rs274 is not installed (apt-get install linuxcnc-uspace)")
     out = tmp_path / "PROBE.ngc"
     code, _, err = run("probe-program", "--machine", SEED_MACHINE, "--path", "all", "--controller",
                        "linuxcnc", "-o", out, *([f"--ball={ball}"] if ball else []))
     assert code == 0, err
-    (out.parent / "t.tbl").write_text("T98 P1 Z120 ;probe\n")
-    (out.parent / "v.var").write_text("")
-    (out.parent / "rs.ini").write_text("[RS274NGC]\nPARAMETER_FILE = v.var\n[TRAJ]\nLINEAR_UNITS = mm\n"
-                                     "ANGULAR_UNITS = degree\nCOORDINATES = XYZAC\n")
-    done = subprocess.run(["rs274", "-i", "rs.ini", "-t", "t.tbl", "-v", "v.var", "-g", out.name,
-                           "canon.txt"],
-                          cwd=out.parent, capture_output=True, text=True, timeout=120)
-    canon = (out.parent / "canon.txt").read_text()
+    canon, done = rs274(out.parent, out.name, "T98 P1 Z120 ;probe")
     probes = np.array([[float(v) for v in m[1].split(",")][:3]
                        for m in re.finditer(r"STRAIGHT_PROBE\(([^)]*)\)", canon)])
     assert len(probes) == 36 * 5, done.stdout + done.stderr
