@@ -87,6 +87,16 @@ def csv_cases(rng: random.Random) -> list[Case]:
     for value in ("K4\rG0", "K4 G0 Z-500", "K4;" + EVIL, "K4(" + EVIL + ")", "4K", "K" * 40, "K4\x1b[2J"):
         cell(f"path={value!r}", "path", value)
     cell("huge cell", "dX", "1" * 200_000)
+    # compgen's own column: a session's nest length, mm (10 to 2000); on the seed a lever only
+    nested = [[*r, "184.670000"] for r in rows]
+    ntop = [*top[:-1], top[-1] + ",probe_length"]
+    for value in ("nan", "inf", "", "abc", "0", "-184.67", "5", "1e6", "١٨٤", "184.67e999"):
+        r = [list(x) for x in nested]
+        r[rng.randrange(len(r))][-1] = value
+        out.append(Case("csv", f"probe_length={value!r}", {"data.csv": _csv(r, ntop)}, fit, "refuse",
+                        ["new.json"]))
+    out.append(Case("csv", "probe_length 284.67 (good)", {"data.csv": _csv(
+        [[*r[:-1], "284.670000"] for r in nested], ntop)}, fit, "accept"))
     whole = _csv(rows, top)
     out += [
         Case("csv", "empty", {"data.csv": ""}, fit, "refuse", ["new.json"]),
@@ -305,6 +315,9 @@ def output_cases() -> list[Case]:
              ["measure-program", "--machine", str(SEED), "--poses", "{dir}/p.csv", "-o", "{dir}/p.csv",
               "--force"], "refuse"),
         Case("output", "good (accept)", {}, [*k, "-o", "{dir}/K.txt"], "accept"),
+        Case("output", "simulate --probe-length with --device probe", {},
+             ["simulate", "--machine", str(SEED), "--truth", str(ROOT / "examples" / "truth-table4.json"),
+              "--device", "probe", "--probe-length", "220", "-o", "{dir}/p.log"], "refuse", ["p.log"]),
     ]
 
 
@@ -459,6 +472,31 @@ def derived_cases(rng: random.Random, programs: dict[str, Path], per_surface: in
     return out
 
 
+def nest_cases(wings: dict[str, Path]) -> list[Case]:
+    """A second nest length on LinuxCNC's maxkins head: --probe-length as a user may mistype
+    it, and a program whose header names one nest and whose pin guard another."""
+    maxkins = str(wings["maxkins"])
+    out = [Case("nest", f"measure-program --probe-length {v!r}", {},
+                ["measure-program", "--machine", maxkins, "--path", "K4", "--probe-length", v, "-o",
+                 "{dir}/N.ngc"], "refuse", ["N.ngc", "N.poses.csv"])
+           for v in ("nan", "inf", "-220", "0", "1e999", "abc", "220mm", "5", "2500", "", " ")]
+    out.append(Case("nest", "measure-program --probe-length 220 (good)", {},
+                    ["measure-program", "--machine", maxkins, "--path", "K4", "--probe-length", "220", "-o",
+                     "{dir}/N.ngc"], "accept"))
+    text = wings["nprogram"].read_text()
+    check = ["check-program", "--machine", maxkins, "--mode", "tcpm", "{dir}/N.ngc"]
+    nest = ", 220.0000 mm below the gauge line"
+    other = "; nest on tool 7, 250.0000 mm below the gauge line\n; active"
+    for name, variant in [("header 320 mm, guard 370", text.replace(nest, nest.replace("220", "320"))),
+                          ("header without the nest", text.replace(nest, "")),
+                          ("two nests in the header", text.replace("; active", other, 1))]:
+        out.append(Case("nest", f"check-program: {name}", {"N.ngc": variant}, check, "refuse"))
+    out.append(Case("nest", "check-program --probe-length 120 on a 220 program", {"N.ngc": text},
+                    [*check, "--probe-length", "120"], "refuse"))
+    out.append(Case("nest", "check-program of the 220 program (good)", {"N.ngc": text}, check, "accept"))
+    return out
+
+
 def wing_inputs(work: Path, compgen: list[str]) -> dict[str, Path]:
     """The wings' valid inputs, made as a user makes them: a probe log, a history export and
     another store to import it into, a B/C machine's CEC tables and the fit for a second
@@ -498,7 +536,9 @@ def wing_inputs(work: Path, compgen: list[str]) -> dict[str, Path]:
     from conftest import on_linuxcnc
     maxkins = on_linuxcnc(work)
     run("measure-program", "--machine", maxkins, "--path", "K4", "-o", "HK4.ngc")
+    run("measure-program", "--machine", maxkins, "--path", "K4", "--probe-length", "220", "-o", "N.ngc")
     return {"hfit": work / "hfit.json", "maxkins": maxkins, "hprogram": work / "HK4.ngc",
+            "nprogram": work / "N.ngc",
             "probe": work / "probe.log", "export": work / "h.json", "target": work / "target.sqlite",
             "cec": work / "A_CEC.INI", "carr": work / "A.MPF", "bcfit": work / "bcfit2.json",
             "trt": work / "trt", "head": work / "head.csv"}
@@ -583,7 +623,7 @@ def main() -> None:
     wings = wing_inputs(work, compgen)
     rng = random.Random(args.seed)
     cases = [*csv_cases(rng), *machine_cases(), *fit_cases(), *current_cases(), *output_cases(),
-             *history_cases(), *derived_cases(rng, programs, args.generated, wings)]
+             *history_cases(), *nest_cases(wings), *derived_cases(rng, programs, args.generated, wings)]
     t0 = time.perf_counter()
     with ThreadPoolExecutor(args.jobs) as pool:
         results = list(pool.map(lambda c: run_case(c, work, compgen), cases))

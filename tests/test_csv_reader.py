@@ -124,3 +124,36 @@ def test_each_axis_side_is_read_as_written_and_nothing_else_is_taken(tmp_path):
             with pytest.raises(CompgenError, match=rf"column C_side: {bad} is neither \+1 nor -1") as e:
                 read_rtest(f, MACHINE)
             assert e.value.where == f"{f}:{at + 1}", e.value.where
+
+
+@pytest.mark.parametrize("fast", [True, False], ids=["fast reader", "careful reader"])
+def test_a_sessions_own_nest_length_is_read_back_and_a_wrong_one_named(tmp_path, monkeypatch, fast):
+    """A session made with another nest (compgen's probe_length column) is written and read
+    back with it, by both readers, on a head (where it moves the axes); a length no nest
+    can have, or a text, is refused with its line and column, the file's nothing taken."""
+    from conftest import HEAD_MACHINE
+    head = load_machine(HEAD_MACHINE)
+    if not fast:
+        monkeypatch.setattr(rtest, "_fast_table", lambda *a: None)
+    poses = generate(head, ["K4"], nest=220.0)
+    dev = np.random.default_rng(2).normal(0, 1e-3, (len(poses), 3))
+    text = format_rtest(head, RTestData(poses, dev))
+    assert text.splitlines()[0].split(",")[-3:] == ["probe_length", "C_side", "B_side"]
+    f = tmp_path / "n.csv"
+    f.write_text(text)
+    back = read_rtest(f, head)
+    assert (back.poses.nest == 220.0).all()
+    # the CSV's angles to 1e-6° (1.7e-8 rad) move the axes by up to that times the 370 mm lever
+    np.testing.assert_allclose(back.poses.q, poses.q, rtol=0, atol=1e-5)
+    np.testing.assert_allclose(back.deviation, dev, rtol=0, atol=1e-9)
+    header, first, *rest = text.splitlines()
+    col = header.split(",").index("probe_length") + 1
+    for bad, says in [("5.000000", "is no nest's distance below the gauge line"),
+                      ("2200.000000", "is no nest's distance below the gauge line"),
+                      ("long", "is not a number")]:
+        cells = first.split(",")
+        cells[col - 1] = bad
+        f.write_text("\n".join([header, ",".join(cells), *rest]) + "\n")
+        with pytest.raises(CompgenError, match=says) as caught:
+            read_rtest(f, head)
+        assert caught.value.where.endswith((":2", f":2:{col}")), caught.value.where

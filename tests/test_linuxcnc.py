@@ -35,8 +35,9 @@ from compgen.controllers.registry import read_edits, read_state
 from compgen.data.rtest import RTestData
 from compgen.data.simulate import simulate
 from compgen.model.effects import location_model
-from compgen.model.kinematics import Model, Poses
+from compgen.model.kinematics import Model, Poses, inverse
 from compgen.model.lines import controller_inverse
+from compgen.model.machine import at_nest
 from compgen.model.paths import generate
 from compgen.statistics.identify import identify
 
@@ -520,3 +521,33 @@ def test_a_head_modules_edit_runs_compgens_program_where_compgen_puts_it(tmp_pat
           f"{np.abs(got[:, :3] - want[:, :3]).max() * 1e3:.2g} um of compgen's model")
     assert before.residual["rms_um"] > 10 * NOISE_UM
     assert after.residual["rms_um"] == pytest.approx(NOISE_UM, rel=0.3)
+
+
+def test_a_longer_nest_program_runs_under_maxkins_with_the_pin_it_asks_for(tmp_path):
+    """The program diagnose advises to tell a head's sag from its angle (K4 with the nest
+    100 mm longer, here its first half) asks maxkins's pivot-length for the pivot to the
+    longer nest (370 mm): under the real module with that pin it runs through, and LinuxCNC
+    puts the joints where compgen's model of the machine with that nest puts the axes; the
+    nominal machine there with the longer nest reads zero. With the pin left at the first
+    session's 270 mm the program stops at its guard, saying so, before anything moves."""
+    machine = load_machine(on_linuxcnc(tmp_path))
+    poses = generate(machine, ["K4"], nest=220.0).take(np.arange(0, 121, 12))
+    emitted = measure_program(machine, poses, "K4", "linuxcnc", "tcpm", "NEST", "0", "d")
+    program = emitted.files[".ngc"]
+    guard = linuxcnc.PIN_GUARD.search(program)
+    assert guard[1] == "maxkins" and float(guard[2]) == pytest.approx(370.0)      # 150 pivot + 220 nest
+    joints, said = _run_head(_head_configuration(tmp_path / "first", machine, "270.0"), machine, program)
+    assert said and "pivot-length is more than 0.1000 mm from 370.0000 mm" in said[-1], said
+    assert all(np.allclose(j, 0, atol=1e-9) for j in joints.values()), joints
+    joints, said = _run_head(_head_configuration(tmp_path / "longer", machine, guard[2]), machine, program)
+    assert [m[:13] for m in said] == ["PRESET CHECK:"], said
+    got = _at_poses(joints, program)
+    listed = emitted.files[".poses.csv"].splitlines()
+    assert listed[0].split(",")[9] == "probe_length"
+    assert {r.split(",")[9] for r in listed[1:]} == {"220.000000"}
+    rotary = np.loadtxt(listed[1:], delimiter=",", usecols=(4, 5))          # C, B as written
+    want = inverse(at_nest(machine, 220.0), np.radians(rotary), poses.ball)
+    np.testing.assert_allclose(got[:, :3], want[:, :3], rtol=0, atol=JOINT_MM)
+    q = np.concatenate([got[:, :3], np.radians(rotary)], axis=1)
+    at = Poses(q, poses.ball, poses.t, poses.path, nest=poses.nest)
+    assert np.abs(Model(machine, []).relative(at, np.zeros(0))).max() < 1e-5

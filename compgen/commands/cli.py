@@ -18,7 +18,15 @@ from ..configuration.session import fit_machine, fit_request, machine_ref, read_
 from ..controllers.advice import Advisor
 from ..controllers.kinematics import corrected_by, kinematics_edit
 from ..controllers.probing import probe_program, with_sphere
-from ..controllers.programs import MODES, NAME_MAX, at_ball, measure_program, program_ball, program_name
+from ..controllers.programs import (
+    MODES,
+    NAME_MAX,
+    at_ball,
+    measure_program,
+    program_ball,
+    program_name,
+    program_nest,
+)
 from ..controllers.registry import for_machine, for_program, read_edits, read_state
 from ..data.probe import format_probe_log, probe_poses, simulate_touches
 from ..data.rtest import SIGNS, format_rtest, read_poses
@@ -26,6 +34,7 @@ from ..data.simulate import read_truth, simulate
 from ..errors import CompgenError
 from ..files import STDOUT, read_text, write_all, write_atomically
 from ..model.effects import catalogue, compose, location_model
+from ..model.machine import at_nest
 from ..model.paths import generate
 from ..model.sides import unknown_sides, unpredicted_sides
 from ..statistics.budget import with_budget
@@ -43,10 +52,12 @@ from .cli_common import (
     FORCE,
     MACHINE,
     OUTPUT,
+    PROBE_LENGTH,
     RECORD,
     Group,
     encoded_like,
     named_paths,
+    nest_mm,
     progress,
     said,
     sha256_of,
@@ -79,6 +90,7 @@ def main():
 @click.option("--ball", default=None, help="Ball centre in the table frame, mm: X,Y,Z "
                                             "(default: the machine file's).")
 @click.option("--there-and-back", "back", is_flag=True, help="Run each path there and back.")
+@PROBE_LENGTH
 @click.option("--rate-hz", type=float, default=None,
               help="A continuous session: a reading every 1/RATE s while each path runs (an R-test "
                    "sampling on the fly), instead of the path's n poses.")
@@ -101,7 +113,7 @@ def main():
                    "after an earlier file, its clock running on (a drift needs one clock).")
 @OUTPUT
 @FORCE
-def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, ball, back, rate_hz, feed,
+def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, ball, back, nest, rate_hz, feed,
                  edits, current, device, stylus_error_um, start_s, output, force):
     """Write the R-test CSV (or, with --device probe, the probe log) that a machine with the
     TRUTH errors would give."""
@@ -114,14 +126,16 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
     if not (np.isfinite(start_s) and start_s >= 0):
         raise CompgenError(f"--start-s is the time of the first reading, a number ≥ 0 s, not {start_s:g}")
     if device == "probe":
-        if back or noise_rho or rate_hz is not None or feed is not None:
-            raise CompgenError("--there-and-back, --noise-rho, --rate-hz and --feed are for R-test sessions",
+        if back or noise_rho or rate_hz is not None or feed is not None or nest is not None:
+            raise CompgenError("--there-and-back, --noise-rho, --rate-hz, --feed and --probe-length are for "
+                               "R-test sessions",
                                hint="a probe touches each pose standing still")
         poses = probe_poses(machine, names, at).starting_at(start_s)
     else:
         if feed is not None and rate_hz is None:
             raise CompgenError("--feed sets the pace of a continuous session", hint="give --rate-hz too")
-        poses = generate(machine, names, ball=at, start_s=start_s, back=back, rate_hz=rate_hz, feed=feed)
+        poses = generate(machine, names, ball=at, start_s=start_s, back=back, rate_hz=rate_hz, feed=feed,
+                         nest=nest_mm(nest))
     drive = None
     if edits:
         held = read_edits(machine, {e: read_state(e) for e in edits},
@@ -273,6 +287,7 @@ def predict_cmd(base, poses_file, output, force):
 @click.option("--there-and-back", "back", is_flag=True,
               help="With --path: run each path there and back, so that every axis reverses "
                    "(what a reversal error, backlash, needs to be seen).")
+@PROBE_LENGTH
 @click.option("--controller", "controller_name", default=None, metavar="NAME",
               help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
 @click.option("--mode", type=click.Choice(MODES), default="tcpm", show_default=True,
@@ -280,20 +295,21 @@ def predict_cmd(base, poses_file, output, force):
 @click.option("-o", "--output", type=FILE, default=None,
               help="Program file; its pose list goes beside it as <stem>.poses.csv. Default: stdout.")
 @FORCE
-def measure_program_cmd(machine_file, path_names, poses_file, ball, back, controller_name, mode, output,
-                        force):
+def measure_program_cmd(machine_file, path_names, poses_file, ball, back, nest, controller_name, mode,
+                        output, force):
     """Write an R-test measurement program for the control, checked against travel and feed."""
     machine = load_machine(machine_file)
     if bool(path_names) == bool(poses_file):
         raise CompgenError("give either --path or --poses")
-    if (ball or back) and poses_file:
-        raise CompgenError("--ball and --there-and-back go with --path: a pose list gives its own "
-                           "poses and ball")
+    if (ball or back or nest) and poses_file:
+        raise CompgenError("--ball, --there-and-back and --probe-length go with --path: a pose list gives "
+                           "its own poses, ball and nest")
     if poses_file:
         poses, label = read_poses(poses_file, machine), Path(poses_file).stem
     else:
         names = named_paths(machine, path_names)
-        poses = generate(machine, names, ball=vec3(ball, "--ball") if ball is not None else None, back=back)
+        poses = generate(machine, names, ball=vec3(ball, "--ball") if ball is not None else None, back=back,
+                         nest=nest_mm(nest))
         label = "+".join(names) + "_BACK" * back
     ctl = for_machine(controller_name or machine.controller, machine)
     output = None if output == STDOUT else output      # -o - is stdout, as no -o
@@ -356,11 +372,12 @@ def probe_program_cmd(machine_file, path_names, ball, controller_name, output, f
 @click.option("--ball", default=None,
               help="The ball centre in the table frame, mm, X,Y,Z (default: the one the program's "
                    "header names, else the machine file's).")
+@PROBE_LENGTH
 @click.option("--mode", type=click.Choice(MODES), default=None,
               help="LinuxCNC: the kinematics the configuration runs the program under (tcpm: trt "
                    "kinematics; axes: identity). The other controls' programs switch TCP themselves.")
 @click.option("--json", "as_json", is_flag=True, help="Print the check as JSON.")
-def check_program_cmd(machine_file, program, controller_name, ball, mode, as_json):
+def check_program_cmd(machine_file, program, controller_name, ball, nest, mode, as_json):
     """Simulate PROGRAM block by block against the R-test set-up, travel and feeds."""
     machine = load_machine(machine_file)
     ctl = (for_machine(controller_name, machine) if controller_name
@@ -373,6 +390,10 @@ def check_program_cmd(machine_file, program, controller_name, ball, mode, as_jso
     at, source = ((vec3(ball, "--ball"), "--ball") if ball is not None else
                   (header, "the program's header") if header is not None else
                   (machine.ball, "the machine file"))
+    # the nest the program was written for: a head's programs and motion follow its length
+    nest_given = nest is not None
+    nest = nest_mm(nest) if nest_given else program_nest(text)
+    machine = at_nest(machine, nest, "--probe-length" if nest is not None else program)
     blocks = ctl.blocks(text, mode)
     probing = any(b.probe for b in blocks)     # a probing program: the probe and its sphere
     if probing:
@@ -382,7 +403,8 @@ def check_program_cmd(machine_file, program, controller_name, ball, mode, as_jso
         click.echo(json.dumps({
             "format": "compgen.check/1", "program": program, "controller": ctl.name,
             "ok": not result.findings,
-            "ball_mm": list(at), "ball_from": source, "moves": result.blocks, "seconds": result.seconds,
+            "ball_mm": list(at), "ball_from": source, "probe_length_mm": machine.probe_length,
+            "moves": result.blocks, "seconds": result.seconds,
             "closest_mm": result.closest_mm, "closest_at": result.closest_at,
             "findings": [{**f.__dict__, "text": f.text(program)} for f in result.findings]},
             indent=2, ensure_ascii=False))
@@ -391,7 +413,9 @@ def check_program_cmd(machine_file, program, controller_name, ball, mode, as_jso
         return
     for finding in result.findings:
         click.echo(finding.text(program))
-    where = f"ball at {', '.join(f'{v:g}' for v in at)} mm (from {source})"
+    where = f"ball at {', '.join(f'{v:g}' for v in at)} mm (from {source})" + (
+        "" if nest is None else f"; nest {nest:g} mm below the gauge line (from "
+        f"{'--probe-length' if nest_given else 'the program' + chr(39) + 's header'})")
     if result.findings:
         click.echo(f"{program}: checked with the {where}", err=True)
         raise SystemExit(1)

@@ -139,6 +139,18 @@ def named_paths(machine, text: str) -> list[str]:
     return [p.strip() for p in text.split(",") if p.strip()]
 
 
+PROBE_LENGTH = click.option(
+    "--probe-length", "nest", default=None, metavar="MM",
+    help="The nest centre's distance below the gauge line in this session, mm, where it is not the machine "
+         "file's [rtest] probe_length. On a head it is the lever of the head's angles: a session with "
+         "another length tells an angle at the pivot from the head's sag.")
+
+
+def nest_mm(text: str | None) -> float | None:
+    """``--probe-length``'s value, mm, or None where it is not given."""
+    return None if text is None else number(text, "--probe-length", "")
+
+
 def vec3(text: str, option: str) -> list[float]:
     parts = text.split(",")
     if len(parts) != 3:

@@ -108,7 +108,8 @@ def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, control
     residual = y - fit.evaluate(machine, poses)
     p = plan(machine, fit, force=True)   # predict even what the limits would refuse to write
     not_held = ctl.not_held(machine, p)
-    after = Poses(ctl.holds(machine, p).drive(machine, poses), poses.ball, poses.t, poses.path)
+    after = Poses(ctl.holds(machine, p).drive(machine, poses), poses.ball, poses.t, poses.path,
+                  nest=poses.nest)
     predicted = Model(machine, fit.model).relative(after, fit.values) + residual
     before = beyond_setup(machine, poses, y)
     pred = beyond_setup(machine, after, predicted)

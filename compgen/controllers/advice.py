@@ -1,12 +1,13 @@
 """The measurements compgen may advise, and only those the machine can make.
 
 A measurement is a path of the machine file with the ball somewhere (as now, higher, lower,
-nearer the table's axis or farther out), run one way or there and back. Before one is
-offered it is checked exactly as ``measure-program`` checks the program it would write:
-travel (with the clearance and the safe height), rotary steps and speeds, and the motion
-check against the set-up with the ball where it would stand. What fails is not offered.
-Data from a touch probe get probing programs (``probe-program``: a probe cannot run a path
-there and back, and probes a path at ``[probe] poses`` of its poses).
+nearer the table's axis or farther out), run one way or there and back; on a head, also with
+a longer nest. Before one is offered it is checked exactly as ``measure-program`` checks the
+program it would write: travel (with the clearance and the safe height), rotary steps and
+speeds, and the motion check against the set-up with the ball (and nest) where it would
+stand. What fails is not offered. Data from a touch probe get probing programs
+(``probe-program``: a probe cannot run a path there and back, and probes a path at
+``[probe] poses`` of its poses).
 """
 
 from __future__ import annotations
@@ -38,6 +39,10 @@ PLACES = (
     (" with the ball 50 mm lower", "DOWN50", 1.0, -50.0, False),
     (" with the ball at 1.5 times its radius", "R150", 1.5, 0.0, False),
 )
+# A head's nest may also go on a longer holder: its angles at the pivot turn the nest by the
+# nest's length, a translation of the head (its sag) does not, so a second length tells them
+# apart where no ball position can. (label, file-name tag, mm longer)
+NESTS = ((" with the nest 100 mm longer", "NEST100", 100.0),)
 MODE = "tcpm"      # measure-program's default: the command printed does not name a mode
 
 
@@ -55,15 +60,18 @@ class Measurement:
     name: str = ""
     device: str = "rtest"        # "probe": made with a touch probe (probe-program)
     again: bool = False          # a repeat of what was measured, right after it: for time
+    nest: float | None = None    # mm below the gauge line, where not the machine file's
 
     def to_dict(self) -> dict:
         return {"label": self.label, "path": self.path, "ball": [round(v, 4) for v in self.ball],
-                "there_and_back": self.back, "name": self.name, "right_after": self.again}
+                "there_and_back": self.back, "name": self.name, "right_after": self.again,
+                **({"probe_length_mm": self.nest} if self.nest is not None else {})}
 
     def options(self) -> str:
         """The options of ``measure-program`` that write it."""
         ball = ",".join(f"{v:.4f}".rstrip("0").rstrip(".") for v in self.ball)   # as to_dict's
-        return f"--path {self.path} --ball {ball}" + " --there-and-back" * self.back
+        return (f"--path {self.path} --ball {ball}" + " --there-and-back" * self.back
+                + (f" --probe-length {self.nest:g}" if self.nest is not None else ""))
 
     def command(self, me: str, machine_ref: str, program_ext: str) -> str:
         """The whole ``measure-program`` (or ``probe-program``) command, as it runs pasted
@@ -132,24 +140,30 @@ def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest")
         # path and ball hold within a run: one look per run, not per pose
         run = runs(measured)
         first = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
-        where_ = [(str(measured.path[i]), tuple(np.round(measured.ball[i], 3))) for i in first]
+        nest = np.where(np.isnan(measured.nest), machine.probe_length, measured.nest)
+        where_ = [(str(measured.path[i]), tuple(np.round(measured.ball[i], 3)), round(float(nest[i]), 3))
+                  for i in first]
         done = set(where_)
         for a in machine.rotary_axes:
             d = motion_direction(measured.q[:, machine.index(a.name)], run)
             back = np.add.reduceat(d > 0, first) & np.add.reduceat(d < 0, first)     # both ways in a run
             turned |= {w for w, both in zip(where_, back, strict=True) if both}
+    places = [(where, tag, scale, dz, back, None) for where, tag, scale, dz, back in PLACES]
+    if machine.heads and device == "rtest":
+        places += [(where, tag, 1.0, 0.0, False, machine.probe_length + more) for where, tag, more in NESTS]
     out = []
-    for where, tag, scale, dz, back in PLACES:
+    for where, tag, scale, dz, back, nest in places:
         if back and device == "probe":
             continue
         at = ball * [scale, scale, 1.0] + [0.0, 0.0, dz]
         for name in machine.paths:
-            again = (name, tuple(np.round(at, 3))) in (turned if back else done)
+            key = (name, tuple(np.round(at, 3)), round(nest or machine.probe_length, 3))
+            again = key in (turned if back else done)
             if again and (back or not timed):     # a repeat: the path as it ran, in time
                 continue
             try:
                 poses = (probe_poses(machine, [name], at) if device == "probe" else
-                         generate(machine, [name], ball=at, back=back))
+                         generate(machine, [name], ball=at, back=back, nest=nest))
             except CompgenError:
                 continue
             poses = poses.starting_at(start)
@@ -157,5 +171,5 @@ def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest")
             if again:
                 label, stem = f"{label} again, right after these data", f"{stem}_AGAIN"
             out.append(Measurement(label, name, tuple(float(v) for v in at), poses, back, stem, device,
-                                   again))
+                                   again, nest))
     return out

@@ -357,5 +357,5 @@ class Held:
 
     def drive(self, machine: Machine, poses: Poses) -> np.ndarray:
         rotary = poses.q[:, [machine.index(a.name) for a in machine.rotary_axes]]
-        q = controller_inverse(machine, self.lines, rotary, poses.ball, self.squareness)
+        q = controller_inverse(machine, self.lines, rotary, poses.ball, self.squareness, poses.nest)
         return apply_tables(machine, self.tables, q)

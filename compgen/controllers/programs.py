@@ -16,11 +16,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..data.rtest import BALL, axis_cells, side_columns
+from ..data.rtest import BALL, NEST, axis_cells, side_columns
 from ..errors import CompgenError
 from ..model.frames import along_tool, at_height, safe_height, world
 from ..model.kinematics import Poses, head_offset, inverse
-from ..model.machine import Machine, check_ball, check_travel
+from ..model.machine import Machine, at_nest, check_ball, check_travel
 from ..model.sides import APPROACH_DEG, program_sides
 from ..setup import motion
 from ..units import number
@@ -37,6 +37,18 @@ NAME_MAX = 24      # characters of a program name every control here keeps
 BALL_HEADER = "ball centre in the table frame:"
 _BALL_LINE = re.compile(re.escape(BALL_HEADER) + r" X([-+]?\d+(?:\.\d+)?) Y([-+]?\d+(?:\.\d+)?) "
                         r"Z([-+]?\d+(?:\.\d+)?) mm")
+NEST_HEADER = "mm below the gauge line"     # the nest's length, where not the machine file's
+_NEST_LINE = re.compile(r"nest on tool \S+, (\d+(?:\.\d+)?) " + re.escape(NEST_HEADER))
+
+
+def program_nest(text: str) -> float | None:
+    """The nest's length below the gauge line (mm) a compgen program was written for, where
+    its header names one (a session with another nest than the machine file's), else None."""
+    found = {float(m[1]) for m in _NEST_LINE.finditer(text)}
+    if len(found) > 1:
+        raise CompgenError(f"the program's header names {len(found)} nest lengths",
+                           hint="give the one it was written for with --probe-length MM")
+    return found.pop() if found else None
 
 
 def program_ball(text: str) -> tuple[float, float, float] | None:
@@ -102,7 +114,14 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     if len(balls) > 1:
         raise CompgenError(f"a program measures one ball position; these poses hold {len(balls)}",
                            hint="write one program per ball position")
-    machine = at_ball(machine, balls[0])   # datum, safe height and motion check: the ball where it is
+    nests = np.unique(poses.nest)
+    if len(nests) > 1:
+        raise CompgenError(f"a program measures with one nest; these poses hold {len(nests)} nest lengths",
+                           hint="write one program per nest length")
+    file_nest = machine.probe_length
+    nest = None if np.isnan(nests[0]) else float(nests[0])
+    # travel, safe height and motion check with the nest the session uses, the ball where it is
+    machine = at_ball(at_nest(machine, nest), balls[0])
     linear = [machine.index(c) for c in "XYZ"]
     rotary = [machine.index(a.name) for a in machine.rotary_axes]
     # the machine executes the angles as written (0.0001 deg): solve X Y Z at exactly those,
@@ -113,7 +132,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     # one segment, with its own approach and retract, per run of one path label
     segments = np.split(np.arange(len(poses)), np.flatnonzero(poses.path[1:] != poses.path[:-1]) + 1)
     run = np.repeat(np.arange(len(segments)), list(map(len, segments)))
-    poses = Poses(q, poses.ball, poses.t, poses.path, program_sides(machine, q, run))
+    poses = Poses(q, poses.ball, poses.t, poses.path, program_sides(machine, q, run), poses.nest)
     check_travel(machine, poses.q, label)
     check_travel(machine, along_tool(machine, poses.q, setup.clearance),
                  f"{label} (clearance {setup.clearance:g} mm off the ball)")
@@ -145,7 +164,9 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
         f"{ascii_text(list_name or name)}.poses.csv, same order",
         f"{BALL_HEADER} "
         + " ".join(f"{c}{fmt(v, LINEAR_DECIMALS)}" for c, v in zip("XYZ", ball, strict=True))
-        + f" mm; nest on tool {setup.tool}",
+        + f" mm; nest on tool {setup.tool}"
+        + (f", {fmt(nest, LINEAR_DECIMALS)} {NEST_HEADER} (not the machine file's {file_nest:g} mm: "
+           "the tool's length must say so)" if nest is not None and nest != file_nest else ""),
         "active preset: the machine file's origin (nominal intersection of the rotary axes)",
         f"feed {setup.feed:g} mm/min; dwell {setup.dwell:g} s per pose; clearance "
         f"{setup.clearance:g} mm; safe height Z {safe:g} mm above the rotary axes (from the set-up)",
@@ -298,13 +319,16 @@ def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool
 def pose_list(machine: Machine, poses: Poses) -> str:
     """CSV v1 columns without readings: add dX dY dZ from the R-test and it is fit input.
     Each rotary axis's side at each pose (``A_side``: the direction it last moved, as the
-    program runs the poses) tells fit where its backlash was."""
+    program runs the poses) tells fit where its backlash was; ``probe_length``, where the
+    session's nest is not the machine file's, its length (``machine`` is the one at that nest)."""
     sides = {name: machine.index(axis) for name, axis in side_columns(machine).items()}
-    head = ["path", *machine.axis_names, *BALL, *sides]
+    nest = not np.isnan(poses.nest).all()
+    head = ["path", *machine.axis_names, *BALL, *[NEST] * nest, *sides]
     lines = [",".join(head)]
     for i in range(len(poses)):
         lines.append(",".join([ascii_text(str(poses.path[i])), *axis_cells(machine, poses.q[i]),
                                *(f"{v:.6f}" for v in poses.ball[i]),
+                               *[f"{machine.probe_length:.6f}"] * nest,
                                *(f"{poses.side[i, j]:+.0f}" for j in sides.values())]))
     return "\n".join(lines) + "\n"
 

@@ -19,11 +19,16 @@ import numpy as np
 from ..errors import CompgenError, one_line
 from ..files import MAX_DATA_BYTES, read_text
 from ..model.kinematics import Poses, head_offset, inverse, nominal, solved
-from ..model.machine import IDENTIFIERS, Machine, check_ball, check_travel, identifier
+from ..model.machine import IDENTIFIERS, NEST_RANGE_MM, Machine, check_ball, check_travel, identifier
 from ..units import NUMBER
 
 DEVIATION = ("dX", "dY", "dZ")
 BALL = ("bx", "by", "bz")
+# compgen's own column beside the contract's (which keeps and ignores what it does not name):
+# the nest centre's distance below the gauge line where a session's nest is not the machine
+# file's ``probe_length``, mm. A head's angle at its pivot turns the nest by this lever, its
+# sag does not: two lengths tell them apart
+NEST = "probe_length"
 SIGNS = ("nest-minus-ball", "ball-minus-nest")
 CELL_MAX = 1e6               # mm, deg or µm: beyond any machine's coordinates
 READING_MAX_MM = 5.0          # no R-test nest measures further from the ball's centre
@@ -152,18 +157,18 @@ def read_poses(path: str | Path, machine: Machine) -> Poses:
     _, first = np.unique(ball[moved], axis=0, return_index=True)
     for k in moved[np.sort(first)]:
         check_ball(machine.setup, ball[k], f"{table.where}:{table.lines[k]}")
-    q = inverse(machine, rotary, ball)
+    q = inverse(machine, rotary, ball, nest=table.nest)
     check_travel(machine, q, table.where, table.lines)
     if all(c in table.columns for c in "XYZ"):
         given = np.column_stack([table.columns[c] for c in "XYZ"])
-        off = np.linalg.norm(given - commanded(machine, q)[:, :3], axis=1)
+        off = np.linalg.norm(given - commanded(machine, q, table.nest)[:, :3], axis=1)
         bad = np.flatnonzero(off > NOMINAL_TOLERANCE_MM)
         if bad.size:
             raise CompgenError(f"X, Y, Z are {off[bad[0]]:.3f} mm from where the nest meets the ball",
                                where=f"{table.where}:{table.lines[bad[0]]}",
                                hint="drop the X, Y, Z columns (compgen computes them) or fix the ball")
     return solved(machine, Poses(q, ball, table.columns.get("t", np.full(len(q), np.nan)), table.labels,
-                                 table.side(machine)))
+                                 table.side(machine), table.nest))
 
 
 @dataclass(frozen=True, eq=False)
@@ -179,6 +184,10 @@ class Table:
             return np.column_stack([self.columns[c] for c in BALL])
         return np.broadcast_to(machine.ball, (len(self.labels), 3)).copy()
 
+    @property
+    def nest(self) -> np.ndarray | None:
+        return self.columns.get(NEST)
+
     def side(self, machine: Machine) -> np.ndarray:
         out = np.full((len(self.labels), len(machine.axes)), np.nan)
         for name, axis in side_columns(machine).items():
@@ -189,9 +198,9 @@ class Table:
     def poses(self, machine: Machine) -> Poses:
         q = np.column_stack([self.columns[a.name] if not a.rotary else np.radians(self.columns[a.name])
                              for a in machine.axes])
-        q[:, :3] -= head_offset(machine, q[:, 3:])     # X, Y, Z are the nest's position
+        q[:, :3] -= head_offset(machine, q[:, 3:], self.nest)     # X, Y, Z are the nest's position
         return Poses(q, self.ball(machine), self.columns.get("t", np.full(len(q), np.nan)), self.labels,
-                     self.side(machine))
+                     self.side(machine), self.nest)
 
 
 def side_columns(machine: Machine) -> dict[str, str]:
@@ -200,7 +209,17 @@ def side_columns(machine: Machine) -> dict[str, str]:
     return {f"{a.name}_side": a.name for a in machine.rotary_axes}
 
 
-def _checked_sides(table: Table) -> Table:
+def _checked(table: Table) -> Table:
+    """The table, its side columns ±1 and its nest lengths where a nest can be."""
+    nest = table.nest
+    if nest is not None:
+        bad = np.flatnonzero((nest < NEST_RANGE_MM[0]) | (nest > NEST_RANGE_MM[1]))
+        if bad.size:
+            raise CompgenError(f"column {NEST}: {nest[bad[0]]:g} mm is no nest's distance below the gauge "
+                               f"line ({NEST_RANGE_MM[0]:g} to {NEST_RANGE_MM[1]:g} mm)",
+                               where=f"{table.where}:{table.lines[bad[0]]}",
+                               hint="give the nest's length in mm, or drop the column (the machine file's "
+                                    "probe_length)")
     for name, v in table.columns.items():
         if name.endswith("_side"):
             bad = np.flatnonzero(np.abs(v) != 1)
@@ -239,15 +258,15 @@ def read_table(path: str | Path, machine: Machine, required: list[str]) -> Table
     has_ball = [c in header for c in BALL]
     if any(has_ball) and not all(has_ball):
         raise CompgenError("give all of bx, by, bz or none", where=f"{where}:{header_line}")
-    numeric = required + [c for c in ("X", "Y", "Z", "t", *BALL, *side_columns(machine))
+    numeric = required + [c for c in ("X", "Y", "Z", "t", *BALL, NEST, *side_columns(machine))
                           if c in header and c not in required]
     col = {c: header.index(c) for c in header}
     digest = hashlib.sha256(raw).hexdigest()
     fast = _fast_table(body, header, numeric, col)
     if fast is not None:
         values, labels = fast
-        return _checked_sides(Table(where, digest, {name: values[:, j] for j, name in enumerate(numeric)},
-                                     labels, range(header_line + 1, header_line + 1 + len(labels))))
+        return _checked(Table(where, digest, {name: values[:, j] for j, name in enumerate(numeric)},
+                              labels, range(header_line + 1, header_line + 1 + len(labels))))
 
     lines = [(i, line) for i, line in enumerate(body.splitlines(), start=header_line + 1)
              if line.strip() and not line.lstrip().startswith("#")]
@@ -276,7 +295,7 @@ def read_table(path: str | Path, machine: Machine, required: list[str]) -> Table
         labels.append(label)
         line_no.append(i)
     columns = {name: values[:, j] for j, name in enumerate(numeric)}
-    return _checked_sides(Table(where, digest, columns, np.array(labels, dtype=object), line_no))
+    return _checked(Table(where, digest, columns, np.array(labels, dtype=object), line_no))
 
 
 def _header(text: str) -> tuple[int, str | None, str]:
@@ -340,11 +359,12 @@ def _fast_table(body: str, header: list[str], numeric: list[str],
     return values, np.array(names, dtype=object)[which.ravel()]
 
 
-def commanded(machine: Machine, q: np.ndarray) -> np.ndarray:
+def commanded(machine: Machine, q: np.ndarray, nest: np.ndarray | None = None) -> np.ndarray:
     """Poses (n, k) as CSV v1 gives them: X, Y, Z the nominal nest centre (under TCPM, where
-    the ball is), which a head's turn moves from the linear axes' position; mm and rad."""
+    the ball is), which a head's turn moves from the linear axes' position; mm and rad.
+    ``nest``: each pose's nest length (``Poses.nest``), if not the machine file's."""
     out = np.array(q, float)
-    out[:, :3] += head_offset(machine, out[:, 3:])
+    out[:, :3] += head_offset(machine, out[:, 3:], nest)
     return out
 
 
@@ -359,14 +379,16 @@ ROWS_AT_ONCE = 20_000     # rows formatted by one %: a few MB of text at a time
 
 def format_rtest(machine: Machine, data: RTestData, comments: tuple[str, ...] = ()) -> str:
     """CSV v1 text: path, t, linear axes, rotary axes (deg), dX dY dZ (µm), ball if not
-    default, and each rotary axis's side where every pose's is known."""
+    default, the nest's length where a pose's is not the machine file's, and each rotary
+    axis's side where every pose's is known."""
     p = data.poses
     ball_default = np.allclose(p.ball, machine.ball, rtol=0, atol=1e-12)
+    nest = not np.isnan(p.nest).all()
     timed = not np.isnan(p.t).any()
     sides = {name: machine.index(axis) for name, axis in side_columns(machine).items()
              if not np.isnan(p.side[:, machine.index(axis)]).any()}
     header = ["path", *(["t"] if timed else []), *machine.axis_names, *DEVIATION] + (
-        [] if ball_default else list(BALL)) + list(sides)
+        [] if ball_default else list(BALL)) + [NEST] * nest + list(sides)
     out = io.StringIO()
     for c in comments:
         out.write(f"# {one_line(c)}\n")
@@ -375,11 +397,13 @@ def format_rtest(machine: Machine, data: RTestData, comments: tuple[str, ...] = 
     # one format for a row's numbers (what axis_cells writes, then µm, then the ball); the
     # labels are identifiers (no comma, no quote), so the row needs no CSV quoting
     scale = np.array([180.0 / np.pi if a.rotary else 1.0 for a in machine.axes])
-    numbers = [commanded(machine, p.q) * scale, data.deviation * 1e3, *([] if ball_default else [p.ball]),
+    numbers = [commanded(machine, p.q, p.nest) * scale, data.deviation * 1e3,
+               *([] if ball_default else [p.ball]),
+               *([np.where(np.isnan(p.nest), machine.probe_length, p.nest)[:, None]] if nest else []),
                p.side[:, list(sides.values())]]
     if timed:
         numbers.insert(0, p.t[:, None])
-    cells = len(machine.axes) + 3 + 3 * (not ball_default)
+    cells = len(machine.axes) + 3 + 3 * (not ball_default) + nest
     fmt = ",".join(["%s", *(["%.3f"] if timed else []), *["%.6f"] * cells, *["%+.0f"] * len(sides)]) + "\n"
     for label in set(p.path.tolist()):
         if not re.fullmatch(r"[^,\"\r\n]*", str(label)):

@@ -47,7 +47,7 @@ def simulate(machine: Machine, truth: Mapping[str, float], poses: Poses, noise_u
     if drive is None:
         dev = model.deviation(poses, values)
     else:
-        actual = Poses(drive(poses), poses.ball, poses.t, poses.path, poses.side)
+        actual = Poses(drive(poses), poses.ball, poses.t, poses.path, poses.side, poses.nest)
         dev = model.relative(actual, values) - Model(machine, ()).relative(poses)
     if noise_um:
         rng = rng or np.random.default_rng()

@@ -35,7 +35,7 @@ from .machine import Axis, Machine
 SLOT_INDEX = {d: i for i, d in enumerate(TRANSLATIONS + ROTATIONS)}
 
 
-FIELDS = ("q", "ball", "t", "path", "side")     # Poses' arrays, one row per pose
+FIELDS = ("q", "ball", "t", "path", "side", "nest")     # Poses' arrays, one row per pose
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,6 +48,10 @@ class Poses:
     path : (n,) path label of each pose
     side : (n, k) per axis, the direction it last moved before the pose was taken (+1, −1):
         the side of its backlash; NaN where the data do not say (default: nowhere)
+    nest : (n,) the nest centre's distance below the spindle's gauge line, mm, where a
+        session used another nest than the machine file's ``probe_length`` (NaN: that one).
+        On a head it is the lever of the head's angles: two lengths tell an angle at the
+        pivot from a translation (a head's sag)
     """
 
     q: np.ndarray
@@ -55,10 +59,13 @@ class Poses:
     t: np.ndarray
     path: np.ndarray
     side: np.ndarray | None = None
+    nest: np.ndarray | None = None
 
     def __post_init__(self):
         if self.side is None:
             object.__setattr__(self, "side", np.full(np.shape(self.q), np.nan))
+        if self.nest is None:
+            object.__setattr__(self, "nest", np.full(len(self.q), np.nan))
         for field in FIELDS:
             a = np.array(getattr(self, field))   # a copy: freezing must not touch the caller's
             a.setflags(write=False)
@@ -81,14 +88,14 @@ class Poses:
     def starting_at(self, t0: float) -> Poses:
         """These poses with their clock moved so that the first is read at ``t0`` s: a
         measurement made after others, the R-test's clock running on."""
-        return Poses(self.q, self.ball, self.t - self.t[0] + t0, self.path, self.side)
+        return Poses(self.q, self.ball, self.t - self.t[0] + t0, self.path, self.side, self.nest)
 
     @staticmethod
-    def at(q: np.ndarray, ball) -> Poses:
+    def at(q: np.ndarray, ball, nest: np.ndarray | None = None) -> Poses:
         """Poses with no time and no path label: ``ball`` (3,) or (n, 3) mm."""
         n = len(q)
         return Poses(q, np.broadcast_to(np.asarray(ball, float), (n, 3)), np.full(n, np.nan),
-                     np.full(n, "", dtype=object))
+                     np.full(n, "", dtype=object), nest=nest)
 
     @staticmethod
     def concat(items: Sequence[Poses]) -> Poses:
@@ -200,15 +207,28 @@ def _known_nominal(machine: Machine, poses: Poses) -> np.ndarray | None:
     return held[1] if held is not None and held[0] is machine else None
 
 
-def nest_centre(machine: Machine, tool: np.ndarray) -> np.ndarray:
+def nest_centre(machine: Machine, tool: np.ndarray, nest: np.ndarray | None = None) -> np.ndarray:
     """The nest centre (n, 3) mm in the machine frame, from the tool chain's transform
-    ``tool`` (n, 4, 4) (``chain_transform``): its frames start at the gauge line."""
+    ``tool`` (n, 4, 4) (``chain_transform``): its frames start at the gauge line. ``nest``:
+    each pose's nest length (``Poses.nest``), if not the machine file's."""
     if not machine.heads:     # the linear axes' position, exactly
         return tool[:, :3, 3]
-    return (tool[:, :3, 3] + tool[:, :3, :3] @ machine.nest_point) + machine.gauge
+    gauge, point = lever(machine, nest, len(tool))
+    return (tool[:, :3, 3] + _rotate(tool[:, :3, :3], point)) + gauge
 
 
-def head_offset(machine: Machine, rotary_rad: np.ndarray) -> np.ndarray:
+def lever(machine: Machine, nest: np.ndarray | None, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The gauge line in the machine frame at the zero pose and the nest centre in the tool
+    chain's last frame, (3,) each or (n, 3) where ``nest`` (n,) gives poses their own nest
+    length (NaN: the machine file's ``probe_length``)."""
+    if nest is None or np.isnan(nest).all():
+        return machine.gauge, machine.nest_point
+    gauge = np.zeros((n, 3))
+    gauge[:, 2] = np.where(np.isnan(nest), machine.probe_length, nest)
+    return gauge, machine.nest_point + machine.gauge - gauge
+
+
+def head_offset(machine: Machine, rotary_rad: np.ndarray, nest: np.ndarray | None = None) -> np.ndarray:
     """Where a head's turn puts the nominal nest centre from the linear axes' position,
     (n, 3) mm at the rotary positions (n, r): what a control adds under TCPM to X, Y, Z
     (the nest's position, the R-test CSV's columns) to drive the axes. Zero without a head."""
@@ -218,7 +238,8 @@ def head_offset(machine: Machine, rotary_rad: np.ndarray) -> np.ndarray:
     q = np.zeros((n, len(machine.axes)))
     q[:, [machine.index(a.name) for a in machine.rotary_axes]] = rotary_rad
     zero = np.zeros((n, 6))
-    return nest_centre(machine, chain_transform(machine, machine.tool, Poses.at(q, np.zeros(3)), {}, zero))
+    return nest_centre(machine, chain_transform(machine, machine.tool, Poses.at(q, np.zeros(3)), {}, zero),
+                       nest)
 
 
 def solved(machine: Machine, poses: Poses) -> Poses:
@@ -318,10 +339,10 @@ def _walk(machine: Machine, poses: Poses, slots: Mapping, lines: Mapping[str, tu
     # the tool side's frames sit at the spindle gauge line, probe_length above the nest
     # centre (q is the nest centre: the tool length compensated), so an angular error of a
     # tool-side carriage turns the nest with the tool length as its lever
-    gauge = machine.gauge
+    gauge, nest_point = lever(machine, poses.nest, n)
     ends, frames = {}, {}
     for chain, start, sign, carrier, point in ((machine.workpiece, np.zeros(3), -1.0, "ball", poses.ball),
-                                               (machine.tool, gauge, 1.0, "nest", machine.nest_point)):
+                                               (machine.tool, gauge, 1.0, "nest", nest_point)):
         R, o = np.broadcast_to(np.eye(3), (n, 3, 3)), np.broadcast_to(start, (n, 3))
         held = []
         for axis in chain:
@@ -557,13 +578,14 @@ def chain_transform(machine: Machine, axes: Sequence[Axis], poses: Poses, slots:
 
 def inverse(machine: Machine, rotary_rad: np.ndarray, ball: np.ndarray,
             lines: Mapping[str, tuple] | None = None,
-            params: Mapping[str, float] | None = None) -> np.ndarray:
+            params: Mapping[str, float] | None = None, nest: np.ndarray | None = None) -> np.ndarray:
     """Nominal inverse kinematics, as a controller's TCPM/TRAORI would compute it.
 
     Parameters
     ----------
     rotary_rad : (n, r) rotary axis positions in ``machine.rotary_axes`` order, rad
     ball : (n, 3) or (3,) ball centre in the table frame, mm
+    nest : (n,) each pose's nest length, mm (``Poses.nest``), if not the machine file's
 
     Returns
     -------
@@ -583,7 +605,7 @@ def inverse(machine: Machine, rotary_rad: np.ndarray, ball: np.ndarray,
     linear = [i for i, a in enumerate(machine.axes) if not a.rotary]
     q[:, [i for i, a in enumerate(machine.axes) if a.rotary]] = rotary_rad
     held = Model(machine, list(params or {}))
-    poses = Poses.at(q, ball)
+    poses = Poses.at(q, ball, nest)
     slots = held._slots(poses, np.array(list((params or {}).values())))
     r0, M = np.empty((n, 3)), np.empty((n, 3, 3))
     for a in range(0, n, BLOCK):

@@ -89,12 +89,14 @@ def nominal_pivot(chain, i) -> np.ndarray:
 
 
 def controller_inverse(machine: Machine, lines: Mapping[str, AxisLine], rotary_rad: np.ndarray,
-                       ball: np.ndarray, squareness: Mapping[str, float] | None = None) -> np.ndarray:
+                       ball: np.ndarray, squareness: Mapping[str, float] | None = None,
+                       nest: np.ndarray | None = None) -> np.ndarray:
     """The linear axis positions a controller holding ``lines`` (and the linear axes'
     ``squareness``, name → rad) commands under TCPM/TRAORI to put the nest on the nominal
-    ball: (n, k) poses, mm and rad."""
+    ball: (n, k) poses, mm and rad; ``nest``: each pose's nest length, where not the machine
+    file's (the control is given the nest's length)."""
     return inverse(machine, rotary_rad, ball, lines=_as_conjugations(machine, lines),
-                   params=dict(squareness or {}))
+                   params=dict(squareness or {}), nest=nest)
 
 
 def _as_conjugations(machine: Machine, lines: Mapping[str, AxisLine]) -> dict[str, tuple]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -273,6 +273,23 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     """``a`` made read-only: a machine's cached arrays are shared by every caller."""
     a.setflags(write=False)
     return a
+
+
+NEST_RANGE_MM = (10.0, 2000.0)     # a nest on a tool holder below the gauge line: no shorter, no longer
+
+
+def at_nest(machine: Machine, length: float | None, where: str = "") -> Machine:
+    """The machine with its R-test nest ``length`` mm below the gauge line instead of the
+    machine file's ``probe_length`` (None: that one): for a session made with a longer or
+    shorter nest, whose programs, travel and motion check follow the nest."""
+    if length is None or length == machine.probe_length:
+        return machine
+    if not (math.isfinite(length) and NEST_RANGE_MM[0] <= length <= NEST_RANGE_MM[1]):
+        raise CompgenError(f"{length:g} mm is no nest's distance below the gauge line ({NEST_RANGE_MM[0]:g} "
+                           f"to {NEST_RANGE_MM[1]:g} mm)", where=where,
+                           hint="give the nest's length in mm (the machine file's [rtest] probe_length is "
+                                f"{machine.probe_length:g})")
+    return replace(machine, probe_length=float(length))
 
 
 def check_ball(setup: Setup, ball, where: str) -> None:

@@ -14,7 +14,7 @@ import numpy as np
 from ..errors import CompgenError
 from ..files import MAX_DATA_BYTES
 from .kinematics import Poses, inverse
-from .machine import Machine, PathDef, check_travel
+from .machine import Machine, PathDef, at_nest, check_travel
 from .sides import program_sides
 
 GAP_S = 20.0   # pause between two paths of one session (re-positioning), s
@@ -51,7 +51,7 @@ def rotary_positions(machine: Machine, path: PathDef, n: int | None = None) -> n
 
 def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | None = None,
              start_s: float = 0.0, back: bool = False, rate_hz: float | None = None,
-             feed: float | None = None) -> Poses:
+             feed: float | None = None, nest: float | None = None) -> Poses:
     """Poses of the named paths run one after another, with the nest on the ball (TCPM);
     with ``back``, each path is run there and back (every axis reverses: what a reversal
     error needs to be seen).
@@ -60,7 +60,8 @@ def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | Non
     it: a reading every 1/rate_hz s while each path runs at ``feed`` (deg/min, the mean
     speed of its most-travelled rotary axis; default the path's own pace, n poses of
     seconds_per_pose). Every pose is checked against the machine's travel; the first one
-    outside is named.
+    outside is named. ``nest``: the nest's length below the gauge line, mm, where it is not
+    the machine file's ``probe_length`` (on a head, the axes follow it).
     """
     if not names:
         raise CompgenError("no path is named", hint=f"name one or more of {', '.join(machine.paths)} "
@@ -70,6 +71,7 @@ def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | Non
     if feed is not None and not (math.isfinite(feed) and feed > 0):
         raise CompgenError(f"the feed must be a finite number > 0 deg/min, not {feed}")
     ball = np.asarray(machine.ball if ball is None else ball, dtype=float)
+    at = at_nest(machine, nest, "--probe-length")
     out, t0 = [], start_s
     for name in names:
         path = path_def(machine, name)
@@ -92,12 +94,13 @@ def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | Non
         if back:
             angles = np.vstack([angles, angles[::-1]])
         n = len(angles)
-        q = inverse(machine, np.radians(angles), ball)
+        q = inverse(at, np.radians(angles), ball)
         t = t0 + step * np.arange(n)
         t0 = t[-1] + GAP_S
-        check_travel(machine, q, name)
+        check_travel(at, q, name)
         out.append(Poses(q, np.broadcast_to(ball, (n, 3)), t, np.full(n, path.name, dtype=object),
-                         program_sides(machine, q, np.zeros(n))))   # as compgen's programs run it
+                         program_sides(machine, q, np.zeros(n)),    # as compgen's programs run it
+                         np.full(n, np.nan if at is machine else at.probe_length)))
     return Poses.concat(out)
 
 

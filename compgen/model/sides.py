@@ -109,7 +109,8 @@ def same_pose(machine: Machine, poses: Poses, run: np.ndarray) -> np.ndarray:
         for a, b in zip(starts, [*starts[1:], len(poses)], strict=True):
             reached[a:b] = last_moves(np.sign(np.diff(poses.q[a:b, j])), np.nan)
         side[:, j] = np.where(unknown, np.where(np.isnan(reached), 2.0 + run, reached), side[:, j])
-    key = np.column_stack([np.round(poses.q * scale * 1e6), np.round(poses.ball * 1e6), side])
+    key = np.column_stack([np.round(poses.q * scale * 1e6), np.round(poses.ball * 1e6),
+                           np.nan_to_num(np.round(poses.nest * 1e6), nan=-1.0), side])
     key = np.ascontiguousarray(key.astype(np.int64))
     # each row as one opaque value: unique of a 1-D array is a third of unique over rows
     rows = key.view(np.dtype((np.void, key.dtype.itemsize * key.shape[1]))).ravel()
