@@ -390,6 +390,7 @@ def test_linuxcnc_head_programs_are_written_and_checked_with_the_heads_body(tmp_
     assert code == 0, err
     program = (tmp_path / "K4.ngc").read_text()
     guard = f"o101 if [ABS[#<_hal[{module}.pivot-length]> - 270.0000] GT 0.1000]"
+    assert f"; mode TCPM: {module} kinematics, " in program and "trt" not in program
     assert "\nG49 ;" in program and "\nM66 E0 L0 ;" in program and f"\n{guard}\n(abort," in program
     assert program.index("\nG49") < program.index("M66 E0 L0") < program.index(guard) < program.index("\nG0 ")
     code, out, err = run("check-program", "--machine", path, "--mode", "tcpm", tmp_path / "K4.ngc")

@@ -138,6 +138,10 @@ class Controller:
         """The control as its files and messages for ``machine`` name it."""
         return self.words
 
+    def tcp_label(self, machine: Machine) -> str:
+        """What carries the nest under TCP on ``machine``, as a program's header says it."""
+        return self.tcp_words
+
     def edits_head(self, machine: Machine) -> bool:
         """Whether compgen writes this control's kinematics edits for ``machine``, whose head
         turns the tool (only where the control's kinematics for it was run: none by default)."""

@@ -594,8 +594,9 @@ class LinuxCNC(Controller):
                    "axes" if re.search(r"(?m)^; mode AXES", text) else mode)
         if mode is None:
             raise CompgenError("a LinuxCNC program's kinematics are the configuration's, not the program's: "
-                               "say which it runs under", hint="give --mode tcpm (trt kinematics active) or "
-                                                               "--mode axes (identity kinematics)")
+                               "say which it runs under",
+                               hint="give --mode tcpm (its kinematics module active: trt, maxkins or "
+                                    "5axiskins) or --mode axes (identity kinematics)")
         if mode != written:
             raise CompgenError(f"the program was written for mode {written.upper()} (its header) and is to "
                                f"run under {mode.upper()}: its positions mean other things there",
@@ -609,6 +610,10 @@ class LinuxCNC(Controller):
     def label(self, machine: Machine) -> str:
         head = head_module(machine)
         return self.words if head is None else f"LinuxCNC ({head[0].module})"
+
+    def tcp_label(self, machine: Machine) -> str:
+        head = head_module(machine)
+        return self.tcp_words if head is None else f"{head[0].module} kinematics"
 
     def corrects(self, machine: Machine, e) -> bool:
         if head_module(machine) is None:

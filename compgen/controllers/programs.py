@@ -157,7 +157,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     header = [
         f"compgen {version} R-test measurement program, {date}",
         f"machine: {ascii_text(machine.name)}; controller: {ctl.label(machine)}",
-        (f"mode TCPM: {ctl.tcp_words}, the control's kinematics moves X Y Z (tests the control)"
+        (f"mode TCPM: {ctl.tcp_label(machine)}, the control's kinematics moves X Y Z (tests the control)"
          if mode == "tcpm" else
          "mode AXES: X Y Z from compgen's inverse kinematics (tests compgen's nominal model)"),
         f"path {ascii_text(label)}: {len(poses)} poses; pose list "
