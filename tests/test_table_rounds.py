@@ -350,6 +350,27 @@ def test_the_records_coarse_offsets_are_checked_against_the_machine_file(bc_mach
             kinematics_edit(machine, fit, "sinumerik840d", state, "c", "K", "0", "d")
 
 
+# Siemens's numbering (shared/research/controllers.md: l1 = $TC_CARR1..3, l2 = 4..6,
+# l3 = 15..17, l4 = 18..20), written here from the manual, not from compgen's table
+COARSE_NUMBERS = [("l1", "x", 1), ("l1", "y", 2), ("l1", "z", 3), ("l2", "x", 4), ("l2", "y", 5),
+                  ("l2", "z", 6), ("l3", "x", 15), ("l3", "y", 16), ("l3", "z", 17), ("l4", "x", 18),
+                  ("l4", "y", 19), ("l4", "z", 20)]
+
+
+@pytest.mark.parametrize("vec, xyz, n", COARSE_NUMBERS)
+def test_every_coarse_offset_of_the_record_is_checked_under_its_own_name(bc_machine, vec, xyz, n):
+    """Each of the twelve coarse offsets the OEM set is read from its own $TC_CARR number:
+    0.5 mm off the machine file's value is refused under that offset's name. Read under
+    another number, one would pass unchecked and another be blamed."""
+    from dataclasses import replace
+    machine = replace(bc_machine, sinumerik={**bc_machine.sinumerik, "offsets": {
+        v: np.zeros(3) for v in ("l1", "l2", "l3", "l4")}})
+    fit = identify(machine, [_measure(machine, {}, np.random.default_rng(2), OEM_CARR)])
+    state = OEM_CARR + f"$TC_CARR{n}[1]=0.5\n"
+    with pytest.raises(CompgenError, match=rf"\$TC_CARR{n}\[1\] \({vec}\.{xyz}\) = 0.5 mm, \+0.5000 mm from "):
+        kinematics_edit(machine, fit, "sinumerik840d", state, "c", "K", "0", "d")
+
+
 def test_the_machine_file_declares_the_records_coarse_offsets(tmp_path):
     from conftest import BC_MACHINE
 
