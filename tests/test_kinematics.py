@@ -112,6 +112,32 @@ def test_rot_exact_matches_scipy(rng):
                                rtol=0, atol=1e-15)
 
 
+def test_the_axis_a_rotation_turns_about_is_its_left_jacobian_at_every_size(rng):
+    """J(w) e is the axis about which R(w) turns as w moves along e: R(w + h e) R(w)ᵀ =
+    exp([h J(w) e]×) to first order (central differences of scipy's rotations; large
+    rotations take the closed form). Near θ = 1e-3, where the series takes over, both
+    agree with J's coefficients in forms free of cancellation, 2 sin²(θ/2)/θ² and the
+    series of (θ − sin θ)/θ³ to θ⁴, within 1e-12 (the closed form's cancellation leaves
+    ~1e-13 just above the switch; the series' next term at the switch is 1e-11)."""
+    from scipy.spatial.transform import Rotation
+
+    from compgen.model.kinematics import _left_jacobian
+    e = np.eye(3)[rng.integers(0, 3, 24)] + 0.3 * rng.normal(size=(24, 3))
+    for theta in (0.05, 0.3, 1.0, 2.5):
+        w = rng.normal(size=(24, 3))
+        w *= theta / np.linalg.norm(w, axis=1)[:, None]
+        h = 1e-6
+        turn = (Rotation.from_rotvec(w + h * e) * Rotation.from_rotvec(w - h * e).inv()).as_rotvec() / (2 * h)
+        np.testing.assert_allclose(_left_jacobian(w, e), turn, rtol=0, atol=1e-8)
+    for theta in (2e-4, 9.99e-4, 1.001e-3, 3e-3):
+        w = rng.normal(size=(24, 3))
+        w *= theta / np.linalg.norm(w, axis=1)[:, None]
+        b = 2 * np.sin(theta / 2) ** 2 / theta**2
+        c = 1 / 6 - theta**2 / 120 + theta**4 / 5040
+        we = np.cross(w, e)
+        np.testing.assert_allclose(_left_jacobian(w, e), e + b * we + c * np.cross(w, we), rtol=0, atol=1e-12)
+
+
 @pytest.mark.parametrize("machine_name", ["seed_machine", "bc_machine", "head_machine"])
 @pytest.mark.parametrize("loaded", [False, True], ids=["nominal", "loaded"])
 def test_analytic_slot_gains_equal_central_differences_of_the_exact_model(machine_name, loaded, request):
