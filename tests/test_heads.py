@@ -119,6 +119,36 @@ def test_the_chain_is_the_head_as_described(case, rng):
     assert np.abs(commanded(machine, poses.q)[:, :3] - poses.q[:, :3]).max() > 100   # the head moves it
 
 
+def test_the_heads_body_is_kept_from_the_ball_and_stem_as_described(case, rng):
+    """The motion check's head body is a sphere of head_radius about the pivot (270 mm above
+    the nest on the tool axis, the files' description): its clearance to the ball and to the
+    ball's stem (a vertical segment from the table top to the ball) and to the table (a disc),
+    written here in the table's frame (the swivel's C turns the table, the fork's ball stands
+    still), equals compgen's to 1e-9 mm at poses across the travel."""
+    from compgen.setup.motion import clearances
+    machine, hand, poses = case
+    s = machine.setup
+    q = poses.q[rng.choice(len(poses), 40, replace=False)].copy()
+    q[:, :3] += rng.uniform([-150, -150, 0], 150, (40, 3))   # the head anywhere above, not only over the ball
+    got, _ = clearances(machine, q)
+    X, Y, Z, C, _B = q.T
+    pivot = np.column_stack([X, Y, Z + GAUGE + PIVOT])
+    if hand is _swivel:                                     # into the C frame the ball is given in
+        pivot = np.einsum("nji,nj->ni", _turn("z", C), pivot)
+    ball = np.array(machine.ball)
+    rb = s.ball_diameter / 2
+    head = machine.heads[0].name
+    np.testing.assert_allclose(got[f"head {head} / ball"],
+                               np.linalg.norm(pivot - ball, axis=1) - rb - s.head_radius, rtol=0, atol=1e-9)
+    z = np.clip(pivot[:, 2], s.table_top, ball[2] - rb)    # the stem's nearest point
+    stem = np.linalg.norm(pivot - np.column_stack([np.full(40, ball[0]), np.full(40, ball[1]), z]), axis=1)
+    np.testing.assert_allclose(got[f"head {head} / stem"], stem - s.stem_diameter / 2 - s.head_radius,
+                               rtol=0, atol=1e-9)
+    assert (pivot[:, 2] > s.table_top).all()                # above the table: to its top face or rim
+    table = np.hypot(pivot[:, 2] - s.table_top, np.maximum(np.hypot(pivot[:, 0], pivot[:, 1]) - s.table_radius, 0))
+    np.testing.assert_allclose(got[f"head {head} / table"], table - s.head_radius, rtol=0, atol=1e-9)
+
+
 def test_a_session_is_fitted_at_the_cramer_rao_bound(case):
     """Location errors only, white noise of 0.5 µm: each estimate within 5 σ of the truth,
     where σ is the bound the hand-written geometry gives (its Jacobian by central
