@@ -773,3 +773,21 @@ def test_a_check_far_noisier_than_its_calibration_asks_to_check_the_set_up(year,
         assert calibration.sigma_um < 0.6
         result = H.check(machine, fit, [d], calibration, entries, edits, when)
         assert any("check the set-up" in a for a in result.advice) == said, result.advice
+
+
+@pytest.mark.parametrize("noise_um, said", [(1.3, True), (0.9, False)])
+def test_a_check_under_a_micrometre_never_blames_the_set_up(year, tmp_path, noise_um, said):
+    """Against a calibration of σ̂ 0.3 µm (a quiet day), a check at 0.9 µm is three times
+    noisier yet within what the R-test gives on any day (1 µm): the set-up is not blamed; at
+    1.3 µm it is."""
+    from dataclasses import replace
+    machine, base, _, (_, corrects) = year
+    with _record(tmp_path / "h.sqlite", year) as store:
+        when = H.taken_at("2026-08-10T10:00")
+        truth = _truth(machine, base, "2026-08-10T10:00", corrects)
+        d = simulate(machine, truth, generate(machine, ["K4"]), noise_um, np.random.default_rng(5))
+        fit = identify(machine, [d], location_model(machine))
+        calibration, entries, edits = H.last_calibration(store, machine, before=when)
+        quiet = replace(calibration, sigma_um=0.3)
+        result = H.check(machine, fit, [d], quiet, entries, edits, when)
+        assert any("check the set-up" in a for a in result.advice) == said, result.advice
