@@ -791,3 +791,16 @@ def test_a_check_under_a_micrometre_never_blames_the_set_up(year, tmp_path, nois
         quiet = replace(calibration, sigma_um=0.3)
         result = H.check(machine, fit, [d], quiet, entries, edits, when)
         assert any("check the set-up" in a for a in result.advice) == said, result.advice
+
+
+def test_an_unknown_machine_is_refused_naming_the_first_five_recorded(tmp_path):
+    """A machine not in the store is refused, and the hint names what is recorded, in order,
+    five at most (a plant's store holds dozens: the line stays one line)."""
+    machine = load_machine("ac-trunnion-itnc530")
+    with open_store(tmp_path / "h.sqlite") as store:
+        store.migrate()
+        for k in range(7):
+            H.lookup_machine(store, f"mill {7 - k}", "S1" if k % 2 else "", create=True)
+        with pytest.raises(CompgenError, match=re.escape(f"no calibration of '{machine.name}' is recorded")) as e:
+            H.machine_id(store, machine)
+    assert str(e.value).endswith(". Recorded: mill 1; mill 2 (S1); mill 3; mill 4 (S1); mill 5"), str(e.value)
