@@ -166,6 +166,22 @@ def test_a_wrong_stylus_diameter_is_refused(tmp_path):
     assert "k.log:3:" in err
 
 
+@pytest.mark.parametrize("noise_um, true_stylus, refused", [(0.2, 3.006, True), (0.2, 2.994, True),
+                                                             (0.2, 3.003, False), (4.0, 3.006, True)])
+def test_a_stylus_is_wrong_beyond_two_micrometres_and_four_sigma_on_the_radius(tmp_path, noise_um, true_stylus,
+                                                                              refused):
+    """With quiet triggers (0.2 µm) a radius 3 µm off is 15 σ and beyond 2 µm: refused, either
+    sign; 1.5 µm off is 7 σ but within what a stylus calibration holds: fitted. With noisy
+    triggers (4 µm) the 3 µm is 6.8 σ of its own estimate: still refused (beyond 4 σ)."""
+    log = write_log(tmp_path / "k.log", noise_um=noise_um, stylus=3.0, true_stylus=true_stylus)
+    if refused:
+        _refused(tmp_path, log, "stylus diameter", f"{(true_stylus - 3.0) / 2 * 1e3:+.1f} ±"
+                 if noise_um < 1 else "+3.4 ± 0.5 µm")
+    else:
+        code, out, err = run("fit", "--machine", SEED_MACHINE, log, "-o", tmp_path / "fit.json")
+        assert code == 0, err
+
+
 def test_a_missing_touch_is_flagged_and_too_few_refused(tmp_path):
     def drop_one(t):
         del t[11]                                  # pose 3 keeps four touches
