@@ -300,6 +300,23 @@ def test_lack_of_fit_is_the_chi2_test_of_each_path_and_direction_against_the_noi
             assert 1e-300 < p < 1e-3 and m["p_value"] == pytest.approx(p, rel=1e-6, abs=0)
 
 
+
+def test_a_path_whose_correlation_leaves_under_one_degree_of_freedom_is_tested_with_one():
+    """Twenty readings at ρ = 0.98 hold 0.2 degrees of freedom by the AR(1) rule: the test
+    takes one, so a residual 30× the noise is still named (with p from χ²(1)), and one at
+    the noise is not."""
+    from scipy import stats
+
+    from compgen.statistics.significance import lack_of_fit
+    n, noise_um = 20, 0.5
+    rho = np.full((n, 3), 0.98)
+    r = np.full((n, 3), noise_um * 1e-3)
+    r[:, 0] *= 30
+    got = lack_of_fit(r, np.repeat(["K4"], n), noise_um, rho, 1.0, 0.01)
+    assert [m["direction"] for m in got] == ["dX"]
+    assert got[0]["p_value"] == pytest.approx(stats.chi2.sf(900.0, 1) * 3, rel=1e-6)
+
+
 def test_a_sine_the_models_columns_hold_is_no_line():
     """Where the model's columns hold the cos/sin pair of a frequency (as a 1/rev term of a
     location error does), the pair's part the model cannot absorb is below SEEN of the
