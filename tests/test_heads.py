@@ -145,7 +145,8 @@ def test_the_heads_body_is_kept_from_the_ball_and_stem_as_described(case, rng):
     np.testing.assert_allclose(got[f"head {head} / stem"], stem - s.stem_diameter / 2 - s.head_radius,
                                rtol=0, atol=1e-9)
     assert (pivot[:, 2] > s.table_top).all()                # above the table: to its top face or rim
-    table = np.hypot(pivot[:, 2] - s.table_top, np.maximum(np.hypot(pivot[:, 0], pivot[:, 1]) - s.table_radius, 0))
+    rim = np.maximum(np.hypot(pivot[:, 0], pivot[:, 1]) - s.table_radius, 0)
+    table = np.hypot(pivot[:, 2] - s.table_top, rim)
     np.testing.assert_allclose(got[f"head {head} / table"], table - s.head_radius, rtol=0, atol=1e-9)
 
 

@@ -801,6 +801,7 @@ def test_an_unknown_machine_is_refused_naming_the_first_five_recorded(tmp_path):
         store.migrate()
         for k in range(7):
             H.lookup_machine(store, f"mill {7 - k}", "S1" if k % 2 else "", create=True)
-        with pytest.raises(CompgenError, match=re.escape(f"no calibration of '{machine.name}' is recorded")) as e:
+        said = re.escape(f"no calibration of '{machine.name}' is recorded")
+        with pytest.raises(CompgenError, match=said) as e:
             H.machine_id(store, machine)
     assert str(e.value).endswith(". Recorded: mill 1; mill 2 (S1); mill 3; mill 4 (S1); mill 5"), str(e.value)

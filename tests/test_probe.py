@@ -168,8 +168,8 @@ def test_a_wrong_stylus_diameter_is_refused(tmp_path):
 
 @pytest.mark.parametrize("noise_um, true_stylus, refused", [(0.2, 3.006, True), (0.2, 2.994, True),
                                                              (0.2, 3.003, False), (4.0, 3.006, True)])
-def test_a_stylus_is_wrong_beyond_two_micrometres_and_four_sigma_on_the_radius(tmp_path, noise_um, true_stylus,
-                                                                              refused):
+def test_a_stylus_is_wrong_beyond_two_micrometres_and_four_sigma_on_the_radius(tmp_path, noise_um,
+                                                                              true_stylus, refused):
     """With quiet triggers (0.2 µm) a radius 3 µm off is 15 σ and beyond 2 µm: refused, either
     sign; 1.5 µm off is 7 σ but within what a stylus calibration holds: fitted. With noisy
     triggers (4 µm) the 3 µm is 6.8 σ of its own estimate: still refused (beyond 4 σ)."""

@@ -367,7 +367,8 @@ def test_every_coarse_offset_of_the_record_is_checked_under_its_own_name(bc_mach
         v: np.zeros(3) for v in ("l1", "l2", "l3", "l4")}})
     fit = identify(machine, [_measure(machine, {}, np.random.default_rng(2), OEM_CARR)])
     state = OEM_CARR + f"$TC_CARR{n}[1]=0.5\n"
-    with pytest.raises(CompgenError, match=rf"\$TC_CARR{n}\[1\] \({vec}\.{xyz}\) = 0.5 mm, \+0.5000 mm from "):
+    said = rf"\$TC_CARR{n}\[1\] \({vec}\.{xyz}\) = 0.5 mm, \+0.5000 mm from "
+    with pytest.raises(CompgenError, match=said):
         kinematics_edit(machine, fit, "sinumerik840d", state, "c", "K", "0", "d")
 
 
