@@ -122,6 +122,13 @@ def _year_checks(store, year):
     return H.trend_text(t)
 
 
+
+def _meets_schema(doc, name):
+    import jsonschema
+    schema = json.loads((ROOT / "docs" / "schemas" / f"{name}.schema.json").read_text())
+    jsonschema.Draft202012Validator.check_schema(schema)
+    jsonschema.Draft202012Validator(schema).validate(doc)
+
 def test_a_year_in_sqlite_and_in_postgresql_gives_one_trend(year, tmp_path, pg_db):
     with _record(tmp_path / "h.sqlite", year) as store:
         sqlite_text = _year_checks(store, year)
@@ -139,11 +146,17 @@ def test_the_check_command_passes_a_healthy_machine_and_fails_the_crashed_one(ye
         corrected = year[3][1] if when >= EDIT_DATE else {}
         d = _session(machine, _truth(machine, base, when, corrected), ["K4"], seed, "x")
         (tmp_path / f"{seed}.csv").write_text(format_rtest(machine, d))
-        rc, out, err = run("check", "--machine", "ac-trunnion-itnc530", f"{seed}.csv", "--date", when)
+        as_json = ["--json"] if code else []       # the failing one as a user's tool reads it
+        rc, out, err = run("check", "--machine", "ac-trunnion-itnc530", f"{seed}.csv", "--date", when,
+                           *as_json)
         assert rc == code, out + err
         assert ("PASS" if code == 0 else "FAIL") in out
         if code:
             assert "BOA" in out and "re-calibrate" in out
+            doc = json.loads(out)
+            _meets_schema(doc, "check")
+            assert doc["format"] == "compgen.check/1" and not doc["passed"]
+            assert next(c for c in doc["changes"] if c["parameter"] == "BOA")["status"] == "fail"
     rc, out, err = run("history", "fleet")
     # the last check measured (not the last recorded) is the healthy one; the next is due 90 days
     # after the last measurement, the calibration of 1 December

@@ -1,5 +1,5 @@
 """The JSON compgen writes, against the schemas in docs/schemas (what a user's own tools may
-rely on): fit.json, diagnose --json, check-program --json."""
+rely on): fit.json, diagnose --json, check-program --json, check --json."""
 
 import json
 
@@ -64,5 +64,5 @@ def test_check_program_json_meets_its_schema(tmp_path):
     code, out, _ = run("check-program", "--machine", SEED_MACHINE, program, "--json")
     assert code == 0
     doc = json.loads(out)
-    _validate(doc, "check")
+    _validate(doc, "check-program")
     assert doc["ok"] and doc["ball_from"] == "the program's header"

@@ -401,7 +401,7 @@ def check_program_cmd(machine_file, program, controller_name, ball, nest, mode, 
     result = ctl.check(at_ball(machine, at), blocks, probe=machine.probe if probing else None)
     if as_json:
         click.echo(json.dumps({
-            "format": "compgen.check/1", "program": program, "controller": ctl.name,
+            "format": "compgen.check-program/1", "program": program, "controller": ctl.name,
             "ok": not result.findings,
             "ball_mm": list(at), "ball_from": source, "probe_length_mm": machine.probe_length,
             "moves": result.blocks, "seconds": result.seconds,
