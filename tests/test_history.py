@@ -87,12 +87,17 @@ def _record(url, year):
 
 def _check(store, year, when, seed):
     """A K4-only check measured on ``when`` against the last calibration before it."""
+    return _checked(store, year, when, seed)[0]
+
+
+def _checked(store, year, when, seed):
+    """``_check``'s result and the check's own fit."""
     machine, base, _, (_, corrects) = year
     corrected = corrects if when >= EDIT_DATE else {}
     d = _session(machine, _truth(machine, base, when, corrected), ["K4"], seed, f"check{seed}.csv")
     fit = identify(machine, [d], location_model(machine))
     calibration, entries, edits = H.last_calibration(store, machine, before=H.taken_at(when))
-    return H.check(machine, fit, [d], calibration, entries, edits, H.taken_at(when))
+    return H.check(machine, fit, [d], calibration, entries, edits, H.taken_at(when)), fit
 
 
 def _year_checks(store, year):
@@ -402,6 +407,23 @@ def test_another_stores_history_is_imported_only_when_asked_and_only_once(year, 
     rc, _, err = run("history", "import", "a.json", "--db", "c.sqlite")
     assert rc == 2 and "another machine of the same name" in err, err
     assert (tmp_path / "c.sqlite").read_bytes() == before
+
+
+def test_checks_failed_and_passed_travel_with_an_export(year, tmp_path, monkeypatch):
+    """A store's checks, the failed one too, come across an export and import as they were."""
+    monkeypatch.chdir(tmp_path)
+    with _record(tmp_path / "a.sqlite", year) as a:
+        for when, seed in (("2026-06-20T10:00", 102), ("2026-07-20T10:00", 101)):   # crashed, healthy
+            result, fit = _checked(a, year, when, seed)
+            H.record_check(a, result, fit, year[0])
+        want = [(c["passed"], c["summary"]) for c in a.rows("SELECT passed, summary FROM checks ORDER BY id")]
+    assert [p for p, _ in want] == [0, 1]
+    assert run("history", "export", "--db", "a.sqlite", "-o", "a.json")[0] == 0
+    rc, out, err = run("history", "import", "a.json", "--db", "b.sqlite")
+    assert rc == 0, out + err
+    with open_store(tmp_path / "b.sqlite") as b:
+        got = [(c["passed"], c["summary"]) for c in b.rows("SELECT passed, summary FROM checks ORDER BY id")]
+    assert got == want
 
 
 def test_a_store_of_the_first_schema_is_migrated_and_keeps_its_rows(tmp_path, fit_file, monkeypatch):

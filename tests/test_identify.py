@@ -410,3 +410,19 @@ def test_a_fit_evaluates_itself_at_poses_it_was_not_fitted_to(seed_machine):
     got = fit.evaluate(seed_machine, d.poses.take(~k4))
     assert np.abs(got - d.deviation[~k4]).max() < 0.001 * UM
     assert np.abs(d.deviation[~k4]).max() > 2000 * UM
+
+
+def test_a_reversal_that_moves_no_reading_asks_for_a_path_there_and_back(seed_machine):
+    """A reversal's column is zero where its axis never turns back: the hint asks for a path
+    there and back, which a drift's (or any other effect's) does not."""
+    from compgen.model.kinematics import Model
+    from compgen.statistics.identify import check_identifiable
+    J = np.random.default_rng(6).normal(size=(300, 12))
+    J[:, 11] = 0.0
+    hints = {}
+    for extra in ("ECC:r1", "drift_X:t1"):
+        with pytest.raises(CompgenError, match=f"{extra} does not change any reading") as exc:
+            check_identifiable(seed_machine, Model(seed_machine, [*TABLE4, extra]), list(range(12)), J)
+        hints[extra] = exc.value.hint
+    assert "measure-program --there-and-back" in hints["ECC:r1"], hints
+    assert "there-and-back" not in hints["drift_X:t1"] and "path that moves its axis" in hints["drift_X:t1"]

@@ -296,3 +296,13 @@ def test_the_command_writes_the_configuration_beside_the_ini(tmp_path, trt, seed
     assert f"start LinuxCNC with {config / 'KIN.ini'}" in out
     code, _, err = run(*args, "-o", config / "KIN.ini")
     assert code == 2 and "exists" in err, err
+
+
+def test_a_joint_table_read_back_stands_for_the_mean_of_its_two_directions(seed_machine):
+    """compgen's predictions do not follow the direction of motion: a table whose trims differ
+    by direction (a loaded one, kept) reads back as their mean, on its own grid (values by hand)."""
+    text = ("-100 0.010 0.006\n0 0.002 0.002\n100 -0.004 0.000\n"
+            "# compgen joint compensation for LinuxCNC: joint 1 = Y (mm)\n")
+    table = linuxcnc.read_comp(text, seed_machine, "KIN.Y.comp")
+    assert table.input == "Y" and tuple(table.grid) == (-100.0, 0.0, 100.0)
+    assert table.values == pytest.approx((0.008, 0.002, -0.002), abs=1e-15)

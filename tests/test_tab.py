@@ -341,3 +341,19 @@ def test_a_latin1_table_is_written_back_in_latin1(seed_machine, fit, tmp_path):
     assert rc == 0, out + err
     assert "Spindel Meßlinie 0°".encode("latin-1") in raw and "ß".encode() not in raw
     assert raw.decode("latin-1").count("\r\n") > 20
+
+
+def test_an_angle_rounded_away_is_told_in_arcseconds(seed_machine, fit):
+    """An angle row the declared decimals round beyond its uncertainty: the loss and the bound
+    are printed in arcseconds (3 decimals of a degree lose at most 1.8″; the bound is compgen's
+    own 0.25″ where the fit's σ is smaller)."""
+    before = _table(newline="\n").split("\n")
+    text = "\n".join([before[0], *NEW_STYLE, "", *before[1 + len(STRUCT):]])
+    fit = replace(fit, parameters={n: replace(e, std=1e-3 if e.unit == "mm" else 0.1 * ARCSEC)
+                                   for n, e in fit.parameters.items()})
+    with pytest.raises(CompgenError) as caught:
+        kinematics_edit(seed_machine, fit, "itnc530", text, "KIN.TAB", "KIN", "0", "d")
+    said = re.search(r"round (-?[ABC]0[A-Z]) to (\S+): (\S+) arcsec of the correction lost, beyond its "
+                     r"uncertainty (\S+) arcsec", caught.value.message)
+    assert said, caught.value.message
+    assert 0.25 < float(said[3]) <= 1.8 and said[4] == "0.25"

@@ -469,7 +469,7 @@ class Sinumerik840D(Controller):
 
     def edits_head(self, machine: Machine) -> bool:
         # a T or M record of two axes: its offset vectors join the head's pivots (CHAIN)
-        return machine.sinumerik is not None and len(carr_axes(machine)) == 2 and len(machine.heads) <= 2
+        return machine.sinumerik is not None and len(carr_axes(machine)) == 2
 
     def tables(self, machine: Machine, p: Plan) -> list[CompTable]:
         return [self._plain(machine, t) for t in super().tables(machine, p)]
