@@ -81,6 +81,7 @@ TESTS = {
     "compgen/history/exchange.py": ["tests/test_history.py"],
     "compgen/statistics/spectrum.py": [*STATS, "tests/test_loop.py"],
     "compgen/statistics/significance.py": [*STATS, "tests/test_loop.py"],
+    "compgen/statistics/device.py": ["tests/test_diagnose.py", "tests/test_probe.py"],
     "compgen/statistics/noise.py": ["tests/test_noise.py", "tests/test_identify.py",
                                     "tests/test_diagnose_stats.py",
                                     *(f"tests/test_diagnose.py::test_{t}" for t in (

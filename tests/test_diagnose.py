@@ -150,6 +150,18 @@ def test_json_contract(seed_machine, poses):
     assert set(d["per_axis"]["C"]) == {"1/rev", "2/rev", "3/rev", "4/rev"}
 
 
+def test_the_residual_against_an_axis_is_told_in_micrometres(seed_machine):
+    """A 3/rev radial error of C of 1.8 µm (1.5 cos, 1 sin), K4 alone (C turns a whole turn;
+    the location errors hold no 3/rev): diagnose's per-axis table reads it back in dX at
+    C 3/rev, within 3 σ of the least-squares amplitude (σ ≈ 0.5 µm·√(2/241) = 0.05 µm)."""
+    k4 = generate(seed_machine, ["K4"])
+    data = [_session(seed_machine, k4, HIDDEN["EXC:h3"])]
+    c = diagnose(seed_machine, data, identify(seed_machine, data)).per_axis["C"]
+    sigma = NOISE_UM * np.sqrt(2 / len(k4))
+    assert c["3/rev"][0] == pytest.approx(np.hypot(1.5, 1.0), abs=3 * sigma)
+    assert max(c["3/rev"][1:]) < 3 * sigma
+
+
 def test_diagnose_whole_catalogue_on_the_bc_machine(bc_machine):
     poses = generate(bc_machine, ["K4", "K1", "K2"])
     hidden = {"ECB:p1": 4 * ARCSEC}                           # B tilt about Z, per rad of B
@@ -849,3 +861,50 @@ def test_a_drift_fitted_across_files_whose_clocks_overlap_is_said(seed_machine, 
     assert said and "YOC:e15" in said and "starts at t = 0 s" in said
     assert one_clock(seed_machine, model, [first, later]) is None
     assert one_clock(seed_machine, location_model(seed_machine), [first, restarted]) is None
+
+
+def _gained(machine, poses, gains, seed, hidden=None, rho=0.0):
+    """The seed machine read by an R-test whose sensors read (1 + g) of the displacement."""
+    d = simulate(machine, {**TABLE4, **(hidden or {})}, poses)
+    rng = np.random.default_rng(seed)
+    noise = (ar1_noise(len(poses), rho, NOISE_UM, rng) if rho
+             else rng.normal(0, NOISE_UM * 1e-3, (len(poses), 3)))
+    return RTestData(d.poses, d.deviation * (1 + np.array(gains)) + noise, "gain.csv", "",
+                     tuple(range(2, len(poses) + 2)))
+
+
+@pytest.mark.parametrize("gains, sensor, size", [((0.015, 0, 0), "X", 1.5), ((0, 0, -0.01), "Z", -1.0)])
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_sensor_gain_is_blamed_on_the_device_and_no_machine_effect_found(seed_machine, poses, gains,
+                                                                          sensor, size, seed):
+    """A 1.5 % X gain (a 1 % Z gain) of the R-test: machine effects fit it too (a C 1/rev, a
+    squareness of Z), but the device explains these data as well, so none is named found; the
+    gain is told within 3 σ, the gate and the text send the user to calibrate that sensor."""
+    from compgen.statistics.gate import fit_gate
+    data = [_gained(seed_machine, poses, gains, seed)]
+    fit = identify(seed_machine, data)
+    d = diagnose(seed_machine, data, fit, noise_um=NOISE_UM)
+    assert d.device_blamed == f"gain_{sensor}" and d.found is None and not d.explained_to_noise
+    gain = next(c for c in d.devices if c.effect == d.device_blamed)
+    assert abs(gain.value - size) < 3 * gain.std and gain.std < 0.3, gain
+    assert f"Calibrate the R-test's {sensor} sensor" in report(d)
+    assert "fit --from fit.json --add" not in report(d)
+    assert any("the R-test itself explains the misfit" in r for r in fit_gate(seed_machine, data, fit))
+    assert d.to_dict()["device_blamed"] == d.device_blamed
+
+
+@pytest.mark.parametrize("hidden, rho", [({}, 0.0), ({}, 0.9), ({"EXC+EYC:h2c": 3 * UM}, 0.0),
+                                         ({"ECC:h2c": 15 * ARCSEC}, 0.0)])
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_calibrated_device_is_not_blamed(seed_machine, poses, hidden, rho, seed):
+    """Read by a device without gain errors: on clean data (white and AR(1) ρ 0.9 noise) no
+    gain is significant; with a hidden machine effect the gains may take a part of its misfit
+    (the fit without it predicts the readings wrongly), but none is blamed, and once the
+    effect is in the model none is significant."""
+    data = [_gained(seed_machine, poses, (0, 0, 0), seed, hidden, rho)]
+    d = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM)
+    assert d.device_blamed is None and bool(d.significant) == bool(hidden)
+    if hidden:
+        model = compose(seed_machine, location_model(seed_machine), [n[:-1] for n in hidden])
+        d = diagnose(seed_machine, data, identify(seed_machine, data, model), noise_um=NOISE_UM)
+    assert not any(c.significant for c in d.devices), d.devices

@@ -58,6 +58,21 @@ def test_single_bad_readings_are_found_and_a_smooth_error_is_not():
     np.testing.assert_allclose(size, 20, atol=2.5)
 
 
+def test_an_outlier_on_a_slope_is_measured_from_its_neighbours_median():
+    """Readings climbing 0.3 µm a reading (an axis moving through a linear error), 0.05 µm
+    noise, one reading 20 µm off: it is found, alone, and its size is its step from the median
+    of its four neighbours (the middle two's mean), 20 µm within 3 σ of the step's noise, not
+    the 20.3 µm that one side's neighbour would give."""
+    rng = np.random.default_rng(11)
+    n = 200
+    r = rng.normal(0, 0.05, (n, 3))
+    r[:, 0] += np.arange(n) * 0.3
+    r[100, 0] += 20
+    found, size = outliers(r, np.zeros(n, int))
+    assert found.tolist() == [100]
+    assert size[0] == pytest.approx(20, abs=3 * 0.05 * np.sqrt(1 + 1 / 2))
+
+
 @pytest.mark.parametrize("step", [0.0, 0.5])
 def test_noiseless_data_has_no_outliers(step):
     """With no noise the robust scale is zero: only a step beyond OUTLIER_MIN_UM (1 µm)

@@ -44,20 +44,22 @@ def _rows(every=5, hidden_ecc_arcsec=0.0):
 
 
 def write_log(path, noise_um=1.0, seed=0, stylus=3.0, true_stylus=None, every=5, hidden_ecc_arcsec=0.0,
-              damage=None, dirs=DIRS):
+              damage=None, dirs=DIRS, ball=False):
     """A probe log v1 of the seed machine with the Table 4 errors; ``damage`` edits the
-    touch rows (a list of [path, pose, A, C, x, y, z, nx, ny, nz] cells) before writing."""
+    touch rows (a list of [path, pose, A, C, x, y, z, nx, ny, nz] cells, then bx, by, bz with
+    ``ball``) before writing."""
     rng = np.random.default_rng(seed)
     rho = (25.4 + (true_stylus or stylus)) / 2
     touches = []
     for k, (label, a, c, centre) in enumerate(_rows(every, hidden_ecc_arcsec), 1):
         for u in dirs:
             tip = centre + (rho + rng.normal(0, noise_um * 1e-3)) * u
-            touches.append([label, str(k), a, c, *(f"{v:.5f}" for v in tip), *(f"{-v:.6f}" for v in u)])
+            touches.append([label, str(k), a, c, *(f"{v:.5f}" for v in tip), *(f"{-v:.6f}" for v in u),
+                            *((f"{v:.3f}" for v in SEED_BALL) if ball else ())])
     if damage:
         damage(touches)
     head = ["# compgen probe log v1", "# sphere_diameter = 25.4", f"# stylus_diameter = {stylus}",
-            f"# machine = {SEED_NAME}", "path,pose,A,C,X,Y,Z,nx,ny,nz"]
+            f"# machine = {SEED_NAME}", "path,pose,A,C,X,Y,Z,nx,ny,nz" + ",bx,by,bz" * ball]
     path.write_text("\n".join(head + [",".join(t) for t in touches]) + "\n")
     return path
 
@@ -111,6 +113,7 @@ def test_a_hidden_c_positioning_error_is_named(tmp_path):
     best = d["candidates"][0]
     assert best["effect"] == "ECC:h2" and best["significant"], best
     assert d["found"] == "ECC:h2" or d["found"] is None, d["found"]
+    assert d["device_effects"] == [] and not d["device_blamed"]    # a probe's centres carry no gain
     code, out, _ = run("fit", "--from", tmp_path / "fit.json", "--add", "ECC:h2", "-o",
                        tmp_path / "fit2.json")
     assert code == 0
@@ -289,6 +292,22 @@ def test_a_pose_whose_sphere_stood_elsewhere_is_refused_at_its_own_line(tmp_path
     first = next(i for i, r in enumerate(_touches()) if r[1] == "4")
     _refused(tmp_path, write_log(tmp_path / "k.log", damage=knocked), "pose 4", "from where the machine file",
              f"k.log:{line_of(first)}:")
+
+
+def test_touches_of_one_pose_naming_two_sphere_places_are_refused_at_the_line(tmp_path):
+    """The sphere's place given per row (bx, by, bz): pose 4's third touch names it 0.5 mm
+    off in X. One centre is fitted from a pose's touches; taking the first row's place for
+    all would fit them as one sphere silently. Refused at that touch's line; the log with
+    one place per pose fits."""
+    first = next(i for i, r in enumerate(_touches()) if r[1] == "4")
+
+    def elsewhere(t):
+        t[first + 2][10] = f"{SEED_BALL[0] + 0.5:.3f}"
+    _refused(tmp_path, write_log(tmp_path / "k.log", damage=elsewhere, ball=True), "pose 4",
+             "different sphere centres", f"k.log:{line_of(first + 2)}:")
+    code, _, err = run("fit", "--machine", SEED_MACHINE, write_log(tmp_path / "ok.log", ball=True),
+                       "-o", tmp_path / "ok.json")
+    assert code == 0, err
 
 
 @pytest.mark.parametrize("after", [1, 2])

@@ -155,6 +155,12 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
             raise CompgenError(f"the touches of {at} are at different rotary positions",
                                where=f"{where}:{log.lines[g[np.argmax(np.ptp(log.rotary[g], axis=1))]]}",
                                hint="every touch of one pose shares its rotary axes; number the poses apart")
+        moved = np.flatnonzero(np.abs(log.ball[g] - log.ball[g[0]]).max(axis=1) > 1e-6)
+        if moved.size:      # one centre is fitted from all its touches: one sphere, one place
+            raise CompgenError(f"the touches of {at} name different sphere centres (bx, by, bz)",
+                               where=f"{where}:{log.lines[g[moved[0]]]}",
+                               hint="every touch of one pose probes one sphere where it stands; "
+                                    "number the poses apart")
         p = log.tip[g]
         # on a known radius, touches in one plane still fix the centre (four side touches
         # without the top one) unless they all look at it from one plane through it: the

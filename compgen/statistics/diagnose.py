@@ -28,6 +28,7 @@ from ..model.kinematics import Model, Poses, runs
 from ..model.machine import Machine
 from ..model.sides import StartSides, same_pose
 from ..units import shown
+from .device import DeviceCandidate, device_candidates
 from .noise import Repeats, ar1, outliers, repeats
 from .ranking import Row, Whitening, effect_columns, rank, started_reversals
 from .results import FitResult
@@ -115,13 +116,16 @@ class Diagnosis:
     lines: tuple[Line, ...] = ()    # the residual's strongest periodic line against each coordinate
     best_share_of_excess: float | None = None   # of the residual beyond the noise, the best removes
     best_sum_sq: float = 0.0        # the residual sum of squares the best significant candidate removes, mm²
+    devices: tuple[DeviceCandidate, ...] = ()   # the R-test's own parameters, tested beside the machine's
+    device_blamed: str | None = None    # the one that explains the misfit as well as the machine's best
     # for rivals: what adding each puts into the fitted parameters, first order, shown units
     carries: dict[str, dict[str, float]] = field(default_factory=dict)
 
     @property
     def unexplained(self) -> bool:
         """No catalogue effect accounts for the misfit (``_unexplained``)."""
-        return _unexplained(self.misfit, bool(self.significant), self.best_share_of_excess, self.outside_line)
+        return _unexplained(self.misfit, bool(self.significant) or any(d.significant for d in self.devices),
+                            self.best_share_of_excess, self.outside_line)
 
     @property
     def outside_line(self) -> Line | None:
@@ -137,7 +141,8 @@ class Diagnosis:
 
     @property
     def explained_to_noise(self) -> bool:
-        return not self.significant and not self.misfit and not self.unexplained
+        return (not self.significant and not self.misfit and not self.unexplained
+                and not any(d.significant for d in self.devices))
 
     @property
     def significant(self) -> tuple[Candidate, ...]:
@@ -168,7 +173,7 @@ class Diagnosis:
         candidate (an A encoder's 4/rev was named EZA:h2)."""
         best = self.significant[0] if self.significant else None
         named = (best is not None and not self.rivals and best.separable and not self.unexplained
-                 and self.device_noise_um is not None)
+                 and self.device_noise_um is not None and self.device_blamed is None)
         return best.effect if named else None
 
     def to_dict(self) -> dict:
@@ -189,6 +194,8 @@ class Diagnosis:
             "still_significant_after_best": list(self.after_best),
             "rivals_of_best": list(self.rivals),
             "found": self.found,
+            "device_blamed": self.device_blamed,
+            "device_effects": [d.to_dict() for d in self.devices],
             "rivals_equivalent": bool(self.rivals and not self.rivals_separated_by),
             "next_measurement": None if self.next_measurement[0] is None else {
                 **self.next_measurement[0].to_dict(), "would_show": list(self.next_measurement[1])},
@@ -222,6 +229,8 @@ class _Residual:
     seg: np.ndarray
     r: np.ndarray
     r3: np.ndarray      # (n, 3) the residual as the fit left it (before Q's projection)
+    pred: np.ndarray    # (n, 3) the fit's prediction of the readings
+    rtest: np.ndarray   # (n,) the reading is an R-test's (not a probe's sphere centre)
     Q: np.ndarray
     R: np.ndarray
     bad: np.ndarray
@@ -266,7 +275,12 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     effects, notes = _to_try(machine, fit, candidates, poses)
     ranked, noise, made, carried = _ranked(machine, fit, effects, res)
     rss_w = noise.rss(r)
-    tested = sum(1 for row in ranked.values() if row.k_eff)
+    # the device beside the machine, in one Bonferroni family with it
+    devices = device_candidates(res.pred, res.rtest, res.Q, r, noise, rss_w / dof)
+    tested = (sum(1 for row in ranked.values() if row.k_eff)
+              + sum(1 for d in devices if d.visibility >= VISIBLE))
+    devices = [replace(d, p_value=p, significant=bool(d.visibility >= VISIBLE and p < alpha))
+               for d in devices for p in [p_value(d.drop_w, 1, rss_w, dof, tested)]]
     out = []
     for e in effects:
         row = ranked[e.name]
@@ -292,15 +306,17 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     bias, units, signature_um = _bias(fit, res, effects, ranked)
 
     significant = [c for c in out if c.significant]
+    blamed = _blamed(devices, ranked[significant[0].effect] if significant else None, rss_w / dof, alpha)
+    seen = [d for d in devices if d.significant]
+    best_sum_sq = max([ranked[c.effect].drop for c in significant[:1]] + [d.drop for d in seen], default=0.0)
     misfit, share = (), None
     if device is not None:
         misfit = tuple(lack_of_fit(r.reshape(-1, 3), poses.path, device, noise.rho, dof / r.size, alpha))
         excess = rss - dof * (device * 1e-3) ** 2
-        if significant and excess > 0:
-            share = min(1.0, ranked[significant[0].effect].drop / excess)
+        if best_sum_sq > 0 and excess > 0:
+            share = min(1.0, best_sum_sq / excess)
     lines = strongest_lines(machine, poses, r.reshape(-1, 3), res.Q)
-    best_sum_sq = ranked[significant[0].effect].drop if significant else 0.0
-    unexplained = _unexplained(misfit, bool(significant), share,
+    unexplained = _unexplained(misfit, bool(significant or seen), share,
                                _outside_line(lines, device, misfit, alpha, best_sum_sq))
 
     # rivals of a curve that fits a little of an unexplained misfit by chance: not pursued
@@ -319,7 +335,22 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         program_ext=advising.program_ext if advising is not None else "", device_noise_um=device,
         repeats=said, misfit=misfit,
         lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, notes=notes,
-        data_device=kind)
+        data_device=kind, devices=tuple(devices), device_blamed=blamed)
+
+
+def _blamed(devices: Sequence[DeviceCandidate], best: Row | None, sigma2_w: float,
+            alpha: float) -> str | None:
+    """The device parameter that explains the misfit as well as the best of the machine's
+    candidates (its rival by ``significance.rivals``, misfit taken as left), or better, or
+    alone: then no machine effect is named found."""
+    seen = [d for d in devices if d.significant]
+    if not seen:
+        return None
+    top = max(seen, key=lambda d: d.drop_w)
+    if best is None or top.drop_w >= best.drop_w or rivals((best.drop_w, best.k_eff), {
+            top.effect: (top.drop_w, 1)}, sigma2_w, alpha, True):
+        return top.effect
+    return None
 
 
 def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residual:
@@ -331,7 +362,9 @@ def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residu
     model = Model(machine, fit.model)
     x = fit.values
     free = [model.names.index(n) for n in fit.free]
-    r3 = joined.deviation - model.deviation(poses, x)
+    pred = model.deviation(poses, x)
+    r3 = joined.deviation - pred
+    rtest = np.array([d.device == "rtest" for d in joined.sets], bool)[joined.set_of]
     starts = StartSides(machine, fit.model, poses).projector()
     if starts is not None:
         r3 = starts.remove(r3)
@@ -340,14 +373,14 @@ def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residu
     if bad.size:
         keep = np.ones(len(poses), bool)
         keep[bad] = False
-        poses, r3, seg = poses.take(keep), r3[keep], seg[keep]
+        poses, r3, seg, pred, rtest = poses.take(keep), r3[keep], seg[keep], pred[keep], rtest[keep]
         starts = StartSides(machine, fit.model, poses).projector()
     r = r3.ravel()
     J = model.jacobian(poses, x)[:, :, free]        # indexed by a list: a copy, projected in place
     Q, R = tall_qr((J if starts is None else starts(J)).reshape(r.size, -1))
     if starts is not None:
         Q = np.hstack([starts.basis(len(poses)), Q])
-    return _Residual(poses, seg, r - Q @ (Q.T @ r), r3, Q, R, bad, size)
+    return _Residual(poses, seg, r - Q @ (Q.T @ r), r3, pred, rtest, Q, R, bad, size)
 
 
 def _to_try(machine: Machine, fit: FitResult, candidates: Sequence[str] | None,

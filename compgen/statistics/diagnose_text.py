@@ -54,6 +54,8 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
             lines.append("      not told apart from the others marked so: see below")
         elif c.significant and d.unexplained:
             lines.append("      it fits a part of the unexplained misfit (see below): not advised on its own")
+        elif c.significant and d.device_blamed:
+            lines.append(f"      the device explains these data as well ({d.device_blamed}): see below")
         elif c.significant and c.separable:
             lines.append(f"      add it: {me()} fit --from {fit} --add {c.effect} -o {after}")
         elif c.significant:
@@ -62,12 +64,15 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
                          + (f"measure {c.separated_by[0].label} first: {_measure(d, c.separated_by[0])}"
                             if c.separated_by else
                             "no set-up this machine can measure separates it"))
+    lines += _devices(d)
     if d.rivals:
         best = d.significant[0].effect
         verb = "explains" if len(d.rivals) == 1 else "explain"
         lines += ["", f"  Not told apart: {', '.join(d.rivals)} {verb} these data as well as "
                       f"{best}, within their noise; no one of them is named as found."]
-        if d.rivals_separated_by:
+        if d.device_blamed:
+            lines.append("  Nor is any of them advised: the device explains these data as well (above).")
+        elif d.rivals_separated_by:
             plan = d.rivals_separated_by
             told = set().union(*(_told(d, m) for m in plan))
             left = [p for p in combinations((d.significant[0].effect, *d.rivals), 2) if p not in told]
@@ -219,6 +224,24 @@ def _told(d: Diagnosis, m: Measurement) -> set[tuple[str, str]]:
     """The pairs of rivals ``m`` tells apart on its own."""
     group = (d.significant[0].effect, *d.rivals)
     return set(combinations(group, 2)) - set(map(tuple, d.rivals_open.get(m.label, ())))
+
+
+def _devices(d: Diagnosis) -> list[str]:
+    """The R-test's own gains, where one is significant: blamed, or outweighed by the machine."""
+    seen = [c for c in d.devices if c.significant]
+    if not seen:
+        return []
+    said = "; ".join(f"{c.effect} {c.value:+.2f} ± {c.std:.2f} % (p = {c.p_value:.2g})" for c in seen)
+    if d.device_blamed is None:
+        return ["", f"  The device: {said} significant, but the best machine effect explains more; "
+                    "no device parameter is blamed."]
+    c = next(c for c in seen if c.effect == d.device_blamed)
+    than = f"as well as {d.significant[0].effect}" if d.significant else "where no machine effect does"
+    return ["", f"  The device: {c.description}, {c.value:+.2f} ± {c.std:.2f} % ({c.effect}), explains these "
+                f"data {than}: no machine effect is named found, and nothing here corrects a control for it.",
+            f"  Calibrate the R-test's {c.effect[-1]} sensor against its reference (its calibration: "
+            "[rtest] gain_u in the machine file), then measure again and fit the new data alone."
+            + (f" ({'Gains tested one at a time: ' + said})" if len(seen) > 1 else "")]
 
 
 def _device(d: Diagnosis) -> str:
