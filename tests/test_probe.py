@@ -15,6 +15,7 @@ from conftest import SEED_MACHINE, TABLE4, run, vector
 from compgen.configuration.machine_file import load_machine
 from compgen.data.probe import read_probe_log, sphere_centres
 from compgen.data.rtest import read_rtest
+from compgen.statistics.diagnose import diagnose
 from compgen.statistics.identify import identify
 
 SEED_NAME = "A/C trunnion, iTNC 530 (seed report)"
@@ -145,6 +146,31 @@ def test_probe_and_rtest_fit_together(tmp_path):
     alone = identify(machine, [rtest])
     # the probe adds information: no parameter is less certain than from the R-test alone
     assert all(fit.parameters[n].std <= alone.parameters[n].std * 1.02 for n in TABLE4)
+
+
+def test_in_a_mixed_session_a_gain_is_the_r_tests_alone(tmp_path):
+    """The R-test's X sensor reads 1.5 % high, the probe's centres beside it carry no gain:
+    diagnose reads gain_X from the R-test's rows only, within 3 σ of 1.5 % (1.53 ± 0.19 %
+    here), significant, and blames the device."""
+    machine = load_machine(SEED_MACHINE)
+    rng = np.random.default_rng(3)
+    with open(vector("seed-table4-noiseless.csv")) as f:
+        rows = list(csv.DictReader(f))
+    for r in rows:
+        for d, gain in (("dX", 1.015), ("dY", 1.0), ("dZ", 1.0)):
+            r[d] = f"{float(r[d]) * gain + rng.normal(0, 0.3):.4f}"
+    with open(tmp_path / "r.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, rows[0].keys())
+        w.writeheader()
+        w.writerows(rows)
+    data = [read_rtest(tmp_path / "r.csv", machine),
+            sphere_centres(read_probe_log(write_log(tmp_path / "k.log", noise_um=2.0, seed=5), machine),
+                           machine).data]
+    d = diagnose(machine, data, identify(machine, data), noise_um=0.3)
+    gain = {g.effect: g for g in d.devices}
+    assert gain["gain_X"].significant, gain["gain_X"]
+    assert abs(gain["gain_X"].value - 1.5) < 3 * gain["gain_X"].std, gain["gain_X"]
+    assert d.device_blamed == "gain_X" and d.found is None
 
 
 def _refused(tmp_path, log, *words):
