@@ -25,6 +25,22 @@ def _program(tmp_path, machine, ctl, path="all"):
 
 
 @pytest.mark.parametrize("ctl", list(EXT))
+def test_a_probing_program_keeps_a_name_of_twenty_and_its_log_twenty_four(tmp_path, ctl):
+    """The log is the program's name and ``_LOG``: a name of 20 characters is kept whole, its
+    log named in 24 (what every control here keeps); one of 21 is refused, nothing written."""
+    out = tmp_path / f"ABCDEFGHIJKLMNOPQRST{EXT[ctl]}"
+    code, _, err = run("probe-program", "--machine", SEED_MACHINE, "--path", "K4", "--controller", ctl,
+                       "-o", out)
+    assert code == 0, err
+    assert "the log: ABCDEFGHIJKLMNOPQRST_LOG" in out.read_text()
+    longer = tmp_path / f"ABCDEFGHIJKLMNOPQRSTU{EXT[ctl]}"
+    code, _, err = run("probe-program", "--machine", SEED_MACHINE, "--path", "K4", "--controller", ctl,
+                       "-o", longer)
+    assert code != 0 and "the control keeps 20" in err and "Traceback" not in err, err
+    assert not longer.exists()
+
+
+@pytest.mark.parametrize("ctl", list(EXT))
 @pytest.mark.parametrize("machine", list(MACHINES))
 def test_every_probing_program_passes_the_check_with_the_probe_in_the_set_up(tmp_path, ctl, machine):
     if ctl == "linuxcnc" and machine == "bc":     # its probe is called by name: refused, one line
