@@ -89,6 +89,11 @@ class Measurements:
         """(n,) whether each reading's covariance is known (a probe log's sphere centres)."""
         return np.array([d.cov is not None for d in self.sets], bool)[self.set_of]
 
+    @cached_property
+    def rtest(self) -> np.ndarray:
+        """(n,) whether each reading is an R-test's (a probe's sphere centres carry no sensor gain)."""
+        return np.array([d.device == "rtest" for d in self.sets], bool)[self.set_of]
+
     def covariance(self, prior: np.ndarray) -> np.ndarray:
         """(n, 3, 3) mm²: each reading's own covariance where its set gives it, else ``prior``."""
         return np.concatenate([d.cov if d.cov is not None else np.broadcast_to(prior, (len(d), 3, 3))

@@ -26,7 +26,7 @@ def gain_sensitivity(machine: Machine, data: Sequence[RTestData], fit: FitResult
     R-test's X, Y and Z sensor (readings of a probe log are sphere centres: no gain)."""
     joined = Measurements.concat(data)
     poses = joined.poses
-    rtest = np.array([d.device == "rtest" for d in joined.sets], bool)[joined.set_of]
+    rtest = joined.rtest
     model = Model(machine, fit.model)
     free = [model.names.index(n) for n in fit.free]
     J = model.jacobian(poses, fit.values)[:, :, free]

@@ -124,7 +124,7 @@ class Diagnosis:
     @property
     def unexplained(self) -> bool:
         """No catalogue effect accounts for the misfit (``_unexplained``)."""
-        return _unexplained(self.misfit, bool(self.significant) or any(d.significant for d in self.devices),
+        return _unexplained(self.misfit, bool(self.significant or self.significant_devices),
                             self.best_share_of_excess, self.outside_line)
 
     @property
@@ -142,11 +142,20 @@ class Diagnosis:
     @property
     def explained_to_noise(self) -> bool:
         return (not self.significant and not self.misfit and not self.unexplained
-                and not any(d.significant for d in self.devices))
+                and not self.significant_devices)
 
     @property
     def significant(self) -> tuple[Candidate, ...]:
         return tuple(c for c in self.candidates if c.significant)
+
+    @property
+    def significant_devices(self) -> tuple[DeviceCandidate, ...]:
+        return tuple(d for d in self.devices if d.significant)
+
+    @property
+    def blamed(self) -> DeviceCandidate | None:
+        """The device parameter blamed for the misfit (``_blamed``), if any."""
+        return next((d for d in self.devices if d.effect == self.device_blamed), None)
 
     @property
     def next_measurement(self) -> tuple[Measurement | None, tuple[str, ...]]:
@@ -364,7 +373,7 @@ def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residu
     free = [model.names.index(n) for n in fit.free]
     pred = model.deviation(poses, x)
     r3 = joined.deviation - pred
-    rtest = np.array([d.device == "rtest" for d in joined.sets], bool)[joined.set_of]
+    rtest = joined.rtest
     starts = StartSides(machine, fit.model, poses).projector()
     if starts is not None:
         r3 = starts.remove(r3)

@@ -228,14 +228,14 @@ def _told(d: Diagnosis, m: Measurement) -> set[tuple[str, str]]:
 
 def _devices(d: Diagnosis) -> list[str]:
     """The R-test's own gains, where one is significant: blamed, or outweighed by the machine."""
-    seen = [c for c in d.devices if c.significant]
+    seen = d.significant_devices
     if not seen:
         return []
     said = "; ".join(f"{c.effect} {c.value:+.2f} ± {c.std:.2f} % (p = {c.p_value:.2g})" for c in seen)
-    if d.device_blamed is None:
+    c = d.blamed
+    if c is None:
         return ["", f"  The device: {said} significant, but the best machine effect explains more; "
                     "no device parameter is blamed."]
-    c = next(c for c in seen if c.effect == d.device_blamed)
     than = f"as well as {d.significant[0].effect}" if d.significant else "where no machine effect does"
     return ["", f"  The device: {c.description}, {c.value:+.2f} ± {c.std:.2f} % ({c.effect}), explains these "
                 f"data {than}: no machine effect is named found, and nothing here corrects a control for it.",

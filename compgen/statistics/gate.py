@@ -49,8 +49,7 @@ def fit_gate(machine: Machine, data: Sequence[RTestData], fit: FitResult) -> lis
                  f"the residual holds a periodic line no catalogue effect has ({found.outside_line.text()})")
         reasons.append(f"{where} and no catalogue effect explains it (run diagnose: it shows where and its "
                        "shape, and how to declare it)")
-    elif found.device_blamed:
-        c = next(c for c in found.devices if c.effect == found.device_blamed)
+    elif c := found.blamed:
         reasons.append(f"the R-test itself explains the misfit as well as any machine effect ({c.effect} "
                        f"{c.value:+.2f} ± {c.std:.2f} %): calibrate the device and measure again")
     elif found.significant:
