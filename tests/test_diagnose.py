@@ -223,6 +223,16 @@ def test_correlated_noise_flags_nothing_because_it_is_whitened(seed_machine, pos
     assert diagnose(seed_machine, data, fit, advisor=Advisor).significant
 
 
+def test_two_significant_drifts_whose_second_was_made_before_are_tested_after_the_best(seed_machine, poses):
+    """Clean data under AR(1) ρ = 0.8 where chance makes two of C's drifts significant: the
+    second's columns were made while ranking, so none is left to walk after the best; that
+    was an internal error (a reshape of no columns) instead of a diagnosis."""
+    data = [_with_noise(seed_machine, poses, {}, _ar1_mm(len(poses), 0.8, np.random.default_rng(1129)))]
+    found = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM)
+    assert [c.effect for c in found.significant] == ["BOC:e45", "BOC:e15"]
+    assert found.after_best == () and "BOC:e15" in found.rivals and found.found is None
+
+
 def test_under_correlated_noise_a_real_effect_is_still_found(seed_machine, poses):
     hidden = {"ECC:h2c": 15 * ARCSEC}
     data = [_with_noise(seed_machine, poses, hidden, _ar1_mm(len(poses), 0.8, np.random.default_rng(6)))]

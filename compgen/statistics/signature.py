@@ -59,6 +59,8 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
     def where(e):            # what an effect's coordinate depends on
         return (e.carrier, e.basis.kind) if e.basis.kind != "e" else ("time", "e")
 
+    if not effects:          # every one's columns made before (diagnose's step 3): none to walk
+        return {}
     coords: dict = {}
     for e in effects:        # on the whole session: a reversal's side depends on its run
         if where(e) not in coords:
