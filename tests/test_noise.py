@@ -43,6 +43,23 @@ def test_ar1_is_estimated_and_white_noise_is_left_white():
     assert np.abs(lag).max() < 0.05
 
 
+def test_segments_of_one_device_share_their_estimate_and_differing_ones_keep_their_own():
+    """Three runs as long as the seed session's K4, K1, K2 of one AR(1) ρ = 0.9: each
+    direction gets one ρ̂ from all three (its s.e. √((1−ρ²)/723) = 0.016, a run's alone
+    0.022–0.040). Runs of ρ 0.3 and 0.9 (paths read at different rates) differ far beyond
+    their errors and keep their own."""
+    rng = np.random.default_rng(4)
+    lens = (241, 361, 121)
+    r = np.vstack([ar1_noise(n, 0.9, 1e3, rng) for n in lens])
+    rho = ar1(r, np.repeat([0, 1, 2], lens))
+    assert (np.ptp(rho, axis=0) == 0).all(), rho[[0, 241, 602]]
+    np.testing.assert_allclose(rho[0], 0.9, atol=0.035)
+    r = np.vstack([ar1_noise(2000, 0.3, 1e3, rng), ar1_noise(2000, 0.9, 1e3, rng)])
+    rho = ar1(r, np.repeat([0, 1], 2000))
+    np.testing.assert_allclose(rho[:2000], 0.3, atol=0.05)
+    np.testing.assert_allclose(rho[2000:], 0.9, atol=0.02)
+
+
 @pytest.mark.parametrize("rho", [0.0, 0.8])
 def test_the_simulators_noise_has_the_sigma_it_is_given_in_mm(rho):
     """ar1_noise(n, ρ, σ µm) is mm with stationary σ: 0.5 µm over 60 000 readings a direction

@@ -19,12 +19,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .significance import chi2_sf
+
 RHO_MAX = 0.99          # beyond this the noise is a random walk: whitening would divide by ~0
 RHO_FLOOR = 0.02        # below this a variance changes by < 4 % ((1 + ρ)/(1 − ρ)): at 10⁵ readings a run,
                         # where 2/√n is 0.006, chance would otherwise whiten one session in five
 OUTLIER_Z = 8.0         # robust s.d. of the step from the neighbours' median
 OUTLIER_MIN_UM = 1.0    # a step below this is noise on any R-test (0.5–1 µm repeatability)
 NEIGHBOURS = 2          # each side
+SAME_RHO_P = 0.05       # segments' ρ̂ differing at this level are not one device's
 REPEATS_MIN = 30        # readings beyond the first of each repeated pose, before they say what the noise is
 
 
@@ -38,16 +41,35 @@ def _previous(x: np.ndarray, seg: np.ndarray) -> np.ndarray:
 
 
 def ar1(r: np.ndarray, seg: np.ndarray) -> np.ndarray:
-    """ρ̂ of each reading's segment and direction, (n, 3), from residuals r (n, 3)."""
+    """ρ̂ of each reading's segment and direction, (n, 3), from residuals r (n, 3).
+
+    Each direction's segments share one ρ̂ where their own estimates agree within their
+    errors (χ² test of one common value, ``SAME_RHO_P``): one device read the same way
+    throughout. Whitening by ρ̂ is what the F tests rest on, and near 1 a small error in it
+    is a large one in the low-frequency variance a smooth candidate is tested against
+    (((1 − ρ)/(1 − ρ̂))²: 0.44 for ρ̂ 0.85 at ρ 0.9), so the estimate from all the segments,
+    with about √(segments) less error, flags fewer clean sessions (AR(1) ρ 0.9 on K4 + K1 + K2,
+    200 sessions: 15 flagged with a ρ̂ per segment, 8 pooled, 3 with the true ρ; see
+    docs/benchmarks.md). Segments whose estimates differ (paths read at different rates)
+    keep their own."""
     rho = np.zeros_like(r, dtype=float)
     lag = r * _previous(r, seg)
-    for s in np.unique(seg):
-        at = seg == s
-        n = int(at.sum())
-        energy = (r[at] ** 2).sum(axis=0)
-        est = np.divide(lag[at].sum(axis=0), energy, out=np.zeros(3), where=energy > 0)
-        est = est + (1 + 3 * est) / n     # the lag-1 estimate's bias (Kendall, 1954)
-        rho[at] = np.where(est > max(2 / np.sqrt(max(n, 1)), RHO_FLOOR), np.minimum(est, RHO_MAX), 0.0)
+    segs, at_seg = np.unique(seg, return_inverse=True)
+    n = np.bincount(at_seg, minlength=len(segs)).astype(float)
+    energy = np.stack([np.bincount(at_seg, r[:, d] ** 2, len(segs)) for d in range(3)], axis=1)
+    lags = np.stack([np.bincount(at_seg, lag[:, d], len(segs)) for d in range(3)], axis=1)
+    est = np.divide(lags, energy, out=np.zeros_like(lags), where=energy > 0)
+    est = est + (1 + 3 * est) / n[:, None]       # the lag-1 estimate's bias (Kendall, 1954)
+    size = np.repeat(n[:, None], 3, axis=1)
+    for d in range(3):
+        live = energy[:, d] > 0
+        if live.sum() > 1:
+            w = n[live] / np.maximum(1 - np.minimum(est[live, d], RHO_MAX) ** 2, 1 - RHO_MAX**2)  # 1/σ²
+            common = float(w @ est[live, d] / w.sum())
+            if chi2_sf(float(w @ (est[live, d] - common) ** 2), int(live.sum()) - 1) >= SAME_RHO_P:
+                est[live, d], size[live, d] = common, n[live].sum()
+    keep = est > np.maximum(2 / np.sqrt(np.maximum(size, 1)), RHO_FLOOR)
+    rho[:] = np.where(keep, np.minimum(est, RHO_MAX), 0.0)[at_seg]
     return rho
 
 
