@@ -10,7 +10,7 @@ from conftest import ARCSEC, SEED_MACHINE, UM
 
 from compgen.controllers import linuxcnc
 from compgen.controllers.kinematics import kinematics_edit
-from compgen.controllers.linuxcnc_config import evaluate
+from compgen.controllers.linuxcnc_config import evaluate, hal_file, then
 from compgen.controllers.registry import read_state
 from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
@@ -306,3 +306,15 @@ def test_a_joint_table_read_back_stands_for_the_mean_of_its_two_directions(seed_
     table = linuxcnc.read_comp(text, seed_machine, "KIN.Y.comp")
     assert table.input == "Y" and tuple(table.grid) == (-100.0, 0.0, 100.0)
     assert table.values == pytest.approx((0.008, 0.002, -0.002), abs=1e-15)
+
+
+def test_an_edit_run_after_a_configuration_is_refused_at_its_own_line():
+    """A HAL edit read after what the configuration ran (as kinematics reads it back) names
+    its own lines from 1, as halcmd does."""
+    cfg = hal_file("setp trtkins.x-rot-point 1\n", "m.hal")
+    with pytest.raises(CompgenError, match="takes a name and one value") as caught:
+        then(cfg, "# the edit\nsetp trtkins.y-offset\n", "edit")
+    assert caught.value.where == "edit:2"
+    with pytest.raises(CompgenError, match=r"set twice in one file \(lines 1 and 3\)") as caught:
+        then(cfg, "setp trtkins.z-offset 1\n\nsetp trtkins.z-offset 2\n", "edit")
+    assert caught.value.where == "edit:3"
