@@ -320,7 +320,8 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     best_sum_sq = max([ranked[c.effect].drop for c in significant[:1]] + [d.drop for d in seen], default=0.0)
     misfit, share = (), None
     if device is not None:
-        misfit = tuple(lack_of_fit(r.reshape(-1, 3), poses.path, device, noise.rho, dof / r.size, alpha))
+        free = 1.0 - np.einsum("ij,ij->i", res.Q, res.Q).reshape(-1, 3)     # 1 − each reading's leverage
+        misfit = tuple(lack_of_fit(r.reshape(-1, 3), poses.path, device, noise.rho, free, alpha))
         excess = rss - dof * (device * 1e-3) ** 2
         if best_sum_sq > 0 and excess > 0:
             share = min(1.0, best_sum_sq / excess)

@@ -118,23 +118,30 @@ def chi2_sf(x: float, k: int) -> float:
     return min(1.0, head + math.exp(top - y) * math.fsum(math.exp(v - top) for v in logs))
 
 
-def lack_of_fit(r: np.ndarray, groups: np.ndarray, noise_um: float, rho: np.ndarray, dof_share: float,
+def lack_of_fit(r: np.ndarray, groups: np.ndarray, noise_um: float, rho: np.ndarray, free,
                 alpha: float) -> list[dict]:
     """Where the residual ``r`` (n, 3; mm) exceeds the R-test's own noise: per group (a path)
-    and direction, a χ² test of its sum of squares against ``noise_um``, with AR(1)
-    correlation ``rho`` (n, 3) shrinking the degrees of freedom (a sum of squares of an
-    AR(1) series varies (1 + ρ²)/(1 − ρ²) times more), ``dof_share`` the share of readings
-    the fit left free, and Bonferroni over the groups tested. Returns the groups that fail,
-    worst first."""
+    and direction, a χ² test of its sum of squares against ``noise_um``, Bonferroni over the
+    groups tested. ``free``: each reading's share the fit left free (1 − its leverage, (n, 3),
+    or one share for all): a group's sum of squares is σ² times its sum under noise alone.
+    Its degrees of freedom shrink with AR(1) correlation ``rho`` (n, 3) (a sum of squares
+    of an AR(1) series varies (1 + ρ²)/(1 − ρ²) times more) and with tails heavier than a
+    normal's: a sum of squares varies (κ − 1)/2 times more with the residual's kurtosis κ
+    (Box, 1953), which the test takes from the group's own residual where it exceeds a
+    normal's 3 (a missing effect's misfit has κ below 3 and keeps the normal's). Returns the
+    groups that fail, worst first."""
     out, tests = [], []
     sigma2 = (noise_um * 1e-3) ** 2
+    free = np.broadcast_to(np.asarray(free, float), r.shape)
     for g in dict.fromkeys(groups):
         at = groups == g
         for d in range(3):
-            rg, rh = r[at, d], np.clip(rho[at, d], -0.99, 0.99)
-            k = max(1, int(round(len(rg) * dof_share * np.mean((1 - rh**2) / (1 + rh**2)))))
-            ratio = float(np.mean(rg**2) / dof_share / sigma2)
-            tests.append((g, "XYZ"[d], k, ratio, float(np.sqrt(np.mean(rg**2))) * 1e3))
+            rg, rh, fg = r[at, d], np.clip(rho[at, d], -0.99, 0.99), float(free[at, d].sum())
+            m2 = float(np.mean(rg**2))
+            kurtosis = max(3.0, float(np.mean(rg**4)) / m2**2) if m2 > 0 else 3.0
+            k = max(1, int(round(fg * np.mean((1 - rh**2) / (1 + rh**2)) * 2 / (kurtosis - 1))))
+            ratio = float(np.sum(rg**2) / fg / sigma2)
+            tests.append((g, "XYZ"[d], k, ratio, float(np.sqrt(m2)) * 1e3))
     for g, d, k, ratio, rms in tests:
         p = min(1.0, chi2_sf(k * ratio, k) * len(tests))
         if p < alpha:
