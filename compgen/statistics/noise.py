@@ -52,7 +52,6 @@ def ar1(r: np.ndarray, seg: np.ndarray) -> np.ndarray:
     200 sessions: 15 flagged with a ρ̂ per segment, 8 pooled, 3 with the true ρ; see
     docs/benchmarks.md). Segments whose estimates differ (paths read at different rates)
     keep their own."""
-    rho = np.zeros_like(r, dtype=float)
     lag = r * _previous(r, seg)
     segs, at_seg = np.unique(seg, return_inverse=True)
     n = np.bincount(at_seg, minlength=len(segs)).astype(float)
@@ -69,8 +68,7 @@ def ar1(r: np.ndarray, seg: np.ndarray) -> np.ndarray:
             if chi2_sf(float(w @ (est[live, d] - common) ** 2), int(live.sum()) - 1) >= SAME_RHO_P:
                 est[live, d], size[live, d] = common, n[live].sum()
     keep = est > np.maximum(2 / np.sqrt(np.maximum(size, 1)), RHO_FLOOR)
-    rho[:] = np.where(keep, np.minimum(est, RHO_MAX), 0.0)[at_seg]
-    return rho
+    return np.where(keep, np.minimum(est, RHO_MAX), 0.0)[at_seg]
 
 
 def whiten(x: np.ndarray, seg: np.ndarray, rho: np.ndarray, before: tuple | None = None) -> np.ndarray:
