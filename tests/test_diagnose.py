@@ -290,6 +290,25 @@ def test_rivals_no_measurement_separates_are_said_to_be_equivalent(seed_machine,
     assert _predicts_unmeasured_balls(seed_machine, truth, fit) < 1.0
 
 
+def test_each_advised_place_puts_the_ball_where_its_words_say(seed_machine):
+    """The label a user reads ("with the ball 100 mm lower") is where the advised program's
+    poses put the ball: heights along Z, radii in X and Y, every path at every place."""
+    bx, by, bz = seed_machine.ball
+    said = {"": (bx, by, bz), " there and back": (bx, by, bz),
+            " with the ball 100 mm higher": (bx, by, bz + 100),
+            " with the ball 100 mm lower": (bx, by, bz - 100),
+            " with the ball 50 mm higher": (bx, by, bz + 50), " with the ball 50 mm lower": (bx, by, bz - 50),
+            " with the ball at half its radius": (bx / 2, by / 2, bz),
+            " with the ball at 1.5 times its radius": (1.5 * bx, 1.5 * by, bz)}
+    seen = set()
+    for m in Advisor(seed_machine).candidates:
+        where = m.label[len(m.path):]
+        assert m.ball == pytest.approx(said[where]) and (m.poses.ball == m.ball).all(), m.label
+        seen.add(where)
+    assert {" with the ball 100 mm lower", " with the ball 100 mm higher",
+            " with the ball at half its radius"} <= seen
+
+
 def test_a_reversal_is_advised_to_be_run_there_and_back_and_then_found(seed_machine, poses):
     """Backlash of C (±5″ by the direction C turns): on paths that turn C one way only it
     acts as a location error and cannot be seen; diagnose says which run there and back would
@@ -753,6 +772,12 @@ def test_an_effect_still_significant_after_the_best_is_a_second_effect_not_a_riv
     assert off(fit) > 10 and off(honest) < 3, (off(fit), off(honest))
     again = FitResult.from_dict(json.loads(honest.to_json()))
     assert again.choices == honest.choices and "cannot be told from EYA:h1" in honest.report()
+    # what the choice moves: the six largest in their σ, in that order, each in its unit
+    text = honest.report().splitlines()
+    listed = text[text.index("  the σ above holds what the choice moves (half the range over them):") + 1]
+    moved = honest.choices[0]["half_range"]
+    want = sorted(moved, key=lambda n: -abs(moved[n]) / honest.parameters[n].std)[:6]
+    assert len(moved) > 6 and [w.split()[0] for w in listed.strip().split(", ")] == want, listed
 
 
 @pytest.mark.parametrize("seed", [7, 8])
@@ -901,6 +926,24 @@ def test_a_sensor_gain_is_blamed_on_the_device_and_no_machine_effect_found(seed_
     assert "fit --from fit.json --add" not in report(d)
     assert any("the R-test itself explains the misfit" in r for r in fit_gate(seed_machine, data, fit))
     assert d.to_dict()["device_blamed"] == d.device_blamed
+    # one sensor's gain leaks into another's test alone (X's made Z's −0.62 ± 0.15 %, p 0.006):
+    # beside the blamed gain, no other is significant or told, and each reads 0 within 3 σ
+    assert [c.effect for c in d.significant_devices] == [d.device_blamed], d.devices
+    assert all(abs(c.value) < 3 * c.std for c in d.devices if c is not d.blamed), d.devices
+    assert "stays significant beside it" not in report(d)
+
+
+def test_two_sensor_gains_are_both_told_and_the_strongest_blamed(seed_machine, poses):
+    """X +1.5 % and Z −1.5 % at once: the stronger blamed, the other significant beside it,
+    each within 3 σ of its truth, and the text asks to calibrate both."""
+    data = [_gained(seed_machine, poses, (0.015, 0, -0.015), 1)]
+    d = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM)
+    assert {c.effect for c in d.significant_devices} == {"gain_X", "gain_Z"}, d.devices
+    assert d.blamed is max(d.significant_devices, key=lambda c: c.drop_w)
+    for c in d.significant_devices:
+        assert abs(c.value - {"gain_X": 1.5, "gain_Z": -1.5}[c.effect]) < 3 * c.std, c
+    other = next(c for c in d.significant_devices if c is not d.blamed)
+    assert f"{other.effect} {other.value:+.2f}" in report(d) and "calibrate that sensor too" in report(d)
 
 
 @pytest.mark.parametrize("hidden, rho", [({}, 0.0), ({}, 0.9), ({"EXC+EYC:h2c": 3 * UM}, 0.0),

@@ -46,6 +46,13 @@ def test_predict_refuses_a_pose_the_machine_cannot_take(fit, tmp_path, rows, say
              tmp_path, "o.csv")
 
 
+def test_predict_refuses_a_ball_moved_off_the_table_at_the_row_it_moves(fit, tmp_path):
+    """Each place the ball stands is checked at its first row, however late it moves."""
+    (tmp_path / "p.csv").write_text("A,C,bx,by,bz\n" + "0,0,0,0,100\n" * 5 + "0,0,5000,0,100\n0,0,0,0,100\n")
+    _refused(["predict", "--from", fit, "--poses", tmp_path / "p.csv", "-o", tmp_path / "o.csv"],
+             "p.csv:7: the ball's stem", tmp_path, "o.csv")
+
+
 @pytest.mark.parametrize("model, says", [
     ([], "model must be a non-empty list"), ("XOC", "model must be a non-empty list"),
     (["XOC", "QQQ"], "do not agree (QQQ)"), (None, "model must be a non-empty list"),

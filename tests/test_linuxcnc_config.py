@@ -185,6 +185,18 @@ def test_halcmd_forms_pin_equals_value_and_comments_anywhere(tmp_path, trt):
     assert evaluate(state).net == {f"{module}.y-offset": "yo"}
 
 
+def test_linkps_and_linksp_net_a_pin_each_their_own_way_round(tmp_path, trt):
+    """halcmd's linkps takes the pin first, linksp the signal first: the signal each makes
+    reaches its pin."""
+    module, nominal = trt
+    hal = (f"linkps {module}.y-offset yo\nsets yo 0.25\nlinksp xr {module}.x-rot-point\nsets xr 0.125\n"
+           + _setp(module, nominal, ["y-offset", "x-rot-point"]))
+    state = _config(tmp_path, "[HAL]\nHALFILE = a.hal\n", a__hal=hal)
+    pins = _pins(state, module)
+    assert pins["y-offset"] == 0.25 and pins["x-rot-point"] == 0.125
+    assert evaluate(state).net == {f"{module}.y-offset": "yo", f"{module}.x-rot-point": "xr"}
+
+
 def test_a_new_signal_takes_the_value_its_first_pin_held(tmp_path, trt):
     module, nominal = trt
     state = _config(

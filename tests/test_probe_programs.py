@@ -132,6 +132,9 @@ def test_simulate_a_probe_log_then_fit_it(tmp_path):
     assert code == 0, err
     code, _, err = run("fit", "--machine", SEED_MACHINE, log, "-o", tmp_path / "fit.json")
     assert code == 0, err
+    code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "--device", "probe",
+                       "--noise-um", "1", "--seed", "3", "--stylus-error-um", "0", "-o", tmp_path / "0.log")
+    assert code == 0 and (tmp_path / "0.log").read_bytes() == log.read_bytes(), err   # the default: none
     machine = load_machine(SEED_MACHINE)
     fit = identify(machine, [sphere_centres(read_probe_log(log, machine), machine).data])
     assert all(abs(fit.parameters[n].value - v) < 5 * fit.parameters[n].std for n, v in TABLE4.items())

@@ -241,7 +241,8 @@ def _devices(d: Diagnosis) -> list[str]:
                 f"data {than}: no machine effect is named found, and nothing here corrects a control for it.",
             f"  Calibrate the R-test's {c.effect[-1]} sensor against its reference (its calibration: "
             "[rtest] gain_u in the machine file), then measure again and fit the new data alone."
-            + (f" ({'Gains tested one at a time: ' + said})" if len(seen) > 1 else "")]
+            + "".join(f" {o.effect} {o.value:+.2f} ± {o.std:.2f} % stays significant beside it (p = "
+                      f"{o.p_value:.2g}): calibrate that sensor too." for o in seen if o is not c)]
 
 
 def _device(d: Diagnosis) -> str:
