@@ -244,3 +244,11 @@ def test_the_nominal_reading_at_poses_inverse_solved_is_zero_as_walked(seed_mach
     copy = Poses(poses.q, poses.ball, poses.t, poses.path)   # the same poses, not marked
     walked = relative(m, copy, {})
     assert np.abs(walked).max() < 1e-11                   # mm
+
+
+def test_no_poses_give_no_readings_of_three_directions(seed_machine):
+    """The chain of no poses: (0, 3), as a library caller concatenating sessions expects."""
+    none = generate(seed_machine, ["K4"]).take(slice(0, 0))
+    assert relative(seed_machine, none, {}).shape == (0, 3)
+    assert np.concatenate([relative(seed_machine, none, {}),
+                           relative(seed_machine, generate(seed_machine, ["K4"]), {})]).shape == (241, 3)
