@@ -408,3 +408,19 @@ def test_tall_qr_is_householders_qr_and_falls_back_where_cholesky_cannot():
         Q, R = tall_qr(bad)
         np.testing.assert_allclose(Q @ R, bad, rtol=0, atol=1e-12 * np.abs(bad).max())
         np.testing.assert_allclose(Q.T @ Q, np.eye(bad.shape[1]), rtol=0, atol=1e-12)
+
+
+def test_a_reversals_visibility_beyond_its_start_sides_does_not_depend_on_its_scale():
+    """‖c⊥‖/‖c‖ of a reversal's column beyond the model and its start sides, from products:
+    as computed from the columns themselves, and the same for the column at 1/1000 of its
+    size (a small sensitivity is no lack of visibility)."""
+    from compgen.statistics.ranking import beyond_starts
+    rng = np.random.default_rng(5)
+    Q = np.linalg.qr(rng.normal(size=(60, 4)))[0]
+    c, B = rng.normal(size=(60, 1)), rng.normal(size=(60, 2))      # the reversal, its start sides
+    want = np.linalg.norm(c - np.column_stack([Q, B]) @ np.linalg.lstsq(np.column_stack([Q, B]), c,
+                                                                         rcond=None)[0]) / np.linalg.norm(c)
+    for scale in (1.0, 1e-3):
+        C = np.column_stack([c * scale, B])
+        got = beyond_starts(C.T @ C, Q.T @ C, 1)
+        assert got[0] == pytest.approx(want, rel=1e-9) and 0 < want < 1
