@@ -424,3 +424,5 @@ def test_a_reversals_visibility_beyond_its_start_sides_does_not_depend_on_its_sc
         C = np.column_stack([c * scale, B])
         got = beyond_starts(C.T @ C, Q.T @ C, 1)
         assert got[0] == pytest.approx(want, rel=1e-9) and 0 < want < 1
+    C = np.column_stack([np.zeros(60), B])          # an axis that never reverses: nothing seen
+    assert beyond_starts(C.T @ C, Q.T @ C, 1)[0] == 0.0
