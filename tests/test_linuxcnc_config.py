@@ -330,3 +330,18 @@ def test_an_edit_run_after_a_configuration_is_refused_at_its_own_line():
     with pytest.raises(CompgenError, match=r"set twice in one file \(lines 1 and 3\)") as caught:
         then(cfg, "setp trtkins.z-offset 1\n\nsetp trtkins.z-offset 2\n", "edit")
     assert caught.value.where == "edit:3"
+
+
+def test_a_linear_joints_trims_are_written_to_the_nanometre_and_an_angles_finer(seed_machine):
+    """A joint table's trims, as LinuxCNC reads them from text: mm to 6 decimals (1 nm),
+    degrees to 7 (0.00036″), and not the round-off of a coarser table."""
+    fit = identify(seed_machine, [simulate(seed_machine, {**TRUTH, "EXX:p1": 20 * UM, "ECC:h2c": 3 * ARCSEC},
+                                           generate(seed_machine, ["K4", "K1", "K2"]))],
+                   [*location_model(seed_machine), "EXX:p1", "ECC:h2c", "ECC:h2s"])
+    files = kinematics_edit(seed_machine, fit, "linuxcnc", None, "", "N", "0", "d", stem="N").files
+    for suffix, decimals in ((".X.comp", 6), (".C.comp", 7)):
+        rows = [ln.split() for ln in files[suffix].splitlines() if ln and not ln.startswith("#")]
+        trims = [w for row in rows for w in row[1:]]
+        assert max(len(w.partition(".")[2]) for w in trims) == decimals, (suffix, trims[:4])
+        table = linuxcnc.read_comp(files[suffix], seed_machine, f"N{suffix}")
+        assert np.abs(table.values).max() > 10 ** -decimals
