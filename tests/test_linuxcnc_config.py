@@ -217,6 +217,26 @@ def test_a_joint_table_beyond_the_limits_is_refused_with_its_line(tmp_path, trt,
         linuxcnc.loaded_joint_tables(seed_machine, state)
 
 
+def test_a_rotary_joints_table_is_held_to_the_tilt_limit_in_degrees(tmp_path, trt, seed_machine):
+    """C's table in degrees against [limits] tilt_arcsec = 60″ (0.0167°): 0.01° is kept,
+    0.02° refused at its line."""
+    module, nominal = trt
+    for trim, kept in ((0.01, True), (0.02, False)):
+        state = _config(
+            tmp_path,
+            "[HAL]\nHALFILE = a.hal\n[JOINT_4]\nCOMP_FILE = c.comp\nCOMP_FILE_TYPE = 1\n",
+            a__hal=_setp(module, nominal),
+            c__comp=f"0 {trim} {trim}\n360 0 0\n",
+        )
+        if kept:
+            ((fwd, _),) = linuxcnc.loaded_joint_tables(seed_machine, state).values()
+            assert fwd.values == (trim, 0.0)
+        else:
+            says = r"m.ini:4 \(c.comp\): joint 4's table trims C by up to 0.02 deg: beyond the machine file's"
+            with pytest.raises(CompgenError, match=says + r" \[limits\] \(tilt_arcsec\)"):
+                linuxcnc.loaded_joint_tables(seed_machine, state)
+
+
 def test_a_table_for_a_joint_the_trt_module_lacks_is_refused_with_its_line(tmp_path, trt, seed_machine):
     """The trt modules have joints 0-4 (X Y Z and the two rotary axes)."""
     module, nominal = trt

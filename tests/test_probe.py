@@ -88,6 +88,11 @@ def test_trigger_noise_is_pooled_and_the_centres_carry_it(tmp_path):
     sd = np.sqrt(np.einsum("nii->ni", c.data.cov)) * 1e3
     assert np.allclose(sd / c.sigma_um, [1 / np.sqrt(1.5), 1 / np.sqrt(1.5), 1 / np.sqrt(2)], rtol=1e-3)
     assert c.data.device == "probe"
+    # diagnose tests the centres against that noise, in µm: the RMS of their three σ
+    from compgen.statistics.diagnose import diagnose
+    d = diagnose(machine, [c.data], identify(machine, [c.data]))
+    assert d.noise_from == "touches"
+    assert d.device_noise_um == pytest.approx(c.sigma_um * np.sqrt((2 / 1.5 + 1 / 2) / 3), rel=1e-3)
 
 
 def test_the_spread_of_centres_matches_their_covariance(tmp_path):
