@@ -220,6 +220,17 @@ def test_history_commands_on_a_real_fit(tmp_path, monkeypatch):
     assert run("history", "export", "-o", "h.csv")[0] == 2            # never overwritten without --force
     rc, out, _ = run("history", "export", "-o", "h.json")
     assert json.loads((tmp_path / "h.json").read_text())["rows"][0]["operator"] == "J. Doe"
+    # a calibration 30 s after the edit, in the same minute: shown after it (by instant, not text)
+    d = simulate(machine, truth, generate(machine, ["K4"]), 0.5, np.random.default_rng(6))
+    (tmp_path / "b.csv").write_text(format_rtest(machine, d))
+    assert run("fit", "--machine", "ac-trunnion-itnc530", "b.csv", "-o", "b.json")[0] == 0
+    rc, out, _ = run("history", "show", "--machine", "ac-trunnion-itnc530")
+    minute = [ln for ln in out.splitlines() if "edit        from" in ln][0].split()[0]   # 2026-03-02T00:00
+    rc, out, err = run("history", "add", "b.json", "--date", f"{minute}:30+00:00")
+    assert rc == 0, out + err
+    rc, out, _ = run("history", "show", "--machine", "ac-trunnion-itnc530")
+    kinds = [ln.split()[1] for ln in out.splitlines() if ln.startswith("  20")]
+    assert kinds == ["calibration", "edit", "calibration"], out
 
 
 def test_the_database_refuses_updates_and_compgen_refuses_foreign_and_newer_stores(tmp_path, year):
