@@ -316,7 +316,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
 
     significant = [c for c in out if c.significant]
     blamed = _blamed(devices, ranked[significant[0].effect] if significant else None, rss_w / dof, alpha)
-    devices = _beside_blamed(devices, blamed, res, noise, alpha)
+    devices = _beside_blamed(devices, blamed, res, noise, rss_w / dof, alpha)
     seen = [d for d in devices if d.significant]
     best_sum_sq = max([ranked[c.effect].drop for c in significant[:1]] + [d.drop for d in seen], default=0.0)
     misfit, share = (), None
@@ -365,29 +365,24 @@ def _blamed(devices: Sequence[DeviceCandidate], best: Row | None, sigma2_w: floa
 
 
 def _beside_blamed(devices: list[DeviceCandidate], blamed: str | None, res: _Residual, noise: Whitening,
-                   alpha: float) -> list[DeviceCandidate]:
+                   sigma2: float, alpha: float) -> list[DeviceCandidate]:
     """The other device parameters beside the blamed one: significant only where they stay so
     once it is added (as a second machine effect after the best), and each told as estimated
     with it (and with those that stay). Alone, one sensor's gain takes a share of another's:
     an X gain of 1.5 % made Z's read −0.6 ± 0.15 % (p 0.006), and beside a Z gain of −1.5 %
-    read 2.5 % itself."""
+    read 2.5 % itself. ``sigma2``: the whitened residual's variance."""
     if blamed is None:
         return devices
     cols = device_columns(res.pred, res.rtest)
     first = noise.white(cols[blamed])[:, None]
     rw = noise.off(noise.white(res.r))
     others = [d for d in devices if d.significant and d.effect != blamed]
-    prods = {}
-    for d in others:
-        c = noise.white(cols[d.effect])[:, None]
-        prods[d.effect] = (c.T @ c, np.vstack([noise.Q.T @ c, first.T @ c]), c.T @ rw)
+    prods = {d.effect: _beside(noise.white(cols[d.effect])[:, None], noise, first, rw) for d in others}
     kept = still_significant(noise.Q, first, rw, prods, alpha) if prods else set()
     joint = [blamed, *(d.effect for d in others if d.effect in kept)]
-    sigma2 = noise.rss(res.r) / res.dof
 
     def together(names):          # values and σ, %, of these gains fitted with the model at once
-        C = np.column_stack([noise.white(cols[e]) for e in names])
-        C = C - noise.Q @ (noise.Q.T @ C)
+        C = noise.off(np.column_stack([noise.white(cols[e]) for e in names]))
         amp = np.linalg.lstsq(C, rw, rcond=None)[0]
         std = np.sqrt(np.diag(np.linalg.inv(C.T @ C)) * sigma2)
         return {e: (float(a) * 100.0, float(s) * 100.0) for e, a, s in zip(names, amp, std, strict=True)}
@@ -398,6 +393,12 @@ def _beside_blamed(devices: list[DeviceCandidate], blamed: str | None, res: _Res
             told[d.effect] = together([*joint, d.effect])[d.effect]
     return [replace(d, value=told[d.effect][0], std=told[d.effect][1],
                     significant=d.significant and (d.effect in joint)) for d in devices]
+
+
+def _beside(C: np.ndarray, noise: Whitening, added: np.ndarray, rw: np.ndarray) -> tuple:
+    """Whitened columns ``C`` as ``still_significant`` takes them beside the model and the
+    columns ``added``: (CᵀC, [Q | added]ᵀC, Cᵀrw)."""
+    return C.T @ C, np.vstack([noise.Q.T @ C, added.T @ C]), C.T @ rw
 
 
 def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residual:
@@ -560,10 +561,8 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out:
         prods = ({e.name: carried[1][e.name] for e in walked} if carried and carried[0] == best else
                  products(machine, poses, walked, (noise.Q, first), rw,
                           (res.seg, noise.rho) if noise.rho.any() else None))
-        for e in others:
-            if e.name in made:
-                C = noise.white(made[e.name])
-                prods[e.name] = (C.T @ C, np.vstack([noise.Q.T @ C, first.T @ C]), C.T @ rw)
+        prods |= {e.name: _beside(noise.white(made[e.name]), noise, first, rw)
+                  for e in others if e.name in made}
         kept = still_significant(noise.Q, first, rw, prods, alpha)
         after_best = tuple(e.name for e in others if e.name in kept)
     if significant:
