@@ -126,3 +126,19 @@ def test_a_tilting_axis_positioning_error_goes_to_a_cec_table(seed_machine):
     result = compare(seed_machine, [pre], fit, "sinumerik840d")
     assert result.not_compensated == ()
     assert result.predicted_post["rms_um"] == pytest.approx(NOISE_UM, rel=0.05)
+
+
+def test_a_parameter_held_at_a_wrong_value_is_predicted_as_the_data_show(seed_machine, session):
+    """A parameter held fixed (an earlier calibration's value) that the control cannot hold
+    either: what the data show of it beyond the held value stays in the residual, and the
+    prediction after the edit carries the machine's true effect, as the post measurement
+    reads it, not the held value's."""
+    truth, poses, pre, _ = session
+    half = {k: v / 2 for k, v in HIDDEN.items()}
+    fit = identify(seed_machine, [pre], location_model(seed_machine), fixed=half)
+    emitted = kinematics_edit(seed_machine, fit, "itnc530", CURRENT_TAB, "c", "K", "0", "d")
+    held = read_edits(seed_machine, {"new.TAB": emitted.files[".TAB"]}, None)
+    result = compare(seed_machine, [pre], fit, "itnc530", [_post(seed_machine, truth, poses, held)])
+    predicted, measured = result.predicted_post["rms_um"], result.measured_post["rms_um"]
+    assert measured > 1.3 * NOISE_UM                          # the whole 2/rev stays on the machine
+    assert abs(predicted - measured) < RMS_AGREE_UM, (predicted, measured)

@@ -13,7 +13,7 @@ from compgen.data.simulate import ar1_noise, simulate
 from compgen.model.effects import compose, location_model
 from compgen.model.paths import generate
 from compgen.statistics.choice import with_choices
-from compgen.statistics.diagnose import diagnose
+from compgen.statistics.diagnose import _per_axis, diagnose
 from compgen.statistics.diagnose_text import report
 from compgen.statistics.identify import fitted, identify
 from compgen.statistics.results import FitResult
@@ -65,7 +65,7 @@ def test_hidden_effect_is_named_first_and_adding_it_brings_rms_to_noise(seed_mac
     assert abs(refit.residual["rms_um"] - best.rms_after_um) < 0.02   # first order predicted it
 
 
-def test_ambiguous_scale_is_reported_with_the_measurement_that_resolves_it(seed_machine, poses):
+def test_ambiguous_scale_is_reported_with_the_measurement_that_resolves_it(seed_machine, poses, monkeypatch):
     # On these paths X ≈ x_ball·cos C: an X scale error looks like a 1/rev radial motion of C.
     hidden = {"EXX:p1": 10 * UM}
     data = [_session(seed_machine, poses, hidden)]
@@ -75,6 +75,8 @@ def test_ambiguous_scale_is_reported_with_the_measurement_that_resolves_it(seed_
     advice = [m for m in found.rivals_separated_by if "half its radius" in m.label]
     assert advice
     # what the plots draw: alike on the measured poses, apart on the advised measurement
+    from compgen.commands import plots
+    from compgen.commands.plots import _png as plots_png
     from compgen.commands.plots import figures, rival_curves
     fit = identify(seed_machine, data)
     curves = rival_curves(seed_machine, poses, fit, found, found.rivals_separated_by[0])
@@ -82,7 +84,13 @@ def test_ambiguous_scale_is_reported_with_the_measurement_that_resolves_it(seed_
     assert np.sqrt(((scale[0] - best[0]) ** 2).mean()) < 0.05 * np.sqrt((best[0] ** 2).mean())
     apart = float(((scale[1] - best[1]) ** 2).sum())                  # µm² over the readings
     assert apart >= 25 * NOISE_UM**2, apart                           # TELLS_APART σ²
+    drawn = []                                     # the figures as drawn, before their PNG
+    monkeypatch.setattr(plots, "_png", lambda fig: drawn.append(fig) or plots_png(fig))
     assert "rivals.png" in figures(seed_machine, data, fit, None, found)
+    rivals = next(f for f in drawn if f.axes[0].get_title().startswith("measured: the rivals"))
+    widths = [line.get_linewidth() for line in rivals.axes[0].get_lines()[1:]]   # after the residual
+    assert len(widths) == len(curves) and all(a > b for a, b in zip(widths, widths[1:])), widths
+    assert widths[-1] >= 1 and widths[0] <= 4      # each beneath shows round the one on it; none blots
     # follow the advice: add K4 with the ball at half its radius, and the tie is broken
     half = generate(seed_machine, ["K4"], ball=np.asarray(seed_machine.ball) * [0.5, 0.5, 1.0])
     data.append(_session(seed_machine, half, hidden, seed=8))
@@ -966,3 +974,20 @@ def test_a_calibrated_device_is_not_blamed(seed_machine, poses, hidden, rho, see
         model = compose(seed_machine, location_model(seed_machine), [n[:-1] for n in hidden])
         d = diagnose(seed_machine, data, identify(seed_machine, data, model), noise_um=NOISE_UM)
     assert not any(c.significant for c in d.devices), d.devices
+
+
+def test_the_residual_against_a_tilting_axis_is_its_quadratic_trend_in_micrometres(seed_machine):
+    """A tilting axis (A, not a whole turn) has no terms per revolution: its row is the RMS
+    over the readings of the least-squares quadratic in A, per direction. A residual that is
+    exactly such a trend in dX (and nothing in dY, dZ), given in mm as the fit holds it,
+    reads back as its own RMS in µm."""
+    poses = generate(seed_machine, ["K4", "K1", "K2"])
+    a = poses.q[:, seed_machine.index("A")]
+    u = (a - a.mean()) / np.ptp(a)
+    trend_um = 2.0 * u + 3.0 * (u**2 - (u**2).mean())
+    r = np.zeros((len(poses), 3))
+    r[:, 0] = trend_um * 1e-3
+    row = _per_axis(seed_machine, poses, r)["A"]
+    assert set(row) == {"trend"}
+    assert row["trend"][0] == pytest.approx(np.sqrt(np.mean(trend_um**2)), rel=1e-9)
+    assert row["trend"][1:] == pytest.approx([0, 0], abs=1e-12)

@@ -5,6 +5,7 @@ with Gaussian trigger noise along the radius."""
 
 import csv
 import json
+import re
 import tempfile
 from pathlib import Path
 
@@ -13,6 +14,7 @@ import pytest
 from conftest import SEED_MACHINE, TABLE4, run, vector
 
 from compgen.configuration.machine_file import load_machine
+from compgen.errors import CompgenError
 from compgen.data.probe import read_probe_log, sphere_centres
 from compgen.data.rtest import read_rtest
 from compgen.statistics.diagnose import diagnose
@@ -377,3 +379,34 @@ def test_a_log_without_times_is_written_without_its_t_column_and_reads_back(tmp_
     (tmp_path / "u.log").write_text(text)
     log = read_probe_log(tmp_path / "u.log", machine)
     assert np.isnan(log.t).all() and len(sphere_centres(log, machine).centre) == len(poses)
+
+
+def test_the_scatter_a_copied_pose_is_told_against_is_an_independent_fit_of_the_touches(tmp_path):
+    """The triggers' scatter named beside a copied pose: the RMS of the touches about a sphere
+    per pose with one stylus radius common to the log, over touches − 3 per pose − 1 degrees
+    of freedom, as scipy's least squares of the exact distances finds it (few poses, so a
+    degree of freedom more or less shows in the figure)."""
+    from scipy.optimize import least_squares
+
+    def copied(t):
+        t += [[r[0], "99", *r[2:]] for r in t if r[1] == "3"]
+    log = read_probe_log(write_log(tmp_path / "c.log", noise_um=2.0, every=60, damage=copied),
+                         load_machine(SEED_MACHINE))
+    with pytest.raises(CompgenError, match="repeat those") as refused:
+        sphere_centres(log, load_machine(SEED_MACHINE))
+    told = float(re.search(r"triggers scatter ([0-9.]+) µm", str(refused.value)).group(1))
+
+    touches = np.array([[float(v) for v in r[4:7]] for r in csv.reader(
+        (tmp_path / "c.log").read_text().splitlines()[5:])])
+    pose = np.repeat(np.arange(len(touches) // len(DIRS)), len(DIRS))
+    rho = (25.4 + 3.0) / 2
+    start = np.concatenate([np.array([touches[pose == k].mean(axis=0) for k in range(pose.max() + 1)]).ravel(),
+                            [0.0]])
+
+    def distance_off(p):
+        centres = p[:-1].reshape(-1, 3)
+        return np.linalg.norm(touches - centres[pose], axis=1) - (rho + p[-1])
+    r = least_squares(distance_off, start, xtol=1e-15, ftol=1e-15, gtol=1e-15).fun
+    dof = len(touches) - 3 * (pose.max() + 1) - 1
+    assert dof < 60
+    assert told == pytest.approx(np.sqrt(r @ r / dof) * 1e3, abs=0.006)
