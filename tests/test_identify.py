@@ -255,7 +255,8 @@ def test_a_correlated_residual_gets_the_covariance_of_least_squares_under_ar1_no
     """The bundled session, fitted without the EXC:h2 it holds, leaves a residual that
     follows from reading to reading: fit says so, and each σ is the square root of
     (JᵀJ)⁻¹JᵀΣJ(JᵀJ)⁻¹ with Σ written out here entry by entry (σ² ρ^|i−j| within a run and
-    direction, each one's own σ² and compgen's ρ̂) — larger than σ̂²(JᵀJ)⁻¹'s."""
+    direction, each one's own σ² and compgen's ρ̂, matched beyond J's span) — larger than
+    σ̂²(JᵀJ)⁻¹'s."""
     from compgen.model.kinematics import Model, runs
     from compgen.statistics.noise import ar1
     data = read_rtest(ROOT / "examples" / "seed-session.csv", seed_machine)
@@ -267,7 +268,7 @@ def test_a_correlated_residual_gets_the_covariance_of_least_squares_under_ar1_no
     J = m.jacobian(data.poses, x).reshape(-1, len(x))
     r = data.deviation - m.deviation(data.poses, x)
     seg = runs(data.poses, np.zeros(len(data)))
-    rho = ar1(r, seg)
+    rho = ar1(r, seg, np.linalg.qr(J)[0])
     n, dof = len(r), r.size - len(x)
     sigma = np.zeros((3 * n, 3 * n))
     for s in np.unique(seg):

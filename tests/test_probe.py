@@ -14,9 +14,9 @@ import pytest
 from conftest import SEED_MACHINE, TABLE4, run, vector
 
 from compgen.configuration.machine_file import load_machine
-from compgen.errors import CompgenError
 from compgen.data.probe import read_probe_log, sphere_centres
 from compgen.data.rtest import read_rtest
+from compgen.errors import CompgenError
 from compgen.statistics.diagnose import diagnose
 from compgen.statistics.identify import identify
 
@@ -400,8 +400,8 @@ def test_the_scatter_a_copied_pose_is_told_against_is_an_independent_fit_of_the_
         (tmp_path / "c.log").read_text().splitlines()[5:])])
     pose = np.repeat(np.arange(len(touches) // len(DIRS)), len(DIRS))
     rho = (25.4 + 3.0) / 2
-    start = np.concatenate([np.array([touches[pose == k].mean(axis=0) for k in range(pose.max() + 1)]).ravel(),
-                            [0.0]])
+    means = [touches[pose == k].mean(axis=0) for k in range(pose.max() + 1)]
+    start = np.concatenate([np.ravel(means), [0.0]])
 
     def distance_off(p):
         centres = p[:-1].reshape(-1, 3)

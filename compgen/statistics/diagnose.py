@@ -55,6 +55,11 @@ RESOLVES_UM = 0.1     # an R-test's sensors resolve about this: a smaller line i
 # Beyond this many poses the first pass carries the best it expects, found on about this
 # many of them: step 5 then needs no pass of its own (5 of 27 s at 720 000 readings)
 SCREEN_POSES = 20_000
+# The tests whiten at ρ̂ plus this many of its standard errors: a ρ̂ below ρ leaves the low
+# frequencies a smooth candidate lives in louder than the rest (((1 − ρ̂)/(1 − ρ))², 1.2 at
+# one s.e. for ρ 0.9 on K4 + K1 + K2), one above quieter, and the family's tail is convex in
+# that: at ρ̂ itself 10 of 200 clean AR(1) ρ 0.9 sessions were flagged, at ρ 3 (α 0.01)
+RHO_MARGIN_SE = 1.0
 
 
 @dataclass(frozen=True)
@@ -480,8 +485,10 @@ def _ranked(machine: Machine, fit: FitResult, effects: Sequence[Effect],
     c = made.get(best.effect.name)
     c = effect_columns(machine, poses, best.effect) if c is None else c
     carried = (best.effect.name, both) if guess is not None and guess.name == best.effect.name else ()
-    rest = r - c @ np.linalg.lstsq(c - Q @ (Q.T @ c), r, rcond=None)[0]
-    rho = ar1((rest - Q @ (Q.T @ rest)).reshape(-1, 3), seg)
+    u, sv, _ = np.linalg.svd(c - Q @ (Q.T @ c), full_matrices=False)
+    beyond = u[:, sv > 1e-9 * sv.max()] if sv.size and sv.max() > 0 else u[:, :0]   # c's span beyond Q
+    rest = r - beyond @ (beyond.T @ r)
+    rho = ar1(rest.reshape(-1, 3), seg, np.hstack([Q, beyond]), RHO_MARGIN_SE)
     if rho.any():
         noise = Whitening(seg, rho, Q)
         rw = noise.off(noise.white(r))

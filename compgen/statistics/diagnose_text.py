@@ -32,9 +32,11 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
         lines += [f"    {o['file']}:{o['line'] or '?'}  path {o['path'] or '(unlabelled)'}  "
                   f"{o['size_um']:.1f} µm" for o in d.outliers]
     if any(any(v) for v in d.noise.values()):
-        lines += ["", "  the noise is correlated from reading to reading: AR(1) ρ̂ per path (dX dY dZ): "
+        lines += ["", "  the noise is correlated from reading to reading: AR(1) ρ per path (dX dY dZ), "
+                      "one standard error above its estimate: "
                   + "; ".join(f"{k} {' '.join(f'{v:.2f}' for v in p)}" for k, p in d.noise.items()),
-                  "  the tests below are made on readings made white with it (generalised least squares)"]
+                  "  the tests below are made on readings made white with it (generalised least squares; "
+                  "at the estimate itself its error would flag clean data more often than α)"]
     lines += ["", "  residual against axis position (µm, amplitude in dX dY dZ)"]
     for axis, a in d.per_axis.items():
         for term, amp in a.items():

@@ -23,7 +23,7 @@ from ..model.sides import StartSides, both_sides
 from ..units import parse_quantity, shown
 from .noise import ar1, ar1_covariance
 from .results import DataRef, Estimate, FitResult
-from .significance import COND_LIMIT, condition
+from .significance import COND_LIMIT, condition, tall_qr
 
 MAX_ITER = 30
 STEP_TOL_SHOWN = 1e-7     # µm or arcsec: Gauss–Newton has converged below this step
@@ -114,7 +114,10 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
     # from the residual (``noise.ar1``: zero unless significant), and where it is not zero
     # the estimates' covariance under that noise; white noise keeps σ²(JᵀJ)⁻¹
     seg = runs(poses, np.concatenate([np.full(len(d), k) for k, d in enumerate(data)]))
-    rho = ar1(r.reshape(-1, 3), seg)
+    basis = tall_qr(normal.J)[0]             # what the fit took out of r: ρ̂ is matched beyond it
+    if starts.count:
+        basis = np.hstack([project.basis(len(poses)), basis])
+    rho = ar1(r.reshape(-1, 3), seg, basis)
     if rho.any():
         cov = ar1_covariance(normal.J.T.reshape(p, len(poses), 3), r.reshape(-1, 3), seg, rho, dof)
     else:
