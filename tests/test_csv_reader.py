@@ -48,7 +48,8 @@ def _move_column(text: str, name: str, to: int) -> str:
 
 
 @pytest.mark.parametrize("variant", ["as written", "path in the middle", "path last", "CRLF",
-                                     "labels of several widths", "no trailing newline"])
+                                     "labels of several widths", "no trailing newline",
+                                     "path last, the widest label first, no trailing newline"])
 def test_the_fast_reader_gives_the_careful_readers_table(tmp_path, monkeypatch, variant):
     text = _session()
     if variant == "path in the middle":
@@ -61,6 +62,8 @@ def test_the_fast_reader_gives_the_careful_readers_table(tmp_path, monkeypatch, 
         text = text.replace("\nK1,", "\nK1long,").replace("\nK2,", "\n  K,")
     elif variant == "no trailing newline":
         text = text.rstrip("\n")
+    else:       # the last row's cells reach past the file's end but for the widest label's width
+        text = _move_column(text, "path", -1).replace(",K4\n", ",K4long\n", 1).rstrip("\n")
     fast, careful, answered = _both(tmp_path, text, monkeypatch)
     assert answered, "the fast reader stepped aside on a well-formed file"
     np.testing.assert_array_equal(fast.deviation, careful.deviation)

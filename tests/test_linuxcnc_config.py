@@ -2,7 +2,10 @@
 each case one a reader that looked at the files rather than at LinuxCNC got wrong; and the
 configuration to start with that an edit writes, evaluated the same way."""
 
+import os
 import re
+import shutil
+import subprocess
 
 import numpy as np
 import pytest
@@ -60,6 +63,19 @@ def test_a_key_given_twice_takes_its_first_value_and_a_second_section_is_not_rea
     assert _pins(state, module)["z-rot-point"] == 29.794  # inivar: the first occurrence
     assert _pins(state, module)["x-rot-point"] == 0.0  # the second [HAL] is never read
     assert "(HALFILE b.hal)" not in state
+
+
+@pytest.mark.skipif(shutil.which("inivar") is None and not os.environ.get("COMPGEN_REQUIRE_LINUXCNC"),
+                    reason="LinuxCNC's inivar (Debian's linuxcnc-uspace) is not installed")
+def test_a_line_ending_in_a_backslash_is_joined_with_the_next_as_inivar_joins_it(tmp_path, trt):
+    module, nominal = trt
+    ini = "[TRT]\nZ = 29.\\\n794\n[HAL]\nHALFILE = a.hal\n"
+    state = _config(tmp_path, ini,
+                    a__hal=_setp(module, nominal, ["z-rot-point"]) + f"setp {module}.z-rot-point [TRT]Z\n")
+    told = subprocess.run(["inivar", "-ini", str(tmp_path / "m.ini"), "-sec", "TRT", "-var", "Z"],
+                          capture_output=True, text=True, check=True).stdout.strip()
+    assert told == "29.794"                                   # LinuxCNC's own reading
+    assert _pins(state, module)["z-rot-point"] == float(told)
 
 
 def test_an_include_is_expanded_and_its_joint_table_kept(tmp_path, trt, seed_machine):

@@ -410,3 +410,21 @@ def test_the_scatter_a_copied_pose_is_told_against_is_an_independent_fit_of_the_
     dof = len(touches) - 3 * (pose.max() + 1) - 1
     assert dof < 60
     assert told == pytest.approx(np.sqrt(r @ r / dof) * 1e3, abs=0.006)
+
+
+def test_a_path_is_probed_at_the_probe_sections_poses_twelve_unless_said(tmp_path):
+    """docs/probing.md: each path thinned to ``[probe] poses``, 12 by default, evenly spread,
+    its first and last pose kept."""
+    from compgen.data.probe import probe_poses
+    from compgen.model.paths import generate
+
+    text = SEED_MACHINE.read_text()
+    said = "poses = 12             # per path, spread evenly along it\n"
+    assert said in text
+    for line, want in (("", 12), ("poses = 7\n", 7)):
+        path = tmp_path / f"m{want}.toml"
+        path.write_text(text.replace(said, line))
+        machine = load_machine(path)
+        probed, k4 = probe_poses(machine, ["K4"]), generate(machine, ["K4"])
+        assert len(probed) == want
+        np.testing.assert_array_equal(probed.q[[0, -1]], k4.q[[0, -1]])

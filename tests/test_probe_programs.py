@@ -60,6 +60,18 @@ def test_every_probing_program_passes_the_check_with_the_probe_in_the_set_up(tmp
     assert text.count(word) == 36 * 5
 
 
+def test_a_heidenhain_probing_direction_of_length_one_and_a_half_is_refused_at_its_line(tmp_path):
+    out, _ = _program(tmp_path, SEED_MACHINE, "itnc530", "K4")
+    text = out.read_text()
+    find = "IX-0.866025 IY+0.000000 IZ-0.500000"
+    at = next(i for i, ln in enumerate(text.splitlines(), 1) if find in ln)
+    bad = tmp_path / "BAD.H"
+    bad.write_text(text.replace(find, "IX-1.299038 IY+0.000000 IZ-0.750000", 1))
+    code, _, err = run("check-program", "--machine", SEED_MACHINE, bad)
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert f"line {at}: the probing direction is not a unit vector" in err, err
+
+
 @pytest.mark.parametrize("ctl, find, replace, rule", [
     ("linuxcnc", "G38.2 ", "G1 ", "stylus tip enters the ball"),                 # a probe made a feed
     ("itnc530", "IX-0.866025 IY+0.000000 IZ-0.500000", "IX+0.866025 IY+0.000000 IZ-0.500000",

@@ -5,6 +5,7 @@ import pytest
 from conftest import SEED_MACHINE, run
 
 from compgen.data.rtest import read_rtest
+from compgen.errors import CompgenError
 from compgen.model.paths import generate
 
 TRUTH = SEED_MACHINE.parents[1] / "examples" / "truth-table4.json"
@@ -18,6 +19,16 @@ def test_a_continuous_path_takes_its_arc_at_the_feed_sampled_at_the_rate(seed_ma
     np.testing.assert_allclose(np.diff(poses.t), 0.02, rtol=1e-12)
     c = np.degrees(poses.q[:, seed_machine.index("C")])
     np.testing.assert_allclose(c, np.linspace(0, 360, 1501), atol=1e-9)
+
+
+def test_a_feed_below_one_degree_a_minute_is_a_feed(seed_machine):
+    """Any finite feed above zero is one: K2's 360° at 0.9 deg/min (a soak) take 400 min,
+    sampled at 0.01 Hz 241 readings 100 s apart; zero is refused."""
+    poses = generate(seed_machine, ["K2"], rate_hz=0.01, feed=0.9)
+    assert len(poses) == 241
+    np.testing.assert_allclose(np.diff(poses.t), 100.0, rtol=1e-12)
+    with pytest.raises(CompgenError, match="feed must be a finite number > 0 deg/min, not 0"):
+        generate(seed_machine, ["K2"], rate_hz=0.01, feed=0.0)
 
 
 def test_simulate_writes_a_continuous_session_that_reads_back(tmp_path, seed_machine):
