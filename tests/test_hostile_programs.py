@@ -175,7 +175,7 @@ def test_a_header_ball_that_does_not_read_is_refused_not_replaced(tmp_path, ball
     said = r"(ball centre in the table frame: )X\S+ Y\S+ Z\S+ mm"
     bad.write_text(re.sub(said, lambda m: m[1] + ball, text))
     code, _, err = run("check-program", "--machine", SEED_MACHINE, "--mode", "tcpm", bad)
-    assert code == 2 and f"line {line}: the header names the ball as" in err, err
+    assert code == 2 and f"B.ngc:{line}: the header names the ball as" in err, err
     assert len(err.splitlines()) == 1
     given = run("check-program", "--machine", SEED_MACHINE, "--mode", "tcpm", "--ball", "0,0,100", bad)
     assert given[0] in (0, 1)

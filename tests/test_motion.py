@@ -205,7 +205,7 @@ def test_a_heidenhain_datum_shift_is_refused_at_its_line(machines, tmp_path):
     at = next(i for i, ln in enumerate(lines) if "CYCL DEF 7.1 X+0" in ln)
     lines[at] = lines[at].replace("X+0", "X+5")
     code, out, err = _check(machines["seed"], tmp_path / "SHIFT.H", "\n".join(lines) + "\n")
-    assert code == 2 and f"line {at + 1}: a datum shift" in err, err
+    assert code == 2 and f"SHIFT.H:{at + 1}: a datum shift" in err, err
 
 
 @pytest.mark.parametrize("ctl, junk", [("itnc530", "25 FOO BAR"), ("sinumerik840d", "FOO BAR"),
@@ -215,7 +215,7 @@ def test_a_block_the_check_cannot_read_is_named_by_its_line(machines, tmp_path, 
     at = len(program) // 2
     text = "\n".join([*program[:at], junk, *program[at:]]) + "\n"
     code, out, err = _check(machines["seed"], tmp_path / f"JUNK{controller(ctl).program_ext}", text)
-    assert code == 2 and f"line {at + 1}: " in err, err
+    assert code == 2 and f"JUNK{controller(ctl).program_ext}:{at + 1}: " in err, err   # the file and line
 
 
 @pytest.mark.parametrize("ctl", ["itnc530", "sinumerik840d", "linuxcnc"])

@@ -69,7 +69,7 @@ def test_a_heidenhain_probing_direction_of_length_one_and_a_half_is_refused_at_i
     bad.write_text(text.replace(find, "IX-1.299038 IY+0.000000 IZ-0.750000", 1))
     code, _, err = run("check-program", "--machine", SEED_MACHINE, bad)
     assert code == 2 and len(err.strip().splitlines()) == 1, err
-    assert f"line {at}: the probing direction is not a unit vector" in err, err
+    assert f"BAD.H:{at}: the probing direction is not a unit vector" in err, err
 
 
 @pytest.mark.parametrize("ctl, find, replace, rule", [
@@ -268,7 +268,7 @@ def test_sinumerik_probing_checks_every_switch_and_every_write(tmp_path):
         at = next(k for k, ln in enumerate(raw) if ln.startswith(cut))
         (out.parent / "cut.MPF").write_text("\n".join(raw[:at] + raw[at + 5:]) + "\n")
         code, _, err = run("check-program", "--machine", SEED_MACHINE, out.parent / "cut.MPF")
-        assert code == 2 and f"line {at + 1}:" in err and "must follow" in err, err
+        assert code == 2 and f"cut.MPF:{at + 1}: " in err and "must follow" in err, err
 
 
 def test_heidenhain_probing_cycle_retracts_and_a_deflected_one_is_refused(tmp_path):

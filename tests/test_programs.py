@@ -368,7 +368,7 @@ def test_heidenhain_calls_a_tool_by_name_in_quotes_and_refuses_a_bare_name(tmp_p
     bare.write_text(program.replace('TOOL CALL "RTEST"', "TOOL CALL RTEST"))
     code, _, err = run("check-program", "--machine", tmp_path / "m.toml", bare)
     line = 1 + next(k for k, ln in enumerate(program.splitlines()) if "TOOL CALL" in ln)
-    assert code == 2 and f"line {line}:" in err and "needs double quotes" in err, err
+    assert code == 2 and f"BARE.H:{line}: " in err and "needs double quotes" in err, err
     assert re.search(r"(?m)^\d+ TOOL CALL 99 Z S0 ", (ROOT / "tests" / "golden" / "ac-trunnion-itnc530" /
                                                       "itnc530" / "rtest-tcpm.H").read_text())
 

@@ -22,6 +22,7 @@ from ..controllers.programs import (
     MODES,
     NAME_MAX,
     at_ball,
+    lines_of,
     measure_program,
     program_ball,
     program_name,
@@ -386,15 +387,16 @@ def check_program_cmd(machine_file, program, controller_name, ball, nest, mode, 
         raise CompgenError(f"--mode is for controls whose configuration decides TCP; {ctl.words} programs "
                            "switch it themselves", hint="leave --mode out")
     text = read_text(program, "program", ansi_ok=True)[0]
-    header = None if ball is not None else program_ball(text)   # --ball overrides the header
+    with lines_of(program):
+        header = None if ball is not None else program_ball(text)   # --ball overrides the header
+        # the nest the program was written for: a head's programs and motion follow its length
+        nest_given = nest is not None
+        nest = nest_mm(nest) if nest_given else program_nest(text)
+        blocks = ctl.blocks(text, mode)
     at, source = ((vec3(ball, "--ball"), "--ball") if ball is not None else
                   (header, "the program's header") if header is not None else
                   (machine.ball, "the machine file"))
-    # the nest the program was written for: a head's programs and motion follow its length
-    nest_given = nest is not None
-    nest = nest_mm(nest) if nest_given else program_nest(text)
     machine = at_nest(machine, nest, "--probe-length" if nest is not None else program)
-    blocks = ctl.blocks(text, mode)
     probing = any(b.probe for b in blocks)     # a probing program: the probe and its sphere
     if probing:
         machine = with_sphere(machine)

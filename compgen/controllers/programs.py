@@ -12,6 +12,7 @@ References: ``shared/research/controllers.md`` §2 (Klartext), §3.8 (SINUMERIK)
 from __future__ import annotations
 
 import re
+from contextlib import contextmanager
 from dataclasses import replace
 
 import numpy as np
@@ -49,6 +50,19 @@ def program_nest(text: str) -> float | None:
         raise CompgenError(f"the program's header names {len(found)} nest lengths",
                            hint="give the one it was written for with --probe-length MM")
     return found.pop() if found else None
+
+
+@contextmanager
+def lines_of(source: str):
+    """Refusals of a program's readers (its header, the controls' blocks) placed at
+    ``source``:line: the readers count lines, not files ("line 49: …" named no program)."""
+    try:
+        yield
+    except CompgenError as e:
+        said = re.fullmatch(r"line (\d+): (.*)", e.message, re.S)
+        if e.where is None and said:
+            raise CompgenError(said[2], where=f"{source}:{said[1]}", hint=e.hint) from None
+        raise
 
 
 def program_ball(text: str) -> tuple[float, float, float] | None:
