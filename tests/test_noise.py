@@ -197,19 +197,22 @@ def test_poses_repeat_only_with_the_same_ball_and_axes_to_the_csvs_resolution(se
     """K4 at one ball and again 100 mm higher: the same commanded axes, another ball, so no
     pose repeats one of the other session; K4 run twice at one ball repeats pose for pose,
     but its first; a ball or an X 2 µm off (beyond the CSV's 1e-6 mm) is another pose, 0.4 nm
-    off the same."""
+    off the same; C 2e-6° off (beyond the CSV's 1e-6°) another, 3e-7° off the same."""
     from compgen.model.kinematics import Poses, runs
     from compgen.model.paths import generate
     from compgen.model.sides import same_pose
     k4 = generate(seed_machine, ["K4"])
-    x = seed_machine.index("X")
+    x, c = seed_machine.index("X"), seed_machine.index("C")
     q = k4.q.copy()
-    q[:, x] = np.round(q[:, x], 6)             # X as a CSV holds it
+    q[:, x] = np.round(q[:, x], 6)             # X and C as a CSV holds them
+    q[:, c] = np.radians(np.round(np.degrees(q[:, c]), 6))
     a = Poses(q, k4.ball, k4.t, k4.path)
-    for dz, dx, repeated in ((100.0, 0, False), (0.0, 0, True), (0.002, 0, False), (4e-7, 0, True),
-                             (0.0, 4e-7, True), (0.0, 0.002, False)):
+    for dz, dx, dc, repeated in ((100.0, 0, 0, False), (0.0, 0, 0, True), (0.002, 0, 0, False),
+                                 (4e-7, 0, 0, True), (0.0, 4e-7, 0, True), (0.0, 0.002, 0, False),
+                                 (0.0, 0, 3e-7, True), (0.0, 0, 2e-6, False)):
         q = a.q.copy()
         q[:, x] += dx
+        q[:, c] += np.radians(dc)
         b = Poses(q, a.ball + [0.0, 0.0, dz], a.t, a.path)
         both = Poses.concat([a, b])
         group = same_pose(seed_machine, both, runs(both))
