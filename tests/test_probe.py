@@ -245,10 +245,15 @@ def test_a_pose_without_its_top_touch_is_fitted_from_the_four_and_flagged(tmp_pa
     assert np.all(np.abs(shift) < 5 * sigma + 0.5) and sigma.max() < 3.0, (shift, sigma)
 
 
-def test_touches_that_all_look_at_the_centre_from_one_plane_are_refused(tmp_path):
-    equator = [np.array([np.cos(a), np.sin(a), 0.0]) for a in np.radians([0, 90, 180, 270, 45])]
-    _refused(tmp_path, write_log(tmp_path / "k.log", dirs=equator), "pose 1", "one plane through the centre",
-             f"k.log:{line_of(0)}:")
+@pytest.mark.parametrize("elevation_deg, rms", [(0.0, "0.00"), (4.0, "0.07")])
+def test_touches_that_all_look_at_the_centre_from_one_plane_are_refused(tmp_path, elevation_deg, rms):
+    """Five touches around at one elevation: their directions lie sin(elevation) out of a
+    plane through the centre, as the rms of a unit direction (0.07 at 4°, below FLAT 0.1)."""
+    el = np.radians(elevation_deg)
+    around = [np.array([np.cos(el) * np.cos(a), np.cos(el) * np.sin(a), np.sin(el)])
+              for a in np.radians([0, 90, 180, 270, 45])]
+    _refused(tmp_path, write_log(tmp_path / "k.log", dirs=around), "pose 1", "one plane through the centre",
+             f"out of it by {rms} rms of a unit direction", f"k.log:{line_of(0)}:")
 
 
 def test_a_touch_that_moved_away_is_refused(tmp_path):
