@@ -439,3 +439,17 @@ def test_a_reversal_that_moves_no_reading_asks_for_a_path_there_and_back(seed_ma
         hints[extra] = exc.value.hint
     assert "measure-program --there-and-back" in hints["ECC:r1"], hints
     assert "there-and-back" not in hints["drift_X:t1"] and "path that moves its axis" in hints["drift_X:t1"]
+
+
+def test_the_normal_equations_basis_is_orthonormal_and_spans_j():
+    """J's columns at scales from 1e-3 to 1e3: the basis ρ̂ is matched beyond has BᵀB = I and
+    holds J whole; a J with a dead column gets a QR's instead of a failed Cholesky."""
+    from compgen.statistics.identify import Normal
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(3000, 5)) * np.array([1e-3, 1.0, 1e3, 5.0, 0.2])
+    B = Normal(J).basis()
+    np.testing.assert_allclose(B.T @ B, np.eye(5), atol=1e-10)
+    np.testing.assert_allclose(B @ (B.T @ J), J, rtol=1e-9, atol=1e-9 * np.abs(J).max())
+    J[:, 2] = 0.0
+    B = Normal(J).basis()
+    np.testing.assert_allclose(B @ (B.T @ J), J, atol=1e-9 * np.abs(J).max())

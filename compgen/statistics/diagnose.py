@@ -488,7 +488,7 @@ def _ranked(machine: Machine, fit: FitResult, effects: Sequence[Effect],
     u, sv, _ = np.linalg.svd(c - Q @ (Q.T @ c), full_matrices=False)
     beyond = u[:, sv > 1e-9 * sv.max()] if sv.size and sv.max() > 0 else u[:, :0]   # c's span beyond Q
     rest = r - beyond @ (beyond.T @ r)
-    rho = ar1(rest.reshape(-1, 3), seg, np.hstack([Q, beyond]), RHO_MARGIN_SE)
+    rho = ar1(rest.reshape(-1, 3), seg, (Q, beyond), RHO_MARGIN_SE)
     if rho.any():
         noise = Whitening(seg, rho, Q)
         rw = noise.off(noise.white(r))

@@ -15,6 +15,7 @@ side): beyond ``OUTLIER_Z`` robust standard deviations of that difference, and b
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,13 +41,15 @@ def _previous(x: np.ndarray, seg: np.ndarray) -> np.ndarray:
     return prev
 
 
-def ar1(r: np.ndarray, seg: np.ndarray, basis: np.ndarray | None = None, margin: float = 0.0) -> np.ndarray:
+def ar1(r: np.ndarray, seg: np.ndarray, basis: np.ndarray | Sequence[np.ndarray] | None = None,
+        margin: float = 0.0) -> np.ndarray:
     """ρ̂ of each reading's segment and direction, (n, 3), from residuals r (n, 3).
 
-    ``basis`` (3n, k), orthonormal, spans what the fit took out of r (rows reading by
-    reading, X Y Z): r's lag-1 sum and energy are then matched to what they are expected
-    to be beyond that span (``_matched``). The fit's smooth columns take low frequencies,
-    and so correlation, with them: at ρ 0.9 on K4 + K1 + K2 (fit's residual, 200 sessions)
+    ``basis`` (3n, k), orthonormal, or such blocks side by side (never copied whole), spans
+    what the fit took out of r (rows reading by reading, X Y Z): r's lag-1 sum and energy
+    are then matched to what they are expected to be beyond that span (``_matched``). The
+    fit's smooth columns take low frequencies, and so correlation, with them: at ρ 0.9 on
+    K4 + K1 + K2 (fit's residual, 200 sessions)
     Kendall's correction for a segment's mean alone leaves ρ̂ 0.894 on average, matched
     0.898. Beside diagnose's best candidate, chosen among some 200 for fitting the residual
     best (so taking more of the noise than a fixed column would), 0.892: what the tests'
@@ -71,8 +74,10 @@ def ar1(r: np.ndarray, seg: np.ndarray, basis: np.ndarray | None = None, margin:
     lags = np.stack([np.bincount(at_seg, lag[:, d], len(segs)) for d in range(3)], axis=1)
     raw = np.divide(lags, energy, out=np.zeros_like(lags), where=energy > 0)
     est = raw + (1 + 3 * raw) / n[:, None]       # the lag-1 estimate's bias (Kendall, 1954)
-    if basis is not None and basis.shape[1]:
-        est = _matched(raw, est, energy, basis.reshape(len(r), 3, -1), at_seg, n)
+    parts = [] if basis is None else [basis] if isinstance(basis, np.ndarray) else list(basis)
+    parts = [b.reshape(len(r), 3, -1) for b in parts if b.shape[1]]
+    if parts:
+        est = _matched(raw, est, energy, parts, at_seg, n)
     size = np.repeat(n[:, None], 3, axis=1)
     for d in range(3):
         live = energy[:, d] > 0
@@ -91,11 +96,12 @@ def ar1(r: np.ndarray, seg: np.ndarray, basis: np.ndarray | None = None, margin:
 MATCH_ROUNDS = 2        # the second moves ρ̂ by < 1e-4 on K4 + K1 + K2 at ρ 0.5–0.95
 
 
-def _matched(raw: np.ndarray, est: np.ndarray, energy: np.ndarray, B: np.ndarray, at_seg: np.ndarray,
+def _matched(raw: np.ndarray, est: np.ndarray, energy: np.ndarray, B: list[np.ndarray], at_seg: np.ndarray,
              n: np.ndarray) -> np.ndarray:
-    """ρ per segment and direction whose expected lag-1 ratio beyond the basis B (n, 3, k) is
-    the one observed (``raw``): with M = I − BBᵀ and the noise's covariance Σ(ρ) (AR(1) in
-    each segment and direction, each its own variance), E[rᵀLr] = tr(L M Σ M) for the lag-1
+    """ρ per segment and direction whose expected lag-1 ratio beyond the basis B ((n, 3, k)
+    blocks side by side) is the one observed (``raw``): with M = I − BBᵀ and the noise's
+    covariance Σ(ρ) (AR(1) in each segment and direction, each its own variance),
+    E[rᵀLr] = tr(L M Σ M) for the lag-1
     sum L of a block and E[rᵀr] = tr(D M Σ M) for its energy, each a trace of k × k products
     (B's columns filtered by the AR(1) correlation, ``_correlate``); 2ρ/n more for the
     ratio's own bias (its numerator and denominator correlate). Blocks the basis leaves
@@ -106,19 +112,21 @@ def _matched(raw: np.ndarray, est: np.ndarray, energy: np.ndarray, B: np.ndarray
         at = np.flatnonzero(at_seg == s)
         for d in range(3):
             if energy[s, d] > 0:
-                c = np.ascontiguousarray(B[at, d])
+                c = np.concatenate([b[at, d] for b in B], axis=1)
                 lag_cc = c[1:].T @ c[:-1]                   # cᵀLc, L's symmetric part
                 blocks.append((s, d, c, energy[s, d] / len(at), c.T @ c, (lag_cc + lag_cc.T) / 2))
     out = est.copy()
     for _ in range(MATCH_ROUNDS):
         q = np.clip(out, 0.0, RHO_MAX)
-        Pc = [_correlate(c, float(q[s, d])) for s, d, c, *_ in blocks]
-        G = sum(v * (c.T @ pc) for (_, _, c, v, _, _), pc in zip(blocks, Pc, strict=True))     # BᵀΣB
-        for (s, d, c, v, cc, lag_cc), pc in zip(blocks, Pc, strict=True):
+        G, traces = 0.0, []              # BᵀΣB; each block's tr(cᵀPc), tr(cᵀ(L + Lᵀ)Pc)
+        for s, d, c, v, *_ in blocks:    # (Pc is a block's size: one at a time)
+            pc = _correlate(c, float(q[s, d]))
+            G = G + v * (c.T @ pc)
+            traces.append((np.vdot(c, pc), np.vdot(c[:-1], pc[1:]) + np.vdot(c[1:], pc[:-1])))
+        for (s, d, c, v, cc, lag_cc), (own, lag_pc) in zip(blocks, traces, strict=True):
             m, qs = len(c), float(q[s, d])
-            lag_pc = np.vdot(c[:-1], pc[1:]) + np.vdot(c[1:], pc[:-1])        # tr(cᵀ(L + Lᵀ)Pc)
             lag = v * (qs * (m - 1) - lag_pc) + np.vdot(lag_cc, G)
-            size = v * (m - 2 * np.vdot(c, pc)) + np.vdot(cc, G)
+            size = v * (m - 2 * own) + np.vdot(cc, G)
             if size > 1e-3 * v * m:
                 out[s, d] = raw[s, d] + qs - lag / size + 2 * qs / m
     return out
