@@ -395,10 +395,10 @@ def test_the_scatter_a_copied_pose_is_told_against_is_an_independent_fit_of_the_
 
     def copied(t):
         t += [[r[0], "99", *r[2:]] for r in t if r[1] == "3"]
-    log = read_probe_log(write_log(tmp_path / "c.log", noise_um=2.0, every=60, damage=copied),
-                         load_machine(SEED_MACHINE))
+    machine = load_machine(SEED_MACHINE)
+    log = read_probe_log(write_log(tmp_path / "c.log", noise_um=2.0, every=60, damage=copied), machine)
     with pytest.raises(CompgenError, match="repeat those") as refused:
-        sphere_centres(log, load_machine(SEED_MACHINE))
+        sphere_centres(log, machine)
     told = float(re.search(r"triggers scatter ([0-9.]+) µm", str(refused.value)).group(1))
 
     touches = np.array([[float(v) for v in r[4:7]] for r in csv.reader(

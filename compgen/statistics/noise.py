@@ -49,11 +49,10 @@ def ar1(r: np.ndarray, seg: np.ndarray, basis: np.ndarray | Sequence[np.ndarray]
     what the fit took out of r (rows reading by reading, X Y Z): r's lag-1 sum and energy
     are then matched to what they are expected to be beyond that span (``_matched``). The
     fit's smooth columns take low frequencies, and so correlation, with them: at ρ 0.9 on
-    K4 + K1 + K2 (fit's residual, 200 sessions)
-    Kendall's correction for a segment's mean alone leaves ρ̂ 0.894 on average, matched
-    0.898. Beside diagnose's best candidate, chosen among some 200 for fitting the residual
-    best (so taking more of the noise than a fixed column would), 0.892: what the tests'
-    ``margin`` covers. Without a basis, Kendall's (1 + 3ρ̂)/n.
+    K4 + K1 + K2 (fit's residual, 200 sessions) Kendall's correction for a segment's mean
+    alone leaves ρ̂ 0.894 on average, matched 0.898. Beside diagnose's best candidate,
+    chosen among some 200 for fitting the residual best (so taking more of the noise than a
+    fixed column would), 0.892: what the tests' ``margin`` covers. Without a basis, Kendall's (1 + 3ρ̂)/n.
 
     Each direction's segments share one ρ̂ where their own estimates agree within their
     errors (χ² test of one common value, ``SAME_RHO_P``; each segment counts by its length):
@@ -101,12 +100,12 @@ def _matched(raw: np.ndarray, est: np.ndarray, energy: np.ndarray, B: list[np.nd
     """ρ per segment and direction whose expected lag-1 ratio beyond the basis B ((n, 3, k)
     blocks side by side) is the one observed (``raw``): with M = I − BBᵀ and the noise's
     covariance Σ(ρ) (AR(1) in each segment and direction, each its own variance),
-    E[rᵀLr] = tr(L M Σ M) for the lag-1
-    sum L of a block and E[rᵀr] = tr(D M Σ M) for its energy, each a trace of k × k products
-    (B's columns filtered by the AR(1) correlation, ``_correlate``); 2ρ/n more for the
-    ratio's own bias (its numerator and denominator correlate). Blocks the basis leaves
-    (almost) nothing of keep ``est``; it starts the rounds. Unbiased within 0.002 at ρ 0–0.95
-    on simulated segments of 80 readings, 15 columns (Kendall: −0.01 to −0.05)."""
+    E[rᵀLr] = tr(L M Σ M) for the lag-1 sum L of a block and E[rᵀr] = tr(D M Σ M) for its
+    energy, each a trace of k × k products (B's columns filtered by the AR(1) correlation,
+    ``_correlate``); 2ρ/n more for the ratio's own bias (its numerator and denominator
+    correlate). Blocks the basis leaves (almost) nothing of keep ``est``; it starts the
+    rounds. Unbiased within 0.002 at ρ 0–0.95 on simulated segments of 80 readings, 15
+    columns (Kendall: −0.01 to −0.05)."""
     blocks = []
     for s in range(len(n)):
         at = np.flatnonzero(at_seg == s)
@@ -192,7 +191,7 @@ def _inverse_transpose(x: np.ndarray, rho: float) -> np.ndarray:
 def _suffix(x: np.ndarray, rho: float) -> np.ndarray:
     """z_i = Σ_{k≥i} ρ^(k−i) x_k along axis 0, by doubling: after the pass with shift h each
     z_i holds the 2h terms from x_i, and passes stop where ρ^h is below a double's precision
-    (9 passes at ρ 0.9, 2 at 0.01), whatever the run's length."""
+    (9 passes at ρ 0.9, 4 at 0.01, 1 below 1e-9), whatever the run's length."""
     z = np.array(x, dtype=float)
     coef, shift = rho, 1
     while shift < len(z) and coef > 1e-17:
