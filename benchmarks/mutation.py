@@ -118,7 +118,11 @@ TESTS = {
     "compgen/commands/checklist.py": ["tests/test_cli.py", "tests/test_controllers.py",
                                       "tests/test_report.py"],
     "compgen/commands/compare.py": ["tests/test_compare.py"],
-    "compgen/commands/plots.py": ["tests/test_report.py"],
+    "compgen/commands/plots.py": ["tests/test_plots.py", "tests/test_report.py",
+                                  "tests/test_streaming.py::test_a_dense_sessions_plots_draw_thinned_series_"
+                                  "and_count_every_reading",
+                                  "tests/test_diagnose.py::test_ambiguous_scale_is_reported_with_the_"
+                                  "measurement_that_resolves_it"],
     "compgen/commands/report.py": ["tests/test_report.py"],
     "compgen/statistics/noise.py": ["tests/test_noise.py", "tests/test_identify.py",
                                     "tests/test_diagnose_stats.py",

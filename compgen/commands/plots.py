@@ -38,6 +38,8 @@ MARKERS = ("o", "s", "^", "v", "D", "x")
 ON_EACH_OTHER_UM = 0.01   # two curves closer than this everywhere are said to coincide
 DRAWN = 4000              # points a series draws at most: a dense session's are thinned evenly (the
                           # figures' numbers, RMS and fits, always use every reading)
+STYLE = "report/plots.mplstyle"   # the look (sizes, fonts, grid), in the templates: no number here
+PANEL_IN, TITLE_IN = 1.8, 0.6     # the trend's height: inches per parameter, and for its title
 
 
 def _drawn(index: np.ndarray) -> np.ndarray:
@@ -71,10 +73,27 @@ def write_plots(folder: str | Path, machine: Machine, data: Sequence[RTestData],
 
 def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
             before: FitResult | None = None, found: Diagnosis | None = None) -> dict[str, bytes]:
-    """PNG images by file name: measured vs model per path, residual vs each axis per path
-    (a linear axis where the data move it ``MIN_PITCH_MM`` or more; the title names the
-    strongest line ``found`` saw against it), and, when ``found`` has rivals, what each
-    would leave on the measurement that tells them apart."""
+    """PNG images by file name (``drawings``, each as a PNG)."""
+    return {name: _png(fig) for name, fig in drawings(machine, data, fit, before, found).items()}
+
+
+def _styled(draw):
+    """``draw`` with compgen's look (``STYLE``) in force while its figure is made."""
+    def styled(*args, **kwargs):
+        from ..controllers import template_dir
+        with plt.style.context(template_dir() / STYLE):
+            return draw(*args, **kwargs)
+    return styled
+
+
+@_styled
+def drawings(machine: Machine, data: Sequence[RTestData], fit: FitResult,
+             before: FitResult | None = None, found: Diagnosis | None = None) -> dict:
+    """The figures (matplotlib's, by PNG file name; the caller closes them): measured vs
+    model per path, residual vs each axis per path (a linear axis where the data move it
+    ``MIN_PITCH_MM`` or more; the title names the strongest line ``found`` saw against it),
+    and, when ``found`` has rivals, what each would leave on the measurement that tells
+    them apart. Every value drawn is in µm (deviations) and in deg or mm (axes)."""
     if before is not None and [d.sha256 for d in before.data] != [d.sha256 for d in fit.data]:
         raise CompgenError("--before must be a fit of the same data files",
                            hint="compare fits made from the same R-test session")
@@ -88,21 +107,19 @@ def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         sel = np.flatnonzero(poses.path == path)
         shown_at = _drawn(np.arange(len(sel)))
         at = sel[shown_at]
-        fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
+        fig, axes = plt.subplots(3, 1, sharex=True)
         for k, ax in enumerate(axes):
-            ax.plot(shown_at, measured[at, k], ".", ms=3, color="0.25", label="measured")
+            ax.plot(shown_at, measured[at, k], ".", color="0.25", label="measured")
             if earlier is not None:
                 ax.plot(shown_at, earlier[at, k], "--", color="tab:orange",
                         label=f"before ({len(before.model)} parameters)")
             ax.plot(shown_at, model[at, k], "-", color="tab:blue", label=label)
             ax.set_ylabel(f"{DIRECTIONS[k]} (µm)")
-            ax.grid(alpha=0.3)
         name = one_line(machine.name)
-        axes[0].set_title(f"{path or 'data'}: measured vs model, {name}{_thinned(len(sel))}",
-                          fontsize=10)
-        axes[0].legend(loc="best", fontsize=8)
+        axes[0].set_title(f"{path or 'data'}: measured vs model, {name}{_thinned(len(sel))}")
+        axes[0].legend()
         axes[-1].set_xlabel("pose")
-        images[f"measured-vs-model-{_safe(path)}.png"] = _png(fig)
+        images[f"measured-vs-model-{_safe(path)}.png"] = fig
     paths = list(dict.fromkeys(poses.path))
     everywhere = _drawn(np.arange(len(poses)))
     thinned = _thinned(max(np.sum(poses.path == p) for p in paths))
@@ -111,56 +128,53 @@ def figures(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         where = np.degrees(where) if axis.rotary else where
         if not axis.rotary and np.ptp(where) < MIN_PITCH_MM:
             continue
-        fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
+        fig, axes = plt.subplots(3, 1, sharex=True)
         for k, ax in enumerate(axes):
             if earlier is not None:
-                ax.plot(where[everywhere], measured[everywhere, k] - earlier[everywhere, k], ".", ms=2,
+                ax.plot(where[everywhere], measured[everywhere, k] - earlier[everywhere, k], ".",
                         color="0.7", label=f"before: RMS {before.residual['rms_um']:.2f} µm")
             for i, path in enumerate(paths):        # a path that holds the axis still is a column
                 sel = np.flatnonzero(poses.path == path)
                 res = measured[sel, k] - model[sel, k]
                 at = _drawn(np.arange(len(sel)))
-                ax.plot(where[sel[at]], res[at], ".", ms=2, color=f"C{i % 10}",
+                ax.plot(where[sel[at]], res[at], ".", color=f"C{i}",       # C10 is C0 again
                         label=f"{path or 'data'}: RMS {np.sqrt((res**2).mean()):.2f} µm")
             ax.set_ylabel(f"{DIRECTIONS[k]} (µm)")
-            ax.grid(alpha=0.3)
         line = next((x for x in (found.lines if found is not None else ()) if x.against == axis.name), None)
         axes[0].set_title(f"residual against {axis.name} per path, {one_line(machine.name)}{thinned}"
-                          + (f"\nstrongest line: {line.text()}" if line is not None else ""), fontsize=9)
-        axes[0].legend(loc="best", fontsize=8)
+                          + (f"\nstrongest line: {line.text()}" if line is not None else ""))
+        axes[0].legend()
         axes[-1].set_xlabel(f"{axis.name} ({'deg' if axis.rotary else 'mm'})")
-        images[f"residual-vs-{axis.name}.png"] = _png(fig)
+        images[f"residual-vs-{axis.name}.png"] = fig
     if found is not None and found.rivals and found.rivals_separated_by:
         images["rivals.png"] = _rivals(machine, poses, fit, found, measured - model)
     return images
 
 
-def _rivals(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosis, residual: np.ndarray) -> bytes:
+def _rivals(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosis, residual: np.ndarray):
     extra = found.rivals_separated_by[0]
     curves = rival_curves(machine, poses, fit, found, extra)
     labels = {}
     for name, (_, after) in curves.items():   # say so where two lie on each other there
         same = [o for o in labels if np.abs(curves[o][1] - after).max() < ON_EACH_OTHER_UM]
         labels[name] = name + (f" (= {', '.join(same)} on {extra.label})" if same else "")
-    fig, axes = plt.subplots(3, 2, figsize=(12, 7), sharex="col", gridspec_kw={"width_ratios": [3, 1]})
+    fig, axes = plt.subplots(3, 2, sharex="col", gridspec_kw={"width_ratios": [3, 1]})
     for k in range(3):
         at = _drawn(np.arange(len(residual)))
-        axes[k, 0].plot(at, residual[at, k], ".", ms=2, color="0.6", label="residual")
+        axes[k, 0].plot(at, residual[at, k], ".", color="0.6", label="residual")
         for i, (name, (now, after)) in enumerate(curves.items()):
             for ax, curve in ((axes[k, 0], now), (axes[k, 1], after)):
                 at = _drawn(np.arange(len(curve)))
                 ax.plot(at, curve[at, k], STYLES[i % len(STYLES)], lw=1.2 + 0.6 * (len(curves) - 1 - i),
-                        color=f"C{i}", marker=MARKERS[i % len(MARKERS)], ms=3,
+                        color=f"C{i}", marker=MARKERS[i % len(MARKERS)],
                         markevery=(i * 3, 4 + 2 * len(curves)), label=labels[name])
         axes[k, 0].set_ylabel(f"{DIRECTIONS[k]} (µm)")
-        for ax in axes[k]:
-            ax.grid(alpha=0.3)
-    axes[0, 0].set_title("measured: the rivals explain the misfit alike", fontsize=10)
-    axes[0, 1].set_title(f"{extra.label}:\nwhat each would leave", fontsize=9)
-    axes[0, 0].legend(loc="best", fontsize=7)
+    axes[0, 0].set_title("measured: the rivals explain the misfit alike")
+    axes[0, 1].set_title(f"{extra.label}:\nwhat each would leave")
+    axes[0, 0].legend()
     axes[-1, 0].set_xlabel("pose (measured)")
     axes[-1, 1].set_xlabel("pose (to measure)")
-    return _png(fig)
+    return fig
 
 
 def rival_curves(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosis,
@@ -193,18 +207,26 @@ def _safe(label: str) -> str:
 def _png(fig) -> bytes:
     buffer = io.BytesIO()
     fig.tight_layout()
-    fig.savefig(buffer, format="png", dpi=110)
+    fig.savefig(buffer, format="png")           # at the figure's dpi (STYLE's)
     plt.close(fig)
     return buffer.getvalue()
 
 
 def trend_png(t) -> bytes:
+    """A machine's history (``history.Trend``) as a PNG (``trend_figure``)."""
+    return _png(trend_figure(t))
+
+
+@_styled
+def trend_figure(t):
     """A machine's history (``history.Trend``): each location error's machine value over
-    time with its ±2σ band; edits as vertical lines, flagged fits circled in red."""
+    time (in the unit it is shown in) with its ±2σ band; edits as vertical lines, flagged
+    fits circled in red. One panel per parameter, each as tall whatever their number."""
     from datetime import datetime
 
     n = len(t.params)
-    fig, axes = plt.subplots(n, 1, figsize=(8, 1.8 * n + 0.6), sharex=True, squeeze=False)
+    width = plt.rcParams["figure.figsize"][0]
+    fig, axes = plt.subplots(n, 1, figsize=(width, PANEL_IN * n + TITLE_IN), sharex=True, squeeze=False)
     for ax, name in zip(axes[:, 0], t.params, strict=True):
         rows = [e for e in t.entries if name in e.values]
         when = [datetime.fromisoformat(e.taken) for e in rows]
@@ -212,7 +234,7 @@ def trend_png(t) -> bytes:
         s = np.array([shown(e.std[name], e.units[name])[0] for e in rows])
         unit = shown(1.0, rows[0].units[name])[1] if rows else ""
         ax.fill_between(when, v - 2 * s, v + 2 * s, alpha=0.25, step=None, label="±2σ")
-        ax.plot(when, v, "o-", ms=3)
+        ax.plot(when, v, "o-")
         for e in t.edits:
             ax.axvline(datetime.fromisoformat(e["taken"]), color="k", ls="--", lw=0.8)
         bad = [i for i, e in enumerate(rows) if any(f.param == name and f.taken == e.taken for f in t.flags)]
@@ -221,4 +243,4 @@ def trend_png(t) -> bytes:
         ax.set_ylabel(f"{name} ({unit})")
     axes[0, 0].set_title(f"{one_line(t.machine)}: machine values over time (dashed: edits; red: flagged)")
     fig.autofmt_xdate()
-    return _png(fig)
+    return fig

@@ -1,0 +1,202 @@
+"""The plots read back against what they claim to draw: every series in the unit its axis
+names, on the panel its title and legend sit on, thinned evenly, in compgen's look; the
+trend's band and marks where the history puts them."""
+
+from datetime import datetime, timedelta
+from types import SimpleNamespace
+
+import matplotlib
+import matplotlib.dates
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+
+from compgen.commands import plots
+from compgen.controllers import template_dir
+from compgen.data.simulate import simulate
+from compgen.errors import CompgenError, one_line
+from compgen.history.drift import Entry
+from compgen.model.paths import generate
+from compgen.statistics.identify import fitted, identify
+from compgen.statistics.spectrum import MIN_PITCH_MM
+
+UM = 1e-3
+TRUTH = {"XOC": 8 * UM, "YOC": -5 * UM, "AOC": np.radians(6 / 3600), "YOA": 4 * UM}
+
+
+@pytest.fixture(scope="module")
+def session(seed_machine):
+    poses = generate(seed_machine, ["K4", "K1", "K2"])
+    data = [simulate(seed_machine, TRUTH, poses, 0.5, np.random.default_rng(11))]
+    return (data, identify(seed_machine, data),
+            identify(seed_machine, data, model=["XOC", "YOC"]))
+
+
+def _drawn(seed_machine, session, found=None):
+    data, fit, before = session
+    figs = plots.drawings(seed_machine, data, fit, before, found)
+    return figs, data[0], fit, before
+
+
+def _series(ax, label):
+    line = next(x for x in ax.get_lines() if x.get_label() == label)
+    return line.get_xdata(), line.get_ydata()
+
+
+def _close(figs):
+    for f in figs.values():
+        plt.close(f)
+
+
+def test_measured_and_model_are_drawn_in_micrometres_per_path(seed_machine, session):
+    figs, data, fit, before = _drawn(seed_machine, session)
+    try:
+        dev, model = data.deviation * 1e3, fitted(seed_machine, fit, [data]) * 1e3
+        earlier = fitted(seed_machine, before, [data]) * 1e3
+        for path in ("K4", "K1", "K2"):
+            axes = figs[f"measured-vs-model-{path}.png"].axes
+            sel = np.flatnonzero(data.poses.path == path)
+            for k, ax in enumerate(axes):
+                assert ax.get_ylabel() == f"{plots.DIRECTIONS[k]} (µm)"
+                x, y = _series(ax, "measured")
+                np.testing.assert_array_equal(x, np.arange(len(sel)))
+                np.testing.assert_allclose(y, dev[sel, k], rtol=0, atol=1e-12)
+                np.testing.assert_allclose(_series(ax, f"model ({len(fit.model)} parameters)")[1],
+                                           model[sel, k], atol=1e-12)
+                np.testing.assert_allclose(_series(ax, f"before ({len(before.model)} parameters)")[1],
+                                           earlier[sel, k], atol=1e-12)
+            # the title and legend on the top panel, the pose axis named on the bottom one
+            assert axes[0].get_title().startswith(f"{path}: measured vs model, {seed_machine.name}")
+            assert [ax.get_legend() is not None for ax in axes] == [True, False, False]
+            assert [ax.get_xlabel() for ax in axes] == ["", "", "pose"]
+    finally:
+        _close(figs)
+
+
+def test_the_residual_against_each_axis_is_measured_less_model_at_the_axis_position(seed_machine, session):
+    figs, data, fit, before = _drawn(seed_machine, session)
+    try:
+        residual = data.deviation * 1e3 - fitted(seed_machine, fit, [data]) * 1e3
+        earlier = data.deviation * 1e3 - fitted(seed_machine, before, [data]) * 1e3
+        q = data.poses.q
+        for axis in seed_machine.axes:
+            where = q[:, seed_machine.index(axis.name)]
+            name = f"residual-vs-{axis.name}.png"
+            if not axis.rotary and np.ptp(where) < MIN_PITCH_MM:
+                assert name not in figs
+                continue
+            where = np.degrees(where) if axis.rotary else where
+            axes = figs[name].axes
+            for k, ax in enumerate(axes):
+                x, y = _series(ax, f"before: RMS {before.residual['rms_um']:.2f} µm")
+                np.testing.assert_allclose(x, where, atol=1e-12)
+                np.testing.assert_allclose(y, earlier[:, k], atol=1e-12)
+                for path in ("K4", "K1", "K2"):
+                    sel = np.flatnonzero(data.poses.path == path)
+                    rms = np.sqrt((residual[sel, k] ** 2).mean())
+                    x, y = _series(ax, f"{path}: RMS {rms:.2f} µm")
+                    np.testing.assert_allclose(x, where[sel], atol=1e-12)
+                    np.testing.assert_allclose(y, residual[sel, k], atol=1e-12)
+            assert axes[0].get_title().startswith(f"residual against {axis.name} per path")
+            assert [ax.get_legend() is not None for ax in axes] == [True, False, False]
+            assert axes[-1].get_xlabel() == f"{axis.name} ({'deg' if axis.rotary else 'mm'})"
+            assert axes[0].get_xlabel() == ""
+        assert {"residual-vs-A.png", "residual-vs-C.png"} <= set(figs)
+    finally:
+        _close(figs)
+
+
+def test_the_figures_take_compgens_look_from_its_style_sheet(seed_machine, session):
+    sheet = matplotlib.rc_params_from_file(template_dir() / plots.STYLE, use_default_template=False)
+    figs, *_ = _drawn(seed_machine, session)
+    try:
+        for fig in figs.values():
+            assert fig.dpi == sheet["figure.dpi"]
+            np.testing.assert_allclose(fig.get_size_inches(), sheet["figure.figsize"])
+    finally:
+        _close(figs)
+    assert plt.rcParams["figure.dpi"] != sheet["figure.dpi"]      # outside the plots, the user's look
+
+
+@pytest.mark.parametrize("n", [3, plots.DRAWN, plots.DRAWN + 1, 2 * plots.DRAWN, 3 * plots.DRAWN + 7])
+def test_a_dense_series_is_thinned_evenly_from_its_first_reading(n):
+    index = np.arange(n) + 10
+    drawn = plots._drawn(index)
+    step = -(-n // plots.DRAWN)                        # the least step that draws ≤ DRAWN
+    assert len(drawn) <= plots.DRAWN and drawn[0] == 10
+    assert set(np.diff(drawn)) <= {step} and len(drawn) == -(-n // step)
+    assert plots._thinned(n) == (f" (every {step}th of {n} readings drawn)" if n > plots.DRAWN else "")
+
+
+def test_plots_are_written_whole_into_a_new_folder_and_a_file_in_the_way_is_refused(seed_machine, session,
+                                                                                     tmp_path):
+    data, fit, before = session
+    written = plots.write_plots(tmp_path / "a" / "b", seed_machine, data, fit)
+    assert sorted(p.name for p in written) == sorted(p.name for p in (tmp_path / "a" / "b").iterdir())
+    assert "measured-vs-model-K4.png" in {p.name for p in written}
+    assert all(p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in written)
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(CompgenError, match="cannot make the plot folder"):
+        plots.write_plots(tmp_path / "file" / "plots", seed_machine, data, fit)
+
+
+def test_rivals_are_drawn_on_the_residual_and_said_equal_only_within_a_hundredth_um(seed_machine, session,
+                                                                                    monkeypatch):
+    """With rivals, the residual (measured less model, µm) beside each rival's curves; a rival
+    within ON_EACH_OTHER_UM of another on the advised measurement is labelled as equal."""
+    data, fit, _ = session
+    n, m = len(data[0].poses), 40
+    base = np.linspace(-1, 1, 3 * m).reshape(m, 3)
+    near = plots.ON_EACH_OTHER_UM / 2
+    curves = {"A": (np.zeros((n, 3)), base), "B": (np.zeros((n, 3)), base + near),
+              "C": (np.zeros((n, 3)), base - 1.5 * plots.ON_EACH_OTHER_UM)}
+    monkeypatch.setattr(plots, "rival_curves", lambda *a: curves)
+    extra = SimpleNamespace(label="K4 at half its radius")
+    found = SimpleNamespace(lines=(), rivals=("B", "C"), rivals_separated_by=(extra,))
+    figs = plots.drawings(seed_machine, data, fit, None, found)
+    try:
+        axes = figs["rivals.png"].axes
+        residual = data[0].deviation * 1e3 - fitted(seed_machine, fit, data) * 1e3
+        for k in range(3):
+            np.testing.assert_allclose(_series(axes[2 * k], "residual")[1], residual[:, k], atol=1e-12)
+        labels = [x.get_label() for x in axes[1].get_lines()]
+        assert labels == ["A", "B (= A on K4 at half its radius)", "C"], labels
+        assert axes[0].get_legend() is not None and axes[2].get_legend() is None
+        assert axes[-2].get_xlabel() == "pose (measured)" and axes[-1].get_xlabel() == "pose (to measure)"
+    finally:
+        _close(figs)
+
+
+def test_the_trend_draws_each_value_with_its_two_sigma_band_edits_and_flags(seed_machine):
+    """Two parameters (mm and rad), three fits a week apart, an edit between the second and
+    the third, the third fit flagged for XOC only."""
+    t0 = datetime(2026, 11, 2, 8, 0)
+    when = [(t0 + timedelta(days=7 * i)).isoformat() for i in range(3)]
+    entries = [Entry(i, w, f"m{i}", "rtest", "rtest", "accepted", 0.5,
+                     values={"XOC": (5 + i) * UM, "AOC": np.radians((2 - i) / 3600)},
+                     std={"XOC": 0.4 * UM, "AOC": np.radians(0.5 / 3600)}, units={"XOC": "mm", "AOC": "rad"},
+                     corrected={"XOC": 1 * UM}) for i, w in enumerate(when)]
+    edit = (t0 + timedelta(days=10)).isoformat()
+    t = SimpleNamespace(machine="m\nsecond line", params=("XOC", "AOC"), entries=entries,
+                        edits=[{"taken": edit}], flags=[SimpleNamespace(param="XOC", taken=when[2])])
+    fig = plots.trend_figure(t)
+    try:
+        axes = fig.axes
+        assert [ax.get_ylabel() for ax in axes] == ["XOC (µm)", "AOC (″)"]
+        days = matplotlib.dates.date2num([datetime.fromisoformat(w) for w in when])
+        for ax, v, s in ((axes[0], [6, 7, 8], 0.4), (axes[1], [2, 1, 0], 0.5)):
+            values = next(x for x in ax.get_lines() if x.get_marker() == "o" and x.get_linestyle() == "-")
+            np.testing.assert_allclose(values.get_ydata(), v, atol=1e-9)
+            band = ax.collections[0].get_paths()[0].vertices
+            for d, value in zip(days, v, strict=True):
+                ys = band[np.isclose(band[:, 0], d), 1]
+                assert ys.min() == pytest.approx(value - 2 * s) and ys.max() == pytest.approx(value + 2 * s)
+            edits = [x for x in ax.get_lines() if x.get_linestyle() == "--"]
+            assert [x.get_xdata()[0] for x in edits] == [datetime.fromisoformat(edit)]
+        flagged = [x for x in axes[0].get_lines() if x.get_markeredgecolor() == "red"]
+        assert len(flagged) == 1 and list(flagged[0].get_ydata()) == pytest.approx([8])
+        assert not [x for x in axes[1].get_lines() if x.get_markeredgecolor() == "red"]
+        # a line break in a machine's name is written out, never a second title line
+        assert "\n" not in axes[0].get_title() and axes[0].get_title().startswith(one_line(t.machine))
+    finally:
+        plt.close(fig)
