@@ -147,15 +147,17 @@ def test_rivals_are_drawn_on_the_residual_and_said_equal_only_within_a_hundredth
     data, fit, _ = session
     n, m = len(data[0].poses), 40
     base = np.linspace(-1, 1, 3 * m).reshape(m, 3)
-    near = plots.ON_EACH_OTHER_UM / 2
-    curves = {"A": (np.zeros((n, 3)), base), "B": (np.zeros((n, 3)), base + near),
-              "C": (np.zeros((n, 3)), base - 1.5 * plots.ON_EACH_OTHER_UM)}
+    curves = {"A": (np.zeros((n, 3)), base), "B": (np.zeros((n, 3)), base + 0.005),   # µm
+              "C": (np.zeros((n, 3)), base - 0.015)}
     monkeypatch.setattr(plots, "rival_curves", lambda *a: curves)
     extra = SimpleNamespace(label="K4 at half its radius")
     found = SimpleNamespace(lines=(), rivals=("B", "C"), rivals_separated_by=(extra,))
     figs = plots.drawings(seed_machine, data, fit, None, found)
     try:
         axes = figs["rivals.png"].axes
+        # three directions, each with the measured poses three times the width of the advised
+        assert len(axes) == 6
+        assert axes[0].get_position().width / axes[1].get_position().width == pytest.approx(3)
         residual = data[0].deviation * 1e3 - fitted(seed_machine, fit, data) * 1e3
         for k in range(3):
             np.testing.assert_allclose(_series(axes[2 * k], "residual")[1], residual[:, k], atol=1e-12)
