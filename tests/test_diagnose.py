@@ -889,7 +889,7 @@ def test_the_best_carried_from_a_screen_changes_no_number(seed_machine, poses, m
     plain, passes = run(10**9)
     assert len(plain["candidates"]) > 100 and sum(c["significant"] for c in plain["candidates"]) > 1
     screened, with_screen = run(200)                  # 723 poses: the best on every 4th
-    assert screened == plain
+    assert _same(screened, plain)
     n = len(poses)
     if rho:     # the pass made white carries the best: the screen is one pass over every 4th
         assert with_screen == [181, *passes]
@@ -897,7 +897,24 @@ def test_the_best_carried_from_a_screen_changes_no_number(seed_machine, poses, m
         assert passes == [n, n] and with_screen == [181, n]
     wrong = next(e for e in module.catalogue(seed_machine) if e.name == "EZA:p1")
     forced, with_wrong = run(200, wrong)
-    assert forced == plain and with_wrong == passes
+    assert _same(forced, plain) and with_wrong == passes
+
+
+def _same(a, b, path="diagnosis"):
+    """The same diagnosis: every word, flag and count equal, every number equal to rounding.
+    The screen's pass and the plain one sum the same terms, but numpy's SIMD sums group
+    them by where an array happens to start in memory, so a last bit may differ."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        assert a.keys() == b.keys(), path
+        return all(_same(a[k], b[k], f"{path}.{k}") for k in a)
+    if isinstance(a, list | tuple) and isinstance(b, list | tuple):
+        assert len(a) == len(b), path
+        return all(_same(x, y, f"{path}[{i}]") for i, (x, y) in enumerate(zip(a, b, strict=True)))
+    if isinstance(a, float) and isinstance(b, float):
+        assert a == pytest.approx(b, rel=1e-9, abs=1e-12), path
+        return True
+    assert a == b and type(a) is type(b), path
+    return True
 
 
 def test_a_drift_fitted_across_files_whose_clocks_overlap_is_said(seed_machine, poses):
