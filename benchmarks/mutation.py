@@ -91,7 +91,8 @@ TESTS = {
     "compgen/data/rtest.py": ["tests/test_csv_reader.py", "tests/test_hostile_inputs.py",
                               "tests/test_edge.py"],
     "compgen/data/simulate.py": ["tests/test_csv_reader.py", "tests/test_identify.py"],
-    "compgen/model/machine.py": ["tests/test_kinematics.py", "tests/test_heads.py", "tests/test_edge.py"],
+    "compgen/model/machine.py": ["tests/test_kinematics.py", "tests/test_heads.py", "tests/test_edge.py",
+                                 "tests/test_motion.py"],        # the set-up's solids and their defaults
     "compgen/model/frames.py": ["tests/test_motion.py", "tests/test_probe_programs.py"],
     "compgen/model/paths.py": ["tests/test_kinematics.py", "tests/test_heads.py", "tests/test_motion.py"],
     "compgen/transforms.py": ["tests/test_kinematics.py", "tests/test_compose.py", "tests/test_motion.py"],

@@ -3,6 +3,7 @@ every program compgen writes passes; crafted defects are refused; LinuxCNC's own
 interpreter (rs274) reads compgen's programs to the same positions as the simulator."""
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -665,3 +666,25 @@ def test_the_searched_table_clearance_is_the_least_to_a_micrometre_and_a_half():
         least = table(fine).min(axis=1) - radius
         assert (least < 0).sum() > 20                      # many reach into the table
         np.testing.assert_allclose(got[f"{part} / table"], least, atol=1.5e-3)
+
+
+def test_the_set_ups_documented_defaults_are_the_ones_a_machine_file_without_them_gets(tmp_path):
+    """docs/controllers.md gives each [rtest] size's default in brackets; a machine file
+    that names only the ball and the probe length is read with exactly those (the table's
+    radius: the ball's distance from the axis + 50 mm)."""
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "controllers.md").read_text(encoding="utf-8")
+    said = doc[doc.index("**The set-up**"):]
+    said = said[:said.index("\n\n")]
+    documented = {k: float(v) for k, v in re.findall(r"`(\w+)`(?:\s+\([^)]*\))?\s+\[(-?[\d.]+)\]", said)}
+    assert set(documented) == {"ball_diameter", "stem_diameter", "table_top", "table_thickness",
+                               "nest_radius", "nest_below", "spindle_radius", "spindle_length",
+                               "nest_range", "margin"}
+    text = SEED_MACHINE.read_text()
+    start = text.index("[rtest]")
+    end = text.index("\n[", start + 1)
+    bare = tmp_path / "bare.toml"
+    bare.write_text(text[:start] + "[rtest]\nball = [-217.504, -0.279, 211.537]\nprobe_length = 184.670\n"
+                    + text[end:])
+    s = load_machine(bare).setup
+    assert {k: getattr(s, k) for k in documented} == documented
+    assert s.table_radius == pytest.approx(np.hypot(217.504, 0.279) + 50, abs=1e-9)
