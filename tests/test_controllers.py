@@ -2,6 +2,8 @@
 nowhere else, goes through the whole loop (edit, read back, drive, compare, checklist)
 without a line of compgen changing; every registered controller passes the same checks."""
 
+import json
+import os
 import re
 
 import numpy as np
@@ -122,3 +124,32 @@ def test_every_controller_fulfils_the_contract(name):
     assert ctl.name == name and ctl.words and ctl.backup and ctl.program_ext.startswith(".")
     assert ctl.comment in "#;" and ctl.tcp_words
     assert type(ctl).edit is not Controller.edit and type(ctl).read is not Controller.read
+
+
+def _compared(as_predicted, verdict):
+    return {"format": "compgen.compare/1",
+            "measured_post": {"as_predicted": as_predicted, "verdicts": {"K4": f"{verdict}: 3.1 µm"}}}
+
+
+@pytest.mark.parametrize("files, now, ready", [
+    # the newest file passes, the oldest not: ready; the other way round: not
+    ([("b.json", False, "FAIL"), ("a.json", True, "PASS")], None, True),
+    ([("c.json", True, "PASS"), ("b.json", True, "PASS"), ("a.json", False, "FAIL")], None, False),
+    # the comparison just made comes after every file, in either of its two conditions
+    ([("a.json", True, "PASS"), ("b.json", True, "PASS")], (False, "PASS"), False),
+    ([("a.json", True, "FAIL"), ("b.json", True, "FAIL")], (True, "PASS"), True),
+    ([("a.json", True, "PASS"), ("b.json", True, "PASS")], (True, "FAIL"), False),
+])
+def test_the_sign_off_follows_the_newest_comparison(seed_machine, tmp_path, files, now, ready):
+    """The checklist says "ready" only if the newest comparison improved as predicted with
+    every path within tolerance: a file written later overrules an earlier one whatever
+    their names; a comparison the caller has just made overrules them all."""
+    for age, (name, as_predicted, verdict) in enumerate(reversed(files)):
+        path = tmp_path / name
+        path.write_text(json.dumps(_compared(as_predicted, verdict)))
+        os.utime(path, (1.7e9 - 60 * age, 1.7e9 - 60 * age))     # listed oldest first
+    steps = checklist(seed_machine, tmp_path, None if now is None else _compared(*now))
+    note = next(s.note for s in steps if s.title == "Sign-off")
+    assert note.startswith("ready" if ready else "not ready"), note
+    numbered = [ln for ln in markdown(seed_machine, steps).splitlines() if re.match(r"\d+\. ", ln)]
+    assert [int(ln.split(".")[0]) for ln in numbered] == list(range(1, len(steps) + 1))

@@ -105,7 +105,9 @@ def checklist(machine: Machine, folder: str | Path, comparison: dict | None = No
     post = [p.resolve() for p in post]
     pre = list(dict.fromkeys([p.resolve() for p in f.data if p.resolve() not in post]
                              + [p for p in fitted if p not in post]))
-    measured = [doc for _, doc in f.compares if "measured_post" in doc]
+    # the newest comparison decides the sign-off, as the newest fit is the one ticked
+    measured = [doc for _, doc in sorted(f.compares, key=lambda x: x[0].stat().st_mtime)
+                if "measured_post" in doc]
     if comparison and "measured_post" in comparison:
         measured.append(comparison)
     passed = measured and measured[-1]["measured_post"].get("as_predicted") and all(
