@@ -188,3 +188,32 @@ def test_no_output_replaces_an_input_of_its_command_even_with_force(tmp_path, mo
         code, _, err = run(*args)
         assert code == 2 and "overwrite an input" in err and len(err.splitlines()) == 1, (args, err)
         assert {p: p.read_bytes() for p in before} == before, args
+
+
+def test_a_reader_gone_before_the_first_line_is_ordinary_use(tmp_path):
+    """The reader's end of the pipe is closed before compgen writes a byte (the race
+    `| head -1` only sometimes loses, made certain): exit 0 and not a word on stderr."""
+    import os
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        done = subprocess.run([sys.executable, "-m", "compgen", "effects", "--machine", str(SEED_MACHINE)],
+                              stdout=write, stderr=subprocess.PIPE, text=True, cwd=tmp_path, timeout=60)
+    finally:
+        os.close(write)
+    assert done.returncode == 0 and done.stderr == "", (done.returncode, done.stderr)
+
+
+def test_a_bug_is_one_line_exit_3_and_the_way_to_its_traceback(monkeypatch):
+    """docs/safety.md: an unexpected exception is compgen's bug: one line, exit 3, and
+    COMPGEN_DEBUG=1 named for the traceback."""
+    from compgen.commands import cli
+
+    def broken(*a, **k):
+        raise ZeroDivisionError("float division by zero")
+    monkeypatch.delenv("COMPGEN_DEBUG", raising=False)
+    monkeypatch.setattr(cli, "catalogue", broken)
+    code, out, err = run("effects", "--machine", SEED_MACHINE)
+    assert code == 3 and out == "" and len(err.strip().splitlines()) == 1, (code, err)
+    assert err.startswith("compgen: error: internal error (ZeroDivisionError: float division by zero)") \
+        and "COMPGEN_DEBUG=1" in err, err
