@@ -165,8 +165,43 @@ def test_rivals_are_drawn_on_the_residual_and_said_equal_only_within_a_hundredth
         assert labels == ["A", "B (= A on K4 at half its radius)", "C"], labels
         assert axes[0].get_legend() is not None and axes[2].get_legend() is None
         assert axes[-2].get_xlabel() == "pose (measured)" and axes[-1].get_xlabel() == "pose (to measure)"
+        assert [ax.get_ylabel() for ax in axes] == ["dX (µm)", "", "dY (µm)", "", "dZ (µm)", ""]
+        assert axes[1].get_title() == "K4 at half its radius:\nwhat each would leave" \
+            and axes[0].get_title().startswith("measured")
     finally:
         _close(figs)
+
+
+def test_the_rivals_curves_are_what_a_fit_of_the_model_leaves_of_each(seed_machine, session):
+    """Each rival's two curves against the exact model fitted anew: data holding only the
+    effect at its size (µm, as diagnose gives it), the fit's own model fitted to the measured
+    poses leaves the first curve; fitted to those and the advised poses together, it leaves
+    the second on the advised ones. The plot's are first order: equal to 0.2 % of the curve."""
+    from compgen.data.rtest import RTestData
+    from compgen.model.effects import resolve
+    from compgen.units import shown
+    data, fit, _ = session
+    poses = data[0].poses
+    extra = SimpleNamespace(poses=generate(seed_machine, ["K2"]).take(slice(0, 200, 2)), label="K2")
+    rivals = (SimpleNamespace(effect="ECC:h2", amplitude=(2.0, -1.0)),       # ″
+              SimpleNamespace(effect="EXC:h3", amplitude=(1.5, 1.0)))       # µm
+    found = SimpleNamespace(candidates=rivals, significant=rivals[:1], rivals=("EXC:h3",))
+    curves = plots.rival_curves(seed_machine, poses, fit, found, extra)
+    assert set(curves) == {"ECC:h2", "EXC:h3"}
+    for c in rivals:
+        e = resolve(seed_machine, c.effect)
+        truth = dict(zip(e.params, np.array(c.amplitude) / shown(1.0, e.unit)[0], strict=True))
+        now, after = curves[c.effect]
+        alone = simulate(seed_machine, truth, poses)
+        refit = identify(seed_machine, [alone], fit.free)
+        left = (alone.deviation - fitted(seed_machine, refit, [alone])) * 1e3
+        both = [alone, simulate(seed_machine, truth, extra.poses)]
+        refit = identify(seed_machine, both, fit.free)
+        advised = RTestData(extra.poses, both[1].deviation)
+        left_after = (advised.deviation - fitted(seed_machine, refit, [advised])) * 1e3
+        assert np.abs(left).max() > 0.3 and np.abs(left_after).max() > 0.3      # µm: curves to see
+        np.testing.assert_allclose(now, left, atol=2e-3 * np.abs(left).max())
+        np.testing.assert_allclose(after, left_after, atol=2e-3 * np.abs(left_after).max())
 
 
 def test_the_trend_draws_each_value_with_its_two_sigma_band_edits_and_flags(seed_machine):
