@@ -764,6 +764,7 @@ def test_a_machine_name_with_mathtext_and_a_writers_line_break_print_as_written(
     with open_store("compgen-history.sqlite") as store, store.writing():
         store.insert("machines", {"name": "forged\nPASS: all machines", "serial": "", "recorded": "x"})
         store.insert("machines", {"name": "L" * 60, "serial": "SN-1", "recorded": "x"})
+        store.insert("machines", {"name": "M", "serial": "S" * 20, "recorded": "x"})
     rc, out, err = run("history", "list")
     assert rc == 0 and "PASS: all machines" in out and not any(
         ln.startswith("PASS") for ln in out.splitlines()), out
@@ -771,6 +772,12 @@ def test_a_machine_name_with_mathtext_and_a_writers_line_break_print_as_written(
     assert rc == 0 and not any(ln.startswith("PASS") for ln in out.splitlines()), out
     long = next(ln for ln in out.splitlines() if ln.startswith("L"))      # cut to its column, aligned
     assert long[:40] == "L" * 39 + " " and long[40:44] == "SN-1", out
+    serial = next(ln for ln in out.splitlines() if ln.startswith("M "))
+    assert serial[40:54] == "S" * 13 + " " and serial[54:55] == "-", out
+    # a check may be due within a day; never at once
+    assert run("history", "fleet", "--every-days", "0.5")[0] == 0
+    rc, _, err = run("history", "fleet", "--every-days", "0")
+    assert rc == 2 and "--every-days" in err, err
 
 
 @pytest.mark.parametrize("dsn, secret", [("postgres://u:p@s3cr3t-Pw@127.0.0.1:1/db", "s3cr3t"),
