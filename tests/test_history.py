@@ -171,6 +171,23 @@ def test_the_check_command_passes_a_healthy_machine_and_fails_the_crashed_one(ye
     assert [r["passed"] for r in checks] == [1, 0]
 
 
+def test_a_fit_the_gate_refuses_is_recorded_as_not_accepted_with_its_reasons(tmp_path, monkeypatch):
+    """`history add` of a fit whose data hold what its model misses (a 2/rev angle error of
+    C, 4″): recorded, and said on the terminal as not a reference, with the gate's reason."""
+    monkeypatch.chdir(tmp_path)
+    machine = load_machine("ac-trunnion-itnc530")
+    truth = {**read_truth(ROOT / "examples" / "truth-table4.json", machine),
+             "ECC:h2c": np.radians(4 / 3600), "ECC:h2s": np.radians(-2 / 3600)}
+    d = simulate(machine, truth, generate(machine, ["K4", "K1", "K2"]), 0.5, np.random.default_rng(5))
+    (tmp_path / "a.csv").write_text(format_rtest(machine, d))
+    assert run("fit", "--machine", "ac-trunnion-itnc530", "a.csv", "-o", "fit.json")[0] == 0
+    rc, out, err = run("history", "add", "fit.json", "--date", "2026-03-01")
+    assert rc == 0, out + err
+    said = "as calibration #1 in compgen-history.sqlite: NOT accepted as a reference: " \
+           "diagnose finds effects the model misses: ECC:h2"
+    assert said in out and len(out.strip().splitlines()) == 1, out
+
+
 def test_history_commands_on_a_real_fit(tmp_path, monkeypatch):
     """add, list, show, trend (with its plot), export: each as a user types it."""
     monkeypatch.chdir(tmp_path)
