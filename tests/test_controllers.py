@@ -153,3 +153,11 @@ def test_the_sign_off_follows_the_newest_comparison(seed_machine, tmp_path, file
     assert note.startswith("ready" if ready else "not ready"), note
     numbered = [ln for ln in markdown(seed_machine, steps).splitlines() if re.match(r"\d+\. ", ln)]
     assert [int(ln.split(".")[0]) for ln in numbered] == list(range(1, len(steps) + 1))
+
+
+def test_the_fit_step_names_the_newest_fit_whatever_the_names(seed_machine, tmp_path):
+    for age, name in enumerate(("a.json", "b.json")):       # a.json written last
+        (tmp_path / name).write_text(json.dumps({"format": "compgen.fit/1", "data": []}))
+        os.utime(tmp_path / name, (1.7e9 - 60 * age, 1.7e9 - 60 * age))
+    step = next(s for s in checklist(seed_machine, tmp_path) if s.title == "Fit")
+    assert step.status == "done" and step.evidence == (str(tmp_path / "a.json"),), step
