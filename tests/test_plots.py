@@ -2,6 +2,7 @@
 names, on the panel its title and legend sit on, thinned evenly, in compgen's look; the
 trend's band and marks where the history puts them."""
 
+import re
 from datetime import datetime, timedelta
 from types import SimpleNamespace
 
@@ -235,5 +236,9 @@ def test_the_trend_draws_each_value_with_its_two_sigma_band_edits_and_flags(seed
         assert not [x for x in axes[1].get_lines() if x.get_markeredgecolor() == "red"]
         # a line break in a machine's name is written out, never a second title line
         assert "\n" not in axes[0].get_title() and axes[0].get_title().startswith(one_line(t.machine))
+        # as wide as every figure of the style sheet, taller with each parameter
+        sheet = (template_dir() / plots.STYLE).read_text()
+        width = float(re.search(r"(?m)^figure\.figsize:\s*([\d.]+)", sheet)[1])
+        assert fig.get_size_inches()[0] == pytest.approx(width)
     finally:
         plt.close(fig)
