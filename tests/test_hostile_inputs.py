@@ -217,3 +217,14 @@ def test_a_bug_is_one_line_exit_3_and_the_way_to_its_traceback(monkeypatch):
     assert code == 3 and out == "" and len(err.strip().splitlines()) == 1, (code, err)
     assert err.startswith("compgen: error: internal error (ZeroDivisionError: float division by zero)") \
         and "COMPGEN_DEBUG=1" in err, err
+
+
+def test_ctrl_c_is_aborted_in_one_line_exit_1(monkeypatch):
+    """An interrupt (Ctrl-C) is the user's, not a bug: "Aborted!" and exit 1, as click's own."""
+    from compgen.commands import cli
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(cli, "catalogue", interrupted)
+    code, out, err = run("effects", "--machine", SEED_MACHINE)
+    assert code == 1 and out == "" and err.strip() == "Aborted!", (code, err)
