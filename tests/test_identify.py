@@ -453,3 +453,14 @@ def test_the_normal_equations_basis_is_orthonormal_and_spans_j():
     J[:, 2] = 0.0
     B = Normal(J).basis()
     np.testing.assert_allclose(B @ (B.T @ J), J, atol=1e-9 * np.abs(J).max())
+
+
+def test_the_condition_number_is_the_largest_over_the_smallest_singular_value(seed_machine):
+    """Of the fit's singular values (largest first): one parameter's fit has condition 1, and
+    a zero singular value (a column moving nothing) is infinite, never a division by zero."""
+    from dataclasses import replace
+    fit = identify(seed_machine, [simulate(seed_machine, TABLE4, generate(seed_machine, ["K4"]))])
+    assert replace(fit, singular_values=np.array([8.0, 2.0, 0.5])).condition_number == 16.0
+    assert replace(fit, singular_values=np.array([2.5])).condition_number == 1.0
+    assert replace(fit, singular_values=np.array([3.0, 1.0, 0.0])).condition_number == np.inf
+    assert replace(fit, singular_values=np.array([])).condition_number == np.inf
