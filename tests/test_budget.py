@@ -62,7 +62,12 @@ def test_the_budget_is_in_fit_json_and_the_report(seed_machine, sessions):
     assert fit.device_budget["gain_u"] == 0.002 and set(fit.device_budget["std"]) == set(fit.free)
     again = FitResult.from_dict(json.loads(fit.to_json()))
     assert again.device_budget == fit.device_budget and again.to_json() == fit.to_json()
-    assert "sensor gains as its calibration allows (± 0.2 %, [rtest] gain_u)" in fit.report()
+    text = fit.report()
+    assert "sensor gains as its calibration allows (± 0.2 %, [rtest] gain_u)" in text
+    # their share: the six whose σ the gains make most of, largest share first
+    share = {n: fit.device_budget["std"][n] / fit.parameters[n].std for n in fit.free}
+    listed = text.split("their share:\n")[1].splitlines()[0].strip().split(", ")
+    assert [item.split()[0] for item in listed] == sorted(share, key=share.get, reverse=True)[:6], listed
     for bad in ({"gain_u": -1, "std": {}}, {"gain_u": 0.01, "std": {"YOW": "x"}}, {"std": {}}):
         with pytest.raises(CompgenError, match="device budget"):
             FitResult.from_dict({**json.loads(fit.to_json()), "device_budget": bad})
