@@ -126,6 +126,13 @@ def test_every_controller_fulfils_the_contract(name):
     assert type(ctl).edit is not Controller.edit and type(ctl).read is not Controller.read
 
 
+def _written(folder, docs):
+    """``docs`` (name → JSON document) written oldest first, a minute apart."""
+    for age, (name, doc) in enumerate(reversed(list(docs.items()))):
+        (folder / name).write_text(json.dumps(doc))
+        os.utime(folder / name, (1.7e9 - 60 * age, 1.7e9 - 60 * age))
+
+
 def _compared(as_predicted, verdict):
     return {"format": "compgen.compare/1",
             "measured_post": {"as_predicted": as_predicted, "verdicts": {"K4": f"{verdict}: 3.1 µm"}}}
@@ -144,10 +151,7 @@ def test_the_sign_off_follows_the_newest_comparison(seed_machine, tmp_path, file
     """The checklist says "ready" only if the newest comparison improved as predicted with
     every path within tolerance: a file written later overrules an earlier one whatever
     their names; a comparison the caller has just made overrules them all."""
-    for age, (name, as_predicted, verdict) in enumerate(reversed(files)):
-        path = tmp_path / name
-        path.write_text(json.dumps(_compared(as_predicted, verdict)))
-        os.utime(path, (1.7e9 - 60 * age, 1.7e9 - 60 * age))     # listed oldest first
+    _written(tmp_path, {name: _compared(as_predicted, verdict) for name, as_predicted, verdict in files})
     steps = checklist(seed_machine, tmp_path, None if now is None else _compared(*now))
     note = next(s.note for s in steps if s.title == "Sign-off")
     assert note.startswith("ready" if ready else "not ready"), note
@@ -156,8 +160,6 @@ def test_the_sign_off_follows_the_newest_comparison(seed_machine, tmp_path, file
 
 
 def test_the_fit_step_names_the_newest_fit_whatever_the_names(seed_machine, tmp_path):
-    for age, name in enumerate(("a.json", "b.json")):       # a.json written last
-        (tmp_path / name).write_text(json.dumps({"format": "compgen.fit/1", "data": []}))
-        os.utime(tmp_path / name, (1.7e9 - 60 * age, 1.7e9 - 60 * age))
+    _written(tmp_path, {name: {"format": "compgen.fit/1", "data": []} for name in ("b.json", "a.json")})
     step = next(s for s in checklist(seed_machine, tmp_path) if s.title == "Fit")
     assert step.status == "done" and step.evidence == (str(tmp_path / "a.json"),), step

@@ -3,6 +3,7 @@ was once an internal error, a silent accept or a wrong refusal. Refusals are one
 stderr with exit 2; nothing is written."""
 
 import json
+import os
 import shlex
 import subprocess
 import sys
@@ -193,7 +194,6 @@ def test_no_output_replaces_an_input_of_its_command_even_with_force(tmp_path, mo
 def test_a_reader_gone_before_the_first_line_is_ordinary_use(tmp_path):
     """The reader's end of the pipe is closed before compgen writes a byte (the race
     `| head -1` only sometimes loses, made certain): exit 0 and not a word on stderr."""
-    import os
     read, write = os.pipe()
     os.close(read)
     try:
@@ -204,27 +204,19 @@ def test_a_reader_gone_before_the_first_line_is_ordinary_use(tmp_path):
     assert done.returncode == 0 and done.stderr == "", (done.returncode, done.stderr)
 
 
-def test_a_bug_is_one_line_exit_3_and_the_way_to_its_traceback(monkeypatch):
-    """docs/safety.md: an unexpected exception is compgen's bug: one line, exit 3, and
-    COMPGEN_DEBUG=1 named for the traceback."""
+@pytest.mark.parametrize("raised, code, said", [
+    # docs/safety.md: an unexpected exception is compgen's bug, COMPGEN_DEBUG=1 shows its traceback
+    (ZeroDivisionError("float division by zero"), 3,
+     "compgen: error: internal error (ZeroDivisionError: float division by zero); this is a bug in "
+     "compgen. Run again with COMPGEN_DEBUG=1 for the traceback and report it"),
+    (KeyboardInterrupt(), 1, "Aborted!"),     # Ctrl-C is the user's, not a bug: as click's own
+])
+def test_a_bug_and_an_interrupt_are_one_line_with_their_exit_codes(monkeypatch, raised, code, said):
     from compgen.commands import cli
 
-    def broken(*a, **k):
-        raise ZeroDivisionError("float division by zero")
+    def failing(*a, **k):
+        raise raised
     monkeypatch.delenv("COMPGEN_DEBUG", raising=False)
-    monkeypatch.setattr(cli, "catalogue", broken)
-    code, out, err = run("effects", "--machine", SEED_MACHINE)
-    assert code == 3 and out == "" and len(err.strip().splitlines()) == 1, (code, err)
-    assert err.startswith("compgen: error: internal error (ZeroDivisionError: float division by zero)") \
-        and "COMPGEN_DEBUG=1" in err, err
-
-
-def test_ctrl_c_is_aborted_in_one_line_exit_1(monkeypatch):
-    """An interrupt (Ctrl-C) is the user's, not a bug: "Aborted!" and exit 1, as click's own."""
-    from compgen.commands import cli
-
-    def interrupted(*a, **k):
-        raise KeyboardInterrupt
-    monkeypatch.setattr(cli, "catalogue", interrupted)
-    code, out, err = run("effects", "--machine", SEED_MACHINE)
-    assert code == 1 and out == "" and err.strip() == "Aborted!", (code, err)
+    monkeypatch.setattr(cli, "catalogue", failing)
+    got, out, err = run("effects", "--machine", SEED_MACHINE)
+    assert (got, out, err.strip()) == (code, "", said), (got, err)

@@ -3,11 +3,10 @@ every program compgen writes passes; crafted defects are refused; LinuxCNC's own
 interpreter (rs274) reads compgen's programs to the same positions as the simulator."""
 
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import BC_MACHINE, SEED_MACHINE, rs274, run
+from conftest import BC_MACHINE, ROOT, SEED_MACHINE, rs274, run
 
 from compgen.configuration.machine_file import load_machine
 from compgen.controllers.registry import controller
@@ -672,7 +671,7 @@ def test_the_set_ups_documented_defaults_are_the_ones_a_machine_file_without_the
     """docs/controllers.md gives each [rtest] size's default in brackets; a machine file
     that names only the ball and the probe length is read with exactly those (the table's
     radius: the ball's distance from the axis + 50 mm)."""
-    doc = (Path(__file__).resolve().parents[1] / "docs" / "controllers.md").read_text(encoding="utf-8")
+    doc = (ROOT / "docs" / "controllers.md").read_text(encoding="utf-8")
     said = doc[doc.index("**The set-up**"):]
     said = said[:said.index("\n\n")]
     documented = {k: float(v) for k, v in re.findall(r"`(\w+)`(?:\s+\([^)]*\))?\s+\[(-?[\d.]+)\]", said)}

@@ -2,7 +2,6 @@
 names, on the panel its title and legend sit on, thinned evenly, in compgen's look; the
 trend's band and marks where the history puts them."""
 
-import re
 from datetime import datetime, timedelta
 from types import SimpleNamespace
 
@@ -178,7 +177,6 @@ def test_the_rivals_curves_are_what_a_fit_of_the_model_leaves_of_each(seed_machi
     effect at its size (µm, as diagnose gives it), the fit's own model fitted to the measured
     poses leaves the first curve; fitted to those and the advised poses together, it leaves
     the second on the advised ones. The plot's are first order: equal to 0.2 % of the curve."""
-    from compgen.data.rtest import RTestData
     from compgen.model.effects import resolve
     from compgen.units import shown
     data, fit, _ = session
@@ -198,8 +196,7 @@ def test_the_rivals_curves_are_what_a_fit_of_the_model_leaves_of_each(seed_machi
         left = (alone.deviation - fitted(seed_machine, refit, [alone])) * 1e3
         both = [alone, simulate(seed_machine, truth, extra.poses)]
         refit = identify(seed_machine, both, fit.free)
-        advised = RTestData(extra.poses, both[1].deviation)
-        left_after = (advised.deviation - fitted(seed_machine, refit, [advised])) * 1e3
+        left_after = (both[1].deviation - fitted(seed_machine, refit, both[1:])) * 1e3
         assert np.abs(left).max() > 0.3 and np.abs(left_after).max() > 0.3      # µm: curves to see
         np.testing.assert_allclose(now, left, atol=2e-3 * np.abs(left).max())
         np.testing.assert_allclose(after, left_after, atol=2e-3 * np.abs(left_after).max())
@@ -237,8 +234,7 @@ def test_the_trend_draws_each_value_with_its_two_sigma_band_edits_and_flags(seed
         # a line break in a machine's name is written out, never a second title line
         assert "\n" not in axes[0].get_title() and axes[0].get_title().startswith(one_line(t.machine))
         # as wide as every figure of the style sheet, taller with each parameter
-        sheet = (template_dir() / plots.STYLE).read_text()
-        width = float(re.search(r"(?m)^figure\.figsize:\s*([\d.]+)", sheet)[1])
-        assert fig.get_size_inches()[0] == pytest.approx(width)
+        sheet = matplotlib.rc_params_from_file(template_dir() / plots.STYLE, use_default_template=False)
+        assert fig.get_size_inches()[0] == pytest.approx(sheet["figure.figsize"][0])
     finally:
         plt.close(fig)
