@@ -171,7 +171,7 @@ def write_all(files: dict[str | Path, str | bytes], force: bool = False, inputs:
                 os.replace(path, saved[path])
             os.replace(tmp, path)
             placed.append(path)
-    except OSError as exc:
+    except BaseException as exc:     # a full disk, or Ctrl-C between two renames: as before
         for path in placed:
             path.unlink(missing_ok=True)
         for path, old in saved.items():
@@ -179,6 +179,8 @@ def write_all(files: dict[str | Path, str | bytes], force: bool = False, inputs:
                 os.rename(old, path)
         for tmp in temps.values():
             Path(tmp).unlink(missing_ok=True)
+        if not isinstance(exc, OSError):
+            raise
         raise CompgenError(f"cannot write: {exc.strerror}", where=str(exc.filename or path)) from None
     for old in saved.values():
         Path(old).unlink(missing_ok=True)

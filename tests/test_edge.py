@@ -226,9 +226,13 @@ def test_outputs_are_written_whole_with_normal_permissions(fitted, tmp_path):
         locked.chmod(0o755)
 
 
-def test_an_edit_is_one_transaction(fitted, tmp_path, monkeypatch):
-    """When its last file cannot be written, none of the edit's files is left, and a file it
-    was to replace (with --force) is as it was."""
+@pytest.mark.parametrize("stop, code, said", [
+    (OSError(28, "No space left on device"), 2, "No space left"),
+    (KeyboardInterrupt(), 130, "compgen: interrupted"),      # Ctrl-C between two renames
+])
+def test_an_edit_is_one_transaction(fitted, tmp_path, monkeypatch, stop, code, said):
+    """When its last file cannot be written, or the user stops compgen on the way, none of
+    the edit's files is left, and a file it was to replace (with --force) is as it was."""
     (tmp_path / "K.TAB").write_text("the user's")
     real = os.replace
     calls = []
@@ -236,11 +240,11 @@ def test_an_edit_is_one_transaction(fitted, tmp_path, monkeypatch):
     def failing(src, dst):
         calls.append(dst)
         if len(calls) == 3:
-            raise OSError(28, "No space left on device", str(dst))
+            raise stop
         return real(src, dst)
     monkeypatch.setattr(os, "replace", failing)
-    code, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", tmp_path / "K.TAB", "--force")
-    assert code == 2 and "No space left" in err, err
+    got, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", tmp_path / "K.TAB", "--force")
+    assert got == code and said in err and "\n" not in err.strip(), err   # (after ^C, click ends its line)
     assert [p.name for p in tmp_path.iterdir()] == ["K.TAB"]
     assert (tmp_path / "K.TAB").read_text() == "the user's"
 

@@ -209,7 +209,8 @@ def test_a_reader_gone_before_the_first_line_is_ordinary_use(tmp_path):
     (ZeroDivisionError("float division by zero"), 3,
      "compgen: error: internal error (ZeroDivisionError: float division by zero); this is a bug in "
      "compgen. Run again with COMPGEN_DEBUG=1 for the traceback and report it"),
-    (KeyboardInterrupt(), 1, "Aborted!"),     # Ctrl-C is the user's, not a bug: as click's own
+    # Ctrl-C is the user's, not a bug; 130 as the shell's own, not check's 1 for a failed check
+    (KeyboardInterrupt(), 130, "compgen: interrupted"),
 ])
 def test_a_bug_and_an_interrupt_are_one_line_with_their_exit_codes(monkeypatch, raised, code, said):
     from compgen.commands import cli

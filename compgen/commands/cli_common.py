@@ -49,11 +49,11 @@ class Group(click.Group):
                 raise
             exc.show()
             sys.exit(exc.exit_code)
-        except click.Abort:
+        except click.Abort:          # Ctrl-C: the shell's 128 + SIGINT, never check's 1 for a fail
             if not standalone:
                 raise
-            click.echo("Aborted!", err=True)
-            sys.exit(1)
+            click.echo("compgen: interrupted", err=True)
+            sys.exit(130)
 
     def invoke(self, ctx):
         new_command()
