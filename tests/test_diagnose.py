@@ -2,6 +2,7 @@
 way: hide a known error, expect it found), on clean data, and on invisible effects."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -1014,3 +1015,65 @@ def test_the_residual_against_a_tilting_axis_is_its_quadratic_trend_in_micrometr
     assert set(row) == {"trend"}
     assert row["trend"][0] == pytest.approx(np.sqrt(np.mean(trend_um**2)), rel=1e-9)
     assert row["trend"][1:] == pytest.approx([0, 0], abs=1e-12)
+
+
+def test_the_text_lists_the_eight_strongest_candidates_with_their_p_values(seed_machine, poses):
+    """The report's candidate list is the JSON's visible candidates, strongest first, at most
+    eight (the rest are in --json), each with its RMS after, its p-value to two digits (below
+    double precision's least, "p < 1e-300") and its verdict."""
+    data = [_session(seed_machine, poses, HIDDEN["ECC:h2"])]
+    found = diagnose(seed_machine, data, identify(seed_machine, data), advisor=Advisor)
+    visible = [c for c in found.to_dict()["candidates"] if c["visible"]]
+    listed = re.findall(r"^ +(\d+)\. (\S+) +RMS → ([\d.]+) µm   p (?:= (\S+)|< (1e-300))  "
+                        r"(SIGNIFICANT|not significant)$", report(found), re.M)
+    assert len(visible) > 8 and len(listed) == 8
+    for i, (c, (no, effect, rms, p, floor, verdict)) in enumerate(zip(visible, listed, strict=False), 1):
+        assert (int(no), effect, verdict) == (i, c["effect"], "SIGNIFICANT" if c["significant"] else
+                                              "not significant")
+        assert float(rms) == pytest.approx(c["rms_after_um"], abs=5e-4)
+        assert (float(p) == pytest.approx(c["p_value"], rel=0.05) if c["p_value"] > 0 else floor), c
+    assert listed[0][4] and any(row[3] for row in listed)    # both ways of saying p are read
+
+
+@pytest.mark.parametrize("candidates, verb", [(None, "explain"), (["EXC:h1", "EXX:p1"], "explains")])
+def test_rivals_and_the_pairs_the_advised_plan_leaves_open_are_said_as_the_json_has_them(
+        seed_machine, poses, candidates, verb):
+    """An X scale error's rivals (a 1/rev radial motion of C, …) are listed with the verb their
+    number takes, and the pairs the plan leaves open are those every measurement of the plan
+    leaves open in the JSON (none: "together they tell every pair apart")."""
+    data = [_session(seed_machine, poses, {"EXX:p1": 10 * UM})]
+    found = diagnose(seed_machine, data, identify(seed_machine, data), candidates, advisor=Advisor)
+    d, text = found.to_dict(), report(found)
+    rivals, best = d["rivals_of_best"], found.significant[0].effect
+    assert f"Not told apart: {', '.join(rivals)} {verb} these data as well as {best}," in text
+    assert (len(rivals) == 1) == (verb == "explains")
+    plan = d["rivals_separated_by"]
+    open_ = set.intersection(*({frozenset(p) for p in m["leaves_open"]} for m in plan))
+    said = re.search(r"together they (?:leave (.+) open|tell every pair apart)$", text, re.M)
+    assert said, text
+    assert {frozenset(p.split(" / ")) for p in said[1].split(", ")} == open_ if said[1] else not open_
+    assert candidates is not None or open_           # both ways of saying it are read
+
+
+def test_a_significant_effect_the_fit_cannot_take_whole_is_said_so_with_fit_s_refusal(seed_machine):
+    """K4 at two radii with a 2/rev angle of C and a 1/rev tilt of A (ECA 20″·sin A): the tilt
+    is seen but not separable whole, and the text says fit --add would refuse it, as it does."""
+    from compgen.errors import CompgenError
+    half = [seed_machine.ball[0] / 2, seed_machine.ball[1] / 2, seed_machine.ball[2]]
+    hidden = {"ECC:h2c": 4 * ARCSEC, "ECA:h1s": 20 * ARCSEC}
+    data = [_session(seed_machine, generate(seed_machine, ["K4"], ball=b), hidden, seed=s)
+            for s, b in enumerate([None, half])]
+    base = identify(seed_machine, data)
+    found = diagnose(seed_machine, data, base, advisor=Advisor)
+    text = report(found, top=len(found.candidates))
+    said = re.findall(r"^ +\d+\. (\S+) .*\n.*\n(?:      partly absorbed by .*\n)?"
+                      r"      seen, but not separable whole on these data "
+                      r"\(fit --add would refuse it: condition ([\d.e+]+)\); (.*)$", text, re.M)
+    assert said, text
+    for effect, cond, then in said:
+        c = next(c for c in found.candidates if c.effect == effect)
+        assert c.significant and not c.separable and float(cond) == pytest.approx(c.condition, rel=5e-3)
+        assert (then.startswith(f"measure {c.separated_by[0].label} first: ") if c.separated_by else
+                then == "no set-up this machine can measure separates it"), then
+        with pytest.raises(CompgenError, match="cannot separate"):
+            identify(seed_machine, data, compose(seed_machine, base.model, [effect]), method="linear")
