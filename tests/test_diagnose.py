@@ -408,10 +408,15 @@ def test_an_effect_outside_the_catalogue_is_unexplained_never_found(seed_machine
         assert line.period == pytest.approx(pitch, rel=2e-3)          # a fraction of the resolution
         assert line.amplitude_um == pytest.approx(2.0, rel=0.1)
         assert (noise is None) == (found.misfit == ())
+        text = report(found)
+        # without the noise, the line itself is what no candidate explains; with it, the misfit
+        said = ("UNEXPLAINED: a periodic line along a linear axis, a shape no catalogue effect has, "
+                "outweighs every candidate" if noise is None else
+                f"UNEXPLAINED: the residual exceeds the R-test's noise ({noise:g} µm) and no catalogue "
+                "effect accounts for it:")
+        assert said in text and f"  its shape: {line.text()}\n" in text, text
+        assert f"--add E{axis}{axis}:w{line.period:.3f}" in text and "add it:" not in text
     assert {m["direction"] for m in found.misfit} == {f"d{axis}"}
-    text = report(found)
-    assert "UNEXPLAINED" in text and f"--add E{axis}{axis}:w{line.period:.3f}" in text
-    assert "add it:" not in text
 
 
 @pytest.mark.parametrize("axis, pitch", [("X", 5.0), ("Z", 12.5)])
@@ -1077,3 +1082,28 @@ def test_a_significant_effect_the_fit_cannot_take_whole_is_said_so_with_fit_s_re
                 then == "no set-up this machine can measure separates it"), then
         with pytest.raises(CompgenError, match="cannot separate"):
             identify(seed_machine, data, compose(seed_machine, base.model, [effect]), method="linear")
+
+
+def test_rivals_with_no_measurement_searched_say_so_and_what_each_choice_moves(seed_machine, poses):
+    """Without an advisor (a library caller; a control compgen writes no programs for) the
+    rivals of an X scale error are not sent to a measurement: the text says none was
+    searched, gives the best's fit --add, and lists what each choice moves in the location
+    errors, 0.2 µm or ″ and more, as the JSON's rivals_carry has them."""
+    from compgen import me
+    data = [_session(seed_machine, poses, {"EXX:p1": 10 * UM})]
+    found = diagnose(seed_machine, data, identify(seed_machine, data))
+    d, text = found.to_dict(), report(found)
+    assert d["rivals_of_best"] and not d["rivals_separated_by"]
+    best = found.significant[0].effect
+    assert (f"  Which measurement would tell them apart was not searched. Any one of them models the misfit: "
+            f"{me()} fit --from fit.json --add {best} -o fit+1.json; the location errors written to a "
+            "control depend on the choice:\n") in text
+    carry = d["rivals_carry"]
+    assert list(carry["shift_by_choice"]) == [best, *d["rivals_of_best"]]
+    assert f"(first order; the first, {best}, is the one the location errors absorb least):" in text
+    for name, shift in carry["shift_by_choice"].items():
+        row = re.search(rf"^    {re.escape(name)} +(.*)$", text, re.M)[1]
+        big = {k: v for k, v in shift.items() if abs(v) >= 0.2}
+        listed = dict(re.findall(r"(\w+) ([+-]\d+\.\d\d) (?:µm|″)", row))
+        assert {k: float(v) for k, v in listed.items()} == pytest.approx(big, abs=0.005001), (name, row)
+        assert big or row == "nothing above 0.2 µm or ″"
