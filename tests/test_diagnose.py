@@ -1053,6 +1053,8 @@ def test_rivals_and_the_pairs_the_advised_plan_leaves_open_are_said_as_the_json_
     assert f"Not told apart: {', '.join(rivals)} {verb} these data as well as {best}," in text
     assert (len(rivals) == 1) == (verb == "explains")
     plan = d["rivals_separated_by"]
+    numbered = re.findall(r"^   (\d+)\. (.+) \(tells apart ", text, re.M)
+    assert numbered == [(str(i), m["label"]) for i, m in enumerate(plan, 1)], numbered
     open_ = set.intersection(*({frozenset(p) for p in m["leaves_open"]} for m in plan))
     said = re.search(r"together they (?:leave (.+) open|tell every pair apart)$", text, re.M)
     assert said, text
@@ -1107,3 +1109,18 @@ def test_rivals_with_no_measurement_searched_say_so_and_what_each_choice_moves(s
         listed = dict(re.findall(r"(\w+) ([+-]\d+\.\d\d) (?:µm|″)", row))
         assert {k: float(v) for k, v in listed.items()} == pytest.approx(big, abs=0.005001), (name, row)
         assert big or row == "nothing above 0.2 µm or ″"
+
+
+@pytest.mark.parametrize("candidates", [["ECC:h2"], ["ECC:h2", "EXX:p1"]])
+def test_effects_that_share_misfit_are_said_only_when_more_than_one_is_significant(seed_machine, poses,
+                                                                                     candidates):
+    """A 2/rev angle of C tried alone is the one significant candidate: nothing is said of
+    shared misfit; beside an X scale error that fits a part of it too, both are significant
+    and the text says what stays significant once the best is added (here: nothing)."""
+    data = [_session(seed_machine, poses, HIDDEN["ECC:h2"])]
+    found = diagnose(seed_machine, data, identify(seed_machine, data), candidates, noise_um=NOISE_UM)
+    text = report(found)
+    assert [c.effect for c in found.significant] == candidates and not found.after_best
+    said = ("  Effects share misfit: once ECC:h2 is added, no other candidate stays significant. Add one "
+            "effect at a time and diagnose again.")
+    assert (said in text) == (len(candidates) > 1), text
