@@ -3,6 +3,7 @@ way: hide a known error, expect it found), on clean data, and on invisible effec
 
 import json
 import re
+from itertools import combinations
 
 import numpy as np
 import pytest
@@ -1053,8 +1054,12 @@ def test_rivals_and_the_pairs_the_advised_plan_leaves_open_are_said_as_the_json_
     assert f"Not told apart: {', '.join(rivals)} {verb} these data as well as {best}," in text
     assert (len(rivals) == 1) == (verb == "explains")
     plan = d["rivals_separated_by"]
-    numbered = re.findall(r"^   (\d+)\. (.+) \(tells apart ", text, re.M)
-    assert numbered == [(str(i), m["label"]) for i, m in enumerate(plan, 1)], numbered
+    numbered = re.findall(r"^   (\d+)\. (.+) \(tells apart (.+)\)$", text, re.M)
+    assert [n[:2] for n in numbered] == [(str(i), m["label"]) for i, m in enumerate(plan, 1)], numbered
+    pairs = {frozenset(p) for p in combinations([best, *rivals], 2)}
+    for (*_, told), m in zip(numbered, plan, strict=True):    # each pair of the group it does not leave open
+        assert {frozenset(p.split(" / ")) for p in told.split(", ")} == \
+            pairs - {frozenset(p) for p in m["leaves_open"]}, told
     open_ = set.intersection(*({frozenset(p) for p in m["leaves_open"]} for m in plan))
     said = re.search(r"together they (?:leave (.+) open|tell every pair apart)$", text, re.M)
     assert said, text
@@ -1124,3 +1129,41 @@ def test_effects_that_share_misfit_are_said_only_when_more_than_one_is_significa
     said = ("  Effects share misfit: once ECC:h2 is added, no other candidate stays significant. Add one "
             "effect at a time and diagnose again.")
     assert (said in text) == (len(candidates) > 1), text
+
+
+def test_the_fragile_parameters_are_the_shift_an_effect_of_1_um_rms_makes(seed_machine, poses):
+    """Each fitted parameter's line under "fragile parameters" is the effect that shifts it
+    most per µm RMS of its readings: simulated at exactly 1 µm RMS (noiseless) and fitted, it
+    shifts that parameter by the figure printed; no effect shifts it more (the JSON's
+    shift_per_unit over signature_rms_um_per_unit)."""
+    from compgen.model.effects import effect_name, resolve
+    data = [simulate(seed_machine, TABLE4, poses)]
+    clean = identify(seed_machine, data)
+    found = diagnose(seed_machine, data, clean)
+    rows = re.findall(r"^    (\w+) +([+-] *\d+\.\d\d) (µm|″) per µm of (\S+)$", report(found), re.M)
+    assert [r[0] for r in rows] == list(TABLE4)
+    sig = found.signature_um
+    for name, value, unit, effect in rows:
+        per_um = {k: v / sig[k] for k, v in found.bias[name].items() if sig[k] > 0}
+        worst = max(per_um, key=lambda k: abs(per_um[k]))
+        assert effect_name(worst) == effect and unit == ("µm" if name[0] in "XYZ" else "″")
+        scale = UM if resolve(seed_machine, effect).unit == "mm" else ARCSEC
+        moved = identify(seed_machine, [simulate(seed_machine, {**TABLE4, worst: scale / sig[worst]}, poses)])
+        shift = moved.parameters[name].value - clean.parameters[name].value
+        shift /= UM if unit == "µm" else ARCSEC
+        assert float(value.replace(" ", "")) == pytest.approx(shift, rel=0.02, abs=0.01), (name, worst)
+
+
+def test_an_unexplained_misfit_lists_its_six_worst_path_directions(seed_machine, poses):
+    """Clean data against an R-test said to be 2.5 times quieter than it is: all nine path
+    directions exceed its noise and no candidate accounts for it; the text lists six, as the
+    JSON's misfit has them (worst first), with their RMS and p-values."""
+    data = [_session(seed_machine, poses, {})]
+    found = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM / 2.5)
+    misfit = found.to_dict()["misfit"]
+    assert found.unexplained and len(misfit) == 9
+    listed = re.findall(r"^    (d[XYZ]) of (\w+): RMS (\d+\.\d\d) µm \(p = (\S+)\)$", report(found), re.M)
+    assert [(d, p) for d, p, *_ in listed] == [(m["direction"], m["path"]) for m in misfit[:6]]
+    for (*_, rms, p), m in zip(listed, misfit, strict=False):
+        assert float(rms) == pytest.approx(m["rms_um"], abs=0.005) and float(p) == pytest.approx(
+            m["p_value"], rel=0.05, abs=1e-300)
