@@ -319,8 +319,7 @@ def test_each_advised_place_puts_the_ball_where_its_words_say(seed_machine):
         where = m.label[len(m.path):]
         assert m.ball == pytest.approx(said[where]) and (m.poses.ball == m.ball).all(), m.label
         seen.add(where)
-    assert {" with the ball 100 mm lower", " with the ball 100 mm higher",
-            " with the ball at half its radius"} <= seen
+    assert seen == set(said)        # on this machine, every place for some path
 
 
 def test_a_reversal_is_advised_to_be_run_there_and_back_and_then_found(seed_machine, poses):
