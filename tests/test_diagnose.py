@@ -1163,9 +1163,9 @@ def test_an_unexplained_misfit_lists_its_six_worst_path_directions(seed_machine,
     assert found.unexplained and len(misfit) == 9
     text = report(found)
     listed = re.findall(r"^    (d[XYZ]) of (\w+): RMS (\d+\.\d\d) µm \(p = (\S+)\)$", text, re.M)
-    # white noise has no shape: no line in those directions is significant, and the text says so
+    # white noise has no shape: no line is significant, and the text says so
     assert not [line for line in found.lines if line.p_value < found.alpha]
-    assert "  no periodic line against an axis or time stands out: look at the residual plots (--plots)" in text
+    assert "  no periodic line against an axis or time stands out: look at the residual plots" in text
     assert [(d, p) for d, p, *_ in listed] == [(m["direction"], m["path"]) for m in misfit[:6]]
     for (*_, rms, p), m in zip(listed, misfit, strict=False):
         assert float(rms) == pytest.approx(m["rms_um"], abs=0.005) and float(p) == pytest.approx(
