@@ -1170,3 +1170,26 @@ def test_an_unexplained_misfit_lists_its_six_worst_path_directions(seed_machine,
     for (*_, rms, p), m in zip(listed, misfit, strict=False):
         assert float(rms) == pytest.approx(m["rms_um"], abs=0.005) and float(p) == pytest.approx(
             m["p_value"], rel=0.05, abs=1e-300)
+
+
+@pytest.mark.parametrize("first", [1, 241])
+def test_advice_after_timed_readings_starts_after_them_and_offers_the_repeat(seed_machine, poses, first):
+    """After readings with their times (one pose, or K4 whole) each advised measurement is
+    read after them (the R-test's clock running on, a gap between programs) and what was
+    measured is offered again, right after: a drift is told by time."""
+    from compgen.model.paths import GAP_S
+    measured = poses.take(np.arange(first))
+    advised = Advisor(seed_machine, measured).candidates
+    assert all(m.poses.t[0] == pytest.approx(measured.t.max() + GAP_S) for m in advised)
+    again = [m for m in advised if m.again]
+    assert [m.label for m in again] == ["K4 again, right after these data"] and again[0].name == "K4_AGAIN"
+
+
+def test_the_json_s_ball_is_the_one_the_printed_command_measures_at(seed_machine):
+    """A ball given to 0.1 µm (-0.2791 mm) halved has five decimals: the JSON rounds it as the
+    command measure-program is given, so a script reading either measures at one place."""
+    from dataclasses import replace
+    machine = replace(seed_machine, ball=(seed_machine.ball[0], -0.2791, seed_machine.ball[2]))
+    for m in Advisor(machine).candidates:
+        given = re.search(r"--ball (\S+)", m.command("compgen", "m.toml", ".H"))[1]
+        assert m.to_dict()["ball"] == [float(v) for v in given.split(",")], m.label
