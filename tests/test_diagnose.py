@@ -1193,3 +1193,18 @@ def test_the_json_s_ball_is_the_one_the_printed_command_measures_at(seed_machine
     for m in Advisor(machine).candidates:
         given = re.search(r"--ball (\S+)", m.command("compgen", "m.toml", ".H"))[1]
         assert m.to_dict()["ball"] == [float(v) for v in given.split(",")], m.label
+
+
+def test_what_was_measured_is_not_advised_as_new(seed_machine):
+    """A ball and a nest given to 0.1 µm, K1 and K4 each run there and back: neither is
+    advised there and back again, nor as a new measurement at the same place; only as a
+    repeat right after (the data are timed). With nothing measured, a measurement's clock
+    starts at 0 s, as a path's does."""
+    from dataclasses import replace
+    machine = replace(seed_machine, ball=(seed_machine.ball[0], -0.2791, seed_machine.ball[2]),
+                      probe_length=seed_machine.probe_length + 0.0004)
+    measured = generate(machine, ["K1", "K4"], back=True)
+    offered = [m.label for m in Advisor(machine, measured).candidates]
+    assert not {"K1 there and back", "K4 there and back", "K1", "K4"} & set(offered), offered
+    assert {"K1 again, right after these data", "K4 again, right after these data"} <= set(offered)
+    assert all(m.poses.t[0] == 0.0 for m in Advisor(machine).candidates)
