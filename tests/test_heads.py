@@ -685,3 +685,14 @@ def test_two_rounds_on_a_head_from_a_non_zero_state_reach_the_noise(tmp_path, ca
     assert before.residual["rms_um"] > 6 * NOISE_UM, before.residual["rms_um"]
     assert after.residual["rms_um"] == pytest.approx(NOISE_UM, rel=0.15), (before.residual["rms_um"],
                                                                             after.residual["rms_um"])
+
+
+def test_a_longer_nest_is_advised_with_the_ball_where_the_machine_file_has_it(tmp_path):
+    """On a head (LinuxCNC's maxkins) the longer nest is the one thing changed: every path
+    is offered with the nest 100 mm longer and the ball where the machine file stands it."""
+    machine = load_machine(on_linuxcnc(tmp_path))
+    longer = [m for m in Advisor(machine).candidates if m.label.endswith(" with the nest 100 mm longer")]
+    assert sorted(m.path for m in longer) == sorted(machine.paths)
+    for m in longer:
+        assert m.ball == pytest.approx(machine.ball) and (m.poses.ball == m.ball).all(), m.label
+        assert m.nest == machine.probe_length + 100 and (m.poses.nest == m.nest).all(), m.label
