@@ -6,7 +6,7 @@ import shlex
 
 import numpy as np
 import pytest
-from conftest import BC_MACHINE, SEED_MACHINE, TABLE4, rs274, run
+from conftest import BC_MACHINE, SEED_MACHINE, TABLE4, UM, rs274, run
 
 from compgen.configuration.machine_file import load_machine
 from compgen.data.probe import read_probe_log, sphere_centres
@@ -150,6 +150,14 @@ def test_simulate_a_probe_log_then_fit_it(tmp_path):
     machine = load_machine(SEED_MACHINE)
     fit = identify(machine, [sphere_centres(read_probe_log(log, machine), machine).data])
     assert all(abs(fit.parameters[n].value - v) < 5 * fit.parameters[n].std for n, v in TABLE4.items())
+    # without trigger noise the centres are the truth's, to the log's 0.1 µm: none is added to them
+    code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "--device", "probe",
+                       "--noise-um", "0", "-o", tmp_path / "exact.log")
+    assert code == 0, err
+    exact = identify(machine, [sphere_centres(read_probe_log(tmp_path / "exact.log", machine), machine).data])
+    assert exact.residual["rms_um"] < 0.1, exact.residual["rms_um"]
+    assert all(abs(exact.parameters[n].value - v) < 0.1 * UM for n, v in TABLE4.items() if n[1] == "O"
+               and n[0] in "XYZ")
     code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "--device", "probe",
                        "--stylus-error-um", "20", "--seed", "3", "-o", tmp_path / "worn.log")
     assert code == 0, err
