@@ -2,6 +2,7 @@
 every program compgen writes passes; crafted defects are refused; LinuxCNC's own
 interpreter (rs274) reads compgen's programs to the same positions as the simulator."""
 
+import json
 import re
 
 import numpy as np
@@ -89,6 +90,11 @@ def test_a_pose_past_travel_is_refused(machines, tmp_path):
     assert bad != program
     code, out, _ = _check(machines["seed"], tmp_path / "FAR.H", bad)
     assert code == 1 and "outside travel" in out and "A reaches -130.000" in out, out
+    # --json: the same finding and exit code, for a script that reads the document
+    code, doc, _ = run("check-program", "--machine", machines["seed"], tmp_path / "FAR.H", "--json")
+    doc = json.loads(doc)
+    assert code == 1 and doc["ok"] is False
+    assert [f["text"] for f in doc["findings"]] == [ln for ln in out.splitlines() if "FAR.H:" in ln]
 
 
 def test_turning_with_the_nest_down_is_refused(machines, tmp_path):
