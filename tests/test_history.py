@@ -212,8 +212,10 @@ def test_history_commands_on_a_real_fit(tmp_path, monkeypatch):
     rc, out, err = run("history", "trend", "--machine", "ac-trunnion-itnc530", "--param", "XYZ")
     assert rc == 2 and "no recorded fit holds XYZ" in err
     # the edit written from it, recorded: what it corrects, the files written and the state loaded
-    rc, out, err = run("kinematics", "--from", "fit.json", "--current",
-                       ROOT / "examples" / "itnc530-current.TAB",
+    # (saved by a Windows editor, with a byte-order mark: its SHA-256 is of the file's bytes)
+    current = tmp_path / "current.TAB"
+    current.write_bytes(b"\xef\xbb\xbf" + (ROOT / "examples" / "itnc530-current.TAB").read_bytes())
+    rc, out, err = run("kinematics", "--from", "fit.json", "--current", current,
                        "-o", "EDIT.TAB", "--record", "--date", "2026-03-02")
     assert rc == 0 and "recorded the edit" in out, out + err
     with open_store(tmp_path / "compgen-history.sqlite") as store:
@@ -223,8 +225,7 @@ def test_history_commands_on_a_real_fit(tmp_path, monkeypatch):
     fit = load_fit(tmp_path / "fit.json")
     assert all(corrects[n] == fit.parameters[n].value for n in corrects)
     assert set(json.loads(edit["written"])) == {"EDIT.TAB", "EDIT.txt", "EDIT_SIGN.H", "EDIT_SIGN_MSG.A"}
-    assert list(json.loads(edit["loaded"]).values())[0] == hashlib.sha256(
-        (ROOT / "examples" / "itnc530-current.TAB").read_bytes()).hexdigest()
+    assert list(json.loads(edit["loaded"]).values())[0] == hashlib.sha256(current.read_bytes()).hexdigest()
     rc, out, _ = run("history", "show", "--machine", "ac-trunnion-itnc530")
     assert "edit        from " + fit.marker in out
     rc, out, err = run("report", "--from", "fit.json", "--history", "-o", "report.html")
