@@ -1208,3 +1208,18 @@ def test_what_was_measured_is_not_advised_as_new(seed_machine):
     assert not {"K1 there and back", "K4 there and back", "K1", "K4"} & set(offered), offered
     assert {"K1 again, right after these data", "K4 again, right after these data"} <= set(offered)
     assert all(m.poses.t[0] == 0.0 for m in Advisor(machine).candidates)
+
+
+def test_the_gate_names_the_three_strongest_significant_effects(seed_machine, poses):
+    """A 2/rev angle of C not modelled: more than three candidates fit some of it; the gate's
+    reason (what kinematics and history add say) names the three strongest, as diagnose
+    orders them, and what to do."""
+    from compgen.statistics.gate import fit_gate
+    data = [_session(seed_machine, poses, HIDDEN["ECC:h2"])]
+    fit = identify(seed_machine, data)
+    significant = [c["effect"] for c in diagnose(seed_machine, data, fit).to_dict()["candidates"]
+                   if c["significant"]]
+    assert len(significant) > 3
+    assert fit_gate(seed_machine, data, fit) == [
+        f"diagnose finds effects the model misses: {', '.join(significant[:3])} (run diagnose, add the "
+        "effect with fit --add, and refit)"]

@@ -346,6 +346,13 @@ def test_a_fit_that_does_not_explain_its_data_writes_no_edit(fitted, tmp_path, d
         code, _, err = run("fit", "--machine", SEED_MACHINE, csv, "-o", fit)
         assert code == 0, err
         assert ("likely in mm" in err) == (data is _in_mm), err
+        if data is _in_mm:         # the spread said is the file's: its largest column range, as µm
+            lines = csv.read_text().splitlines()
+            head = next(i for i, ln in enumerate(lines) if ln.startswith("path,"))
+            cols = lines[head].split(",")
+            rows = [ln.split(",") for ln in lines[head + 1:]]
+            spread = max(np.ptp([float(r[cols.index(c)]) for r in rows]) for c in ("dX", "dY", "dZ"))
+            assert f"the readings spread over {spread:.3g} µm at most" in err, (spread, err)
     out = tmp_path / "K.txt"
     code, _, err = run("kinematics", "--from", fit, "--controller", "itnc530", "-o", out)
     assert code == 2 and err.count("\n") == 1 and expected in err, err
