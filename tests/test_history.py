@@ -879,3 +879,21 @@ def test_an_unknown_machine_is_refused_naming_the_first_five_recorded(tmp_path):
         with pytest.raises(CompgenError, match=said) as e:
             H.machine_id(store, machine)
     assert str(e.value).endswith(". Recorded: mill 1; mill 2 (S1); mill 3; mill 4 (S1); mill 5"), str(e.value)
+
+
+def test_a_failed_check_names_the_change_furthest_beyond_its_own_limit(year, tmp_path):
+    """YOC 2 times its limit away (10 µm of 5) and BOA 3 times (30″ of 10″): both fail, and
+    the advice names BOA as moved most, each change against the limit of its own unit."""
+    machine, base, _, _ = year
+    when = "2026-05-10T10:00"
+    with _record(tmp_path / "h.sqlite", year) as store:
+        truth = _truth(machine, base, when, {})
+        truth = {**truth, "YOC": truth["YOC"] + 10 * UM, "BOA": truth["BOA"] + 30 * ARCSEC}
+        d = _session(machine, truth, ["K4"], 105, "moved.csv")
+        fit = identify(machine, [d], location_model(machine))
+        calibration, entries, edits = H.last_calibration(store, machine, before=H.taken_at(when))
+        checked = H.check(machine, fit, [d], calibration, entries, edits, H.taken_at(when))
+    failed = {c.param: abs(c.change) / c.limit for c in checked.changes if c.status == "fail"}
+    assert set(failed) == {"YOC", "BOA"} and 1.8 < failed["YOC"] < 2.5 < failed["BOA"] < 3.3, failed
+    assert any(a.startswith("re-calibrate: ") and "(BOA, " in a and ", most)" in a for a in checked.advice), \
+        checked.advice
