@@ -124,7 +124,12 @@ def _year_checks(store, year):
     uncorrected = _check(store, year, "2026-05-10T10:00", 104)
     assert all(c.status == "pass" for c in uncorrected.changes) and not uncorrected.passed
     assert uncorrected.paths["K4"].startswith("FAIL") and "not corrected" in uncorrected.advice[0]
-    return H.trend_text(t)
+    text = H.trend_text(t)
+    # the rows in time: the edit of 2 July between the fits of July and August
+    rows = [(ln[:10], ln[12:23].strip() == "edit") for ln in text.splitlines() if ln.startswith("2026-")]
+    assert rows == ([(f"2026-{m:02d}-01", False) for m in range(1, 8)] + [("2026-07-02", True)]
+                    + [(f"2026-{m:02d}-01", False) for m in range(8, 13)]), text
+    return text
 
 
 
