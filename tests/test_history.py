@@ -902,3 +902,21 @@ def test_a_failed_check_names_the_change_furthest_beyond_its_own_limit(year, tmp
     assert set(failed) == {"YOC", "BOA"} and 1.8 < failed["YOC"] < 2.5 < failed["BOA"] < 3.3, failed
     assert any(a.startswith("re-calibrate: ") and "(BOA, " in a and ", most)" in a for a in checked.advice), \
         checked.advice
+
+
+def test_a_change_beyond_its_limit_but_within_its_noise_asks_to_measure_more(year, tmp_path):
+    """YOC 7 µm away (limit 5 µm) measured with a noisy check (12 µm): beyond its limit but
+    within 3 σ: unsure, and the advice asks to measure more, naming it."""
+    machine, base, _, _ = year
+    when = "2026-05-10T10:00"
+    with _record(tmp_path / "h.sqlite", year) as store:
+        truth = _truth(machine, base, when, {})
+        truth = {**truth, "YOC": truth["YOC"] + 7 * UM}
+        d = simulate(machine, truth, generate(machine, ["K4"]), 12.0, np.random.default_rng(106))
+        fit = identify(machine, [d], location_model(machine))
+        calibration, entries, edits = H.last_calibration(store, machine, before=H.taken_at(when))
+        checked = H.check(machine, fit, [d], calibration, entries, edits, H.taken_at(when))
+    unsure = [c for c in checked.changes if c.status == "unsure"]
+    assert [c.param for c in unsure] == ["YOC"] and not checked.passed
+    assert ("measure more (all paths, or the check path twice): YOC may have moved beyond its limit, "
+            "but its σ is too large to say") in checked.advice, checked.advice
