@@ -920,3 +920,18 @@ def test_a_change_beyond_its_limit_but_within_its_noise_asks_to_measure_more(yea
     assert [c.param for c in unsure] == ["YOC"] and not checked.passed
     assert ("measure more (all paths, or the check path twice): YOC may have moved beyond its limit, "
             "but its σ is too large to say") in checked.advice, checked.advice
+
+
+def test_a_fit_measured_at_the_edit_s_instant_follows_it_in_the_trend(year, tmp_path):
+    """A fit taken at the very instant the edit was recorded counts that edit's corrections
+    (written before it, to the second), and the trend shows the edit's row first."""
+    machine, base, _, (_, corrects) = year
+    with _record(tmp_path / "h.sqlite", year) as store:
+        d = _session(machine, _truth(machine, base, EDIT_DATE, corrects), ["K4", "K1", "K2"], 107, "same.csv")
+        H.record_fit(store, identify(machine, [d], location_model(machine)), machine, taken=EDIT_DATE)
+        t = H.trend(store, machine)
+    same = next(e for e in t.entries if e.taken == EDIT_DATE)
+    assert same.corrected == pytest.approx(dict(corrects))
+    rows = [(ln[:10], ln[12:23].strip() == "edit") for ln in H.trend_text(t).splitlines()
+            if ln.startswith("2026-07")]
+    assert rows == [("2026-07-01", False), ("2026-07-02", True), ("2026-07-02", False)], rows
