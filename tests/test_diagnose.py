@@ -1055,14 +1055,15 @@ def test_rivals_and_the_pairs_the_advised_plan_leaves_open_are_said_as_the_json_
     plan = d["rivals_separated_by"]
     numbered = re.findall(r"^   (\d+)\. (.+) \(tells apart (.+)\)$", text, re.M)
     assert [n[:2] for n in numbered] == [(str(i), m["label"]) for i, m in enumerate(plan, 1)], numbered
+    def said_pairs(words):            # "A / B, A / C" as the text writes pairs
+        return {frozenset(p.split(" / ")) for p in words.split(", ")}
     pairs = {frozenset(p) for p in combinations([best, *rivals], 2)}
     for (*_, told), m in zip(numbered, plan, strict=True):    # each pair of the group it does not leave open
-        assert {frozenset(p.split(" / ")) for p in told.split(", ")} == \
-            pairs - {frozenset(p) for p in m["leaves_open"]}, told
+        assert said_pairs(told) == pairs - {frozenset(p) for p in m["leaves_open"]}, told
     open_ = set.intersection(*({frozenset(p) for p in m["leaves_open"]} for m in plan))
     said = re.search(r"together they (?:leave (.+) open|tell every pair apart)$", text, re.M)
     assert said, text
-    assert {frozenset(p.split(" / ")) for p in said[1].split(", ")} == open_ if said[1] else not open_
+    assert said_pairs(said[1]) == open_ if said[1] else not open_
     assert candidates is not None or open_           # both ways of saying it are read
 
 
@@ -1185,11 +1186,16 @@ def test_advice_after_timed_readings_starts_after_them_and_offers_the_repeat(see
     assert [m.label for m in again] == ["K4 again, right after these data"] and again[0].name == "K4_AGAIN"
 
 
+def _to_a_tenth_um(machine, **more):
+    """The machine with its ball's Y given to 0.1 µm (-0.2791 mm), and ``more`` replaced."""
+    from dataclasses import replace
+    return replace(machine, ball=(machine.ball[0], -0.2791, machine.ball[2]), **more)
+
+
 def test_the_json_s_ball_is_the_one_the_printed_command_measures_at(seed_machine):
     """A ball given to 0.1 µm (-0.2791 mm) halved has five decimals: the JSON rounds it as the
     command measure-program is given, so a script reading either measures at one place."""
-    from dataclasses import replace
-    machine = replace(seed_machine, ball=(seed_machine.ball[0], -0.2791, seed_machine.ball[2]))
+    machine = _to_a_tenth_um(seed_machine)
     for m in Advisor(machine).candidates:
         given = re.search(r"--ball (\S+)", m.command("compgen", "m.toml", ".H"))[1]
         assert m.to_dict()["ball"] == [float(v) for v in given.split(",")], m.label
@@ -1200,9 +1206,7 @@ def test_what_was_measured_is_not_advised_as_new(seed_machine):
     advised there and back again, nor as a new measurement at the same place; only as a
     repeat right after (the data are timed). With nothing measured, a measurement's clock
     starts at 0 s, as a path's does."""
-    from dataclasses import replace
-    machine = replace(seed_machine, ball=(seed_machine.ball[0], -0.2791, seed_machine.ball[2]),
-                      probe_length=seed_machine.probe_length + 0.0004)
+    machine = _to_a_tenth_um(seed_machine, probe_length=seed_machine.probe_length + 0.0004)
     measured = generate(machine, ["K1", "K4"], back=True)
     offered = [m.label for m in Advisor(machine, measured).candidates]
     assert not {"K1 there and back", "K4 there and back", "K1", "K4"} & set(offered), offered

@@ -305,10 +305,15 @@ def test_the_same_fit_is_not_applied_twice(fitted, tmp_path, controller):
     assert not again.exists()
 
 
-def _swap_dx_dy(text):
+def _table(text):
+    """An R-test CSV's lines, its header's index and the header's column names."""
     lines = text.splitlines()
     head = next(i for i, ln in enumerate(lines) if ln.startswith("path,"))
-    cols = lines[head].split(",")
+    return lines, head, lines[head].split(",")
+
+
+def _swap_dx_dy(text):
+    lines, head, cols = _table(text)
     ix, iy = cols.index("dX"), cols.index("dY")
     out = lines[:head + 1]
     for ln in lines[head + 1:]:
@@ -319,9 +324,7 @@ def _swap_dx_dy(text):
 
 
 def _in_mm(text):
-    lines = text.splitlines()
-    head = next(i for i, ln in enumerate(lines) if ln.startswith("path,"))
-    cols = lines[head].split(",")
+    lines, head, cols = _table(text)
     idx = [cols.index(c) for c in ("dX", "dY", "dZ")]
     out = lines[:head + 1]
     for ln in lines[head + 1:]:
@@ -347,9 +350,7 @@ def test_a_fit_that_does_not_explain_its_data_writes_no_edit(fitted, tmp_path, d
         assert code == 0, err
         assert ("likely in mm" in err) == (data is _in_mm), err
         if data is _in_mm:         # the spread said is the file's: its largest column range, as µm
-            lines = csv.read_text().splitlines()
-            head = next(i for i, ln in enumerate(lines) if ln.startswith("path,"))
-            cols = lines[head].split(",")
+            lines, head, cols = _table(csv.read_text())
             rows = [ln.split(",") for ln in lines[head + 1:]]
             spread = max(np.ptp([float(r[cols.index(c)]) for r in rows]) for c in ("dX", "dY", "dZ"))
             assert f"the readings spread over {spread:.3g} µm at most" in err, (spread, err)

@@ -50,8 +50,8 @@ def _truth(machine, base, when: str, corrected: dict) -> dict:
     return {n: v - corrected.get(n, 0.0) for n, v in t.items()}
 
 
-def _session(machine, truth, paths, seed, name):
-    d = simulate(machine, truth, generate(machine, paths), 0.5, np.random.default_rng(seed))
+def _session(machine, truth, paths, seed, name, noise_um=0.5):
+    d = simulate(machine, truth, generate(machine, paths), noise_um, np.random.default_rng(seed))
     return replace(d, source=name, sha256=f"{seed:064x}")
 
 
@@ -85,19 +85,27 @@ def _record(url, year):
     return store
 
 
-def _check(store, year, when, seed):
-    """A K4-only check measured on ``when`` against the last calibration before it."""
-    return _checked(store, year, when, seed)[0]
+def _check(store, year, when, seed, moved=None, noise_um=0.5):
+    """A K4-only check measured on ``when`` against the last calibration before it; ``moved``:
+    location errors moved beyond the year's story (name → mm or rad)."""
+    return _checked(store, year, when, seed, moved, noise_um)[0]
 
 
-def _checked(store, year, when, seed):
+def _checked(store, year, when, seed, moved=None, noise_um=0.5):
     """``_check``'s result and the check's own fit."""
     machine, base, _, (_, corrects) = year
     corrected = corrects if when >= EDIT_DATE else {}
-    d = _session(machine, _truth(machine, base, when, corrected), ["K4"], seed, f"check{seed}.csv")
+    truth = _truth(machine, base, when, corrected)
+    truth = {n: v + (moved or {}).get(n, 0.0) for n, v in truth.items()}
+    d = _session(machine, truth, ["K4"], seed, f"check{seed}.csv", noise_um)
     fit = identify(machine, [d], location_model(machine))
     calibration, entries, edits = H.last_calibration(store, machine, before=H.taken_at(when))
     return H.check(machine, fit, [d], calibration, entries, edits, H.taken_at(when)), fit
+
+
+def _trend_rows(text, month="2026-"):
+    """The trend's rows of ``month`` as (date, whether the row is an edit), in their order."""
+    return [(ln[:10], ln[12:23].strip() == "edit") for ln in text.splitlines() if ln.startswith(month)]
 
 
 def _year_checks(store, year):
@@ -126,7 +134,7 @@ def _year_checks(store, year):
     assert uncorrected.paths["K4"].startswith("FAIL") and "not corrected" in uncorrected.advice[0]
     text = H.trend_text(t)
     # the rows in time: the edit of 2 July between the fits of July and August
-    rows = [(ln[:10], ln[12:23].strip() == "edit") for ln in text.splitlines() if ln.startswith("2026-")]
+    rows = _trend_rows(text)
     assert rows == ([(f"2026-{m:02d}-01", False) for m in range(1, 8)] + [("2026-07-02", True)]
                     + [(f"2026-{m:02d}-01", False) for m in range(8, 13)]), text
     return text
@@ -889,15 +897,8 @@ def test_an_unknown_machine_is_refused_naming_the_first_five_recorded(tmp_path):
 def test_a_failed_check_names_the_change_furthest_beyond_its_own_limit(year, tmp_path):
     """YOC 2 times its limit away (10 µm of 5) and BOA 3 times (30″ of 10″): both fail, and
     the advice names BOA as moved most, each change against the limit of its own unit."""
-    machine, base, _, _ = year
-    when = "2026-05-10T10:00"
     with _record(tmp_path / "h.sqlite", year) as store:
-        truth = _truth(machine, base, when, {})
-        truth = {**truth, "YOC": truth["YOC"] + 10 * UM, "BOA": truth["BOA"] + 30 * ARCSEC}
-        d = _session(machine, truth, ["K4"], 105, "moved.csv")
-        fit = identify(machine, [d], location_model(machine))
-        calibration, entries, edits = H.last_calibration(store, machine, before=H.taken_at(when))
-        checked = H.check(machine, fit, [d], calibration, entries, edits, H.taken_at(when))
+        checked = _check(store, year, "2026-05-10T10:00", 105, {"YOC": 10 * UM, "BOA": 30 * ARCSEC})
     failed = {c.param: abs(c.change) / c.limit for c in checked.changes if c.status == "fail"}
     assert set(failed) == {"YOC", "BOA"} and 1.8 < failed["YOC"] < 2.5 < failed["BOA"] < 3.3, failed
     assert any(a.startswith("re-calibrate: ") and "(BOA, " in a and ", most)" in a for a in checked.advice), \
@@ -907,15 +908,8 @@ def test_a_failed_check_names_the_change_furthest_beyond_its_own_limit(year, tmp
 def test_a_change_beyond_its_limit_but_within_its_noise_asks_to_measure_more(year, tmp_path):
     """YOC 7 µm away (limit 5 µm) measured with a noisy check (12 µm): beyond its limit but
     within 3 σ: unsure, and the advice asks to measure more, naming it."""
-    machine, base, _, _ = year
-    when = "2026-05-10T10:00"
     with _record(tmp_path / "h.sqlite", year) as store:
-        truth = _truth(machine, base, when, {})
-        truth = {**truth, "YOC": truth["YOC"] + 7 * UM}
-        d = simulate(machine, truth, generate(machine, ["K4"]), 12.0, np.random.default_rng(106))
-        fit = identify(machine, [d], location_model(machine))
-        calibration, entries, edits = H.last_calibration(store, machine, before=H.taken_at(when))
-        checked = H.check(machine, fit, [d], calibration, entries, edits, H.taken_at(when))
+        checked = _check(store, year, "2026-05-10T10:00", 106, {"YOC": 7 * UM}, noise_um=12.0)
     unsure = [c for c in checked.changes if c.status == "unsure"]
     assert [c.param for c in unsure] == ["YOC"] and not checked.passed
     assert ("measure more (all paths, or the check path twice): YOC may have moved beyond its limit, "
@@ -932,6 +926,5 @@ def test_a_fit_measured_at_the_edit_s_instant_follows_it_in_the_trend(year, tmp_
         t = H.trend(store, machine)
     same = next(e for e in t.entries if e.taken == EDIT_DATE)
     assert same.corrected == pytest.approx(dict(corrects))
-    rows = [(ln[:10], ln[12:23].strip() == "edit") for ln in H.trend_text(t).splitlines()
-            if ln.startswith("2026-07")]
+    rows = _trend_rows(H.trend_text(t), "2026-07")
     assert rows == [("2026-07-01", False), ("2026-07-02", True), ("2026-07-02", False)], rows
