@@ -85,6 +85,9 @@ CASES = {
     # two drifts at once: YOC and AOC growing through the session
     "two drifts: YOC 3 µm and AOC 6″, τ = 15 min": ({"YOC:e15": 3 * UM, "AOC:e15": 6 * ARCSEC},
                                                    frozenset({"YOC:e15", "AOC:e15"})),
+    # the device and the machine at once: the gain told beside the machine's best
+    "X sensor gain 1.5 % and C 2/rev angular 15″": ({"gain_X": 0.015, "ECC:h2c": 15 * ARCSEC},
+                                                    frozenset({"gain_X", "ECC:h2"})),
     # an A encoder's 4/rev: on a tilting axis too, every order of the catalogue is tried
     "A encoder 4/rev, 4″": ({"EAA:h4c": 4 * ARCSEC}, "EAA:h4"),
     # three at once: a candidate still significant once the best is added is a second effect
@@ -158,8 +161,9 @@ def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
         elif found.unexplained:
             named.append("unexplained")
             break
-        elif found.device_blamed:      # the user calibrates the R-test and measures everything again
-            named.append(f"device {found.device_blamed}")
+        elif found.significant_devices:    # blamed, or significant beside the machine's best:
+            # the user calibrates the R-test and measures everything again
+            named.append(f"device {found.device_blamed or found.significant_devices[0].effect}")
             truth = {k: v for k, v in truth.items() if not k.startswith(GAIN)}
             data = [measure(machine, truth, generate(machine, ["K4", "K1", "K2"]), kind, rng, outside)]
             followed.append("calibrated, K4+K1+K2 again")
@@ -219,7 +223,7 @@ def main() -> None:
             continue
         kind = "ar0.9" if "AR(1)" in name else "white"
         outside = expect if isinstance(expect, tuple) else None
-        used = replace(machine, gain_u=GAIN_U) if expect == "device" else machine
+        used = replace(machine, gain_u=GAIN_U) if any(p.startswith(GAIN) for p in hidden) else machine
         out = discover(used, {**TABLE4, **hidden}, kind, np.random.default_rng(11), outside,
                        blind="without the sides" in name)
         if outside is not None:

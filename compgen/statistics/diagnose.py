@@ -34,7 +34,17 @@ from .ranking import Row, Whitening, effect_columns, rank, started_reversals
 from .results import FitResult
 from .separation import separating, telling_apart
 from .signature import products
-from .significance import ALPHA, COND_LIMIT, VISIBLE, lack_of_fit, p_value, rivals, still_significant, tall_qr
+from .significance import (
+    ALPHA,
+    COND_LIMIT,
+    VISIBLE,
+    lack_of_fit,
+    p_beside,
+    p_value,
+    rivals,
+    still_significant,
+    tall_qr,
+)
 from .spectrum import Line, strongest_lines
 
 if TYPE_CHECKING:        # the type only: advice writes programs, a layer above
@@ -320,8 +330,12 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     bias, units, signature_um = _bias(fit, res, effects, ranked)
 
     significant = [c for c in out if c.significant]
+    # the best machine effect's whitened columns: its rivals and second effects are tested
+    # beside it, and so are the gains with them
+    first = noise.white(_columns(machine, res, made, significant[0].effect)) if significant else None
     blamed = _blamed(devices, ranked[significant[0].effect] if significant else None, rss_w / dof, alpha)
-    devices = _beside_blamed(devices, blamed, res, noise, rss_w / dof, alpha)
+    if blamed is not None:
+        devices = _told_beside(devices, r[:, None][:, :0], res, noise, alpha, blamed)
     seen = [d for d in devices if d.significant]
     best_sum_sq = max([ranked[c.effect].drop for c in significant[:1]] + [d.drop for d in seen], default=0.0)
     misfit, share = (), None
@@ -336,8 +350,11 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
                                _outside_line(lines, device, misfit, alpha, best_sum_sq))
 
     # rivals of a curve that fits a little of an unexplained misfit by chance: not pursued
-    out, rival = _rivals(machine, res, [] if unexplained else significant, out, ranked, noise, made, carried,
-                         model_effects, alpha, advising)
+    out, rival = _rivals(machine, res, [] if unexplained else significant, first, out, ranked, noise, made,
+                         carried, model_effects, alpha, advising)
+    if blamed is None and first is not None:     # beside the machine's best and its second effects
+        seconds = [noise.white(_columns(machine, res, made, e)) for e in rival["after_best"]]
+        devices = _told_beside(devices, np.column_stack([first, *seconds]), res, noise, alpha)
     return Diagnosis(
         machine=machine.name, fit_file=fit_file, model=fit.model,
         rms_um=float(np.sqrt(rss / r.size)) * 1e3, sigma_um=float(np.sqrt(rss / dof)) * 1e3,
@@ -369,35 +386,63 @@ def _blamed(devices: Sequence[DeviceCandidate], best: Row | None, sigma2_w: floa
     return None
 
 
-def _beside_blamed(devices: list[DeviceCandidate], blamed: str | None, res: _Residual, noise: Whitening,
-                   sigma2: float, alpha: float) -> list[DeviceCandidate]:
-    """The other device parameters beside the blamed one: significant only where they stay so
-    once it is added (as a second machine effect after the best), and each told as estimated
-    with it (and with those that stay). Alone, one sensor's gain takes a share of another's:
-    an X gain of 1.5 % made Z's read −0.6 ± 0.15 % (p 0.006), and beside a Z gain of −1.5 %
-    read 2.5 % itself. ``sigma2``: the whitened residual's variance."""
-    if blamed is None:
-        return devices
-    cols = device_columns(res.pred, res.rtest)
-    first = noise.white(cols[blamed])[:, None]
+def _told_beside(devices: list[DeviceCandidate], beside: np.ndarray, res: _Residual, noise: Whitening,
+                 alpha: float, lead: str | None = None) -> list[DeviceCandidate]:
+    """The device parameters told beside what explains the misfit first: the blamed gain
+    (``lead``), or, where none is, the machine's best candidate and the second effects that
+    stay significant beside it (whitened columns ``beside``), and then the gain that stays
+    most significant beside those. Significant only where they stay so, one after the other,
+    and each told as estimated with them (and with the gains that stay). Alone, a gain takes
+    a share of a misfit it does not cause: an X gain of 1.5 % made Z's read −0.6 ± 0.15 %
+    (p 0.006), and beside a Z gain of −1.5 % read 2.5 % itself; a calibrated R-test beside an
+    unmodelled 15″ 2/rev angle of C read X −56 ± 1.7 % (p < 1e-300), and beside the best of
+    three machine effects X was significant, where the other two took it back."""
+    cols = {e: noise.white(c)[:, None] for e, c in device_columns(res.pred, res.rtest).items()}
     rw = noise.off(noise.white(res.r))
-    others = [d for d in devices if d.significant and d.effect != blamed]
-    prods = {d.effect: _beside(noise.white(cols[d.effect])[:, None], noise, first, rw) for d in others}
-    kept = still_significant(noise.Q, first, rw, prods, alpha) if prods else set()
-    joint = [blamed, *(d.effect for d in others if d.effect in kept)]
+    machine = _orthonormal(noise.off(beside))     # rivals among second effects are one column
 
-    def together(names):          # values and σ, %, of these gains fitted with the model at once
-        C = noise.off(np.column_stack([noise.white(cols[e]) for e in names]))
+    def tested(names, added):
+        """These gains' p-values beside the model and ``added``, Bonferroni over them."""
+        basis = _orthonormal(noise.off(added))
+        prods = {e: _beside(cols[e], noise, basis, rw) for e in names}
+        return p_beside(noise.Q, basis, rw, prods) if prods else {}
+
+    # beside the machine's effects every gain the model leaves visible is tested again: alone,
+    # a gain is tested against a residual the misfit it does not cause inflates
+    seen = [d.effect for d in devices if (d.significant if lead else d.visibility >= VISIBLE)]
+    p = {} if lead else tested(seen, machine)
+    lead = lead or min((e for e in seen if p[e] < alpha), key=p.get, default=None)
+    if lead:
+        p |= tested([e for e in seen if e != lead], np.column_stack([machine, cols[lead]]))
+    joint = [lead, *(e for e in seen if e != lead and p[e] < alpha)] if lead else []
+
+    def together(names):
+        """Values and σ, %, of these gains fitted at once with the model and the machine's
+        effects, σ from the residual all of them leave: the misfit they explain is not noise."""
+        C = noise.off(np.column_stack([*(cols[e] for e in names), machine]))
         amp = np.linalg.lstsq(C, rw, rcond=None)[0]
-        std = np.sqrt(np.diag(np.linalg.inv(C.T @ C)) * sigma2)
-        return {e: (float(a) * 100.0, float(s) * 100.0) for e, a, s in zip(names, amp, std, strict=True)}
+        left = rw - C @ amp
+        std = np.sqrt(np.diag(np.linalg.inv(C.T @ C)) * float(left @ left) / (res.dof - C.shape[1]))
+        return {e: (float(a) * 100.0, float(s) * 100.0) for e, a, s in zip(names, amp, std, strict=False)}
 
     told = together(joint)
     for d in devices:
         if d.effect not in told:
             told[d.effect] = together([*joint, d.effect])[d.effect]
-    return [replace(d, value=told[d.effect][0], std=told[d.effect][1],
-                    significant=d.significant and (d.effect in joint)) for d in devices]
+    return [replace(d, value=told[d.effect][0], std=told[d.effect][1], p_value=p.get(d.effect, d.p_value),
+                    significant=d.effect in joint) for d in devices]
+
+
+def _orthonormal(M: np.ndarray) -> np.ndarray:
+    """Orthonormal columns spanning M's (those of M's singular values above 1e-9 of its
+    largest): what a p-value beside M takes, where two of M's effects nearly coincide."""
+    U, s, _ = np.linalg.svd(M, full_matrices=False)
+    return U[:, s > 1e-9 * s.max()] if s.size and s.max() > 0 else M[:, :0]
+
+
+def _columns(machine: Machine, res: _Residual, made: dict[str, np.ndarray], name: str) -> np.ndarray:
+    """A candidate's columns: those step 3 made (a reversal's carry its start sides), or a walk."""
+    return made[name] if name in made else effect_columns(machine, res.poses, resolve(machine, name))
 
 
 def _beside(C: np.ndarray, noise: Whitening, added: np.ndarray, rw: np.ndarray) -> tuple:
@@ -543,16 +588,17 @@ def _bias(fit: FitResult, res: _Residual, effects: Sequence[Effect], ranked: dic
     return bias, units, signature_um
 
 
-def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out: list[Candidate],
-            ranked: dict[str, Row], noise: Whitening, made: dict[str, np.ndarray], carried: tuple,
-            model_effects: Sequence[Effect], alpha: float,
+def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], first: np.ndarray | None,
+            out: list[Candidate], ranked: dict[str, Row], noise: Whitening, made: dict[str, np.ndarray],
+            carried: tuple, model_effects: Sequence[Effect], alpha: float,
             advising: Advisor | None) -> tuple[list[Candidate], dict]:
     """Step 5: which significant candidates stay so once the best is added (a second
     effect, never a rival: the data tell it from the best), which are the best's rivals (the
     data cannot tell them apart), and what would tell them apart. Returns the candidates
     (equivalent rivals reordered) and the ``Diagnosis`` fields. ``made``: the columns step 3
     made (the reversals with start sides, and its best); ``carried``: (best, products) of
-    step 3's last pass, its columns beside the model's, if it carried them."""
+    step 3's last pass, its columns beside the model's, if it carried them; ``first``: the
+    best's whitened columns."""
     poses, r = res.poses, res.r
     after_best, rival_names, rivals_separated_by, rivals_open = (), (), (), {}
     if len(significant) > 1:
@@ -560,8 +606,6 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], out:
         # the poses (their columns would take a walk each); a reversal with start sides,
         # whose columns carry them, from the columns step 3 made
         best = significant[0].effect
-        first = noise.white(made[best] if best in made
-                            else effect_columns(machine, poses, resolve(machine, best)))
         others = [resolve(machine, c.effect) for c in significant[1:]]
         rw = noise.off(noise.white(r))
         walked = [e for e in others if e.name not in made]

@@ -10,6 +10,7 @@ from .. import me
 from ..model.effects import effect_name
 from ..units import three, three_header
 from .diagnose import Diagnosis
+from .significance import said_p
 
 if TYPE_CHECKING:        # the type only: advice writes programs, a layer above
     from ..controllers.advice import Measurement
@@ -47,7 +48,7 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
     for i, c in enumerate(visible[:top], 1):
         amp = " ".join(f"{a:+.2f}" for a in c.amplitude)
         verdict = "SIGNIFICANT" if c.significant else "not significant"
-        p = f"p = {c.p_value:.2g}" if c.p_value > 0 else "p < 1e-300"
+        p = said_p(c.p_value)
         lines.append(f"  {i:>2}. {c.effect:<12} RMS → {c.rms_after_um:.3f} µm   {p}  {verdict}")
         lines.append(f"      {c.description} (≈ {amp} {c.unit}); likely cause: {c.cause}")
         if c.confounded_with:
@@ -229,22 +230,28 @@ def _told(d: Diagnosis, m: Measurement) -> set[tuple[str, str]]:
 
 
 def _devices(d: Diagnosis) -> list[str]:
-    """The R-test's own gains, where one is significant: blamed, or outweighed by the machine."""
+    """The R-test's own gains, where one is significant: blamed, or beside the machine's best."""
     seen = d.significant_devices
     if not seen:
         return []
-    said = "; ".join(f"{c.effect} {c.value:+.2f} ± {c.std:.2f} % (p = {c.p_value:.2g})" for c in seen)
     c = d.blamed
     if c is None:
-        return ["", f"  The device: {said} significant, but the best machine effect explains more; "
-                    "no device parameter is blamed."]
+        said = "; ".join(f"{o.effect} {o.value:+.2f} ± {o.std:.2f} % ({said_p(o.p_value)})" for o in seen)
+        sensors = " and ".join(o.effect[-1] for o in seen)
+        verb = "stays" if len(seen) == 1 else "stay"
+        return ["", f"  The device: {said} {verb} significant beside the machine's effects (the best and "
+                    "those significant beside it), which explain more: no device parameter is blamed for "
+                    "the misfit, but "
+                    f"calibrate the R-test's {sensors} sensor{'s' if len(seen) > 1 else ''} against its "
+                    "reference (its calibration: [rtest] gain_u in the machine file) before these data "
+                    "correct a control, then measure again."]
     than = f"as well as {d.significant[0].effect}" if d.significant else "where no machine effect does"
     return ["", f"  The device: {c.description}, {c.value:+.2f} ± {c.std:.2f} % ({c.effect}), explains these "
                 f"data {than}: no machine effect is named found, and nothing here corrects a control for it.",
             f"  Calibrate the R-test's {c.effect[-1]} sensor against its reference (its calibration: "
             "[rtest] gain_u in the machine file), then measure again and fit the new data alone."
-            + "".join(f" {o.effect} {o.value:+.2f} ± {o.std:.2f} % stays significant beside it (p = "
-                      f"{o.p_value:.2g}): calibrate that sensor too." for o in seen if o is not c)]
+            + "".join(f" {o.effect} {o.value:+.2f} ± {o.std:.2f} % stays significant beside it "
+                      f"({said_p(o.p_value)}): calibrate that sensor too." for o in seen if o is not c)]
 
 
 def _device(d: Diagnosis) -> str:

@@ -56,6 +56,10 @@ def fit_gate(machine: Machine, data: Sequence[RTestData], fit: FitResult) -> lis
         reasons.append("diagnose finds effects the model misses: "
                        + ", ".join(c.effect for c in found.significant[:3])
                        + " (run diagnose, add the effect with fit --add, and refit)")
+        if found.significant_devices:       # a second cause, the device's: no refit removes it
+            reasons.append("the R-test's own " + ", ".join(
+                f"{c.effect} {c.value:+.2f} ± {c.std:.2f} %" for c in found.significant_devices)
+                + " stays significant beside them: calibrate the device and measure again")
     return reasons
 
 

@@ -69,6 +69,12 @@ def p_value(drop: float, k: int, rss: float, dof: int, tried: int) -> float:
     return min(1.0, f_sf(F, k, dof - k) * tried)
 
 
+def said_p(p: float) -> str:
+    """A p-value as the texts write it: two digits, and below double precision's smallest
+    normal number (where its digits mean nothing) "p < 1e-300"."""
+    return f"p = {p:.2g}" if p >= 1e-300 else "p < 1e-300"
+
+
 # The two distributions diagnose needs, in the standard library's arithmetic (scipy.special
 # alone costs diagnose more start-up than numpy's import; the tests hold these to scipy's).
 
@@ -164,7 +170,13 @@ def chi2_isf(alpha: float, k: int) -> float:
 def still_significant(Q: np.ndarray, added: np.ndarray, r: np.ndarray, prods: dict,
                                 alpha: float) -> set[str]:
     """Which effects stay significant once the model (orthonormal columns ``Q``) is joined by
-    the columns ``added``, first order; Bonferroni over all of them. Each effect is given by
+    the columns ``added``, first order; Bonferroni over all of them (``p_beside``)."""
+    return {name for name, p in p_beside(Q, added, r, prods).items() if p < alpha}
+
+
+def p_beside(Q: np.ndarray, added: np.ndarray, r: np.ndarray, prods: dict) -> dict[str, float]:
+    """Each effect's p-value once the model (orthonormal columns ``Q``) is joined by the
+    columns ``added``, first order; Bonferroni over all of them. Each effect is given by
     its products with ``[Q | added]`` and the residual, name → (cᵀc, [Q | added]ᵀc, cᵀr),
     ``r`` orthogonal to Q: what one walk of the poses makes for every effect
     (``signature.products``), where the columns themselves would cost a walk each. Only the
@@ -183,7 +195,7 @@ def still_significant(Q: np.ndarray, added: np.ndarray, r: np.ndarray, prods: di
         ac = np.linalg.solve(Ra.T, bc - QB.T @ qc)
         vis_cols, drop, _ = explained(cc, np.vstack([qc, ac]), cr - ac.T @ ar)
         drops.append((name, drop, int((vis_cols >= VISIBLE).sum())))
-    return {name for name, drop, k in drops if k and p_value(drop, k, rss, dof, len(drops)) < alpha}
+    return {name: p_value(drop, k, rss, dof, len(drops)) if k else 1.0 for name, drop, k in drops}
 
 
 def rivals(best: tuple[float, int], others: dict[str, tuple[float, int]], sigma2_w: float, alpha: float,

@@ -19,7 +19,7 @@ import numpy as np
 from ..model.kinematics import Poses
 from ..model.machine import Machine
 from ..search import golden_least
-from .significance import f_sf
+from .significance import f_sf, said_p
 
 MIN_PITCH_MM = 2.0     # shorter periods: below what R-test paths sample along an axis
 MIN_PERIOD_S = 60.0    # shorter periods in time: an R-test reads settled poses, not vibration
@@ -46,9 +46,8 @@ class Line:
     def text(self) -> str:
         per = (f"pitch {self.period:.3f} mm" if self.unit == "mm" else
                f"{self.period:g}/rev" if self.unit == "/rev" else f"period {self.period:.0f} s")
-        p = f"p = {self.p_value:.2g}" if self.p_value > 0 else "p < 1e-300"
         return (f"{self.direction} against {self.against}: {per}, amplitude {self.amplitude_um:.2f} µm, "
-                f"removes {self.share:.0%} of the residual ({p})")
+                f"removes {self.share:.0%} of the residual ({said_p(self.p_value)})")
 
     def to_dict(self) -> dict:
         return {"against": self.against, "direction": self.direction, "period": self.period,
