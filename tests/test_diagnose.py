@@ -1049,6 +1049,23 @@ def test_a_gain_that_a_second_machine_effect_also_explains_is_left_to_the_next_r
     assert abs(d.blamed.value - 1.5) < 3 * d.blamed.std < 1.0, d.blamed
 
 
+def test_a_gain_s_sigma_is_its_scatter_over_sessions(seed_machine, poses):
+    """On clean sessions (a calibrated R-test, nothing missing) each gain is told alone beside
+    the model: over 16 noise draws its values scatter as the σ it reports says (within the
+    spread 16 draws allow), about 0."""
+    told = []
+    for seed in range(100, 116):
+        data = [_gained(seed_machine, poses, (0, 0, 0), seed)]
+        d = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM)
+        assert not d.significant and not d.significant_devices
+        told.append([(c.value, c.std) for c in d.devices])
+    value, std = np.array(told).transpose(2, 0, 1)
+    assert np.all((0.6 < value.std(axis=0, ddof=1) / std.mean(axis=0))
+                  & (value.std(axis=0, ddof=1) / std.mean(axis=0) < 1.6)), (value, std)
+    assert np.all(abs(value.mean(axis=0)) < 3 * std.mean(axis=0) / 4), value
+    assert np.all((0.05 < std) & (std < 0.5))       # % of the displacement, as the text prints it
+
+
 def test_the_residual_against_a_tilting_axis_is_its_quadratic_trend_in_micrometres(seed_machine):
     """A tilting axis (A, not a whole turn) has no terms per revolution: its row is the RMS
     over the readings of the least-squares quadratic in A, per direction. A residual that is
