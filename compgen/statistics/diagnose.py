@@ -335,7 +335,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     first = noise.white(_columns(machine, res, made, significant[0].effect)) if significant else None
     blamed = _blamed(devices, ranked[significant[0].effect] if significant else None, rss_w / dof, alpha)
     if blamed is not None:
-        devices = _told_beside(devices, r[:, None][:, :0], res, noise, alpha, blamed)
+        devices = _told_beside(devices, np.empty((r.size, 0)), res, noise, alpha, blamed)
     seen = [d for d in devices if d.significant]
     best_sum_sq = max([ranked[c.effect].drop for c in significant[:1]] + [d.drop for d in seen], default=0.0)
     misfit, share = (), None
