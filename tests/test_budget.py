@@ -50,6 +50,7 @@ def test_the_gain_sensitivity_is_the_refit_of_scaled_readings(seed_machine, sess
     d = sessions[0]
     fit = identify(seed_machine, [d])
     s = gain_sensitivity(seed_machine, [d], fit)
+    assert s.shape == (3, len(fit.free))       # one row per sensor, X Y Z
     g = 1e-3
     moved = identify(seed_machine, [replace(d, deviation=d.deviation * np.array([1 + g, 1, 1]))])
     got = np.array([moved.parameters[n].value - fit.parameters[n].value for n in fit.free])

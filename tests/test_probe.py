@@ -433,3 +433,16 @@ def test_a_path_is_probed_at_the_probe_sections_poses_twelve_unless_said(tmp_pat
         probed, k4 = probe_poses(machine, ["K4"]), generate(machine, ["K4"])
         assert len(probed) == want
         np.testing.assert_array_equal(probed.q[[0, -1]], k4.q[[0, -1]])
+
+
+def test_a_probe_log_saved_with_a_byte_order_mark_is_read_as_a_probe_log(tmp_path):
+    """An editor on Windows saves UTF-8 with a byte-order mark: the log is still told from an
+    R-test CSV by its first line and gives the same centres as without it."""
+    from compgen.configuration.session import read_data
+    machine = load_machine(SEED_MACHINE)
+    plain = write_log(tmp_path / "k.log")
+    marked = tmp_path / "bom.log"
+    marked.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    a, b = read_data(plain, machine), read_data(marked, machine)
+    assert a.device == b.device == "probe"
+    np.testing.assert_array_equal(a.deviation, b.deviation)
