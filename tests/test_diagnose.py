@@ -1050,6 +1050,24 @@ def test_a_sensor_gain_beside_a_machine_effect_is_told_beside_it(seed_machine, p
     assert any(f"the R-test's own gain_Z {z.value:+.2f}" in r for r in fit_gate(seed_machine, data, fit))
 
 
+def test_no_gain_is_judged_beside_more_second_effects_than_are_told(seed_machine, poses, monkeypatch):
+    """Where more second effects stay significant than a gain is told beside (each a walk
+    of the poses), the machine's side is far from settled: the gains are told, none called
+    significant. Here a −1.5 % Z gain beside a 15″ 2/rev angle of C: judged beside ECC:h2 and
+    its twelve second effects (the gain's own look-alikes), it is significant; with fewer of
+    them told (a denser session's budget of walks), it is not."""
+    from compgen.statistics import diagnose as module
+    data = [_gained(seed_machine, poses, (0, 0, -0.015), 2, {"ECC:h2c": 15 * ARCSEC})]
+    fit = identify(seed_machine, data)
+    d = diagnose(seed_machine, data, fit, noise_um=NOISE_UM)
+    assert len(d.after_best) > 1 and d.device_blamed is None
+    assert [c.effect for c in d.significant_devices] == ["gain_Z"], d.devices
+    monkeypatch.setattr(module, "SECOND_WALKS", len(poses))       # one second effect told
+    d = diagnose(seed_machine, data, fit, noise_um=NOISE_UM)
+    assert d.after_best and d.device_blamed is None and not d.significant_devices, d.devices
+    assert "The device:" not in report(d)
+
+
 @pytest.mark.parametrize("seed", [1, 2])
 def test_a_gain_that_a_second_machine_effect_also_explains_is_left_to_the_next_round(
         seed_machine, poses, seed):

@@ -70,6 +70,11 @@ SCREEN_POSES = 20_000
 # one s.e. for ρ 0.9 on K4 + K1 + K2), one above quieter, and the family's tail is convex in
 # that: at ρ̂ itself 10 of 200 clean AR(1) ρ 0.9 sessions were flagged, at ρ 3 (α 0.01)
 RHO_MARGIN_SE = 1.0
+# The second effects a gain is told beside, strongest first, as poses × effects walked: each
+# takes a walk of the poses (0.3–1 s at 241 000 poses, where this allows 8; on a K4 + K1 + K2
+# of 723 poses, 2766). Where more stay significant, no gain is judged in that round: it is
+# told, never called significant
+SECOND_WALKS = 2_000_000
 
 
 @dataclass(frozen=True)
@@ -353,8 +358,10 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     out, rival = _rivals(machine, res, [] if unexplained else significant, first, out, ranked, noise, made,
                          carried, model_effects, alpha, advising)
     if blamed is None and first is not None:     # beside the machine's best and its second effects
-        seconds = [noise.white(_columns(machine, res, made, e)) for e in rival["after_best"]]
-        devices = _told_beside(devices, np.column_stack([first, *seconds]), res, noise, alpha)
+        told = max(1, SECOND_WALKS // len(poses))
+        seconds = [noise.white(_columns(machine, res, made, e)) for e in rival["after_best"][:told]]
+        devices = _told_beside(devices, np.column_stack([first, *seconds]), res, noise,
+                               alpha if len(rival["after_best"]) <= told else 0.0)
     return Diagnosis(
         machine=machine.name, fit_file=fit_file, model=fit.model,
         rms_um=float(np.sqrt(rss / r.size)) * 1e3, sigma_um=float(np.sqrt(rss / dof)) * 1e3,
