@@ -1102,6 +1102,18 @@ def test_a_gain_s_sigma_is_its_scatter_over_sessions(seed_machine, poses):
     assert np.all((std > 0.05) & (std < 0.5))       # % of the displacement, as the text prints it
 
 
+def test_the_bonferroni_family_is_every_candidate_and_gain_the_model_leaves_visible(seed_machine, poses):
+    """One family for the machine's candidates and the R-test's gains: its size, said in the
+    text as "N tried", counts every visible candidate and every visible gain (three on an
+    R-test's data)."""
+    data = [_session(seed_machine, poses, HIDDEN["ECC:h2"])]
+    d = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM)
+    visible = [c for c in d.candidates if c.visible]
+    assert len([g for g in d.devices if g.visibility >= 0.01]) == 3
+    assert d.tested == len(visible) + 3, (d.tested, len(visible))
+    assert f"({d.tested} tried; F test, Bonferroni-corrected" in report(d)
+
+
 def test_the_residual_against_a_tilting_axis_is_its_quadratic_trend_in_micrometres(seed_machine):
     """A tilting axis (A, not a whole turn) has no terms per revolution: its row is the RMS
     over the readings of the least-squares quadratic in A, per direction. A residual that is

@@ -60,3 +60,15 @@ def test_three_columns_never_run_together():
     assert three([1.0, 22.5, -333.25]) == "    1.000   22.500 -333.250"
     assert three([8.9, 10.263, 12.676]).split() == ["8.900", "10.263", "12.676"]
     assert three_header(("RMS dX", "dY", "dZ")) == "   RMS dX       dY       dZ"
+
+
+def test_a_long_text_where_a_number_belongs_is_refused_with_its_first_forty_characters():
+    """A whole line pasted where a number belongs is quoted cut at 40 characters, not in full."""
+    from compgen.units import number
+    text = "1.5; DROP TABLE fits; -- " + "x" * 60
+    with pytest.raises(CompgenError) as refused:
+        number(text, "$TC_CARR3 value", "a.spf:2")
+    said = str(refused.value)
+    assert f"$TC_CARR3 value {text[:40] + '...'!r} is not a number" in said and text[40:] not in said
+    with pytest.raises(CompgenError, match=r"value '12x' is not a number"):
+        number("12x", "value", "")
