@@ -10,7 +10,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, FORK_MACHINE, ROOT, UM, measured_under, on_linuxcnc, run
+from conftest import ARCSEC, FORK_MACHINE, HEAD_MACHINE, ROOT, UM, measured_under, on_linuxcnc, run
 from scipy.spatial.transform import Rotation
 
 from compgen.commands.compare import compare
@@ -522,7 +522,7 @@ def test_sinumerik_edits_of_a_head_against_hand_computed_records(tmp_path, case)
         v1 = [0, -np.sin(np.radians(8 * sec)), np.cos(np.radians(8 * sec))]       # C turned 8" about X
         v2 = [-np.sin(np.radians(6 * sec)), np.cos(np.radians(6 * sec)), 0]       # B turned 6" about Z
     else:
-        machine = _on_sinumerik(tmp_path, ROOT / "machines" / "bc-swivel-head-table.toml",
+        machine = _on_sinumerik(tmp_path, HEAD_MACHINE,
                                 "{ B = [0.0, 1.0, 0.0], C = [0.0, 0.0, -1.0] }")
         truth = {"XOB": 10 * UM, "ZOB": 20 * UM, "AOB": 5 * ARCSEC, "XOC": 5 * UM, "YOC": -7 * UM,
                  "BOC": 7 * ARCSEC}
@@ -565,7 +565,7 @@ def test_heidenhain_edits_of_a_head_against_hand_computed_rows(tmp_path, case):
     written for a head: the sign check's poses are named."""
     sec = 1 / 3600
     if case == "swivel-itnc530":
-        machine = load_machine(ROOT / "machines" / "bc-swivel-head-table.toml")
+        machine = load_machine(HEAD_MACHINE)
         ctl, current = "itnc530", SWIVEL_TAB
     else:
         machine = load_machine(FORK_MACHINE)
@@ -612,8 +612,8 @@ ROUNDS = {
     "linuxcnc-maxkins": (None, {"XOW": 4 * UM, "YOW": -6 * UM, "ZOW": 9 * UM, "ZOB": 30 * UM}),
     "linuxcnc-5axiskins": (FORK_MACHINE, {"XOW": 4 * UM, "YOW": -6 * UM, "ZOW": 9 * UM, "ZOB": -25 * UM}),
     "sinumerik-T": (FORK_MACHINE, TRUTH),
-    "sinumerik-M": (ROOT / "machines" / "bc-swivel-head-table.toml", TRUTH),
-    "itnc530": (ROOT / "machines" / "bc-swivel-head-table.toml", TRUTH),
+    "sinumerik-M": (HEAD_MACHINE, TRUTH),
+    "itnc530": (HEAD_MACHINE, TRUTH),
 }
 SWIVEL_TAB_HELD = """BEGIN KINEMATIC_BC.TAB MM
 NR  KEY       AXIS  COORD        DOC
@@ -696,3 +696,26 @@ def test_a_longer_nest_is_advised_with_the_ball_where_the_machine_file_has_it(tm
     for m in longer:
         assert m.ball == pytest.approx(machine.ball) and (m.poses.ball == m.ball).all(), m.label
         assert m.nest == machine.probe_length + 100 and (m.poses.nest == m.nest).all(), m.label
+
+
+def test_a_heads_pivot_stands_where_the_head_carries_it_when_the_table_moves_too(tmp_path):
+    """The motion check's head body is a sphere about the pivot, in the table frame. The
+    pivot is rigid with the nest, so at every pose of every path (the nest at the ball) it
+    stands the pivot-to-nest distance from the ball: on the swivel-head machine as shipped
+    (the table only turns) and with X moved to the table (a travelling table: the table
+    frame's origin then moves, 711 mm over the paths). Taken the wrong way round, the head
+    stood 30–570 mm from the ball instead of 270."""
+    from compgen.model.frames import head_pivots
+    text = (HEAD_MACHINE).read_text()
+    x = re.search(r'\[\[tool\]\]\naxis = "X".*?feed_max = 30000.0\n', text, re.S).group(0)
+    table_x = x.replace("[[tool]]", "[[workpiece]]")
+    moved = text.replace(x, "").replace('[[workpiece]]\naxis = "C"', table_x + '\n[[workpiece]]\naxis = "C"')
+    (tmp_path / "x-table.toml").write_text(moved)
+    shipped = load_machine(HEAD_MACHINE)
+    travelling = load_machine(tmp_path / "x-table.toml")
+    assert [a.name for a in travelling.workpiece] == ["X", "C"]
+    for m in (shipped, travelling):
+        poses = generate(m, list(m.paths))
+        distance = np.linalg.norm(head_pivots(m, poses.q)[:, 0] - poses.ball, axis=1)
+        assert distance == pytest.approx(np.full(len(poses), 150.0 + m.probe_length), abs=1e-9)
+    assert np.ptp(generate(travelling, ["K4"]).q[:, travelling.index("X")]) > 100

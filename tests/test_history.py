@@ -17,7 +17,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import ROOT, UM, run
+from conftest import ROOT, SEED_MACHINE, UM, run
 
 from compgen import history as H
 from compgen.configuration.machine_file import load_machine
@@ -928,3 +928,16 @@ def test_a_fit_measured_at_the_edit_s_instant_follows_it_in_the_trend(year, tmp_
     assert same.corrected == pytest.approx(dict(corrects))
     rows = _trend_rows(H.trend_text(t), "2026-07")
     assert rows == [("2026-07-01", False), ("2026-07-02", True), ("2026-07-02", False)], rows
+
+
+def test_the_drift_defaults_are_those_the_machine_file_doc_gives():
+    """docs/machine-file.md's `[drift]` row names each limit with its default in brackets:
+    a machine file without `[drift]` takes exactly those (the next check due after 90 days)."""
+    from dataclasses import fields
+
+    from compgen.model.machine import Drift
+    row = next(line for line in (ROOT / "docs" / "machine-file.md").read_text().splitlines()
+               if line.startswith("| `[drift]`"))
+    documented = {name: float(value) for name, value in re.findall(r"`(\w+)` \(([\d.]+)\)", row)}
+    assert documented == {f.name: f.default for f in fields(Drift)}, documented
+    assert load_machine(SEED_MACHINE).drift == Drift()
