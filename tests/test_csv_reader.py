@@ -49,7 +49,8 @@ def _move_column(text: str, name: str, to: int) -> str:
 
 @pytest.mark.parametrize("variant", ["as written", "path in the middle", "path last", "CRLF",
                                      "labels of several widths", "no trailing newline",
-                                     "path last, the widest label first, no trailing newline"])
+                                     "path last, the widest label first, no trailing newline",
+                                     "every label empty"])
 def test_the_fast_reader_gives_the_careful_readers_table(tmp_path, monkeypatch, variant):
     text = _session()
     if variant == "path in the middle":
@@ -62,6 +63,9 @@ def test_the_fast_reader_gives_the_careful_readers_table(tmp_path, monkeypatch, 
         text = text.replace("\nK1,", "\nK1long,").replace("\nK2,", "\n  K,")
     elif variant == "no trailing newline":
         text = text.rstrip("\n")
+    elif variant == "every label empty":     # a path column written but never filled in
+        text = "\n".join(line if line.startswith(("#", "path")) else line[line.index(","):]
+                         for line in text.splitlines()) + "\n"
     else:       # the last row's cells reach past the file's end but for the widest label's width
         text = _move_column(text, "path", -1).replace(",K4\n", ",K4long\n", 1).rstrip("\n")
     fast, careful, answered = _both(tmp_path, text, monkeypatch)
