@@ -159,6 +159,9 @@ def test_a_control_character_inside_a_state_value_is_refused_with_its_line(tmp_p
     line = 1 + next(k for k, ln in enumerate(hal.splitlines()) if "x-rot-point 0.003175" in ln)
     with pytest.raises(Exception, match=rf"k.hal:{line}: .*control character"):
         read_text(bad, "state", ansi_ok=True)
+    bad.write_bytes(b"\n" + bad.read_bytes())     # a blank first line counts too
+    with pytest.raises(Exception, match=rf"k.hal:{line + 1}: .*control character"):
+        read_text(bad, "state", ansi_ok=True)
     good = tmp_path / "cr.TAB"                 # a CR alone is a line end where no line ends in LF
     good.write_text((ROOT / "examples" / "itnc530-current.TAB").read_text().replace("\n", "\r"), newline="")
     assert read_text(good, "state", ansi_ok=True)[0].count("\r") == 12
