@@ -43,6 +43,10 @@ class DeviceCandidate:
     p_value: float = 1.0
     significant: bool = False
 
+    def text(self) -> str:
+        """The gain as every text says it: "gain_X +1.31 ± 0.21 %"."""
+        return f"{self.effect} {self.value:+.2f} ± {self.std:.2f} %"
+
     def to_dict(self) -> dict:
         return {"effect": self.effect, "description": self.description, "value": self.value,
                 "std": self.std, "unit": self.unit, "visibility": self.visibility,

@@ -236,7 +236,7 @@ def _devices(d: Diagnosis) -> list[str]:
         return []
     c = d.blamed
     if c is None:
-        said = "; ".join(f"{o.effect} {o.value:+.2f} ± {o.std:.2f} % ({said_p(o.p_value)})" for o in seen)
+        said = "; ".join(f"{o.text()} ({said_p(o.p_value)})" for o in seen)
         sensors = " and ".join(o.effect[-1] for o in seen)
         verb = "stays" if len(seen) == 1 else "stay"
         return ["", f"  The device: {said} {verb} significant beside the machine's effects (the best and "
@@ -250,7 +250,7 @@ def _devices(d: Diagnosis) -> list[str]:
                 f"data {than}: no machine effect is named found, and nothing here corrects a control for it.",
             f"  Calibrate the R-test's {c.effect[-1]} sensor against its reference (its calibration: "
             "[rtest] gain_u in the machine file), then measure again and fit the new data alone."
-            + "".join(f" {o.effect} {o.value:+.2f} ± {o.std:.2f} % stays significant beside it "
+            + "".join(f" {o.text()} stays significant beside it "
                       f"({said_p(o.p_value)}): calibrate that sensor too." for o in seen if o is not c)]
 
 

@@ -50,16 +50,15 @@ def fit_gate(machine: Machine, data: Sequence[RTestData], fit: FitResult) -> lis
         reasons.append(f"{where} and no catalogue effect explains it (run diagnose: it shows where and its "
                        "shape, and how to declare it)")
     elif c := found.blamed:
-        reasons.append(f"the R-test itself explains the misfit as well as any machine effect ({c.effect} "
-                       f"{c.value:+.2f} ± {c.std:.2f} %): calibrate the device and measure again")
+        reasons.append(f"the R-test itself explains the misfit as well as any machine effect ({c.text()}): "
+                       "calibrate the device and measure again")
     elif found.significant:
         reasons.append("diagnose finds effects the model misses: "
                        + ", ".join(c.effect for c in found.significant[:3])
                        + " (run diagnose, add the effect with fit --add, and refit)")
         if found.significant_devices:       # a second cause, the device's: no refit removes it
-            reasons.append("the R-test's own " + ", ".join(
-                f"{c.effect} {c.value:+.2f} ± {c.std:.2f} %" for c in found.significant_devices)
-                + " stays significant beside them: calibrate the device and measure again")
+            reasons.append("the R-test's own " + ", ".join(c.text() for c in found.significant_devices)
+                           + " stays significant beside them: calibrate the device and measure again")
     return reasons
 
 
