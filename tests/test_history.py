@@ -584,6 +584,20 @@ def _first(tables, name):
     (lambda t: _first(t, "sessions").pop("machine_sha256"), "sessions row .*columns are not a session's "
                                                             r"\(machine_sha256\)"),
     (lambda t: _first(t, "fits").update(recorded_by="owner"), "columns are not a fit's"),
+    (lambda t: _first(t, "sessions").update(temperatures='{"hall": "21"}'), "a temperature is not a finite"),
+    (lambda t: _first(t, "sessions").update(temperatures="[21.5]"), "temperatures is not a JSON dict"),
+    (lambda t: _first(t, "fits").update(parameters=json.dumps({"XOC": {"value": float("nan"), "std": 0.1,
+                                                                         "unit": "mm"}})),
+     "a parameter's value or σ is not a finite number"),
+    (lambda t: _first(t, "fits").update(fit_json="{}"), "fit_json is not a fit compgen wrote"),
+    (lambda t: _first(t, "machines").update(id="1"), "machines row '1': no whole-number id"),
+    (lambda t: _first(t, "edits").update(corrects="[]"), "corrects is not a JSON dict"),
+    (lambda t: t.pop("edits"), r"incomplete or damaged \(KeyError\('edits'\)\)"),
+    # rows each valid, twice: what the store keeps once, refused before a store is opened
+    (lambda t: t["fits"].append({**_first(t, "fits"), "id": 10 ** 6}),
+     "fit fit:[0-9a-f]+ of .* is in the export twice"),
+    (lambda t: t["edits"].append({**_first(t, "edits"), "id": 10 ** 6}), "a second edit from one fit"),
+    (lambda t: t["sessions"].append({**_first(t, "sessions")}), "sessions row 1: its id is another row's"),
 ])
 def test_an_import_with_a_damaged_row_is_refused_and_leaves_the_store_as_it_was(tmp_path, year, monkeypatch,
                                                                                damage, says):
@@ -941,3 +955,21 @@ def test_the_drift_defaults_are_those_the_machine_file_doc_gives():
     documented = {name: float(value) for name, value in re.findall(r"`(\w+)` \(([\d.]+)\)", row)}
     assert documented == {f.name: f.default for f in fields(Drift)}, documented
     assert load_machine(SEED_MACHINE).drift == Drift()
+
+
+def test_the_ledger_refuses_what_it_cannot_key_before_writing(tmp_path, year):
+    """The library's own entry points (no CLI in front): a device compgen does not know, a
+    fit made with another machine file, an edit whose fit was never recorded, each one line,
+    and the store left without a row."""
+    machine, _, fits, (efit, corrects) = year
+    store = init(tmp_path / "h.sqlite")[0]
+    when, fit, verdict = fits[0]
+    with pytest.raises(CompgenError, match="device must be one of rtest, probe, not 'laser'"):
+        H.record_fit(store, fit, machine, taken=when, device="laser")
+    other = replace(machine, sha256="0" * 64)
+    with pytest.raises(CompgenError, match="another machine file than the one given"):
+        H.record_fit(store, fit, other, taken=when)
+    with pytest.raises(CompgenError, match=rf"the edit's fit \({efit.marker}\) is not in the history"):
+        H.record_edit(store, efit, machine, "itnc530", corrects, {"EDIT.TAB": "0" * 64}, {}, taken=EDIT_DATE)
+    assert store.rows("SELECT id FROM fits") == [] and store.rows("SELECT id FROM edits") == []
+    store.close()

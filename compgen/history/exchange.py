@@ -88,7 +88,8 @@ def check_export(doc, where: str) -> dict[str, list]:
     try:
         t = {name: list(doc["tables"][name]) for name in _COLUMNS}
     except (KeyError, TypeError) as exc:
-        raise CompgenError(f"the export is incomplete or damaged ({exc!r})", where=where) from None
+        raise CompgenError(f"the export is incomplete or damaged ({exc!r}); nothing was imported",
+                             where=where) from None
     _valid_rows(t, where)
     return t
 
@@ -125,9 +126,13 @@ def _valid_rows(t: dict[str, list], where: str) -> None:
             bad(table, row, f"{key} is not a finite number")
 
     for table, rows in t.items():
+        seen = set()
         for row in rows:
             if not isinstance(row, dict) or type(row.get("id")) is not int:
                 bad(table, row if isinstance(row, dict) else {}, "no whole-number id")
+            if row["id"] in seen:
+                bad(table, row, "its id is another row's")
+            seen.add(row["id"])
             if set(row) != set(_COLUMNS[table]):
                 odd = sorted(set(row) ^ set(_COLUMNS[table]))
                 bad(table, row, f"its columns are not a {table[:-1]}'s ({', '.join(odd)})")
@@ -189,6 +194,20 @@ def _valid_rows(t: dict[str, list], where: str) -> None:
         if c.get("passed") not in (0, 1) or isinstance(c.get("passed"), bool):
             bad("checks", c, "passed is neither 0 nor 1")
         doc("checks", c, "summary", dict)
+    # what the store keeps once (its content keys): twice in one export is refused here, before
+    # any store is opened or made for it
+    machine = {m["id"]: (m["name"], m["serial"]) for m in t["machines"]}
+    of_session = {s["id"]: machine[s["machine_id"]] for s in t["sessions"]}
+    fits, edited = set(), set()
+    for f in t["fits"]:
+        key = (of_session[f["session_id"]], f["marker"])
+        if key in fits:
+            bad("fits", f, f"fit {f['marker']} of {key[0][0]!r} is in the export twice")
+        fits.add(key)
+    for e in t["edits"]:
+        if e["fit_id"] in edited:
+            bad("edits", e, "a second edit from one fit (the store keeps one per fit)")
+        edited.add(e["fit_id"])
 
 
 def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str, int]:
@@ -207,7 +226,8 @@ def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str
         session_machine = {s["id"]: machines[s["machine_id"]] for s in t["sessions"]}
         held = {(session_machine[f["session_id"]], f["marker"]) for f in t["fits"]}
     except (KeyError, TypeError) as exc:
-        raise CompgenError(f"the export is incomplete or damaged ({exc!r})", where=where) from None
+        raise CompgenError(f"the export is incomplete or damaged ({exc!r}); nothing was imported",
+                             where=where) from None
     # a machine of the same name and serial here is the same machine only if it was measured
     # with a machine file this store has seen for it (two plants' "DMU-50" without serials are
     # two machines, never merged silently)
