@@ -973,3 +973,32 @@ def test_the_ledger_refuses_what_it_cannot_key_before_writing(tmp_path, year):
         H.record_edit(store, efit, machine, "itnc530", corrects, {"EDIT.TAB": "0" * 64}, {}, taken=EDIT_DATE)
     assert store.rows("SELECT id FROM fits") == [] and store.rows("SELECT id FROM edits") == []
     store.close()
+
+
+def _foreign_schema(path):
+    with contextlib.closing(sqlite3.connect(path)) as db:
+        db.execute("CREATE TABLE compgen_schema (app TEXT, version INTEGER, store_id TEXT)")
+        db.execute("INSERT INTO compgen_schema VALUES ('another-tool', 1, 'x')")
+        db.commit()
+
+
+@pytest.mark.parametrize("argv, make, says", [
+    (["history", "init", "--db", "h.sqlite", "--grant", "reader"], None, "roles are PostgreSQL's"),
+    (["history", "init", "--db", "postgresql://u@127.0.0.1:1/plant", "--grant", "r; DROP SCHEMA x"], None,
+     "'r; DROP SCHEMA x' is not a plain role name"),
+    (["history", "list", "--db", "store"], lambda p: (p / "store").mkdir(), "the history store is a folder"),
+    (["history", "list", "--db", "h.sqlite"], lambda p: _foreign_schema(p / "h.sqlite"),
+     "compgen_schema is not a compgen history's"),
+])
+def test_a_store_compgen_cannot_use_is_refused_before_anything_is_made(tmp_path, monkeypatch, argv, make,
+                                                                        says):
+    """A grant on an SQLite file, a role name that is not one, a folder, another tool's
+    schema table: one line, and nothing made or changed (a grant is judged before the store
+    is opened: neither a file nor a connection for it)."""
+    monkeypatch.chdir(tmp_path)
+    if make:
+        make(tmp_path)
+    before = {p.name: p.read_bytes() if p.is_file() else None for p in tmp_path.iterdir()}
+    rc, _, err = run(*argv)
+    assert rc == 2 and says in err and len(err.splitlines()) == 1, err
+    assert {p.name: p.read_bytes() if p.is_file() else None for p in tmp_path.iterdir()} == before

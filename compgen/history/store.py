@@ -276,11 +276,7 @@ class Store:
 
     def grant(self, role: str) -> None:
         """PostgreSQL: let ``role`` read and append, nothing more (run by the owner)."""
-        if not self.postgres:
-            raise CompgenError("roles are PostgreSQL's: an SQLite store is a file, guarded by its "
-                               "permissions", where=self.where)
-        if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]{0,62}", role):
-            raise CompgenError(f"{role!r} is not a plain role name", hint="letters, digits and _")
+        _grantable(role, self.postgres, self.where)
         with self.writing():
             self.db.execute(f"GRANT USAGE ON SCHEMA {PG_SCHEMA} TO {role}")
             self.db.execute(f"REVOKE ALL ON ALL TABLES IN SCHEMA {PG_SCHEMA} FROM {role}")
@@ -289,6 +285,14 @@ class Store:
             # every later open refuse the store (or take it for another version)
             self.db.execute(f"REVOKE INSERT ON {PG_SCHEMA}.compgen_schema FROM {role}")
             self.db.execute(f"GRANT USAGE ON ALL SEQUENCES IN SCHEMA {PG_SCHEMA} TO {role}")
+
+
+def _grantable(role: str, postgres: bool, where: str) -> None:
+    if not postgres:
+        raise CompgenError("roles are PostgreSQL's: an SQLite store is a file, guarded by its "
+                           "permissions", where=where, hint="leave --grant out")
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]{0,62}", role):
+        raise CompgenError(f"{role!r} is not a plain role name", hint="letters, digits and _")
 
 
 def _refuse_newer(version: int | None, where: str) -> None:
@@ -385,7 +389,10 @@ def _postgres(url: str) -> Store:
 def init(given: str | None, grant: tuple[str, ...] = ()) -> tuple[Store, list[int]]:
     """Create or migrate a store (PostgreSQL: as its owner), and grant writers."""
     url = store_url(given)
-    store = _postgres(url) if _is_postgres(url) else open_store(url)
+    postgres = _is_postgres(url)
+    for role in grant:          # before a store is opened, or made
+        _grantable(role, postgres, redact(url))
+    store = _postgres(url) if postgres else open_store(url)
     try:
         applied = store.migrate() if store.postgres else []
         for role in grant:
