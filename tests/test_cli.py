@@ -355,3 +355,32 @@ def test_a_follow_up_simulated_on_the_sessions_clock_fits_a_drift_without_a_warn
         code, _, err = run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "--start-s", bad,
                            "-o", tmp_path / "x.csv")
         assert code == 2 and err.count("\n") == 1 and "--start-s" in err and not (tmp_path / "x.csv").exists()
+
+
+def test_a_fit_whose_machine_file_or_data_moved_on_is_refused(hidden_session):
+    """What a fit was made with must be what a later command reads: a machine file edited
+    since, a data file gone, a bundled machine that differs from the fit's: one line each,
+    with what to do."""
+    folder, data, _ = hidden_session
+    machine = folder / "m.toml"
+    machine.write_text(SEED_MACHINE.read_text())
+    fit = folder / "own.json"
+    assert run("fit", "--machine", machine, data, "-o", fit)[0] == 0
+    machine.write_text(SEED_MACHINE.read_text().replace("feed = 500.0", "feed = 400.0"))
+    code, _, err = run("diagnose", "--from", fit)
+    assert code == 2 and "machine file changed since the fit" in err and err.count("\n") == 1, err
+    machine.write_text(SEED_MACHINE.read_text())
+    assert run("diagnose", "--from", fit, "--json")[0] == 0
+    data.rename(folder / "elsewhere.csv")
+    code, _, err = run("diagnose", "--from", fit)
+    assert code == 2 and "data file of the fit is gone" in err and "refit" in err, err
+    (folder / "elsewhere.csv").rename(data)
+    bundled = folder / "bundled.json"
+    assert run("fit", "--machine", "ac-trunnion-itnc530", data, "-o", bundled)[0] == 0
+    doc = json.loads(bundled.read_text())
+    assert doc["machine"]["bundled"]
+    doc["machine"]["sha256"] = "0" * 64          # as if made with another compgen's bundled file
+    bundled.write_text(json.dumps(doc))
+    code, _, err = run("diagnose", "--from", bundled)
+    assert code == 2 and "the bundled machine 'ac-trunnion-itnc530' of this compgen differs" in err, err
+    assert "--machine FILE" in err

@@ -292,6 +292,12 @@ def test_a_probe_calibration_and_check_are_kept_as_probe_sessions(tmp_path):
      ["is not a number (a finite one, in ASCII digits)"]),
     (lambda s: s.replace("# stylus_diameter = 3.0", "# stylus_diameter = 3.0\n# stylus_diameter = 2.0", 1),
      ["gives stylus_diameter twice (line 3 and line 4)", "k.log:4:"]),
+    (lambda s: s.replace("# stylus_diameter = 3.0\n", "", 1),
+     ["the log's set-up does not give stylus_diameter (mm)", "# stylus_diameter = VALUE"]),
+    (lambda s: s.replace("# sphere_diameter = 25.4", "# sphere_diameter = 0", 1),
+     ["sphere_diameter '0' is not a diameter in mm", "k.log:2:"]),
+    (lambda s: s.replace("# stylus_diameter = 3.0", "# stylus_diameter = 3000", 1),
+     ["stylus_diameter '3000' is not a diameter in mm", "k.log:3:"]),
 ])
 def test_the_logs_head_is_read_strictly(tmp_path, edit, words):
     log = write_log(tmp_path / "k.log")
@@ -446,3 +452,22 @@ def test_a_probe_log_saved_with_a_byte_order_mark_is_read_as_a_probe_log(tmp_pat
     a, b = read_data(plain, machine), read_data(marked, machine)
     assert a.device == b.device == "probe"
     np.testing.assert_array_equal(a.deviation, b.deviation)
+
+
+@pytest.mark.parametrize("column, value, words", [
+    (1, "0", ["pose 0 is not a whole number from 1"]),
+    (1, "2.5", ["pose 2.5 is not a whole number from 1"]),
+    (7, "0.5", ["nx, ny, nz has length", "not 1: not a direction"]),
+    (3, "10.0", ["the touches of", "are at different rotary positions"]),
+    (3, "-10.0", ["the touches of", "are at different rotary positions"]),   # the line, not the pose's first
+])
+def test_a_touch_row_that_is_no_touch_is_refused_at_its_line(tmp_path, column, value, words):
+    """A pose numbered 0 or 2.5, a direction that is not a unit vector, one touch of a pose
+    logged at another C than its others (10° more or less: the row named was the one whose A
+    and C differed most from each other, the pose's first where C fell): refused at that row's
+    line (pose 2's third touch)."""
+    at = next(i for i, r in enumerate(_touches()) if r[1] == "2") + 2
+
+    def damage(t):
+        t[at][column] = value
+    _refused(tmp_path, write_log(tmp_path / "k.log", damage=damage), *words, f"k.log:{line_of(at)}:")

@@ -152,8 +152,9 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
     for g, (c, u, weakest) in zip(groups, fitted, strict=True):
         at = _at(log, g)
         if np.ptp(log.rotary[g], axis=0).max() > math.radians(1e-4):
-            raise CompgenError(f"the touches of {at} are at different rotary positions",
-                               where=f"{where}:{log.lines[g[np.argmax(np.ptp(log.rotary[g], axis=1))]]}",
+            off = np.abs(log.rotary[g] - np.median(log.rotary[g], axis=0)).max(axis=1)
+            raise CompgenError(f"the touches of {at} are at different rotary positions",   # the odd one named
+                               where=f"{where}:{log.lines[g[np.argmax(off)]]}",
                                hint="every touch of one pose shares its rotary axes; number the poses apart")
         moved = np.flatnonzero(np.abs(log.ball[g] - log.ball[g[0]]).max(axis=1) > 1e-6)
         if moved.size:      # one centre is fitted from all its touches: one sphere, one place
