@@ -384,3 +384,31 @@ def test_a_fit_whose_machine_file_or_data_moved_on_is_refused(hidden_session):
     code, _, err = run("diagnose", "--from", bundled)
     assert code == 2 and "the bundled machine 'ac-trunnion-itnc530' of this compgen differs" in err, err
     assert "--machine FILE" in err
+
+
+def test_a_device_reporting_ball_minus_nest_fits_the_same_once_told(hidden_session):
+    """The contract's sign switch: the same readings negated, read with --sign
+    ball-minus-nest, give the same fit; the fit keeps the sign, so a later command reading the
+    file again reads it the same way (never guessed)."""
+    folder, data, fit = hidden_session
+    lines = data.read_text().splitlines()
+    head = next(i for i, x in enumerate(lines) if not x.startswith("#"))
+    cols = [lines[head].split(",").index(c) for c in ("dX", "dY", "dZ")]
+    for i in range(head + 1, len(lines)):
+        cells = lines[i].split(",")
+        for j in cols:
+            cells[j] = f"{-float(cells[j]):.6f}"
+        lines[i] = ",".join(cells)
+    flipped = folder / "flipped.csv"
+    flipped.write_text("\n".join(lines) + "\n")
+    out = folder / "flipped.json"
+    assert run("fit", "--machine", SEED_MACHINE, flipped, "--sign", "ball-minus-nest", "-o", out)[0] == 0
+    a, b = json.loads(fit.read_text()), json.loads(out.read_text())
+    for name, p in a["parameters"].items():
+        assert b["parameters"][name]["value"] == pytest.approx(p["value"], abs=1e-9), name
+    code, got, err = run("diagnose", "--from", out, "--json")
+    assert code == 0 and json.loads(got)["candidates"][0]["effect"] == "ECC:h2", err
+    unsigned = folder / "unsigned.json"        # the same file read as the contract's default
+    assert run("fit", "--machine", SEED_MACHINE, flipped, "-o", unsigned)[0] == 0
+    c = json.loads(unsigned.read_text())
+    assert c["parameters"]["XOC"]["value"] == pytest.approx(-a["parameters"]["XOC"]["value"], rel=0.05)

@@ -8,7 +8,7 @@ from conftest import SEED_MACHINE
 
 from compgen.configuration.machine_file import load_machine
 from compgen.data import rtest
-from compgen.data.rtest import RTestData, format_rtest, read_rtest
+from compgen.data.rtest import RTestData, format_rtest, read_poses, read_rtest
 from compgen.errors import CompgenError
 from compgen.model.paths import generate
 
@@ -164,3 +164,40 @@ def test_a_sessions_own_nest_length_is_read_back_and_a_wrong_one_named(tmp_path,
         with pytest.raises(CompgenError, match=says) as caught:
             read_rtest(f, head)
         assert caught.value.where.endswith((":2", f":2:{col}")), caught.value.where
+
+
+def test_a_row_whose_x_y_z_miss_the_ball_and_a_ball_given_in_part_are_refused(tmp_path):
+    """X, Y, Z a file gives are checked against where the nest meets the ball (0.5 mm off at
+    the fourth row: named at its line, by the session's reader and the pose list's); bx
+    alone is refused (the ball in part would be taken
+    for the machine file's with one coordinate moved)."""
+    lines = _session().splitlines()
+    cells = lines[5].split(",")
+    cells[2] = f"{float(cells[2]) + 0.5:.6f}"
+    lines[5] = ",".join(cells)
+    f = tmp_path / "s.csv"
+    f.write_text("\n".join(lines) + "\n")
+    with pytest.raises(CompgenError, match=r"s\.csv:6: commanded X, Y, Z are 0\.500 mm from the nominal "
+                                           r"ball centre at these rotary positions \(1 rows like this\)"):
+        read_rtest(f, MACHINE)
+    with pytest.raises(CompgenError, match=r"s\.csv:6: X, Y, Z are 0\.500 mm from where the nest meets"):
+        read_poses(f, MACHINE)       # as a pose list (predict's input): the same row named
+    lines = _session().splitlines()
+    lines[1] += ",bx"
+    lines[2:] = [line + ",-217.504" for line in lines[2:]]
+    f.write_text("\n".join(lines) + "\n")
+    with pytest.raises(CompgenError, match=r"s\.csv:2: give all of bx, by, bz or none"):
+        read_rtest(f, MACHINE)
+
+
+def test_the_reader_takes_no_sign_it_does_not_know_and_the_writer_no_label_a_cell_breaks(tmp_path):
+    f = tmp_path / "s.csv"
+    f.write_text(_session())
+    with pytest.raises(CompgenError, match="sign must be one of nest-minus-ball, ball-minus-nest, "
+                                           "not 'nest'"):
+        read_rtest(f, MACHINE, "nest")
+    poses = generate(MACHINE, ["K2"])
+    poses = type(poses)(poses.q, poses.ball, poses.t, np.array(['K2,"x"'] * len(poses)), poses.side,
+                        poses.nest)
+    with pytest.raises(CompgenError, match="path label 'K2,\"x\"' cannot be written into a CSV cell"):
+        format_rtest(MACHINE, RTestData(poses, np.zeros((len(poses), 3))), ())
