@@ -150,6 +150,34 @@ def test_an_include_is_expanded_and_its_joint_table_kept(tmp_path, trt, seed_mac
             {"a__hal": "setp xyzac-trt-kins.x-rot-point '0\n"},
             r"a.hal:1: an unterminated",
         ),
+        ("[HAL]\n#INCLUDE $(HOME).inc\n", {}, r"m.ini:2: #INCLUDE \$\(HOME\).inc: the start script expands"),
+        ("# compgen: file a.hal\n[HAL]\n", {}, r"the INI holds a line starting '# compgen: file'"),
+        (
+            "[HAL]\nHALFILE = a.hal\n",
+            {"a__hal": "# compgen: file b.hal\n"},
+            r"a.hal: HALFILE a.hal holds a line starting '# compgen: file'",
+        ),
+        ("[HAL]\nTWOPASS = on\nHALFILE = a.hal\n", {"a__hal": ""}, r"\[HAL\] TWOPASS: LinuxCNC runs the HAL"),
+        (
+            "[HAL]\nHALFILE = a.hal\n[JOINT_0]\nCOMP_FILE = c.comp\nCOMP_FILE_TYPE = 2\n",
+            {"a__hal": "", "c__comp": "0 0 0\n"},
+            r"m.ini:5: \[JOINT_0\] COMP_FILE_TYPE = 2: LinuxCNC takes 0 or 1",
+        ),
+        (
+            "[HAL]\nHALFILE = a.hal\n",
+            {"a__hal": "unlinkp xyzac-trt-kins.x-rot-point\n"},
+            r"a.hal:1: unlinkp: compgen does not evaluate it",
+        ),
+        (
+            "[HAL]\nHALFILE = a.hal\n",
+            {"a__hal": "net a xyzac-trt-kins.x-rot-point\nnet b xyzac-trt-kins.x-rot-point\n"},
+            r"a.hal:2: net b: xyzac-trt-kins.x-rot-point is already on a",
+        ),
+        (
+            "[HAL]\nHALFILE = a.hal\n",
+            {"a__hal": "source b.hal\n", "b__hal": "unlinkp xyzac-trt-kins.x-rot-point\n"},
+            r"b.hal:1: unlinkp",       # a sourced file is read as the HAL file's own lines
+        ),
     ],
 )
 def test_every_file_and_line_linuxcnc_would_stop_at_is_refused_with_its_line(tmp_path, ini, files, says):
@@ -381,3 +409,23 @@ def test_a_linear_joints_trims_are_written_to_the_nanometre_and_an_angles_finer(
         assert max(len(w.partition(".")[2]) for w in trims) == decimals, (suffix, trims[:4])
         table = linuxcnc.read_comp(files[suffix], seed_machine, f"N{suffix}")
         assert np.abs(table.values).max() > 10 ** -decimals
+
+
+@pytest.mark.parametrize("ini, says", [
+    # one INI key that two pins take: the correction moves them apart
+    ("[TRT]\nR = 0.0\n", "one place sets two values that now differ"),
+    # the value's own line continued by a backslash (inivar joins it)
+    ("[TRT]\nR = 0.\\\n0\n", "the value is on a line that a backslash joins to the next"),
+])
+def test_a_pin_compgen_cannot_change_alone_is_refused_at_its_line(tmp_path, trt, seed_machine, ini, says):
+    """The edit changes a value where the configuration sets it, or says why it cannot:
+    never one pin's change carried silently into another, never half of a joined line."""
+    module, nominal = trt
+    two = "two" in says
+    hal = (f"setp {module}.x-rot-point [TRT]R\n" + (f"setp {module}.y-rot-point [TRT]R\n" if two else "")
+           + _setp(module, nominal, ["x-rot-point", *(["y-rot-point"] if two else [])]))
+    state = _config(tmp_path, ini + "[HAL]\nHALFILE = trt.hal\n", trt__hal=hal)
+    fit = identify(seed_machine, [simulate(seed_machine, TRUTH, generate(seed_machine, ["K4", "K1", "K2"]))])
+    with pytest.raises(CompgenError, match=says) as got:
+        _edit_ini(seed_machine, fit, state, tmp_path)
+    assert "m.ini:2" in str(got.value), got.value
