@@ -340,3 +340,33 @@ def test_sinumerik_l4_must_close_the_chain_to_its_rounding(bc_machine, l4_off_mm
     else:
         with pytest.raises(CompgenError, match="do not close the chain"):
             read()
+
+
+def _bc_file(tmp_path, before, after):
+    from compgen.configuration.machine_file import load_machine
+    text = (ROOT / "machines" / "bc-table-sinumerik840d.toml").read_text()
+    assert before in text
+    (tmp_path / "m.toml").write_text(text.replace(before, after, 1))
+    return load_machine(tmp_path / "m.toml")
+
+
+def test_a_sinumerik_state_or_machine_file_the_edit_cannot_build_on_is_refused(tmp_path, bc_machine):
+    """--current without a vector the edit rewrites; a fine offset held beyond MD20188 (the
+    control would refuse what it holds); a CEC table for a machine whose file names no
+    machine axes: one line each."""
+    fit = _fit(bc_machine, BC_A)
+    lacking = re.sub(r"(?m)^\$TC_CARR10\[1\]=.*\n", "", OEM_CARR)
+    with pytest.raises(CompgenError, match=r"--current lacks \$TC_CARR10\[1\] \(and 0 more\)"):
+        kinematics_edit(bc_machine, fit, "sinumerik840d", lacking, "c", "K", "0", "d")
+    tight = _bc_file(tmp_path, "fine_correction = true", "fine_correction = true\nfine_limit_mm = 0.01")
+    k = next(i for i, ln in enumerate(OEM_CARR.splitlines(), 1) if ln.startswith("$TC_CARR44["))
+    with pytest.raises(CompgenError, match=rf"^c:{k}: \$TC_CARR44\[1\] = 0\.0123 mm exceeds MD20188 = "
+                                           r"0\.01 mm"):
+        kinematics_edit(tight, fit, "sinumerik840d", OEM_CARR, "c", "K", "0", "d")
+    unnamed = _bc_file(tmp_path, 'machine_axes = { X = "X1", Y = "Y1", Z = "Z1", B = "B1", C = "C1" }', "")
+    model = [*fit.model, "ECC:h2c", "ECC:h2s"]
+    cec = identify(unnamed, [simulate(unnamed, {**BC_A, "ECC:h2c": 6 * ARCSEC},
+                                      generate(unnamed, ["K4", "K1", "K2"]))], model)
+    with pytest.raises(CompgenError, match="CEC tables address machine axes .* the machine file does "
+                                           "not name"):
+        kinematics_edit(unnamed, cec, "sinumerik840d", OEM_CARR, "c", "K", "0", "d")
