@@ -10,6 +10,7 @@ from conftest import ROOT, SEED_MACHINE, run, vector
 from compgen.controllers.programs import measure_program, read_program
 from compgen.controllers.registry import CONTROLLERS
 from compgen.data.rtest import read_rtest
+from compgen.errors import CompgenError
 from compgen.model.kinematics import Model, Poses
 from compgen.model.paths import generate
 
@@ -381,3 +382,47 @@ def test_the_heidenhain_preset_check_is_a_message_the_control_shows(tmp_path):
     at = next(k for k, ln in enumerate(lines) if re.search(r"^\d+ STOP\b", ln))
     assert re.fullmatch(r"\d+ FN 16: F-PRINT TNC:\\K4_MSG\.A / SCREEN:", lines[at - 1])
     assert (tmp_path / "K4_MSG.A").read_text().startswith('"PRESET CHECK: the nest is 20 mm above the ball')
+
+
+def test_a_program_read_back_must_be_one_compgen_wrote_whole(seed_machine):
+    """The reader of emitted programs (the round trips' oracle) refuses a text with no pose
+    block, a pose renumbered, and a mode compgen does not write."""
+    text = emitted_program(seed_machine, generate(seed_machine, ["K2"]))
+    with pytest.raises(CompgenError, match="no pose blocks found"):
+        read_program("; nothing\n", seed_machine, "itnc530")
+    edited = re.sub(r"(?m)^(\d+ L .*;.*?\bpose )2\b", r"\g<1>7", text, count=1)
+    assert edited != text
+    with pytest.raises(CompgenError, match=r"pose numbers are not 1, 2, 3, …: the program was edited"):
+        read_program(edited, seed_machine, "itnc530")
+    with pytest.raises(CompgenError, match="mode must be one of tcpm, axes, not 'tcp'"):
+        measure_program(seed_machine, generate(seed_machine, ["K2"]), "K2", "itnc530", "tcp", "RT", "0", DATE)
+
+
+def test_a_program_whose_header_names_two_nests_is_not_checked_with_either(tmp_path):
+    """Two programs pasted into one file, written for nests of 150 and 160 mm: check-program
+    cannot tell which length the motion is for, and says to give it."""
+    for n, length in (("A", 150), ("B", 160)):
+        code, _, err = run("measure-program", "--machine", SEED_MACHINE, "--path", "K2", "--probe-length",
+                           length, "-o", tmp_path / f"{n}.H")
+        assert code == 0, err
+    both = tmp_path / "AB.H"
+    both.write_text((tmp_path / "A.H").read_text() + (tmp_path / "B.H").read_text())
+    code, _, err = run("check-program", "--machine", SEED_MACHINE, both)
+    assert code == 2 and "the program's header names 2 nest lengths" in err and "--probe-length" in err, err
+    code, _, err = run("check-program", "--machine", SEED_MACHINE, tmp_path / "B.H")
+    assert code == 0, err
+
+
+@pytest.mark.parametrize("controller", CONTROLLERS)
+def test_a_program_for_another_nest_is_checked_with_the_nest_its_header_names(tmp_path, controller):
+    """A session with a 150 mm nest (the machine file's is 184.67): check-program moves that
+    nest, 34.67 mm shorter, nearer the ball. HEIDENHAIN writes the length signed (+150.0000)
+    and it was not read: the program was checked with the machine file's nest."""
+    ext = CONTROLLERS[controller].program_ext
+    code, _, err = run("measure-program", "--machine", SEED_MACHINE, "--path", "K2", "--probe-length", 150,
+                       "--controller", controller, "-o", tmp_path / f"P{ext}")
+    assert code == 0, err
+    args = ["--mode", "tcpm"] if controller == "linuxcnc" else []
+    code, out, err = run("check-program", "--machine", SEED_MACHINE, "--controller", controller, *args,
+                         tmp_path / f"P{ext}")
+    assert code == 0 and "nest 150 mm below the gauge line (from the program's header)" in out, (out, err)

@@ -39,7 +39,8 @@ BALL_HEADER = "ball centre in the table frame:"
 _BALL_LINE = re.compile(re.escape(BALL_HEADER) + r" X([-+]?\d+(?:\.\d+)?) Y([-+]?\d+(?:\.\d+)?) "
                         r"Z([-+]?\d+(?:\.\d+)?) mm")
 NEST_HEADER = "mm below the gauge line"     # the nest's length, where not the machine file's
-_NEST_LINE = re.compile(r"nest on tool \S+, (\d+(?:\.\d+)?) " + re.escape(NEST_HEADER))
+# the length as the control's numbers write it (HEIDENHAIN signs it: +150.0000)
+_NEST_LINE = re.compile(r"nest on tool \S+, ([-+]?\d+(?:\.\d+)?) " + re.escape(NEST_HEADER))
 
 
 def program_nest(text: str) -> float | None:
