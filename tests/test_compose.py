@@ -370,3 +370,12 @@ def test_a_sinumerik_state_or_machine_file_the_edit_cannot_build_on_is_refused(t
     with pytest.raises(CompgenError, match="CEC tables address machine axes .* the machine file does "
                                            "not name"):
         kinematics_edit(unnamed, cec, "sinumerik840d", OEM_CARR, "c", "K", "0", "d")
+
+
+def test_a_heidenhain_table_without_doc_column_is_refused_before_any_row_is_written(seed_machine):
+    """compgen's rows are named by their DOC (the ISO name, then the fit's marker): a table
+    without that column could not tell later which rows are compgen's."""
+    bare = "\n".join(line[:33].rstrip() for line in OEM_TAB.splitlines()) + "\n"
+    assert "DOC" not in bare and "Trans     Z     +29.794" in bare
+    with pytest.raises(CompgenError, match="the current table has no DOC column to name the correction rows"):
+        _edit(seed_machine, SEED_A, "itnc530", bare)
