@@ -47,6 +47,11 @@ CASES = [
     (".H", "F0", _sub("C+1.5000 R0 F500", "C+1.5000 R0 F0"), "F0: a feed must be above zero"),
     (".H", "F-500", _sub("C+1.5000 R0 F500", "C+1.5000 R0 F-500"), "a feed must be above zero"),
     (".H", "a block after END PGM", lambda t: t + "999 L Z+400 R0 FMAX\n", "after the program's end"),
+    (".H", "no BEGIN PGM", lambda t: _drop(t, lambda ln: "BEGIN PGM" in ln),
+     "'END PGM K4 MM' ends a program no BEGIN PGM began"),
+    (".H", "END PGM of another", _sub("END PGM K4 MM", "END PGM K5 MM"), "ends a program other than K4"),
+    (".H", "an axis the machine lacks", _sub("L Z+378.0000 R0 FMAX", "L V+378.0000 R0 FMAX"),
+     "'V+378.0000' is not a word this check reads"),
     (".MPF", "no M30", lambda t: _drop(t, lambda ln: ln.strip() == "M30"), "no end block"),
     (".MPF", "G57 for G54", _sub("\nG54 ;", "\nG57 ;"), "selects G57; the machine file's work offset is G54"),
     (".MPF", "G70 (inch)", _sub("G17 G90 G71 G94", "G17 G90 G70 G94"), "not a word"),
@@ -198,3 +203,16 @@ def test_a_file_name_with_a_line_break_stays_on_its_comment_line(tmp_path):
     assert code == 0, err
     text = (tmp_path / "p.csv").read_text()
     assert "a\\nb.csv" in text and not any(ln.startswith("b.csv") for ln in text.splitlines())
+
+
+def test_tcp_switched_on_before_every_axis_is_positioned_is_a_finding(programs, tmp_path):
+    """FUNCTION TCPM before the first positioning block: the control's TCP would start from
+    positions nobody wrote. Found at its line (exit 1), not simulated from somewhere."""
+    text = programs[".H"]
+    first = re.search(r"(?m)^(\d+) L Z\+378\.0000 R0 FMAX", text)
+    early = text.replace(first[0], f"{first[1]} FUNCTION TCPM F CONT AXIS POS PATHCTRL AXIS\n{first[0]}", 1)
+    path = tmp_path / "EARLY.H"
+    path.write_text(early)
+    code, out, err = run("check-program", "--machine", SEED_MACHINE, path)
+    assert code == 1 and "TCP before positioning: TCP is on before every axis has been positioned" in out, (
+        out, err)

@@ -345,7 +345,9 @@ def program_blocks(text: str) -> list[Block]:
                 name = d[2]
                 out.append(Block(k, raw, "units"))
             elif d[2] != name:
-                raise CompgenError(f"line {k}: {b!r} ends a program other than {name}")
+                raise CompgenError(f"line {k}: {b!r} ends a program other than {name}" if name else
+                                   f"line {k}: {b!r} ends a program no BEGIN PGM began",
+                                   hint=f"write the program with {me()} measure-program")
             else:
                 out.append(Block(k, raw, "end"))
             continue
