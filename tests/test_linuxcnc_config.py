@@ -429,3 +429,30 @@ def test_a_pin_compgen_cannot_change_alone_is_refused_at_its_line(tmp_path, trt,
     with pytest.raises(CompgenError, match=says) as got:
         _edit_ini(seed_machine, fit, state, tmp_path)
     assert "m.ini:2" in str(got.value), got.value
+
+
+@pytest.mark.parametrize("comp, says", [
+    ("# a table to come\n", "the joint table holds no line of three numbers"),
+    ("-100 0 0\n0 1e999 0\n100 0 0\n", "'0 1e999 0' is not three finite numbers"),
+    ("".join(f"{k} 0 0\n" for k in range(-150, 151)), "the joint table has 301 lines; LinuxCNC takes 256"),
+])
+def test_a_joint_table_linuxcnc_would_refuse_or_misread_is_refused(tmp_path, trt, seed_machine, comp, says):
+    """usrmotLoadComp reads triplets up to the first other line, at most 256: an empty table,
+    an infinite trim, a table longer than LinuxCNC holds are refused with the INI line."""
+    module, nominal = trt
+    state = _config(tmp_path, "[HAL]\nHALFILE = a.hal\n[JOINT_1]\nCOMP_FILE = y.comp\nCOMP_FILE_TYPE = 1\n",
+                    a__hal=_setp(module, nominal), y__comp=comp)
+    with pytest.raises(CompgenError, match=re.escape(says)) as got:
+        linuxcnc.loaded_joint_tables(seed_machine, state)
+    assert "m.ini:4 (y.comp)" in str(got.value), got.value
+
+
+def test_a_joint_table_read_back_must_say_whose_joint_it_is(seed_machine):
+    """compgen's closing notes name the joint and its axis: a table without them, or naming
+    a joint that is not the axis's in the trt module, is refused (it would replace another
+    joint's table)."""
+    with pytest.raises(CompgenError, match="without compgen's closing notes"):
+        linuxcnc.read_comp("-100 0 0\n100 0 0\n", seed_machine, "y.comp")
+    note = "# compgen joint compensation for LinuxCNC: joint 2 = Y (mm)\n"
+    with pytest.raises(CompgenError, match="the table says joint 2 = Y; the trt module's joint of Y is 1"):
+        linuxcnc.read_comp("-100 0 0\n100 0 0\n" + note, seed_machine, "y.comp")
