@@ -178,6 +178,12 @@ def test_an_include_is_expanded_and_its_joint_table_kept(tmp_path, trt, seed_mac
             {"a__hal": "source b.hal\n", "b__hal": "unlinkp xyzac-trt-kins.x-rot-point\n"},
             r"b.hal:1: unlinkp",       # a sourced file is read as the HAL file's own lines
         ),
+        ("[HAL]\nHALFILE = a.hal " + "x" * 250 + "\n", {"a__hal": ""},
+         r"m.ini:2: a line of 266 characters: LinuxCNC reads 255"),
+        ("[HAL]\n#INCLUDE\n", {}, r"m.ini:2: #INCLUDE without a file name"),
+        ("[HAL]\n#INCLUDE x.inc\n", {"x__inc": "#INCLUDE y.inc\n"}, r"an #INCLUDE inside an included file"),
+        ("[HAL]\n#INCLUDE x.inc\n", {"x__inc": "HALFILE = " + "y" * 260 + "\n"},
+         r"a line of 270 characters: LinuxCNC reads 255"),
     ],
 )
 def test_every_file_and_line_linuxcnc_would_stop_at_is_refused_with_its_line(tmp_path, ini, files, says):
@@ -456,3 +462,27 @@ def test_a_joint_table_read_back_must_say_whose_joint_it_is(seed_machine):
     note = "# compgen joint compensation for LinuxCNC: joint 2 = Y (mm)\n"
     with pytest.raises(CompgenError, match="the table says joint 2 = Y; the trt module's joint of Y is 1"):
         linuxcnc.read_comp("-100 0 0\n100 0 0\n" + note, seed_machine, "y.comp")
+
+
+
+@pytest.mark.parametrize("stop, runs_b", [("HALFILE =", False), ("HALFILE ", False), ("HALFILE= ", False),
+                                          ("HALFILE", True)])
+def test_halfiles_are_read_up_to_the_first_without_a_value_as_linuxcncs_loop_reads_them(tmp_path, trt, stop,
+                                                                                       runs_b):
+    """The start script asks inivar for HALFILE 1, 2, ... and stops at the first empty
+    answer: a HALFILE without a value ends the list, and the files after it never run. A bare
+    "HALFILE" (no blank, no =) is no HALFILE to inivar: the list goes on. Where LinuxCNC's
+    inivar is installed, it is asked too."""
+    module, nominal = trt
+    state = _config(tmp_path, f"[HAL]\nHALFILE = a.hal\n{stop}\nHALFILE = b.hal\n",
+                    a__hal=_setp(module, nominal), b__hal=f"setp {module}.x-rot-point 5\n")
+    assert _pins(state, module)["x-rot-point"] == (5.0 if runs_b else nominal["x-rot-point"])
+    if shutil.which("inivar"):
+        told = []
+        for num in (1, 2, 3):
+            got = subprocess.run(["inivar", "-ini", str(tmp_path / "m.ini"), "-sec", "HAL", "-var", "HALFILE",
+                                  "-num", str(num)], capture_output=True, text=True)
+            if got.returncode or not got.stdout.strip():
+                break                       # where linuxcnc's loop ends
+            told.append(got.stdout.strip())
+        assert told == (["a.hal", "b.hal"] if runs_b else ["a.hal"]), told
