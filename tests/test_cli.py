@@ -412,3 +412,49 @@ def test_a_device_reporting_ball_minus_nest_fits_the_same_once_told(hidden_sessi
     assert run("fit", "--machine", SEED_MACHINE, flipped, "-o", unsigned)[0] == 0
     c = json.loads(unsigned.read_text())
     assert c["parameters"]["XOC"]["value"] == pytest.approx(-a["parameters"]["XOC"]["value"], rel=0.05)
+
+
+def test_the_effects_catalogue_as_text_marks_the_default_model():
+    code, out, err = run("effects", "--machine", SEED_MACHINE)
+    assert code == 0, err
+    lines = out.splitlines()
+    xoc = next(ln for ln in lines if ln[2:].startswith("XOC "))
+    ecc = next(ln for ln in lines if ln[2:].startswith("ECC:h2 "))
+    assert xoc.startswith("* ") and ecc.startswith("  ") and "ECC:h2c, ECC:h2s" in ecc, (xoc, ecc)
+    assert sum(ln.startswith("* ") for ln in lines[:-1]) == 11 and lines[-1] == "* in the default model"
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["simulate", "--machine", SEED_MACHINE, "--truth", "truth.json", "--paths", " , ", "-o", "s.csv"],
+     "--paths names no path"),
+    (["simulate", "--machine", SEED_MACHINE, "--truth", "truth.json", "--device", "probe", "--there-and-back",
+      "-o", "s.log"],
+     "--there-and-back, --noise-rho, --rate-hz, --feed and --probe-length are for R-test sessions"),
+    (["measure-program", "--machine", SEED_MACHINE, "--poses", "p.csv", "--ball", "0,0,200", "-o", "P.H"],
+     "--ball, --there-and-back and --probe-length go with --path"),
+    (["history", "add", "fit.json", "--temperature", "hall", "--db", "h.sqlite"],
+     "--temperature takes NAME=°C, not 'hall'"),
+    (["history", "add", "fit.json", "--temperature", "=21", "--db", "h.sqlite"],
+     "--temperature takes NAME=°C, not '=21'"),
+])
+def test_options_that_do_not_go_together_are_refused_before_anything_is_written(hidden_session, monkeypatch,
+                                                                                 argv, says):
+    folder, data, fit = hidden_session
+    monkeypatch.chdir(folder)
+    (folder / "p.csv").write_text("A,C\n0,0\n")
+    before = sorted(p.name for p in folder.iterdir())
+    code, _, err = run(*argv)
+    assert code == 2 and says in err and err.count("\n") == 1, err
+    assert sorted(p.name for p in folder.iterdir()) == before
+
+
+def test_the_report_lists_the_files_sent_to_the_control_with_their_checksums(hidden_session):
+    import hashlib
+    folder, _, fit = hidden_session
+    kin = folder / "KIN.TAB"
+    code, _, err = run("kinematics", "--from", fit, "-o", kin, "--despite-gate")
+    assert code == 0, err
+    code, _, err = run("report", "--from", fit, "--emitted", kin, "-o", folder / "r.html")
+    assert code == 0, err
+    html = (folder / "r.html").read_text()
+    assert "KIN.TAB" in html and hashlib.sha256(kin.read_bytes()).hexdigest() in html
