@@ -1002,3 +1002,23 @@ def test_a_store_compgen_cannot_use_is_refused_before_anything_is_made(tmp_path,
     rc, _, err = run(*argv)
     assert rc == 2 and says in err and len(err.splitlines()) == 1, err
     assert {p.name: p.read_bytes() if p.is_file() else None for p in tmp_path.iterdir()} == before
+
+
+def test_a_store_without_an_accepted_calibration_says_so(year, tmp_path, monkeypatch):
+    """list on a store with no machine, and check where every recorded fit has a reason it
+    should not reach the control: one line each, what to do named (nothing to check against
+    is not a pass)."""
+    monkeypatch.chdir(tmp_path)
+    assert run("history", "init", "--db", "h.sqlite")[0] == 0
+    rc, out, err = run("history", "list", "--db", "h.sqlite")
+    assert rc == 0 and out.strip().endswith("h.sqlite: no machine recorded yet"), out + err
+    machine, base, fits, _ = year
+    with open_store(tmp_path / "h.sqlite") as store:
+        when, fit, _ = fits[0]
+        H.record_fit(store, fit, machine, taken=when, verdict=["the fit leaves σ̂ = 4.00 µm"])
+    d = _session(machine, _truth(machine, base, "2026-02-01T09:00:00+00:00", {}), ["K4"], 301, "x")
+    (tmp_path / "c.csv").write_text(format_rtest(machine, d))
+    rc, out, err = run("check", "--machine", "ac-trunnion-itnc530", "c.csv", "--date", "2026-02-01T10:00",
+                       "--db", "h.sqlite")
+    assert rc == 2 and "no accepted calibration of this machine is recorded" in err, out + err
+    assert len(err.splitlines()) == 1
