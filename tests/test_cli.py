@@ -458,3 +458,19 @@ def test_the_report_lists_the_files_sent_to_the_control_with_their_checksums(hid
     assert code == 0, err
     html = (folder / "r.html").read_text()
     assert "KIN.TAB" in html and hashlib.sha256(kin.read_bytes()).hexdigest() in html
+
+
+def test_a_fit_with_nothing_to_fit_or_too_few_readings_is_refused(hidden_session):
+    """Every parameter held, or fewer readings than parameters: one line, no fit file."""
+    folder, data, fit = hidden_session
+    out = folder / "n.json"
+    code, _, err = run("fit", "--from", fit, "--model", "XOC", "--fix", "XOC=0", "-o", out)
+    assert code == 2 and "every parameter is fixed: nothing to fit" in err and not out.exists(), err
+    lines = data.read_text().splitlines()
+    head = next(i for i, x in enumerate(lines) if not x.startswith("#"))
+    few = folder / "few.csv"
+    few.write_text("\n".join(lines[:head + 4]) + "\n")           # three poses, nine readings
+    code, _, err = run("fit", "--machine", SEED_MACHINE, few, "-o", out)
+    assert code == 2 and "3 poses give 9 readings for 11 parameters" in err, err
+    assert "Measure more poses" in err
+    assert not out.exists()
