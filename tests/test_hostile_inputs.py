@@ -224,3 +224,47 @@ def test_a_bug_and_an_interrupt_are_one_line_with_their_exit_codes(monkeypatch, 
     monkeypatch.setattr(cli, "catalogue", failing)
     got, out, err = run("effects", "--machine", SEED_MACHINE)
     assert (got, out, err.strip()) == (code, "", said), (got, err)
+
+
+def _bump(d, key, value):
+    d[key] = value
+    return d
+
+
+@pytest.mark.parametrize("damage, says", [
+    (lambda d: _bump(d, "format", "compgen.fit/0"), "not a compgen fit file (format 'compgen.fit/0')"),
+    (lambda d: d.pop("residual") and d, "fit file is incomplete or damaged (KeyError('residual'))"),
+    (lambda d: d["parameters"]["XOC"].update(std=-0.001) or d, "negative uncertainty -0.001"),
+    (lambda d: [d], "a fit file is a JSON object, not list"),
+])
+def test_a_fit_file_not_as_compgen_wrote_it_is_refused(fit, tmp_path, damage, says):
+    (tmp_path / "bad.json").write_text(json.dumps(damage(json.loads(fit.read_text()))))
+    _refused(["diagnose", "--from", tmp_path / "bad.json"], says, tmp_path)
+
+
+@pytest.mark.parametrize("truth, says", [
+    ({"parameters": ["XOC"]}, 'needs an object "parameters"'),
+    ({"parameters": {"XOC": {"value": True, "unit": "um"}}}, 'must be {"value": number, "unit": text}'),
+    ({"parameters": {"XOC": {"value": 5, "unit": 3}}}, 'must be {"value": number, "unit": text}'),
+    ({"parameters": {"XOC": {"value": 5, "unit": "furlong"}}}, "furlong"),
+])
+def test_a_truth_file_not_as_the_contract_writes_it_is_refused(tmp_path, truth, says):
+    (tmp_path / "t.json").write_text(json.dumps(truth))
+    _refused(["simulate", "--machine", SEED_MACHINE, "--truth", tmp_path / "t.json",
+              "-o", tmp_path / "s.csv"], says, tmp_path, "s.csv")
+
+
+def test_what_no_controller_reads_and_a_folder_not_there_are_refused(fit, tmp_path):
+    (tmp_path / "P.txt").write_text("G0 X0\n")
+    _refused(["check-program", "--machine", SEED_MACHINE, tmp_path / "P.txt"],
+             "no controller writes programs ending in '.txt'", tmp_path)
+    (tmp_path / "E.txt").write_text("an edit, it says\n")
+    _refused(["simulate", "--machine", SEED_MACHINE, "--truth", ROOT / "examples" / "truth-table4.json",
+              "--edit", tmp_path / "E.txt", "-o", tmp_path / "s.csv"],
+             "not a kinematics edit compgen wrote for any controller it knows", tmp_path, "s.csv")
+    _refused(["kinematics", "--from", fit, "-o", tmp_path / "gone" / "K.TAB"], "output folder does not exist",
+             tmp_path)
+    _refused(["fit", "--from", fit, "--fix", "XOC=12furlong", "-o", tmp_path / "f.json"],
+             "--fix XOC=12furlong: unknown unit 'furlong'. Use one of mm, um", tmp_path, "f.json")
+    _refused(["fit", "--from", fit, "--fix", "XOC=twelve", "-o", tmp_path / "f.json"],
+             "cannot read 'twelve' as a number with a unit", tmp_path, "f.json")
