@@ -165,6 +165,11 @@ def test_a_control_character_inside_a_state_value_is_refused_with_its_line(tmp_p
     good = tmp_path / "cr.TAB"                 # a CR alone is a line end where no line ends in LF
     good.write_text((ROOT / "examples" / "itnc530-current.TAB").read_text().replace("\n", "\r"), newline="")
     assert read_text(good, "state", ansi_ok=True)[0].count("\r") == 12
+    lines = good.read_bytes().decode().split("\r")      # lines ending in CR: counted by CR, first byte on
+    lines[4] += "\x07"
+    good.write_text("\r" + "\r".join(lines), newline="")
+    with pytest.raises(Exception, match=r"cr.TAB:6: .*control character '\\x07'"):
+        read_text(good, "state", ansi_ok=True)
 
 
 def test_no_output_replaces_an_input_of_its_command_even_with_force(tmp_path, monkeypatch):

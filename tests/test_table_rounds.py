@@ -490,3 +490,24 @@ def test_a_cec_table_is_written_where_its_six_decimals_reach_its_stop(stop, coun
             _cec_text(t, 0, {"X": "X1"})
     else:
         assert _cec_text(t, 0, {"X": "X1"})["max"] == written
+
+
+@pytest.mark.parametrize("held, says", [
+    (-120.5, None),                     # the OEM's value, as the machine file declares it
+    (-120.0, r"\$TC_CARR6\[1\] \(l2\.z\) = -120 mm, \+0\.5000 mm from the machine file's -120\.5"),
+    (120.5, r"\$TC_CARR6\[1\] \(l2\.z\) = 120\.5 mm, \+241\.0000 mm from the machine file's -120\.5"),
+])
+def test_a_coarse_offset_is_held_to_the_machine_files_own_value_not_to_zero(bc_machine, held, says):
+    """The OEM's l2 at z = -120.5 mm, as declared: the record holding it is the measured
+    machine's; 0.5 mm off, or the sign turned, is another record (every declared value in the
+    tests before was 0, where value - want and value + want agree)."""
+    from dataclasses import replace
+    machine = replace(bc_machine, sinumerik={**bc_machine.sinumerik, "offsets": {
+        "l2": np.array([0.0, 0.0, -120.5])}})
+    fit = identify(machine, [_measure(machine, {}, np.random.default_rng(2), OEM_CARR)])
+    state = OEM_CARR + f"$TC_CARR6[1]={held}\n"
+    if says is None:
+        kinematics_edit(machine, fit, "sinumerik840d", state, "c", "K", "0", "d")
+    else:
+        with pytest.raises(CompgenError, match=says):
+            kinematics_edit(machine, fit, "sinumerik840d", state, "c", "K", "0", "d")
