@@ -426,7 +426,8 @@ def test_linuxcnc_head_programs_are_written_and_checked_with_the_heads_body(tmp_
     assert program.index("\nG49") < program.index("M66 E0 L0") < program.index(guard) < program.index("\nG0 ")
     code, out, err = run("check-program", "--machine", path, "--mode", "tcpm", tmp_path / "K4.ngc")
     assert code == 0 and "OK" in out, err
-    for bad, says in [(program.replace("\nG49 ", "\nG43 H7 "), "acts along world Z"),
+    for bad, says in [(program.replace("\nG49 ", "\nG43 H7 "),
+                       f"under {module} a G43 length acts along world Z"),
                       (program.replace("- 270.0000]", "- 250.0000]"), "must stop unless"),
                       (program.replace("GT 0.1000]", "GT 5.0000]"), "must stop unless"),
                       (re.sub(r"o101 if.*\n.*\no101 endif\n", "", program), "no pin guard")]:

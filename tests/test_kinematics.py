@@ -141,14 +141,16 @@ def test_the_axis_a_rotation_turns_about_is_its_left_jacobian_at_every_size(rng)
 @pytest.mark.parametrize("machine_name", ["seed_machine", "bc_machine", "head_machine"])
 @pytest.mark.parametrize("loaded", [False, True], ids=["nominal", "loaded"])
 def test_analytic_slot_gains_equal_central_differences_of_the_exact_model(machine_name, loaded, request):
-    """Every slot of the catalogue, on both machines (both chain layouts, linear axes on
+    """Every slot of the catalogue (and the ball turned about its centre, which moves no
+    reading), on both machines (both chain layouts, linear axes on
     either side, squareness among them), against the exact model moved by ±1e-6: on the
     nominal machine, and on one carrying errors in every slot at once (up to 0.05 mm and
     3 mrad, 100× a real machine's: far enough from zero that gains taken at zero would
     miss by ~1e-3 and fail)."""
     machine = request.getfixturevalue(machine_name)
     poses = generate(machine, list(machine.paths))
-    keys = sorted({(e.carrier, e.slot, d) for e in catalogue(machine) for d in e.direction})
+    keys = sorted({(e.carrier, e.slot, d) for e in catalogue(machine) for d in e.direction}
+                  | {("ball", "loc", d) for d in "abc"})     # a ball's tilt: its centre stays
     rng = np.random.default_rng(3)
     base = {}
     if loaded:

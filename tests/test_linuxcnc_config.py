@@ -486,3 +486,21 @@ def test_halfiles_are_read_up_to_the_first_without_a_value_as_linuxcncs_loop_rea
                 break                       # where linuxcnc's loop ends
             told.append(got.stdout.strip())
         assert told == (["a.hal", "b.hal"] if runs_b else ["a.hal"]), told
+
+
+@pytest.mark.parametrize("off_mm, refused", [(0.08, False), (0.15, True), (-0.15, True)])
+def test_a_held_pin_beyond_the_limits_is_another_machines_configuration(trt, seed_machine, off_mm, refused):
+    """--current with x-rot-point 80 µm from the machine file's value passes; 150 µm (either
+    way) is beyond [limits] offset_um = 100 µm: refused at its line, never built on."""
+    module, nominal = trt
+    held = nominal["x-rot-point"] + off_mm
+    hal = _setp(module, nominal, ["x-rot-point"]) + f"setp {module}.x-rot-point {held:.6f}\n"
+    fit = identify(seed_machine, [simulate(seed_machine, TRUTH, generate(seed_machine, ["K4", "K1", "K2"]))])
+    if not refused:
+        kinematics_edit(seed_machine, fit, "linuxcnc", hal, "k.hal", "N", "0", "d")
+        return
+    said = (f"{module}.x-rot-point = {off_mm:g} mm, {off_mm:+.4f} mm from the machine file's 0: beyond its "
+            "[limits] offset_um 100 µm")
+    with pytest.raises(CompgenError, match=re.escape(said)) as got:
+        kinematics_edit(seed_machine, fit, "linuxcnc", hal, "k.hal", "N", "0", "d")
+    assert str(got.value.where) == f"k.hal:{len(nominal)}", got.value.where

@@ -147,7 +147,23 @@ def test_probe_and_rtest_fit_together(tmp_path):
     log = write_log(tmp_path / "k.log", noise_um=2.0, seed=5)
     probe = sphere_centres(read_probe_log(log, machine), machine)
     rtest = read_rtest(tmp_path / "r.csv", machine)
-    fit = identify(machine, [rtest, probe.data])
+    from compgen.statistics import identify as module
+    rounds = []
+    rescale = module.Weights.rescale
+
+    def counted(self, *a):
+        moved = rescale(self, *a)
+        rounds.append((self.rounds, moved, dict(self.factor)))
+        return moved
+    module.Weights.rescale = counted
+    try:
+        fit = identify(machine, [rtest, probe.data])
+    finally:
+        module.Weights.rescale = rescale
+    # the variances settle (the factors move by less than 1 %) well before the cap of rounds
+    assert not rounds[-1][1] and len(rounds) < module.Weights.ROUNDS, rounds
+    last, before = rounds[-1][2], rounds[-2][2]
+    assert all(abs(last[g] / before[g] - 1) <= 0.01 for g in last), rounds
     z = {n: (fit.parameters[n].value - v) / fit.parameters[n].std for n, v in TABLE4.items()}
     assert max(abs(v) for v in z.values()) < 5, z
     alone = identify(machine, [rtest])
@@ -471,3 +487,13 @@ def test_a_touch_row_that_is_no_touch_is_refused_at_its_line(tmp_path, column, v
     def damage(t):
         t[at][column] = value
     _refused(tmp_path, write_log(tmp_path / "k.log", damage=damage), *words, f"k.log:{line_of(at)}:")
+
+
+def test_a_stylus_a_little_larger_than_logged_shows_in_the_radius_offset_in_micrometres(tmp_path):
+    """The tip 3.002 mm where the log says 3.0: the touches lie on a sphere 1 µm larger than
+    the nominal ρ. Within the 2 µm the reader lets pass, the offset is reported, in µm."""
+    machine = load_machine(SEED_MACHINE)
+    c = sphere_centres(read_probe_log(write_log(tmp_path / "k.log", noise_um=0.2, true_stylus=3.002, seed=5),
+                                      machine), machine)
+    assert c.radius_offset_um == pytest.approx(1.0, abs=4 * c.radius_sigma_um)
+    assert 0.001 < c.radius_sigma_um < 0.1, c.radius_sigma_um

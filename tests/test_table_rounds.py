@@ -495,6 +495,8 @@ def test_a_cec_table_is_written_where_its_six_decimals_reach_its_stop(stop, coun
 @pytest.mark.parametrize("held, says", [
     (-120.5, None),                     # the OEM's value, as the machine file declares it
     (-120.0, r"\$TC_CARR6\[1\] \(l2\.z\) = -120 mm, \+0\.5000 mm from the machine file's -120\.5"),
+    (-120.35, r"\(l2\.z\) = -120\.35 mm, \+0\.1500 mm from the machine file's -120\.5: beyond its \[limits\] "
+              r"offset_um 100 µm"),                                # 150 µm: beyond the 100 µm, not 200
     (120.5, r"\$TC_CARR6\[1\] \(l2\.z\) = 120\.5 mm, \+241\.0000 mm from the machine file's -120\.5"),
 ])
 def test_a_coarse_offset_is_held_to_the_machine_files_own_value_not_to_zero(bc_machine, held, says):

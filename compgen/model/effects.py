@@ -324,15 +324,15 @@ def resolve(machine: Machine, name: str, table: dict | None = None) -> Effect:
                       "a periodic error along the axis: ball-screw pitch or scale interpolation")
     else:
         m = re.fullmatch(r"([hpter])(-?)(\d{1,3})", order_txt)
-        kind, order = (m[1], int(m[2] + m[3])) if m else ("", 0)
         compound = len(direction) == 2
-        if not m or kind not in kinds or not _order_ok(kind, order, first, compound):
+        if not m or m[1] not in kinds or not _order_ok(m[1], int(m[2] + m[3]), first, compound):
             turns = " (N < 0 turns against the axis)" if compound else ""
             raise CompgenError(f"{symbol} takes {' or '.join(k + 'N' for k in kinds)} with N ≥ {first}"
                                f"{turns}, not {order_txt!r}" + (" (eN: τ = N min, 1…999)" if "e" in kinds
                                                                  else ""), where=name,
                                hint="an order-1 straightness is a squareness: use COX, AOZ or BOZ"
                                if first == 2 else None)
+        kind, order = m[1], int(m[2] + m[3])
         tilting = carrier in machine.axis_names and machine.axis(carrier).rotary \
             and not machine.axis(carrier).full_turn
         basis = Basis(kind, order, origin=kind == "h" and tilting)
