@@ -89,7 +89,7 @@ def check_export(doc, where: str) -> dict[str, list]:
         t = {name: list(doc["tables"][name]) for name in _COLUMNS}
     except (KeyError, TypeError) as exc:
         raise CompgenError(f"the export is incomplete or damaged ({exc!r}); nothing was imported",
-                             where=where) from None
+                           where=where) from None
     _valid_rows(t, where)
     return t
 
@@ -227,7 +227,7 @@ def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str
         held = {(session_machine[f["session_id"]], f["marker"]) for f in t["fits"]}
     except (KeyError, TypeError) as exc:
         raise CompgenError(f"the export is incomplete or damaged ({exc!r}); nothing was imported",
-                             where=where) from None
+                           where=where) from None
     # a machine of the same name and serial here is the same machine only if it was measured
     # with a machine file this store has seen for it (two plants' "DMU-50" without serials are
     # two machines, never merged silently)
