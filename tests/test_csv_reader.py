@@ -201,3 +201,11 @@ def test_the_reader_takes_no_sign_it_does_not_know_and_the_writer_no_label_a_cel
                         poses.nest)
     with pytest.raises(CompgenError, match="path label 'K2,\"x\"' cannot be written into a CSV cell"):
         format_rtest(MACHINE, RTestData(poses, np.zeros((len(poses), 3))), ())
+
+
+@pytest.mark.parametrize("text", ["", "# only a comment\n\n   \n# and another\n", "\ufeff\n"])
+def test_a_file_with_no_header_is_refused_as_empty(tmp_path, text):
+    f = tmp_path / "s.csv"
+    f.write_text(text)
+    with pytest.raises(CompgenError, match=r"s\.csv: empty file: no header and no data"):
+        read_rtest(f, MACHINE)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import SEED_MACHINE, TABLE4, run, vector
+from conftest import ROOT, SEED_MACHINE, TABLE4, run, vector
 
 from compgen.configuration.machine_file import load_machine
 from compgen.data.probe import read_probe_log, sphere_centres
@@ -497,3 +497,32 @@ def test_a_stylus_a_little_larger_than_logged_shows_in_the_radius_offset_in_micr
                                       machine), machine)
     assert c.radius_offset_um == pytest.approx(1.0, abs=4 * c.radius_sigma_um)
     assert 0.001 < c.radius_sigma_um < 0.1, c.radius_sigma_um
+
+
+def test_the_probe_defaults_are_those_the_machine_file_doc_gives(tmp_path):
+    """A [probe] giving only what it must (tool, length, the two diameters) takes the
+    defaults docs/machine-file.md's `[probe]` row names, each read from that row."""
+    from compgen.model.machine import ProbeSetup
+    row = next(line for line in (ROOT / "docs" / "machine-file.md").read_text().splitlines()
+               if line.startswith("| `[probe]`"))
+    said = {"stylus_length": r"`stylus_length` \(tip centre to probe body, default ([\d.]+)\)",
+            "shaft_diameter": r"`shaft_diameter` \(([\d.]+)\)",
+            "body_diameter": r"`body_diameter` \(([\d.]+)\)",
+            "touches": r"`touches` per pose \(.*?default ([\d.]+)\)",
+            "elevation": r"`elevation` of the side touches \(.*?default ([\d.]+)\)",
+            "poses": r"`poses` per path \(.*?default ([\d.]+)\)",
+            "approach": r"`approach` and `overtravel` \(mm from and beyond the surface, ([\d.]+) and",
+            "overtravel": r"`overtravel` \(mm from and beyond the surface, [\d.]+ and ([\d.]+)\)",
+            "feed": r"`feed` and `probe_feed` \(mm/min, ([\d.]+) and",
+            "probe_feed": r"mm/min, [\d.]+ and ([\d.]+)\)",
+            "margin": r"`margin` \(mm the stylus keeps from the set-up, ([\d.]+)\)"}
+    documented = {k: float(re.search(p, row)[1]) for k, p in said.items()}
+    text = SEED_MACHINE.read_text()
+    head, probe = text.split("[probe]", 1)
+    must = ("tool", "length", "sphere_diameter", "stylus_diameter")
+    kept = [ln for ln in probe.splitlines() if ln.split("=")[0].strip() in must]
+    rest = probe[probe.index("\n[", 1):] if "\n[" in probe else ""
+    (tmp_path / "m.toml").write_text(head + "[probe]\n" + "\n".join(kept) + "\n" + rest)
+    got = load_machine(tmp_path / "m.toml").probe
+    assert {k: float(getattr(got, k)) for k in documented} == documented
+    assert documented == {k: float(getattr(ProbeSetup(25.4, 3.0, 120.0), k)) for k in documented}

@@ -247,9 +247,7 @@ def read_table(path: str | Path, machine: Machine, required: list[str]) -> Table
     """A CSV v1 table with every cell checked: numbers finite, rows whole, columns present."""
     where = str(path)
     text, raw = read_text(path, "data file", limit=MAX_DATA_BYTES)
-    header_line, header_text, body = _header(text)
-    if header_text is None:
-        raise CompgenError("empty file: no header and no data", where=where)
+    header_line, header_text, body = _header(text, where)
     header = [h.strip() for h in _cells(header_text, f"{where}:{header_line}")]
     dup = sorted({h for h in header if header.count(h) > 1})
     if dup:
@@ -303,10 +301,10 @@ def read_table(path: str | Path, machine: Machine, required: list[str]) -> Table
     return _checked(Table(where, digest, columns, np.array(labels, dtype=object), line_no))
 
 
-def _header(text: str) -> tuple[int, str | None, str]:
+def _header(text: str, where: str) -> tuple[int, str, str]:
     """The first line that is neither blank nor a comment (its number and text) and the
     text after it; a large file's rest is not split into lines here (line ends as
-    ``str.splitlines`` takes them)."""
+    ``str.splitlines`` takes them). A file without one is refused."""
     for limit in (1 << 16, len(text)):
         lines = text[:limit].splitlines(keepends=True)
         if limit < len(text):
@@ -317,7 +315,7 @@ def _header(text: str) -> tuple[int, str | None, str]:
             content = (line.splitlines() or [""])[0]
             if content.strip() and not content.lstrip().startswith("#"):
                 return number, content, text[offset:]
-    return 0, None, ""
+    raise CompgenError("empty file: no header and no data", where=where)
 
 
 def _fast_table(body: str, header: list[str], numeric: list[str],
