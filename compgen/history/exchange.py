@@ -196,8 +196,7 @@ def _valid_rows(t: dict[str, list], where: str) -> None:
         doc("checks", c, "summary", dict)
     # what the store keeps once (its content keys): twice in one export is refused here, before
     # any store is opened or made for it
-    machine = {m["id"]: (m["name"], m["serial"]) for m in t["machines"]}
-    of_session = {s["id"]: machine[s["machine_id"]] for s in t["sessions"]}
+    _, of_session = _machine_keys(t)
     fits, edited = set(), set()
     for f in t["fits"]:
         key = (of_session[f["session_id"]], f["marker"])
@@ -208,6 +207,13 @@ def _valid_rows(t: dict[str, list], where: str) -> None:
         if e["fit_id"] in edited:
             bad("edits", e, "a second edit from one fit (the store keeps one per fit)")
         edited.add(e["fit_id"])
+
+
+def _machine_keys(t: dict[str, list]) -> tuple[dict[int, tuple], dict[int, tuple]]:
+    """Each machine row's key in a store, (name, serial), and each session's machine's key
+    (the rows' references checked already)."""
+    machines = {m["id"]: (m["name"], m["serial"]) for m in t["machines"]}
+    return machines, {s["id"]: machines[s["machine_id"]] for s in t["sessions"]}
 
 
 def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str, int]:
@@ -221,13 +227,8 @@ def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str
     if store.rows("SELECT id FROM imports WHERE file_sha256 = ?", (sha256,)):
         raise CompgenError("this export has been imported here already", where=where,
                            hint="nothing to import")
-    try:
-        machines = {m["id"]: (m["name"], m["serial"]) for m in t["machines"]}
-        session_machine = {s["id"]: machines[s["machine_id"]] for s in t["sessions"]}
-        held = {(session_machine[f["session_id"]], f["marker"]) for f in t["fits"]}
-    except (KeyError, TypeError) as exc:
-        raise CompgenError(f"the export is incomplete or damaged ({exc!r}); nothing was imported",
-                           where=where) from None
+    machines, session_machine = _machine_keys(t)
+    held = {(session_machine[f["session_id"]], f["marker"]) for f in t["fits"]}
     # a machine of the same name and serial here is the same machine only if it was measured
     # with a machine file this store has seen for it (two plants' "DMU-50" without serials are
     # two machines, never merged silently)
@@ -268,9 +269,10 @@ def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str
             ids["fits"][f["id"]] = store.insert("fits", {
                 **{k: f[k] for k in _COLUMNS["fits"][2:]}, "session_id": ids["sessions"][f["session_id"]],
                 "content_sha256": content_key("fit", name, serial, f["marker"])}, unique="content_sha256")
-            if ids["fits"][f["id"]] is None:
-                raise CompgenError(f"the export holds fit {f['marker']} of {name!r} twice; nothing was "
-                                   "imported", where=where, hint="import an export compgen wrote, unchanged")
+            if ids["fits"][f["id"]] is None:     # another writer recorded it since the check above
+                raise CompgenError(f"fit {f['marker']} of {name!r} was recorded in this store while the "
+                                   "import ran; nothing was imported", where=where,
+                                   hint="import again: what this store holds by then is refused by name")
         for e in t["edits"]:
             name, serial = machines[e["machine_id"]]
             if store.insert("edits", {**{k: e[k] for k in _COLUMNS["edits"][3:]},
@@ -279,9 +281,9 @@ def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str
                                       "content_sha256": content_key("edit", name, serial,
                                                                     markers[e["fit_id"]])},
                             unique="content_sha256") is None:
-                raise CompgenError(f"the export holds two edits from fit {markers[e['fit_id']]} of {name!r}; "
-                                   "nothing was imported", where=where,
-                                   hint="a fit's correction is made once: import an export compgen wrote")
+                raise CompgenError(f"an edit from fit {markers[e['fit_id']]} of {name!r} was recorded in "
+                                   "this store while the import ran; nothing was imported", where=where,
+                                   hint="import again: what this store holds by then is refused by name")
         for c in t["checks"]:
             store.insert("checks", {**{k: c[k] for k in _COLUMNS["checks"][4:]},
                                     "machine_id": ids["machines"][c["machine_id"]],
