@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, SEED_MACHINE, run
+from conftest import BC_MACHINE, ROOT, SEED_MACHINE, run
 
 from compgen.configuration.session import reload
 from compgen.controllers.correction import plan
@@ -61,10 +61,32 @@ BAD_MACHINE_EDITS = {
 }
 
 
-@pytest.mark.parametrize("case", BAD_MACHINE_EDITS)
-def test_machine_file_mistakes_are_refused_with_their_key(tmp_path, case):
-    before, after, expected = BAD_MACHINE_EDITS[case]
-    text = SEED_MACHINE.read_text()
+# the same in the bundled SINUMERIK machine's [sinumerik]: the key named as file: section: key
+BAD_SINUMERIK_EDITS = {
+    "a vector not a unit one": ("B = [0.0, -1.0, 0.0]", "B = [0.0, -0.5, 0.0]",
+                                "m.toml: sinumerik: vectors: B: must be the unit vector ±y the control "
+                                "holds for B, got [0.0, -0.5, 0.0]"),
+    "a vector along another axis": ("B = [0.0, -1.0, 0.0]", "B = [1.0, 0.0, 0.0]",
+                                    "m.toml: sinumerik: vectors: B: must be the unit vector ±y the control "
+                                    "holds for B"),
+    "a machine-axis name in lower case": ('X = "X1"', 'X = "x1"', "m.toml: sinumerik: machine_axes: X: "
+                                          "machine-axis name 'x1' is not a SINUMERIK"),
+    "a modulo axis that does not turn round": ('modulo = ["C"]', 'modulo = ["B"]',
+                                               "m.toml: sinumerik: modulo: B is not a rotary axis that turns "
+                                               "a whole revolution"),
+    "a modulo axis the machine lacks": ('modulo = ["C"]', 'modulo = ["A"]', "m.toml: sinumerik: modulo: "
+                                        "A is not a rotary axis that turns a whole revolution"),
+    "fine correction as a number": ("fine_correction = true", "fine_correction = 1",
+                                    "m.toml: sinumerik: fine_correction: must be true or false (SD42974 "
+                                    "$SC_TOCARR_FINE_CORRECTION = 1 or 0)"),
+}
+
+
+@pytest.mark.parametrize("source, case", [*((SEED_MACHINE, c) for c in BAD_MACHINE_EDITS),
+                                          *((BC_MACHINE, c) for c in BAD_SINUMERIK_EDITS)])
+def test_machine_file_mistakes_are_refused_with_their_key(tmp_path, source, case):
+    before, after, expected = (BAD_MACHINE_EDITS if source == SEED_MACHINE else BAD_SINUMERIK_EDITS)[case]
+    text = source.read_text()
     assert before in text
     machine = tmp_path / "m.toml"
     machine.write_text(text.replace(before, after, 1))
@@ -553,32 +575,3 @@ def test_compare_says_when_the_prediction_is_against_the_edit(tmp_path):
     for path, tol in (("K4", 10), ("K1", 8), ("K2", 8)):
         assert re.search(rf"WARNING: {path} is predicted at [\d.]+ µm range, beyond its tolerance {tol} µm",
                          out), path
-
-
-# (replace this, with that) in the bundled SINUMERIK machine's [sinumerik] → the line back
-BAD_SINUMERIK_EDITS = {
-    "a vector not a unit one": ("B = [0.0, -1.0, 0.0]", "B = [0.0, -0.5, 0.0]",
-                                "must be the unit vector ±y the control holds for B, got [0.0, -0.5, 0.0]"),
-    "a vector along another axis": ("B = [0.0, -1.0, 0.0]", "B = [1.0, 0.0, 0.0]",
-                                    "must be the unit vector ±y the control holds for B"),
-    "a machine-axis name in lower case": ('X = "X1"', 'X = "x1"',
-                                          "machine-axis name 'x1' is not a SINUMERIK"),
-    "a modulo axis that does not turn round": ('modulo = ["C"]', 'modulo = ["B"]',
-                                               "B is not a rotary axis that turns a whole revolution"),
-    "a modulo axis the machine lacks": ('modulo = ["C"]', 'modulo = ["A"]',
-                                        "A is not a rotary axis that turns a whole revolution"),
-    "fine correction as a number": ("fine_correction = true", "fine_correction = 1",
-                                    "must be true or false (SD42974 $SC_TOCARR_FINE_CORRECTION = 1 or 0)"),
-}
-
-
-@pytest.mark.parametrize("case", BAD_SINUMERIK_EDITS)
-def test_sinumerik_section_mistakes_are_refused_with_their_key(tmp_path, case):
-    before, after, expected = BAD_SINUMERIK_EDITS[case]
-    text = (ROOT / "machines" / "bc-table-sinumerik840d.toml").read_text()
-    assert before in text
-    machine = tmp_path / "m.toml"
-    machine.write_text(text.replace(before, after, 1))
-    code, _, err = run("effects", "--machine", machine)
-    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
-    assert expected in err and "m.toml: sinumerik: " in err, err
