@@ -1338,3 +1338,33 @@ def test_the_gate_names_the_three_strongest_significant_effects(seed_machine, po
     assert fit_gate(seed_machine, data, fit) == [
         f"diagnose finds effects the model misses: {', '.join(significant[:3])} (run diagnose, add the "
         "effect with fit --add, and refit)"]
+
+
+def test_absorbed_by_names_each_parameter_taking_a_quarter_of_the_signature(seed_machine, poses):
+    """docs/diagnose.md: a parameter is named as absorbing a candidate when its part of the
+    least-squares fit J x = c takes at least a quarter of c (‖J_i‖·‖x_i‖ ≥ ‖c‖/4), largest
+    first. Checked against the stacked Jacobian, not the products diagnose uses; shares
+    within 0.005 of the quarter are left to rounding."""
+    from compgen.model.effects import resolve
+    from compgen.model.kinematics import Model
+    from compgen.statistics.signature import columns
+    data = [_session(seed_machine, poses, {}, seed=3)]
+    base = identify(seed_machine, data)
+    found = diagnose(seed_machine, data, base)
+    J = Model(seed_machine, list(base.model)).jacobian(poses).reshape(3 * len(poses), -1)
+    J = J[:, [base.model.index(p) for p in base.free]]
+    between = 0
+    for c in found.candidates:
+        e = resolve(seed_machine, c.effect)
+        if e.basis.kind == "r" or c.silent:
+            continue
+        C = columns(seed_machine, poses, [e])
+        x = np.linalg.lstsq(J, C, rcond=None)[0]
+        share = np.linalg.norm(J, axis=0) * np.linalg.norm(x, axis=1) / np.linalg.norm(C)
+        of = dict(zip(base.free, share, strict=True))
+        clear = {p for p, s in of.items() if abs(s - 0.25) > 0.005}
+        assert clear & set(c.confounded_with) == {p for p in clear if of[p] > 0.25}, (c.effect, of)
+        said = [of[p] for p in c.confounded_with]                       # largest first
+        assert all(a > b - 1e-9 for a, b in zip(said[:-1], said[1:], strict=True)), (c.effect, of)
+        between += sum(0.3 < of[p] < 0.45 for p in clear)
+    assert between > 20             # many parameters take between a quarter and a half
