@@ -720,3 +720,34 @@ def test_a_heads_pivot_stands_where_the_head_carries_it_when_the_table_moves_too
         distance = np.linalg.norm(head_pivots(m, poses.q)[:, 0] - poses.ball, axis=1)
         assert distance == pytest.approx(np.full(len(poses), 150.0 + m.probe_length), abs=1e-9)
     assert np.ptp(generate(travelling, ["K4"]).q[:, travelling.index("X")]) > 100
+
+
+def test_linuxcnc_refuses_what_a_head_module_cannot_take(tmp_path):
+    """On maxkins: an INI that loads a joint compensation table (compgen does not compose
+    one for a head module yet) is refused at its COMP_FILE line; conventional_directions =
+    true is refused (Debian's 2.9 maxkins has no such pin); a head's program checked
+    against a table machine's file says it was written for a head."""
+    from conftest import SEED_MACHINE
+
+    from compgen.controllers.registry import read_state
+    path = on_linuxcnc(tmp_path, None)
+    machine = load_machine(path)
+    (tmp_path / "a.hal").write_text("setp maxkins.pivot-length 270\n")
+    (tmp_path / "c.comp").write_text("-10 -0.001 0.001\n10 0.001 -0.001\n")
+    (tmp_path / "m.ini").write_text("[HAL]\nHALFILE = a.hal\n[JOINT_4]\nCOMP_FILE = c.comp\n")
+    state = read_state(str(tmp_path / "m.ini"))
+    with pytest.raises(CompgenError, match=r"m.ini:4.*compgen does not compose them for a head module"):
+        linuxcnc.loaded_joint_tables(machine, state)
+    code, _, err = run("measure-program", "--machine", path, "--path", "K4", "-o", tmp_path / "K4.ngc")
+    assert code == 0, err
+    table = tmp_path / "table.toml"
+    table.write_text(re.sub(r'controller = "\w+"', 'controller = "linuxcnc"', SEED_MACHINE.read_text())
+                     .replace('tool = "RTEST"', 'tool = "7"'))
+    code, _, err = run("check-program", "--machine", table, "--mode", "tcpm", tmp_path / "K4.ngc")
+    assert code == 2 and "the program was written for a head on maxkins, which this machine file is not" \
+        in err, err
+    path.write_text(path.read_text().replace("directions = false", "directions = true")
+                    .replace('version = "2.9"', 'version = "2.10"'))        # the trt pin's version
+    code, _, err = run("measure-program", "--machine", path, "--path", "K4", "-o", tmp_path / "K4b.ngc")
+    assert code == 2 and "maxkins was run without a conventional-directions pin" in err, err
+    assert "[linuxcnc] conventional_directions" in err and not (tmp_path / "K4b.ngc").exists()

@@ -357,3 +357,29 @@ def test_an_angle_rounded_away_is_told_in_arcseconds(seed_machine, fit):
                      r"uncertainty (\S+) arcsec", caught.value.message)
     assert said, caught.value.message
     assert 0.25 < float(said[3]) <= 1.8 and said[4] == "0.25"
+
+
+@pytest.mark.parametrize("cut, message, line", [
+    (lambda t: t.replace(COLS + "\n", ""), "no header line with NR and KEY", 13),
+    (lambda t: t.split("[END]")[0], "no [END] line", None),
+    (lambda t: t.replace("#STRUCTEND\n", "").split(COLS)[0], "the column-description block does not end", 2),
+    (lambda t: t.replace("#STRUCTBEGIN", "TableDescription (").split(COLS)[0],
+     "the column-description block does not end", 2),
+])
+def test_a_table_cut_short_is_refused_where_it_ends(cut, message, line):
+    """A table without its header line, its [END] or the end of its column description
+    (either style) is refused at the line where what is missing was looked for."""
+    text = cut(_table(newline="\n"))
+    with pytest.raises(CompgenError, match=re.escape(message)) as e:
+        TabTable.parse(text, "t.TAB")
+    assert e.value.where == ("t.TAB" if line is None else f"t.TAB:{line}")
+
+
+def test_blank_lines_between_rows_are_no_rows():
+    """A blank line among the rows (an editor's, or the control's after a deleted row) is
+    passed over: the table's rows and their line numbers are those of the rows."""
+    text = _table(newline="\n").replace("3    MachBase\n", "3    MachBase\n\n   \n")
+    table = TabTable.parse(text, "t.TAB")
+    lines = text.split("\n")
+    assert [r["NR"] for r in table.rows] == [str(k) for k in range(11)]
+    assert [lines[k].split()[0] for k in table.row_at] == [str(k) for k in range(11)]
