@@ -1368,3 +1368,44 @@ def test_absorbed_by_names_each_parameter_taking_a_quarter_of_the_signature(seed
         assert all(a > b - 1e-9 for a, b in zip(said[:-1], said[1:], strict=True)), (c.effect, of)
         between += sum(0.3 < of[p] < 0.45 for p in clear)
     assert between > 20             # many parameters take between a quarter and a half
+
+
+def test_equally_short_measurements_are_advised_by_how_far_they_tell_the_rivals_apart(seed_machine):
+    """A positioning error of A growing with its angle and a 1/rev tilt of C, measured on
+    K4: K2 as it is and K2 with the ball elsewhere (121 poses each) tell them apart. The
+    plan and the rival's own list put first the one after which either, at its fitted
+    size, leaves the larger misfit in a fit of the other: computed here by stacked least
+    squares on the poses with each measurement added, not by diagnose's R factors."""
+    poses = generate(seed_machine, ["K4"])
+    from compgen.model.effects import effect_of_param, resolve
+    from compgen.model.kinematics import Poses
+    from compgen.statistics.signature import columns
+    from compgen.units import shown
+    data = [_session(seed_machine, poses, {"EAA:p1": 3 * ARCSEC})]
+    fit = identify(seed_machine, data)
+    pair = ["EAA:p1", "EBC:h1"]
+    found = diagnose(seed_machine, data, fit, pair, advisor=Advisor)
+    assert {found.significant[0].effect, *found.rivals} == set(pair)
+    model = list(dict.fromkeys(effect_of_param(seed_machine, n) for n in fit.free))
+    size = {c.effect: np.array(c.amplitude) / shown(1.0, resolve(seed_machine, c.effect).unit)[0]
+            for c in found.candidates if c.effect in pair}
+
+    def apart(P):             # what each, true, leaves in a fit of the other: the lesser
+        left = []
+        for a, b in (pair, pair[::-1]):
+            A = columns(seed_machine, P, [*model, resolve(seed_machine, b)])
+            v = columns(seed_machine, P, [resolve(seed_machine, a)]) @ size[a]
+            left.append(float(np.sum((v - A @ np.linalg.lstsq(A, v, rcond=None)[0]) ** 2)))
+        return min(left)
+
+    advisor = Advisor(seed_machine, poses)
+    now, sigma2 = apart(poses), (fit.residual["sigma_um"] * 1e-3) ** 2
+    gain = {m.label: apart(Poses.concat([poses, m.poses])) - now for m in advisor.candidates}
+    tells = sorted((m for m in advisor.candidates
+                    if gain[m.label] >= 25 * sigma2 and advisor.why_not(m) is None),
+                   key=lambda m: (len(m.poses), -gain[m.label]))
+    shortest = [m.label for m in tells if len(m.poses) == len(tells[0].poses)]
+    assert len(shortest) >= 2 and gain[shortest[0]] > 1.1 * gain[shortest[1]], {k: gain[k] for k in shortest}
+    assert found.rivals_separated_by[0].label == shortest[0]
+    rival = next(c for c in found.candidates if c.effect == found.rivals[0])
+    assert [m.label for m in rival.separated_by] == [m.label for m in tells[:3]]
