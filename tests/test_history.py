@@ -466,6 +466,17 @@ def test_checks_failed_and_passed_travel_with_an_export(year, tmp_path, monkeypa
     with open_store(tmp_path / "b.sqlite") as b:
         got = [(c["passed"], c["summary"]) for c in b.rows("SELECT passed, summary FROM checks ORDER BY id")]
     assert got == want
+    # a check's verdict is 0 or 1 and its summary a JSON dict, or the import is refused
+    doc = json.loads((tmp_path / "a.json").read_text())
+    for key, value, says in (("passed", 2, "passed is neither 0 nor 1"),
+                             ("passed", True, "passed is neither"), ("passed", "1", "passed is neither"),
+                             ("summary", "[1]", "summary is not a JSON dict")):
+        bad = json.loads(json.dumps(doc))
+        bad["tables"]["checks"][0][key] = value
+        (tmp_path / "bad.json").write_text(json.dumps(bad))
+        rc, _, err = run("history", "import", "bad.json", "--db", "c.sqlite")
+        assert rc == 2 and f"checks row {bad['tables']['checks'][0]['id']}" in err and says in err, err
+        assert not (tmp_path / "c.sqlite").exists()
 
 
 def test_a_store_of_the_first_schema_is_migrated_and_keeps_its_rows(tmp_path, fit_file, monkeypatch):
