@@ -682,6 +682,12 @@ def test_the_drift_line_kept_as_sums_is_the_weighted_least_squares_line():
         chi2 = np.sum(w * (y - A @ coef / np.sqrt(w)) ** 2) / max(n - 2, 1)
         sigma = np.sqrt(np.linalg.inv(A.T @ A)[1, 1] * max(chi2, 1.0))
         assert line.slope() == pytest.approx((coef[1], sigma), rel=1e-6)
+    # fits all taken at one instant (one day's sessions dated alike) hold no slope: an unknown
+    # rate (σ infinite), never flagged as a drift, however their values differ
+    line = _Line(entries[0].taken)
+    for k in range(3):
+        line.add(replace(entries[0], values={"YOC": 0.01 + k * 0.1}), "YOC")
+    assert line.slope() == (0.0, math.inf)
 
 
 def test_a_serial_is_one_line_by_the_machine_files_rule(tmp_path, fit_file):
