@@ -1039,3 +1039,42 @@ def test_a_store_without_an_accepted_calibration_says_so(year, tmp_path, monkeyp
                        "--db", "h.sqlite")
     assert rc == 2 and "no accepted calibration of this machine is recorded" in err, out + err
     assert len(err.splitlines()) == 1
+
+
+def test_a_check_that_shows_a_new_drift_advises_planning_the_next_calibration(year, tmp_path):
+    """Two monthly calibrations, then a check a month later: YOC's 1.5 µm/month (limit 1) is
+    a drift from the third point, flagged at the check and advised on in its words."""
+    machine, _, fits, _ = year
+    store = init(tmp_path / "h.sqlite")[0]
+    for when, fit, verdict in fits[:2]:
+        H.record_fit(store, fit, machine, taken=when, verdict=verdict)
+    result = _check(store, year, "2026-03-01T09:00", 103)
+    store.close()
+    drift = [f for f in result.flags if f.kind == "drift"]
+    assert [f.param for f in drift] == ["YOC"], result.flags
+    said = [a for a in result.advice if a.startswith("YOC drifts steadily (")]
+    assert len(said) == 1 and "plan the next calibration before it reaches its limit" in said[0], said
+    assert drift[0].text().split("  ", 1)[1] in said[0]
+
+
+def test_a_trend_shows_a_dash_where_a_fit_does_not_hold_the_parameter(year, tmp_path):
+    """A fit with an effect added (EXC:h2 here) beside fits of the location errors alone:
+    the trend of the effect's parameter has a dash for each fit without it, and its value
+    (µm) for the one that holds it."""
+    from compgen.model.effects import compose
+    machine, base, fits, _ = year
+    store = init(tmp_path / "h.sqlite")[0]
+    for when, fit, verdict in fits[:2]:
+        H.record_fit(store, fit, machine, taken=when, verdict=verdict)
+    d = _session(machine, {**base, "EXC:h2c": 2 * UM}, ["K4", "K1", "K2"], 31, "m3.csv")
+    added = identify(machine, [d], compose(machine, location_model(machine), ["EXC:h2"]))
+    H.record_fit(store, added, machine, taken="2026-03-01T09:00", verdict="accepted")
+    text = H.trend_text(H.trend(store, machine, params=("EXC:h2c", "YOC")))
+    store.close()
+    rows = {ln[:10]: ln for ln in text.splitlines() if ln.startswith("2026-")}
+    assert list(rows) == ["2026-01-01", "2026-02-01", "2026-03-01"], text
+    for day in ("2026-01-01", "2026-02-01"):
+        assert re.search(r" {17}- ", rows[day]), rows[day]
+    value = added.parameters["EXC:h2c"]
+    assert f"{value.value * 1e3:.2f} ± {value.std * 1e3:.2f}" in rows["2026-03-01"], text
+    assert " - " not in rows["2026-03-01"]
