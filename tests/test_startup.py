@@ -115,7 +115,7 @@ def test_the_distributions_diagnose_uses_are_scipys():
                     assert f_sf(F, k, m) == pytest.approx(want, rel=1e-8, abs=0), (k, m, F)
                 else:
                     assert f_sf(F, k, m) < 1e-280
-        for x in (0.01, 0.5, 1.0, 3.0, 10.0, 40.0, 200.0, 1000.0):
+        for x in (-1.0, 0.0, 0.01, 0.5, 1.0, 3.0, 10.0, 40.0, 200.0, 1000.0):   # ≤ 0: a residual of 0
             assert chi2_sf(x, k) == pytest.approx(stats.chi2.sf(x, k), rel=1e-12, abs=1e-300)
         for alpha in (0.5, 0.01, 1e-6):
             assert chi2_isf(alpha, k) == pytest.approx(stats.chi2.isf(alpha, k), rel=1e-10)
