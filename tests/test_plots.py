@@ -172,6 +172,32 @@ def test_rivals_are_drawn_on_the_residual_and_said_equal_only_within_a_hundredth
         _close(figs)
 
 
+@pytest.mark.parametrize("count", [2, 7, 11])
+def test_no_two_rivals_put_a_marker_on_the_same_pose(seed_machine, session, monkeypatch, count):
+    """Rival curves lie on each other where the data cannot tell them apart: each is told by
+    its marker, so no two curves mark the same pose, however many rivals (diagnose names up
+    to ten), and each marks some pose of every panel."""
+    data, fit, _ = session
+    n, m = len(data[0].poses), 40
+    curves = {f"R{i}": (np.zeros((n, 3)), np.zeros((m, 3))) for i in range(count)}
+    monkeypatch.setattr(plots, "rival_curves", lambda *a: curves)
+    found = SimpleNamespace(lines=(), rivals=tuple(curves)[1:],
+                            rivals_separated_by=(SimpleNamespace(label="K4 at half its radius"),))
+    figs = plots.drawings(seed_machine, data, fit, None, found)
+    try:
+        for ax in figs["rivals.png"].axes:
+            marked = []
+            for line in ax.get_lines():
+                if line.get_label() == "residual":
+                    continue
+                start, step = line.get_markevery()
+                marked.append(set(range(start, len(line.get_xdata()), step)))
+            assert len(marked) == count and all(marked), [len(x) for x in marked]
+            assert all(not (a & b) for i, a in enumerate(marked) for b in marked[i + 1:]), ax.get_title()
+    finally:
+        _close(figs)
+
+
 def test_the_rivals_curves_are_what_a_fit_of_the_model_leaves_of_each(seed_machine, session):
     """Each rival's two curves against the exact model fitted anew: data holding only the
     effect at its size (µm, as diagnose gives it), the fit's own model fitted to the measured

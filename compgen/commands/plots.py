@@ -166,9 +166,11 @@ def _rivals(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosis, re
         for i, (name, (now, after)) in enumerate(curves.items()):
             for ax, curve in ((axes[k, 0], now), (axes[k, 1], after)):
                 at = _drawn(np.arange(len(curve)))
+                # where rivals lie on each other only their markers tell them: each curve marks
+                # every (3n + 1)-th pose from 3i on, so no two mark the same pose
                 ax.plot(at, curve[at, k], STYLES[i % len(STYLES)], lw=1.2 + 0.6 * (len(curves) - 1 - i),
                         color=f"C{i}", marker=MARKERS[i % len(MARKERS)],
-                        markevery=(i * 3, 4 + 2 * len(curves)), label=labels[name])
+                        markevery=(3 * i, 3 * len(curves) + 1), label=labels[name])
         axes[k, 0].set_ylabel(f"{DIRECTIONS[k]} (µm)")
     axes[0, 0].set_title("measured: the rivals explain the misfit alike")
     axes[0, 1].set_title(f"{extra.label}:\nwhat each would leave")
