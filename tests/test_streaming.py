@@ -94,3 +94,15 @@ def test_a_dense_sessions_plots_draw_thinned_series_and_count_every_reading(seed
     assert abs(rms[0] - np.sqrt((res[::4, 0] ** 2).mean())) > 0.2
     legends = [f"K2: RMS {v:.2f} µm" for v in rms] * sum(k.startswith("residual-vs-") for k in images)
     assert legends == [x for x in labels if x.startswith("K2: RMS")]
+
+
+@pytest.mark.parametrize("readings", [2, 3])
+def test_a_path_sampled_at_two_or_three_readings_is_a_session_of_that_many(seed_machine, readings):
+    """The least a continuous path can be is two readings, its start and its end: a rate
+    that gives two or three over K2's run makes a session of exactly that many, from the
+    path's first pose to its last."""
+    whole = generate(seed_machine, ["K2"], rate_hz=100, feed=600)
+    seconds = whole.t[-1] - whole.t[0]
+    poses = generate(seed_machine, ["K2"], rate_hz=(readings - 1) / seconds, feed=600)
+    assert len(poses) == readings
+    np.testing.assert_allclose(poses.q[[0, -1]], whole.q[[0, -1]], atol=1e-9)
