@@ -746,8 +746,11 @@ def test_linuxcnc_refuses_what_a_head_module_cannot_take(tmp_path):
     code, _, err = run("check-program", "--machine", table, "--mode", "tcpm", tmp_path / "K4.ngc")
     assert code == 2 and "the program was written for a head on maxkins, which this machine file is not" \
         in err, err
-    path.write_text(path.read_text().replace("directions = false", "directions = true")
-                    .replace('version = "2.9"', 'version = "2.10"'))        # the trt pin's version
+    path.write_text(path.read_text().replace("directions = false", "directions = true"))
+    code, _, err = run("measure-program", "--machine", path, "--path", "K4", "-o", tmp_path / "K4b.ngc")
+    assert code == 2 and "LinuxCNC 2.9 has no conventional-directions pin" in err, err
+    assert "its kinematics modules, trt or head, turn the axes" in err, err      # not "its trt kinematics"
+    path.write_text(path.read_text().replace('version = "2.9"', 'version = "2.10"'))   # the trt pin's version
     code, _, err = run("measure-program", "--machine", path, "--path", "K4", "-o", tmp_path / "K4b.ngc")
     assert code == 2 and "maxkins was run without a conventional-directions pin" in err, err
     assert "[linuxcnc] conventional_directions" in err and not (tmp_path / "K4b.ngc").exists()

@@ -534,7 +534,8 @@ class LinuxCNC(Controller):
             version = (int(m[1]), int(m[2]))
         if conventional and version is not None and version < PIN_SINCE:
             raise CompgenError(f"LinuxCNC {get.doc['version']} has no conventional-directions pin (it came "
-                               "with 2.10): its trt kinematics turn the axes the unconventional way",
+                               "with 2.10): its kinematics modules, trt or head, turn the axes the "
+                               "unconventional way",
                                where=get.at("conventional_directions"), hint="set it false")
         try:
             module = trt_module(machine)[0]
