@@ -1376,11 +1376,11 @@ def test_equally_short_measurements_are_advised_by_how_far_they_tell_the_rivals_
     plan and the rival's own list put first the one after which either, at its fitted
     size, leaves the larger misfit in a fit of the other: computed here by stacked least
     squares on the poses with each measurement added, not by diagnose's R factors."""
-    poses = generate(seed_machine, ["K4"])
     from compgen.model.effects import effect_of_param, resolve
     from compgen.model.kinematics import Poses
     from compgen.statistics.signature import columns
     from compgen.units import shown
+    poses = generate(seed_machine, ["K4"])
     data = [_session(seed_machine, poses, {"EAA:p1": 3 * ARCSEC})]
     fit = identify(seed_machine, data)
     pair = ["EAA:p1", "EBC:h1"]

@@ -10,7 +10,17 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, FORK_MACHINE, HEAD_MACHINE, ROOT, UM, measured_under, on_linuxcnc, run
+from conftest import (
+    ARCSEC,
+    FORK_MACHINE,
+    HEAD_MACHINE,
+    ROOT,
+    SEED_MACHINE,
+    UM,
+    measured_under,
+    on_linuxcnc,
+    run,
+)
 from scipy.spatial.transform import Rotation
 
 from compgen.commands.compare import compare
@@ -725,10 +735,9 @@ def test_a_heads_pivot_stands_where_the_head_carries_it_when_the_table_moves_too
 def test_linuxcnc_refuses_what_a_head_module_cannot_take(tmp_path):
     """On maxkins: an INI that loads a joint compensation table (compgen does not compose
     one for a head module yet) is refused at its COMP_FILE line; conventional_directions =
-    true is refused (Debian's 2.9 maxkins has no such pin); a head's program checked
+    true is refused on 2.9 (no such pin before 2.10) and on 2.10 (compgen models the head
+    modules as Debian's 2.9 runs them, without the pin); a head's program checked
     against a table machine's file says it was written for a head."""
-    from conftest import SEED_MACHINE
-
     from compgen.controllers.registry import read_state
     path = on_linuxcnc(tmp_path, None)
     machine = load_machine(path)

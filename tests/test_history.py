@@ -27,7 +27,7 @@ from compgen.data.rtest import format_rtest
 from compgen.data.simulate import read_truth, simulate
 from compgen.errors import CompgenError
 from compgen.history.store import init, open_store
-from compgen.model.effects import location_model
+from compgen.model.effects import compose, location_model
 from compgen.model.paths import generate
 from compgen.statistics.gate import fit_gate
 from compgen.statistics.identify import identify
@@ -74,10 +74,11 @@ def year():
     return machine, base, fits, edit
 
 
-def _record(url, year):
+def _record(url, year, months=12):
+    """The year's first ``months`` calibrations (and the edit, once its month is among them)."""
     machine, _, fits, (efit, corrects) = year
     store = init(url)[0]             # a PostgreSQL store is made by its owner; a file on first use
-    for when, fit, verdict in fits:
+    for when, fit, verdict in fits[:months]:
         H.record_fit(store, fit, machine, taken=when, verdict=verdict)
         if fit is efit:
             H.record_edit(store, fit, machine, "itnc530", corrects, {"EDIT.TAB": "0" * 64}, {},
@@ -1044,12 +1045,8 @@ def test_a_store_without_an_accepted_calibration_says_so(year, tmp_path, monkeyp
 def test_a_check_that_shows_a_new_drift_advises_planning_the_next_calibration(year, tmp_path):
     """Two monthly calibrations, then a check a month later: YOC's 1.5 µm/month (limit 1) is
     a drift from the third point, flagged at the check and advised on in its words."""
-    machine, _, fits, _ = year
-    store = init(tmp_path / "h.sqlite")[0]
-    for when, fit, verdict in fits[:2]:
-        H.record_fit(store, fit, machine, taken=when, verdict=verdict)
-    result = _check(store, year, "2026-03-01T09:00", 103)
-    store.close()
+    with _record(tmp_path / "h.sqlite", year, months=2) as store:
+        result = _check(store, year, "2026-03-01T09:00", 103)
     drift = [f for f in result.flags if f.kind == "drift"]
     assert [f.param for f in drift] == ["YOC"], result.flags
     said = [a for a in result.advice if a.startswith("YOC drifts steadily (")]
@@ -1061,16 +1058,12 @@ def test_a_trend_shows_a_dash_where_a_fit_does_not_hold_the_parameter(year, tmp_
     """A fit with an effect added (EXC:h2 here) beside fits of the location errors alone:
     the trend of the effect's parameter has a dash for each fit without it, and its value
     (µm) for the one that holds it."""
-    from compgen.model.effects import compose
-    machine, base, fits, _ = year
-    store = init(tmp_path / "h.sqlite")[0]
-    for when, fit, verdict in fits[:2]:
-        H.record_fit(store, fit, machine, taken=when, verdict=verdict)
+    machine, base, _, _ = year
     d = _session(machine, {**base, "EXC:h2c": 2 * UM}, ["K4", "K1", "K2"], 31, "m3.csv")
     added = identify(machine, [d], compose(machine, location_model(machine), ["EXC:h2"]))
-    H.record_fit(store, added, machine, taken="2026-03-01T09:00", verdict="accepted")
-    text = H.trend_text(H.trend(store, machine, params=("EXC:h2c", "YOC")))
-    store.close()
+    with _record(tmp_path / "h.sqlite", year, months=2) as store:
+        H.record_fit(store, added, machine, taken="2026-03-01T09:00", verdict="accepted")
+        text = H.trend_text(H.trend(store, machine, params=("EXC:h2c", "YOC")))
     rows = {ln[:10]: ln for ln in text.splitlines() if ln.startswith("2026-")}
     assert list(rows) == ["2026-01-01", "2026-02-01", "2026-03-01"], text
     for day in ("2026-01-01", "2026-02-01"):
