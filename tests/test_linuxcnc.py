@@ -21,6 +21,7 @@ import subprocess
 import tempfile
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pytest
@@ -139,12 +140,26 @@ def end_linuxcnc(marker: str, grace_s: float = 10.0) -> None:
         lock.unlink()
 
 
+class Rest(NamedTuple):
+    """The joints at rest once, as the test driver wrote it: the program line (1-based) the
+    status named, the polls they held, the joints read."""
+    line: int
+    polls: int
+    joints: np.ndarray
+
+
+def _rests(text: str, width: int) -> list[Rest]:
+    """The driver's rests, in the order they came, of ``width`` joint values each."""
+    return [Rest(int(w[0]), int(w[1]), np.array([float(v) for v in w[2:2 + width]]))
+            for w in (ln.split() for ln in text.splitlines()) if w[0].isdigit()]
+
+
 def run_linuxcnc(folder, machine, program: str, edit: str, budget_s: float = RUN_BUDGET_S,
-                 tables: dict[str, str] | None = None) -> dict[int, np.ndarray]:
+                 tables: dict[str, str] | None = None) -> list[Rest]:
     """Run ``program`` on a headless LinuxCNC with the configuration's pins and ``edit`` (a
     further HAL file, as a user loads compgen's edit) and the joint compensation ``tables``
-    (file name → text) put in the INI as the edit's header says; settled joints by 1-based
-    program line: the five joint positions then the five motor commands (with the tables'
+    (file name → text) put in the INI as the edit's header says; every rest of the joints, in
+    time order: the five joint positions then the five motor commands (with the tables'
     trims), the nest's tool length taken off Z (G43 adds it to the joint)."""
     assert shutil.which("linuxcnc"), "LinuxCNC is required here (COMPGEN_REQUIRE_LINUXCNC)"
     module, tilt, _ = linuxcnc.trt_module(machine)
@@ -170,9 +185,7 @@ def run_linuxcnc(folder, machine, program: str, edit: str, budget_s: float = RUN
     assert text.rstrip().endswith("done"), text[-500:]
     stops = re.search(r"(?m)^stops (\d+)$", text)
     assert stops and int(stops[1]) == program.count("\nM0"), ("the program's stops", text[-300:])
-    joints = {int(w[0]): np.array([float(v) for v in w[1:]])
-              for w in (ln.split() for ln in text.splitlines()) if w[0].isdigit()}
-    return {k: v - [0, 0, machine.probe_length, 0, 0] * 2 for k, v in joints.items()}
+    return [r._replace(joints=r.joints - [0, 0, machine.probe_length, 0, 0] * 2) for r in _rests(text, 10)]
 
 
 def launch(folder: Path, ini: Path, more_env: dict[str, str], budget_s: float = RUN_BUDGET_S,
@@ -224,23 +237,27 @@ def launch(folder: Path, ini: Path, more_env: dict[str, str], budget_s: float = 
     return subprocess.CompletedProcess(command, launcher.returncode, stdout or "")
 
 
-def _at_poses(joints: dict[int, np.ndarray], program: str) -> np.ndarray:
-    """Joints at each pose block, read where the machine rests at that pose: of the samples
-    at rest the driver kept for the pose's dwell line, its own line and the last line before
-    it (a block that moves nothing, the first pose repeating the approach, has no motion line
-    of its own), the one whose tilting and C joints are the angles the pose's line writes.
-    The status's line can lag or lead the motion by a block (a CI run read a pose from the
-    line before): the program's own words say which sample is the pose's, never compgen's
-    model. None matching, the last line's (and the test's comparison fails)."""
-    text = program.splitlines()
-    seen = np.array(sorted(joints))
-    out = []
-    for line, raw in ((i, ln) for i, ln in enumerate(text, start=1) if re.search(r"; pose \d+", ln)):
+def _at_poses(rests: list[Rest], program: str) -> np.ndarray:
+    """Joints at each pose block, read where the machine rested at that pose: for each pose
+    in the program's order, of the rests after the last pose's, those whose tilting and C
+    joints are the angles the pose's line writes (in the module's own turn) and whose
+    status line is within two of the pose's, the longest (the dwell's). The status's line can
+    lag or lead the motion by a block or more (CI runs read a pose from a neighbour's line):
+    the program's words, the order and the dwell say which rest is the pose's, never
+    compgen's model. Lines within two: the first pose repeats the approach onto the ball,
+    which rests at its angles one line before; the last pose is followed by the move off the
+    ball, which may rest at them two lines later (and shortly)."""
+    out, after = [], 0
+    numbered = enumerate(program.splitlines(), start=1)
+    for line, raw in ((i, ln) for i, ln in numbered if re.search(r"; pose \d+", ln)):
         words = dict(re.findall(r"\b([A-C])(-?[0-9.]+)", raw.split(";")[0]))
-        angles = [float(words[a]) for a in sorted(words, key=lambda a: a == "C")]    # tilt, C
-        near = [c for c in (line + 1, line, seen[seen <= line].max()) if c in joints]
-        out.append(next((joints[c] for c in near if np.allclose(joints[c][3:5], angles, rtol=0, atol=1e-6)),
-                        joints[near[-1]]))
+        angles = [float(words[a]) for a in sorted(words, key=lambda a: a == "C")]        # tilt, C
+        here = [k for k in range(after, len(rests)) if abs(rests[k].line - line) <= 2
+                and np.allclose(rests[k].joints[3:5], angles, rtol=0, atol=1e-6)]
+        assert here, (f"LinuxCNC did not rest at line {line}'s angles {angles} after its rest {after}",
+                      [(r.line, r.polls, r.joints[3:5]) for r in rests[after:after + 8]])
+        after = max(here, key=lambda k: rests[k].polls)
+        out.append(rests[after].joints)
     return np.array(out)
 
 
@@ -436,18 +453,16 @@ def _head_configuration(folder: Path, machine, pin: str) -> Path:
     return folder / "sim.ini"
 
 
-def _run_head(ini: Path, machine, program: str) -> tuple[dict, list[str]]:
-    """Start LinuxCNC with ``ini`` and run ``program``: the joints (X Y Z, tilt, C) at each
-    line where they rested, and the operator's messages."""
+def _run_head(ini: Path, machine, program: str) -> tuple[list[Rest], list[str]]:
+    """Start LinuxCNC with ``ini`` and run ``program``: every rest of the joints (X Y Z, tilt,
+    C), in time order, and the operator's messages."""
     folder = ini.parent
     (folder / "prog.ngc").write_text(program)
     read = HEAD_JOINTS[linuxcnc.head_module(machine)[0].module][1]
     launcher = launch(folder, ini, {"COMPGEN_NGC": str(folder / "prog.ngc"), "COMPGEN_READ_JOINTS": read})
     text = (folder / "joints.txt").read_text() if (folder / "joints.txt").exists() else ""
     assert text.rstrip().endswith("done"), (text[-500:], launcher.stdout[-1500:])
-    joints = {int(w[0]): np.array([float(v) for v in w[1:6]])
-              for w in (ln.split() for ln in text.splitlines()) if w[0].isdigit()}
-    return joints, re.findall(r"(?m)^message (.*)$", text)
+    return _rests(text, 5), re.findall(r"(?m)^message (.*)$", text)
 
 
 # what a head module's pin holds (the B line 30 µm farther from the nest along the tool) and
@@ -480,8 +495,8 @@ def test_a_head_modules_edit_runs_compgens_program_where_compgen_puts_it(tmp_pat
         joints, said = _run_head(_head_configuration(tmp_path / "short", machine, "250.0"), machine, program)
         at = program[:guard.start()].count("\n") + 1                       # the guard's line
         assert said and "pivot-length is more than 0.1000 mm from 270.0000 mm" in said[-1], said
-        assert all(line <= at + 2 for line in joints), sorted(joints)       # nothing after the guard
-        assert all(np.allclose(j, 0, atol=1e-9) for j in joints.values()), joints
+        assert all(r.line <= at + 2 for r in joints), joints                # nothing after the guard
+        assert all(np.allclose(r.joints, 0, atol=1e-9) for r in joints), joints
     rng = np.random.default_rng(7)
     pre = simulate(machine, HEAD_TRUTH, generate(machine, ["K4", "K2"]), NOISE_UM, rng)
     fit = identify(machine, [pre], location_model(machine))
@@ -538,7 +553,7 @@ def test_a_longer_nest_program_runs_under_maxkins_with_the_pin_it_asks_for(tmp_p
     assert guard[1] == "maxkins" and float(guard[2]) == pytest.approx(370.0)      # 150 pivot + 220 nest
     joints, said = _run_head(_head_configuration(tmp_path / "first", machine, "270.0"), machine, program)
     assert said and "pivot-length is more than 0.1000 mm from 370.0000 mm" in said[-1], said
-    assert all(np.allclose(j, 0, atol=1e-9) for j in joints.values()), joints
+    assert all(np.allclose(r.joints, 0, atol=1e-9) for r in joints), joints
     joints, said = _run_head(_head_configuration(tmp_path / "longer", machine, guard[2]), machine, program)
     assert [m[:13] for m in said] == ["PRESET CHECK:"], said
     got = _at_poses(joints, program)

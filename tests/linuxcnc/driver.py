@@ -1,8 +1,9 @@
 #!/usr/bin/python3
 """The 'display' of the test configuration: switch on, home, run $COMPGEN_NGC in AUTO,
-and write the settled joint positions per program line to $COMPGEN_JOINTS: the joints'
-commanded positions, then their motor commands (with the joint compensation tables' trims),
-of the joints $COMPGEN_READ_JOINTS names (default 0 to 4)."""
+and write to $COMPGEN_JOINTS every time the joints rested, in the order they did: the
+program line the status named, how many polls they held, the joints' commanded positions,
+then their motor commands (with the joint compensation tables' trims), of the joints
+$COMPGEN_READ_JOINTS names (default 0 to 4)."""
 import os
 import time
 
@@ -44,8 +45,8 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
         c.auto(linuxcnc.AUTO_RUN, 0)
         # running, or stopped at once by the program's own guard (its message says so)
         wait(lambda: heard() or s.interp_state != linuxcnc.INTERP_IDLE, 10)
-        settled, last, stops = {}, None, 0
-        still, longest = 0, {}     # polls the joints have held; each line's longest such run
+        rests, last, stops = [], None, 0
+        still, line = 0, 0         # polls the joints have held at rest; the status's line then
         end = time.time() + 600
         while time.time() < end:
             s.poll()
@@ -57,21 +58,26 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
                 c.auto(linuxcnc.AUTO_RESUME)
                 wait(lambda: not s.paused, 10)
                 continue
-            # joint and motor commands read from HAL together; settled when at rest and
-            # unchanged since the last sample. The status buffer's line and velocity lag HAL
-            # by a cycle or so, and a starved real-time thread can hold HAL's values for a
-            # poll mid-move: so each line keeps the sample of its longest run at rest (the
-            # dwell after a pose: 50 polls at the tests' 0.1 s, 500 at a machine's 1 s), never a
-            # brief one at its edges
+            # joint and motor commands read from HAL together; at rest when the status says
+            # so and unchanged since the last sample. Every rest is kept, in time order: the
+            # status buffer's line and velocity lag or lead HAL by a cycle or more under load
+            # (a CI run labelled one pose's dwell with a neighbour's line, and kept the longer
+            # of the two), and a starved real-time thread can hold HAL's values for a poll
+            # mid-move; the tests tell a pose's dwell (50 polls at the tests' 0.1 s, 500 at a
+            # machine's 1 s) by the program's words, the order and the length
             now = [hal.get_value(f"joint.{j}.{pin}")
                    for pin in ("pos-cmd", "motor-pos-cmd") for j in read]
-            still = still + 1 if now == last else 0
-            if s.current_vel == 0 and still and still >= longest.get(s.motion_line, 0):
-                settled[s.motion_line], longest[s.motion_line] = now, still
+            if s.current_vel == 0 and now == last:
+                still, line = still + 1, s.motion_line
+            elif still:
+                rests.append((line, still, last))
+                still = 0
             last = now
             time.sleep(0.002)
-        for line in sorted(settled):
-            out.write(f"{line} " + " ".join(f"{v:.9f}" for v in settled[line]) + "\n")
+        if still:
+            rests.append((line, still, last))
+        for line, polls, values in rests:
+            out.write(f"{line} {polls} " + " ".join(f"{v:.9f}" for v in values) + "\n")
         out.writelines(f"message {m}\n" for m in messages)
         out.write(f"stops {stops}\ndone\n")
     except Exception as exc:   # the test reads this line and fails with it
