@@ -58,16 +58,17 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
                 c.auto(linuxcnc.AUTO_RESUME)
                 wait(lambda: not s.paused, 10)
                 continue
-            # joint and motor commands read from HAL together; at rest when the status says
-            # so and unchanged since the last sample. Every rest is kept, in time order: the
-            # status buffer's line and velocity lag or lead HAL by a cycle or more under load
-            # (a CI run labelled one pose's dwell with a neighbour's line, and kept the longer
-            # of the two), and a starved real-time thread can hold HAL's values for a poll
-            # mid-move; the tests tell a pose's dwell (50 polls at the tests' 0.1 s, 500 at a
-            # machine's 1 s) by the program's words, the order and the length
+            # the joints, their motor commands and the motion's speed read from HAL (the
+            # real-time side): at rest when the speed is nil and the joints unchanged since the
+            # last sample. Not the status buffer's speed: under load it lags HAL by a block or
+            # more (a CI run saw no rest at all at one pose, its 0.1 s dwell read as moving).
+            # The line is the status's (HAL's motion.program-line stays 0 here), which can lag
+            # or lead likewise. Every rest is kept, in time order, for the tests to tell a
+            # pose's dwell (50 polls at the tests' 0.1 s) by the program's words, the order and
+            # the length, from a starved real-time thread holding HAL's values mid-move
             now = [hal.get_value(f"joint.{j}.{pin}")
                    for pin in ("pos-cmd", "motor-pos-cmd") for j in read]
-            if s.current_vel == 0 and now == last:
+            if hal.get_value("motion.current-vel") == 0 and now == last:
                 still, line = still + 1, s.motion_line
             elif still:
                 rests.append((line, still, last))
