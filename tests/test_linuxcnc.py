@@ -136,8 +136,35 @@ def end_linuxcnc(marker: str, grace_s: float = 10.0) -> None:
             break
     assert not _ours(marker), f"LinuxCNC processes {_ours(marker)} survived SIGKILL"
     lock = Path("/tmp/linuxcnc.lock")
-    if lock.exists() and not _milltasks():
-        lock.unlink()
+    if not _milltasks():
+        lock.unlink(missing_ok=True)
+        _remove_left_buffers()
+
+
+# the NML file of every configuration here: none sets [EMC] NML_FILE, as none of LinuxCNC's
+# samples does
+NML_FILE = Path("/usr/share/linuxcnc/linuxcnc.nml")
+
+
+def _nml_buffers() -> list[list[str]]:
+    """The kernel's rows (key shmid perms size cpid lpid nattch …) of the System V shared
+    memory at the SHMEM keys of LinuxCNC's NML file: its NML buffers."""
+    keys = {int(w[9]) for w in (ln.split() for ln in NML_FILE.read_text().splitlines())
+            if len(w) > 9 and w[0] == "B" and w[2] == "SHMEM"}
+    rows = (ln.split() for ln in Path("/proc/sysvipc/shm").read_text().splitlines()[1:])
+    return [r for r in rows if int(r[0]) in keys]
+
+
+def _remove_left_buffers() -> None:
+    """Remove the NML buffers a run left, as LinuxCNC's launcher does at its end (``ipcrm -M``
+    for each SHMEM buffer of the NML file; a buffer a dying process still holds goes when it
+    lets go). A run killed outright, or whose launcher was killed during that clean-up (the
+    grace above runs out under load), never gets there, and the next run's linuxcncsvr takes
+    the buffers over as they were: the IO command buffer's serial numbers then run ahead of
+    milltask's count, every IO command 'times out' and the program never starts (a CI run
+    waited out its whole budget so). Only while no LinuxCNC runs."""
+    for row in _nml_buffers():
+        subprocess.run(["ipcrm", "-m", row[1]], check=True, capture_output=True)
 
 
 class Rest(NamedTuple):
@@ -215,6 +242,7 @@ def launch(folder: Path, ini: Path, more_env: dict[str, str], budget_s: float = 
                         "waits for it nor ends it: run the test when it has stopped")
         if lock.exists():                   # left by a run that died: the launcher would ask
             lock.unlink()
+        _remove_left_buffers()              # likewise, and they would stop the run (above)
         # a terminal as its input: the start script then prints to the pipe what it otherwise
         # writes to temporary files it deletes (``if ! tty -s``)
         terminal, keys = os.openpty()
@@ -323,6 +351,34 @@ def test_a_run_past_its_budget_is_ended_whole(tmp_path):
     with pytest.raises(pytest.fail.Exception, match=r"did not finish within 4 s; it said: (?s:.*)LINUXCNC"):
         run_linuxcnc(tmp_path / "run", machine, "G4 P600\nM2\n", "", budget_s=4)
     assert not _ours(str(tmp_path / "run" / "joints.txt"))
+
+
+def test_a_run_killed_outright_leaves_no_buffers_to_stop_the_next(tmp_path):
+    """A run whose processes all die by SIGKILL (a crash, or a launcher killed during its own
+    clean-up) leaves LinuxCNC's NML buffers behind; they are removed, and the next run goes
+    through (with them, its IO commands time out and it waits out its budget)."""
+    machine = load_machine(_as_linuxcnc(tmp_path, SEED_MACHINE))
+    left, end_as_tests_do = [], end_linuxcnc
+
+    def killed_outright(marker, grace_s=10.0):
+        end = time.monotonic() + 60                 # linuxcncsvr has made its buffers
+        while not any(r[6] != "0" for r in _nml_buffers()) and time.monotonic() < end:
+            time.sleep(0.1)
+        for pid in _ours(marker):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        while any(r[6] != "0" for r in _nml_buffers()) and time.monotonic() < end:
+            time.sleep(0.1)                         # the killed let go of them
+        left.extend(r[0] for r in _nml_buffers())
+        end_as_tests_do(marker, grace_s)
+
+    with pytest.MonkeyPatch.context() as patched:
+        patched.setitem(globals(), "end_linuxcnc", killed_outright)
+        with pytest.raises(pytest.fail.Exception, match="did not finish within 4 s"):
+            run_linuxcnc(tmp_path / "killed", machine, "G4 P600\nM2\n", "", budget_s=4)
+    assert sorted(left) == ["1001", "1002", "1003", "1004", "1005"] and not _nml_buffers()
+    rests = run_linuxcnc(tmp_path / "next", machine, "G0 X1 Y2\nG4 P0.2\nM2\n", "", budget_s=120)
+    assert any(np.allclose(r.joints[:2], [1, 2]) for r in rests)
 
 
 # LinuxCNC's own trt sample configurations, as linuxcnc-uspace ships them: their pins are set
