@@ -138,7 +138,7 @@ def end_linuxcnc(marker: str, grace_s: float = 10.0) -> None:
     lock = Path("/tmp/linuxcnc.lock")
     if not _milltasks():
         lock.unlink(missing_ok=True)
-        _remove_left_buffers()
+        _remove_left_buffers(wait_s=grace_s)
 
 
 # the NML file of every configuration here: none sets [EMC] NML_FILE, as none of LinuxCNC's
@@ -155,16 +155,20 @@ def _nml_buffers() -> list[list[str]]:
     return [r for r in rows if int(r[0]) in keys]
 
 
-def _remove_left_buffers() -> None:
+def _remove_left_buffers(wait_s: float = 0.0) -> None:
     """Remove the NML buffers a run left, as LinuxCNC's launcher does at its end (``ipcrm -M``
-    for each SHMEM buffer of the NML file; a buffer a dying process still holds goes when it
-    lets go). A run killed outright, or whose launcher was killed during that clean-up (the
-    grace above runs out under load), never gets there, and the next run's linuxcncsvr takes
-    the buffers over as they were: the IO command buffer's serial numbers then run ahead of
-    milltask's count, every IO command 'times out' and the program never starts (a CI run
-    waited out its whole budget so). Only while no LinuxCNC runs."""
+    for each SHMEM buffer of the NML file). A run killed outright, or whose launcher was killed
+    during that clean-up (the grace above runs out under load), never gets there, and the next
+    run's linuxcncsvr takes the buffers over as they were: the IO command buffer's serial
+    numbers then run ahead of milltask's count, every IO command 'times out' and the program
+    never starts (a CI run waited out its whole budget so). Only buffers no process holds,
+    after up to ``wait_s`` for killed processes to let go: one held is a live LinuxCNC's."""
+    end = time.monotonic() + wait_s
+    while any(r[6] != "0" for r in _nml_buffers()) and time.monotonic() < end:
+        time.sleep(0.1)
     for row in _nml_buffers():
-        subprocess.run(["ipcrm", "-m", row[1]], check=True, capture_output=True)
+        if row[6] == "0":
+            subprocess.run(["ipcrm", "-m", row[1]], check=True, capture_output=True)
 
 
 class Rest(NamedTuple):
