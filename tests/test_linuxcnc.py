@@ -172,10 +172,11 @@ def _remove_left_buffers(wait_s: float = 0.0) -> None:
 
 
 class Rest(NamedTuple):
-    """The joints at rest once, as the test driver wrote it: the program line (1-based) the
-    status named, the polls they held, the joints read."""
+    """The joints at rest once, as the test driver wrote it: the program line (1-based) of
+    the move that brought them there (0: none yet), the servo periods they held, the joints
+    read."""
     line: int
-    polls: int
+    periods: int
     joints: np.ndarray
 
 
@@ -271,24 +272,23 @@ def launch(folder: Path, ini: Path, more_env: dict[str, str], budget_s: float = 
 
 def _at_poses(rests: list[Rest], program: str) -> np.ndarray:
     """Joints at each pose block, read where the machine rested at that pose: for each pose
-    in the program's order, of the rests after the last pose's, those whose tilting and C
-    joints are the angles the pose's line writes (in the module's own turn) and whose
-    status line is within two of the pose's, the longest (the dwell's). The status's line can
-    lag or lead the motion by a block or more (CI runs read a pose from a neighbour's line):
-    the program's words, the order and the dwell say which rest is the pose's, never
-    compgen's model. Lines within two: the first pose repeats the approach onto the ball,
-    which rests at its angles one line before; the last pose is followed by the move off the
-    ball, which may rest at them two lines later (and shortly)."""
-    out, after = [], 0
+    in the program's order, of the rests after the last pose's, the one the latest move up to
+    the pose's own line brought about (HAL's line of that move, sampled in the servo thread),
+    at the angles the pose's line writes (in the module's own turn); the longest if there are
+    several. The latest move, not the pose's line alone: the first pose repeats the approach
+    onto the ball, which does not move, so its dwell is the approach's rest. The program's
+    words, the order and HAL's lines say which rest is the pose's, never compgen's model."""
+    out, after, before = [], 0, 0
     numbered = enumerate(program.splitlines(), start=1)
     for line, raw in ((i, ln) for i, ln in numbered if re.search(r"; pose \d+", ln)):
         words = dict(re.findall(r"\b([A-C])(-?[0-9.]+)", raw.split(";")[0]))
         angles = [float(words[a]) for a in sorted(words, key=lambda a: a == "C")]        # tilt, C
-        here = [k for k in range(after, len(rests)) if abs(rests[k].line - line) <= 2
+        here = [k for k in range(after, len(rests)) if before < rests[k].line <= line
                 and np.allclose(rests[k].joints[3:5], angles, rtol=0, atol=1e-6)]
         assert here, (f"LinuxCNC did not rest at line {line}'s angles {angles} after its rest {after}",
-                      [(r.line, r.polls, r.joints[3:5]) for r in rests[after:after + 8]])
-        after = max(here, key=lambda k: rests[k].polls)
+                      [(r.line, r.periods, r.joints[3:5]) for r in rests[after:after + 8]])
+        after = max(here, key=lambda k: (rests[k].line, rests[k].periods))
+        before = line
         out.append(rests[after].joints)
     return np.array(out)
 
@@ -553,9 +553,8 @@ def test_a_head_modules_edit_runs_compgens_program_where_compgen_puts_it(tmp_pat
     assert guard[1] == name and float(guard[2]) == pytest.approx(270.0)      # 150 pivot + 120 nest
     if name == "maxkins":
         joints, said = _run_head(_head_configuration(tmp_path / "short", machine, "250.0"), machine, program)
-        at = program[:guard.start()].count("\n") + 1                       # the guard's line
         assert said and "pivot-length is more than 0.1000 mm from 270.0000 mm" in said[-1], said
-        assert all(r.line <= at + 2 for r in joints), joints                # nothing after the guard
+        assert joints and all(r.line == 0 for r in joints), joints      # no move of the program ran
         assert all(np.allclose(r.joints, 0, atol=1e-9) for r in joints), joints
     rng = np.random.default_rng(7)
     pre = simulate(machine, HEAD_TRUTH, generate(machine, ["K4", "K2"]), NOISE_UM, rng)
@@ -613,6 +612,7 @@ def test_a_longer_nest_program_runs_under_maxkins_with_the_pin_it_asks_for(tmp_p
     assert guard[1] == "maxkins" and float(guard[2]) == pytest.approx(370.0)      # 150 pivot + 220 nest
     joints, said = _run_head(_head_configuration(tmp_path / "first", machine, "270.0"), machine, program)
     assert said and "pivot-length is more than 0.1000 mm from 370.0000 mm" in said[-1], said
+    assert joints and all(r.line == 0 for r in joints), joints          # no move of the program ran
     assert all(np.allclose(r.joints, 0, atol=1e-9) for r in joints), joints
     joints, said = _run_head(_head_configuration(tmp_path / "longer", machine, guard[2]), machine, program)
     assert [m[:13] for m in said] == ["PRESET CHECK:"], said

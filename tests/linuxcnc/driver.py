@@ -1,10 +1,17 @@
 #!/usr/bin/python3
 """The 'display' of the test configuration: switch on, home, run $COMPGEN_NGC in AUTO,
 and write to $COMPGEN_JOINTS every time the joints rested, in the order they did: the
-program line the status named, how many polls they held, the joints' commanded positions,
-then their motor commands (with the joint compensation tables' trims), of the joints
-$COMPGEN_READ_JOINTS names (default 0 to 4)."""
+program line of the move that brought them there, how many servo periods they held, the
+joints' commanded positions, then their motor commands (with the joint compensation
+tables' trims), of the joints $COMPGEN_READ_JOINTS names (default 0 to 4).
+
+The joints, the speed and the line are sampled by HAL's own sampler in the servo thread,
+every period, into a FIFO this script drains: a rest is seen whole, under its own line,
+however late this script runs. Polled from here, a pose's 0.1 s dwell was missed outright
+when a loaded machine kept the script off the CPU for longer (a CI run), and the status's
+line lagged or led the motion by blocks."""
 import os
+import subprocess
 import time
 
 import hal
@@ -16,6 +23,54 @@ read = [int(j) for j in os.environ.get("COMPGEN_READ_JOINTS", "0 1 2 3 4").split
 s, c, wait = display.s, display.c, display.wait
 errors = linuxcnc.error_channel()     # the operator's messages: an (abort, ...) says why it stopped
 messages = []
+SAMPLER_KEY = 0x48534130    # LinuxCNC's streamer.h: SAMPLER_SHMEM_KEY, sampler 0's FIFO
+DEPTH = 16384               # servo periods (1 ms) of slack before the FIFO overruns
+
+
+def halcmd(*words: str) -> str:
+    return subprocess.run(["halcmd", "-s", *words], check=True, capture_output=True, text=True).stdout
+
+
+def sample(pins: list) -> "hal.stream":
+    """Load a sampler of ``pins`` (floats, then one s32) into the servo thread; its FIFO."""
+    halcmd("loadrt", "sampler", f"depth={DEPTH}", "cfg=" + "f" * (len(pins) - 1) + "s")
+    halcmd("addf", "sampler.0", "servo-thread")
+    for k, pin in enumerate(pins):
+        shown = halcmd("show", "pin", pin).split()
+        arrow = [i for i, w in enumerate(shown) if w in ("==>", "<==", "<=>")]
+        if arrow:                                # on a signal already: the sampler reads it too
+            halcmd("net", shown[arrow[0] + 1], f"sampler.0.pin.{k}")
+        else:
+            halcmd("net", f"compgen-sample-{k}", pin, f"sampler.0.pin.{k}")
+    return hal.stream(display.component, SAMPLER_KEY)
+
+
+class Rests:
+    """The rests in the sampled periods, in time order: (line, periods, joints). A rest's
+    line is HAL's motion.program-line of the last move before it (the pin holds the line of
+    the move under way; it reads 0 at rest): a pose's dwell is filed under the pose's block."""
+
+    def __init__(self):
+        self.seen, self.still, self.line, self.moved_by, self.last = [], 0, 0, 0, None
+
+    def drain(self, fifo) -> None:
+        """Read the FIFO to its end: at rest where the speed is nil and the joints are the
+        last period's."""
+        while (got := fifo.read()) is not None:
+            *now, speed, line = got
+            self.moved_by = line or self.moved_by
+            if speed == 0 and now == self.last:
+                if not self.still:
+                    self.line = self.moved_by
+                self.still += 1
+            else:
+                self.end()
+            self.last = now
+
+    def end(self) -> None:
+        if self.still:
+            self.seen.append((self.line, self.still, self.last))
+            self.still = 0
 
 
 def heard() -> bool:
@@ -39,14 +94,16 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
             c.mdi("G90 G0 " + " ".join(f"{a}{value}" for a in axes))
             c.wait_complete(30)
             wait(lambda: s.interp_state == linuxcnc.INTERP_IDLE and s.inpos)
+        # every period from here on: the joints, their motor commands, the motion's speed
+        fifo = sample([f"joint.{j}.{pin}" for pin in ("pos-cmd", "motor-pos-cmd") for j in read]
+                      + ["motion.current-vel", "motion.program-line"])
         c.mode(linuxcnc.MODE_AUTO)
         wait(lambda: s.task_mode == linuxcnc.MODE_AUTO)
         c.program_open(os.environ["COMPGEN_NGC"])
         c.auto(linuxcnc.AUTO_RUN, 0)
         # running, or stopped at once by the program's own guard (its message says so)
         wait(lambda: heard() or s.interp_state != linuxcnc.INTERP_IDLE, 10)
-        rests, last, stops = [], None, 0
-        still, line = 0, 0         # polls the joints have held at rest; the status's line then
+        rests, stops = Rests(), 0
         end = time.time() + 600
         while time.time() < end:
             s.poll()
@@ -58,27 +115,15 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
                 c.auto(linuxcnc.AUTO_RESUME)
                 wait(lambda: not s.paused, 10)
                 continue
-            # the joints, their motor commands and the motion's speed read from HAL (the
-            # real-time side): at rest when the speed is nil and the joints unchanged since the
-            # last sample. Not the status buffer's speed: under load it lags HAL by a block or
-            # more (a CI run saw no rest at all at one pose, its 0.1 s dwell read as moving).
-            # The line is the status's (HAL's motion.program-line stays 0 here), which can lag
-            # or lead likewise. Every rest is kept, in time order, for the tests to tell a
-            # pose's dwell (50 polls at the tests' 0.1 s) by the program's words, the order and
-            # the length, from a starved real-time thread holding HAL's values mid-move
-            now = [hal.get_value(f"joint.{j}.{pin}")
-                   for pin in ("pos-cmd", "motor-pos-cmd") for j in read]
-            if hal.get_value("motion.current-vel") == 0 and now == last:
-                still, line = still + 1, s.motion_line
-            elif still:
-                rests.append((line, still, last))
-                still = 0
-            last = now
-            time.sleep(0.002)
-        if still:
-            rests.append((line, still, last))
-        for line, polls, values in rests:
-            out.write(f"{line} {polls} " + " ".join(f"{v:.9f}" for v in values) + "\n")
+            rests.drain(fifo)
+            time.sleep(0.01)
+        time.sleep(0.05)           # the periods after the end reach the FIFO
+        rests.drain(fifo)
+        if hal.get_value("sampler.0.overruns"):
+            raise RuntimeError(f"the sampler's FIFO overran {hal.get_value('sampler.0.overruns')} times")
+        rests.end()
+        for line, periods, values in rests.seen:
+            out.write(f"{line} {periods} " + " ".join(f"{v:.9f}" for v in values) + "\n")
         out.writelines(f"message {m}\n" for m in messages)
         out.write(f"stops {stops}\ndone\n")
     except Exception as exc:   # the test reads this line and fails with it
