@@ -155,6 +155,11 @@ def _nml_buffers() -> list[list[str]]:
     return [r for r in rows if int(r[0]) in keys]
 
 
+def _buffers_held() -> bool:
+    """Whether a process holds one of LinuxCNC's NML buffers (nattch, the rows' 7th column)."""
+    return any(r[6] != "0" for r in _nml_buffers())
+
+
 def _remove_left_buffers(wait_s: float = 0.0) -> None:
     """Remove the NML buffers a run left, as LinuxCNC's launcher does at its end (``ipcrm -M``
     for each SHMEM buffer of the NML file). A run killed outright, or whose launcher was killed
@@ -164,7 +169,7 @@ def _remove_left_buffers(wait_s: float = 0.0) -> None:
     never starts (a CI run waited out its whole budget so). Only buffers no process holds,
     after up to ``wait_s`` for killed processes to let go: one held is a live LinuxCNC's."""
     end = time.monotonic() + wait_s
-    while any(r[6] != "0" for r in _nml_buffers()) and time.monotonic() < end:
+    while _buffers_held() and time.monotonic() < end:
         time.sleep(0.1)
     for row in _nml_buffers():
         if row[6] == "0":
@@ -366,12 +371,12 @@ def test_a_run_killed_outright_leaves_no_buffers_to_stop_the_next(tmp_path):
 
     def killed_outright(marker, grace_s=10.0):
         end = time.monotonic() + 60                 # linuxcncsvr has made its buffers
-        while not any(r[6] != "0" for r in _nml_buffers()) and time.monotonic() < end:
+        while not _buffers_held() and time.monotonic() < end:
             time.sleep(0.1)
         for pid in _ours(marker):
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
-        while any(r[6] != "0" for r in _nml_buffers()) and time.monotonic() < end:
+        while _buffers_held() and time.monotonic() < end:
             time.sleep(0.1)                         # the killed let go of them
         left.extend(r[0] for r in _nml_buffers())
         end_as_tests_do(marker, grace_s)

@@ -94,7 +94,7 @@ with open(os.environ["COMPGEN_JOINTS"], "w") as out:
             c.mdi("G90 G0 " + " ".join(f"{a}{value}" for a in axes))
             c.wait_complete(30)
             wait(lambda: s.interp_state == linuxcnc.INTERP_IDLE and s.inpos)
-        # every period from here on: the joints, their motor commands, the motion's speed
+        # every period from here on: the joints, their motor commands, the motion's speed and line
         fifo = sample([f"joint.{j}.{pin}" for pin in ("pos-cmd", "motor-pos-cmd") for j in read]
                       + ["motion.current-vel", "motion.program-line"])
         c.mode(linuxcnc.MODE_AUTO)
