@@ -422,28 +422,20 @@ class SlotGains:
 def effect_gains(gains: SlotGains, effect: Effect, x: np.ndarray, made: dict | None = None) -> np.ndarray:
     """What a unit of each of ``effect``'s parameters does to every reading, first order:
     (n, 3, len(params)) mm per unit, its basis values at the coordinate ``x`` times the
-    gain of its slot. ``made`` keeps the gains of slots already asked for."""
-    out = np.empty((len(effect.params), len(x), 3))
-    fill_gains(out, gains, effect, effect.basis.values(x), made)
-    return out.transpose(1, 2, 0)
-
-
-def fill_gains(out: np.ndarray, gains: SlotGains, effect: Effect, b: np.ndarray, made: dict | None = None,
-               rows: slice = slice(None)) -> None:
-    """``effect_gains`` written into ``out`` (len(params), n, 3), from the basis values ``b``
-    (n, len(params)) at its coordinate, for the ``rows`` of the poses ``gains`` walked: the
-    candidates' columns side by side, a basis's values shared (``signature.products``).
-    Multiplied into ``out``: a temporary and an add cost three times as much."""
+    gain of its slot (an effect of two directions: the sum of two). ``made`` keeps the
+    gains of slots already asked for."""
     made = {} if made is None else made
-    for i, (d, v) in enumerate(effect.split(b)):
+    out = np.empty((len(x), 3, len(effect.params)))
+    for i, (d, v) in enumerate(effect.split(effect.basis.values(x))):
         key = (effect.carrier, effect.slot, d)
         if key not in made:
             made[key] = gains(key)
-        term = (v.T[:, :, None], made[key][None, rows])
-        if i == 0:
+        term = (made[key][:, :, None], v[:, None, :])
+        if i == 0:              # into ``out``: a temporary and an add cost three times as much
             np.multiply(*term, out=out)
-        else:                       # a compound's second direction
+        else:                   # a compound's second direction
             out += np.multiply(*term)
+    return out
 
 
 def slot_gains(machine: Machine, poses: Poses, keys) -> dict[tuple[str, str, str], np.ndarray]:

@@ -17,7 +17,7 @@ from ..model.kinematics import Poses
 from ..model.machine import Machine
 from ..model.sides import StartSides
 from .noise import whiten
-from .signature import columns
+from .signature import columns, signatures
 from .significance import VISIBLE, condition, explained, gram_factor
 
 ABSORBS = 0.25        # share of an effect's signature a parameter must take to be named
@@ -45,9 +45,12 @@ def without_b(R: np.ndarray, qj: np.ndarray, cc: np.ndarray, m: int) -> np.ndarr
 
 def started_reversals(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> dict[str, np.ndarray]:
     """The reversal candidates that come with start sides on these poses (data without the
-    axis's side), by name: their columns as ``effect_columns`` makes them."""
-    return {e.name: effect_columns(machine, poses, e) for e in effects
-            if e.basis.kind == "r" and StartSides(machine, e.params, poses).count}
+    axis's side), by name: their columns as ``effect_columns`` makes them, from one walk of
+    the chain (a walk of 723 000 poses is ~0.8 s)."""
+    sides = {e.name: StartSides(machine, e.params, poses) for e in effects if e.basis.kind == "r"}
+    started = [e for e in effects if e.name in sides and sides[e.name].count]
+    return {e.name: np.hstack([c, sides[e.name].projector().basis(len(poses))])
+            for e, c in signatures(machine, poses, started)}
 
 
 def effect_columns(machine: Machine, poses: Poses, e: Effect) -> np.ndarray:

@@ -9,13 +9,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..model.effects import Effect
-from ..model.kinematics import Poses, SlotGains, coordinate, effect_gains, fill_gains
+from ..model.kinematics import Poses, SlotGains, coordinate, effect_gains
 from ..model.machine import Machine
-from .noise import whiten
 
-CHUNK_BYTES = 8 << 20  # the columns of every candidate held at once: ~800 poses of ~400 columns
-BLOCK = 4096           # poses a walk of the chain serves: its slots' gains (~250 × 96 kB) held
-BAND = 3              # cᵀc of effects of up to BAND parameters from C's rows' products with the next ones
+CHUNK_BYTES = 8 << 20  # the basis values of every candidate held at once: ~2 500 poses of ~400 columns
+BLOCK = 4096           # poses a walk of the chain serves: its slots' gains held
 
 
 def signatures(machine: Machine, poses: Poses, effects: Sequence[Effect]):
@@ -47,15 +45,17 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
              noise: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, tuple]:
     """Each effect's first-order signature c, reduced to what diagnose needs of it: cᵀc
     (k × k), Qᵀc (p × k) and cᵀr (k), over blocks of poses: a dense session's columns are
-    millions of rows, made a block at a time (the chain walked once a block, for every
-    effect) and never held whole. ``Q`` (3n, p), or blocks of it side by side ([Q | more]
+    millions of rows, never made. ``Q`` (3n, p), or blocks of it side by side ([Q | more]
     without a copy of Q: 240 MB at 720 000 readings), and ``r`` (3n,) are in (n, 3) reading
-    order. With ``noise`` = (segments, ρ (n, 3)), the columns are made white first
-    (Prais–Winsten, carried from one block to the next), as Q and r must already be.
+    order. With ``noise`` = (segments, ρ (n, 3)), the columns are taken white (Prais–Winsten
+    W), as Q and r must already be.
 
-    A block's columns of every effect are made side by side, so that Qᵀc and cᵀr are one
-    matrix product each (per effect they were memory-bound: 8 of diagnose's 36 s at 720 000
-    readings), and a basis's values are made once for every effect sharing them."""
+    A column is its basis values v (one number per pose) times its slot's gain g (a 3-vector
+    per pose; an effect of two directions, the sum of two such), so its products follow
+    from each slot's own, made once per pose for every effect on it: Qᵀc = vᵀ(g·WᵀQ),
+    cᵀr = vᵀ(g·Wᵀr) and cᵀc = Σ vᵢvⱼ gᵢ·(WᵀW)gⱼ, WᵀW tridiagonal within a segment (a pose
+    and the next). Made as columns, K × 3n, they took 8 of diagnose's 23 s at 723 000
+    readings."""
     def where(e):            # what an effect's coordinate depends on
         return (e.carrier, e.basis.kind) if e.basis.kind != "e" else ("time", "e")
 
@@ -65,49 +65,95 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
     for e in effects:        # on the whole session: a reversal's side depends on its run
         if where(e) not in coords:
             coords[where(e)] = coordinate(machine, e, poses)
-    edges = np.cumsum([0, *(len(e.params) for e in effects)])
-    K = int(edges[-1])
-    Qs = [Q] if isinstance(Q, np.ndarray) else list(Q)     # [Q | more] without copying Q
-    qc, cr = np.zeros((sum(q.shape[1] for q in Qs), K)), np.zeros(K)
-    chunk = max(64, CHUNK_BYTES // (24 * max(K, 1)))
-    band = np.zeros((BAND, K))          # Σ cᵢ·cᵢ₊d: cᵀc of every effect of up to BAND params
-    wide = {i: 0.0 for i, e in enumerate(effects) if len(e.params) > BAND}   # the others' own
-    carry = None
     n = len(poses)
+    Qs = [Q] if isinstance(Q, np.ndarray) else list(Q)     # [Q | more] without copying Q
+    P = sum(q.shape[1] for q in Qs)
+    slots = list(dict.fromkeys((e.carrier, e.slot, d) for e in effects for d in e.direction))
+    groups: dict[tuple[int, ...], list[int]] = {}          # effects on the same slots, side by side
+    for i, e in enumerate(effects):
+        groups.setdefault(tuple(slots.index((e.carrier, e.slot, d)) for d in e.direction), []).append(i)
+    cols, spans, K = {}, {}, 0
+    for g, members in groups.items():
+        lo = K
+        for i in members:
+            cols[i] = (K, K + len(effects[i].params))
+            K = cols[i][1]
+        spans[g] = (lo, K)
+    white = noise is not None
+    if white:
+        seg, rho = noise
+        same = seg[1:] == seg[:-1]                 # a reading and the next in one segment
+        off = np.zeros((n, 3))                     # (WᵀW)ₘ,ₘ₊₁ per direction
+        off[:-1] = np.where(same[:, None], -rho[1:], 0.0)
+        first = np.r_[True, ~same]
+        gram = np.where(first[:, None], 1 - rho**2, 1.0) + off**2        # (WᵀW)ₘ,ₘ
+        diag = np.where(first[:, None], np.sqrt(1 - rho**2), 1.0)       # Wₘ,ₘ
+    qc, cr = np.zeros((P, K)), np.zeros(K)
+    cc = {g: np.zeros((hi - lo, hi - lo)) for g, (lo, hi) in spans.items()}
+    lag = {g: np.zeros((hi - lo, hi - lo)) for g, (lo, hi) in spans.items()}    # F of F + Fᵀ
+    chunk = max(64, CHUNK_BYTES // (8 * max(K, 1)))
     for a in range(0, n, BLOCK):
-        gains, made = SlotGains(machine, poses.take(slice(a, min(a + BLOCK, n)))), {}
-        for b in range(a, min(a + BLOCK, n), chunk):     # columns a chunk at a time: memory
-            at = slice(b, min(b + chunk, n, a + BLOCK))
-            local = slice(at.start - a, at.stop - a)
-            C = np.empty((K, at.stop - at.start, 3))     # an effect's columns side by side
+        stop = min(a + BLOCK, n)
+        gains = SlotGains(machine, poses.take(slice(a, min(stop + 1, n) if white else stop)))
+        G_all = np.stack([gains(k) for k in slots], axis=1)      # (poses, slots, 3)
+        for b in range(a, stop, chunk):
+            e_ = min(b + chunk, stop)
+            m = e_ - b
+            pairs = min(e_ + 1, n) - b - 1 if white else 0      # a pose and the next
+            rows = max(m, pairs + 1)                             # white: with the next pose
+            G = G_all[b - a:b - a + rows]
+            Gm = G[:m]
+            Y = np.concatenate([q[3 * b:3 * e_].reshape(m, 3, -1) for q in Qs], axis=2)
+            y = r[3 * b:3 * e_].reshape(m, 3)
+            if white:                      # WᵀY, as Qᵀ_w C_w = (WᵀQ_w)ᵀ C
+                nxt, ynext = np.zeros((m, 3, P)), np.zeros((m, 3))
+                nxt[:pairs] = np.concatenate([q[3 * b + 3:3 * (b + 1 + pairs)].reshape(pairs, 3, -1)
+                                              for q in Qs], axis=2)
+                ynext[:pairs] = r[3 * b + 3:3 * (b + 1 + pairs)].reshape(pairs, 3)
+                Y = diag[b:e_, :, None] * Y + off[b:e_, :, None] * nxt
+                y = diag[b:e_] * y + off[b:e_] * ynext
+            gq = Gm @ Y                                          # (m, slots, P): g·WᵀY
+            gr = (Gm @ y[:, :, None])[..., 0]
+            Gw = Gm * gram[b:e_, None] if white else Gm
+            w0 = np.einsum("msd,msd->ms", Gw, Gm)               # g·(WᵀW)g per pose
+            if pairs:                                            # gₘ·(WᵀW)ₘ,ₘ₊₁gₘ₊₁
+                w1 = np.einsum("msd,msd->ms", G[:pairs] * off[b:b + pairs, None], G[1:pairs + 1])
             values: dict = {}
-            for e, lo, hi in zip(effects, edges[:-1], edges[1:], strict=True):
-                key = (where(e), e.basis)
-                if key not in values:
-                    values[key] = e.basis.values(coords[where(e)][at])
-                fill_gains(C[lo:hi], gains, e, values[key], made, local)
-            if noise is not None:
-                seg, rho = noise
-                before, carry = carry, (C[:, -1].T.copy(), seg[at.stop - 1])
-                C = np.ascontiguousarray(whiten(C.transpose(1, 2, 0), seg[at], rho[at], before)
-                                         .transpose(2, 0, 1))
-            C = C.reshape(K, -1)
-            rows = slice(3 * at.start, 3 * at.stop)
-            qc += np.vstack([(C @ q[rows]).T for q in Qs])
-            cr += C @ r[rows]
-            for d in range(BAND):
-                band[d, :K - d] += np.einsum("ij,ij->i", C[:K - d], C[d:])
-            for i in wide:
-                lo, hi = edges[i], edges[i + 1]
-                wide[i] = wide[i] + C[lo:hi] @ C[lo:hi].T
+            for g, members in groups.items():
+                terms: list[list[np.ndarray]] = [[] for _ in g]
+                for i in members:
+                    e = effects[i]
+                    key = (where(e), e.basis)
+                    if key not in values:
+                        values[key] = e.basis.values(coords[where(e)][b:b + rows])
+                    for t, (_, v) in enumerate(e.split(values[key])):
+                        terms[t].append(v)
+                V = [np.concatenate(t, axis=1) if len(t) > 1 else t[0] for t in terms]
+                lo, hi = spans[g]
+                if len(g) > 1:     # two directions: made as columns, where they cancel (as they may) exactly
+                    c = sum(G[:, s, :, None] * v[:, None, :] for s, v in zip(g, V, strict=True))
+                    flat = c[:m].reshape(3 * m, -1)
+                    qc[:, lo:hi] += Y.reshape(3 * m, P).T @ flat
+                    cr[lo:hi] += y.ravel() @ flat
+                    cc[g] += flat.T @ (gram[b:e_].reshape(-1, 1) * flat if white else flat)
+                    if pairs:
+                        lag[g] += (off[b:b + pairs, :, None] * c[:pairs]).reshape(3 * pairs, -1).T \
+                            @ c[1:pairs + 1].reshape(3 * pairs, -1)
+                    continue
+                s, v = g[0], V[0]
+                qc[:, lo:hi] += gq[:, s].T @ v[:m]
+                cr[lo:hi] += gr[:, s] @ v[:m]
+                cc[g] += v[:m].T @ (w0[:, s, None] * v[:m])
+                if pairs:
+                    lag[g] += v[:pairs].T @ (w1[:, s, None] * v[1:pairs + 1])
     out = {}
-    for i, (e, lo, hi) in enumerate(zip(effects, edges[:-1], edges[1:], strict=True)):
-        cc = wide.get(i)
-        if cc is None:
-            k = hi - lo
-            cc = np.zeros((k, k))
-            for d in range(k):          # the d-th diagonal above and below
-                i_, j_ = np.arange(k - d), np.arange(d, k)
-                cc[i_, j_] = cc[j_, i_] = band[d, lo:hi - d]
-        out[e.name] = (np.asarray(cc), qc[:, lo:hi], cr[lo:hi])
-    return out
+    for g, members in groups.items():
+        whole = cc[g] + lag[g] + lag[g].T
+        # a sum of squares, made white from a pose's products with the next: where the white
+        # column is nothing, rounding may leave it a few ulps of its parts below zero
+        np.fill_diagonal(whole, np.maximum(np.diagonal(whole), 0.0))
+        for i in members:
+            lo, hi = cols[i]
+            at = slice(lo - spans[g][0], hi - spans[g][0])
+            out[effects[i].name] = (whole[at, at], qc[:, lo:hi], cr[lo:hi])
+    return {e.name: out[e.name] for e in effects}
