@@ -126,8 +126,11 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
                     key = (where(e), e.basis)
                     if key not in values:
                         values[key] = e.basis.values(coords[where(e)][b:b + rows])
-                    for t, (_, v) in enumerate(e.split(values[key])):
-                        terms[t].append(v)
+                    if len(g) == 1:
+                        terms[0].append(values[key])
+                    else:
+                        for t, (_, v) in enumerate(e.split(values[key])):
+                            terms[t].append(v)
                 V = [np.concatenate(t, axis=1) if len(t) > 1 else t[0] for t in terms]
                 lo, hi = spans[g]
                 if len(g) > 1:     # two directions: made as columns, where they cancel (as they may) exactly
