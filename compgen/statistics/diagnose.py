@@ -467,7 +467,7 @@ def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residu
     model = Model(machine, fit.model)
     x = fit.values
     free = [model.names.index(n) for n in fit.free]
-    pred = model.deviation(poses, x)
+    pred, J = model.linearise(poses, x)              # one walk of the chains for both
     r3 = joined.deviation - pred
     rtest = joined.rtest
     starts = StartSides(machine, fit.model, poses).projector()
@@ -480,8 +480,9 @@ def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residu
         keep[bad] = False
         poses, r3, seg, pred, rtest = poses.take(keep), r3[keep], seg[keep], pred[keep], rtest[keep]
         starts = StartSides(machine, fit.model, poses).projector()
+        J = J[keep]
     r = r3.ravel()
-    J = model.jacobian(poses, x)[:, :, free]        # indexed by a list: a copy, projected in place
+    J = J[:, :, free]                               # indexed by a list: a copy, projected in place
     Q, R = tall_qr((J if starts is None else starts(J)).reshape(r.size, -1))
     if starts is not None:
         Q = np.hstack([starts.basis(len(poses)), Q])
