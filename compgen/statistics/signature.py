@@ -97,24 +97,24 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
         gains = SlotGains(machine, poses.take(slice(a, min(stop + 1, n) if white else stop)))
         G_all = np.stack([gains(k) for k in slots], axis=1)      # (poses, slots, 3)
         for b in range(a, stop, chunk):
-            e_ = min(b + chunk, stop)
-            m = e_ - b
-            pairs = min(e_ + 1, n) - b - 1 if white else 0      # a pose and the next
+            end = min(b + chunk, stop)
+            m = end - b
+            pairs = min(end + 1, n) - b - 1 if white else 0      # a pose and the next
             rows = max(m, pairs + 1)                             # white: with the next pose
             G = G_all[b - a:b - a + rows]
             Gm = G[:m]
-            Y = np.concatenate([q[3 * b:3 * e_].reshape(m, 3, -1) for q in Qs], axis=2)
-            y = r[3 * b:3 * e_].reshape(m, 3)
+            Y = np.concatenate([q[3 * b:3 * end].reshape(m, 3, -1) for q in Qs], axis=2)
+            y = r[3 * b:3 * end].reshape(m, 3)
             if white:                      # WᵀY, as Qᵀ_w C_w = (WᵀQ_w)ᵀ C
                 nxt, ynext = np.zeros((m, 3, P)), np.zeros((m, 3))
                 nxt[:pairs] = np.concatenate([q[3 * b + 3:3 * (b + 1 + pairs)].reshape(pairs, 3, -1)
                                               for q in Qs], axis=2)
                 ynext[:pairs] = r[3 * b + 3:3 * (b + 1 + pairs)].reshape(pairs, 3)
-                Y = diag[b:e_, :, None] * Y + off[b:e_, :, None] * nxt
-                y = diag[b:e_] * y + off[b:e_] * ynext
+                Y = diag[b:end, :, None] * Y + off[b:end, :, None] * nxt
+                y = diag[b:end] * y + off[b:end] * ynext
             gq = Gm @ Y                                          # (m, slots, P): g·WᵀY
             gr = (Gm @ y[:, :, None])[..., 0]
-            Gw = Gm * gram[b:e_, None] if white else Gm
+            Gw = Gm * gram[b:end, None] if white else Gm
             w0 = np.einsum("msd,msd->ms", Gw, Gm)               # g·(WᵀW)g per pose
             if pairs:                                            # gₘ·(WᵀW)ₘ,ₘ₊₁gₘ₊₁
                 w1 = np.einsum("msd,msd->ms", G[:pairs] * off[b:b + pairs, None], G[1:pairs + 1])
@@ -138,7 +138,7 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
                     flat = c[:m].reshape(3 * m, -1)
                     qc[:, lo:hi] += Y.reshape(3 * m, P).T @ flat
                     cr[lo:hi] += y.ravel() @ flat
-                    cc[g] += flat.T @ (gram[b:e_].reshape(-1, 1) * flat if white else flat)
+                    cc[g] += flat.T @ (gram[b:end].reshape(-1, 1) * flat if white else flat)
                     if pairs:
                         lag[g] += (off[b:b + pairs, :, None] * c[:pairs]).reshape(3 * pairs, -1).T \
                             @ c[1:pairs + 1].reshape(3 * pairs, -1)
