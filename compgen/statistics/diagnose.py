@@ -423,10 +423,13 @@ def _told_beside(devices: list[DeviceCandidate], beside: np.ndarray, res: _Resid
         p |= tested([e for e in seen if e != lead], np.column_stack([machine, cols[lead]]))
     joint = [lead, *(e for e in seen if e != lead and p[e] < alpha)] if lead else []
 
+    off = {e: noise.off(c) for e, c in cols.items()}     # each gain's column off the model, once
+
     def together(names):
         """Values and σ, %, of these gains fitted at once with the model and the machine's
-        effects, σ from the residual all of them leave: the misfit they explain is not noise."""
-        C = noise.off(np.column_stack([*(cols[e] for e in names), machine]))
+        effects, σ from the residual all of them leave: the misfit they explain is not noise.
+        ``machine`` is off the model already (``_orthonormal`` of what was)."""
+        C = np.column_stack([*(off[e] for e in names), machine])
         amp = np.linalg.lstsq(C, rw, rcond=None)[0]
         left = rw - C @ amp
         std = np.sqrt(np.diag(np.linalg.inv(C.T @ C)) * float(left @ left) / (res.dof - C.shape[1]))
