@@ -68,6 +68,8 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
     n = len(poses)
     Qs = [Q] if isinstance(Q, np.ndarray) else list(Q)     # [Q | more] without copying Q
     P = sum(q.shape[1] for q in Qs)
+    edges = np.cumsum([0, *(q.shape[1] for q in Qs)])
+    rows_of = [slice(lo, hi) for lo, hi in zip(edges[:-1], edges[1:], strict=True)]   # qc's rows per block
     slots = list(dict.fromkeys((e.carrier, e.slot, d) for e in effects for d in e.direction))
     groups: dict[tuple[int, ...], list[int]] = {}          # effects on the same slots, side by side
     for i, e in enumerate(effects):
@@ -103,16 +105,14 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
             rows = max(m, pairs + 1)                             # white: with the next pose
             G = G_all[b - a:b - a + rows]
             Gm = G[:m]
-            Y = np.concatenate([q[3 * b:3 * end].reshape(m, 3, -1) for q in Qs], axis=2)
+            # each block of Q on its own, as Qᵀc of the model's Q must not depend on what is
+            # carried beside it (a screened pass and a plain one give the same numbers)
+            Ys = [q[3 * b:3 * end].reshape(m, 3, -1) for q in Qs]
             y = r[3 * b:3 * end].reshape(m, 3)
             if white:                      # WᵀY, as Qᵀ_w C_w = (WᵀQ_w)ᵀ C
-                nxt, ynext = np.zeros((m, 3, P)), np.zeros((m, 3))
-                nxt[:pairs] = np.concatenate([q[3 * b + 3:3 * (b + 1 + pairs)].reshape(pairs, 3, -1)
-                                              for q in Qs], axis=2)
-                ynext[:pairs] = r[3 * b + 3:3 * (b + 1 + pairs)].reshape(pairs, 3)
-                Y = diag[b:end, :, None] * Y + off[b:end, :, None] * nxt
-                y = diag[b:end] * y + off[b:end] * ynext
-            gq = Gm @ Y                                          # (m, slots, P): g·WᵀY
+                Ys = [_transposed_white(q, diag, off, b, end, pairs) for q in Qs]
+                y = _transposed_white(r[:, None], diag, off, b, end, pairs)[..., 0]
+            gq = [Gm @ Y for Y in Ys]                            # (m, slots, p): g·WᵀY
             gr = (Gm @ y[:, :, None])[..., 0]
             Gw = Gm * gram[b:end, None] if white else Gm
             w0 = np.einsum("msd,msd->ms", Gw, Gm)               # g·(WᵀW)g per pose
@@ -136,7 +136,8 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
                 if len(g) > 1:     # two directions: made as columns, where they cancel (as they may) exactly
                     c = sum(G[:, s, :, None] * v[:, None, :] for s, v in zip(g, V, strict=True))
                     flat = c[:m].reshape(3 * m, -1)
-                    qc[:, lo:hi] += Y.reshape(3 * m, P).T @ flat
+                    for at, Y in zip(rows_of, Ys, strict=True):
+                        qc[at, lo:hi] += Y.reshape(3 * m, -1).T @ flat
                     cr[lo:hi] += y.ravel() @ flat
                     cc[g] += flat.T @ (gram[b:end].reshape(-1, 1) * flat if white else flat)
                     if pairs:
@@ -144,7 +145,8 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
                             @ c[1:pairs + 1].reshape(3 * pairs, -1)
                     continue
                 s, v = g[0], V[0]
-                qc[:, lo:hi] += gq[:, s].T @ v[:m]
+                for at, g_q in zip(rows_of, gq, strict=True):
+                    qc[at, lo:hi] += g_q[:, s].T @ v[:m]
                 cr[lo:hi] += gr[:, s] @ v[:m]
                 cc[g] += v[:m].T @ (w0[:, s, None] * v[:m])
                 if pairs:
@@ -160,3 +162,14 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
             at = slice(lo - spans[g][0], hi - spans[g][0])
             out[effects[i].name] = (whole[at, at], qc[:, lo:hi], cr[lo:hi])
     return {e.name: out[e.name] for e in effects}
+
+
+def _transposed_white(q: np.ndarray, diag: np.ndarray, off: np.ndarray, b: int, end: int,
+                      pairs: int) -> np.ndarray:
+    """Rows b..end of Wᵀq, (end − b, 3, columns), for q (3n, columns) in (n, 3) reading
+    order: each reading's Wₘ,ₘ times itself, plus (WᵀW)ₘ,ₘ₊₁ (= −ρₘ₊₁) times the next
+    reading in its segment (``pairs`` of them here)."""
+    m = end - b
+    out = diag[b:end, :, None] * q[3 * b:3 * end].reshape(m, 3, -1)
+    out[:pairs] += off[b:b + pairs, :, None] * q[3 * b + 3:3 * (b + 1 + pairs)].reshape(pairs, 3, -1)
+    return out
