@@ -67,9 +67,8 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
             coords[where(e)] = coordinate(machine, e, poses)
     n = len(poses)
     Qs = [Q] if isinstance(Q, np.ndarray) else list(Q)     # [Q | more] without copying Q
-    P = sum(q.shape[1] for q in Qs)
     edges = np.cumsum([0, *(q.shape[1] for q in Qs)])
-    rows_of = [slice(lo, hi) for lo, hi in zip(edges[:-1], edges[1:], strict=True)]   # qc's rows per block
+    q_rows = [slice(lo, hi) for lo, hi in zip(edges[:-1], edges[1:], strict=True)]   # qc's rows per block
     slots = list(dict.fromkeys((e.carrier, e.slot, d) for e in effects for d in e.direction))
     groups: dict[tuple[int, ...], list[int]] = {}          # effects on the same slots, side by side
     for i, e in enumerate(effects):
@@ -85,12 +84,12 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
     if white:
         seg, rho = noise
         same = seg[1:] == seg[:-1]                 # a reading and the next in one segment
-        off = np.zeros((n, 3))                     # (WᵀW)ₘ,ₘ₊₁ per direction
+        off = np.zeros((n, 3))                     # (WᵀW)ₘ,ₘ₊₁ per direction, = Wₘ₊₁,ₘ = −ρₘ₊₁
         off[:-1] = np.where(same[:, None], -rho[1:], 0.0)
         first = np.r_[True, ~same]
         gram = np.where(first[:, None], 1 - rho**2, 1.0) + off**2        # (WᵀW)ₘ,ₘ
         diag = np.where(first[:, None], np.sqrt(1 - rho**2), 1.0)       # Wₘ,ₘ
-    qc, cr = np.zeros((P, K)), np.zeros(K)
+    qc, cr = np.zeros((edges[-1], K)), np.zeros(K)
     cc = {g: np.zeros((hi - lo, hi - lo)) for g, (lo, hi) in spans.items()}
     lag = {g: np.zeros((hi - lo, hi - lo)) for g, (lo, hi) in spans.items()}    # F of F + Fᵀ
     chunk = max(64, CHUNK_BYTES // (8 * max(K, 1)))
@@ -136,7 +135,7 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
                 if len(g) > 1:     # two directions: made as columns, where they cancel (as they may) exactly
                     c = sum(G[:, s, :, None] * v[:, None, :] for s, v in zip(g, V, strict=True))
                     flat = c[:m].reshape(3 * m, -1)
-                    for at, Y in zip(rows_of, Ys, strict=True):
+                    for at, Y in zip(q_rows, Ys, strict=True):
                         qc[at, lo:hi] += Y.reshape(3 * m, -1).T @ flat
                     cr[lo:hi] += y.ravel() @ flat
                     cc[g] += flat.T @ (gram[b:end].reshape(-1, 1) * flat if white else flat)
@@ -145,7 +144,7 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
                             @ c[1:pairs + 1].reshape(3 * pairs, -1)
                     continue
                 s, v = g[0], V[0]
-                for at, g_q in zip(rows_of, gq, strict=True):
+                for at, g_q in zip(q_rows, gq, strict=True):
                     qc[at, lo:hi] += g_q[:, s].T @ v[:m]
                 cr[lo:hi] += gr[:, s] @ v[:m]
                 cc[g] += v[:m].T @ (w0[:, s, None] * v[:m])
@@ -167,8 +166,8 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
 def _transposed_white(q: np.ndarray, diag: np.ndarray, off: np.ndarray, b: int, end: int,
                       pairs: int) -> np.ndarray:
     """Rows b..end of Wᵀq, (end − b, 3, columns), for q (3n, columns) in (n, 3) reading
-    order: each reading's Wₘ,ₘ times itself, plus (WᵀW)ₘ,ₘ₊₁ (= −ρₘ₊₁) times the next
-    reading in its segment (``pairs`` of them here)."""
+    order: each reading's Wₘ,ₘ times itself, plus Wₘ₊₁,ₘ (``off``) times the next reading
+    in its segment (``pairs`` of them here)."""
     m = end - b
     out = diag[b:end, :, None] * q[3 * b:3 * end].reshape(m, 3, -1)
     out[:pairs] += off[b:b + pairs, :, None] * q[3 * b + 3:3 * (b + 1 + pairs)].reshape(pairs, 3, -1)
