@@ -4,18 +4,21 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, ROOT, TABLE4, UM
+from conftest import ARCSEC, FORK_MACHINE, ROOT, TABLE4, UM
 
 from compgen.commands.compare import compare
+from compgen.configuration.machine_file import load_machine
 from compgen.controllers.correction import Held
 from compgen.controllers.kinematics import kinematics_edit
 from compgen.controllers.registry import controller as controller_of
 from compgen.controllers.registry import read_edits
+from compgen.data.rtest import RTestData
 from compgen.data.simulate import simulate
+from compgen.errors import CompgenError
 from compgen.model.effects import location_model
 from compgen.model.lines import AxisLine
 from compgen.model.paths import generate
-from compgen.statistics.identify import identify
+from compgen.statistics.identify import SETUP, beyond_setup, identify
 
 NOISE_UM = 0.5
 HIDDEN = {"EXC:h2c": 1.5 * UM, "EXC:h2s": 0.8 * UM}       # radial 2/rev of C: no kinematics edit holds it
@@ -35,6 +38,36 @@ def session(seed_machine):
 def _post(machine, truth, poses, held, seed=6):
     return simulate(machine, truth, poses, NOISE_UM, np.random.default_rng(seed),
                     lambda p: held.drive(machine, p))
+
+
+@pytest.mark.parametrize("which", ["table", "swivel head", "fork head"])
+def test_beyond_setup_in_closed_form_is_identify_s_fit_of_the_set_up(seed_machine, head_machine, which):
+    """The set-up-only figures (one walk: the readings are linear in the ball's offset) are
+    those of identify's Gauss–Newton fit of XOW YOW ZOW, refusals alike; on AR(1) noise too."""
+    machine = {"table": seed_machine, "swivel head": head_machine,
+               "fork head": load_machine(FORK_MACHINE)}[which]
+    poses = generate(machine, ["K4", "K1", "K2"])
+    truth = {"XOW": 40 * UM, "YOW": -25 * UM, "ZOW": 60 * UM, "BOA": 20 * ARCSEC, "XOC": 15 * UM}
+    rng = np.random.default_rng(3)
+    data = simulate(machine, {n: v for n, v in truth.items() if n in location_model(machine)}, poses,
+                    NOISE_UM, rng)
+    drifted = data.deviation + np.cumsum(rng.normal(0, 0.3e-3, data.deviation.shape), axis=0)
+    for reading in (data.deviation, drifted):
+        got = beyond_setup(machine, poses, reading)
+        fit = identify(machine, [RTestData(poses, reading)], list(SETUP))
+        assert got["rms_um"] == pytest.approx(fit.residual["rms_um"], rel=1e-9)
+        assert got["per_path"].keys() == fit.residual["per_path"].keys()
+        for name, stats in fit.residual["per_path"].items():
+            for key in ("rms_um", "range_um", "max_abs_um"):
+                assert got["per_path"][name][key] == pytest.approx(stats[key], rel=1e-9, abs=1e-9)
+            assert got["per_path"][name]["ar1_rho"] == stats["ar1_rho"]
+    assert any(fit.residual["per_path"][p]["ar1_rho"] != [0.0] * 3 for p in fit.residual["per_path"])
+    one = poses.take(slice(0, 1))
+    with pytest.raises(CompgenError) as closed:
+        beyond_setup(machine, one, data.deviation[:1])
+    with pytest.raises(CompgenError) as fitted:
+        identify(machine, [RTestData(one, data.deviation[:1])], list(SETUP))
+    assert str(closed.value) == str(fitted.value)
 
 
 def test_prediction_agrees_with_the_measurement_after_the_edit(seed_machine, session):
