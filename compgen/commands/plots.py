@@ -27,7 +27,7 @@ from ..model.machine import Machine  # noqa: E402
 from ..statistics.diagnose import Diagnosis  # noqa: E402
 from ..statistics.identify import fitted  # noqa: E402
 from ..statistics.results import FitResult  # noqa: E402
-from ..statistics.signature import columns  # noqa: E402
+from ..statistics.signature import signatures  # noqa: E402
 from ..statistics.significance import tall_qr  # noqa: E402
 from ..statistics.spectrum import MIN_PITCH_MM  # noqa: E402
 from ..units import shown  # noqa: E402
@@ -188,18 +188,30 @@ def rival_curves(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosi
     second when ``extra`` tells them apart."""
     model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
     both = Poses.concat([poses, extra.poses])
-    J = columns(machine, both, model_effects)
-    Q_now = tall_qr(J[:3 * len(poses)])[0]       # 0.3 s where Householder took 2 at 723 000 readings
-    Q_both = tall_qr(J)[0]
+    n3 = 3 * len(poses)
+    named = [c for c in found.candidates if c.effect in (found.significant[0].effect, *found.rivals)]
+    rivals = {c.effect: resolve(machine, c.effect) for c in named}
+    # one walk of the chains for the model's columns and every rival's: each rival's kept
+    # only as its curve at the fitted size (one column, not its parameters')
+    J, v = [], {}
+    for e, cols in signatures(machine, both, [*model_effects, *rivals.values()]):
+        if e.name in rivals:
+            c = next(c for c in named if c.effect == e.name)
+            v[e.name] = cols @ (np.array(c.amplitude) / shown(1.0, e.unit)[0])
+        else:
+            J.append(cols)
+    J = np.column_stack(J)
+    Q_now, R_now = tall_qr(J[:n3])      # 0.3 s where Householder took 2 at 723 000 readings
+    # the measured and the extra poses' span from the measured one's R: [J_now; J_extra] =
+    # diag(Q_now, I)·[R_now; J_extra], so its Q is diag(Q_now, I) times that small stack's,
+    # and no second QR of millions of rows is made
+    Q_add = np.linalg.qr(np.vstack([R_now, J[n3:]]))[0]
     out = {}
-    for c in found.candidates:
-        if c.effect not in (found.significant[0].effect, *found.rivals):
-            continue
-        e = resolve(machine, c.effect)
-        v = columns(machine, both, [e]) @ (np.array(c.amplitude) / shown(1.0, e.unit)[0])
-        now = v[:3 * len(poses)] - Q_now @ (Q_now.T @ v[:3 * len(poses)])
-        after = (v - Q_both @ (Q_both.T @ v))[3 * len(poses):]
-        out[c.effect] = (now.reshape(-1, 3) * 1e3, after.reshape(-1, 3) * 1e3)
+    for name in rivals:
+        a = Q_now.T @ v[name][:n3]
+        now = v[name][:n3] - Q_now @ a
+        after = v[name][n3:] - Q_add[len(R_now):] @ (Q_add.T @ np.r_[a, v[name][n3:]])
+        out[name] = (now.reshape(-1, 3) * 1e3, after.reshape(-1, 3) * 1e3)
     return out
 
 
