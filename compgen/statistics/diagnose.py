@@ -32,7 +32,7 @@ from .device import DeviceCandidate, device_candidates, device_columns
 from .noise import Repeats, ar1, outliers, repeats
 from .ranking import Row, Whitening, effect_columns, rank, started_reversals
 from .results import FitResult
-from .separation import separating, telling_apart
+from .separation import Measured, separating, telling_apart
 from .signature import products
 from .significance import (
     ALPHA,
@@ -325,13 +325,6 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     advising = advisor(machine, poses, kind) if advisor is not None else None
     if advising is not None and advising.unable:      # said, never taken for "none would tell"
         notes, advising = (*notes, f"  {advising.unable}."), None
-    # seen, but not to be added as a whole: a part of it the model absorbs (fit --add
-    # refuses it), so the measurement that shows that part is what to advise
-    unseen = [c for c in out if not c.visible or (c.significant and not c.separable)]
-    if advising is not None and unseen:
-        seen = separating(machine, model_effects, poses, [resolve(machine, c.effect) for c in unseen],
-                          advising)
-        out = [replace(c, separated_by=seen[c.effect]) if c.effect in seen else c for c in out]
     bias, units, signature_um = _bias(fit, res, effects, ranked)
 
     significant = [c for c in out if c.significant]
@@ -355,8 +348,9 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
                                _outside_line(lines, device, misfit, alpha, best_sum_sq))
 
     # rivals of a curve that fits a little of an unexplained misfit by chance: not pursued
-    out, rival = _rivals(machine, res, [] if unexplained else significant, first, out, ranked, noise, made,
-                         carried, model_effects, alpha, advising)
+    rival = _rivals(machine, res, [] if unexplained else significant, first, out, ranked, noise, made,
+                    carried, alpha)
+    out, rival = _advised(machine, res, out, ranked, rival, model_effects, advising)
     if blamed is None and first is not None:     # beside the machine's best and its second effects
         told = max(1, SECOND_WALKS // len(poses))
         seconds = [noise.white(_columns(machine, res, made, e)) for e in rival["after_best"][:told]]
@@ -601,17 +595,15 @@ def _bias(fit: FitResult, res: _Residual, effects: Sequence[Effect], ranked: dic
 
 def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], first: np.ndarray | None,
             out: list[Candidate], ranked: dict[str, Row], noise: Whitening, made: dict[str, np.ndarray],
-            carried: tuple, model_effects: Sequence[Effect], alpha: float,
-            advising: Advisor | None) -> tuple[list[Candidate], dict]:
+            carried: tuple, alpha: float) -> dict:
     """Step 5: which significant candidates stay so once the best is added (a second
-    effect, never a rival: the data tell it from the best), which are the best's rivals (the
-    data cannot tell them apart), and what would tell them apart. Returns the candidates
-    (equivalent rivals reordered) and the ``Diagnosis`` fields. ``made``: the columns step 3
-    made (the reversals with start sides, and its best); ``carried``: (best, products) of
+    effect, never a rival: the data tell it from the best), and which are the best's rivals
+    (the data cannot tell them apart): the ``Diagnosis`` fields. ``made``: the columns step
+    3 made (the reversals with start sides, and its best); ``carried``: (best, products) of
     step 3's last pass, its columns beside the model's, if it carried them; ``first``: the
     best's whitened columns."""
     poses, r = res.poses, res.r
-    after_best, rival_names, rivals_separated_by, rivals_open = (), (), (), {}
+    after_best, rival_names = (), ()
     if len(significant) > 1:
         # the others' products with the model, the best and the residual from one walk of
         # the poses (their columns would take a walk each); a reversal with start sides,
@@ -634,26 +626,42 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], firs
             for c in out if c.visible and c.effect != best.effect.name},
             noise.rss(r) / res.dof, alpha, bool(after_best))
         rival_names = tuple(n for n in rival_names if n not in after_best)
-        if rival_names and advising is not None:
-            group = [best, *(ranked[e] for e in rival_names)]
-            by_rival, rivals_separated_by, rivals_open = telling_apart(
-                machine, model_effects, poses, group, res.rss / res.dof, advising)
+    return {"after_best": after_best, "rivals": rival_names, "rivals_separated_by": (), "rivals_open": {}}
+
+
+def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dict[str, Row], rival: dict,
+             model_effects: Sequence[Effect], advising: Advisor | None) -> tuple[list[Candidate], dict]:
+    """Step 6: what would separate what these data cannot (``separation.py``, one R factor of
+    the measured poses for both): a candidate the model absorbs, or a part of it (fit --add
+    refuses it), and the best's rivals. Equivalent rivals reordered. Returns the candidates
+    and ``rival`` with what tells the rivals apart."""
+    rival_names = rival["rivals"]
+    best = next((ranked[c.effect] for c in out if c.significant), None)
+    group = [best, *(ranked[e] for e in rival_names)] if rival_names else []
+    # seen, but not to be added as a whole: a part of it the model absorbs, so the
+    # measurement that shows that part is what to advise
+    unseen = [resolve(machine, c.effect) for c in out if not c.visible or (c.significant and not c.separable)]
+    if advising is not None and (unseen or group):
+        measured = Measured(machine, model_effects, res.poses, [*unseen, *(row.effect for row in group)])
+        seen = separating(measured, unseen, advising) if unseen else {}
+        out = [replace(c, separated_by=seen[c.effect]) if c.effect in seen else c for c in out]
+        if group:
+            by_rival, separated_by, left_open = telling_apart(measured, group, res.rss / res.dof, advising)
             out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
-        if rival_names and not rivals_separated_by:
-            # equivalent everywhere: put first the one the location errors absorb least, so
-            # that adding it leaves them where an effect without that absorbed part has them.
-            # (Not the one that moves them least: that keeps the bias of the fit without it,
-            # and a compound the model absorbs a part of would come last.) No order makes the
-            # choice right: what each carries is printed, and a fit's σ holds the spread.
-            group = [c for c in out if c.significant and c.effect in (best.effect.name, *rival_names)]
-            first = max(group, key=lambda c: c.visibility)
-            if first.effect != best.effect.name:
-                out.remove(first)
-                out.insert(out.index(next(c for c in out if c.effect == best.effect.name)), first)
-                rival_names = tuple(c.effect for c in out if c.effect in (best.effect.name, *rival_names)
-                                    and c is not first)
-    return out, {"after_best": after_best, "rivals": rival_names, "rivals_separated_by": rivals_separated_by,
-                 "rivals_open": rivals_open}
+            rival = {**rival, "rivals_separated_by": separated_by, "rivals_open": left_open}
+    if rival_names and not rival["rivals_separated_by"]:
+        # equivalent everywhere: put first the one the location errors absorb least, so
+        # that adding it leaves them where an effect without that absorbed part has them.
+        # (Not the one that moves them least: that keeps the bias of the fit without it,
+        # and a compound the model absorbs a part of would come last.) No order makes the
+        # choice right: what each carries is printed, and a fit's σ holds the spread.
+        named = (best.effect.name, *rival_names)
+        first = max((c for c in out if c.significant and c.effect in named), key=lambda c: c.visibility)
+        if first.effect != best.effect.name:
+            out.remove(first)
+            out.insert(out.index(next(c for c in out if c.effect == best.effect.name)), first)
+            rival = {**rival, "rivals": tuple(c.effect for c in out if c.effect in named and c is not first)}
+    return out, rival
 
 
 def _carries(fit: FitResult, out: Sequence[Candidate], ranked: dict[str, Row],

@@ -27,40 +27,55 @@ TELLS_APART = 25.0    # σ̂² of misfit a measurement must add between two riva
 ADVISED = 3           # measurements named per effect, shortest first (each written and motion-checked)
 
 
-def separating(machine: Machine, model_effects: Sequence[Effect], poses: Poses, effects: Sequence[Effect],
-                advisor: Advisor) -> dict[str, tuple[Measurement, ...]]:
-    """For effects these data cannot tell from ``model_effects`` (or not whole): the
+class Measured:
+    """R of the model's and the effects' columns on the measured poses, from one walk of
+    them for ``separating`` and ``telling_apart`` alike (a walk of 723 000 readings is a
+    second), and with each extra measurement's rows, added once: R of stacked data is R
+    of the stacked R factors, and the R factor of a subset of columns is that of the same
+    columns of R, so each effect is judged on small blocks."""
+
+    def __init__(self, machine: Machine, model_effects: Sequence[Effect], poses: Poses,
+                 effects: Sequence[Effect]):
+        self.machine, self.poses = machine, poses
+        effects = list({e.name: e for e in effects}.values())
+        self.effects = [*model_effects, *effects]
+        self.p = sum(len(e.params) for e in model_effects)
+        self.cols, at = {}, self.p
+        for e in effects:
+            self.cols[e.name] = list(range(at, at + len(e.params)))
+            at += len(e.params)
+        self.R = r_factor(machine, poses, self.effects)
+        self._with: dict[str, np.ndarray] = {}
+
+    def with_extra(self, extra: Measurement) -> np.ndarray:
+        """R with ``extra``'s poses measured too."""
+        if extra.label not in self._with:
+            self._with[extra.label] = r_factor(self.machine, extra.poses, self.effects, self.R)
+        return self._with[extra.label]
+
+
+def separating(measured: Measured, effects: Sequence[Effect],
+               advisor: Advisor) -> dict[str, tuple[Measurement, ...]]:
+    """For effects these data cannot tell from the model's (or not whole): the
     measurements the machine can make after which they could, shortest first, at most
     ``ADVISED``: each column then visible (``SEPARATES``) and the model with the effect
-    separable as fit --add judges it.
-
-    R of stacked data is R of the stacked R factors, and the R factor of a subset of
-    columns is that of the same columns of R: the measured poses are reduced once, each
-    extra measurement adds only its own rows, and each effect is judged on small blocks.
-    """
-    both = [*model_effects, *effects]
-    p = sum(len(e.params) for e in model_effects)
-    R0 = r_factor(machine, poses, both)
+    separable as fit --add judges it."""
+    machine, poses, p = measured.machine, measured.poses, measured.p
     found: dict[str, list[Measurement]] = {e.name: [] for e in effects}
     for extra in sorted(advisor.candidates, key=lambda m: len(m.poses)):
-        R = r_factor(machine, extra.poses, both, R0)
-        col = p
+        R = measured.with_extra(extra)
         for e in effects:
-            k = len(e.params)
             if e.basis.kind == "r" and not both_sides(machine, e.carrier, poses, extra.poses):
-                col += k    # one side throughout is the axis's zero offset, not its backlash
-                continue
-            Re = np.linalg.qr(R[:, [*range(p), *range(col, col + k)]], mode="r")
+                continue    # one side throughout is the axis's zero offset, not its backlash
+            Re = np.linalg.qr(R[:, [*range(p), *measured.cols[e.name]]], mode="r")
             vis = np.linalg.norm(Re[p:, p:], axis=0) / np.maximum(np.linalg.norm(Re[:, p:], axis=0), 1e-300)
             if vis.min() >= SEPARATES and condition(Re) < COND_LIMIT:
                 found[e.name].append(extra)
-            col += k
     return {k: advisor.runnable(v, most=ADVISED) for k, v in found.items()}
 
 
-def telling_apart(machine: Machine, model_effects: Sequence[Effect], poses: Poses, group: Sequence[Row],
-                   sigma2: float, advisor: Advisor
-                   ) -> tuple[dict[str, tuple[Measurement, ...]], tuple[Measurement, ...], dict]:
+def telling_apart(measured: Measured, group: Sequence[Row], sigma2: float, advisor: Advisor
+                  ) -> tuple[dict[str, tuple[Measurement, ...]], tuple[Measurement, ...], dict]:
     """Which measurements, not made yet and that the machine can make, tell the best
     (``group[0]``) and its rivals apart: a pair is told apart when, at their fitted sizes,
     they would differ by ``TELLS_APART`` σ̂² more than now (each hypothesis, were it true,
@@ -73,11 +88,7 @@ def telling_apart(machine: Machine, model_effects: Sequence[Effect], poses: Pose
     would."""
     effects = [row.effect for row in group]
     amps = {row.effect.name: row.amp for row in group}
-    p = sum(len(e.params) for e in model_effects)
-    cols, at = {}, p
-    for e in effects:
-        cols[e.name] = list(range(at, at + len(e.params)))
-        at += len(e.params)
+    p, cols = measured.p, measured.cols
 
     def misfit(R, a, b):        # a true, fitted with the model and b: what a leaves
         Rs = np.linalg.qr(R[:, [*range(p), *cols[b], *cols[a]]], mode="r")
@@ -87,13 +98,11 @@ def telling_apart(machine: Machine, model_effects: Sequence[Effect], poses: Pose
     def apart(R, a, b):
         return min(misfit(R, a, b), misfit(R, b, a))
 
-    both = [*model_effects, *effects]
-    R0 = r_factor(machine, poses, both)
     pairs = list(combinations([e.name for e in effects], 2))
-    now = {pq: apart(R0, *pq) for pq in pairs}
+    now = {pq: apart(measured.R, *pq) for pq in pairs}
     split = {}
     for extra in advisor.candidates:
-        R = r_factor(machine, extra.poses, both, R0)
+        R = measured.with_extra(extra)
         gains = {pq: apart(R, *pq) - now[pq] for pq in pairs}
         told = {pq for pq, g in gains.items() if g >= TELLS_APART * sigma2}
         if told:
