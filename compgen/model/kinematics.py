@@ -402,7 +402,10 @@ class SlotGains:
                     term = (sign * mark[2] if len(mark) > 2 else sign) * R[:, :, k]
                 elif kind == "r" and k >= 3 and k != mark[3]:
                     w = mark[2]
-                    axis = _rotate(R, _left_jacobian(w, e)) if w.any() else R[:, :, k - 3]
+                    if not w.any():
+                        axis = R[:, :, k - 3]
+                    else:       # a location error turns every pose alike: its J(w)e once
+                        axis = _rotate(R, _left_jacobian(w[:1], e)[0] if _same(w) else _left_jacobian(w, e))
                     term = (sign * mark[4] if len(mark) > 4 else sign) * _cross(axis, P - o)
                 elif kind == "turn" and k == mark[2]:
                     term = sign * _cross(R[:, :, k - 3], P - o)
@@ -442,6 +445,11 @@ def slot_gains(machine: Machine, poses: Poses, keys) -> dict[tuple[str, str, str
     """``SlotGains`` of each key on the nominal machine, as a dict."""
     gains = SlotGains(machine, poses)
     return {key: gains(key) for key in keys}
+
+
+def _same(w: np.ndarray) -> bool:
+    """Every pose's row of ``w`` (n, 3) is the first's."""
+    return len(w) > 0 and bool((w == w[0]).all())
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -534,6 +542,8 @@ def _compose(R: np.ndarray, o: np.ndarray, op: tuple) -> tuple[np.ndarray, np.nd
     if kind == "t":
         return R, o + _rotate(R, a[0])
     if kind == "w":
+        if _same(a[0]):     # a location error turns every pose alike: one 3 × 3, one product
+            return (R.reshape(-1, 3) @ rodrigues(a[0][0])).reshape(R.shape), o
         return R @ rodrigues(a[0]), o
     if kind == "q":
         i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[a[0]]
