@@ -411,7 +411,8 @@ class SlotGains:
                     term = sign * _cross(R[:, :, k - 3], P - o)
                 elif kind == "line" and k >= 3:
                     _, _, w, run, line = mark
-                    term = sign * run[:, None] * _rotate(R, _cross(_left_jacobian(w, e), line))
+                    turned = _left_jacobian(w[:1], e)[0] if _same(w) else _left_jacobian(w, e)
+                    term = sign * run[:, None] * _rotate(R, _cross(turned, line))
                 if term is None:
                     continue
                 if not self.twice:       # one factor holds each slot
