@@ -80,6 +80,25 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
             cols[i] = (K, K + len(effects[i].params))
             K = cols[i][1]
         spans[g] = (lo, K)
+    # the basis values each group's columns are, per slot of the group: where in the
+    # distinct bases' values side by side, and a compound's sign (``Effect.split`` of the
+    # identity: a signed selection of its terms, (cos, −sin) and (sin, cos) turned by sense)
+    bases = list(dict.fromkeys((where(e), e.basis) for e in effects))
+    first_col = np.cumsum([0, *(len(basis.terms) for _, basis in bases)])
+    taken: dict = {}
+    for g, members in groups.items():
+        picks: list[list] = [[] for _ in g]
+        for i in members:
+            e = effects[i]
+            j = bases.index((where(e), e.basis))
+            own = np.arange(first_col[j], first_col[j + 1])
+            for t, (_, M) in enumerate(e.split(np.eye(len(own)))):
+                if not ((M != 0).sum(axis=0) == 1).all():
+                    raise ValueError(f"{e.name}: a part that is not a signed choice of its terms")
+                row = np.abs(M).argmax(axis=0)
+                picks[t].append((own[row], M[row, np.arange(M.shape[1])]))
+        taken[g] = [(np.concatenate([p for p, _ in pick]),
+                     None if len(g) == 1 else np.concatenate([s for _, s in pick])) for pick in picks]
     white = noise is not None
     if white:
         seg, rho = noise
@@ -117,23 +136,14 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
             w0 = np.einsum("msd,msd->ms", Gw, Gm)               # g·(WᵀW)g per pose
             if pairs:                                            # gₘ·(WᵀW)ₘ,ₘ₊₁gₘ₊₁
                 w1 = np.einsum("msd,msd->ms", G[:pairs] * off[b:b + pairs, None], G[1:pairs + 1])
-            values: dict = {}
-            for g, members in groups.items():
-                terms: list[list[np.ndarray]] = [[] for _ in g]
-                for i in members:
-                    e = effects[i]
-                    key = (where(e), e.basis)
-                    if key not in values:
-                        values[key] = e.basis.values(coords[where(e)][b:b + rows])
-                    if len(g) == 1:
-                        terms[0].append(values[key])
-                    else:
-                        for t, (_, v) in enumerate(e.split(values[key])):
-                            terms[t].append(v)
-                V = [np.concatenate(t, axis=1) if len(t) > 1 else t[0] for t in terms]
+            # every distinct basis once, side by side; each group's columns taken from them
+            values = np.concatenate([basis.values(coords[at][b:b + rows]) for at, basis in bases], axis=1)
+            for g in groups:
+                V = [values[:, pick] if sign is None else values[:, pick] * sign for pick, sign in taken[g]]
                 lo, hi = spans[g]
                 if len(g) > 1:     # two directions: made as columns, where they cancel (as they may) exactly
-                    c = sum(G[:, s, :, None] * v[:, None, :] for s, v in zip(g, V, strict=True))
+                    c = G[:, g[0], :, None] * V[0][:, None, :]
+                    c += G[:, g[1], :, None] * V[1][:, None, :]
                     flat = c[:m].reshape(3 * m, -1)
                     for at, Y in zip(q_rows, Ys, strict=True):
                         qc[at, lo:hi] += Y.reshape(3 * m, -1).T @ flat
