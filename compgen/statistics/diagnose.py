@@ -417,17 +417,23 @@ def _told_beside(devices: list[DeviceCandidate], beside: np.ndarray, res: _Resid
         p |= tested([e for e in seen if e != lead], np.column_stack([machine, cols[lead]]))
     joint = [lead, *(e for e in seen if e != lead and p[e] < alpha)] if lead else []
 
-    off = {e: noise.off(c) for e, c in cols.items()}     # each gain's column off the model, once
+    # every gain's column off the model beside the machine's effects (off it already:
+    # ``_orthonormal`` of what was), and their products with each other and the residual,
+    # once: each joint fit below is then a few columns' normal equations
+    names = list(cols)
+    C = np.column_stack([*(noise.off(cols[e]) for e in names), machine])
+    CC, Cr, rr = C.T @ C, C.T @ rw, float(rw @ rw)
+    beside_m = list(range(len(names), C.shape[1]))
 
-    def together(names):
+    def together(chosen):
         """Values and σ, %, of these gains fitted at once with the model and the machine's
-        effects, σ from the residual all of them leave: the misfit they explain is not noise.
-        ``machine`` is off the model already (``_orthonormal`` of what was)."""
-        C = np.column_stack([*(off[e] for e in names), machine])
-        amp = np.linalg.lstsq(C, rw, rcond=None)[0]
-        left = rw - C @ amp
-        std = np.sqrt(np.diag(np.linalg.inv(C.T @ C)) * float(left @ left) / (res.dof - C.shape[1]))
-        return {e: (float(a) * 100.0, float(s) * 100.0) for e, a, s in zip(names, amp, std, strict=False)}
+        effects, σ from the residual all of them leave: the misfit they explain is not noise."""
+        at = [names.index(e) for e in chosen] + beside_m
+        inv = np.linalg.inv(CC[np.ix_(at, at)])
+        amp = inv @ Cr[at]
+        left = max(rr - float(Cr[at] @ amp), 0.0)
+        std = np.sqrt(np.diag(inv) * left / (res.dof - len(at)))
+        return {e: (float(a) * 100.0, float(s) * 100.0) for e, a, s in zip(chosen, amp, std, strict=False)}
 
     told = together(joint)
     for d in devices:
