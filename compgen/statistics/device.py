@@ -73,7 +73,7 @@ def device_candidates(pred: np.ndarray, rtest: np.ndarray, Q: np.ndarray, r: np.
     R-test's, or the fit predicts no displacement to scale."""
     if not rtest.any() or not np.any(pred[rtest]):
         return []
-    rw = noise.off(noise.white(r))
+    rw = noise.residual(r)
     out = []
     for name, c in device_columns(pred, rtest).items():
         cc, qc, cr = np.array([[c @ c]]), (Q.T @ c)[:, None], np.array([c @ r])

@@ -399,7 +399,7 @@ def _told_beside(devices: list[DeviceCandidate], beside: np.ndarray, res: _Resid
     unmodelled 15″ 2/rev angle of C read X −56 ± 1.7 % (p < 1e-300), and beside the best of
     three machine effects X was significant, where the other two took it back."""
     cols = {e: noise.white(c)[:, None] for e, c in device_columns(res.pred, res.rtest).items()}
-    rw = noise.off(noise.white(res.r))
+    rw = noise.residual(res.r)
     machine = _orthonormal(noise.off(beside))     # rivals among second effects are one column
 
     def tested(names, added):
@@ -547,7 +547,7 @@ def _ranked(machine: Machine, fit: FitResult, effects: Sequence[Effect],
     rho = ar1(rest.reshape(-1, 3), seg, (Q, beyond), RHO_MARGIN_SE)
     if rho.any():
         noise = Whitening(seg, rho, Q)
-        rw = noise.off(noise.white(r))
+        rw = noise.residual(r)
         both = products(machine, poses, walked, (noise.Q, noise.white(c)), rw, (seg, rho))
         white = {e: (cc, qx[:p], cr) for e, (cc, qx, cr) in both.items()}
         white |= {e: (Cw.T @ Cw, noise.Q.T @ Cw, Cw.T @ rw)
@@ -616,7 +616,7 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], firs
         # whose columns carry them, from the columns step 3 made
         best = significant[0].effect
         others = [resolve(machine, c.effect) for c in significant[1:]]
-        rw = noise.off(noise.white(r))
+        rw = noise.residual(r)
         walked = [e for e in others if e.name not in made]
         prods = ({e.name: carried[1][e.name] for e in walked} if carried and carried[0] == best else
                  products(machine, poses, walked, (noise.Q, first), rw,
