@@ -158,7 +158,8 @@ def _fit(x: np.ndarray, y: np.ndarray, f: float, Q: np.ndarray | None) -> tuple[
     """The sum of squares a sine of frequency ``f`` (with a constant) removes from ``y``,
     jointly with the model's columns ``Q`` (n, p), and its amplitude."""
     B = np.column_stack([np.cos(2 * np.pi * f * x), np.sin(2 * np.pi * f * x), np.ones_like(x)])
-    G = B.T @ B - ((Q.T @ B).T @ (Q.T @ B) if Q is not None else 0.0)
+    QB = Q.T @ B if Q is not None else None
+    G = B.T @ B - (QB.T @ QB if QB is not None else 0.0)
     rhs = B.T @ y
     coef = np.linalg.lstsq(G, rhs, rcond=None)[0]
     return float(coef @ rhs), float(np.hypot(*coef[:2]))
