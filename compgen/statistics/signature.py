@@ -4,7 +4,8 @@ their columns, stacked over poses a chunk at a time so that memory stays as fit'
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -30,14 +31,31 @@ def columns(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np.nda
     return np.column_stack([c for _, c in signatures(machine, poses, effects)])
 
 
+def in_halves(work: Callable[[range], object], starts: range) -> list:
+    """``work`` on the first and the second half of the blocks ``starts``, each on its own
+    thread where there are two halves: numpy and LAPACK let go of the GIL in their loops,
+    so a dense session's pass takes ~0.8 of its time on two cores. The halves depend on
+    the poses alone and their results come back in order: the same numbers on any machine."""
+    half = len(starts) // 2
+    if not half:
+        return [work(starts)]
+    with ThreadPoolExecutor(2) as pool:
+        return list(pool.map(work, (starts[:half], starts[half:])))
+
+
 def r_factor(machine: Machine, poses: Poses, effects: Sequence[Effect],
               start: np.ndarray | None = None, chunk: int = 4096) -> np.ndarray:
-    """R of the QR factorisation of the effects' columns on ``poses`` stacked under ``start``."""
-    R = start
-    for i in range(0, len(poses), chunk):
-        block = columns(machine, poses.take(slice(i, i + chunk)), effects)
-        R = np.linalg.qr(block if R is None else np.vstack([R, block]), mode="r")
-    return R
+    """R of the QR factorisation of the effects' columns on ``poses`` stacked under ``start``
+    (R of stacked rows is R of the stacked R factors: the halves' are made apart)."""
+    def part(blocks: range) -> np.ndarray | None:
+        R = None
+        for i in blocks:
+            block = columns(machine, poses.take(slice(i, i + chunk)), effects)
+            R = np.linalg.qr(block if R is None else np.vstack([R, block]), mode="r")
+        return R
+
+    parts = [R for R in (start, *in_halves(part, range(0, len(poses), chunk))) if R is not None]
+    return parts[0] if len(parts) == 1 else np.linalg.qr(np.vstack(parts), mode="r")
 
 
 def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.ndarray | Sequence[np.ndarray],
@@ -108,58 +126,68 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
         first = np.r_[True, ~same]
         gram = np.where(first[:, None], 1 - rho**2, 1.0) + off**2        # (WᵀW)ₘ,ₘ
         diag = np.where(first[:, None], np.sqrt(1 - rho**2), 1.0)       # Wₘ,ₘ
-    qc, cr = np.zeros((edges[-1], K)), np.zeros(K)
-    cc = {g: np.zeros((hi - lo, hi - lo)) for g, (lo, hi) in spans.items()}
-    lag = {g: np.zeros((hi - lo, hi - lo)) for g, (lo, hi) in spans.items()}    # F of F + Fᵀ
     chunk = max(64, CHUNK_BYTES // (8 * max(K, 1)))
-    for a in range(0, n, BLOCK):
-        stop = min(a + BLOCK, n)
-        gains = SlotGains(machine, poses.take(slice(a, min(stop + 1, n) if white else stop)))
-        G_all = np.stack([gains(k) for k in slots], axis=1)      # (poses, slots, 3)
-        for b in range(a, stop, chunk):
-            end = min(b + chunk, stop)
-            m = end - b
-            pairs = min(end + 1, n) - b - 1 if white else 0      # a pose and the next
-            rows = max(m, pairs + 1)                             # white: with the next pose
-            G = G_all[b - a:b - a + rows]
-            Gm = G[:m]
-            # each block of Q on its own, as Qᵀc of the model's Q must not depend on what is
-            # carried beside it (a screened pass and a plain one give the same numbers)
-            Ys = [q[3 * b:3 * end].reshape(m, 3, -1) for q in Qs]
-            y = r[3 * b:3 * end].reshape(m, 3)
-            if white:                      # WᵀY, as Qᵀ_w C_w = (WᵀQ_w)ᵀ C
-                Ys = [_transposed_white(q, diag, off, b, end, pairs) for q in Qs]
-                y = _transposed_white(r[:, None], diag, off, b, end, pairs)[..., 0]
-            gq = [Gm @ Y for Y in Ys]                            # (m, slots, p): g·WᵀY
-            gr = (Gm @ y[:, :, None])[..., 0]
-            Gw = Gm * gram[b:end, None] if white else Gm
-            w0 = np.einsum("msd,msd->ms", Gw, Gm)               # g·(WᵀW)g per pose
-            if pairs:                                            # gₘ·(WᵀW)ₘ,ₘ₊₁gₘ₊₁
-                w1 = np.einsum("msd,msd->ms", G[:pairs] * off[b:b + pairs, None], G[1:pairs + 1])
-            # every distinct basis once, side by side; each group's columns taken from them
-            values = np.concatenate([basis.values(coords[at][b:b + rows]) for at, basis in bases], axis=1)
-            for g in groups:
-                V = [values[:, pick] if sign is None else values[:, pick] * sign for pick, sign in taken[g]]
-                lo, hi = spans[g]
-                if len(g) > 1:     # two directions: made as columns, where they cancel (as they may) exactly
-                    c = G[:, g[0], :, None] * V[0][:, None, :]
-                    c += G[:, g[1], :, None] * V[1][:, None, :]
-                    flat = c[:m].reshape(3 * m, -1)
-                    for at, Y in zip(q_rows, Ys, strict=True):
-                        qc[at, lo:hi] += Y.reshape(3 * m, -1).T @ flat
-                    cr[lo:hi] += y.ravel() @ flat
-                    cc[g] += flat.T @ (gram[b:end].reshape(-1, 1) * flat if white else flat)
+
+    def part(blocks: range) -> tuple:
+        """The sums over these blocks' poses."""
+        qc, cr = np.zeros((edges[-1], K)), np.zeros(K)
+        cc = {g: np.zeros((hi - lo, hi - lo)) for g, (lo, hi) in spans.items()}
+        lag = {g: np.zeros((hi - lo, hi - lo)) for g, (lo, hi) in spans.items()}    # F of F + Fᵀ
+        for a in blocks:
+            stop = min(a + BLOCK, n)
+            gains = SlotGains(machine, poses.take(slice(a, min(stop + 1, n) if white else stop)))
+            G_all = np.stack([gains(k) for k in slots], axis=1)      # (poses, slots, 3)
+            for b in range(a, stop, chunk):
+                end = min(b + chunk, stop)
+                m = end - b
+                pairs = min(end + 1, n) - b - 1 if white else 0      # a pose and the next
+                rows = max(m, pairs + 1)                             # white: with the next pose
+                G = G_all[b - a:b - a + rows]
+                Gm = G[:m]
+                # each block of Q on its own, as Qᵀc of the model's Q must not depend on what is
+                # carried beside it (a screened pass and a plain one give the same numbers)
+                Ys = [q[3 * b:3 * end].reshape(m, 3, -1) for q in Qs]
+                y = r[3 * b:3 * end].reshape(m, 3)
+                if white:                      # WᵀY, as Qᵀ_w C_w = (WᵀQ_w)ᵀ C
+                    Ys = [_transposed_white(q, diag, off, b, end, pairs) for q in Qs]
+                    y = _transposed_white(r[:, None], diag, off, b, end, pairs)[..., 0]
+                gq = [Gm @ Y for Y in Ys]                            # (m, slots, p): g·WᵀY
+                gr = (Gm @ y[:, :, None])[..., 0]
+                Gw = Gm * gram[b:end, None] if white else Gm
+                w0 = np.einsum("msd,msd->ms", Gw, Gm)               # g·(WᵀW)g per pose
+                if pairs:                                            # gₘ·(WᵀW)ₘ,ₘ₊₁gₘ₊₁
+                    w1 = np.einsum("msd,msd->ms", G[:pairs] * off[b:b + pairs, None], G[1:pairs + 1])
+                # every distinct basis once, side by side; each group's columns taken from them
+                values = np.concatenate([basis.values(coords[at][b:b + rows]) for at, basis in bases], axis=1)
+                for g in groups:
+                    V = [values[:, pick] if sign is None else values[:, pick] * sign
+                         for pick, sign in taken[g]]
+                    lo, hi = spans[g]
+                    if len(g) > 1:     # two directions: as columns, where they cancel (as they may) exactly
+                        c = G[:, g[0], :, None] * V[0][:, None, :]
+                        c += G[:, g[1], :, None] * V[1][:, None, :]
+                        flat = c[:m].reshape(3 * m, -1)
+                        for at, Y in zip(q_rows, Ys, strict=True):
+                            qc[at, lo:hi] += Y.reshape(3 * m, -1).T @ flat
+                        cr[lo:hi] += y.ravel() @ flat
+                        cc[g] += flat.T @ (gram[b:end].reshape(-1, 1) * flat if white else flat)
+                        if pairs:
+                            lag[g] += (off[b:b + pairs, :, None] * c[:pairs]).reshape(3 * pairs, -1).T \
+                                @ c[1:pairs + 1].reshape(3 * pairs, -1)
+                        continue
+                    s, v = g[0], V[0]
+                    for at, g_q in zip(q_rows, gq, strict=True):
+                        qc[at, lo:hi] += g_q[:, s].T @ v[:m]
+                    cr[lo:hi] += gr[:, s] @ v[:m]
+                    cc[g] += v[:m].T @ (w0[:, s, None] * v[:m])
                     if pairs:
-                        lag[g] += (off[b:b + pairs, :, None] * c[:pairs]).reshape(3 * pairs, -1).T \
-                            @ c[1:pairs + 1].reshape(3 * pairs, -1)
-                    continue
-                s, v = g[0], V[0]
-                for at, g_q in zip(q_rows, gq, strict=True):
-                    qc[at, lo:hi] += g_q[:, s].T @ v[:m]
-                cr[lo:hi] += gr[:, s] @ v[:m]
-                cc[g] += v[:m].T @ (w0[:, s, None] * v[:m])
-                if pairs:
-                    lag[g] += v[:pairs].T @ (w1[:, s, None] * v[1:pairs + 1])
+                        lag[g] += v[:pairs].T @ (w1[:, s, None] * v[1:pairs + 1])
+        return qc, cr, cc, lag
+
+    sums = in_halves(part, range(0, n, BLOCK))
+    qc, cr = sum(t[0] for t in sums), sum(t[1] for t in sums)
+    cc = {g: sum(t[2][g] for t in sums) for g in spans}
+    lag = {g: sum(t[3][g] for t in sums) for g in spans}
     out = {}
     for g, members in groups.items():
         whole = cc[g] + lag[g] + lag[g].T
