@@ -5,7 +5,6 @@ their columns, stacked over poses a chunk at a time so that memory stays as fit'
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -36,6 +35,8 @@ def in_halves(work: Callable[[range], object], starts: range) -> list:
     thread where there are two halves: numpy and LAPACK let go of the GIL in their loops,
     so a dense session's pass takes ~0.8 of its time on two cores. The halves depend on
     the poses alone and their results come back in order: the same numbers on any machine."""
+    from concurrent.futures import ThreadPoolExecutor  # here: every command's start-up would pay it
+
     half = len(starts) // 2
     if not half:
         return [work(starts)]
