@@ -4,12 +4,12 @@ their columns, stacked over poses a chunk at a time so that memory stays as fit'
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
 from ..model.effects import Effect
-from ..model.kinematics import Poses, SlotGains, coordinate, effect_gains
+from ..model.kinematics import Poses, SlotGains, coordinate, effect_gains, in_halves
 from ..model.machine import Machine
 
 CHUNK_BYTES = 8 << 20  # the basis values of every candidate held at once: ~2 500 poses of ~400 columns
@@ -28,20 +28,6 @@ def columns(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np.nda
     """First-order signatures of the effects' parameters, (3n, Σ params), mm per unit, in
     the order of ``effects``."""
     return np.column_stack([c for _, c in signatures(machine, poses, effects)])
-
-
-def in_halves(work: Callable[[range], object], starts: range) -> list:
-    """``work`` on the first and the second half of the blocks ``starts``, each on its own
-    thread where there are two halves: numpy and LAPACK let go of the GIL in their loops,
-    so a dense session's pass takes ~0.8 of its time on two cores. The halves depend on
-    the poses alone and their results come back in order: the same numbers on any machine."""
-    from concurrent.futures import ThreadPoolExecutor  # here: every command's start-up would pay it
-
-    half = len(starts) // 2
-    if not half:
-        return [work(starts)]
-    with ThreadPoolExecutor(2) as pool:
-        return list(pool.map(work, (starts[:half], starts[half:])))
 
 
 def r_factor(machine: Machine, poses: Poses, effects: Sequence[Effect],
