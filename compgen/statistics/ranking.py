@@ -17,7 +17,7 @@ from ..model.kinematics import Poses
 from ..model.machine import Machine
 from ..model.sides import StartSides
 from .noise import whiten
-from .signature import columns, signatures
+from .signature import columns
 from .significance import VISIBLE, condition, explained, gram_factor
 
 ABSORBS = 0.25        # share of an effect's signature a parameter must take to be named
@@ -49,8 +49,12 @@ def started_reversals(machine: Machine, poses: Poses, effects: Sequence[Effect])
     the chain (a walk of 723 000 poses is ~0.8 s)."""
     sides = {e.name: StartSides(machine, e.params, poses) for e in effects if e.basis.kind == "r"}
     started = [e for e in effects if e.name in sides and sides[e.name].count]
+    if not started:
+        return {}
+    at = np.cumsum([len(e.params) for e in started])[:-1]
+    made = np.split(columns(machine, poses, started), at, axis=1)
     return {e.name: np.hstack([c, sides[e.name].projector().basis(len(poses))])
-            for e, c in signatures(machine, poses, started)}
+            for e, c in zip(started, made, strict=True)}
 
 
 def effect_columns(machine: Machine, poses: Poses, e: Effect) -> np.ndarray:

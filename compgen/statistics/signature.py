@@ -26,23 +26,44 @@ def signatures(machine: Machine, poses: Poses, effects: Sequence[Effect]):
 
 def columns(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np.ndarray:
     """First-order signatures of the effects' parameters, (3n, Σ params), mm per unit, in
-    the order of ``effects``."""
-    return np.column_stack([c for _, c in signatures(machine, poses, effects)])
+    the order of ``effects``; a walk of the chains a block of poses at a time, in halves
+    (one walk of a dense session's every pose at once is fresh memory at every link)."""
+    x = _coordinates(machine, poses, effects)
+    halves = in_halves(lambda starts: [_columns_at(machine, poses, effects, x, slice(a, a + BLOCK))
+                                       for a in starts], range(0, len(poses), BLOCK))
+    blocks = [block for half in halves for block in half]
+    return np.concatenate(blocks) if blocks else np.zeros((0, sum(len(e.params) for e in effects)))
 
 
 def r_factor(machine: Machine, poses: Poses, effects: Sequence[Effect],
               start: np.ndarray | None = None, chunk: int = 4096) -> np.ndarray:
     """R of the QR factorisation of the effects' columns on ``poses`` stacked under ``start``
     (R of stacked rows is R of the stacked R factors: the halves' are made apart)."""
+    x = _coordinates(machine, poses, effects)
+
     def part(blocks: range) -> np.ndarray | None:
         R = None
         for i in blocks:
-            block = columns(machine, poses.take(slice(i, i + chunk)), effects)
+            block = _columns_at(machine, poses, effects, x, slice(i, i + chunk))
             R = np.linalg.qr(block if R is None else np.vstack([R, block]), mode="r")
         return R
 
     parts = [R for R in (start, *in_halves(part, range(0, len(poses), chunk))) if R is not None]
     return parts[0] if len(parts) == 1 else np.linalg.qr(np.vstack(parts), mode="r")
+
+
+def _coordinates(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> list[np.ndarray]:
+    """Each effect's coordinate on the whole session: a reversal's side depends on its run
+    (a block of it would take its first pose's side from the block's first move)."""
+    return [coordinate(machine, e, poses) for e in effects]
+
+
+def _columns_at(machine: Machine, poses: Poses, effects: Sequence[Effect], x: Sequence[np.ndarray],
+                at: slice) -> np.ndarray:
+    """The effects' columns on the poses ``at`` from one walk, ``x`` their coordinates."""
+    gains, made = SlotGains(machine, poses.take(at)), {}
+    return np.column_stack([effect_gains(gains, e, c[at], made).reshape(-1, len(e.params))
+                            for e, c in zip(effects, x, strict=True)])
 
 
 def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.ndarray | Sequence[np.ndarray],
