@@ -140,6 +140,28 @@ def test_products_a_block_at_a_time_equal_those_of_the_whole_columns(seed_machin
             np.testing.assert_allclose(cr, c.T @ r, rtol=0, atol=1e-12 * np.sqrt(scale) * 50, err_msg=e.name)
 
 
+def test_the_r_factor_of_chunks_takes_a_reversal_s_sides_from_the_whole_session(seed_machine):
+    """``r_factor`` stacks chunks of poses; a reversal's side at a chunk's first pose is that of
+    the move that reached it in the session (as ``products`` and ``columns`` take it), not of
+    the chunk's first move: RᵀR is the Gram matrix of the whole columns, where a chunk starts
+    at the pose where the axis turns."""
+    from dataclasses import replace
+
+    from compgen.model.effects import resolve
+    from compgen.model.kinematics import coordinate
+    from compgen.model.paths import generate
+    from compgen.statistics.signature import columns, r_factor
+    k2 = generate(seed_machine, ["K2"], back=True)
+    poses = replace(k2, side=np.full_like(k2.side, np.nan))      # data that do not say the side
+    effects = [resolve(seed_machine, "ECC:r1"), resolve(seed_machine, "XOC")]
+    side = coordinate(seed_machine, effects[0], poses)
+    chunk = next(k for k in range(2, len(poses)) if side[k] != side[k + 1])     # the turning pose
+    assert coordinate(seed_machine, effects[0], poses.take(slice(chunk, None)))[0] != side[chunk]
+    C = columns(seed_machine, poses, effects)
+    R = r_factor(seed_machine, poses, effects, chunk=chunk)
+    np.testing.assert_allclose(R.T @ R, C.T @ C, rtol=1e-10, atol=1e-12 * np.abs(C.T @ C).max())
+
+
 def test_the_scans_sums_are_the_least_squares_sines_sum_of_squares():
     """The scan's sum of squares at each frequency (from running phasors) is what the least-
     squares sine with a constant removes, fitted anew; with the model's columns taken out too."""
