@@ -189,15 +189,14 @@ def rival_curves(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosi
     model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
     both = Poses.concat([poses, extra.poses])
     n3 = 3 * len(poses)
-    named = [c for c in found.candidates if c.effect in (found.significant[0].effect, *found.rivals)]
-    rivals = {c.effect: resolve(machine, c.effect) for c in named}
+    drawn = (found.significant[0].effect, *found.rivals)
+    named = {c.effect: c for c in found.candidates if c.effect in drawn}
     # one walk of the chains for the model's columns and every rival's: each rival's kept
     # only as its curve at the fitted size (one column, not its parameters')
     J, v = [], {}
-    for e, cols in signatures(machine, both, [*model_effects, *rivals.values()]):
-        if e.name in rivals:
-            c = next(c for c in named if c.effect == e.name)
-            v[e.name] = cols @ (np.array(c.amplitude) / shown(1.0, e.unit)[0])
+    for e, cols in signatures(machine, both, [*model_effects, *(resolve(machine, n) for n in named)]):
+        if e.name in named:
+            v[e.name] = cols @ (np.array(named[e.name].amplitude) / shown(1.0, e.unit)[0])
         else:
             J.append(cols)
     J = np.column_stack(J)
@@ -207,7 +206,7 @@ def rival_curves(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosi
     # and no second QR of millions of rows is made
     Q_add = np.linalg.qr(np.vstack([R_now, J[n3:]]))[0]
     out = {}
-    for name in rivals:
+    for name in named:
         a = Q_now.T @ v[name][:n3]
         now = v[name][:n3] - Q_now @ a
         after = v[name][n3:] - Q_add[len(R_now):] @ (Q_add.T @ np.r_[a, v[name][n3:]])

@@ -632,7 +632,7 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], firs
             for c in out if c.visible and c.effect != best.effect.name},
             noise.rss(r) / res.dof, alpha, bool(after_best))
         rival_names = tuple(n for n in rival_names if n not in after_best)
-    return {"after_best": after_best, "rivals": rival_names, "rivals_separated_by": (), "rivals_open": {}}
+    return {"after_best": after_best, "rivals": rival_names}
 
 
 def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dict[str, Row], rival: dict,
@@ -641,7 +641,7 @@ def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dic
     the measured poses for both): a candidate the model absorbs, or a part of it (fit --add
     refuses it), and the best's rivals. Equivalent rivals reordered. Returns the candidates
     and ``rival`` with what tells the rivals apart."""
-    rival_names = rival["rivals"]
+    rival_names, separated_by, left_open = rival["rivals"], (), {}
     best = next((ranked[c.effect] for c in out if c.significant), None)
     group = [best, *(ranked[e] for e in rival_names)] if rival_names else []
     # seen, but not to be added as a whole: a part of it the model absorbs, so the
@@ -654,8 +654,7 @@ def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dic
         if group:
             by_rival, separated_by, left_open = telling_apart(measured, group, res.rss / res.dof, advising)
             out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
-            rival = {**rival, "rivals_separated_by": separated_by, "rivals_open": left_open}
-    if rival_names and not rival["rivals_separated_by"]:
+    if rival_names and not separated_by:
         # equivalent everywhere: put first the one the location errors absorb least, so
         # that adding it leaves them where an effect without that absorbed part has them.
         # (Not the one that moves them least: that keeps the bias of the fit without it,
@@ -666,8 +665,9 @@ def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dic
         if first.effect != best.effect.name:
             out.remove(first)
             out.insert(out.index(next(c for c in out if c.effect == best.effect.name)), first)
-            rival = {**rival, "rivals": tuple(c.effect for c in out if c.effect in named and c is not first)}
-    return out, rival
+            rival_names = tuple(c.effect for c in out if c.effect in named and c is not first)
+    return out, {**rival, "rivals": rival_names, "rivals_separated_by": separated_by,
+                 "rivals_open": left_open}
 
 
 def _carries(fit: FitResult, out: Sequence[Candidate], ranked: dict[str, Row],

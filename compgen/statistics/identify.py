@@ -60,9 +60,7 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
     joined = Measurements.concat(data)
     poses, y = joined.poses, joined.deviation
     readings, p = y.size, len(free)
-    if readings <= p:
-        raise CompgenError(f"{len(poses)} poses give {readings} readings for {p} parameters",
-                           hint="measure more poses: a K4 path has 241")
+    _enough(poses, readings, p)
 
     x = np.array([fixed.get(n, 0.0) for n in names])
     weights = Weights(data)
@@ -71,9 +69,7 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
     # estimates without carrying the constants (Frisch–Waugh–Lovell)
     starts = StartSides(machine, names, poses)
     project = starts.projector(weights.apply_at) or (lambda v: v)
-    if readings <= p + starts.count:
-        raise CompgenError(f"{len(poses)} poses give {readings} readings for {p} parameters and "
-                           f"{starts.count} free start sides", hint="measure more poses: a K4 path has 241")
+    _enough(poses, readings, p, starts.count)
 
     buffer = np.empty((len(names), len(poses), 3))
 
@@ -140,6 +136,14 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         residual=residual_stats(poses, raw, dof, rho),
         method=method, iterations=iterations, sign=sign, version=__version__,
         descriptions={n: e.words for n, e in zip(names, m.effects, strict=True)})
+
+
+def _enough(poses: Poses, readings: int, p: int, starts: int = 0) -> None:
+    """Refuse readings too few for ``p`` parameters (and ``starts`` free start sides)."""
+    if readings <= p + starts:
+        raise CompgenError(f"{len(poses)} poses give {readings} readings for {p} parameters"
+                           + (f" and {starts} free start sides" if starts else ""),
+                           hint="measure more poses: a K4 path has 241")
 
 
 def fitted(machine: Machine, fit: FitResult, data: Sequence[RTestData]) -> np.ndarray:
@@ -427,16 +431,14 @@ def beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
     exactly linear in it and one walk of the chains gives the answer Gauss–Newton
     converges to in three (1.65 → 1.07 s at 723 000 readings, most of it now the AR(1)
     ρ̂); the same refusal, the same residual figures and ρ̂ (``tests/test_compare.py``)."""
+    _enough(poses, reading.size, len(SETUP))
     dof = reading.size - len(SETUP)
-    if dof <= 0:
-        raise CompgenError(f"{len(poses)} poses give {reading.size} readings for {len(SETUP)} parameters",
-                           hint="measure more poses: a K4 path has 241")
     m = Model(machine, list(SETUP))
     dev, J = m.linearise(poses)
     normal = Normal(np.moveaxis(J, 2, 0).reshape(len(SETUP), -1).T)
     check_identifiable(machine, m, list(range(len(SETUP))), normal, poses)
     raw = reading - dev
     raw = raw - (normal.J @ normal.solve(raw.ravel())).reshape(-1, 3)
-    rho = ar1(raw, runs(poses, np.zeros(len(poses), int)), (normal.basis(),))
+    rho = ar1(raw, runs(poses), (normal.basis(),))
     stats = residual_stats(poses, raw, dof, rho)
     return {"rms_um": stats["rms_um"], "per_path": stats["per_path"]}
