@@ -14,6 +14,15 @@ from ..model.machine import Machine
 
 CHUNK_BYTES = 8 << 20  # the basis values of every candidate held at once: ~2 500 poses of ~400 columns
 BLOCK = 4096           # poses a walk of the chain serves: its slots' gains held
+SMALLEST = 1024        # poses a walk serves at least (a walk has its cost in Python as well)
+
+
+def _block(n: int) -> int:
+    """Poses a walk of the chain serves in a session of ``n``: ``BLOCK``, or a sixteenth of a
+    smaller session, so that what the walks hold (two at once, one per half) grows with the
+    session as fit's memory does: BLOCK's frames alone were 60 MiB beside fit's 32 at 21 690
+    poses."""
+    return min(BLOCK, max(SMALLEST, n // 16))
 
 
 def signatures(machine: Machine, poses: Poses, effects: Sequence[Effect]):
@@ -29,17 +38,19 @@ def columns(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np.nda
     the order of ``effects``; a walk of the chains a block of poses at a time, in halves
     (one walk of a dense session's every pose at once is fresh memory at every link)."""
     x = _coordinates(machine, poses, effects)
-    halves = in_halves(lambda starts: [_columns_at(machine, poses, effects, x, slice(a, a + BLOCK))
-                                       for a in starts], range(0, len(poses), BLOCK))
-    blocks = [block for half in halves for block in half]
+    block = _block(len(poses))
+    halves = in_halves(lambda starts: [_columns_at(machine, poses, effects, x, slice(a, a + block))
+                                       for a in starts], range(0, len(poses), block))
+    blocks = [b for half in halves for b in half]
     return np.concatenate(blocks) if blocks else np.zeros((0, sum(len(e.params) for e in effects)))
 
 
 def r_factor(machine: Machine, poses: Poses, effects: Sequence[Effect],
-              start: np.ndarray | None = None, chunk: int = 4096) -> np.ndarray:
+              start: np.ndarray | None = None, chunk: int | None = None) -> np.ndarray:
     """R of the QR factorisation of the effects' columns on ``poses`` stacked under ``start``
     (R of stacked rows is R of the stacked R factors: the halves' are made apart)."""
     x = _coordinates(machine, poses, effects)
+    chunk = chunk or _block(len(poses))
 
     def part(blocks: range) -> np.ndarray | None:
         R = None
@@ -135,6 +146,7 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
         gram = np.where(first[:, None], 1 - rho**2, 1.0) + off**2        # (WᵀW)ₘ,ₘ
         diag = np.where(first[:, None], np.sqrt(1 - rho**2), 1.0)       # Wₘ,ₘ
     chunk = max(64, CHUNK_BYTES // (8 * max(K, 1)))
+    block = _block(n)
 
     def part(blocks: range) -> tuple:
         """The sums over these blocks' poses."""
@@ -142,7 +154,7 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
         cc = {g: np.zeros((hi - lo, hi - lo)) for g, (lo, hi) in spans.items()}
         lag = {g: np.zeros((hi - lo, hi - lo)) for g, (lo, hi) in spans.items()}    # F of F + Fᵀ
         for a in blocks:
-            stop = min(a + BLOCK, n)
+            stop = min(a + block, n)
             gains = SlotGains(machine, poses.take(slice(a, min(stop + 1, n) if white else stop)))
             G_all = np.stack([gains(k) for k in slots], axis=1)      # (poses, slots, 3)
             for b in range(a, stop, chunk):
@@ -192,7 +204,7 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
                         lag[g] += v[:pairs].T @ (w1[:, s, None] * v[1:pairs + 1])
         return qc, cr, cc, lag
 
-    sums = in_halves(part, range(0, n, BLOCK))
+    sums = in_halves(part, range(0, n, block))
     qc, cr = sum(t[0] for t in sums), sum(t[1] for t in sums)
     cc = {g: sum(t[2][g] for t in sums) for g in spans}
     lag = {g: sum(t[3][g] for t in sums) for g in spans}
