@@ -254,3 +254,20 @@ def test_no_poses_give_no_readings_of_three_directions(seed_machine):
     assert relative(seed_machine, none, {}).shape == (0, 3)
     assert np.concatenate([relative(seed_machine, none, {}),
                            relative(seed_machine, generate(seed_machine, ["K4"]), {})]).shape == (241, 3)
+
+
+def test_in_halves_threads_only_a_dense_session_and_keeps_the_order():
+    import threading
+
+    from compgen.model.kinematics import THREADED, in_halves
+
+    def work(starts):
+        return [(a, threading.get_ident()) for a in starts]
+
+    small = in_halves(work, range(0, THREADED - 1, 1024))
+    assert {ident for half in small for _, ident in half} == {threading.get_ident()}
+    assert [a for half in small for a, _ in half] == list(range(0, THREADED - 1, 1024))
+    dense = in_halves(work, range(0, THREADED, 1024))
+    # in the pool (a thread may take both halves when the first is done before the second)
+    assert len(dense) == 2 and threading.get_ident() not in {ident for half in dense for _, ident in half}
+    assert [a for half in dense for a, _ in half] == list(range(0, THREADED, 1024))
