@@ -25,10 +25,9 @@ from ..model.effects import effect_of_param, resolve  # noqa: E402
 from ..model.kinematics import Poses  # noqa: E402
 from ..model.machine import Machine  # noqa: E402
 from ..statistics.diagnose import Diagnosis  # noqa: E402
-from ..statistics.identify import fitted  # noqa: E402
+from ..statistics.identify import Normal, fitted  # noqa: E402
 from ..statistics.results import FitResult  # noqa: E402
-from ..statistics.signature import signatures  # noqa: E402
-from ..statistics.significance import tall_qr  # noqa: E402
+from ..statistics.signature import columns  # noqa: E402
 from ..statistics.spectrum import MIN_PITCH_MM  # noqa: E402
 from ..units import shown  # noqa: E402
 
@@ -191,25 +190,23 @@ def rival_curves(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosi
     n3 = 3 * len(poses)
     drawn = (found.significant[0].effect, *found.rivals)
     named = {c.effect: c for c in found.candidates if c.effect in drawn}
-    # one walk of the chains for the model's columns and every rival's: each rival's kept
-    # only as its curve at the fitted size (one column, not its parameters')
-    J, v = [], {}
-    for e, cols in signatures(machine, both, [*model_effects, *(resolve(machine, n) for n in named)]):
-        if e.name in named:
-            v[e.name] = cols @ (np.array(named[e.name].amplitude) / shown(1.0, e.unit)[0])
-        else:
-            J.append(cols)
-    J = np.column_stack(J)
-    Q_now, R_now = tall_qr(J[:n3])      # 0.3 s where Householder took 2 at 723 000 readings
-    # the measured and the extra poses' span from the measured one's R: [J_now; J_extra] =
-    # diag(Q_now, I)·[R_now; J_extra], so its Q is diag(Q_now, I) times that small stack's,
-    # and no second QR of millions of rows is made
-    Q_add = np.linalg.qr(np.vstack([R_now, J[n3:]]))[0]
+    # one walk of the chains (in blocks) for the model's columns and every rival's, each
+    # rival kept as its curve at the fitted size (one column, not its parameters')
+    rivals = [resolve(machine, n) for n in named]
+    C = columns(machine, both, [*model_effects, *rivals])
+    p = sum(len(e.params) for e in model_effects)
+    J, at, v = C[:, :p], p, {}
+    for e in rivals:
+        v[e.name] = C[:, at:at + len(e.params)] @ (np.array(named[e.name].amplitude) / shown(1.0, e.unit)[0])
+        at += len(e.params)
+    # the misfit left is the part of a curve off the model's span, on the measured poses
+    # alone and on both: normal equations of p columns (a QR of millions of rows took 0.8 s,
+    # the walk of every pose at once 1.9 s at 723 000 readings)
+    now_fit, both_fit = Normal(J[:n3]), Normal(J)
     out = {}
     for name in named:
-        a = Q_now.T @ v[name][:n3]
-        now = v[name][:n3] - Q_now @ a
-        after = v[name][n3:] - Q_add[len(R_now):] @ (Q_add.T @ np.r_[a, v[name][n3:]])
+        now = v[name][:n3] - J[:n3] @ now_fit.solve(v[name][:n3])
+        after = v[name][n3:] - J[n3:] @ both_fit.solve(v[name])
         out[name] = (now.reshape(-1, 3) * 1e3, after.reshape(-1, 3) * 1e3)
     return out
 
