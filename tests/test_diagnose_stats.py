@@ -110,7 +110,7 @@ def test_products_a_block_at_a_time_equal_those_of_the_whole_columns(seed_machin
     """``signature.products`` (blocks of poses, whitening carried across them) against cᵀc,
     Qᵀc and cᵀr of each effect's whole columns, plain and made white with AR(1) ρ."""
     from compgen.model.effects import Basis, Effect, catalogue
-    from compgen.model.kinematics import Model, runs
+    from compgen.model.kinematics import Model, SlotGains, coordinate, effect_gains, runs
     from compgen.model.paths import generate
     from compgen.statistics import signature
     from compgen.statistics.noise import whiten
@@ -130,7 +130,10 @@ def test_products_a_block_at_a_time_equal_those_of_the_whole_columns(seed_machin
     monkeypatch.setattr(signature, "CHUNK_BYTES", 1)      # chunks of 64 poses: a block's last shorter
     for noise in (None, (seg, rho)):
         got = signature.products(seed_machine, poses, effects, (Q[:, :2], Q[:, 2:]), r, noise)
-        for e, c in signature.signatures(seed_machine, poses, effects):
+        # the reference: each effect's columns from one walk of every pose, no blocks
+        gains, made = SlotGains(seed_machine, poses), {}
+        for e in effects:
+            c = effect_gains(gains, e, coordinate(seed_machine, e, poses), made).reshape(-1, len(e.params))
             if noise is not None:
                 c = whiten(c.reshape(len(poses), 3, -1), seg, rho).reshape(c.shape)
             cc, qc, cr = got[e.name]

@@ -25,14 +25,6 @@ def _block(n: int) -> int:
     return min(BLOCK, max(SMALLEST, n // 16))
 
 
-def signatures(machine: Machine, poses: Poses, effects: Sequence[Effect]):
-    """Each effect with its first-order signature, (3n, its params) mm per unit, one at a
-    time, so that only the chain's frames and one effect's columns are held."""
-    gains, made = SlotGains(machine, poses), {}
-    for e in effects:
-        yield e, effect_gains(gains, e, coordinate(machine, e, poses), made).reshape(-1, len(e.params))
-
-
 def columns(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np.ndarray:
     """First-order signatures of the effects' parameters, (3n, Σ params), mm per unit, in
     the order of ``effects``; a walk of the chains a block of poses at a time, in halves
