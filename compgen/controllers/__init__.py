@@ -54,17 +54,20 @@ def ascii_text(text: str) -> str:
 def _one_line(value) -> None:
     """Every string a template is given, however deep: a line break or control character in
     it would start a block of its own on the control, so it is refused (free text goes
-    through ``ascii_text``, identifiers are checked where they are read)."""
-    if isinstance(value, str):
-        if CONTROL.search(value):
-            raise CompgenError(f"refusing to write {value[:40]!r}: a line break or control "
-                               "character in a value would become a block of its own")
-    elif isinstance(value, dict):
-        for v in (*value.keys(), *value.values()):
-            _one_line(v)
-    elif isinstance(value, list | tuple):
-        for v in value:
-            _one_line(v)
+    through ``ascii_text``, identifiers are checked where they are read). Walked with a list,
+    not by recursion: a program's steps are thousands of small dicts."""
+    todo = [value]
+    while todo:
+        v = todo.pop()
+        if isinstance(v, str):
+            if CONTROL.search(v):
+                raise CompgenError(f"refusing to write {v[:40]!r}: a line break or control "
+                                   "character in a value would become a block of its own")
+        elif isinstance(v, dict):
+            todo += v.keys()
+            todo += v.values()
+        elif isinstance(v, list | tuple):
+            todo += v
 
 
 def fmt_signed(value: float, decimals: int = 4) -> str:

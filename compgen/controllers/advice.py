@@ -23,7 +23,7 @@ from ..model.kinematics import Poses, motion_direction, runs
 from ..model.machine import Machine
 from ..model.paths import GAP_S, generate
 from .probing import probe_program
-from .programs import measure_program
+from .programs import checked_program
 from .registry import controller
 
 # Where the ball may go for a further measurement: (label, file-name tag, ball scale in
@@ -117,7 +117,7 @@ def _refusal(machine: Machine, m: Measurement) -> str | None:
         if m.device == "probe":
             probe_program(machine, m.poses, m.path, machine.controller, "ADVICE", "", "")
         else:
-            measure_program(machine, m.poses, m.path, machine.controller, MODE, "ADVICE", "", "")
+            checked_program(machine, m.poses, m.path, machine.controller, MODE, "ADVICE", "", "")
     except CompgenError as exc:
         return str(exc)
     return None

@@ -114,6 +114,21 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     Each path label is a segment with its own approach and retract along machine Z, so a
     program may chain paths whose ends are far apart.
     """
+    text, machine, poses, stops = checked_program(machine, poses, label, controller_name, mode, name,
+                                                  version, date, list_name, notes)
+    ctl = for_machine(controller_name, machine)
+    messages = ctl.message_files(name, stops)
+    return Emitted({ctl.program_ext: text, ".poses.csv": pose_list(machine, poses), **messages},
+                   named=frozenset(messages))
+
+
+def checked_program(machine: Machine, poses: Poses, label: str, controller_name: str, mode: str,
+                    name: str, version: str, date: str, list_name: str | None = None,
+                    notes: tuple[str, ...] = ()) -> tuple[str, Machine, Poses, list[str]]:
+    """``measure_program``'s program text, every check made (a refusal raises): with the
+    machine at its ball and nest, the poses as solved, and the notes of its stops. The
+    advice asks only this of each measurement it offers (the files beside it are not
+    refusals)."""
     ctl = for_machine(controller_name, machine)
     if mode not in MODES:
         raise CompgenError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
@@ -204,9 +219,7 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
         raise CompgenError(f"the machine cannot run {label} with the ball at {at} mm: {result.first(name)}",
                            hint="put the ball higher on its stem or nearer the rotary axes, or choose "
                                 "another path; the set-up's solids are the machine file's [rtest]")
-    messages = ctl.message_files(name, [s["note"] for s in steps if s["kind"] == "stop"])
-    return Emitted({ctl.program_ext: text, ".poses.csv": pose_list(machine, poses), **messages},
-                   named=frozenset(messages))
+    return text, machine, poses, [s["note"] for s in steps if s["kind"] == "stop"]
 
 
 ROT = set("ABC")
