@@ -614,11 +614,13 @@ def test_where_rounding_ends_and_a_limit_begins():
     assert feed_minutes(1.0e-9, 3.0, 15.0) == pytest.approx(0.2)         # only turns: 3° at F15
     findings = []
     limits = np.array([a.feed_max for a in m.axes])
-    motion._seconds(m, Block(2, "L", "move", feed=1.0), np.zeros((2, 5)), np.zeros(5),
-                    limits * (1 + 1.5e-9), 1.0, 0.0, findings)
+    move = _Segment(Block(2, "L", "move", feed=1.0), False, np.zeros(5), np.zeros(5), False)
+    move.path = np.zeros((2, 5))
+    move.path[1, x] = 1.0                      # 1 mm at F1: a minute, one step
+    took = motion._seconds(m, [move], np.zeros((1, 5)), limits[None] * (1 + 1.5e-9), findings)
+    assert took == [60.0]
     assert [f.rule for f in findings] == ["feed above feed_max"]
-    motion._seconds(m, Block(2, "L", "move", feed=1.0), np.zeros((2, 5)), np.zeros(5),
-                    limits * (1 + 0.5e-9), 1.0, 0.0, findings)
+    motion._seconds(m, [move], np.zeros((1, 5)), limits[None] * (1 + 0.5e-9), findings)
     assert len(findings) == 1
 
 

@@ -343,15 +343,10 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
     closest = (np.inf, "")
     checkable = []
     moved, fastest, outside = _per_segment(machine, segments)
-    for seg, per_axis, top_step, out in zip(segments, moved, fastest, outside, strict=True):
+    for seg, took, out in zip(segments, _seconds(machine, segments, moved, fastest, findings), outside,
+                              strict=True):
         b, path = seg.block, seg.path
-        delta = np.nan_to_num(path[-1] - path[0])
-        if seg.tcp:
-            travel_mm = float(np.linalg.norm(seg.end[:3] - seg.start[:3]))
-        else:
-            travel_mm = float(np.linalg.norm(delta[linear]))
-        turn_deg = float(np.degrees(np.abs(delta[rotary])).max())      # a machine has a rotary axis
-        seconds += _seconds(machine, b, path, per_axis, top_step, travel_mm, turn_deg, findings)
+        seconds += took
         if out.any():
             _check_travel(machine, b, path, out, findings)
         # an axis whose start is unknown (the program's first moves) is safe only where
@@ -465,31 +460,34 @@ def _turned(modulo: tuple[str, ...], b: Block, letter: str, value: float, now: f
 
 def _paths(machine: Machine, segments: list[_Segment], linear, rotary) -> None:
     """Every move's samples (≤ 1 mm, ≤ 0.5°) as machine poses; TCP moves interpolate in TCP
-    coordinates and are converted together."""
-    tcp_parts, where = [], []
-    for seg in segments:
-        if seg.tcp:
-            d = seg.end - seg.start
-            n = _samples(np.abs(d[:3]).max(), np.degrees(np.abs(d[3:])).max())
-            tcp_parts.append(seg.start + np.linspace(0, 1, n + 1)[:, None] * d)
-            where.append(seg)
+    coordinates and are converted together. All moves of a kind at once: a program is
+    hundreds of short moves, and a move at a time was a sixth of the check."""
+    for tcp in (True, False):
+        own = [seg for seg in segments if seg.tcp == tcp]
+        if not own:
+            continue
+        start, end = np.array([seg.start for seg in own]), np.array([seg.end for seg in own])
+        unknown = np.isnan(start)                # an axis not positioned yet goes straight there
+        delta = end - start if tcp else np.where(unknown, 0.0, end - start)
+        mm, turn = (delta[:, :3], delta[:, 3:]) if tcp else (delta[:, linear], delta[:, rotary])
+        n = _samples(np.abs(mm).max(axis=1), np.degrees(np.abs(turn)).max(axis=1))
+        move = np.repeat(np.arange(len(own)), n + 1)
+        first = np.cumsum(n + 1) - (n + 1)
+        # each move's fractions as np.linspace(0, 1, n + 1) makes them: j·(1/n), the last 1
+        f = (np.arange(len(move)) - first[move]) * (1.0 / n)[move]
+        f[first + n] = 1.0
+        path = start[move] + f[:, None] * delta[move]
+        if tcp:
+            path = from_world(machine, path[:, :3], path[:, 3:])
         else:
-            q0 = seg.start
-            delta = np.where(np.isnan(q0), 0.0, seg.end - q0)
-            n = _samples(np.abs(delta[linear]).max(), np.degrees(np.abs(delta[rotary])).max())
-            f = np.linspace(0, 1, n + 1)[:, None]
-            seg.path = np.where(np.isnan(q0), seg.end, q0 + f * delta)
-    if tcp_parts:
-        allw = np.concatenate(tcp_parts)
-        q = from_world(machine, allw[:, :3], allw[:, 3:])
-        start = 0
-        for seg, part in zip(where, tcp_parts, strict=True):
-            seg.path = q[start:start + len(part)]
-            start += len(part)
+            path = np.where(unknown[move], end[move], path)
+        for seg, a, k in zip(own, first, n, strict=True):
+            seg.path = path[a:a + k + 1]
 
 
-def _samples(mm: float, deg: float) -> int:
-    return max(1, int(np.ceil(max(mm / STEP_MM, deg / STEP_DEG))))
+def _samples(mm: np.ndarray, deg: np.ndarray) -> np.ndarray:
+    """Samples of each move (≥ 1 step): its steps of ``STEP_MM`` and ``STEP_DEG``."""
+    return np.maximum(1, np.ceil(np.maximum(mm / STEP_MM, deg / STEP_DEG))).astype(int)
 
 
 def _axes_text(machine: Machine, q: np.ndarray) -> str:
@@ -523,24 +521,42 @@ def feed_minutes(travel_mm, turn_deg, feed: float):
     return np.where(np.asarray(travel_mm) > ONLY_TURNS_MM, travel_mm, turn_deg) / feed
 
 
-def _seconds(machine: Machine, b: Block, path: np.ndarray, per_axis: np.ndarray, top_step: np.ndarray,
-             travel_mm: float, turn_deg: float, findings: list) -> float:
-    """Time of a move, and a finding where an axis would exceed its feed_max."""
+def _seconds(machine: Machine, segments: list[_Segment], moved: np.ndarray, fastest: np.ndarray,
+             findings: list) -> list[float]:
+    """Time of each move (``moved``, ``fastest``: ``_per_segment``'s), and a finding where
+    an axis would exceed its feed_max: every move at once, the findings in their order."""
+    if not segments:
+        return []
+    linear = [machine.index(c) for c in "XYZ"]
+    rotary = [machine.index(a.name) for a in machine.rotary_axes]
     limits = np.array([a.feed_max for a in machine.axes])
-    if b.rapid or b.feed is None:
-        return float((per_axis / limits).max() * 60.0) if per_axis.any() else 0.0
-    minutes = float(feed_minutes(travel_mm, turn_deg, b.feed))
-    if minutes <= 0:
-        return 0.0
-    speed = top_step * ((len(path) - 1) / minutes)
-    over = np.flatnonzero(speed > limits * OVER_FEED)
-    if over.size:
-        i = over[int(np.argmax(speed[over] / limits[over]))]
+    ends = np.array([(seg.path[0], seg.path[-1]) for seg in segments])
+    delta = np.nan_to_num(ends[:, 1] - ends[:, 0])
+    # the nest's travel in its active frame: a TCP move's in TCP coordinates
+    frame = delta[:, linear]
+    tcp = np.array([seg.tcp for seg in segments])
+    if tcp.any():
+        frame[tcp] = [seg.end[:3] - seg.start[:3] for seg in segments if seg.tcp]
+    travel_mm = np.linalg.norm(frame, axis=1)
+    turn_deg = np.degrees(np.abs(delta[:, rotary])).max(axis=1)      # a machine has a rotary axis
+    feed = np.array([np.nan if seg.block.rapid or seg.block.feed is None else seg.block.feed
+                     for seg in segments])
+    fed = ~np.isnan(feed)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        minutes = np.where(fed, feed_minutes(travel_mm, turn_deg, np.where(fed, feed, 1.0)), 0.0)
+        rapid = np.where(moved.any(axis=1), (moved / limits).max(axis=1) * 60.0, 0.0)
+        steps = np.array([len(seg.path) - 1 for seg in segments])
+        speed = fastest * (steps / minutes)[:, None]
+    took = np.where(fed, np.where(minutes > 0, minutes * 60.0, 0.0), rapid)
+    over = fed & (minutes > 0) & (speed > limits * OVER_FEED).any(axis=1)
+    for m in np.flatnonzero(over):
+        axes = np.flatnonzero(speed[m] > limits * OVER_FEED)
+        i = axes[int(np.argmax(speed[m, axes] / limits[axes]))]
         unit = "deg" if machine.axes[i].rotary else "mm"
-        findings.append(Finding(b.line, "feed above feed_max", f"{machine.axes[i].name} would move at "
-                                f"{speed[i]:.0f} {unit}/min, its feed_max is {limits[i]:g}",
-                                _axes_text(machine, path[-1])))
-    return float(minutes * 60.0)
+        findings.append(Finding(segments[m].block.line, "feed above feed_max",
+                                f"{machine.axes[i].name} would move at {speed[m, i]:.0f} {unit}/min, its "
+                                f"feed_max is {limits[i]:g}", _axes_text(machine, segments[m].path[-1])))
+    return took.tolist()
 
 
 def _check_travel(machine: Machine, b: Block, path: np.ndarray, out: np.ndarray, findings: list) -> None:
