@@ -695,3 +695,37 @@ def test_the_set_ups_documented_defaults_are_the_ones_a_machine_file_without_the
     s = load_machine(bare).setup
     assert {k: getattr(s, k) for k in documented} == documented
     assert s.table_radius == pytest.approx(np.hypot(217.504, 0.279) + 50, abs=1e-9)
+
+
+def test_every_move_is_sampled_as_its_own_straight_line():
+    """``_paths`` samples all moves at once: each move's samples are np.linspace's fractions
+    of it (≤ 1 mm and ≤ 0.5° apart, its ends exact), an axis not yet positioned goes straight
+    to its target, and a TCP move is sampled in TCP coordinates, then converted."""
+    from compgen.model.frames import from_world, world
+    from compgen.setup.motion import Block, _paths, _Segment
+    m = load_machine(SEED_MACHINE)
+    linear = [m.index(c) for c in "XYZ"]
+    rotary = [m.index(a.name) for a in m.rotary_axes]
+    k = len(m.axes)
+    q0 = np.zeros(k)
+    q0[linear[2]] = 300.0
+    q1 = q0.copy()
+    q1[linear[0]] = 48.3                     # 48.3 mm: 49 steps (49 × (1/49) is not 1: the end is)
+    q2 = q1.copy()
+    q2[rotary[0]] = np.radians(1.2)          # 1.2°: three steps
+    blind = np.full(k, np.nan)
+    blind[linear[2]] = 300.0                 # only Z known: the others go straight to q1's
+    w0 = np.concatenate([world(m, q2[None])[0], q2[rotary]])
+    w1 = w0 + np.r_[0.0, 0.0, -0.4, np.zeros(len(rotary))]     # 0.4 mm down under TCP: one step
+    segs = [_Segment(Block(1, "a", "move"), False, q0, q1, False),
+            _Segment(Block(2, "b", "move"), True, w0, w1, False),
+            _Segment(Block(3, "c", "move"), False, q1, q2, False),
+            _Segment(Block(4, "d", "move"), False, blind, q1, True)]
+    _paths(m, segs, linear, rotary)
+    f = np.linspace(0, 1, 50)[:, None]
+    assert np.array_equal(segs[0].path, q0 + f * (q1 - q0)) and segs[0].path[-1, linear[0]] == 48.3
+    f = np.linspace(0, 1, 4)[:, None]
+    assert np.array_equal(segs[2].path, q1 + f * (q2 - q1))
+    tcp = w0 + np.linspace(0, 1, 2)[:, None] * (w1 - w0)
+    assert np.array_equal(segs[1].path, from_world(m, tcp[:, :3], tcp[:, 3:]))
+    assert np.array_equal(segs[3].path, np.tile(q1, (2, 1)))     # Z stays; the rest: q1 at once
