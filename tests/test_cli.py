@@ -316,6 +316,24 @@ def test_fit_data_adds_to_the_fits_own_and_positional_data_are_refused_with_the_
     assert code == 2 and "same readings" in err, err
 
 
+def test_data_at_a_second_ball_position_are_said_to_share_the_first_ones_offset(hidden_session, tmp_path):
+    """compgen fits one ball offset to every file of a fit: fit and diagnose say so where the
+    ball stood at more than one position (a ball moved is a ball mounted again), and not
+    where it stood at one."""
+    folder, data, fit = hidden_session
+    code, _, err = run("fit", "--from", fit, "-o", tmp_path / "same.json")
+    assert code == 0 and "one ball offset" not in err, err
+    more = tmp_path / "more.csv"
+    assert run("simulate", "--machine", SEED_MACHINE, "--truth", ROOT / "examples" / "truth-table4.json",
+               "--paths", "K2", "--ball", "-108.752,-0.1395,211.537", "--noise-um", "0.5", "--seed", "3",
+               "-o", more)[0] == 0
+    code, _, err = run("fit", "--from", fit, "--data", more, "-o", tmp_path / "f2.json")
+    assert code == 0 and err.count("fits one ball offset (XOW YOW ZOW)") == 1, err
+    assert "the ball at 2 positions" in err and "benchmarks/moved_ball.py" in err
+    code, _, err = run("diagnose", "--from", tmp_path / "f2.json")
+    assert code == 0 and err.count("the ball at 2 positions") == 1, err
+
+
 @pytest.mark.parametrize("command", ["effects", "checklist"])
 def test_listing_commands_speak_json(command):
     code, out, _ = run(command, "--machine", SEED_MACHINE, "--json")

@@ -42,7 +42,7 @@ from ..statistics.budget import with_budget
 from ..statistics.diagnose import diagnose
 from ..statistics.diagnose_text import report as diagnosis_text
 from ..statistics.gate import gate_edit, unit_suspicion
-from ..statistics.identify import identify
+from ..statistics.identify import identify, one_ball_offset
 from ..statistics.results import load_fit
 from .checklist import checklist, markdown
 from .cli_common import (
@@ -206,9 +206,10 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
     write_atomically(output, result.to_json(Path(output).resolve().parent), force,
                      inputs=(machine.source, base, *(s.source for s in sets)))
     said(output, result.report() + f"\nwrote {output}")
-    sides = unknown_sides(machine, result.model, *(s.poses for s in sets))
-    if sides:
-        warn(sides)
+    for said_once in (unknown_sides(machine, result.model, *(s.poses for s in sets)),
+                      one_ball_offset(*(s.poses for s in sets))):
+        if said_once:
+            warn(said_once)
     suspicion = unit_suspicion(sets)
     if suspicion:
         click.echo(f"compgen: warning: {suspicion}; kinematics will refuse this fit", err=True)
@@ -241,9 +242,10 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um):
     result = diagnose(machine, sets, fit, names, fit_file=base, machine_ref=machine_ref(fit),
                       noise_um=noise_um, advisor=Advisor)
     named = compose(machine, fit.model, [c.effect for c in result.candidates if c.significant])
-    sides = unknown_sides(machine, named, *(s.poses for s in sets))
-    if sides:
-        warn(sides)
+    for said_once in (unknown_sides(machine, named, *(s.poses for s in sets)),
+                      one_ball_offset(*(s.poses for s in sets))):
+        if said_once:
+            warn(said_once)
     if plots_dir:
         from .plots import write_plots  # matplotlib only when asked for
         earlier = load_fit(before) if before else None

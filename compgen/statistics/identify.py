@@ -422,6 +422,24 @@ def parse_fixed(machine: Machine, items: Sequence[str]) -> dict[str, float]:
 SETUP = ("XOW", "YOW", "ZOW")      # the ball's offset: what every set-up has anew
 
 
+def one_ball_offset(*poses: Poses) -> str | None:
+    """What a fit of data with the ball at more than one position rests on, said once, or
+    None: one ball offset (``SETUP``) for every position. A ball moved is a ball mounted
+    again, off the centre its program was written for by what mounting left; compgen does
+    not fit an offset per set-up yet, and a few µm of such a change are read as an effect:
+    on the bundled example, re-mounted 3 µm off at the position diagnose advises, the tilt
+    error motion of C that position was to show is named found (``benchmarks/moved_ball.py``)."""
+    balls = np.unique(np.round(np.concatenate([p.ball for p in poses]), 3), axis=0)
+    if len(balls) < 2:
+        return None
+    return (f"these data hold the ball at {len(balls)} positions, and compgen fits one ball offset "
+            f"({' '.join(SETUP)}) to them all, as if the ball sat as far off its nominal centre at each; a "
+            "ball mounted again elsewhere is off by what mounting left, and compgen does not fit an offset "
+            "per set-up yet: until it does, an effect the other positions were to show (a 1/rev tilt error "
+            "motion of a table axis) or a shift of the location errors may be the ball's mounting, not the "
+            "machine (benchmarks/moved_ball.py: 3 µm of it named such an effect found)")
+
+
 def beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
     """RMS and per-path figures of ``reading`` (n, 3) mm beyond the set-up terms alone:
     what an edit leaves, or a check measures, whatever the ball's offset.
