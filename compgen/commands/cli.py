@@ -206,16 +206,22 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
     write_atomically(output, result.to_json(Path(output).resolve().parent), force,
                      inputs=(machine.source, base, *(s.source for s in sets)))
     said(output, result.report() + f"\nwrote {output}")
-    for said_once in (unknown_sides(machine, result.model, *(s.poses for s in sets)),
-                      one_ball_offset(*(s.poses for s in sets))):
-        if said_once:
-            warn(said_once)
+    _warn_about_data(machine, result.model, sets)
     suspicion = unit_suspicion(sets)
     if suspicion:
         click.echo(f"compgen: warning: {suspicion}; kinematics will refuse this fit", err=True)
     if record and output != STDOUT:
         _, _, fid, reasons = record_fit_file(db, output, None, None, taken, None, "", ())
         click.echo(f"recorded as calibration #{fid}" + (": NOT accepted as a reference" if reasons else ""))
+
+
+def _warn_about_data(machine, names, sets) -> None:
+    """What a fit of ``names`` to these data rests on that the data cannot show, each said
+    once: the sides no column gives, one ball offset for every ball position."""
+    poses = [s.poses for s in sets]
+    for message in (unknown_sides(machine, names, *poses), one_ball_offset(*poses)):
+        if message:
+            warn(message)
 
 
 @main.command("diagnose")
@@ -242,10 +248,7 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um):
     result = diagnose(machine, sets, fit, names, fit_file=base, machine_ref=machine_ref(fit),
                       noise_um=noise_um, advisor=Advisor)
     named = compose(machine, fit.model, [c.effect for c in result.candidates if c.significant])
-    for said_once in (unknown_sides(machine, named, *(s.poses for s in sets)),
-                      one_ball_offset(*(s.poses for s in sets))):
-        if said_once:
-            warn(said_once)
+    _warn_about_data(machine, named, sets)
     if plots_dir:
         from .plots import write_plots  # matplotlib only when asked for
         earlier = load_fit(before) if before else None
