@@ -617,10 +617,12 @@ def test_where_rounding_ends_and_a_limit_begins():
     move = _Segment(Block(2, "L", "move", feed=1.0), False, np.zeros(5), np.zeros(5), False)
     move.path = np.zeros((2, 5))
     move.path[1, x] = 1.0                      # 1 mm at F1: a minute, one step
-    took = motion._seconds(m, [move], np.zeros((1, 5)), limits[None] * (1 + 1.5e-9), findings)
+    linear, rotary = [m.index(c) for c in "XYZ"], [m.index(a.name) for a in m.rotary_axes]
+    took = motion._seconds(m, [move], np.zeros((1, 5)), limits[None] * (1 + 1.5e-9), linear, rotary,
+                           findings)
     assert took == [60.0]
     assert [f.rule for f in findings] == ["feed above feed_max"]
-    motion._seconds(m, [move], np.zeros((1, 5)), limits[None] * (1 + 0.5e-9), findings)
+    motion._seconds(m, [move], np.zeros((1, 5)), limits[None] * (1 + 0.5e-9), linear, rotary, findings)
     assert len(findings) == 1
 
 

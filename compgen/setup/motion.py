@@ -343,8 +343,8 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
     closest = (np.inf, "")
     checkable = []
     moved, fastest, outside = _per_segment(machine, segments)
-    for seg, took, out in zip(segments, _seconds(machine, segments, moved, fastest, findings), outside,
-                              strict=True):
+    took_s = _seconds(machine, segments, moved, fastest, linear, rotary, findings)
+    for seg, took, out in zip(segments, took_s, outside, strict=True):
         b, path = seg.block, seg.path
         seconds += took
         if out.any():
@@ -521,14 +521,12 @@ def feed_minutes(travel_mm, turn_deg, feed: float):
     return np.where(np.asarray(travel_mm) > ONLY_TURNS_MM, travel_mm, turn_deg) / feed
 
 
-def _seconds(machine: Machine, segments: list[_Segment], moved: np.ndarray, fastest: np.ndarray,
-             findings: list) -> list[float]:
+def _seconds(machine: Machine, segments: list[_Segment], moved: np.ndarray, fastest: np.ndarray, linear,
+             rotary, findings: list) -> list[float]:
     """Time of each move (``moved``, ``fastest``: ``_per_segment``'s), and a finding where
     an axis would exceed its feed_max: every move at once, the findings in their order."""
     if not segments:
         return []
-    linear = [machine.index(c) for c in "XYZ"]
-    rotary = [machine.index(a.name) for a in machine.rotary_axes]
     limits = np.array([a.feed_max for a in machine.axes])
     ends = np.array([(seg.path[0], seg.path[-1]) for seg in segments])
     delta = np.nan_to_num(ends[:, 1] - ends[:, 0])
