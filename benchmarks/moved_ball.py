@@ -48,11 +48,23 @@ def worst_off(fit: dict, truth: dict) -> tuple[str, float]:
     return name, offs[name]
 
 
+def _offset(text: str) -> list[float]:
+    """X,Y,Z in µm, three finite numbers (argparse's one-line refusal otherwise)."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r} is not X,Y,Z in µm (e.g. 15,-10,5)")
+    return values
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--delta", default="15,-10,5", help="the re-mounted ball's further offset, µm, X,Y,Z")
+    ap.add_argument("--delta", default="15,-10,5", type=_offset,
+                    help="the re-mounted ball's further offset, µm, X,Y,Z")
     args = ap.parse_args()
-    delta = [float(v) for v in args.delta.split(",")]
+    delta = args.delta
     truth = json.loads(TRUTH.read_text())["parameters"]
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
@@ -64,7 +76,7 @@ def main() -> None:
         print(f"  {'follow-up ball':<34}{'fit RMS µm':>11}  {'worst location error':<22}  "
               "diagnose names first")
         for label, extra in (("as offset as the first", (0.0, 0.0, 0.0)),
-                             (f"re-mounted {args.delta} µm further", delta)):
+                             (f"re-mounted {','.join(f'{v:g}' for v in delta)} µm further", delta)):
             moved = {n: dict(p) for n, p in truth.items()}
             for name, v in zip(("XOW", "YOW", "ZOW"), extra, strict=True):
                 moved[name]["value"] = truth[name]["value"] + v
