@@ -316,22 +316,36 @@ def test_fit_data_adds_to_the_fits_own_and_positional_data_are_refused_with_the_
     assert code == 2 and "same readings" in err, err
 
 
-def test_data_at_a_second_ball_position_are_said_to_share_the_first_ones_offset(hidden_session, tmp_path):
-    """compgen fits one ball offset to every file of a fit: fit and diagnose say so where the
-    ball stood at more than one position (a ball moved is a ball mounted again), and not
-    where it stood at one."""
+def test_a_ball_mounted_again_elsewhere_has_an_offset_of_its_own(hidden_session, tmp_path):
+    """A ball moved is a ball mounted again, off its nominal centre by what mounting left:
+    a follow-up at another position, its ball re-mounted 15, −10, 5 µm off, fits with the
+    first session exactly as one whose ball sat as the first's (where one offset for both
+    left 3.6 µm of misfit and named an error motion found, benchmarks/moved_ball.py); fit
+    says the ball offset it reports is the first mounting's, and says nothing of the kind
+    where the ball stood at one position."""
     folder, data, fit = hidden_session
     code, _, err = run("fit", "--from", fit, "-o", tmp_path / "same.json")
-    assert code == 0 and "one ball offset" not in err, err
-    more = tmp_path / "more.csv"
-    assert run("simulate", "--machine", SEED_MACHINE, "--truth", ROOT / "examples" / "truth-table4.json",
-               "--paths", "K2", "--ball", "-108.752,-0.1395,211.537", "--noise-um", "0.5", "--seed", "3",
-               "-o", more)[0] == 0
-    code, _, err = run("fit", "--from", fit, "--data", more, "-o", tmp_path / "f2.json")
-    assert code == 0 and err.count("fits one ball offset (XOW YOW ZOW)") == 1, err
-    assert "the ball at 2 positions" in err and "benchmarks/moved_ball.py" in err
-    code, _, err = run("diagnose", "--from", tmp_path / "f2.json")
-    assert code == 0 and err.count("the ball at 2 positions") == 1, err
+    assert code == 0 and "mountings" not in err, err
+    truth = json.loads((folder / "truth.json").read_text())["parameters"]
+    got = {}
+    for name, offset in {"kept": (0, 0, 0), "mounted again": (15, -10, 5)}.items():
+        moved = tmp_path / f"{name}.json"
+        ball = {n: {"value": v, "unit": "um"} for n, v in zip(("XOW", "YOW", "ZOW"), offset, strict=True)}
+        moved.write_text(json.dumps({"parameters": {**truth, **ball}}))
+        more = tmp_path / f"{name}.csv"
+        assert run("simulate", "--machine", SEED_MACHINE, "--truth", moved, "--paths", "K2", "--ball",
+                   "-108.752,-0.1395,211.537", "--noise-um", "0.5", "--seed", "3", "-o", more)[0] == 0
+        code, _, err = run("fit", "--from", fit, "--data", more, "-o", tmp_path / f"{name}-fit.json")
+        assert code == 0 and err.count("the ball at 2 mountings") == 1, err
+        assert "XOW YOW ZOW are the first's (ball at -217.504, -0.279, 211.537 mm)" in err
+        got[name] = json.loads((tmp_path / f"{name}-fit.json").read_text())
+    kept, again = got["kept"], got["mounted again"]
+    assert again["residual"]["rms_um"] == pytest.approx(kept["residual"]["rms_um"], abs=1e-3)
+    for n, p in kept["parameters"].items():        # the same to a thousandth of a µm or ″
+        assert again["parameters"][n]["value"] == pytest.approx(p["value"], abs=5e-9), n
+    code, out, err = run("diagnose", "--from", tmp_path / "mounted again-fit.json")
+    assert code == 0 and err.count("the ball at 2 mountings") == 1, err
+    assert "1. ECC:h2" in out
 
 
 @pytest.mark.parametrize("command", ["effects", "checklist"])

@@ -16,6 +16,7 @@ from compgen.data.rtest import RTestData
 from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
 from compgen.model.effects import location_model
+from compgen.model.kinematics import Poses
 from compgen.model.lines import AxisLine
 from compgen.model.paths import generate
 from compgen.statistics.identify import SETUP, beyond_setup, identify
@@ -43,7 +44,9 @@ def _post(machine, truth, poses, held, seed=6):
 @pytest.mark.parametrize("which", ["table", "swivel head", "fork head"])
 def test_beyond_setup_in_closed_form_is_identify_s_fit_of_the_set_up(seed_machine, head_machine, which):
     """The set-up-only figures (one walk: the readings are linear in the ball's offset) are
-    those of identify's Gauss–Newton fit of XOW YOW ZOW, refusals alike; on AR(1) noise too."""
+    those of identify's Gauss–Newton fit of XOW YOW ZOW, refusals alike; on AR(1) noise too;
+    and with the ball mounted again elsewhere, an offset per mounting in both, the same
+    figures as had the ball sat as far off as before."""
     machine = {"table": seed_machine, "swivel head": head_machine,
                "fork head": load_machine(FORK_MACHINE)}[which]
     poses = generate(machine, ["K4", "K1", "K2"])
@@ -52,16 +55,32 @@ def test_beyond_setup_in_closed_form_is_identify_s_fit_of_the_set_up(seed_machin
     data = simulate(machine, {n: v for n, v in truth.items() if n in location_model(machine)}, poses,
                     NOISE_UM, rng)
     drifted = data.deviation + np.cumsum(rng.normal(0, 0.3e-3, data.deviation.shape), axis=0)
-    for reading in (data.deviation, drifted):
-        got = beyond_setup(machine, poses, reading)
-        fit = identify(machine, [RTestData(poses, reading)], list(SETUP))
+    # and K2 with the ball moved, mounted again 30, −20, 10 µm further off: an offset of its own
+    ball = np.add(machine.ball, [20.0, -10.0, 0.0])
+    moved = generate(machine, ["K2"], ball=ball)
+    held = {n: v for n, v in truth.items() if n in location_model(machine)}
+    kept, again = (simulate(machine, {**held, **offset}, moved, NOISE_UM, np.random.default_rng(4))
+                   for offset in ({}, {"XOW": 70 * UM, "YOW": -45 * UM, "ZOW": 70 * UM}))
+    both = Poses.concat([poses, moved])
+    rho = {}
+    for case, at, reading in (("white", poses, data.deviation), ("drifted", poses, drifted),
+                              ("mounted again", both, np.vstack([data.deviation, again.deviation]))):
+        got = beyond_setup(machine, at, reading)
+        fit = identify(machine, [RTestData(at, reading)], list(SETUP))
         assert got["rms_um"] == pytest.approx(fit.residual["rms_um"], rel=1e-9)
         assert got["per_path"].keys() == fit.residual["per_path"].keys()
         for name, stats in fit.residual["per_path"].items():
             for key in ("rms_um", "range_um", "max_abs_um"):
                 assert got["per_path"][name][key] == pytest.approx(stats[key], rel=1e-9, abs=1e-9)
             assert got["per_path"][name]["ar1_rho"] == stats["ar1_rho"]
-    assert any(fit.residual["per_path"][p]["ar1_rho"] != [0.0] * 3 for p in fit.residual["per_path"])
+        rho[case] = [stats["ar1_rho"] for stats in fit.residual["per_path"].values()]
+    assert any(r != [0.0] * 3 for r in rho["drifted"])
+    # the same figures as where the ball had sat as far off as at its first mounting
+    same = beyond_setup(machine, both, np.vstack([data.deviation, kept.deviation]))
+    assert got["rms_um"] == pytest.approx(same["rms_um"], abs=0.01)      # second order: nm
+    for name, stats in same["per_path"].items():
+        for key in ("rms_um", "range_um", "max_abs_um"):
+            assert got["per_path"][name][key] == pytest.approx(stats[key], abs=0.01), (name, key)
     one = poses.take(slice(0, 1))
     with pytest.raises(CompgenError) as closed:
         beyond_setup(machine, one, data.deviation[:1])

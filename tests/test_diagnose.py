@@ -1179,13 +1179,14 @@ def test_rivals_and_the_pairs_the_advised_plan_leaves_open_are_said_as_the_json_
 
 
 def test_a_significant_effect_the_fit_cannot_take_whole_is_said_so_with_fit_s_refusal(seed_machine):
-    """K4 at two radii with a 2/rev angle of C and a 1/rev tilt of A (ECA 20″·sin A): the tilt
-    is seen but not separable whole, and the text says fit --add would refuse it, as it does."""
+    """K4 with the ball 7 mm from C's axis (the location errors barely conditioned: 377) and
+    an A sag in Z (EZA 4 µm·(1 − cos A)): the sag is seen but not separable whole, and the
+    text says fit --add would refuse it, as it does. (Until each mounting of the ball had an
+    offset of its own, this case was K4 at two radii with a 1/rev tilt of A, seen only
+    because both radii shared one offset: with an offset each it is absorbed whole.)"""
     from compgen.errors import CompgenError
-    half = [seed_machine.ball[0] / 2, seed_machine.ball[1] / 2, seed_machine.ball[2]]
-    hidden = {"ECC:h2c": 4 * ARCSEC, "ECA:h1s": 20 * ARCSEC}
-    data = [_session(seed_machine, generate(seed_machine, ["K4"], ball=b), hidden, seed=s)
-            for s, b in enumerate([None, half])]
+    near = [seed_machine.ball[0] / 30, seed_machine.ball[1] / 30, seed_machine.ball[2]]
+    data = [_session(seed_machine, generate(seed_machine, ["K4"], ball=near), {"EZA:h1c": -4 * UM}, seed=1)]
     base = identify(seed_machine, data)
     found = diagnose(seed_machine, data, base, advisor=Advisor)
     text = report(found, top=len(found.candidates))
@@ -1409,3 +1410,19 @@ def test_equally_short_measurements_are_advised_by_how_far_they_tell_the_rivals_
     assert found.rivals_separated_by[0].label == shortest[0]
     rival = next(c for c in found.candidates if c.effect == found.rivals[0])
     assert [m.label for m in rival.separated_by] == [m.label for m in tells[:3]]
+
+
+def test_a_1_rev_error_motion_turning_with_a_table_axis_is_sent_to_no_ball_position(seed_machine, poses):
+    """A ball moved is mounted again, off by an offset of its own (``sides.mountings``): a
+    1/rev radial or tilt error motion turning with C or A is, at every ball position, one
+    more table-frame offset of the ball and a change of location errors, so no measurement
+    separates it and diagnose says it needs an independent reference (with one offset for
+    every position, K2 100 mm lower was said to show EAC+EBC:h1). What offsets cannot take,
+    an axial 1/rev of C, another ball position still shows."""
+    data = [_session(seed_machine, poses, {"EXC:h2c": 2 * UM})]
+    found = diagnose(seed_machine, data, identify(seed_machine, data), advisor=Advisor)
+    by = {c.effect: c for c in found.candidates}
+    for name in ("EAC+EBC:h1", "EXC+EYC:h1", "EBA+ECA:h1", "EYA+EZA:h1"):
+        assert not by[name].visible and not by[name].separated_by, name
+    assert "it needs an independent reference" in report(found, top=len(found.candidates))
+    assert not by["EZC:h1"].visible and any("ball" in m.label for m in by["EZC:h1"].separated_by)

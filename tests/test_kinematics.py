@@ -199,14 +199,14 @@ def test_a_free_constant_stands_for_the_side_of_a_path_that_holds_the_axis(seed_
     where the data carry the side, none without a reversal in the model."""
     from compgen.model.kinematics import Model
     from compgen.model.paths import generate
-    from compgen.model.sides import StartSides
+    from compgen.model.sides import FreeConstants
     p = generate(seed_machine, ["K4", "K1", "K2"])
     blind = Poses(p.q, p.ball, p.t, p.path)
-    starts = StartSides(seed_machine, ["XOC", "EAA:r1"], blind)
+    starts = FreeConstants(seed_machine, ["XOC", "EAA:r1"], blind)
     assert starts.labels == [("A", "K2")]
     assert [len(i) for (_, i), in starts.blocks] == [int((p.path == "K2").sum())]
-    assert StartSides(seed_machine, ["XOC", "EAA:r1"], p).count == 0       # sides recorded
-    assert StartSides(seed_machine, ["XOC", "ECC:h2c"], blind).count == 0    # no reversal
+    assert FreeConstants(seed_machine, ["XOC", "EAA:r1"], p).count == 0       # sides recorded
+    assert FreeConstants(seed_machine, ["XOC", "ECC:h2c"], blind).count == 0    # no reversal
     # a reading that is A standing 3″ off on K2 alone is removed whole; one on K1 is not
     sided = Poses(p.q, p.ball, p.t, p.path, np.ones_like(p.q))
     gain = Model(seed_machine, ["EAA:r1"]).jacobian(sided)[:, :, 0]
@@ -271,3 +271,33 @@ def test_in_halves_threads_only_a_dense_session_and_keeps_the_order():
     # in the pool (a thread may take both halves when the first is done before the second)
     assert len(dense) == 2 and threading.get_ident() not in {ident for half in dense for _, ident in half}
     assert [a for half in dense for a, _ in half] == list(range(0, THREADED, 1024))
+
+
+def test_each_later_mounting_of_the_ball_has_an_offset_of_its_own_beside_the_start_sides(seed_machine):
+    """K2 without A_side at the ball, at another position, and back at the first: three
+    mountings (a ball moved back is mounted again too). With the ball's offset in the model,
+    each later mounting gets its own three constants beside each run's start side, and the
+    projector removes their span exactly: what it leaves is orthogonal to every later
+    mounting's offset columns (the gains of XOW YOW ZOW on its rows, from the model here) and
+    to the start sides, though a mounting's offset and the runs in it share rows (projected
+    one after the other, their blocks would leave a part along the first)."""
+    from compgen.model.kinematics import Model
+    from compgen.model.paths import generate
+    from compgen.model.sides import SETUP, FreeConstants, mountings
+    moved = np.add(seed_machine.ball, [20.0, 10.0, -30.0])
+    parts = [generate(seed_machine, ["K2"], ball=b) for b in (None, moved, None)]
+    p = Poses.concat([Poses(q.q, q.ball, q.t, q.path) for q in parts])
+    n = [len(q) for q in parts]
+    assert mountings(p.ball).tolist() == [0] * n[0] + [1] * n[1] + [2] * n[2]
+    constants = FreeConstants(seed_machine, [*SETUP, "YOC", "EAA:r1"], p)
+    assert constants.labels == [("A", "K2")] * 3 and constants.count == 3 + 2 * 3
+    assert FreeConstants(seed_machine, ["YOC", "EAA:r1"], p).count == 3      # no ball offset: no mounting's
+    v = np.random.default_rng(2).normal(size=(len(p), 3))
+    left = constants.projector()(v.copy())
+    gains = Model(seed_machine, SETUP).jacobian(p)
+    for k in (1, 2):
+        cols = (gains * (mountings(p.ball) == k)[:, None, None]).reshape(-1, 3)
+        assert np.abs(cols.T @ left.ravel()).max() < 1e-9 * np.linalg.norm(cols) * np.linalg.norm(v)
+    sides = FreeConstants(seed_machine, ["EAA:r1"], p).projector()
+    np.testing.assert_allclose(sides(left.copy()), left, atol=1e-12)
+    np.testing.assert_allclose(constants.projector()(v - left), 0.0, atol=1e-12)   # v − left in the span

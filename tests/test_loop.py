@@ -10,11 +10,13 @@ import shlex
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from conftest import ARCSEC, ROOT, TABLE4, UM
 
 from compgen.configuration.machine_file import load_machine
 from compgen.model.effects import effect_name, effect_of_param
+from compgen.model.sides import SETUP
 
 NOISE_UM = 0.5
 SIGMA_AT_NOISE = 1.1                   # a final σ̂ within 10 % of the noise: nothing left
@@ -51,20 +53,27 @@ def test_the_printed_commands_take_a_k4_session_to_the_noise(tmp_path, case):
     machine = load_machine(machine_name)
     truth = {n: {"value": v, "unit": effect_of_param(machine, n).unit}
              for n, v in {**LOCATION[machine_name], **hidden}.items()}
-    (tmp_path / "truth.json").write_text(json.dumps({"parameters": truth}))
     cg = f"{shlex.quote(sys.executable)} -m compgen"
     seed = iter(range(100, 200))
+    mounted = {"ball": None}
 
     def machine_measures(path, ball, back, name):      # the machine: not a printed command
+        # a ball moved is mounted again: off its nominal centre by what that mounting left
+        if mounted["ball"] not in (None, ball):
+            again = np.random.default_rng(len(followed)).normal(0, 20, 3)        # µm
+            truth.update({n: {"value": v, "unit": "um"} for n, v in zip(SETUP, again, strict=True)})
+        mounted["ball"] = ball
+        (tmp_path / "truth.json").write_text(json.dumps({"parameters": truth}))
         done = _bash(f"{cg} simulate --machine {machine_name} --truth truth.json --paths {path} --ball {ball}"
                      f"{' --there-and-back' if back else ''} --noise-um {NOISE_UM} --seed {next(seed)} "
                      f"-o {name}.csv", tmp_path)
         assert done.returncode == 0, done.stderr
 
+    followed: list[str] = []
     machine_measures("K4", ",".join(f"{v:g}" for v in machine.ball), False, "K4")
     done = _bash(f"{cg} fit --machine {machine_name} K4.csv -o fit.json", tmp_path)
     assert done.returncode == 0, done.stderr
-    fit, followed = "fit.json", []
+    fit = "fit.json"
     for _ in range(STEPS):
         shown = _bash(f"{cg} diagnose --from {fit}", tmp_path)
         assert shown.returncode == 0, shown.stderr

@@ -42,7 +42,7 @@ from ..statistics.budget import with_budget
 from ..statistics.diagnose import diagnose
 from ..statistics.diagnose_text import report as diagnosis_text
 from ..statistics.gate import gate_edit, unit_suspicion
-from ..statistics.identify import identify, one_ball_offset
+from ..statistics.identify import identify, mountings_note
 from ..statistics.results import load_fit
 from .checklist import checklist, markdown
 from .cli_common import (
@@ -217,11 +217,14 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
 
 def _warn_about_data(machine, names, sets) -> None:
     """What a fit of ``names`` to these data rests on that the data cannot show, each said
-    once: the sides no column gives, one ball offset for every ball position."""
+    once (the sides no column gives), and what it reports of a ball mounted more than once."""
     poses = [s.poses for s in sets]
-    for message in (unknown_sides(machine, names, *poses), one_ball_offset(*poses)):
-        if message:
-            warn(message)
+    message = unknown_sides(machine, names, *poses)
+    if message:
+        warn(message)
+    note = mountings_note(names, *poses)
+    if note:
+        click.echo(f"compgen: note: {note}", err=True)
 
 
 @main.command("diagnose")
@@ -273,8 +276,8 @@ def predict_cmd(base, poses_file, output, force):
     data = simulate(machine, values, poses)
     comments = (f"compgen predict: {fit.marker} ({base}) on machine {machine.name}",
                 f"poses {poses_file}; dX dY dZ: nest minus ball, µm, as the fitted model predicts them",
-                "the fit's set-up terms (ball offset) belong to its own set-up: compare with a "
-                "constant per set-up aside")
+                "the fit's ball offset (XOW YOW ZOW) is its first mounting's: a ball mounted again is off "
+                "by its own, a translation in the table frame (compgen compare fits it per mounting)")
     write_atomically(output, format_rtest(machine, data, comments), force, inputs=(base, poses_file))
     said(output, f"wrote {output}: {len(poses)} poses predicted by {fit.marker}")
     sides = unpredicted_sides(machine, fit.model, poses)

@@ -308,7 +308,7 @@ def motion_direction(q: np.ndarray, run: np.ndarray) -> np.ndarray:
     keeps it); the poses before its first move take that move's direction, as a program
     approaches a path's start (compgen's do: ``program_sides``); 0 throughout a run that
     never moves the axis, whose side only the approach decides: one free constant per such
-    run (``StartSides``)."""
+    run (``FreeConstants``)."""
     out = np.zeros(len(q))
     starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
     for a, b in zip(starts, [*starts[1:], len(q)], strict=True):

@@ -1,7 +1,8 @@
 """Which side each pose reached each rotary axis from: what a reversal (backlash) effect
 needs. The sides the data record, the side each pose takes from its path's moves where
-they do not (``StartSides``: one free constant for a path that holds an axis), the
-sides compgen's programs approach from, and whether an axis was seen from both."""
+they do not (``FreeConstants``: one free constant for a path that holds an axis, beside
+one ball offset for each mounting of the ball after the first), the sides compgen's
+programs approach from, and whether an axis was seen from both."""
 
 from __future__ import annotations
 
@@ -14,34 +15,63 @@ from .effects import Effect, effect_of_param
 from .kinematics import Poses, SlotGains, effect_gains, last_moves, motion_direction, runs
 from .machine import Machine
 
+SETUP = ("XOW", "YOW", "ZOW")      # the ball's offset: what every mounting of the ball has anew
 
-class StartSides:
-    """The side of each run that holds an axis, where the data do not record it (no
-    ``A_side`` column): for every reversal (backlash) effect among ``names`` and every run
-    that never moves its axis, one free constant — the effect's value there, ± half the
-    reversal as the unknown approach left it. They are fitted beside the parameters
-    (projected out, ``projector``: the estimates and their uncertainties are the joint
-    fit's, the constants themselves are not reported), so a path that holds the axis leaves
-    no offset of its own behind, where it would look like drift."""
+
+def mountings(ball: np.ndarray) -> np.ndarray:
+    """The mounting of the ball each pose was measured in (``ball``: the nominal centre per
+    pose, (n, 3) mm, as ``Poses.ball``): 0 for the first, one more wherever the ball's
+    position changes in the order taken (a ball moved is a ball mounted again, and one
+    moved back is mounted again too). Poses at one position in a row share it, across
+    files too: the ball was not touched between them."""
+    return np.cumsum(np.r_[False, np.any(ball[1:] != ball[:-1], axis=1)])
+
+
+class FreeConstants:
+    """The constants a fit carries beside its parameters and never reports:
+
+    - each later mounting's ball offset (``mountings``): a ball mounted again sits off its
+      nominal centre by whatever that mounting left, so where ``names`` hold the ball's
+      offset (``SETUP``), the first mounting's is the parameter and each later one has its
+      own, a translation of the table frame on that mounting's poses alone;
+    - the side of each run that holds an axis, where the data do not record it (no
+      ``A_side`` column): for every reversal (backlash) effect among ``names`` and every run
+      that never moves its axis, the effect's value there, ± half the reversal as the
+      unknown approach left it.
+
+    They are fitted beside the parameters (projected out, ``projector``: the estimates and
+    their uncertainties are the joint fit's), so a path that holds an axis leaves no offset
+    of its own behind, where it would look like drift, and a ball mounted again leaves none
+    that would look like an error motion."""
 
     def __init__(self, machine: Machine, names: Iterable[str], poses: Poses):
         self.machine, self.poses = machine, poses
-        run = runs(poses)
-        self.labels: list[tuple[str, str]] = []            # (axis, path) per constant
-        per_run: dict[int, list[tuple[Effect, np.ndarray]]] = {}
-        for e in dict.fromkeys(effect_of_param(machine, n) for n in names):
+        run, mount = runs(poses), mountings(poses.ball)
+        effects = list(dict.fromkeys(effect_of_param(machine, n) for n in names))
+        self.labels: list[tuple[str, str]] = []            # (axis, path) per start side
+        # a block per run, or per later mounting with the runs in it (runs never cross a
+        # change of the ball's position): the projector's blocks must be orthogonal
+        per_block: dict[tuple[int, int], list[tuple[Effect, np.ndarray]]] = {}
+        for e in effects:
             if e.basis.kind != "r":
                 continue
             j = machine.index(e.carrier)
             at = np.flatnonzero(np.isnan(poses.side[:, j]) & (motion_direction(poses.q[:, j], run) == 0))
             for idx in np.split(at, np.flatnonzero(np.diff(run[at])) + 1) if at.size else ():
-                per_run.setdefault(int(run[idx[0]]), []).append((e, idx))
+                k = int(mount[idx[0]])
+                per_block.setdefault((k, 0 if k else int(run[idx[0]])), []).append((e, idx))
                 self.labels.append((e.carrier, str(poses.path[idx[0]])))
-        self.blocks = [per_run[k] for k in sorted(per_run)]
+        ball = [e for e in effects if e.name in SETUP and e.basis.kind == "const"]
+        self.mounts = int(mount[-1]) if ball and len(poses) else 0
+        for k in range(1, self.mounts + 1):
+            idx = np.flatnonzero(mount == k)
+            per_block.setdefault((k, 0), []).extend((e, idx) for e in ball)
+        self.blocks = [per_block[k] for k in sorted(per_block)]
+        self.ball = len(ball)
 
     @property
     def count(self) -> int:
-        return len(self.labels)
+        return len(self.labels) + self.ball * self.mounts
 
     def projector(self, whiten=None) -> _Projector | None:
         """Removes from readings (n, 3) or their Jacobian (n, 3, p) what the constants would
@@ -142,11 +172,11 @@ def unknown_sides(machine: Machine, names: Iterable[str], *poses: Poses) -> str 
     """What a reversal (backlash) effect among the parameters ``names`` cannot use in these
     poses (each data set's, looked at where it is), said once: the axes whose side the data
     do not give at some pose (no ``A_side`` column), and the free constants that stand in
-    for it (``StartSides``), or None."""
+    for it (``FreeConstants``), or None."""
     reversals = [n for n in names if effect_of_param(machine, n).basis.kind == "r"]
     axes = sorted({e.carrier for e in map(partial(effect_of_param, machine), reversals)
                    if any(np.isnan(p.side[:, machine.index(e.carrier)]).any() for p in poses)})
-    held = [lab for p in poses for lab in StartSides(machine, reversals, p).labels]
+    held = [lab for p in poses for lab in FreeConstants(machine, reversals, p).labels]
     # a linear axis's side no column can give: worth a word only where a path holds the
     # axis and a free constant stands in for it (elsewhere the moves say every side)
     # only a rotary axis's side has a column: compgen's reader takes it and its pose lists carry it
@@ -176,10 +206,10 @@ def unpredicted_sides(machine: Machine, names: Iterable[str], poses: Poses) -> s
     """What ``predict`` cannot say at poses with no recorded side: paths that hold an axis
     are predicted without the model's reversal of it (its sign there is the unknown
     approach's), or None."""
-    starts = StartSides(machine, names, poses)
-    if not starts.count:
+    starts = FreeConstants(machine, names, poses)
+    if not starts.labels:
         return None
-    at = np.unique(np.concatenate([i for block in starts.blocks for _, i in block]))
+    at = np.unique(np.concatenate([i for block in starts.blocks for e, i in block if e.basis.kind == "r"]))
     axes = " and ".join(dict.fromkeys(a for a, _ in starts.labels))
     paths = ", ".join(dict.fromkeys(p or "(no label)" for _, p in starts.labels))
     return (f"the pose list does not say from which side {axes} reached each pose: {len(at)} poses of "

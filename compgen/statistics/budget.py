@@ -15,7 +15,7 @@ import numpy as np
 from ..data.rtest import Measurements, RTestData
 from ..model.kinematics import Model
 from ..model.machine import Machine
-from ..model.sides import StartSides
+from ..model.sides import FreeConstants
 from .choice import with_choices
 from .results import FitResult
 from .significance import ALPHA
@@ -30,7 +30,7 @@ def gain_sensitivity(machine: Machine, data: Sequence[RTestData], fit: FitResult
     model = Model(machine, fit.model)
     free = [model.names.index(n) for n in fit.free]
     J = model.jacobian(poses, fit.values)[:, :, free]
-    starts = StartSides(machine, fit.model, poses).projector()
+    starts = FreeConstants(machine, fit.model, poses).projector()
     if starts is not None:       # the start sides' constants are fitted too: as fit projects them
         J = starts(J)
     A = J.reshape(-1, len(free))

@@ -26,7 +26,7 @@ from ..errors import CompgenError
 from ..model.effects import Effect, catalogue, effect_of_param, resolve
 from ..model.kinematics import Model, Poses, runs
 from ..model.machine import Machine
-from ..model.sides import StartSides, same_pose
+from ..model.sides import FreeConstants, same_pose
 from ..units import shown
 from .device import DeviceCandidate, device_candidates, device_columns
 from .noise import Repeats, ar1, outliers, repeats
@@ -464,7 +464,7 @@ def _beside(C: np.ndarray, noise: Whitening, added: np.ndarray, rw: np.ndarray) 
 def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residual:
     """Step 1: the fit's residual, each path's start side fitted as fit fits it, outlying
     readings (``noise.outliers``) left out. Only Q and R of the model's Jacobian are kept:
-    J's column norms are R's. Free start sides (``StartSides``) come first in Q, and R is
+    J's column norms are R's. Free start sides (``FreeConstants``) come first in Q, and R is
     that of J without them, as fit has it."""
     poses = joined.poses
     model = Model(machine, fit.model)
@@ -473,7 +473,7 @@ def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residu
     pred, J = model.linearise(poses, x)              # one walk of the chains for both
     r3 = joined.deviation - pred
     rtest = joined.rtest
-    starts = StartSides(machine, fit.model, poses).projector()
+    starts = FreeConstants(machine, fit.model, poses).projector()
     if starts is not None:
         r3 = starts.remove(r3)
     seg = runs(poses, joined.set_of)
@@ -482,7 +482,7 @@ def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residu
         keep = np.ones(len(poses), bool)
         keep[bad] = False
         poses, r3, seg, pred, rtest = poses.take(keep), r3[keep], seg[keep], pred[keep], rtest[keep]
-        starts = StartSides(machine, fit.model, poses).projector()
+        starts = FreeConstants(machine, fit.model, poses).projector()
         J = J[keep]
     r = r3.ravel()
     J = J[:, :, free]                               # indexed by a list: a copy, projected in place

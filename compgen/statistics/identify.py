@@ -19,7 +19,7 @@ from ..errors import CompgenError
 from ..model.effects import canonical, effect_of_param, location_model
 from ..model.kinematics import Model, Poses, runs
 from ..model.machine import Machine
-from ..model.sides import StartSides, both_sides
+from ..model.sides import SETUP, FreeConstants, both_sides, mountings
 from ..units import parse_quantity, shown
 from .noise import ar1, ar1_covariance
 from .results import DataRef, Estimate, FitResult
@@ -65,9 +65,9 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
     x = np.array([fixed.get(n, 0.0) for n in names])
     weights = Weights(data)
     # where the data do not say which side a path started on, one free constant per path
-    # (``StartSides``), projected out of readings and Jacobian alike: the joint fit's
+    # (``FreeConstants``), projected out of readings and Jacobian alike: the joint fit's
     # estimates without carrying the constants (Frisch–Waugh–Lovell)
-    starts = StartSides(machine, names, poses)
+    starts = FreeConstants(machine, names, poses)
     project = starts.projector(weights.apply_at) or (lambda v: v)
     _enough(poses, readings, p, starts.count)
 
@@ -148,12 +148,12 @@ def _enough(poses: Poses, readings: int, p: int, starts: int = 0) -> None:
 
 def fitted(machine: Machine, fit: FitResult, data: Sequence[RTestData]) -> np.ndarray:
     """The readings (n, 3) mm the fit's model gives at the data's poses, with each path's
-    start side where the data do not record it (``StartSides``, fitted to these readings as
+    start side where the data do not record it (``FreeConstants``, fitted to these readings as
     ``identify`` fits them; readings unweighted): what the fit's residual is taken from."""
     joined = Measurements.concat(data)
     poses, y = joined.poses, joined.deviation
     dev = fit.evaluate(machine, poses)
-    starts = StartSides(machine, fit.model, poses).projector()
+    starts = FreeConstants(machine, fit.model, poses).projector()
     return dev if starts is None else y - starts.remove(y - dev)
 
 
@@ -364,7 +364,7 @@ def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.
     for i, extra in enumerate(advisor.candidates):    # the ball as it stands first, then moved
         if measured is not None and not all(both_sides(machine, a, measured, extra.poses) for a in reversals):
             continue
-        cond = condition(np.vstack([J, m.jacobian(extra.poses)[:, :, free].reshape(-1, len(free))]))
+        cond = condition(np.vstack([J, _as_mounted(m, free, measured, extra.poses)]))
         if cond < COND_LIMIT:
             options.append((round(cond), i, extra.label, extra))
     runnable = advisor.runnable([o[-1] for o in sorted(options, key=lambda o: o[:2])], most=3)
@@ -373,6 +373,23 @@ def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.
     cond = {o[2]: o[0] for o in options}
     best = ", ".join(f"{m.label} (condition {cond[m.label]:.0f})" for m in runnable)
     return f"adding one of these measurements would: {best}"
+
+
+def _as_mounted(m: Model, free: list[int], measured: Poses | None, poses: Poses) -> np.ndarray:
+    """The free parameters' Jacobian (3n, p) of an extra measurement at ``poses`` as the fit
+    would take it beside ``measured``: where the ball must be mounted again for it (another
+    position), less what that mounting's own offset fits (``FreeConstants``). A measurement
+    at the ball's last position after a later mounting is taken as a mounting of its own
+    too: that asks no more of it than the fit would."""
+    J = m.jacobian(poses)
+    at = [m.names.index(n) for n in SETUP if n in m.names]
+    flat = J[:, :, free].reshape(-1, len(free))
+    same = measured is not None and not mountings(measured.ball)[-1] \
+        and np.array_equal(poses.ball[0], measured.ball[-1])
+    if same or not at:
+        return flat
+    B = J[:, :, at].reshape(-1, len(at))
+    return flat - B @ np.linalg.lstsq(B, flat, rcond=None)[0]
 
 
 def residual_stats(poses: Poses, r: np.ndarray, dof: int, rho: np.ndarray | None = None) -> dict:
@@ -419,48 +436,50 @@ def parse_fixed(machine: Machine, items: Sequence[str]) -> dict[str, float]:
     return out
 
 
-SETUP = ("XOW", "YOW", "ZOW")      # the ball's offset: what every set-up has anew
-
-
-def one_ball_offset(*poses: Poses) -> str | None:
-    """What a fit of data with the ball at more than one position rests on, said once, or
-    None: one ball offset (``SETUP``) for every position. A ball moved is a ball mounted
-    again, off the centre its program was written for by what mounting left; compgen does
-    not fit an offset per set-up yet, and a few µm of such a change are read as an effect:
-    on the bundled example, re-mounted 3 µm off at the position diagnose advises, the tilt
-    error motion of C that position was to show is named found (``benchmarks/moved_ball.py``)."""
-    ball = np.round(np.concatenate([p.ball for p in poses]), 3)
-    # the ball stays for runs of readings: the distinct positions among the runs' first rows
-    # (np.unique of every row took 0.8 s of fit's 7 at 723 000 readings)
-    moved = np.r_[True, (ball[1:] != ball[:-1]).any(axis=1)]
-    balls = np.unique(ball[moved], axis=0)
-    if len(balls) < 2:
+def mountings_note(names: Sequence[str], *poses: Poses) -> str | None:
+    """What a fit of ``names`` to data with the ball mounted more than once reports of the
+    ball's offset, said once, or None: the first mounting's (``SETUP``); each later one has
+    an offset of its own, fitted beside the parameters and not reported
+    (``sides.FreeConstants``)."""
+    held = [n for n in SETUP if n in names]
+    if not held:
         return None
-    return (f"these data hold the ball at {len(balls)} positions, and compgen fits one ball offset "
-            f"({' '.join(SETUP)}) to them all, as if the ball sat as far off its nominal centre at each; a "
-            "ball mounted again elsewhere is off by what mounting left, and compgen does not fit an offset "
-            "per set-up yet: until it does, an effect the other positions were to show (a 1/rev tilt error "
-            "motion of a table axis) or a shift of the location errors may be the ball's mounting, not the "
-            "machine (benchmarks/moved_ball.py: 3 µm of it named such an effect found)")
+    ball = np.concatenate([p.ball for p in poses])
+    mount = mountings(ball)
+    if not len(mount) or mount[-1] == 0:
+        return None
+    first = ball[0]
+    return (f"these data hold the ball at {mount[-1] + 1} mountings (a new one wherever its position "
+            f"changes): each later mounting's ball offset is fitted beside the parameters and not "
+            f"reported; {' '.join(held)} are the first's (ball at {first[0]:g}, {first[1]:g}, "
+            f"{first[2]:g} mm)")
 
 
 def beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
     """RMS and per-path figures of ``reading`` (n, 3) mm beyond the set-up terms alone:
-    what an edit leaves, or a check measures, whatever the ball's offset.
+    what an edit leaves, or a check measures, whatever the ball's offset at each of its
+    mountings (``mountings``: a ball moved is a ball mounted again).
 
-    ``identify``'s fit of XOW YOW ZOW, in closed form: the ball's offset is a translation
-    at the workpiece chain's end, turned by the frames before it, so the readings are
-    exactly linear in it and one walk of the chains gives the answer Gauss–Newton
-    converges to in three (1.65 → 1.07 s at 723 000 readings, most of it now the AR(1)
-    ρ̂); the same refusal, the same residual figures and ρ̂ (``tests/test_compare.py``)."""
-    _enough(poses, reading.size, len(SETUP))
-    dof = reading.size - len(SETUP)
+    ``identify``'s fit of XOW YOW ZOW, one for each mounting, in closed form: the ball's
+    offset is a translation at the workpiece chain's end, turned by the frames before it,
+    so the readings are exactly linear in it and one walk of the chains gives the answer
+    Gauss–Newton converges to in three (1.65 → 1.07 s at 723 000 readings, most of it now
+    the AR(1) ρ̂); the same refusal, the same residual figures and ρ̂
+    (``tests/test_compare.py``)."""
+    mount = mountings(poses.ball)
+    count = len(SETUP) * (int(mount[-1]) + 1 if len(mount) else 1)
+    _enough(poses, reading.size, count)
     m = Model(machine, list(SETUP))
     dev, J = m.linearise(poses)
-    normal = Normal(np.moveaxis(J, 2, 0).reshape(len(SETUP), -1).T)
-    check_identifiable(machine, m, list(range(len(SETUP))), normal, poses)
     raw = reading - dev
-    raw = raw - (normal.J @ normal.solve(raw.ravel())).reshape(-1, 3)
-    rho = ar1(raw, runs(poses), (normal.basis(),))
-    stats = residual_stats(poses, raw, dof, rho)
+    basis = np.zeros((len(poses), 3, count))
+    # each mounting's rows are one stretch of the readings (``mountings``)
+    ends = [*np.flatnonzero(np.diff(mount)) + 1, len(poses)]
+    for k, (a, b) in enumerate(zip([0, *ends[:-1]], ends, strict=True)):
+        normal = Normal(np.moveaxis(J[a:b], 2, 0).reshape(len(SETUP), -1).T)
+        check_identifiable(machine, m, list(range(len(SETUP))), normal, poses.take(slice(a, b)))
+        raw[a:b] -= (normal.J @ normal.solve(raw[a:b].ravel())).reshape(-1, 3)
+        basis[a:b, :, 3 * k:3 * k + 3] = normal.basis().reshape(b - a, 3, -1)
+    rho = ar1(raw, runs(poses), (basis.reshape(3 * len(poses), -1),))
+    stats = residual_stats(poses, raw, reading.size - count, rho)
     return {"rms_um": stats["rms_um"], "per_path": stats["per_path"]}

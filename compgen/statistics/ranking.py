@@ -15,7 +15,7 @@ import numpy as np
 from ..model.effects import Effect
 from ..model.kinematics import Poses
 from ..model.machine import Machine
-from ..model.sides import StartSides
+from ..model.sides import FreeConstants
 from .noise import whiten
 from .signature import columns
 from .significance import VISIBLE, condition, explained, gram_factor
@@ -47,7 +47,7 @@ def started_reversals(machine: Machine, poses: Poses, effects: Sequence[Effect])
     """The reversal candidates that come with start sides on these poses (data without the
     axis's side), by name: their columns as ``effect_columns`` makes them, from one walk of
     the chains for all of them (``signature.columns``)."""
-    sides = {e.name: StartSides(machine, e.params, poses) for e in effects if e.basis.kind == "r"}
+    sides = {e.name: FreeConstants(machine, e.params, poses) for e in effects if e.basis.kind == "r"}
     started = [e for e in effects if e.name in sides and sides[e.name].count]
     if not started:
         return {}
@@ -59,10 +59,10 @@ def started_reversals(machine: Machine, poses: Poses, effects: Sequence[Effect])
 
 def effect_columns(machine: Machine, poses: Poses, e: Effect) -> np.ndarray:
     """An effect's first-order columns (3n, m); for a reversal on data that do not say each
-    pose's side, followed by the start sides ``fit --add`` fits with it (``StartSides``): so
+    pose's side, followed by the start sides ``fit --add`` fits with it (``FreeConstants``): so
     what diagnose tries is what fit would fit."""
     c = columns(machine, poses, [e])
-    starts = StartSides(machine, e.params, poses).projector() if e.basis.kind == "r" else None
+    starts = FreeConstants(machine, e.params, poses).projector() if e.basis.kind == "r" else None
     return c if starts is None else np.hstack([c, starts.basis(len(poses))])
 
 

@@ -14,7 +14,7 @@ import numpy as np
 from ..model.effects import Effect
 from ..model.kinematics import Poses
 from ..model.machine import Machine
-from ..model.sides import both_sides
+from ..model.sides import SETUP, both_sides, mountings
 from .ranking import Row
 from .signature import r_factor
 from .significance import COND_LIMIT, condition
@@ -32,7 +32,13 @@ class Measured:
     them for ``separating`` and ``telling_apart`` alike (a walk of 723 000 readings is a
     second), and with each extra measurement's rows, added once: R of stacked data is R
     of the stacked R factors, and the R factor of a subset of columns is that of the same
-    columns of R, so each effect is judged on small blocks."""
+    columns of R, so each effect is judged on small blocks.
+
+    Each mounting of the ball after the first carries its own offset (``mountings``), as
+    the fit has it: its rows' columns are taken less what that offset would fit (R of
+    [offset | columns], its lower right block), so a position the ball is moved to shows
+    only what no re-mounting could. An extra measurement at the ball's last position
+    continues that mounting; elsewhere it is a mounting of its own."""
 
     def __init__(self, machine: Machine, model_effects: Sequence[Effect], poses: Poses,
                  effects: Sequence[Effect]):
@@ -44,13 +50,40 @@ class Measured:
         for e in effects:
             self.cols[e.name] = list(range(at, at + len(e.params)))
             at += len(e.params)
-        self.R = r_factor(machine, poses, self.effects)
+        # the ball's offset as the model holds it: each later mounting has as many columns
+        self.ball = [e for e in model_effects if e.name in SETUP and e.basis.kind == "const"]
+        mount = mountings(poses.ball)
+        ends = [*np.flatnonzero(np.diff(mount)) + 1, len(poses)]
+        parts = [self._mounted(poses.take(slice(a, b)), k > 0)
+                 for k, (a, b) in enumerate(zip([0, *ends[:-1]], ends, strict=True))]
+        # the last mounting's whole R (its own offset's columns first, if any), which an
+        # extra measurement at the ball's last position continues
+        self.last, self.last_own = parts[-1], len(parts) > 1
+        self.before = [self._reduced(R) for R in parts[:-1]]
+        self.R = self._stacked([*self.before, self._reduced(self.last)])
         self._with: dict[str, np.ndarray] = {}
 
+    def _mounted(self, poses: Poses, later: bool, start: np.ndarray | None = None) -> np.ndarray:
+        """R of the columns on ``poses``, a later mounting's own offset's columns first."""
+        return r_factor(self.machine, poses, [*self.ball, *self.effects] if later else self.effects, start)
+
+    def _reduced(self, R: np.ndarray) -> np.ndarray:
+        """R of the columns less what a mounting's own offset fits: R's lower right block."""
+        k = R.shape[1] - sum(len(e.params) for e in self.effects)
+        return R[k:, k:]
+
+    @staticmethod
+    def _stacked(parts: Sequence[np.ndarray]) -> np.ndarray:
+        return parts[0] if len(parts) == 1 else np.linalg.qr(np.vstack(parts), mode="r")
+
     def with_extra(self, extra: Measurement) -> np.ndarray:
-        """R with ``extra``'s poses measured too."""
+        """R with ``extra``'s poses measured too (a program holds the ball where it is put)."""
         if extra.label not in self._with:
-            self._with[extra.label] = r_factor(self.machine, extra.poses, self.effects, self.R)
+            if np.array_equal(extra.poses.ball[0], self.poses.ball[-1]):     # the ball left as it is
+                parts = [*self.before, self._reduced(self._mounted(extra.poses, self.last_own, self.last))]
+            else:
+                parts = [self.R, self._reduced(self._mounted(extra.poses, True))]
+            self._with[extra.label] = self._stacked(parts)
         return self._with[extra.label]
 
 
