@@ -47,6 +47,7 @@ from compgen.data.simulate import ar1_noise  # noqa: E402
 from compgen.model.effects import compose, effect_name, location_model  # noqa: E402
 from compgen.model.kinematics import Model, Poses  # noqa: E402
 from compgen.model.paths import generate  # noqa: E402
+from compgen.model.sides import SETUP  # noqa: E402
 from compgen.statistics.budget import with_budget  # noqa: E402
 from compgen.statistics.diagnose import diagnose  # noqa: E402
 from compgen.statistics.identify import identify  # noqa: E402
@@ -55,6 +56,7 @@ SIGMA_UM = 0.5
 UNMEASURED_BALLS = ([-150.0, 120.0, 180.0], [120.0, -100.0, 260.0])   # mm, table frame
 MAX_ROUNDS = 8          # diagnoses: each names, adds or measures one thing
 MAX_LOOKS = 2           # measurements made only to look where the data are blind
+MOUNT_UM = 20.0         # σ of the ball's offset a mounting leaves, per axis
 
 CASES = {
     # name: (hidden parameters, the effect a user should end up naming)
@@ -143,9 +145,19 @@ def session(machine, truth, poses, kind, rng, outside=None, blind=False) -> RTes
                      tuple(range(2, len(poses) + 2)))
 
 
+def remounted(truth, poses, data, rng) -> dict:
+    """The truth of a follow-up at ``poses``: where the ball must move for it, the user
+    mounts it again, off its nominal centre by what that mounting leaves (``MOUNT_UM`` per
+    axis, table frame); at the ball's last position it stays as it is."""
+    if np.array_equal(poses.ball[0], data[-1].poses.ball[-1]):
+        return truth
+    return {**truth, **dict(zip(SETUP, rng.normal(0, MOUNT_UM * 1e-3, 3), strict=True))}
+
+
 def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
     measure = partial(session, blind=blind)      # every measurement of the case alike
     data = [measure(machine, truth, generate(machine, ["K4", "K1", "K2"]), kind, rng, outside)]
+    first = {n: truth[n] for n in SETUP}        # the ball's offset the fit reports: its first mounting's
     model, named, followed, last, looks = location_model(machine), [], [], None, 0
     for _ in range(MAX_ROUNDS):
         fit = identify(machine, data, model)
@@ -165,7 +177,10 @@ def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
             # the user calibrates the R-test and measures everything again
             named.append(f"device {found.device_blamed or found.significant_devices[0].effect}")
             truth = {k: v for k, v in truth.items() if not k.startswith(GAIN)}
-            data = [measure(machine, truth, generate(machine, ["K4", "K1", "K2"]), kind, rng, outside)]
+            poses = generate(machine, ["K4", "K1", "K2"])
+            truth = remounted(truth, poses, data, rng)
+            first = {n: truth[n] for n in SETUP}
+            data = [measure(machine, truth, poses, kind, rng, outside)]
             followed.append("calibrated, K4+K1+K2 again")
             model = location_model(machine)
         elif found.found:
@@ -179,6 +194,7 @@ def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
                 continue
             m = found.rivals_separated_by[0]
             followed.append(m.label)
+            truth = remounted(truth, m.poses, data, rng)
             data.append(measure(machine, truth, m.poses, kind, rng, outside))   # a fresh session
         elif looks < MAX_LOOKS:      # explained to the noise: look where these data are blind
             m, _ = found.next_measurement
@@ -186,6 +202,7 @@ def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
                 break
             looks += 1
             followed.append(m.label)
+            truth = remounted(truth, m.poses, data, rng)
             data.append(measure(machine, truth, m.poses, kind, rng, outside))
         else:
             break
@@ -195,6 +212,7 @@ def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
     fit = with_budget(machine, data, fit, noise_um=SIGMA_UM)     # σ holding its whole budget
     model_now = Model(machine, fit.model)
     x = np.array([fit.parameters[n].value for n in fit.model])
+    truth = {**truth, **first}          # the ball as the fit reports it: at its first mounting
     worst = 0.0
     for ball in UNMEASURED_BALLS:
         poses = generate(machine, ["K4"], ball=ball)

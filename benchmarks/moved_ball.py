@@ -1,7 +1,8 @@
 """A follow-up at another ball position is a new set-up: the ball sits where it was mounted,
-off the centre the program was written for by what mounting it left. compgen fits one ball
-offset (XOW YOW ZOW) to every file of a fit. A benchmark of that defect (found 2026-12-06),
-not a test: it shows what a user meets, and will show the fix.
+off the centre the program was written for by what mounting left. Until 2026-12-06 compgen
+fitted one ball offset (XOW YOW ZOW) to every file of a fit, and 3 µm of re-mounting named a
+wrong effect found; each mounting now has an offset of its own. A benchmark, not a test: it
+shows what a user meets.
 
     python benchmarks/moved_ball.py [--delta 15,-10,5]
 
@@ -9,9 +10,10 @@ On the bundled example (the seed machine, its Table 4 errors, a hidden 2/rev rad
 of C, 0.5 µm noise), it does what the README's loop does: fit, diagnose, and the measurement
 diagnose advises first (``next_measurement``), simulated with fresh noise; then fit both
 files together and diagnose again. Twice: the follow-up's ball exactly as offset as the
-first (what ``compgen simulate`` assumes, and every test and benchmark so far), and
-re-mounted ``--delta`` µm further off (table frame). Printed: the combined fit's RMS, the
-worst location error against the truth in its own σ, and what diagnose names first.
+first (what ``compgen simulate`` assumes with the first's truth), and re-mounted ``--delta``
+µm further off (table frame). Printed: the combined fit's RMS, the worst location error
+against the truth in its own σ, and what diagnose names first: the same both times, where
+the fit holds an offset per mounting.
 """
 
 from __future__ import annotations
