@@ -481,3 +481,24 @@ def test_the_condition_number_is_the_largest_over_the_smallest_singular_value(se
     assert replace(fit, singular_values=np.array([2.5])).condition_number == 1.0
     assert replace(fit, singular_values=np.array([3.0, 1.0, 0.0])).condition_number == np.inf
     assert replace(fit, singular_values=np.array([])).condition_number == np.inf
+
+
+def test_a_ball_position_that_changes_from_row_to_row_is_refused_with_what_to_do(seed_machine, rng):
+    """Each change of the ball's position is a mounting with an offset of its own: a file
+    whose bx drifts from row to row leaves no reading for the parameters. fit and compare's
+    set-up figures refuse it alike, naming the constants and what to give each row."""
+    from compgen.model.kinematics import Poses
+    from compgen.statistics.identify import beyond_setup
+    p = generate(seed_machine, ["K4"])
+    drifting = Poses(p.q, p.ball + np.arange(len(p))[:, None] * [1e-3, 0.0, 0.0], p.t, p.path)
+    data = simulate(seed_machine, TABLE4, drifting, NOISE_UM, rng)
+    said = []
+    for refused in (lambda: identify(seed_machine, [data]), lambda: beyond_setup(seed_machine, drifting,
+                                                                                    data.deviation)):
+        with pytest.raises(CompgenError) as exc:
+            refused()
+        said.append(exc.value)
+    assert str(said[0]).startswith("241 poses give 723 readings for 11 parameters and 720 free constants "
+                                   "(720 offsets of the ball's 240 later mountings)")
+    assert "for 3 parameters and 720 free constants" in str(said[1])
+    assert all(e.hint.endswith("give every row of one mounting the same bx, by, bz") for e in said)

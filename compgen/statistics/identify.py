@@ -69,7 +69,7 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
     # estimates without carrying the constants (Frisch–Waugh–Lovell)
     starts = FreeConstants(machine, names, poses)
     project = starts.projector(weights.apply_at) or (lambda v: v)
-    _enough(poses, readings, p, starts.count)
+    _enough(poses, readings, p, starts)
 
     buffer = np.empty((len(names), len(poses), 3))
 
@@ -138,12 +138,19 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         descriptions={n: e.words for n, e in zip(names, m.effects, strict=True)})
 
 
-def _enough(poses: Poses, readings: int, p: int, starts: int = 0) -> None:
-    """Refuse readings too few for ``p`` parameters (and ``starts`` free start sides)."""
-    if readings <= p + starts:
-        raise CompgenError(f"{len(poses)} poses give {readings} readings for {p} parameters"
-                           + (f" and {starts} free start sides" if starts else ""),
-                           hint="measure more poses: a K4 path has 241")
+def _enough(poses: Poses, readings: int, p: int, free: FreeConstants | None = None) -> None:
+    """Refuse readings too few for ``p`` parameters (and the ``free`` constants beside them)."""
+    count = free.count if free is not None else 0
+    if readings <= p + count:
+        sides, offsets = (len(free.labels), free.count - len(free.labels)) if count else (0, 0)
+        parts = [f"{sides} start sides" if sides else "",
+                 f"{offsets} offsets of the ball's {free.mounts} later mountings" if offsets else ""]
+        raise CompgenError(
+            f"{len(poses)} poses give {readings} readings for {p} parameters"
+            + (f" and {count} free constants ({', '.join(filter(None, parts))})" if count else ""),
+            hint="the ball's position changes between readings, and each change is a mounting with an "
+                 "offset of its own: give every row of one mounting the same bx, by, bz" if offsets
+            else "measure more poses: a K4 path has 241")
 
 
 def fitted(machine: Machine, fit: FitResult, data: Sequence[RTestData]) -> np.ndarray:
@@ -468,7 +475,8 @@ def beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
     (``tests/test_compare.py``)."""
     mount = mountings(poses.ball)
     count = len(SETUP) * (int(mount[-1]) + 1 if len(mount) else 1)
-    _enough(poses, reading.size, count)
+    _enough(poses, reading.size, len(SETUP))
+    _enough(poses, reading.size, len(SETUP), FreeConstants(machine, SETUP, poses))     # as identify refuses
     m = Model(machine, list(SETUP))
     dev, J = m.linearise(poses)
     raw = reading - dev
