@@ -340,6 +340,7 @@ def test_a_ball_mounted_again_elsewhere_has_an_offset_of_its_own(hidden_session,
         assert "XOW YOW ZOW are the first's (ball at -217.504, -0.279, 211.537 mm)" in err
         got[name] = json.loads((tmp_path / f"{name}-fit.json").read_text())
     kept, again = got["kept"], got["mounted again"]
+    assert again["parameters"]["XOW"]["description"].endswith(", at the first of the ball's 2 mountings")
     assert again["residual"]["rms_um"] == pytest.approx(kept["residual"]["rms_um"], abs=1e-3)
     for n, p in kept["parameters"].items():        # the same to a thousandth of a µm or ″
         assert again["parameters"][n]["value"] == pytest.approx(p["value"], abs=5e-9), n

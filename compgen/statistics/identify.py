@@ -135,7 +135,9 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         correlation=np.clip(corr, -1.0, 1.0), singular_values=sv,
         residual=residual_stats(poses, raw, dof, rho),
         method=method, iterations=iterations, sign=sign, version=__version__,
-        descriptions={n: e.words for n, e in zip(names, m.effects, strict=True)})
+        descriptions={n: e.words + (f", at the first of the ball's {starts.mounts + 1} mountings"
+                                    if starts.mounts and n in SETUP else "")
+                      for n, e in zip(names, m.effects, strict=True)})
 
 
 def _enough(poses: Poses, readings: int, p: int, free: FreeConstants | None = None) -> None:
