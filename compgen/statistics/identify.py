@@ -387,9 +387,10 @@ def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.
 def _as_mounted(m: Model, free: list[int], measured: Poses | None, poses: Poses) -> np.ndarray:
     """The free parameters' Jacobian (3n, p) of an extra measurement at ``poses`` as the fit
     would take it beside ``measured``: where the ball must be mounted again for it (another
-    position), less what that mounting's own offset fits (``FreeConstants``). A measurement
-    at the ball's last position after a later mounting is taken as a mounting of its own
-    too: that asks no more of it than the fit would."""
+    position), less what that mounting's own offset fits (``FreeConstants``). One at the
+    ball's last position continues that mounting; where that is a later one, it is taken as
+    a mounting of its own all the same (the offset it shares with the data's last rows is
+    not in ``J``): it then promises less than it may give, never more."""
     J = m.jacobian(poses)
     at = [m.names.index(n) for n in SETUP if n in m.names]
     flat = J[:, :, free].reshape(-1, len(free))
