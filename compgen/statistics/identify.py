@@ -373,7 +373,7 @@ def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.
     for i, extra in enumerate(advisor.candidates):    # the ball as it stands first, then moved
         if measured is not None and not all(both_sides(machine, a, measured, extra.poses) for a in reversals):
             continue
-        cond = condition(np.vstack([J, _as_mounted(m, free, measured, extra.poses)]))
+        cond = condition(_with_extra(m, free, J, measured, extra.poses))
         if cond < COND_LIMIT:
             options.append((round(cond), i, extra.label, extra))
     runnable = advisor.runnable([o[-1] for o in sorted(options, key=lambda o: o[:2])], most=3)
@@ -384,22 +384,29 @@ def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.
     return f"adding one of these measurements would: {best}"
 
 
-def _as_mounted(m: Model, free: list[int], measured: Poses | None, poses: Poses) -> np.ndarray:
-    """The free parameters' Jacobian (3n, p) of an extra measurement at ``poses`` as the fit
-    would take it beside ``measured``: where the ball must be mounted again for it (another
-    position), less what that mounting's own offset fits (``FreeConstants``). One at the
-    ball's last position continues that mounting; where that is a later one, it is taken as
-    a mounting of its own all the same (the offset it shares with the data's last rows is
-    not in ``J``): it then promises less than it may give, never more."""
-    J = m.jacobian(poses)
+def _with_extra(m: Model, free: list[int], J: np.ndarray, measured: Poses | None, poses: Poses) -> np.ndarray:
+    """The free parameters' Jacobian ``J`` (3n, p) of the ``measured`` poses, as the fit
+    takes it (each later mounting's ball offset projected out, ``FreeConstants``), with the
+    rows of an extra measurement at ``poses`` as the fit would add them: where the ball must
+    be mounted again for it (another position), less what that mounting's own offset fits;
+    at the ball's last position, in the mounting it continues (a later one: its rows and the
+    data's of that mounting less their one offset, together)."""
+    jac = m.jacobian(poses)
     at = [m.names.index(n) for n in SETUP if n in m.names]
-    flat = J[:, :, free].reshape(-1, len(free))
-    same = measured is not None and not mountings(measured.ball)[-1] \
-        and np.array_equal(poses.ball[0], measured.ball[-1])
-    if same or not at:
-        return flat
-    B = J[:, :, at].reshape(-1, len(at))
-    return flat - B @ np.linalg.lstsq(B, flat, rcond=None)[0]
+    rows = jac[:, :, free].reshape(-1, len(free))
+    if not at:                          # no ball offset in the model: none per mounting either
+        return np.vstack([J, rows])
+    offset = jac[:, :, at].reshape(-1, len(at))
+    mount = mountings(measured.ball) if measured is not None else None
+    if mount is not None and np.array_equal(poses.ball[0], measured.ball[-1]):
+        if not mount[-1]:               # the first mounting: its offset is the parameters'
+            return np.vstack([J, rows])
+        start = int(np.flatnonzero(mount == mount[-1])[0])
+        last = m.jacobian(measured.take(slice(start, None)))
+        rows = np.vstack([last[:, :, free].reshape(-1, len(free)), rows])
+        offset = np.vstack([last[:, :, at].reshape(-1, len(at)), offset])
+        J = J[:3 * start]
+    return np.vstack([J, rows - offset @ np.linalg.lstsq(offset, rows, rcond=None)[0]])
 
 
 def residual_stats(poses: Poses, r: np.ndarray, dof: int, rho: np.ndarray | None = None) -> dict:
