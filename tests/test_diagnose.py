@@ -1426,3 +1426,36 @@ def test_a_1_rev_error_motion_turning_with_a_table_axis_is_sent_to_no_ball_posit
         assert not by[name].visible and not by[name].separated_by, name
     assert "it needs an independent reference" in report(found, top=len(found.candidates))
     assert not by["EZC:h1"].visible and any("ball" in m.label for m in by["EZC:h1"].separated_by)
+
+
+def test_the_separations_take_each_mounting_of_the_ball_with_its_own_offset(seed_machine):
+    """``separation.Measured``: R of the model's and the candidates' columns, with each later
+    mounting's ball offset a nuisance, and with an extra measurement stacked as the fit
+    would add it, continuing the last mounting or a mounting of its own: RᵀR is the Gram
+    matrix of the whole design with the offsets as explicit columns projected out, built
+    here from the model's Jacobian."""
+    from types import SimpleNamespace
+
+    from compgen.model.effects import effect_of_param, resolve
+    from compgen.model.kinematics import Model, Poses
+    from compgen.model.sides import SETUP
+    from compgen.statistics.separation import Measured
+    names = list(location_model(seed_machine))
+    model_effects = list(dict.fromkeys(effect_of_param(seed_machine, n) for n in names))
+    candidates = [resolve(seed_machine, "EZC:h1"), resolve(seed_machine, "EXC:h2")]
+    params = [*names, *(p for e in candidates for p in e.params)]
+    moved = np.add(seed_machine.ball, [30.0, -20.0, 0.0])
+    k4, k2 = generate(seed_machine, ["K4"]), generate(seed_machine, ["K2"], ball=moved)
+    measured = Measured(seed_machine, model_effects, Poses.concat([k4, k2]), candidates)
+    at = [names.index(n) for n in SETUP]
+    for label, extra, mount in (("continues", generate(seed_machine, ["K1"], ball=moved), 1),
+                                ("back", generate(seed_machine, ["K1"]), 2)):
+        R = measured.with_extra(SimpleNamespace(label=label, poses=extra))
+        full = Model(seed_machine, params).jacobian(Poses.concat([k4, k2, extra]))
+        which = np.r_[np.zeros(len(k4)), np.ones(len(k2)), np.full(len(extra), mount)]
+        N = np.concatenate([full[:, :, at] * (which == k)[:, None, None] for k in (1, 2)], axis=2)
+        A, N = full.reshape(-1, len(params)), N.reshape(-1, N.shape[2])
+        N = N[:, np.abs(N).sum(axis=0) > 0]
+        want = A - N @ np.linalg.lstsq(N, A, rcond=None)[0]
+        gram = want.T @ want
+        np.testing.assert_allclose(R.T @ R, gram, rtol=1e-7, atol=1e-9 * np.abs(gram).max(), err_msg=label)
