@@ -1430,30 +1430,43 @@ def test_a_1_rev_error_motion_turning_with_a_table_axis_is_sent_to_no_ball_posit
 
 def test_the_separations_take_each_mounting_of_the_ball_with_its_own_offset(seed_machine):
     """``separation.Measured``: R of the model's and the candidates' columns, with each later
-    mounting's ball offset a nuisance, and with an extra measurement stacked as the fit
-    would add it, continuing the last mounting or a mounting of its own: RᵀR is the Gram
-    matrix of the whole design with the offsets as explicit columns projected out, built
-    here from the model's Jacobian."""
+    mounting's ball offset and each later nest's offset a nuisance, and with an extra
+    measurement stacked as the fit would add it, continuing the last mounting and nest or
+    with its own: RᵀR is the Gram matrix of the whole design with the offsets as explicit
+    columns projected out, built here from the model's Jacobian. The data: K4 at the ball,
+    K2 with the ball moved, K1 there with a longer nest (the ball's mounting and the nest
+    change apart, so their offsets share rows without sharing a stretch)."""
     from types import SimpleNamespace
 
     from compgen.model.effects import effect_of_param, resolve
     from compgen.model.kinematics import Model, Poses
-    from compgen.model.sides import SETUP
+    from compgen.model.sides import NEST, SETUP
     from compgen.statistics.separation import Measured
     names = list(location_model(seed_machine))
     model_effects = list(dict.fromkeys(effect_of_param(seed_machine, n) for n in names))
     candidates = [resolve(seed_machine, "EZC:h1"), resolve(seed_machine, "EXC:h2")]
     params = [*names, *(p for e in candidates for p in e.params)]
     moved = np.add(seed_machine.ball, [30.0, -20.0, 0.0])
-    k4, k2 = generate(seed_machine, ["K4"]), generate(seed_machine, ["K2"], ball=moved)
-    measured = Measured(seed_machine, model_effects, Poses.concat([k4, k2]), candidates)
+
+    def measure(path, ball=None, nest=None):
+        p = generate(seed_machine, [path], ball=ball)
+        return Poses(p.q, p.ball, p.t, p.path, p.side, np.full(len(p), np.nan if nest is None else nest))
+
+    data = [(measure("K4"), 0, 0), (measure("K2", moved), 1, 0), (measure("K1", moved, 150.0), 1, 1)]
+    measured = Measured(seed_machine, model_effects, Poses.concat([p for p, *_ in data]), candidates)
     at = [names.index(n) for n in SETUP]
-    for label, extra, mount in (("continues", generate(seed_machine, ["K1"], ball=moved), 1),
-                                ("back", generate(seed_machine, ["K1"]), 2)):
-        R = measured.with_extra(SimpleNamespace(label=label, poses=extra))
-        full = Model(seed_machine, params).jacobian(Poses.concat([k4, k2, extra]))
-        which = np.r_[np.zeros(len(k4)), np.ones(len(k2)), np.full(len(extra), mount)]
-        N = np.concatenate([full[:, :, at] * (which == k)[:, None, None] for k in (1, 2)], axis=2)
+    for label, extra in (("continues both", (measure("K2", moved, 150.0), 1, 1)),
+                         ("a longer nest", (measure("K4", moved, 200.0), 1, 2)),
+                         ("the ball back, the nest back", (measure("K1"), 2, 2))):
+        R = measured.with_extra(SimpleNamespace(label=label, poses=extra[0]))
+        parts = [*data, extra]
+        poses = Poses.concat([p for p, *_ in parts])
+        full = Model(seed_machine, params).jacobian(poses)
+        nest = Model(seed_machine, NEST).jacobian(poses)
+        ball_at = np.concatenate([np.full(len(p), b) for p, b, _ in parts])
+        nest_at = np.concatenate([np.full(len(p), k) for p, _, k in parts])
+        N = np.concatenate([full[:, :, at] * (ball_at == k)[:, None, None] for k in (1, 2)]
+                           + [nest * (nest_at == k)[:, None, None] for k in (1, 2)], axis=2)
         A, N = full.reshape(-1, len(params)), N.reshape(-1, N.shape[2])
         N = N[:, np.abs(N).sum(axis=0) > 0]
         want = A - N @ np.linalg.lstsq(N, A, rcond=None)[0]

@@ -763,3 +763,32 @@ def test_linuxcnc_refuses_what_a_head_module_cannot_take(tmp_path):
     code, _, err = run("measure-program", "--machine", path, "--path", "K4", "-o", tmp_path / "K4b.ngc")
     assert code == 2 and "maxkins was run without a conventional-directions pin" in err, err
     assert "[linuxcnc] conventional_directions" in err and not (tmp_path / "K4b.ngc").exists()
+
+
+def test_a_longer_nest_is_a_nest_put_in_again_with_an_offset_of_its_own():
+    """The advice sends a head to K4 with a longer nest: another nest, or the same on
+    another holder, off the spindle's axis by what that clamping left. With one nest offset
+    for both, 3, −2, 1 µm of it read as a 25″ tilt error motion of C, significant; with an
+    offset for each nest (``sides.nest_mountings``) the fit is the one whose second nest sat
+    as the first, to 0.001 µm and ″, the location errors within 3 σ of the truth, and
+    diagnose, told the noise, finds nothing left."""
+    machine = load_machine(FORK)
+    truth = {"XOW": 5 * UM, "YOW": -8 * UM, "ZOW": 12 * UM, "XOC": 6 * UM, "YOC": -4 * UM,
+             "AOC": 5 * ARCSEC, "BOC": -4 * ARCSEC, "XOB": 10 * UM, "ZOB": -7 * UM, "AOB": 6 * ARCSEC,
+             "COB": -3 * ARCSEC}
+    first = simulate(machine, truth, generate(machine, ["K4", "K1", "K2"]), NOISE_UM,
+                     np.random.default_rng(1))
+    k4 = generate(machine, ["K4"])
+    longer = Poses(k4.q, k4.ball, k4.t, k4.path, k4.side, np.full(len(k4), machine.probe_length + 30))
+    fits = {}
+    for name, offset in {"kept": (0, 0, 0), "put in again": (3, -2, 1)}.items():
+        nest = {f"nest_{d}": v * UM for d, v in zip("XYZ", offset, strict=True)}
+        second = simulate(machine, {**truth, **nest}, longer, NOISE_UM, np.random.default_rng(2))
+        fits[name] = (identify(machine, [first, second]), [first, second])
+    kept, (again, data) = fits["kept"][0], fits["put in again"]
+    assert again.residual["rms_um"] == pytest.approx(kept.residual["rms_um"], abs=1e-3)
+    for n, p in kept.parameters.items():            # to 0.001 µm or ″
+        near = 1e-3 * (UM if p.unit == "mm" else ARCSEC)
+        assert again.parameters[n].value == pytest.approx(p.value, abs=near), n
+        assert abs(again.parameters[n].value - truth[n]) < 3 * again.parameters[n].std, n
+    assert not diagnose(machine, data, again, noise_um=NOISE_UM).significant

@@ -501,35 +501,44 @@ def test_a_ball_position_that_changes_from_row_to_row_is_refused_with_what_to_do
     assert str(said[0]).startswith("241 poses give 723 readings for 11 parameters and 720 free constants "
                                    "(720 offsets of the ball's 240 later mountings)")
     assert "for 3 parameters and 720 free constants" in str(said[1])
-    assert all(e.hint.endswith("give every row of one mounting the same bx, by, bz") for e in said)
+    assert all(e.hint.endswith("give the rows of one mounting one ball position (bx, by, bz)") for e in said)
 
 
 def test_a_measurement_advised_beside_mounted_data_is_taken_as_the_fit_would_take_it(seed_machine):
     """The refusal's advice stacks an extra measurement under the data as the fit would:
-    with every later mounting's ball offset a nuisance, its Gram matrix (JᵀJ of the
-    parameters, the offsets projected out) is that of the whole design with the offsets as
-    explicit columns, built here: K4 at the ball, then K2 with the ball moved (a second
-    mounting), and K1 there (continuing it: one offset for K2 and K1) or K1 back at the
-    first position (a third mounting)."""
+    with every later mounting's ball offset and every later nest's offset a nuisance, its
+    Gram matrix (JᵀJ of the parameters, the offsets projected out) is that of the whole
+    design with the offsets as explicit columns, built here. The data: K4 at the ball, K2
+    with the ball moved (a second mounting). The extras: K1 there (continuing it), K1 there
+    with a longer nest (continuing the mounting, a nest of its own), K1 back at the first
+    position (a third mounting)."""
     from compgen.model.effects import location_model
     from compgen.model.kinematics import Model, Poses
-    from compgen.model.sides import SETUP, FreeConstants
+    from compgen.model.sides import NEST, SETUP, FreeConstants
     from compgen.statistics.identify import _with_extra
     names = list(location_model(seed_machine))
     m, free = Model(seed_machine, names), list(range(len(names)))
     moved = np.add(seed_machine.ball, [30.0, -20.0, 0.0])
-    k4, k2 = generate(seed_machine, ["K4"]), generate(seed_machine, ["K2"], ball=moved)
+
+    def measure(path, ball=None, nest=np.nan):
+        p = generate(seed_machine, [path], ball=ball)
+        return Poses(p.q, p.ball, p.t, p.path, p.side, np.full(len(p), nest))
+
+    k4, k2 = measure("K4"), measure("K2", moved)
     measured = Poses.concat([k4, k2])
     project = FreeConstants(seed_machine, names, measured).projector()
     J = project(m.jacobian(measured)).reshape(-1, len(names))
     at = [names.index(n) for n in SETUP]
-    for extra, joins in ((generate(seed_machine, ["K1"], ball=moved), True),
-                         (generate(seed_machine, ["K1"]), False)):
-        got = _with_extra(m, free, J, measured, extra)
-        full = m.jacobian(Poses.concat([measured, extra]))              # (n, 3, p), every row
-        n0, n1 = len(k4), len(k2)
-        mount = np.r_[np.zeros(n0), np.ones(n1), np.full(len(extra), 1 if joins else 2)]
-        nuisance = np.concatenate([full[:, :, at] * (mount == k)[:, None, None] for k in (1, 2)], axis=2)
+    for extra, mounting, nest in ((measure("K1", moved), 1, 0), (measure("K1", moved, 150.0), 1, 1),
+                                  (measure("K1"), 2, 0)):
+        got = _with_extra(seed_machine, m, free, J, measured, extra)
+        poses = Poses.concat([measured, extra])
+        full = m.jacobian(poses)                                       # (n, 3, p), every row
+        mount = np.r_[np.zeros(len(k4)), np.ones(len(k2)), np.full(len(extra), mounting)]
+        held = np.r_[np.zeros(len(measured)), np.full(len(extra), nest)]
+        nuisance = np.concatenate([full[:, :, at] * (mount == k)[:, None, None] for k in (1, 2)]
+                                  + [Model(seed_machine, NEST).jacobian(poses) * (held == 1)[:, None, None]],
+                                  axis=2)
         A, N = full.reshape(-1, len(names)), nuisance.reshape(-1, nuisance.shape[2])
         N = N[:, np.abs(N).sum(axis=0) > 0]
         want = A - N @ np.linalg.lstsq(N, A, rcond=None)[0]

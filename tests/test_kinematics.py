@@ -301,3 +301,40 @@ def test_each_later_mounting_of_the_ball_has_an_offset_of_its_own_beside_the_sta
     sides = FreeConstants(seed_machine, ["EAA:r1"], p).projector()
     np.testing.assert_allclose(sides(left.copy()), left, atol=1e-12)
     np.testing.assert_allclose(constants.projector()(v - left), 0.0, atol=1e-12)   # v − left in the span
+
+
+def test_a_nest_of_another_length_has_an_offset_of_its_own_and_coinciding_offsets_count_once(seed_machine):
+    """K2 at the ball; K2 with the ball moved (its second mounting); K1 there with a longer
+    nest (the second nest: the ball stays); K1 back at the ball with the first length (a
+    third mounting and a third nest at once). The projector leaves what is orthogonal to
+    every later mounting's and nest's offset columns (from the model here), though they
+    share rows across stretches, and counts the independent ones: on K1, where only C
+    turns, a table-frame Z and a machine-frame Z are one translation, so the last
+    stretch's six offsets span five dimensions, the rank the explicit design has."""
+    from compgen.model.kinematics import Model
+    from compgen.model.paths import generate
+    from compgen.model.sides import NEST, SETUP, FreeConstants, nest_mountings
+    moved = np.add(seed_machine.ball, [20.0, 10.0, -30.0])
+
+    def measure(path, ball=None, nest=np.nan):
+        p = generate(seed_machine, [path], ball=ball)
+        return Poses(p.q, p.ball, p.t, p.path, p.side, np.full(len(p), nest))
+
+    parts = [measure("K2"), measure("K2", moved), measure("K1", moved, 150.0), measure("K1")]
+    p = Poses.concat(parts)
+    n = np.cumsum([0, *map(len, parts)])
+    held = nest_mountings(seed_machine, p.nest)
+    assert held.tolist() == [0] * n[2] + [1] * len(parts[2]) + [2] * len(parts[3])
+    constants = FreeConstants(seed_machine, [*SETUP, "YOC"], p)
+    assert constants.count == 3 * 2 + 3 * 2 and len(constants.blocks) == 2     # the last stretch apart
+    project = constants.projector()
+    ball, nest = Model(seed_machine, SETUP).jacobian(p), Model(seed_machine, NEST).jacobian(p)
+    rows = lambda a, b: (np.arange(len(p)) >= n[a]) & (np.arange(len(p)) < n[b])     # noqa: E731
+    design = np.concatenate([ball * rows(1, 3)[:, None, None], ball * rows(3, 4)[:, None, None],
+                             nest * rows(2, 3)[:, None, None], nest * rows(3, 4)[:, None, None]], axis=2)
+    design = design.reshape(-1, design.shape[2])
+    assert project.rank == np.linalg.matrix_rank(design) == constants.count - 1
+    v = np.random.default_rng(3).normal(size=(len(p), 3))
+    left = project(v.copy())
+    assert np.abs(design.T @ left.ravel()).max() < 1e-9 * np.linalg.norm(design) * np.linalg.norm(v)
+    np.testing.assert_allclose(project(v - left), 0.0, atol=1e-12)          # v − left in their span

@@ -222,7 +222,7 @@ def _warn_about_data(machine, names, sets) -> None:
     message = unknown_sides(machine, names, *poses)
     if message:
         warn(message)
-    note = mountings_note(names, *poses)
+    note = mountings_note(machine, names, *poses)
     if note:
         click.echo(f"compgen: note: {note}", err=True)
 

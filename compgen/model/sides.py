@@ -1,8 +1,8 @@
 """Which side each pose reached each rotary axis from: what a reversal (backlash) effect
 needs. The sides the data record, the side each pose takes from its path's moves where
 they do not (``FreeConstants``: one free constant for a path that holds an axis, beside
-one ball offset for each mounting of the ball after the first), the sides compgen's
-programs approach from, and whether an axis was seen from both."""
+one offset for each mounting of the ball and each nest after the first), the sides
+compgen's programs approach from, and whether an axis was seen from both."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ from .kinematics import Poses, SlotGains, effect_gains, last_moves, motion_direc
 from .machine import Machine
 
 SETUP = ("XOW", "YOW", "ZOW")      # the ball's offset: what every mounting of the ball has anew
+NEST = ("nest_X", "nest_Y", "nest_Z")   # the nest's offset: what every nest put in the spindle has anew
 
 
 def mountings(ball: np.ndarray) -> np.ndarray:
@@ -27,6 +28,16 @@ def mountings(ball: np.ndarray) -> np.ndarray:
     return np.cumsum(np.r_[False, np.any(ball[1:] != ball[:-1], axis=1)])
 
 
+def nest_mountings(machine: Machine, nest: np.ndarray) -> np.ndarray:
+    """The nest each pose was measured with (``nest``: its length per pose, NaN for the
+    machine file's ``probe_length``, as ``Poses.nest``): 0 for the first, one more wherever
+    the length changes in the order taken. A nest of another length is another nest, or
+    the same on another holder: put in the spindle again, off the spindle's axis by what
+    that clamping left."""
+    length = np.where(np.isnan(nest), machine.probe_length, nest)
+    return np.cumsum(np.r_[False, length[1:] != length[:-1]])
+
+
 class FreeConstants:
     """The constants a fit carries beside its parameters and never reports:
 
@@ -34,6 +45,8 @@ class FreeConstants:
       nominal centre by whatever that mounting left, so where ``names`` hold the ball's
       offset (``SETUP``), the first mounting's is the parameter and each later one has its
       own, a translation of the table frame on that mounting's poses alone;
+    - each later nest's offset (``nest_mountings``), a translation of the tool frame on its
+      poses alone: the first nest's is in the location errors (or the model's ``NEST``);
     - the side of each run that holds an axis, where the data do not record it (no
       ``A_side`` column): for every reversal (backlash) effect among ``names`` and every run
       that never moves its axis, the effect's value there, ± half the reversal as the
@@ -41,37 +54,38 @@ class FreeConstants:
 
     They are fitted beside the parameters (projected out, ``projector``: the estimates and
     their uncertainties are the joint fit's), so a path that holds an axis leaves no offset
-    of its own behind, where it would look like drift, and a ball mounted again leaves none
-    that would look like an error motion."""
+    of its own behind, where it would look like drift, and a ball or nest mounted again
+    leaves none that would look like an error motion."""
 
     def __init__(self, machine: Machine, names: Iterable[str], poses: Poses):
         self.machine, self.poses = machine, poses
-        run, mount = runs(poses), mountings(poses.ball)
+        run = runs(poses)
         effects = list(dict.fromkeys(effect_of_param(machine, n) for n in names))
         self.labels: list[tuple[str, str]] = []            # (axis, path) per start side
-        # a block per run, or per later mounting with the runs in it (runs never cross a
-        # change of the ball's position): the projector's blocks must be orthogonal
-        per_block: dict[tuple[int, int], list[tuple[Effect, np.ndarray]]] = {}
+        entries: list[tuple[Effect, np.ndarray]] = []
         for e in effects:
             if e.basis.kind != "r":
                 continue
             j = machine.index(e.carrier)
             at = np.flatnonzero(np.isnan(poses.side[:, j]) & (motion_direction(poses.q[:, j], run) == 0))
             for idx in np.split(at, np.flatnonzero(np.diff(run[at])) + 1) if at.size else ():
-                k = int(mount[idx[0]])
-                per_block.setdefault((k, 0 if k else int(run[idx[0]])), []).append((e, idx))
+                entries.append((e, idx))
                 self.labels.append((e.carrier, str(poses.path[idx[0]])))
         ball = [e for e in effects if e.name in SETUP and e.basis.kind == "const"]
-        self.mounts = int(mount[-1]) if ball and len(poses) else 0
-        for k in range(1, self.mounts + 1):
-            idx = np.flatnonzero(mount == k)
-            per_block.setdefault((k, 0), []).extend((e, idx) for e in ball)
-        self.blocks = [per_block[k] for k in sorted(per_block)]
+        nest = [effect_of_param(machine, n) for n in NEST]
+        self.mounts = self.nests = 0
+        if len(poses):
+            mount, held = mountings(poses.ball), nest_mountings(machine, poses.nest)
+            self.mounts = int(mount[-1]) if ball else 0
+            self.nests = int(held[-1])
+            entries += [(e, np.flatnonzero(mount == k)) for k in range(1, self.mounts + 1) for e in ball]
+            entries += [(e, np.flatnonzero(held == k)) for k in range(1, self.nests + 1) for e in nest]
         self.ball = len(ball)
+        self.blocks = _disjoint(entries, len(poses))
 
     @property
     def count(self) -> int:
-        return len(self.labels) + self.ball * self.mounts
+        return len(self.labels) + self.ball * self.mounts + len(NEST) * self.nests
 
     def projector(self, whiten=None) -> _Projector | None:
         """Removes from readings (n, 3) or their Jacobian (n, 3, p) what the constants would
@@ -83,17 +97,53 @@ class FreeConstants:
         for block in self.blocks:
             idx = np.unique(np.concatenate([i for _, i in block]))
             gains, made = SlotGains(self.machine, self.poses.take(idx)), {}
-            G = np.stack([effect_gains(gains, e, np.isin(idx, i).astype(float), made)[:, :, 0]
-                          for e, i in block], axis=-1)                  # (m, 3, c)
-            Gw = G if whiten is None else whiten(idx, G)
-            Q, R = np.linalg.qr(Gw.reshape(-1, G.shape[-1]))
-            parts.append((idx, G, Q, R))
+            masks = [np.isin(idx, i).astype(float) for _, i in block]
+            # a constant's column is its gain on its own rows only (a block holds the rows of
+            # every constant that shares one with another)
+            G = np.stack([effect_gains(gains, e, mask, made)[:, :, 0] * mask[:, None]
+                          for (e, _), mask in zip(block, masks, strict=True)], axis=-1)     # (m, 3, c)
+            Gw = (G if whiten is None else whiten(idx, G)).reshape(-1, G.shape[-1])
+            parts.append((idx, G, span(Gw), Gw))
         return _Projector(parts)
+
+
+def _disjoint(entries: list[tuple[Effect, np.ndarray]], n: int) -> list[list[tuple[Effect, np.ndarray]]]:
+    """The constants (effect, rows) in blocks that share no row, those that share one in the
+    same block (the projector takes block after block: only blocks apart make that the
+    projection onto all the constants' columns at once), in the order of their first rows."""
+    owner, groups = np.full(n, -1), {}
+    for k, (_, idx) in enumerate(entries):
+        joined = [k]
+        for g in np.unique(owner[idx]).tolist():
+            if g >= 0:
+                joined += groups.pop(g)
+        groups[k] = joined
+        for m in joined:
+            owner[entries[m][1]] = k
+    blocks = [[entries[m] for m in sorted(members)] for members in groups.values()]
+    return sorted(blocks, key=lambda block: min(int(i[0]) for _, i in block))
+
+
+def span(G: np.ndarray) -> np.ndarray:
+    """Orthonormal columns spanning G's (m, c) column space, to its rank: a ball's and a
+    nest's offsets taken up together may coincide in part on a path (a translation along
+    the only axis that turns is the same in the table's frame and the machine's), and a
+    QR factor would keep a column of rounding for each such direction."""
+    U, s, _ = np.linalg.svd(G, full_matrices=False)
+    return U[:, s > RANK_TOL * s[0]] if s.size and s[0] > 0 else G[:, :0]
+
+
+RANK_TOL = 1e-9        # a singular value below this share of the largest is rounding
 
 
 class _Projector:
     def __init__(self, parts):
         self.parts = parts
+
+    @property
+    def rank(self) -> int:
+        """How many independent constants: what the fit's degrees of freedom lose."""
+        return sum(Q.shape[1] for _, _, Q, _ in self.parts)
 
     def __call__(self, v: np.ndarray) -> np.ndarray:
         """``v`` (n, 3, …) whitened, less its part along the constants' columns (in place)."""
@@ -116,8 +166,8 @@ class _Projector:
         form, where readings are weighted): what the joint fit leaves."""
         out = raw.copy()
         white = raw if white is None else white
-        for idx, G, Q, R in self.parts:
-            c = np.linalg.lstsq(R, Q.T @ white[idx].ravel(), rcond=None)[0]
+        for idx, G, _, Gw in self.parts:
+            c = np.linalg.lstsq(Gw, white[idx].ravel(), rcond=RANK_TOL)[0]     # G c is unique, c need not be
             out[idx] -= G @ c
         return out
 

@@ -19,7 +19,7 @@ from ..errors import CompgenError
 from ..model.effects import canonical, effect_of_param, location_model
 from ..model.kinematics import Model, Poses, runs
 from ..model.machine import Machine
-from ..model.sides import SETUP, FreeConstants, both_sides, mountings
+from ..model.sides import NEST, SETUP, FreeConstants, both_sides, mountings, nest_mountings
 from ..units import parse_quantity, shown
 from .noise import ar1, ar1_covariance
 from .results import DataRef, Estimate, FitResult
@@ -68,7 +68,8 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
     # (``FreeConstants``), projected out of readings and Jacobian alike: the joint fit's
     # estimates without carrying the constants (Frisch–Waugh–Lovell)
     starts = FreeConstants(machine, names, poses)
-    project = starts.projector(weights.apply_at) or (lambda v: v)
+    constants = starts.projector(weights.apply_at)
+    project = constants or (lambda v: v)
     _enough(poses, readings, p, starts)
 
     buffer = np.empty((len(names), len(poses), 3))
@@ -103,7 +104,7 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
     raw, r, normal = at
     if starts.count:            # the residual the joint fit leaves, constants fitted
         raw = project.remove(raw, weights.apply(raw))
-    dof = readings - p - starts.count
+    dof = readings - p - (constants.rank if constants is not None else 0)
     sigma2 = float(r @ r) / dof
     # readings taken close together (an R-test sampling at 100 Hz, or a set-up drifting
     # between poses) are not independent: the noise's AR(1) ρ of each run and direction
@@ -144,14 +145,16 @@ def _enough(poses: Poses, readings: int, p: int, free: FreeConstants | None = No
     """Refuse readings too few for ``p`` parameters (and the ``free`` constants beside them)."""
     count = free.count if free is not None else 0
     if readings <= p + count:
-        sides, offsets = (len(free.labels), free.count - len(free.labels)) if count else (0, 0)
-        parts = [f"{sides} start sides" if sides else "",
-                 f"{offsets} offsets of the ball's {free.mounts} later mountings" if offsets else ""]
+        ball, nest = (free.ball * free.mounts, len(NEST) * free.nests) if count else (0, 0)
+        parts = [f"{len(free.labels)} start sides" if count and free.labels else "",
+                 f"{ball} offsets of the ball's {free.mounts} later mountings" if ball else "",
+                 f"{nest} offsets of {free.nests} later nests" if nest else ""]
+        moves = [w for w, k in (("ball position (bx, by, bz)", ball), ("nest length", nest)) if k]
         raise CompgenError(
             f"{len(poses)} poses give {readings} readings for {p} parameters"
             + (f" and {count} free constants ({', '.join(filter(None, parts))})" if count else ""),
-            hint="the ball's position changes between readings, and each change is a mounting with an "
-                 "offset of its own: give every row of one mounting the same bx, by, bz" if offsets
+            hint=f"each change of the {' or '.join(moves)} between readings is a mounting with an offset "
+                 f"of its own: give the rows of one mounting one {' and one '.join(moves)}" if moves
             else "measure more poses: a K4 path has 241")
 
 
@@ -373,7 +376,7 @@ def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.
     for i, extra in enumerate(advisor.candidates):    # the ball as it stands first, then moved
         if measured is not None and not all(both_sides(machine, a, measured, extra.poses) for a in reversals):
             continue
-        cond = condition(_with_extra(m, free, J, measured, extra.poses))
+        cond = condition(_with_extra(machine, m, free, J, measured, extra.poses))
         if cond < COND_LIMIT:
             options.append((round(cond), i, extra.label, extra))
     runnable = advisor.runnable([o[-1] for o in sorted(options, key=lambda o: o[:2])], most=3)
@@ -384,29 +387,36 @@ def _separating_measurements(machine: Machine, m: Model, free: list[int], J: np.
     return f"adding one of these measurements would: {best}"
 
 
-def _with_extra(m: Model, free: list[int], J: np.ndarray, measured: Poses | None, poses: Poses) -> np.ndarray:
+def _with_extra(machine: Machine, m: Model, free: list[int], J: np.ndarray, measured: Poses | None,
+                poses: Poses) -> np.ndarray:
     """The free parameters' Jacobian ``J`` (3n, p) of the ``measured`` poses, as the fit
-    takes it (each later mounting's ball offset projected out, ``FreeConstants``), with the
-    rows of an extra measurement at ``poses`` as the fit would add them: where the ball must
-    be mounted again for it (another position), less what that mounting's own offset fits;
-    at the ball's last position, in the mounting it continues (a later one: its rows and the
-    data's of that mounting less their one offset, together)."""
+    takes it (each later mounting's and nest's offset projected out, ``FreeConstants``),
+    with the rows of an extra measurement at ``poses`` as the fit would add them: where the
+    ball must be mounted again for it (another position), or another nest put in, less what
+    that mounting's own offset fits. One that continues a later mounting or nest shares its
+    offset with the data's rows of it: then the whole is taken again, unweighted, as the
+    fit would take the data with it."""
     jac = m.jacobian(poses)
-    at = [m.names.index(n) for n in SETUP if n in m.names]
     rows = jac[:, :, free].reshape(-1, len(free))
-    if not at:                          # no ball offset in the model: none per mounting either
-        return np.vstack([J, rows])
-    offset = jac[:, :, at].reshape(-1, len(at))
-    mount = mountings(measured.ball) if measured is not None else None
-    if mount is not None and np.array_equal(poses.ball[0], measured.ball[-1]):
-        if not mount[-1]:               # the first mounting: its offset is the parameters'
-            return np.vstack([J, rows])
-        start = int(np.flatnonzero(mount == mount[-1])[0])
-        last = m.jacobian(measured.take(slice(start, None)))
-        rows = np.vstack([last[:, :, free].reshape(-1, len(free)), rows])
-        offset = np.vstack([last[:, :, at].reshape(-1, len(at)), offset])
-        J = J[:3 * start]
-    return np.vstack([J, rows - offset @ np.linalg.lstsq(offset, rows, rcond=None)[0]])
+    at = [m.names.index(n) for n in SETUP if n in m.names]
+    if measured is None:                # where the ball stood is not known: mounted again
+        same_ball, same_nest, later = False, True, (0, 0)
+    else:
+        same_ball = np.array_equal(poses.ball[0], measured.ball[-1])
+        same_nest = not nest_mountings(machine, np.r_[measured.nest[-1], poses.nest[0]])[-1]
+        later = (int(mountings(measured.ball)[-1]) if at else 0,
+                 int(nest_mountings(machine, measured.nest)[-1]))
+    if (same_ball and later[0]) or (same_nest and later[1]):
+        both = Poses.concat([measured, poses])
+        whole = m.jacobian(both)
+        project = FreeConstants(machine, m.names, both).projector()
+        return (whole if project is None else project(whole))[:, :, free].reshape(-1, len(free))
+    offsets = ([jac[:, :, at].reshape(-1, len(at))] if at and not same_ball else []) \
+        + ([Model(machine, NEST).jacobian(poses).reshape(-1, len(NEST))] if not same_nest else [])
+    if offsets:
+        B = np.hstack(offsets)
+        rows = rows - B @ np.linalg.lstsq(B, rows, rcond=None)[0]
+    return np.vstack([J, rows])
 
 
 def residual_stats(poses: Poses, r: np.ndarray, dof: int, rho: np.ndarray | None = None) -> dict:
@@ -453,23 +463,28 @@ def parse_fixed(machine: Machine, items: Sequence[str]) -> dict[str, float]:
     return out
 
 
-def mountings_note(names: Sequence[str], *poses: Poses) -> str | None:
-    """What a fit of ``names`` to data with the ball mounted more than once reports of the
-    ball's offset, said once, or None: the first mounting's (``SETUP``); each later one has
-    an offset of its own, fitted beside the parameters and not reported
-    (``sides.FreeConstants``)."""
+def mountings_note(machine: Machine, names: Sequence[str], *poses: Poses) -> str | None:
+    """What a fit of ``names`` reports of a ball mounted more than once, or of more than one
+    nest, said once, or None: the first ball mounting's offset (``SETUP``); each later
+    mounting and each later nest has an offset of its own, fitted beside the parameters and
+    not reported (``sides.FreeConstants``)."""
     held = [n for n in SETUP if n in names]
-    if not held:
-        return None
     ball = np.concatenate([p.ball for p in poses])
-    mount = mountings(ball)
-    if not len(mount) or mount[-1] == 0:
+    if not len(ball):
+        return None
+    mount = mountings(ball)[-1] if held else 0
+    nests = nest_mountings(machine, np.concatenate([p.nest for p in poses]))[-1]
+    said = []
+    if mount:
+        said.append(f"the ball at {mount + 1} mountings (a new one wherever its position changes)")
+    if nests:
+        said.append(f"{nests + 1} nests (a new one wherever the nest's length changes)")
+    if not said:
         return None
     first = ball[0]
-    return (f"these data hold the ball at {mount[-1] + 1} mountings (a new one wherever its position "
-            f"changes): each later mounting's ball offset is fitted beside the parameters and not "
-            f"reported; {' '.join(held)} are the first's (ball at {first[0]:g}, {first[1]:g}, "
-            f"{first[2]:g} mm)")
+    return (f"these data hold {' and '.join(said)}: each later one's offset is fitted beside the "
+            "parameters and not reported" + (f"; {' '.join(held)} are the first's (ball at {first[0]:g}, "
+                                             f"{first[1]:g}, {first[2]:g} mm)" if mount else ""))
 
 
 def beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
@@ -477,27 +492,27 @@ def beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
     what an edit leaves, or a check measures, whatever the ball's offset at each of its
     mountings (``mountings``: a ball moved is a ball mounted again).
 
-    ``identify``'s fit of XOW YOW ZOW, one for each mounting, in closed form: the ball's
+    ``identify``'s fit of XOW YOW ZOW (each later mounting's, and each later nest's offset,
+    projected out as ``identify`` does: ``FreeConstants``), in closed form: the ball's
     offset is a translation at the workpiece chain's end, turned by the frames before it,
     so the readings are exactly linear in it and one walk of the chains gives the answer
     Gauss–Newton converges to in three (1.65 → 1.07 s at 723 000 readings, most of it now
     the AR(1) ρ̂); the same refusal, the same residual figures and ρ̂
     (``tests/test_compare.py``)."""
-    mount = mountings(poses.ball)
-    count = len(SETUP) * (int(mount[-1]) + 1 if len(mount) else 1)
+    free = FreeConstants(machine, SETUP, poses)       # each later ball's and nest's offset
     _enough(poses, reading.size, len(SETUP))
-    _enough(poses, reading.size, len(SETUP), FreeConstants(machine, SETUP, poses))     # as identify refuses
+    _enough(poses, reading.size, len(SETUP), free)     # as identify refuses
     m = Model(machine, list(SETUP))
     dev, J = m.linearise(poses)
     raw = reading - dev
-    basis = np.zeros((len(poses), 3, count))
-    # each mounting's rows are one stretch of the readings (``mountings``)
-    ends = [*np.flatnonzero(np.diff(mount)) + 1, len(poses)]
-    for k, (a, b) in enumerate(zip([0, *ends[:-1]], ends, strict=True)):
-        normal = Normal(np.moveaxis(J[a:b], 2, 0).reshape(len(SETUP), -1).T)
-        check_identifiable(machine, m, list(range(len(SETUP))), normal, poses.take(slice(a, b)))
-        raw[a:b] -= (normal.J @ normal.solve(raw[a:b].ravel())).reshape(-1, 3)
-        basis[a:b, :, 3 * k:3 * k + 3] = normal.basis().reshape(b - a, 3, -1)
-    rho = ar1(raw, runs(poses), (basis.reshape(3 * len(poses), -1),))
-    stats = residual_stats(poses, raw, reading.size - count, rho)
+    project = free.projector()
+    if project is not None:
+        J, raw = project(J), project(raw)
+    normal = Normal(np.moveaxis(J, 2, 0).reshape(len(SETUP), -1).T)
+    check_identifiable(machine, m, list(range(len(SETUP))), normal, poses)
+    raw = raw - (normal.J @ normal.solve(raw.ravel())).reshape(-1, 3)
+    taken = (*((project.basis(len(poses)),) if project is not None else ()), normal.basis())
+    rho = ar1(raw, runs(poses), taken)
+    dof = reading.size - len(SETUP) - (project.rank if project is not None else 0)
+    stats = residual_stats(poses, raw, dof, rho)
     return {"rms_um": stats["rms_um"], "per_path": stats["per_path"]}

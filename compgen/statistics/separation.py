@@ -11,10 +11,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..model.effects import Effect
+from ..model.effects import Effect, effect_of_param
 from ..model.kinematics import Poses
 from ..model.machine import Machine
-from ..model.sides import SETUP, both_sides, mountings
+from ..model.sides import NEST, SETUP, both_sides, mountings, nest_mountings, span
 from .ranking import Row
 from .signature import r_factor
 from .significance import COND_LIMIT, condition
@@ -34,11 +34,14 @@ class Measured:
     of the stacked R factors, and the R factor of a subset of columns is that of the same
     columns of R, so each effect is judged on small blocks.
 
-    Each mounting of the ball after the first carries its own offset (``mountings``), as
-    the fit has it: its rows' columns are taken less what that offset would fit (R of
-    [offset | columns], its lower right block), so a position the ball is moved to shows
-    only what no re-mounting could. An extra measurement at the ball's last position
-    continues that mounting; elsewhere it is a mounting of its own."""
+    Each mounting of the ball after the first, and each nest after the first, carries an
+    offset of its own (``FreeConstants``), as the fit has it: R is that of the columns less
+    what those offsets fit (R of [offsets | columns], its lower right block), so a position
+    the ball is moved to, or a longer nest, shows only what no mounting could. The offsets'
+    columns are laid out once for all the data: a stretch of readings with one ball
+    position and one nest is walked alone, and its R factor's columns are put where its
+    offsets are. An extra measurement at the ball's last position continues that mounting,
+    with the last nest's length that nest; elsewhere it is a mounting of its own."""
 
     def __init__(self, machine: Machine, model_effects: Sequence[Effect], poses: Poses,
                  effects: Sequence[Effect]):
@@ -50,40 +53,77 @@ class Measured:
         for e in effects:
             self.cols[e.name] = list(range(at, at + len(e.params)))
             at += len(e.params)
-        # the ball's offset as the model holds it: each later mounting has as many columns
+        # the ball's offset as the model holds it (each later mounting has as many columns),
+        # and the nest's (three columns for each later nest)
         self.ball = [e for e in model_effects if e.name in SETUP and e.basis.kind == "const"]
-        mount = mountings(poses.ball)
-        ends = [*np.flatnonzero(np.diff(mount)) + 1, len(poses)]
-        parts = [self._mounted(poses.take(slice(a, b)), k > 0)
-                 for k, (a, b) in enumerate(zip([0, *ends[:-1]], ends, strict=True))]
-        # the last mounting's whole R (its own offset's columns first, if any), which an
-        # extra measurement at the ball's last position continues
-        self.last, self.last_own = parts[-1], len(parts) > 1
-        self.before = [self._reduced(R) for R in parts[:-1]]
-        self.R = self._stacked([*self.before, self._reduced(self.last)])
+        self.nest = [effect_of_param(machine, n) for n in NEST]
+        mount = mountings(poses.ball) if self.ball else np.zeros(len(poses), int)
+        held = nest_mountings(machine, poses.nest)
+        self.last = (int(mount[-1]), int(held[-1]))         # the mounting and nest an extra may continue
+        self.layout = {("ball", k): None for k in range(1, self.last[0] + 1)}
+        self.layout.update({("nest", k): None for k in range(1, self.last[1] + 1)})
+        self._place()
+        ends = [*np.flatnonzero(np.diff(mount) | np.diff(held)) + 1, len(poses)]
+        self.full = self._stacked([self._walked(poses.take(slice(a, b)), (int(mount[a]), int(held[a])))
+                                   for a, b in zip([0, *ends[:-1]], ends, strict=True)])
+        self.R = self._reduced(self.full, self.width)
         self._with: dict[str, np.ndarray] = {}
 
-    def _mounted(self, poses: Poses, later: bool, start: np.ndarray | None = None) -> np.ndarray:
-        """R of the columns on ``poses``, a later mounting's own offset's columns first."""
-        return r_factor(self.machine, poses, [*self.ball, *self.effects] if later else self.effects, start)
+    def _place(self) -> None:
+        """Each later mounting's and nest's offset columns, in order, before the effects'."""
+        at = 0
+        for key in self.layout:
+            self.layout[key] = at
+            at += len(self.ball if key[0] == "ball" else self.nest)
+        self.width = at
 
-    def _reduced(self, R: np.ndarray) -> np.ndarray:
-        """R of the columns less what a mounting's own offset fits: R's lower right block."""
-        k = R.shape[1] - sum(len(e.params) for e in self.effects)
-        return R[k:, k:]
+    def _walked(self, poses: Poses, where: tuple[int, int]) -> np.ndarray:
+        """R of one stretch's columns (one ball mounting, one nest), its offsets' columns
+        put where ``layout`` has them, zero in the other offsets'."""
+        offsets = ((("ball", where[0]), self.ball), (("nest", where[1]), self.nest))
+        lead = [(key, group) for key, group in offsets if key[1] > 0 and group]
+        R = r_factor(self.machine, poses, [*(e for _, group in lead for e in group), *self.effects])
+        out = np.zeros((R.shape[0], self.width + R.shape[1] - sum(len(g) for _, g in lead)))
+        k = 0
+        for key, group in lead:
+            out[:, self.layout[key]:self.layout[key] + len(group)] = R[:, k:k + len(group)]
+            k += len(group)
+        out[:, self.width:] = R[:, k:]
+        return out
+
+    @staticmethod
+    def _reduced(R: np.ndarray, width: int) -> np.ndarray:
+        """R of the columns after the first ``width`` (the offsets') less what those fit: their
+        span to its rank (a ball's and a nest's offsets may coincide in part on a path), where
+        the lower right block of R would carry a column of rounding for each such direction."""
+        if not width:
+            return R
+        U = span(R[:, :width])
+        rest = R[:, width:]
+        return np.linalg.qr(rest - U @ (U.T @ rest), mode="r")
 
     @staticmethod
     def _stacked(parts: Sequence[np.ndarray]) -> np.ndarray:
         return parts[0] if len(parts) == 1 else np.linalg.qr(np.vstack(parts), mode="r")
 
     def with_extra(self, extra: Measurement) -> np.ndarray:
-        """R with ``extra``'s poses measured too (a program holds the ball where it is put)."""
+        """R with ``extra``'s poses measured too (a program holds one ball position and one
+        nest throughout)."""
         if extra.label not in self._with:
-            if np.array_equal(extra.poses.ball[0], self.poses.ball[-1]):     # the ball left as it is
-                parts = [*self.before, self._reduced(self._mounted(extra.poses, self.last_own, self.last))]
-            else:
-                parts = [self.R, self._reduced(self._mounted(extra.poses, True))]
-            self._with[extra.label] = self._stacked(parts)
+            same_ball = np.array_equal(extra.poses.ball[0], self.poses.ball[-1])
+            length = nest_mountings(self.machine, np.r_[self.poses.nest[-1], extra.poses.nest[0]])
+            where = (self.last[0] if same_ball else self.last[0] + 1,
+                     self.last[1] if length[-1] == 0 else self.last[1] + 1)
+            before, width = dict(self.layout), self.width
+            new = [key for key in (("ball", where[0]), ("nest", where[1]))
+                   if key[1] > 0 and key not in self.layout and (key[0] == "nest" or self.ball)]
+            self.layout.update({key: None for key in new})
+            self._place()
+            added = self.width - width
+            full = np.hstack([self.full[:, :width], np.zeros((len(self.full), added)), self.full[:, width:]])
+            R = self._stacked([full, self._walked(extra.poses, where)])
+            self._with[extra.label] = self._reduced(R, self.width)
+            self.layout, self.width = before, width
         return self._with[extra.label]
 
 
