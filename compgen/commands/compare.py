@@ -68,8 +68,8 @@ class Comparison:
     def report(self) -> str:
         ctl = controller(self.controller).words
         lines = [f"compgen compare: after the kinematics edit for {ctl}",
-                 "  misfit beyond the ball's set-up (XOW YOW ZOW fitted out at each mounting of the ball), "
-                 "µm:", "",
+                 "  misfit beyond the set-up (the ball's offset XOW YOW ZOW fitted out at each of its "
+                 "mountings, and each later nest's), µm:", "",
                  f"  {'path':<8}{'before RMS':>11}{'predicted':>11}"
                  + (f"{'measured':>10}" if self.measured_post else "")
                  + "   predicted range dX dY dZ" + ("   tolerance" if self.measured_post else "")]
