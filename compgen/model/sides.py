@@ -125,10 +125,11 @@ def _disjoint(entries: list[tuple[Effect, np.ndarray]], n: int) -> list[list[tup
 
 
 def span(G: np.ndarray) -> np.ndarray:
-    """Orthonormal columns spanning G's (m, c) column space, to its rank: a ball's and a
-    nest's offsets taken up together may coincide in part on a path (a translation along
-    the only axis that turns is the same in the table's frame and the machine's), and a
-    QR factor would keep a column of rounding for each such direction."""
+    """Orthonormal columns spanning G's (m, c) column space, to its rank (singular values
+    above ``RANK_TOL`` of the largest), where columns may coincide in part: a ball's and a
+    nest's offsets on a path where one axis turns (a translation along it is the same in the
+    table's frame and the machine's), two of diagnose's effects. A QR factor would keep a
+    column of rounding for each such direction."""
     U, s, _ = np.linalg.svd(G, full_matrices=False)
     return U[:, s > RANK_TOL * s[0]] if s.size and s[0] > 0 else G[:, :0]
 

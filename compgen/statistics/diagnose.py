@@ -26,7 +26,7 @@ from ..errors import CompgenError
 from ..model.effects import Effect, catalogue, effect_of_param, resolve
 from ..model.kinematics import Model, Poses, runs
 from ..model.machine import Machine
-from ..model.sides import FreeConstants, same_pose
+from ..model.sides import FreeConstants, same_pose, span
 from ..units import shown
 from .device import DeviceCandidate, device_candidates, device_columns
 from .noise import Repeats, ar1, outliers, repeats
@@ -400,11 +400,11 @@ def _told_beside(devices: list[DeviceCandidate], beside: np.ndarray, res: _Resid
     three machine effects X was significant, where the other two took it back."""
     cols = {e: noise.white(c)[:, None] for e, c in device_columns(res.pred, res.rtest).items()}
     rw = noise.residual(res.r)
-    machine = _orthonormal(noise.off(beside))     # rivals among second effects are one column
+    machine = span(noise.off(beside))     # rivals among second effects are one column
 
     def tested(names, added):
         """These gains' p-values beside the model and ``added``, Bonferroni over them."""
-        basis = _orthonormal(noise.off(added))
+        basis = span(noise.off(added))
         prods = {e: _beside(cols[e], noise, basis, rw) for e in names}
         return p_beside(noise.Q, basis, rw, prods) if prods else {}
 
@@ -418,7 +418,7 @@ def _told_beside(devices: list[DeviceCandidate], beside: np.ndarray, res: _Resid
     joint = [lead, *(e for e in seen if e != lead and p[e] < alpha)] if lead else []
 
     # every gain's column off the model beside the machine's effects (off it already:
-    # ``_orthonormal`` of what was), and their products with each other and the residual,
+    # ``span`` of what was), and their products with each other and the residual,
     # once: each joint fit below is then a few columns' normal equations
     names = list(cols)
     C = np.column_stack([*(noise.off(cols[e]) for e in names), machine])
@@ -441,13 +441,6 @@ def _told_beside(devices: list[DeviceCandidate], beside: np.ndarray, res: _Resid
             told[d.effect] = together([*joint, d.effect])[d.effect]
     return [replace(d, value=told[d.effect][0], std=told[d.effect][1], p_value=p.get(d.effect, d.p_value),
                     significant=d.effect in joint) for d in devices]
-
-
-def _orthonormal(M: np.ndarray) -> np.ndarray:
-    """Orthonormal columns spanning M's (those of M's singular values above 1e-9 of its
-    largest): what a p-value beside M takes, where two of M's effects nearly coincide."""
-    U, s, _ = np.linalg.svd(M, full_matrices=False)
-    return U[:, s > 1e-9 * s.max()] if s.size and s.max() > 0 else M[:, :0]
 
 
 def _columns(machine: Machine, res: _Residual, made: dict[str, np.ndarray], name: str) -> np.ndarray:
