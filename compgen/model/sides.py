@@ -38,6 +38,14 @@ def nest_mountings(machine: Machine, nest: np.ndarray) -> np.ndarray:
     return np.cumsum(np.r_[False, length[1:] != length[:-1]])
 
 
+def continues(machine: Machine, before: Poses, after: Poses) -> tuple[bool, bool]:
+    """Whether a measurement at ``after`` continues the last mounting of the ball and the
+    last nest of ``before``, as ``mountings`` and ``nest_mountings`` number them: the ball
+    where it was left, a nest of the same length."""
+    return (bool(np.array_equal(after.ball[0], before.ball[-1])),
+            not nest_mountings(machine, np.r_[before.nest[-1], after.nest[0]])[-1])
+
+
 class FreeConstants:
     """The constants a fit carries beside its parameters and never reports:
 

@@ -19,7 +19,7 @@ from ..errors import CompgenError
 from ..model.effects import canonical, effect_of_param, location_model
 from ..model.kinematics import Model, Poses, runs
 from ..model.machine import Machine
-from ..model.sides import NEST, SETUP, FreeConstants, both_sides, mountings, nest_mountings
+from ..model.sides import NEST, SETUP, FreeConstants, both_sides, continues, mountings, nest_mountings
 from ..units import parse_quantity, shown
 from .noise import ar1, ar1_covariance
 from .results import DataRef, Estimate, FitResult
@@ -402,8 +402,7 @@ def _with_extra(machine: Machine, m: Model, free: list[int], J: np.ndarray, meas
     if measured is None:                # where the ball stood is not known: mounted again
         same_ball, same_nest, later = False, True, (0, 0)
     else:
-        same_ball = np.array_equal(poses.ball[0], measured.ball[-1])
-        same_nest = not nest_mountings(machine, np.r_[measured.nest[-1], poses.nest[0]])[-1]
+        same_ball, same_nest = continues(machine, measured, poses)
         later = (int(mountings(measured.ball)[-1]) if at else 0,
                  int(nest_mountings(machine, measured.nest)[-1]))
     if (same_ball and later[0]) or (same_nest and later[1]):

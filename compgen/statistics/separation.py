@@ -14,7 +14,7 @@ import numpy as np
 from ..model.effects import Effect, effect_of_param
 from ..model.kinematics import Poses
 from ..model.machine import Machine
-from ..model.sides import NEST, SETUP, both_sides, mountings, nest_mountings, span
+from ..model.sides import NEST, SETUP, both_sides, continues, mountings, nest_mountings, span
 from .ranking import Row
 from .signature import r_factor
 from .significance import COND_LIMIT, condition
@@ -60,35 +60,36 @@ class Measured:
         mount = mountings(poses.ball) if self.ball else np.zeros(len(poses), int)
         held = nest_mountings(machine, poses.nest)
         self.last = (int(mount[-1]), int(held[-1]))         # the mounting and nest an extra may continue
-        self.layout = {("ball", k): None for k in range(1, self.last[0] + 1)}
-        self.layout.update({("nest", k): None for k in range(1, self.last[1] + 1)})
-        self._place()
+        self.layout, self.width = self._laid_out([*(("ball", k) for k in range(1, self.last[0] + 1)),
+                                                  *(("nest", k) for k in range(1, self.last[1] + 1))])
         ends = [*np.flatnonzero(np.diff(mount) | np.diff(held)) + 1, len(poses)]
-        self.full = self._stacked([self._walked(poses.take(slice(a, b)), (int(mount[a]), int(held[a])))
+        self.full = self._stacked([self._walked(poses.take(slice(a, b)), (int(mount[a]), int(held[a])),
+                                                self.layout, self.width)
                                    for a, b in zip([0, *ends[:-1]], ends, strict=True)])
         self.R = self._reduced(self.full, self.width)
         self._with: dict[str, np.ndarray] = {}
 
-    def _place(self) -> None:
-        """Each later mounting's and nest's offset columns, in order, before the effects'."""
-        at = 0
-        for key in self.layout:
-            self.layout[key] = at
+    def _laid_out(self, keys) -> tuple[dict[tuple[str, int], int], int]:
+        """Where each later mounting's and nest's offset columns start, in the order of
+        ``keys``, before the effects', and how many there are."""
+        layout, at = {}, 0
+        for key in keys:
+            layout[key] = at
             at += len(self.ball if key[0] == "ball" else self.nest)
-        self.width = at
+        return layout, at
 
-    def _walked(self, poses: Poses, where: tuple[int, int]) -> np.ndarray:
+    def _walked(self, poses: Poses, where: tuple[int, int], layout: dict, width: int) -> np.ndarray:
         """R of one stretch's columns (one ball mounting, one nest), its offsets' columns
         put where ``layout`` has them, zero in the other offsets'."""
         offsets = ((("ball", where[0]), self.ball), (("nest", where[1]), self.nest))
         lead = [(key, group) for key, group in offsets if key[1] > 0 and group]
         R = r_factor(self.machine, poses, [*(e for _, group in lead for e in group), *self.effects])
-        out = np.zeros((R.shape[0], self.width + R.shape[1] - sum(len(g) for _, g in lead)))
+        out = np.zeros((R.shape[0], width + R.shape[1] - sum(len(g) for _, g in lead)))
         k = 0
         for key, group in lead:
-            out[:, self.layout[key]:self.layout[key] + len(group)] = R[:, k:k + len(group)]
+            out[:, layout[key]:layout[key] + len(group)] = R[:, k:k + len(group)]
             k += len(group)
-        out[:, self.width:] = R[:, k:]
+        out[:, width:] = R[:, k:]
         return out
 
     @staticmethod
@@ -108,22 +109,18 @@ class Measured:
 
     def with_extra(self, extra: Measurement) -> np.ndarray:
         """R with ``extra``'s poses measured too (a program holds one ball position and one
-        nest throughout)."""
+        nest throughout): its new mounting's and nest's offsets laid out after the data's,
+        zero on the data's rows."""
         if extra.label not in self._with:
-            same_ball = np.array_equal(extra.poses.ball[0], self.poses.ball[-1])
-            length = nest_mountings(self.machine, np.r_[self.poses.nest[-1], extra.poses.nest[0]])
-            where = (self.last[0] if same_ball else self.last[0] + 1,
-                     self.last[1] if length[-1] == 0 else self.last[1] + 1)
-            before, width = dict(self.layout), self.width
+            same = continues(self.machine, self.poses, extra.poses)
+            where = tuple(k if kept else k + 1 for k, kept in zip(self.last, same, strict=True))
             new = [key for key in (("ball", where[0]), ("nest", where[1]))
                    if key[1] > 0 and key not in self.layout and (key[0] == "nest" or self.ball)]
-            self.layout.update({key: None for key in new})
-            self._place()
-            added = self.width - width
-            full = np.hstack([self.full[:, :width], np.zeros((len(self.full), added)), self.full[:, width:]])
-            R = self._stacked([full, self._walked(extra.poses, where)])
-            self._with[extra.label] = self._reduced(R, self.width)
-            self.layout, self.width = before, width
+            layout, width = self._laid_out([*self.layout, *new])
+            full = np.hstack([self.full[:, :self.width], np.zeros((len(self.full), width - self.width)),
+                              self.full[:, self.width:]])
+            R = self._stacked([full, self._walked(extra.poses, where, layout, width)])
+            self._with[extra.label] = self._reduced(R, width)
         return self._with[extra.label]
 
 
