@@ -310,7 +310,8 @@ def test_a_nest_of_another_length_has_an_offset_of_its_own_and_coinciding_offset
     every later mounting's and nest's offset columns (from the model here), though they
     share rows across stretches, and counts the independent ones: on K1, where only C
     turns, a table-frame Z and a machine-frame Z are one translation, so the last
-    stretch's six offsets span five dimensions, the rank the explicit design has."""
+    stretch's six offsets span five dimensions, the rank the explicit design has. Only a
+    model holding the ball's offset brings these constants."""
     from compgen.model.kinematics import Model
     from compgen.model.paths import generate
     from compgen.model.sides import NEST, SETUP, FreeConstants, nest_mountings
@@ -327,6 +328,10 @@ def test_a_nest_of_another_length_has_an_offset_of_its_own_and_coinciding_offset
     assert held.tolist() == [0] * n[2] + [1] * len(parts[2]) + [2] * len(parts[3])
     constants = FreeConstants(seed_machine, [*SETUP, "YOC"], p)
     assert constants.count == 3 * 2 + 3 * 2 and len(constants.blocks) == 2     # the last stretch apart
+    # a set-up's constants come with the set-up's parameters: a reversal candidate alone (its
+    # sides recorded here) or a model without the ball's offset brings none
+    assert FreeConstants(seed_machine, ["EAA:r1"], p).count == 0
+    assert FreeConstants(seed_machine, ["YOC"], p).count == 0
     project = constants.projector()
     ball, nest = Model(seed_machine, SETUP).jacobian(p), Model(seed_machine, NEST).jacobian(p)
     rows = lambda a, b: (np.arange(len(p)) >= n[a]) & (np.arange(len(p)) < n[b])     # noqa: E731

@@ -54,7 +54,9 @@ class FreeConstants:
       offset (``SETUP``), the first mounting's is the parameter and each later one has its
       own, a translation of the table frame on that mounting's poses alone;
     - each later nest's offset (``nest_mountings``), a translation of the tool frame on its
-      poses alone: the first nest's is in the location errors (or the model's ``NEST``);
+      poses alone, where ``names`` hold the ball's offset too (a set-up's constants come with
+      the set-up's parameters: a candidate's start sides alone bring none): the first
+      nest's is in the location errors (or the model's ``NEST``);
     - the side of each run that holds an axis, where the data do not record it (no
       ``A_side`` column): for every reversal (backlash) effect among ``names`` and every run
       that never moves its axis, the effect's value there, ± half the reversal as the
@@ -80,12 +82,11 @@ class FreeConstants:
                 entries.append((e, idx))
                 self.labels.append((e.carrier, str(poses.path[idx[0]])))
         ball = [e for e in effects if e.name in SETUP and e.basis.kind == "const"]
-        nest = [effect_of_param(machine, n) for n in NEST]
+        nest = [effect_of_param(machine, n) for n in NEST] if ball else []
         self.mounts = self.nests = 0
-        if len(poses):
+        if ball and len(poses):
             mount, held = mountings(poses.ball), nest_mountings(machine, poses.nest)
-            self.mounts = int(mount[-1]) if ball else 0
-            self.nests = int(held[-1])
+            self.mounts, self.nests = int(mount[-1]), int(held[-1])
             entries += [(e, np.flatnonzero(mount == k)) for k in range(1, self.mounts + 1) for e in ball]
             entries += [(e, np.flatnonzero(held == k)) for k in range(1, self.nests + 1) for e in nest]
         self.ball = len(ball)

@@ -403,15 +403,15 @@ def _with_extra(machine: Machine, m: Model, free: list[int], J: np.ndarray, meas
         same_ball, same_nest, later = False, True, (0, 0)
     else:
         same_ball, same_nest = continues(machine, measured, poses)
-        later = (int(mountings(measured.ball)[-1]) if at else 0,
-                 int(nest_mountings(machine, measured.nest)[-1]))
+        later = (int(mountings(measured.ball)[-1]), int(nest_mountings(machine, measured.nest)[-1])) \
+            if at else (0, 0)                # no ball offset in the model: no set-up's constants
     if (same_ball and later[0]) or (same_nest and later[1]):
         both = Poses.concat([measured, poses])
         whole = m.jacobian(both)
         project = FreeConstants(machine, m.names, both).projector()
         return (whole if project is None else project(whole))[:, :, free].reshape(-1, len(free))
     offsets = ([jac[:, :, at].reshape(-1, len(at))] if at and not same_ball else []) \
-        + ([Model(machine, NEST).jacobian(poses).reshape(-1, len(NEST))] if not same_nest else [])
+        + ([Model(machine, NEST).jacobian(poses).reshape(-1, len(NEST))] if at and not same_nest else [])
     if offsets:
         B = np.hstack(offsets)
         rows = rows - B @ np.linalg.lstsq(B, rows, rcond=None)[0]
@@ -469,9 +469,9 @@ def mountings_note(machine: Machine, names: Sequence[str], *poses: Poses) -> str
     not reported (``sides.FreeConstants``)."""
     held = [n for n in SETUP if n in names]
     ball = np.concatenate([p.ball for p in poses])
-    if not len(ball):
+    if not held or not len(ball):       # no ball offset in the model: no set-up's constants
         return None
-    mount = mountings(ball)[-1] if held else 0
+    mount = mountings(ball)[-1]
     nests = nest_mountings(machine, np.concatenate([p.nest for p in poses]))[-1]
     said = []
     if mount:

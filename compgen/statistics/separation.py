@@ -56,9 +56,10 @@ class Measured:
         # the ball's offset as the model holds it (each later mounting has as many columns),
         # and the nest's (three columns for each later nest)
         self.ball = [e for e in model_effects if e.name in SETUP and e.basis.kind == "const"]
-        self.nest = [effect_of_param(machine, n) for n in NEST]
-        mount = mountings(poses.ball) if self.ball else np.zeros(len(poses), int)
-        held = nest_mountings(machine, poses.nest)
+        self.nest = [effect_of_param(machine, n) for n in NEST] if self.ball else []
+        none = np.zeros(len(poses), int)           # no ball offset in the model: no set-up's constants
+        mount = mountings(poses.ball) if self.ball else none
+        held = nest_mountings(machine, poses.nest) if self.ball else none
         self.last = (int(mount[-1]), int(held[-1]))         # the mounting and nest an extra may continue
         self.layout, self.width = self._laid_out([*(("ball", k) for k in range(1, self.last[0] + 1)),
                                                   *(("nest", k) for k in range(1, self.last[1] + 1))])
@@ -115,7 +116,7 @@ class Measured:
             same = continues(self.machine, self.poses, extra.poses)
             where = tuple(k if kept else k + 1 for k, kept in zip(self.last, same, strict=True))
             new = [key for key in (("ball", where[0]), ("nest", where[1]))
-                   if key[1] > 0 and key not in self.layout and (key[0] == "nest" or self.ball)]
+                   if key[1] > 0 and key not in self.layout and self.ball]
             layout, width = self._laid_out([*self.layout, *new])
             full = np.hstack([self.full[:, :self.width], np.zeros((len(self.full), width - self.width)),
                               self.full[:, self.width:]])
