@@ -123,11 +123,13 @@ def run(*args):
     return result.exit_code, result.stdout, result.stderr
 
 
-def rs274(folder: Path, program: str, tool: str, coordinates: str = "XYZAC"):
+def rs274(folder: Path, program: str, tool: str, coordinates: str = "XYZAC", params: dict | None = None):
     """LinuxCNC's stand-alone interpreter on ``folder/program`` with the one-line tool table
     ``tool``: its canonical calls (canon.txt) and the finished run. Its own HOME: rs274
     re-creates $HOME/.tool.mmap, the tool table a running LinuxCNC reads from, and emptied it
-    under the LinuxCNC test running beside it ("Requested tool 7 not found in the tool table")."""
+    under the LinuxCNC test running beside it ("Requested tool 7 not found in the tool table").
+    ``params``: the parameter file's values (number -> value), as a shop left them (the
+    persistent work offsets: G92 #5211-, G54 #5221-)."""
     import shutil
     import subprocess
     if shutil.which("rs274") is None:
@@ -135,7 +137,7 @@ def rs274(folder: Path, program: str, tool: str, coordinates: str = "XYZAC"):
             pytest.fail("rs274 (LinuxCNC's interpreter) is required here")
         pytest.skip("rs274 is not installed (apt-get install linuxcnc-uspace)")
     (folder / "t.tbl").write_text(tool + "\n")
-    (folder / "v.var").write_text("")
+    (folder / "v.var").write_text("".join(f"{n}\t{v}\n" for n, v in sorted((params or {}).items())))
     (folder / "rs.ini").write_text("[RS274NGC]\nPARAMETER_FILE = v.var\n[TRAJ]\nLINEAR_UNITS = mm\n"
                                    f"ANGULAR_UNITS = degree\nCOORDINATES = {coordinates}\n")
     done = subprocess.run(["rs274", "-i", "rs.ini", "-t", "t.tbl", "-v", "v.var", "-g", program,

@@ -45,6 +45,9 @@ class Toy(Controller):
     def blocks(self, text, mode=None):
         return LinuxCNC().blocks(text, mode)
 
+    def program_context(self, machine):       # LinuxCNC's template, with what it needs
+        return LinuxCNC().program_context(machine)
+
     def main_suffix(self, current):
         return ".toy"
 

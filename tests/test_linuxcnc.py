@@ -631,3 +631,22 @@ def test_a_longer_nest_program_runs_under_maxkins_with_the_pin_it_asks_for(tmp_p
     q = np.concatenate([got[:, :3], np.radians(rotary)], axis=1)
     at = Poses(q, poses.ball, poses.t, poses.path, nest=poses.nest)
     assert np.abs(Model(machine, []).relative(at, np.zeros(0))).max() < 1e-5
+
+
+def test_a_5axiskins_program_stops_on_w_or_a_work_offset_left_set(tmp_path):
+    """What a shop leaves on the real LinuxCNC (5axiskins: a fork head on a bridge mill with
+    W, which the module adds to its pivot): W jogged to -5 (here by the line before the
+    program) and, in the parameter file, G54 touched off on the table centre. The program
+    stops at its guard before any move of its own, and the operator's message says what is
+    set (rs274 alone cannot show W: it has no W axis)."""
+    machine = load_machine(on_linuxcnc(tmp_path, FORK_MACHINE))
+    poses = generate(machine, ["K4"]).take(np.arange(0, 121, 12))
+    program = measure_program(machine, poses, "K4", "linuxcnc", "tcpm", "HEAD", "0", "d").files[".ngc"]
+    ini = _head_configuration(tmp_path / "w", machine, "270.0")
+    joints, said = _run_head(ini, machine, "G0 W-5\n" + program)
+    assert said and "W stands at W-5.000000 mm" in said[-1], said
+    assert joints and all(r.line <= 1 for r in joints), joints                # no move of the program ran
+    (ini.parent / "sim.var").write_text("5221\t100.0\n5222\t50.0\n")
+    joints, said = _run_head(ini, machine, program)
+    assert said and "G54 holds X100.000000 Y50.000000" in said[-1], said
+    assert joints and all(r.line == 0 for r in joints), joints

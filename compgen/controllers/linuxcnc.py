@@ -87,6 +87,7 @@ class HeadModule:
     head: tuple[tuple[str, str], ...]     # the head's axes, base outwards: (name, direction)
     table: tuple[tuple[str, str], ...]    # the table's rotary axes
     sense: tuple[tuple[str, int], ...]    # ±1 a rotary axis: its turn in the module's words
+    notes: tuple[str, ...] = ()           # what its programs' headers must tell the operator
 
 
 # Debian's 2.9: maxkins.c (a B head over a C table, always active; X Y Z in the table frame)
@@ -95,7 +96,13 @@ class HeadModule:
 # other way too, 5axiskins its head's C as the tool turns.
 HEAD_MODULES = (
     HeadModule("maxkins", "a B head over a C table", "always active",
-               head=(("B", "y"),), table=(("C", "z"),), sense=(("B", -1), ("C", -1))),
+               head=(("B", "y"),), table=(("C", "z"),), sense=(("B", -1), ("C", -1)),
+               # 2.9's maxkins.c forward kinematics copies the joints (its inverse turns them):
+               # switched to joint mode (Manual after an abort), X and Y jump by up to 2 L sin B
+               notes=("After an abort or an E-stop: maxkins' forward kinematics do not invert its inverse,",
+                      "and Manual mode then moves X and Y by up to 2 x pivot-length x sin B. Stay in MDI:",
+                      "take the nest off the ball along its axis, go up to the safe height, G0 B0 C0;",
+                      "only then switch to Manual.")),
     HeadModule("5axiskins", "a C head carrying a B fork",
                "at motion.switchkins-type 0 (its start without sparm=identityfirst)",
                head=(("C", "z"), ("B", "y")), table=(), sense=(("B", -1), ("C", 1))),
@@ -419,10 +426,76 @@ def read_comp(text: str, machine: Machine, where: str) -> CompTable:
 
 
 POSITION = {"5420": "X", "5421": "Y", "5422": "Z", "5423": "A", "5424": "B", "5425": "C"}
+LINELEN = 255                # rs274ngc.hh: a longer line is "Command too long"
+
+# LinuxCNC applies G92 (and G52, which shares its parameters) and the active G5x offset to a
+# program's positions before its kinematics: they do not turn with the table, so under TCP
+# a G54 touched off on the table centre moves every tilted pose (224 mm at K4's worst), and
+# under identity kinematics it moves every position. compgen's positions are the kinematics'
+# own coordinates: the programs select G54 and stop, naming what is set, unless G92's and
+# G54's offsets (and its XY rotation) are zero on the axes the program moves or the
+# kinematics read (W: the head modules lengthen the pivot by it). An abort's text expands
+# #n as a DEBUG does (rs274, tried); it holds no ";", which compgen's reader takes for a
+# comment. Each line stays within LINELEN.
+OFFSET_WORDS = {"G92": (5211, "XYZABCW"), "G54": (5221, "XYZABCWR")}
+PARAM_OF = dict(zip("XYZABCUVWR", range(10), strict=True))
+
+
+def _guard(label: str, params: list[tuple[str, int]], then: str) -> list[str]:
+    cond = " OR ".join(f"[ABS[#{n}] GT 0.0001]" for _, n in params)
+    said = " ".join(f"{w}#{n}" for w, n in params)
+    return [f"o{label} if [{cond}]", f"(abort, {then.format(said=said)})", f"o{label} endif"]
+
+
+def offsets_guard() -> list[str]:
+    """The blocks that stop a LinuxCNC program, before any motion, unless the work offsets
+    it runs under are zero (compgen's reader takes exactly these)."""
+    (g92, w92), (g54, w54) = OFFSET_WORDS["G92"], OFFSET_WORDS["G54"]
+    return ["G54 ; LinuxCNC applies G54 and G92 before its kinematics: both must be zero",
+            *_guard("102", [(w, g92 + PARAM_OF[w]) for w in w92],
+                    "G92 offsets are set: {said}. G92.1 clears them"),
+            *_guard("103", [(w, g54 + PARAM_OF[w]) for w in w54],
+                    "G54 holds {said}. compgen's positions need it zero: G10 L2 P1 with each of those 0")]
+
+
+def head_guard(module: str) -> list[str]:
+    """A head module's own state, read after the length is off and motion has settled: W
+    (both modules compute with pivot-length + W) and, for 5axiskins, the switchable type
+    that runs it (0, as LinuxCNC's bridgemill sample's M428 sets it)."""
+    lines = _guard("104", [("W", 5428)], f"W stands at {{said}} mm. {module} lengthens the pivot by W: "
+                                         "bring W to 0 first")
+    if module == "5axiskins":
+        lines += ["o105 if [#<_hal[motion.switchkins-type]> NE 0]",
+                  "(abort, motion.switchkins-type is #<_hal[motion.switchkins-type]>. 5axiskins runs at 0: M428 "
+                  "in LinuxCNC's bridgemill sample)", "o105 endif"]
+    return lines
 
 
 HEAD_PROGRAM = re.compile(r"^; LinuxCNC: (\S+kins) \(", re.MULTILINE)    # a program written for a head
 PIN_GUARD = re.compile(r"o101 if \[ABS\[#<_hal\[(\S+kins)\.pivot-length\]> - (\S+)\] GT (\S+)\]")
+
+
+STATE_GUARDS = {"offsets": {"": offsets_guard()},
+                "head state": {m.module: head_guard(m.module) for m in HEAD_MODULES}}
+
+
+def _state_guard(lines: list[str], k: int) -> tuple[str, str, int] | None:
+    """Whether line ``k`` starts one of compgen's state guards (the work offsets, a head
+    module's W and type): its kind, module and last line; a line that starts one but does
+    not go on as compgen writes it is refused (a guard edited is no guard)."""
+    got = [ln.split(";", 1)[0].strip() for ln in lines[k - 1:]]
+    starts = False
+    for kind, guards in STATE_GUARDS.items():
+        for module, guard in guards.items():
+            want = [g.split(";", 1)[0].strip() for g in guard]
+            if got[:len(want)] == want:
+                return kind, module, k + len(want) - 1
+            starts |= got[0] == want[0]
+    if starts or re.match(r"o10[2-5] ", got[0]):
+        raise CompgenError(f"line {k}: {lines[k - 1].strip()!r} is not compgen's guard (of the work offsets "
+                           "or a head module's state: each condition, its abort and endif)",
+                           hint="give the program compgen wrote")
+    return None
 
 
 def program_blocks(text: str, tcp: bool, head: str | None = None) -> list[Block]:
@@ -433,14 +506,17 @@ def program_blocks(text: str, tcp: bool, head: str | None = None) -> list[Block]
     and the program's guard stops unless the pin holds the length (a ``pin`` block)."""
     out, modal, feed = [Block(0, "kinematics", "tcp", on=tcp)], None, None
     lines = text.splitlines()
-    guard_at = None
+    guard_at, read_to = None, 0
     for k, raw in enumerate(lines, start=1):
         b = raw.split(";", 1)[0].strip()
-        if guard_at is not None and k in (guard_at + 1, guard_at + 2):
-            continue                        # the guard's abort and endif, read with it
+        if guard_at is not None and k in (guard_at + 1, guard_at + 2) or k <= read_to:
+            continue                        # a guard's abort and endif, read with it
         if not b:
             continue
-        if b == "G21 G90 G94 G17":          # G21: millimetres
+        if (state := _state_guard(lines, k)) is not None:
+            kind, module, read_to = state
+            out.append(Block(k, raw, kind, name=module))
+        elif b == "G21 G90 G94 G17":          # G21: millimetres
             out.append(Block(k, raw, "units"))
         elif b in ("M2", "M30"):
             out.append(Block(k, raw, "end"))
@@ -491,6 +567,18 @@ def program_blocks(text: str, tcp: bool, head: str | None = None) -> list[Block]
             move, modal, feed = gcode_move(raw, k, b.split(), modal, feed, "G53")
             out.append(move)
     return out
+
+
+def _guarded_first(blocks: list[Block], kind: str, name: str, what: str, before=("tool", "move")) -> None:
+    """Refuse a program that does not ``what`` (a state guard of ``kind`` for ``name``)
+    before the first block of a kind in ``before`` (its tool change, its first move)."""
+    first = next((b for b in blocks if b.kind in (*before, kind)), None)
+    if first is None or first.kind != kind or first.name != name:
+        at = f"line {first.line}: " if first is not None and first.kind != kind else ""
+        said = " and ".join({"tool": "its tool change", "move": "any move"}[k] for k in before)
+        raise CompgenError(f"{at}a LinuxCNC program must {what} before {said}",
+                           hint=f"write it again with {me()} measure-program (or probe-program) for this "
+                                "machine file")
 
 
 class LinuxCNC(Controller):
@@ -565,11 +653,13 @@ class LinuxCNC(Controller):
     def program_context(self, machine: Machine) -> dict:
         head = head_module(machine)
         mirrored = head and [a for a, v in head[0].sense if v == -1]
-        return {"head": head and {"module": head[0].module, "what": head[0].what, "active": head[0].active,
+        return {"offsets_guard": offsets_guard(),
+                "head": head and {"module": head[0].module, "what": head[0].what, "active": head[0].active,
                                   "pivot": f"{head[1]:.4f}", "within": f"{pin_tolerance(machine):.4f}",
                                   "mirrored": " and ".join(mirrored)
                                   + (" are" if len(mirrored) > 1 else " is"),
-                                  "them": "them" if len(mirrored) > 1 else "it"}}
+                                  "them": "them" if len(mirrored) > 1 else "it",
+                                  "guard": head_guard(head[0].module), "notes": head[0].notes}}
 
     def check(self, machine: Machine, blocks: list[Block], probe=None):
         """The motion check, where a head module's program checks the module's pin: compgen
@@ -588,6 +678,13 @@ class LinuxCNC(Controller):
             raise CompgenError(f"line {pins[0].line}: the program was written for a head on "
                                f"{next(iter(pins[0].target)).split('.')[0]}, which this machine file is not",
                                hint="check it against the machine file it was written for")
+        _guarded_first(blocks, "offsets", "", "stop unless G54's and G92's offsets are zero (LinuxCNC applies "
+                       "them before its kinematics: an offset left set moves every pose)")
+        if head:
+            _guarded_first(blocks, "head state", head[0].module, f"stop unless W is at 0 ({head[0].module} "
+                           "lengthens the pivot by W)" + (" and motion.switchkins-type is 0"
+                                                          if head[0].module == "5axiskins" else ""),
+                           before=("move",))
         return super().check(machine, blocks, probe)
 
     def blocks(self, text: str, mode: str | None = None) -> list[Block]:

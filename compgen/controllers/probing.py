@@ -135,7 +135,8 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
     text = render(f"{ctl.family}/probe{ctl.program_ext}.j2", name=name, header=header, steps=steps,
                   tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}", probe_feed=f"{setup.probe_feed:g}",
                   work_offset=machine.program.work_offset, log_name=log_name, log_head=log_head,
-                  rotary=names, number=ctl.number, retract=ctl.number(setup.approach, 4), ball=ball)
+                  rotary=names, number=ctl.number, retract=ctl.number(setup.approach, 4), ball=ball,
+                  **ctl.program_context(machine))
     named = {**ctl.message_files(name, [s["note"] for s in steps if s["kind"] == "stop"]),
              **ctl.log_files(log_head, list(count), names, ball)}
     files = {ctl.program_ext: text, ".poses.csv": pose_list(machine, poses), **named}

@@ -45,7 +45,8 @@ class Block:
 
     line: int
     text: str
-    kind: str                    # move, dwell, tcp, tool, length, require, stop, units, offset, end
+    kind: str                    # move, dwell, tcp, tool, length, require, stop, units, offset, end;
+                                 # a control's own guards (offsets, head state, pin, sync)
     target: dict = field(default_factory=dict)
     rapid: bool = False
     feed: float | None = None    # mm/min (deg/min for a block that only turns)
