@@ -71,7 +71,8 @@ def test_every_linuxcnc_program_stops_at_its_guard_on_what_a_shop_left_set(linux
         for state, (params, says) in LEFT_SET.items():
             canon, done = rs274(tmp_path, name, tool, params=params)
             assert _motion(canon) == [], (kind, state)       # neither the tool change nor a move ran
-            assert done.returncode != 0 and says in done.stdout + done.stderr, (kind, state, done.stderr[-400:])
+            said = done.stdout + done.stderr
+            assert done.returncode != 0 and says in said, (kind, state, said[-400:])
         # G55 left active (its own offsets set): the program selects G54 and runs as on a clean control
         canon, done = rs274(tmp_path, name, tool, params={5220: 2.0, 5241: 100.0, 5242: -40.0})
         assert done.returncode == 0 and _motion(canon) == moves, kind
@@ -88,7 +89,8 @@ def test_a_head_modules_program_stops_on_a_work_offset_before_its_tool_change(tm
     text = (tmp_path / "K4.ngc").read_text()
     module = linuxcnc.head_module(load_machine(path))[0].module
     w_guard = linuxcnc.head_guard(module)
-    assert "\n".join(w_guard) in text and text.index("M66 E0 L0") < text.index(w_guard[0]) < text.index("\nG0 ")
+    assert "\n".join(w_guard) in text
+    assert text.index("M66 E0 L0") < text.index(w_guard[0]) < text.index("\nG0 ")
     if module == "maxkins":          # how to leave an abort: its forward kinematics do not invert
         assert "Stay in MDI:" in text and "G0 B0 C0;\n; only then switch to Manual." in text
 
@@ -109,7 +111,8 @@ def _without(text: str, first: str) -> str:
     (lambda t: t.replace("G92.1 clears them)\no102 endif", "G92.1 clears them)\nG0 X0\no102 endif"),
      "is not compgen's guard"),
 ])
-def test_check_program_refuses_a_linuxcnc_program_without_the_offsets_guard(linuxcnc_seed, tmp_path, edit, says):
+def test_check_program_refuses_a_linuxcnc_program_without_the_offsets_guard(linuxcnc_seed, tmp_path, edit,
+                                                                            says):
     code, _, err = run("measure-program", "--machine", linuxcnc_seed, "--path", "K2", "--mode", "tcpm",
                        "-o", tmp_path / "RT.ngc")
     assert code == 0, err
@@ -134,5 +137,6 @@ def test_the_guard_moves_after_the_tool_change_is_refused(linuxcnc_seed, tmp_pat
 
 
 def test_every_line_of_the_guards_fits_linuxcncs_line_length():
-    for line in [*linuxcnc.offsets_guard(), *(g for m in linuxcnc.HEAD_MODULES for g in linuxcnc.head_guard(m.module))]:
+    heads = [g for m in linuxcnc.HEAD_MODULES for g in linuxcnc.head_guard(m.module)]
+    for line in [*linuxcnc.offsets_guard(), *heads]:
         assert len(line) <= linuxcnc.LINELEN, line

@@ -466,8 +466,8 @@ def head_guard(module: str) -> list[str]:
                                          "bring W to 0 first")
     if module == "5axiskins":
         lines += ["o105 if [#<_hal[motion.switchkins-type]> NE 0]",
-                  "(abort, motion.switchkins-type is #<_hal[motion.switchkins-type]>. 5axiskins runs at 0: M428 "
-                  "in LinuxCNC's bridgemill sample)", "o105 endif"]
+                  "(abort, motion.switchkins-type is #<_hal[motion.switchkins-type]>. 5axiskins runs at 0: "
+                  "M428 in LinuxCNC's bridgemill sample)", "o105 endif"]
     return lines
 
 
@@ -678,8 +678,8 @@ class LinuxCNC(Controller):
             raise CompgenError(f"line {pins[0].line}: the program was written for a head on "
                                f"{next(iter(pins[0].target)).split('.')[0]}, which this machine file is not",
                                hint="check it against the machine file it was written for")
-        _guarded_first(blocks, "offsets", "", "stop unless G54's and G92's offsets are zero (LinuxCNC applies "
-                       "them before its kinematics: an offset left set moves every pose)")
+        _guarded_first(blocks, "offsets", "", "stop unless G54's and G92's offsets are zero (LinuxCNC "
+                       "applies them before its kinematics: an offset left set moves every pose)")
         if head:
             _guarded_first(blocks, "head state", head[0].module, f"stop unless W is at 0 ({head[0].module} "
                            "lengthens the pivot by W)" + (" and motion.switchkins-type is 0"
