@@ -1071,3 +1071,62 @@ def test_a_trend_shows_a_dash_where_a_fit_does_not_hold_the_parameter(year, tmp_
     value = added.parameters["EXC:h2c"]
     assert f"{value.value * 1e3:.2f} ± {value.std * 1e3:.2f}" in rows["2026-03-01"], text
     assert " - " not in rows["2026-03-01"]
+
+
+@pytest.mark.parametrize("kind", ["sqlite", "postgresql"])
+@pytest.mark.parametrize("dated", [True, False], ids=["date given", "no date"])
+def test_the_first_check_after_an_edit_recorded_with_its_fit_passes(tmp_path, monkeypatch, request, kind,
+                                                                     dated):
+    """kinematics --record records the fit and its edit at one instant (the --date given, or
+    now for both). The edit comes after its fit all the same: the calibration's machine
+    values do not hold its own correction, so the same machine measured after the edit was
+    loaded checks unchanged (before, every corrected location error failed by its whole
+    correction: ZOA -32.6 µm)."""
+    monkeypatch.chdir(tmp_path)
+    db = request.getfixturevalue("pg_db") if kind == "postgresql" else str(tmp_path / "h.sqlite")
+    if kind == "postgresql":
+        assert run("history", "init", "--db", db)[0] == 0
+    machine = load_machine("ac-trunnion-itnc530")
+    from conftest import TABLE4
+    pre = _session(machine, TABLE4, ["K4", "K1", "K2"], 31, "pre.csv")
+    (tmp_path / "pre.csv").write_text(format_rtest(machine, pre))
+    assert run("fit", "--machine", "ac-trunnion-itnc530", "pre.csv", "-o", "fit.json")[0] == 0
+    date = ["--date", "2026-11-02T08:00"] if dated else []
+    rc, out, err = run("kinematics", "--from", "fit.json", "-o", "EDIT.TAB", "--record", *date, "--db", db)
+    assert rc == 0 and "recorded the edit" in out, out + err
+    corrects = corrected_by(machine, load_fit("fit.json"), controller("itnc530"))
+    assert abs(corrects["ZOA"]) > 20 * UM                  # a correction the check would see
+    post = _session(machine, {n: v - corrects.get(n, 0.0) for n, v in TABLE4.items()}, ["K4"], 32, "post.csv")
+    (tmp_path / "post.csv").write_text(format_rtest(machine, post))
+    when = ["--date", "2026-11-03T08:00"] if dated else []
+    rc, out, err = run("check", "--machine", "ac-trunnion-itnc530", "post.csv", *when, "--db", db, "--json")
+    doc = json.loads(out)
+    worst = max(doc["changes"], key=lambda c: abs(c["change"]) / c["std"])
+    assert rc == 0 and doc["passed"], (worst, err)
+    assert all(abs(c["change"]) < 4 * c["std"] for c in doc["changes"]), worst
+
+
+def test_every_command_that_records_takes_the_serial(tmp_path, monkeypatch):
+    """fit --record and kinematics --record take --serial as history add does: the edit goes
+    to the machine its fit was recorded under, and no other machine is made."""
+    monkeypatch.chdir(tmp_path)
+    db = str(tmp_path / "h.sqlite")
+    machine = load_machine("ac-trunnion-itnc530")
+    from conftest import TABLE4
+    (tmp_path / "pre.csv").write_text(format_rtest(machine, _session(machine, TABLE4, ["K4", "K1", "K2"], 41,
+                                                                     "pre.csv")))
+    rc, out, err = run("fit", "--machine", "ac-trunnion-itnc530", "pre.csv", "-o", "fit.json", "--record",
+                       "--serial", "SN-7", "--date", "2026-11-02", "--db", db)
+    assert rc == 0 and "recorded as calibration" in out, out + err
+    rc, out, err = run("kinematics", "--from", "fit.json", "-o", "EDIT.TAB", "--record", "--serial", "SN-7",
+                       "--date", "2026-11-02T10:00", "--db", db)
+    assert rc == 0 and "recorded the edit" in out, out + err
+    with open_store(db) as store:
+        rows = store.rows("SELECT m.serial, COUNT(e.id) AS n FROM machines m LEFT JOIN edits e "
+                          "ON e.machine_id = m.id GROUP BY m.serial")
+    assert [(r["serial"], r["n"]) for r in rows] == [("SN-7", 1)], rows
+    rc, out, err = run("history", "show", "--machine", "ac-trunnion-itnc530", "--serial", "SN-7", "--db", db)
+    assert rc == 0 and " edit " in out, out + err
+    rc, out, err = run("kinematics", "--from", "fit.json", "-o", "E2.TAB", "--record", "--serial", "a b",
+                       "--db", db)
+    assert rc == 2 and "serial" in err and not (tmp_path / "E2.TAB").exists(), err

@@ -55,6 +55,7 @@ from .cli_common import (
     OUTPUT,
     PROBE_LENGTH,
     RECORD,
+    SERIAL,
     Group,
     encoded_like,
     named_paths,
@@ -189,10 +190,11 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
 @OUTPUT
 @FORCE
 @RECORD
+@SERIAL
 @DATE
 @DB
 def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, method, sign, output, force,
-            record, taken, db):
+            record, serial, taken, db):
     """Identify location errors (and any added effects) from R-test DATA files (CSV v1)."""
     if record:
         from ..history import taken_at
@@ -211,7 +213,7 @@ def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, met
     if suspicion:
         click.echo(f"compgen: warning: {suspicion}; kinematics will refuse this fit", err=True)
     if record and output != STDOUT:
-        _, _, fid, reasons = record_fit_file(db, output, None, None, taken, None, "", ())
+        _, _, fid, reasons = record_fit_file(db, output, None, serial, taken, None, "", ())
         click.echo(f"recorded as calibration #{fid}" + (": NOT accepted as a reference" if reasons else ""))
 
 
@@ -455,10 +457,11 @@ def check_program_cmd(machine_file, program, controller_name, ball, nest, mode, 
 @click.option("--beyond-limits", "beyond", is_flag=True,
               help="Write corrections larger than the machine file's [limits].")
 @RECORD
+@SERIAL
 @DATE
 @DB
-def kinematics_cmd(base, controller_name, current, measured, output, force, despite, beyond, record, taken,
-                   db):
+def kinematics_cmd(base, controller_name, current, measured, output, force, despite, beyond, record, serial,
+                   taken, db):
     """Write the controller's kinematics edit for a fit, with a sign check and a backup step."""
     fit = load_fit(base)
     machine, sets = reload(fit)
@@ -489,18 +492,18 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
         taken = taken_at(taken)      # before a store is opened (or made) for it
         store = history_store(db)
         try:
-            refuse_second_edit(store, fit, machine, written, None)
+            refuse_second_edit(store, fit, machine, written, serial)
         except Recorded as exc:
             recorded = exc.message
     write_all(files, force, inputs=(base, *current, *measured, machine.source, *(d.file for d in fit.data)))
     click.echo("\n".join(emitted.notes))
     click.echo("wrote " + ", ".join(str(p) for p in files))
     if record and recorded is None:
-        record_fit(store, fit, machine, taken=taken, verdict=reasons, exist_ok=True)
+        record_fit(store, fit, machine, serial=serial, taken=taken, verdict=reasons, exist_ok=True)
         try:
             eid = record_edit(store, fit, machine, ctl.name, corrected_by(machine, fit, ctl), written,
                               {p: sha256_of(read_text(p, "state file", ansi_ok=True)[1]) for p in current},
-                              taken=taken)
+                              serial=serial, taken=taken)
             recorded = f"recorded the edit as #{eid}"
         except Recorded as exc:
             recorded = exc.message

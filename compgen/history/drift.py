@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
@@ -72,6 +72,23 @@ class Trend:
     flags: list[Flag] = field(default_factory=list)
 
 
+def edit_key(edit: dict, fit_taken: Mapping[int, str]) -> tuple:
+    """Where an edit stands among fits keyed (taken, id, 0): after the fit it was written
+    from, even at that fit's very instant (an edit recorded with its fit, to the second:
+    counted before that fit, its correction would be in the calibration's machine values and
+    the first check after it would fail by the whole correction), and before any other fit
+    of its instant. ``fit_taken``: fit id → its instant."""
+    own = fit_taken.get(edit["fit_id"])
+    return (edit["taken"], edit["fit_id"] if own == edit["taken"] else 0, 1)
+
+
+def timeline(entries: Sequence[Entry], edits: Sequence[dict]) -> list[Entry | dict]:
+    """The fits and edits of a machine in the order they happened."""
+    at = {e.id: e.taken for e in entries}
+    return sorted([*entries, *edits], key=lambda x: (x.taken, x.id, 0) if isinstance(x, Entry)
+                  else edit_key(x, at))
+
+
 def _entries(store: Store, mid: int) -> tuple[list[Entry], list[dict]]:
     """The machine's fits in time order, each with the corrections written before it (one
     sweep through fits and edits together: linear in their number)."""
@@ -79,9 +96,9 @@ def _entries(store: Store, mid: int) -> tuple[list[Entry], list[dict]]:
                       "f.recorded_by, s.taken, s.device, s.machine_sha256 FROM fits f "
                       "JOIN sessions s ON s.id = f.session_id WHERE s.machine_id = ? "
                       "ORDER BY s.taken, f.id", (mid,))
-    edits = store.rows("SELECT e.id, e.taken, e.controller, e.corrects, e.written, e.loaded, f.marker, "
-                       "f.verdict FROM edits e JOIN fits f ON f.id = e.fit_id WHERE e.machine_id = ? "
-                       "ORDER BY e.taken, e.id", (mid,))
+    edits = store.rows("SELECT e.id, e.taken, e.controller, e.corrects, e.written, e.loaded, e.fit_id, "
+                       "f.marker, f.verdict FROM edits e JOIN fits f ON f.id = e.fit_id "
+                       "WHERE e.machine_id = ? ORDER BY e.taken, e.id", (mid,))
     for e in edits:
         e["corrects"] = json.loads(e["corrects"])
         e["written"], e["loaded"] = json.loads(e["written"]), json.loads(e["loaded"])
@@ -89,12 +106,13 @@ def _entries(store: Store, mid: int) -> tuple[list[Entry], list[dict]]:
     for f in fits:
         f["taken"] = utc(f["taken"])
     fits.sort(key=lambda f: (f["taken"], f["id"]))       # as instants: rows an older compgen kept
-    edits.sort(key=lambda e: (e["taken"], e["id"]))      # with their offsets order as time does
+    at = {f["id"]: f["taken"] for f in fits}
+    edits.sort(key=lambda e: (edit_key(e, at), e["id"]))      # with their offsets order as time does
     out = []
     corrected: dict[str, float] = {}
     done = 0
     for f in fits:
-        while done < len(edits) and edits[done]["taken"] <= f["taken"]:
+        while done < len(edits) and edit_key(edits[done], at) < (f["taken"], f["id"], 0):
             for n, v in edits[done]["corrects"].items():
                 corrected[n] = corrected.get(n, 0.0) + v
             done += 1

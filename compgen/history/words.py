@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ..errors import one_line
 from ..units import shown
-from .drift import Trend
+from .drift import Trend, timeline
 from .store import Store
 
 
@@ -44,9 +44,8 @@ def trend_text(t: Trend) -> str:
     serial = f" ({one_line(t.serial)})" if t.serial else ""
     lines = [f"{one_line(t.machine)}{serial}: machine values (measured + corrections "
              "written before), ± σ", f"{'date':<12}{'fit':<11}{'kind':<12}{head}"]
-    events = [(e.taken, 1, e) for e in t.entries] + [(d["taken"], 0, d) for d in t.edits]
-    for _, is_fit, e in sorted(events, key=lambda x: (x[0], x[1])):
-        if not is_fit:
+    for e in timeline(t.entries, t.edits):
+        if isinstance(e, dict):
             lines.append(f"{e['taken'][:10]:<12}{'edit':<11}{e['controller'][:11]:<12}corrects "
                          + ", ".join(map(one_line, e["corrects"])) + f" (from {one_line(e['marker'])}"
                          + (f", written despite the fit gate: {one_line(e['verdict'])})"
