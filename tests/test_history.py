@@ -636,6 +636,8 @@ def test_an_import_with_a_damaged_row_is_refused_and_leaves_the_store_as_it_was(
 @pytest.mark.parametrize("dsn, shown", [
     ("postgresql://u:p@ss@host/db", "postgresql://u:***@host/db"),
     ("POSTGRESQL://u:secret@h/db", "POSTGRESQL://u:***@h/db"),
+    ("postgresql+psycopg://u:secret@h/db", "postgresql+psycopg://u:***@h/db"),
+    ("postgresql:/u:secret@h/db", "postgresql:/u:***@h/db"),
     ("port=5432 dbname=x password=a@b", "port=5432 dbname=x password=***"),
     ("host=h password='a b\\' c' dbname=d", "host=h password=*** dbname=d"),
 ])
@@ -844,6 +846,10 @@ def test_a_machine_name_with_mathtext_and_a_writers_line_break_print_as_written(
 
 
 @pytest.mark.parametrize("dsn, secret", [("postgres://u:p@s3cr3t-Pw@127.0.0.1:1/db", "s3cr3t"),
+                                         ("postgresql+psycopg://u:s3cr3t-Pw@127.0.0.1:1/db", "s3cr3t"),
+                                         ("postgresql:/u:s3cr3t-Pw@127.0.0.1:1/db", "s3cr3t"),
+                                         ("postgresql:u:s3cr3t-Pw@127.0.0.1:1/db", "s3cr3t"),
+                                         ("mysql://u:s3cr3t-Pw@127.0.0.1:1/db", "s3cr3t"),
                                          ("postgres://u:p@Pw4@127.0.0.1:1/db", "Pw4"),   # short
                                          ("s3cr3t-Pw=x", "s3cr3t"),
                                          ("host=127.0.0.1 port=1 password = s3cr3t-Pw", "s3cr3t"),

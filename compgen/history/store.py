@@ -90,11 +90,16 @@ POSTGRES_MIGRATIONS: dict[int, tuple[str, ...]] = {
 }
 
 
+# a URL's scheme and the slashes after it, however many a user typed (postgresql:/, or a
+# driver's postgresql+psycopg://): what follows may hold a user's password
+SCHEME = re.compile(r"(?i)[a-z][a-z0-9+.-]*:/*")
+
+
 def redact(url: str) -> str:
     """The store as it may be shown: a DSN's password replaced by ***. In a URL the user
     information runs to the last "@" before the path (a password may hold "@"); in a
     keyword DSN the password is a word or a quoted string with backslash escapes."""
-    scheme = re.match(r"(?i)[a-z][a-z0-9+.-]*://", url)
+    scheme = SCHEME.match(url)
     if scheme:
         rest = url[scheme.end():]
         host_end = rest.find("/") if "/" in rest else len(rest)
@@ -120,7 +125,15 @@ def _is_postgres(url: str) -> bool:
     libpq does not read is refused rather than taken for a file (it may hold a password)."""
     if url.lower().startswith(("postgresql://", "postgres://")):
         return True
-    if "=" not in url or url.startswith("sqlite:///"):
+    if url.startswith("sqlite:///"):
+        return False
+    scheme = SCHEME.match(url)
+    if scheme and (scheme[0].endswith("/") or scheme[0][:-1].lower().startswith(("postgres", "sqlite"))):
+        # a URL compgen does not read, never a file name: shown without what may be a password
+        raise CompgenError(f"--db {redact(url)!r} is a URL compgen does not read",
+                           hint="give postgresql://user@host/db (or postgres://), a libpq keyword DSN "
+                                "(host=… dbname=…), a file, or sqlite:///PATH")
+    if "=" not in url:
         return False
     try:
         from psycopg import conninfo
@@ -315,7 +328,7 @@ def _scrub(text: str, url: str) -> str:
         secrets.add(conninfo.conninfo_to_dict(url).get("password") or "")
     except Exception:          # no psycopg, or a DSN libpq does not read: the patterns below
         pass
-    scheme = re.match(r"(?i)[a-z][a-z0-9+.-]*://", url)
+    scheme = SCHEME.match(url)
     if scheme:
         rest = url[scheme.end():]
         info = rest[:rest.rfind("@", 0, rest.find("/") if "/" in rest else len(rest))]
