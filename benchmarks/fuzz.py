@@ -61,6 +61,10 @@ class Case:
     unchanged: list[str] = field(default_factory=list)  # files byte for byte as given, after a refusal
 
 
+# the suffix of an edit's main file with a --current state, as -o must name it
+MAIN = {"itnc530": ".TAB", "tnc640": ".TAB", "sinumerik840d": ".MPF", "linuxcnc": ".hal"}
+
+
 def _csv_rows():
     lines = SESSION.read_text().splitlines()
     head = next(i for i, ln in enumerate(lines) if ln.startswith("path,"))
@@ -262,9 +266,10 @@ def current_cases() -> list[Case]:
 
     def case(name, ctl, text, expect="refuse"):
         assert expect == "accept" or ctl == "tnc640" or text not in (tab, carr_good, hal_good()), name
+        main = f"K{MAIN[ctl]}"          # the edit's main file as -o must name it
         out.append(Case("current", f"{name} [{ctl}]", {"current.txt": text},
                         ["kinematics", "--from", "{dir}/fit.json", "--controller", ctl, "--current",
-                         "{dir}/current.txt", "-o", "{dir}/K.out"], expect, ["K.out"]))
+                         "{dir}/current.txt", "-o", "{dir}/" + main], expect, [main]))
 
     case("a table for a TNC 640 (it keeps no *.TAB)", "tnc640", tab)
     for ctl in ("itnc530",):
@@ -416,7 +421,7 @@ def derived_cases(rng: random.Random, programs: dict[str, Path], per_surface: in
     out = []
     vectors = {7: -1.0, 8: 0.0, 9: 0.0, 10: 0.0, 11: 0.0, 12: -1.0}
     carr = "".join(f"$TC_CARR{k}[1]={vectors.get(k, 0.0)}\n" for k in (*vectors, 44, 45, 46, *range(55, 61)))
-    kin = ["kinematics", "--from", "{dir}/fit.json", "--current", "{dir}/state.txt", "-o", "{dir}/K.out"]
+    kin = ["kinematics", "--from", "{dir}/fit.json", "--current", "{dir}/state.txt", "-o"]
     surfaces = [
         ("csv", "data.csv", SESSION.read_text(),
          ["fit", "--machine", str(SEED), "{dir}/data.csv", "-o", "{dir}/out.json"], ["out.json"]),
@@ -426,9 +431,9 @@ def derived_cases(rng: random.Random, programs: dict[str, Path], per_surface: in
             f"P,{a:.1f},{c:.1f}\n" for a, c in zip(range(-60, 61, 15), range(0, 361, 45), strict=True)),
          ["predict", "--from", "{dir}/fit.json", "--poses", "{dir}/poses.csv", "-o", "{dir}/pred.csv"],
          ["pred.csv"]),
-        ("state", "state.txt", TAB.read_text(), [*kin[:3], "--controller", "itnc530", *kin[3:]], ["K.out"]),
-        ("state", "state.txt", carr, [*kin[:3], "--controller", "sinumerik840d", *kin[3:]], ["K.out"]),
-        ("state", "state.txt", hal_good(), [*kin[:3], "--controller", "linuxcnc", *kin[3:]], ["K.out"]),
+        *(("state", "state.txt", text, [*kin[:3], "--controller", ctl, *kin[3:], f"{{dir}}/K{MAIN[ctl]}"],
+           [f"K{MAIN[ctl]}"])
+          for ctl, text in (("itnc530", TAB.read_text()), ("sinumerik840d", carr), ("linuxcnc", hal_good()))),
     ]
     for ctl, path in programs.items():
         mode = ["--mode", "tcpm"] if ctl == "linuxcnc" else []
@@ -460,7 +465,7 @@ def derived_cases(rng: random.Random, programs: dict[str, Path], per_surface: in
         # and a head's program under LinuxCNC's maxkins (its pin guard)
         ("head-tab", "state.txt", HEAD_TAB,
          ["kinematics", "--from", str(wings["hfit"]), "--controller", "itnc530", "--current",
-          "{dir}/state.txt", "-o", "{dir}/K.out"], ["K.out"]),
+          "{dir}/state.txt", "-o", "{dir}/K.TAB"], ["K.TAB"]),
         ("head-program", "K4.ngc", wings["hprogram"].read_text(),
          ["check-program", "--machine", str(wings["maxkins"]), "--mode", "tcpm", "{dir}/K4.ngc"], []),
     ]
@@ -513,7 +518,7 @@ def wing_inputs(work: Path, compgen: list[str]) -> dict[str, Path]:
     run("simulate", "--machine", SEED, "--truth", truth, "--device", "probe", "--noise-um", "1",
         "-o", "probe.log")
     run("history", "add", FIT, "--db", "a.sqlite", "--date", "2026-03-01")
-    run("kinematics", "--from", FIT, "-o", "E.TAB", "--record", "--db", "a.sqlite", "--date", "2026-03-02",
+    run("kinematics", "--from", FIT, "-o", "E.txt", "--record", "--db", "a.sqlite", "--date", "2026-03-02",
         "--despite-gate")
     run("history", "export", "--db", "a.sqlite", "-o", "h.json")
     run("history", "init", "--db", "target.sqlite")

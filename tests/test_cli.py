@@ -484,13 +484,13 @@ def test_options_that_do_not_go_together_are_refused_before_anything_is_written(
 def test_the_report_lists_the_files_sent_to_the_control_with_their_checksums(hidden_session):
     import hashlib
     folder, _, fit = hidden_session
-    kin = folder / "KIN.TAB"
+    kin = folder / "KIN.txt"
     code, _, err = run("kinematics", "--from", fit, "-o", kin, "--despite-gate")
     assert code == 0, err
     code, _, err = run("report", "--from", fit, "--emitted", kin, "-o", folder / "r.html")
     assert code == 0, err
     html = (folder / "r.html").read_text()
-    assert "KIN.TAB" in html and hashlib.sha256(kin.read_bytes()).hexdigest() in html
+    assert "KIN.txt" in html and hashlib.sha256(kin.read_bytes()).hexdigest() in html
 
 
 def test_a_fit_with_nothing_to_fit_or_too_few_readings_is_refused(hidden_session):

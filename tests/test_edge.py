@@ -250,20 +250,20 @@ def test_outputs_never_replace_an_input_or_a_device(fitted, tmp_path):
 def test_outputs_are_written_whole_with_normal_permissions(fitted, tmp_path):
     old = os.umask(0o022)
     try:
-        code, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", tmp_path / "K.TAB")
+        code, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", tmp_path / "K.txt")
     finally:
         os.umask(old)
     assert code == 0, err
     for f in tmp_path.glob("K*"):
         assert f.stat().st_mode & 0o777 == 0o644, f
-    code, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", "/proc/K.TAB")
+    code, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", "/proc/K.txt")
     assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
     locked = tmp_path / "locked"
     locked.mkdir()
     locked.chmod(0o555)
     try:
         if not os.access(locked, os.W_OK):      # (root may write anywhere)
-            code, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", locked / "K.TAB")
+            code, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", locked / "K.txt")
             assert code == 2 and err.count("\n") == 1 and "not writable" in err, err
     finally:
         locked.chmod(0o755)
@@ -276,7 +276,7 @@ def test_outputs_are_written_whole_with_normal_permissions(fitted, tmp_path):
 def test_an_edit_is_one_transaction(fitted, tmp_path, monkeypatch, stop, code, said):
     """When its last file cannot be written, or the user stops compgen on the way, none of
     the edit's files is left, and a file it was to replace (with --force) is as it was."""
-    (tmp_path / "K.TAB").write_text("the user's")
+    (tmp_path / "K.txt").write_text("the user's")
     real = os.replace
     calls = []
 
@@ -286,10 +286,10 @@ def test_an_edit_is_one_transaction(fitted, tmp_path, monkeypatch, stop, code, s
             raise stop
         return real(src, dst)
     monkeypatch.setattr(os, "replace", failing)
-    got, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", tmp_path / "K.TAB", "--force")
+    got, _, err = run("kinematics", "--from", fitted / "fit2.json", "-o", tmp_path / "K.txt", "--force")
     assert got == code and said in err and "\n" not in err.strip(), err   # (after ^C, click ends its line)
-    assert [p.name for p in tmp_path.iterdir()] == ["K.TAB"]
-    assert (tmp_path / "K.TAB").read_text() == "the user's"
+    assert [p.name for p in tmp_path.iterdir()] == ["K.txt"]
+    assert (tmp_path / "K.txt").read_text() == "the user's"
 
 
 def _big_table(d):
@@ -337,7 +337,7 @@ def test_the_same_fit_is_not_applied_twice(fitted, tmp_path, controller):
                             for k in (*held, 44, 45, 46, *range(55, 61))))
     first = {"itnc530": ["--current", ROOT / "examples" / "itnc530-current.TAB"],
              "sinumerik840d": ["--current", carr]}.get(controller, [])
-    out = tmp_path / "K1.out"
+    out = tmp_path / f"K1{ctl.main_suffix('held' if first else None)}"
     code, _, err = run("kinematics", "--from", fitted / "fit2.json", "--controller", controller, *first,
                        "-o", out)
     assert code == 0, err

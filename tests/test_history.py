@@ -528,9 +528,9 @@ def test_an_edit_written_despite_the_gate_says_so_in_the_history(tmp_path, monke
     monkeypatch.chdir(tmp_path)
     assert run("fit", "--machine", "ac-trunnion-itnc530", ROOT / "examples" / "seed-session.csv",
                "-o", "fit.json")[0] == 0
-    args = ["kinematics", "--from", "fit.json", "-o", "EDIT.TAB", "--record", "--date", "2026-03-02"]
+    args = ["kinematics", "--from", "fit.json", "-o", "EDIT.txt", "--record", "--date", "2026-03-02"]
     rc, _, err = run(*args, "--force")
-    assert rc == 2 and "--despite-gate" in err and not (tmp_path / "EDIT.TAB").exists()
+    assert rc == 2 and "--despite-gate" in err and not (tmp_path / "EDIT.txt").exists()
     rc, out, err = run(*args, "--despite-gate")
     assert rc == 0 and "recorded the edit" in out, out + err
     rc, out, err = run("history", "trend", "--machine", "ac-trunnion-itnc530")
@@ -727,12 +727,12 @@ def test_the_same_edit_twice_is_one_row_and_a_second_edit_from_a_fit_is_refused_
     assert run("fit", "--machine", "ac-trunnion-itnc530", ROOT / "examples" / "seed-session.csv",
                "-o", "fit.json")[0] == 0
     args = ["kinematics", "--from", "fit.json", "--record", "--date", "2026-03-02", "--despite-gate"]
-    rc, out, err = run(*args, "-o", "EDIT.TAB")
+    rc, out, err = run(*args, "-o", "EDIT.txt")
     assert rc == 0 and "recorded the edit as #1" in out, out + err
-    rc, out, err = run(*args, "-o", "EDIT.TAB", "--force")         # the same edit again: one row
+    rc, out, err = run(*args, "-o", "EDIT.txt", "--force")         # the same edit again: one row
     assert rc == 0 and "this edit is recorded already (#1" in out, out + err
-    rc, out, err = run(*args, "-o", "OTHER.TAB")                   # other files: refused, nothing written
-    assert rc == 2 and "a fit's correction is made once" in err and not (tmp_path / "OTHER.TAB").exists()
+    rc, out, err = run(*args, "-o", "OTHER.txt")                   # other files: refused, nothing written
+    assert rc == 2 and "a fit's correction is made once" in err and not (tmp_path / "OTHER.txt").exists()
     with open_store("compgen-history.sqlite") as store:
         assert store.rows("SELECT COUNT(*) AS n FROM edits") == [{"n": 1}]
         fit = load_fit("fit.json")
@@ -1098,7 +1098,7 @@ def test_the_first_check_after_an_edit_recorded_with_its_fit_passes(tmp_path, mo
     (tmp_path / "pre.csv").write_text(format_rtest(machine, pre))
     assert run("fit", "--machine", "ac-trunnion-itnc530", "pre.csv", "-o", "fit.json")[0] == 0
     date = ["--date", "2026-11-02T08:00"] if dated else []
-    rc, out, err = run("kinematics", "--from", "fit.json", "-o", "EDIT.TAB", "--record", *date, "--db", db)
+    rc, out, err = run("kinematics", "--from", "fit.json", "-o", "EDIT.txt", "--record", *date, "--db", db)
     assert rc == 0 and "recorded the edit" in out, out + err
     corrects = corrected_by(machine, load_fit("fit.json"), controller("itnc530"))
     assert abs(corrects["ZOA"]) > 20 * UM                  # a correction the check would see
@@ -1124,7 +1124,7 @@ def test_every_command_that_records_takes_the_serial(tmp_path, monkeypatch):
     rc, out, err = run("fit", "--machine", "ac-trunnion-itnc530", "pre.csv", "-o", "fit.json", "--record",
                        "--serial", "SN-7", "--date", "2026-11-02", "--db", db)
     assert rc == 0 and "recorded as calibration" in out, out + err
-    rc, out, err = run("kinematics", "--from", "fit.json", "-o", "EDIT.TAB", "--record", "--serial", "SN-7",
+    rc, out, err = run("kinematics", "--from", "fit.json", "-o", "EDIT.txt", "--record", "--serial", "SN-7",
                        "--date", "2026-11-02T10:00", "--db", db)
     assert rc == 0 and "recorded the edit" in out, out + err
     with open_store(db) as store:
@@ -1133,6 +1133,6 @@ def test_every_command_that_records_takes_the_serial(tmp_path, monkeypatch):
     assert [(r["serial"], r["n"]) for r in rows] == [("SN-7", 1)], rows
     rc, out, err = run("history", "show", "--machine", "ac-trunnion-itnc530", "--serial", "SN-7", "--db", db)
     assert rc == 0 and " edit " in out, out + err
-    rc, out, err = run("kinematics", "--from", "fit.json", "-o", "E2.TAB", "--record", "--serial", "a b",
+    rc, out, err = run("kinematics", "--from", "fit.json", "-o", "E2.txt", "--record", "--serial", "a b",
                        "--db", db)
-    assert rc == 2 and "serial" in err and not (tmp_path / "E2.TAB").exists(), err
+    assert rc == 2 and "serial" in err and not (tmp_path / "E2.txt").exists(), err

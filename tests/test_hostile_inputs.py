@@ -267,7 +267,7 @@ def test_what_no_controller_reads_and_a_folder_not_there_are_refused(fit, tmp_pa
     _refused(["simulate", "--machine", SEED_MACHINE, "--truth", ROOT / "examples" / "truth-table4.json",
               "--edit", tmp_path / "E.txt", "-o", tmp_path / "s.csv"],
              "not a kinematics edit compgen wrote for any controller it knows", tmp_path, "s.csv")
-    _refused(["kinematics", "--from", fit, "-o", tmp_path / "gone" / "K.TAB"], "output folder does not exist",
+    _refused(["kinematics", "--from", fit, "-o", tmp_path / "gone" / "K.txt"], "output folder does not exist",
              tmp_path)
     _refused(["fit", "--from", fit, "--fix", "XOC=12furlong", "-o", tmp_path / "f.json"],
              "--fix XOC=12furlong: unknown unit 'furlong'. Use one of mm, um", tmp_path, "f.json")

@@ -9,12 +9,14 @@ import subprocess
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, SEED_MACHINE, UM
+from conftest import ARCSEC, SEED_MACHINE, UM, run
 
+from compgen.configuration.machine_file import load_machine
 from compgen.controllers import linuxcnc
 from compgen.controllers.kinematics import kinematics_edit
 from compgen.controllers.linuxcnc_config import evaluate, hal_file, then
 from compgen.controllers.registry import read_state
+from compgen.data.rtest import format_rtest
 from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
 from compgen.model.effects import location_model
@@ -504,3 +506,112 @@ def test_a_held_pin_beyond_the_limits_is_another_machines_configuration(trt, see
     with pytest.raises(CompgenError, match=re.escape(said)) as got:
         kinematics_edit(seed_machine, fit, "linuxcnc", hal, "k.hal", "N", "0", "d")
     assert str(got.value.where) == f"k.hal:{len(nominal)}", got.value.where
+
+
+# --- the configuration as LinuxCNC's start script reads it, corners included ---------------
+
+@pytest.mark.parametrize("ini, files, says", [
+    # handle_includes copies the INI through bash's `while read a b`: a last line without a line
+    # end is dropped, a backslash is taken as an escape
+    ("[HAL]\nHALFILE = a.hal\n#INCLUDE x.inc\n[KINS]\nX = 1", {"a__hal": "", "x__inc": "[TRT]\n"},
+     r"m.ini:5: the INI's last line has no line end: with #INCLUDE"),
+    ("[HAL]\nHALFILE = a\\b.hal\n#INCLUDE x.inc\n", {"x__inc": "[TRT]\n"},
+     r"m.ini:2: a backslash in the INI: with #INCLUDE"),
+    # cat of the included file, then its end marker on the same line
+    ("[HAL]\nHALFILE = a.hal\n#INCLUDE x.inc\n", {"a__hal": "", "x__inc": "[TRT]\nX = 1"},
+     r"x.inc:2: the included file's last line has no line end"),
+    # IFS='\ ' read CFGFILE ARGS: a tab is part of the file's name
+    ("[HAL]\nHALFILE = a.hal\targ\n", {"a__hal": ""}, r"m.ini:2: HALFILE a.hal\targ: no such file"),
+    # halcmd would source a file that is running without end
+    ("[HAL]\nHALFILE = a.hal\n", {"a__hal": "source b.hal\n", "b__hal": "source a.hal\n"},
+     r"b.hal:1: source a.hal runs a file that is still running"),
+    ("[HAL]\nHALFILE = a.hal\n", {"a__hal": "source a.hal\n"}, r"a.hal:1: source a.hal runs a file"),
+])
+def test_the_start_scripts_corners_are_refused_with_their_line(tmp_path, ini, files, says):
+    with pytest.raises(CompgenError, match=says):
+        _config(tmp_path, ini, **files)
+
+
+def test_without_include_the_ini_is_read_as_inivar_reads_it(tmp_path, trt):
+    """handle_includes copies nothing where no line starts with #INCLUDE: inivar reads the
+    last line without a line end, and a HALFILE's arguments after a space are arguments."""
+    module, nominal = trt
+    state = _config(tmp_path, "[HAL]\nHALFILE = a.hal arg1\n[KINS]\nX = 1", a__hal=_setp(module, nominal))
+    assert _pins(state, module) == pytest.approx(nominal)
+
+
+def test_two_changed_files_of_one_name_are_written_to_two_files(tmp_path, trt, seed_machine):
+    """a/p.hal and b/p.hal each set pins the edit changes: both are written, under two names,
+    each named by the line that named its source, and each holds its own correction."""
+    module, nominal = trt
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    first = {n: v for n, v in nominal.items() if n.endswith("rot-point")}
+    second = {n: v for n, v in nominal.items() if n not in first}
+    (tmp_path / "a" / "p.hal").write_text("".join(f"setp {module}.{n} {v:.6f}\n" for n, v in first.items()))
+    (tmp_path / "b" / "p.hal").write_text("".join(f"setp {module}.{n} {v:.6f}\n" for n, v in second.items()))
+    state = _config(tmp_path, "[HAL]\nHALFILE = a/p.hal\nHALFILE = b/p.hal\n")
+    fit = identify(seed_machine, [simulate(seed_machine, TRUTH, generate(seed_machine, ["K4", "K1", "K2"]))],
+                   location_model(seed_machine))
+    out = _edit_ini(seed_machine, fit, state, tmp_path)
+    assert {".ini", ".p.hal", ".2.p.hal"} <= set(out.files), sorted(out.files)
+    for suffix, text in out.files.items():
+        (tmp_path / f"N{suffix}").write_text(text)
+    assert "HALFILE = N.p.hal\nHALFILE = N.2.p.hal" in out.files[".ini"]
+    held = _pins(read_state(str(tmp_path / "N.ini")), module)
+    alone = kinematics_edit(seed_machine, fit, "linuxcnc", None, "", "H", "0", "d").files[".hal"]
+    want = {**nominal, **{m[1]: float(m[2])
+                          for m in re.finditer(rf"(?m)^setp {re.escape(module)}\.(\S+) (\S+)", alone)}}
+    assert held == pytest.approx(want, abs=1e-9) and held != pytest.approx(nominal, abs=1e-6)
+
+
+@pytest.mark.parametrize("stem", ["K#1", "K 1", "K$1", "K[1]"])
+def test_an_output_name_halcmd_cannot_carry_is_refused(tmp_path, trt, seed_machine, stem):
+    module, nominal = trt
+    state = _config(tmp_path, "[HAL]\nHALFILE = a.hal\n", a__hal=_setp(module, nominal))
+    fit = identify(seed_machine, [simulate(seed_machine, TRUTH, generate(seed_machine, ["K4", "K1", "K2"]))],
+                   location_model(seed_machine))
+    with pytest.raises(CompgenError, match="start script and halcmd cannot carry this name"):
+        kinematics_edit(seed_machine, fit, "linuxcnc", state, "m.ini", "N", "0", "d", stem=stem,
+                        folder=str(tmp_path))
+
+
+def test_the_file_the_notes_name_is_the_file_written(tmp_path, trt, seed_machine):
+    """-o KIN.hal with an INI as --current would put the configuration to start into a .hal
+    file while the notes say to start KIN.ini: refused, nothing written."""
+    module, nominal = trt
+    _config(tmp_path, "[HAL]\nHALFILE = a.hal\n", a__hal=_setp(module, nominal))
+    machine = tmp_path / "m.toml"
+    machine.write_text(SEED_MACHINE_TEXT.replace('controller = "itnc530"', 'controller = "linuxcnc"'))
+    data = tmp_path / "d.csv"
+    m = load_machine(machine)
+    data.write_text(format_rtest(m, simulate(m, TRUTH, generate(m, ["K4", "K1", "K2"]))))
+    assert run("fit", "--machine", machine, data, "-o", tmp_path / "f.json")[0] == 0
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code, _, err = run("kinematics", "--from", tmp_path / "f.json", "--current", tmp_path / "m.ini",
+                       "-o", tmp_path / "KIN.hal")
+    assert code == 2 and "-o KIN.hal: this edit's main file is a .ini file" in err and "KIN.ini" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+@pytest.mark.parametrize("comp, rows", [
+    ("-100 0 0\n0 0.001 0.001 a note\n100 0 0\n", 3),          # sscanf ignores what follows the third
+    ("-100 0 0\n0 0.001-0.001 0\n100 0 0\n", 3),               # "%lf %lf": no space needed between
+    ("-100 0 0\n0 0.001 0.001" + " " * 300 + "x\n100 0 0\n", 2),  # a piece past 254 characters stops it
+    ("-100 0 0\n0 0.001\n100 0 0\n", 1),
+])
+def test_a_joint_table_is_read_where_linuxcnc_reads_it_and_no_further(tmp_path, trt, seed_machine, comp,
+                                                                       rows):
+    module, nominal = trt
+    state = _config(tmp_path, "[HAL]\nHALFILE = a.hal\n[JOINT_1]\nCOMP_FILE = y.comp\nCOMP_FILE_TYPE = 1\n",
+                    a__hal=_setp(module, nominal), y__comp=comp)
+    ((fwd, _),) = linuxcnc.loaded_joint_tables(seed_machine, state).values()
+    assert len(fwd.grid) == rows, fwd.grid
+
+
+def test_a_joint_table_number_compgen_cannot_read_as_linuxcnc_does_is_refused(tmp_path, trt, seed_machine):
+    module, nominal = trt
+    state = _config(tmp_path, "[HAL]\nHALFILE = a.hal\n[JOINT_1]\nCOMP_FILE = y.comp\nCOMP_FILE_TYPE = 1\n",
+                    a__hal=_setp(module, nominal), y__comp="-100 0 0\n0 0x1p-10 0\n100 0 0\n")
+    with pytest.raises(CompgenError, match="hexadecimal"):
+        linuxcnc.loaded_joint_tables(seed_machine, state)

@@ -157,7 +157,7 @@ def test_kinematics_writes_a_declared_spline_into_the_compensation_table(machine
     csv = tmp_path / "s.csv"
     csv.write_text(format_rtest(machine, _session(machine, KNOTS, SCREW, 1.0, 5)[0]))
     assert run("fit", "--machine", path, csv, "--add", "EXX:s.screw", "-o", tmp_path / "f.json")[0] == 0
-    code, _, err = run("kinematics", "--from", tmp_path / "f.json", "-o", tmp_path / "KIN.TAB")
+    code, _, err = run("kinematics", "--from", tmp_path / "f.json", "-o", tmp_path / "KIN.txt")
     assert code == 0, err
     text = (tmp_path / "KIN.comp.csv").read_text()
     rows = [r.split(",") for r in text.splitlines() if r.startswith("EXX:s.screw,")]

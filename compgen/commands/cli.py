@@ -482,6 +482,12 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
                               read_state(measured) if measured else None, out.stem, ", ".join(measured),
                               str(out.absolute().parent), despite=tuple(reasons))
     main_key = ctl.main_suffix(text)
+    if output != STDOUT and out.suffix.lower() != main_key.lower():
+        # the file the notes name is the file written: a .hal holding an INI would be started as
+        # neither, and a .TAB holding a change list is no table
+        raise CompgenError(f"-o {out.name}: this edit's main file is a {main_key} file ({ctl.words}"
+                           + (", from --current" if current else ", no --current given") + ")",
+                           hint=f"give -o {out.stem}{main_key}")
     files = emitted.paths(out, name, main_key)
     if len(current) == 1 and main_key in emitted.files:   # the edited state keeps its encoding
         files[out] = encoded_like(current[0], files[out])

@@ -112,7 +112,8 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
                                hint="give --current as well")
         # the state measured with passes every check --current does, and is this control's:
         # an edit over it is written (and dropped) before anything is read from it
-        ctl.edit(machine, p, measured, measured_where, EditContext(name, (), (), (), version, date))
+        ctl.edit(machine, p, measured, measured_where,
+                 EditContext(name, (), (), (), version, date, stem=stem or name))
         p = rest(machine, p, ctl.since(machine, measured, current, current_where), force)
         then, now = (ctl.loaded_tables(machine, s, current_where) for s in (measured, current))
         if then != now:       # the tables are composed over --current: the data must have seen them

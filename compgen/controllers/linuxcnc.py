@@ -187,20 +187,52 @@ def nominal_pins(machine: Machine, tilt, c) -> dict[str, float]:
 
 
 
-TRIPLET = re.compile(r"^\s*(\S+)\s+(\S+)\s+(\S+)")
+# usrmotLoadComp (usrmotintf.cc) reads a table with fgets(buffer, LINELEN) — LINELEN 255 in
+# config.h, so 254 characters at a time, a longer line read as two — and takes each piece
+# with sscanf("%lf %lf %lf"): white space (C's isspace) before each number, each number the
+# longest prefix strtod reads, anything after the third ignored; it stops at the first piece
+# that does not give three
+COMP_LINELEN = 255
+SCANNED = re.compile(r"[ \t\n\v\f\r]*([+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?)")
+STRTOD_ELSE = re.compile(r"[ \t\n\v\f\r]*[+-]?(?:inf|nan|0x)", re.IGNORECASE)   # strtod reads these too
 
 
-def _triplets(lines, where: str) -> np.ndarray:
-    """A joint table's lines as ``usrmotLoadComp`` (usrmotintf.cc) reads them: three numbers
-    at the start of each line, up to the first line that has not."""
+def _pieces(text: str):
+    """The pieces fgets(buffer, COMP_LINELEN) reads: up to a line end, at most 254 characters."""
+    at = 0
+    while at < len(text):
+        end = text.find("\n", at, at + COMP_LINELEN - 1)
+        end = end + 1 if end >= 0 else min(at + COMP_LINELEN - 1, len(text))
+        yield text[at:end]
+        at = end
+
+
+def _scanned(piece: str, where: str) -> list[float] | None:
+    """sscanf(piece, "%lf %lf %lf") when it gives three numbers; None where it gives fewer."""
+    row, at = [], 0
+    for _ in range(3):
+        if STRTOD_ELSE.match(piece, at):
+            raise CompgenError(f"{piece.strip()!r}: LinuxCNC reads an infinity, a NaN or a hexadecimal "
+                               "number here, which compgen does not", where=where,
+                               hint="write the table's numbers in decimals")
+        m = SCANNED.match(piece, at)
+        if m is None:
+            return None
+        row.append(float(m[1]))
+        at = m.end()
+    return row
+
+
+def _triplets(text: str, where: str) -> np.ndarray:
+    """A joint table as ``usrmotLoadComp`` reads it (``_pieces``, ``_scanned``): three
+    numbers at the start of each piece, up to the first piece that has not."""
     rows = []
-    for line in lines:
-        m = TRIPLET.match(line)
-        if m is None or not all(NUMBER.fullmatch(m[i]) for i in (1, 2, 3)):
+    for piece in _pieces(text):
+        row = _scanned(piece, where)
+        if row is None:
             break
-        row = [float(m[i]) for i in (1, 2, 3)]
         if not np.all(np.isfinite(row)):
-            raise CompgenError(f"{line.strip()!r} is not three finite numbers", where=where)
+            raise CompgenError(f"{piece.strip()!r} is not three finite numbers", where=where)
         rows.append(row)
     if not rows:
         raise CompgenError("the joint table holds no line of three numbers", where=where)
@@ -235,7 +267,7 @@ def _joint_tables(machine: Machine, cfg: Configuration) -> dict[str, tuple[CompT
     for joint, (comp, kind, text) in cfg.joints.items():
         where = f"{comp.place} ({comp.value})"
         axis = _joint_axis(machine, joint, str(comp.place))
-        rows = _triplets(text.splitlines(), where)
+        rows = _triplets(text, where)
         if len(rows) > COMP_ENTRIES:
             raise CompgenError(f"the joint table has {len(rows)} lines; LinuxCNC takes {COMP_ENTRIES}",
                                where=where)
@@ -414,7 +446,7 @@ def read_comp(text: str, machine: Machine, where: str) -> CompTable:
     if note is None:
         raise CompgenError("a joint compensation file without compgen's closing notes: which joint "
                            "it is for is unknown", where=where, hint="give the .comp file compgen wrote")
-    rows = _triplets(text.splitlines(), where)
+    rows = _triplets(text, where)
     axis = note[2]
     if joint_number(machine, axis) != int(note[1]):
         raise CompgenError(f"the table says joint {note[1]} = {axis}; the trt module's joint of {axis} is "
@@ -427,6 +459,7 @@ def read_comp(text: str, machine: Machine, where: str) -> CompTable:
 
 POSITION = {"5420": "X", "5421": "Y", "5422": "Z", "5423": "A", "5424": "B", "5425": "C"}
 LINELEN = 255                # rs274ngc.hh: a longer line is "Command too long"
+HAL_NAME = re.compile(r"[A-Za-z0-9._+-]+")      # a file name every reader of a configuration carries
 
 # LinuxCNC applies G92 (and G52, which shares its parameters) and the active G5x offset to a
 # program's positions before its kinematics: they do not turn with the table, so under TCP
@@ -731,6 +764,12 @@ class LinuxCNC(Controller):
 
     def edit(self, machine: Machine, p: Plan, current: str | None, where: str,
              ctx: EditContext) -> EditFiles:
+        if not HAL_NAME.fullmatch(ctx.stem):
+            # the name goes into HALFILE values, source lines and the INI: halcmd takes "#" for a
+            # comment, "$" and "[" for references; the start script splits a HALFILE at a space
+            raise CompgenError(f"-o {ctx.stem!r}: LinuxCNC's start script and halcmd cannot carry this "
+                               "name (a space, '#', '$', '[' or another character they read)",
+                               hint="give -o a name of letters, digits, '.', '_', '+' and '-', e.g. KIN.ini")
         state = configuration(current, where)       # the configuration, evaluated once
         module, rows, other, settings = pins(machine, p, state, where)
         cfg = state if is_bundle(current) else None

@@ -39,6 +39,7 @@ from .linuxcnc_files import (
     Place,
     Setting,
     expand_includes,
+    start_script_words,
 )
 
 
@@ -241,8 +242,7 @@ def _evaluate(ini_path: str, ini_text: str, load: Loader) -> Configuration:
         )
     run = _Hal(cfg, load)
     for entry in ini.all("HAL", "HALFILE"):
-        name = entry.value.split(None, 1)[0]
-        run.file("HALFILE", name, entry.place)
+        run.file("HALFILE", start_script_words(entry.value)[0], entry.place)
     for entry in ini.all("HAL", "HALCMD"):
         run.halcmd(entry)
     for entry in ini.all("HAL", "POSTGUI_HALFILE"):
@@ -268,12 +268,20 @@ class _Hal:
         self.cfg, self.load = cfg, load
         self.pending: dict[str, Place] = {}  # signals set before any net names them
         self.set_in: dict[tuple[str, str, str], Place] = {}  # (file, kind, name) set once a file
+        self.running: list[str] = []  # the files being run, outermost first (source nests)
 
     def file(self, kind: str, name: str, at: Place) -> None:
         full, text = self.load(kind, name, at)
         if text is None:
             self.cfg.library.append(name)
             return
+        if full in self.running:
+            raise CompgenError(
+                f"{kind} {name} runs a file that is still running ({' -> '.join(self.running + [full])}): "
+                "halcmd would source it again without end",
+                where=str(at),
+                hint="source each file once",
+            )
         self.cfg.texts[full] = text
         self.cfg.named_at.setdefault(full, []).append((at, name))
         if full.endswith(".tcl"):
@@ -282,8 +290,10 @@ class _Hal:
                 where=str(at),
                 hint="set the kinematics pins in a .hal file or in HALCMD lines",
             )
+        self.running.append(full)
         for k, raw in enumerate(text.splitlines(), start=1):
             self.line(raw, Place(full, k))
+        self.running.pop()
 
     def halcmd(self, entry: IniEntry) -> None:
         # the start script runs `halcmd $HALCOMMAND`: the words as halcmd's arguments, with no
@@ -495,12 +505,18 @@ def configuration_files(
             change(kind.place, kind.value, "1")
 
     renamed: dict[str, str] = {}
+    order = list(cfg.texts)         # the order the start script reads the files: names follow it
     todo = {p.file for p in changed} | {p.file for p in after}
     while todo:
-        file = todo.pop()
+        file = min(todo, key=order.index)
+        todo.discard(file)
         if file == cfg.ini_path or file in renamed:
             continue
-        renamed[file] = f"{stem}.{Path(file).name}"
+        # distinct sources, distinct files: a/p.hal and b/p.hal are KIN.p.hal and KIN.2.p.hal
+        base, n = Path(file).name, 1
+        while (name := f"{stem}.{base}" if n == 1 else f"{stem}.{n}.{base}") in renamed.values():
+            n += 1
+        renamed[file] = name
         for place, name in cfg.named_at.get(file, []):
             change(place, name, renamed[file], last=False)
             todo.add(place.file)
@@ -513,6 +529,6 @@ def configuration_files(
         for place in sorted((p for p in after if p.file == file), key=lambda p: -p.line):
             text[place.line : place.line] = after[place]
         body = [f"# {h}" for h in header] + text  # '#' opens a comment in an INI and in HAL
-        suffix = ".ini" if file == cfg.ini_path else "." + Path(file).name
+        suffix = ".ini" if file == cfg.ini_path else renamed[file][len(stem):]
         out[suffix] = "\n".join(body) + "\n"
     return out

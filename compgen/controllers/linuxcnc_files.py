@@ -145,6 +145,49 @@ class Ini:
 
 # --- reading the files --------------------------------------------------------------------
 
+
+def _as_read_by_the_start_script(path: str, text: str, lines: list[str]) -> None:
+    """An INI with ``#INCLUDE`` is copied line by line by the start script's
+    ``while read a b`` (handle_includes) before inivar reads it: bash's read drops a last
+    line without a line end and takes backslashes as escapes ("a\\b" is "ab"). compgen refuses
+    both rather than read what LinuxCNC does not (a dropped line compgen edited would start
+    to count, with the edit on top)."""
+    if text and not text.endswith("\n") and lines[-1].strip():
+        raise CompgenError(
+            "the INI's last line has no line end: with #INCLUDE, LinuxCNC's start script "
+            "(handle_includes, bash's read) drops it, so LinuxCNC runs without it",
+            where=f"{path}:{len(lines)}",
+            hint="end it with a line break if LinuxCNC is to read it (the machine then runs with it), "
+                 "or delete it",
+        )
+    for k, line in enumerate(lines, start=1):
+        if "\\" in (line[:-1] if line.endswith("\\") and not line.endswith("\\\\") else line):
+            raise CompgenError(
+                "a backslash in the INI: with #INCLUDE, LinuxCNC's start script copies the INI "
+                "through bash's read, which takes it as an escape and drops it",
+                where=f"{path}:{k}",
+                hint="write the line without a backslash",
+            )
+
+
+def start_script_words(value: str) -> tuple[str, str]:
+    """A HALFILE value split as the start script splits it (``IFS='\\ ' read CFGFILE
+    CFGFILE_ARGS``): backslash escapes taken, then the first word up to a space; a tab is
+    part of the name (the file is then not found, and LinuxCNC stops)."""
+    words, escaped, k = [[], []], False, 0
+    for ch in value.lstrip(" "):
+        if escaped:                       # an escaped character is the character, never a space
+            words[k].append(ch)
+            escaped = False
+        elif ch == "\\":
+            escaped = True
+        elif ch == " " and k == 0:
+            k = 1
+        else:
+            words[k].append(ch)
+    return "".join(words[0]), "".join(words[1]).strip(" ")
+
+
 Loader = Callable[[str, str, Place | None], tuple[str, str | None]]
 
 
@@ -158,6 +201,8 @@ def expand_includes(
     out: list[tuple[Place, str]] = []
     included = []
     expands = any(line.startswith("#INCLUDE") for line in lines)
+    if expands:
+        _as_read_by_the_start_script(path, text, lines)
     for k, line in enumerate(lines, start=1):
         at = Place(path, k)
         if len(line) > INI_LINE_MAX:
@@ -177,6 +222,14 @@ def expand_includes(
         name = words[1].strip()
         inc_path, inc_text = load("#INCLUDE", name, at)
         inc_text = inc_text or ""
+        if inc_text and not inc_text.endswith("\n"):
+            # cat "$breal", then echo "#*** End   #INCLUDE file: ..." onto the same line
+            raise CompgenError(
+                "the included file's last line has no line end: the start script appends its "
+                "'#*** End   #INCLUDE file' line to it, and LinuxCNC reads that line otherwise",
+                where=f"{inc_path}:{len(inc_text.splitlines())}",
+                hint="end the file with a line break",
+            )
         included.append((inc_path, inc_text, at, name))
         for j, inc in enumerate(inc_text.splitlines(), start=1):
             if inc.split(None, 1)[:1] == ["#INCLUDE"]:
