@@ -479,6 +479,42 @@ def test_linuxcnc_starts_its_own_sample_with_compgens_configuration_and_holds_it
         print(f"LinuxCNC {kins} sample ({variant}): pins {pins}")
 
 
+def test_linuxcnc_starts_compgens_configuration_of_a_sample_with_the_start_scripts_corners(tmp_path):
+    """The trt sample as a shop keeps it: its HAL lines in two files of one name (b/trt.hal:
+    the nets and the offsets' signals; a/trt.hal: the rot points), and an #INCLUDE, so the
+    start script copies the INI through bash's read. compgen's configuration to start with
+    writes the two files as KIN.trt.hal and KIN.2.trt.hal (one was lost before: both were
+    KIN.trt.hal), and LinuxCNC started with KIN.ini holds every pin compgen computes."""
+    machine = load_machine(_as_linuxcnc(tmp_path, SEED_MACHINE, "xyzac"))
+    module, tilt, c = linuxcnc.trt_module(machine)
+    nominal = linuxcnc.nominal_pins(machine, tilt, c)
+    ini = sample_copy(tmp_path / "shop", machine, halfile=True)
+    lines = (ini.parent / "trt.hal").read_text().splitlines()
+    for sub, keep in (("a", lambda ln: "rot-point" in ln), ("b", lambda ln: "rot-point" not in ln)):
+        (ini.parent / sub).mkdir()
+        (ini.parent / sub / "trt.hal").write_text("".join(ln + "\n" for ln in lines if keep(ln)))
+    (ini.parent / "trt.hal").unlink()
+    (ini.parent / "extra.inc").write_text("[COMPGEN]\nNOTE = corners\n")
+    ini.write_text(ini.read_text().replace("HALFILE = trt.hal", "HALFILE = b/trt.hal\nHALFILE = a/trt.hal")
+                   + "#INCLUDE extra.inc\n")
+    session = simulate(machine, TRUTH["xyzac"], generate(machine, ["K4", "K1", "K2"]), NOISE_UM,
+                       np.random.default_rng(9))
+    fit = identify(machine, [session], location_model(machine))
+    alone = kinematics_edit(machine, fit, "linuxcnc", None, "", "H", "0", "d").files[".hal"]
+    out = kinematics_edit(machine, fit, "linuxcnc", read_state(str(ini)), str(ini), "KIN", "0", "d",
+                          stem="KIN", folder=str(ini.parent))
+    assert {".ini", ".trt.hal", ".2.trt.hal"} <= set(out.files), sorted(out.files)
+    for suffix, text in out.files.items():
+        (ini.parent / f"KIN{suffix}").write_text(text)
+    setp = rf"(?m)^setp {re.escape(module)}\.(\S+) (\S+)"
+    want = {**nominal, **{m[1]: float(m[2]) for m in re.finditer(setp, alone)}}
+    got = read_back(ini.parent / "KIN.ini", machine)
+    pins = {name.split(".", 1)[1]: v for name, v in got["values"].items()}
+    assert set(pins) == set(linuxcnc.pin_names(tilt)) and len(pins) == 5, pins
+    assert pins == pytest.approx({n: want[n] for n in pins}, abs=1e-9), (pins, want)
+    assert pins != pytest.approx({n: nominal[n] for n in pins}, abs=1e-6)
+
+
 HEAD_HAL = "\n".join([
     "loadrt [KINS]KINEMATICS",
     "loadrt [EMCMOT]EMCMOT servo_period_nsec=[EMCMOT]SERVO_PERIOD num_joints=[KINS]JOINTS",
