@@ -302,6 +302,15 @@ def test_an_implausible_current_state_is_refused_with_its_file_and_line(seed_mac
     twice = CURRENT_CARR + "\n" + lines[k] + "\n"
     with pytest.raises(CompgenError, match=r"\$TC_CARR44\[1\] is assigned twice"):
         kinematics_edit(bc_machine, bc_fit, "sinumerik840d", twice, "c", "KIN", "0", DATE)
+    # the record's kind: a head's record (T) is another chain than the table's (P)
+    assert '$TC_CARR23[1]="P"' in CURRENT_CARR
+    assert kinematics_edit(bc_machine, bc_fit, "sinumerik840d", CURRENT_CARR.replace('="P"', '="p"'), "c",
+                           "KIN", "0", DATE).files[".MPF"]
+    k23 = next(i for i, ln in enumerate(lines) if ln.startswith("$TC_CARR23["))
+    with pytest.raises(CompgenError, match=rf'^c:{k23 + 1}: \$TC_CARR23\[1\] = "T": a record of kind T; the '
+                                           r"machine file's rotary axes make a kind P record \(table\)"):
+        kinematics_edit(bc_machine, bc_fit, "sinumerik840d", CURRENT_CARR.replace('="P"', '="T"'), "c", "KIN",
+                        "0", DATE)
     from compgen.controllers import linuxcnc
     module, tilt, c = linuxcnc.trt_module(seed_machine)
     nominal = linuxcnc.nominal_pins(seed_machine, tilt, c)

@@ -513,3 +513,29 @@ def test_a_coarse_offset_is_held_to_the_machine_files_own_value_not_to_zero(bc_m
     else:
         with pytest.raises(CompgenError, match=says):
             kinematics_edit(machine, fit, "sinumerik840d", state, "c", "K", "0", "d")
+
+
+def test_a_loaded_cec_tables_direction_and_multiplier_are_kept_or_the_round_refused(bc_machine):
+    """A loaded table's $AN_CEC_DIRECTION and $AN_CEC_MULT_BY_TABLE are written back as read
+    (they were reset to 0 while this round was added); this round is not added to a table
+    that acts one way only or through another table's factor, since its trims act both ways
+    and alone."""
+    model = [*location_model(bc_machine), *TABLES]
+    rng = np.random.default_rng(4)
+    _, a = _edit(bc_machine, _measure(bc_machine, {}, rng, OEM_CARR), OEM_CARR, "A", model)
+    # an OEM table of X on Z, one way and multiplied by table 0, which this round does not touch
+    oem = ("".join(f"$AN_CEC[7,{k}]=0.00{k}\n" for k in range(3))
+           + "$AN_CEC_INPUT_AXIS[7]=(X1)\n$AN_CEC_OUTPUT_AXIS[7]=(Z1)\n$AN_CEC_STEP[7]=100\n"
+             "$AN_CEC_MIN[7]=-100\n$AN_CEC_MAX[7]=100\n$AN_CEC_DIRECTION[7]=1\n$AN_CEC_MULT_BY_TABLE[7]=2\n"
+             "$AN_CEC_IS_MODULO[7]=0\n")
+    cec = a.files["_CEC.INI"].removesuffix("M17\n") + oem + "M17\n"
+    state = joined([("carr.txt", a.files[".MPF"]), ("cec.ini", cec)])
+    _, b = _edit(bc_machine, _measure(bc_machine, {}, rng, OEM_CARR), state, "B", model)
+    lines = b.files["_CEC.INI"].splitlines()
+    assert "$AN_CEC_DIRECTION[7]=1" in lines and "$AN_CEC_MULT_BY_TABLE[7]=2" in lines, lines
+    # the same on a table this round adds to: refused
+    first = next(ln for ln in a.files["_CEC.INI"].splitlines() if ln.startswith("$AN_CEC_DIRECTION["))
+    one_way = a.files["_CEC.INI"].replace(first, first.replace("=0", "=-1"))
+    with pytest.raises(CompgenError, match=r"acts with \$AN_CEC_DIRECTION.*=-1: compgen does not add"):
+        _edit(bc_machine, _measure(bc_machine, {}, rng, OEM_CARR),
+              joined([("carr.txt", a.files[".MPF"]), ("cec.ini", one_way)]), "C", model)

@@ -33,6 +33,7 @@ from .correction import (
 MM_DECIMALS = 5
 VECTOR_DECIMALS = 10
 CARR = re.compile(r"^\s*\$TC_CARR(\d+)\[(\d+)\]\s*=\s*(\S+?)\s*(?:;.*)?$")
+KIND = re.compile(r"""^\s*\$TC_CARR23\[(\d+)\]\s*=\s*"([A-Za-z])"\s*(?:;.*)?$""")
 CEC = re.compile(r"^\$AN_CEC(_[A-Z_]+)?\[(\d+)(?:,(\d+))?\]=\(?([^);\s]+)\)?")
 FINE = {"l1": (41, 42, 43), "l2": (44, 45, 46), "l3": (55, 56, 57), "l4": (58, 59, 60)}
 # Which offset vectors each kinematic type ($TC_CARR23) chains, and what they join
@@ -82,6 +83,16 @@ def check_current(text: str, where: str, machine: Machine) -> None:
     limit = machine.sinumerik.get("fine_limit_mm")
     fine = {i for idx in FINE.values() for i in idx}
     lines = _carr_lines(text, where, record)
+    for at, line in state_lines(text, where):
+        # the record's kind ($TC_CARR23, a character: T head, P table, M mixed) decides which
+        # offset vectors chain which pivots: another kind's record is another chain
+        m = KIND.match(line)
+        if m and int(m[1]) == record and m[2].upper() != machine.sinumerik["kind"]:
+            want = machine.sinumerik["kind"]
+            raise CompgenError(f"$TC_CARR23[{record}] = \"{m[2]}\": a record of kind {m[2].upper()}; the "
+                               f"machine file's rotary axes make a kind {want} record "
+                               f"({ {'P': 'table', 'T': 'head', 'M': 'head and table'}[want]})", where=at,
+                               hint="is this the record of the measured machine ([sinumerik] tcarr)?")
     declared = machine.sinumerik.get("offsets") or {}
     for vec, idx in COARSE.items():
         for k, n in enumerate(idx):
@@ -277,6 +288,22 @@ def read_cec(text: str, machine: Machine, where: str = "CEC file") -> list[CompT
     return out
 
 
+# what a loaded table holds beyond its values (K3 03/2013 4.4): DIRECTION (0 both ways, 1 or
+# -1 one way only) and MULT_BY_TABLE (its output multiplied by another table's); kept as read
+MODES = ("_DIRECTION", "_MULT_BY_TABLE")
+
+
+def cec_modes(text: str, where: str) -> dict[int, dict[str, str]]:
+    """Each loaded table's DIRECTION and MULT_BY_TABLE as written (table -> key -> text)."""
+    out: dict[int, dict[str, str]] = {}
+    for at, line in state_lines(text, where):
+        m = CEC.match(line.strip())
+        if m and m[1] in MODES:
+            number(m[4], f"$AN_CEC{m[1]}", at)
+            out.setdefault(int(m[2]), {})[m[1]] = m[4]
+    return out
+
+
 def cec_places(tables: list[CompTable]) -> list[tuple[int, CompTable]]:
     """Each table's place in the control: a loaded one's own, a new one the next free."""
     taken = {int(t.effect.split()[-1]) for t in tables if t.effect.startswith("CEC table ")}
@@ -294,7 +321,7 @@ def _machine_axes(machine: Machine) -> dict[str, str]:
     return names
 
 
-def _cec_text(t: CompTable, index: int, names: dict[str, str]) -> dict:
+def _cec_text(t: CompTable, index: int, names: dict[str, str], modes: dict[str, str] | None = None) -> dict:
     """A table's entries as written: MIN, STEP and MAX such that (MAX − MIN) / STEP is the
     whole number of steps the values span, in the decimals written (the control derives
     each value's position from them)."""
@@ -308,7 +335,9 @@ def _cec_text(t: CompTable, index: int, names: dict[str, str]) -> dict:
                            f"{len(t.values) - 1} whole steps at 6 decimals")
     return {"index": index, "effect": t.effect, "words": ascii_text(t.words), "input": names[t.input],
             "output": names[t.output], "step": str(step), "min": str(low), "max": str(high),
-            "modulo": int(t.modulo), "unit": t.unit, "values": [fmt_plain(v, 6) for v in t.values]}
+            "modulo": int(t.modulo), "unit": t.unit, "values": [fmt_plain(v, 6) for v in t.values],
+            "direction": (modes or {}).get("_DIRECTION", "0"),
+            "mult": (modes or {}).get("_MULT_BY_TABLE", "0")}
 
 
 # A 360° modulo rotary axis (MD30310 ROT_IS_MODULO) moves to a plain absolute position the way
@@ -560,9 +589,20 @@ class Sinumerik840D(Controller):
         if new:
             names = _machine_axes(machine)
             placed = cec_places(tables)
+            modes = cec_modes(current, where)
+            for k, t in placed:
+                if t not in loaded and any(float(v) != 0 for v in modes.get(k, {}).values()):
+                    # this round's trims act both ways and alone: added to a table that acts one
+                    # way, or is multiplied by another, they would not be what compgen predicts
+                    raise CompgenError(f"CEC table {k} ({t.input}->{t.output}) acts "
+                                       + " and ".join(f"with $AN_CEC{key}[{k}]={v}"
+                                                      for key, v in modes[k].items() if float(v) != 0)
+                                       + ": compgen does not add this round's correction to it",
+                                       where=where, hint="give this round a table of its own with the "
+                                                         "OEM, or correct that table by hand")
             files["_CEC.INI"] = render("sinumerik/cec.INI.j2", header=ctx.header, raw=[],
                                        points=max(len(t.values) for t in tables),
-                                       tables=[_cec_text(t, k, names) for k, t in placed])
+                                       tables=[_cec_text(t, k, names, modes.get(k)) for k, t in placed])
             slots = {t.effect for t in loaded}
             zero = [_cec_text(replace(t, values=(0.0,) * len(t.values), effect="(none)", words="not loaded"),
                               k, names) for k, t in placed if t.effect not in slots]
