@@ -494,7 +494,7 @@ def test_a_store_of_the_first_schema_is_migrated_and_keeps_its_rows(tmp_path, fi
                     old.insert(table, row)
             assert old.version() == 1
     with open_store(tmp_path / "old.sqlite") as new:
-        assert new.version() == S.VERSION == 3
+        assert new.version() == S.VERSION == 4
         assert new.rows("SELECT import_id FROM sessions") == [{"import_id": None}]
         assert new.rows("SELECT content_sha256 FROM fits") == [{"content_sha256": None}]
         assert _counts(new) == {"machines": 1, "sessions": 1, "fits": 1}
@@ -805,8 +805,18 @@ def test_a_writer_can_neither_break_the_schema_nor_pass_a_forged_calibration_to_
         db.execute("INSERT INTO compgen.fits (session_id, marker, kind, model, parameters, sigma_um, rms_um, "
                    "verdict, fit_json, recorded, recorded_by) VALUES (%s, %s, %s, %s, %s, %s, %s, %s, %s, "
                    "%s, 'compgen_owner')", (session, *row[1:4], json.dumps(params), *row[5:]))
+        # ids claimed ahead of the sequence: the database gives its own, so no writer is blocked
+        last = db.execute("SELECT MAX(id) FROM compgen.machines").fetchone()[0]
+        for ahead in range(1, 4):
+            db.execute("INSERT INTO compgen.machines (id, name, serial, recorded) OVERRIDING SYSTEM VALUE "
+                       "VALUES (%s, %s, '', 'now')", (last + ahead, f"squatter {ahead}"))
+    with open_store(writer) as store:
+        other = replace(machine, name="another machine")
+        H.record_fit(store, load_fit(fit_file), other, taken="2026-01-03T09:00Z")
+        ids = [r["id"] for r in store.rows("SELECT id FROM machines ORDER BY id")]
+        assert len(ids) == 5 and ids == list(range(ids[0], ids[0] + 5)), ids
     with open_store(pg_db) as store:
-        assert store.version() == 3           # the store still opens for everyone
+        assert store.version() == 4           # the store still opens for everyone
         assert {r["recorded_by"] for r in store.rows("SELECT recorded_by FROM fits")} == {"forger"}
         with pytest.raises(CompgenError, match=r"recorded by forger\).*does not hold the values its own fit"):
             H.last_calibration(store, machine)

@@ -72,6 +72,8 @@ MIGRATIONS: tuple[tuple[int, tuple[str, ...]], ...] = (
         "ALTER TABLE fits ADD COLUMN recorded_by TEXT",
         "ALTER TABLE edits ADD COLUMN recorded_by TEXT",
     )),
+    # (PostgreSQL only, below) every row's id from the database's own sequence
+    (4, ()),
 )
 VERSION = MIGRATIONS[-1][0]
 # What PostgreSQL adds to a migration: the role that writes a row is the database's word
@@ -87,6 +89,21 @@ POSTGRES_MIGRATIONS: dict[int, tuple[str, ...]] = {
                      AND privilege_type <> 'SELECT' AND grantee NOT IN (current_user, 'PUBLIC') LOOP
                 EXECUTE format('REVOKE INSERT ON {PG_SCHEMA}.compgen_schema FROM %I', r.grantee);
             END LOOP; END $$"""),
+    # a writer may INSERT ... OVERRIDING SYSTEM VALUE an id the sequence will give later: every
+    # insert after it would then fail on the key, for every writer. The id is the sequence's,
+    # whatever an INSERT says (SQLite takes the largest id + 1 and is not blocked so)
+    # (the identity's own default has just taken currval; an id given in the INSERT is another)
+    4: (f"""CREATE OR REPLACE FUNCTION {PG_SCHEMA}.sequence_id() RETURNS trigger LANGUAGE plpgsql AS $$
+            DECLARE seq text := pg_get_serial_sequence(TG_TABLE_SCHEMA || '.' || TG_TABLE_NAME, 'id');
+            BEGIN
+              BEGIN
+                IF NEW.id IS DISTINCT FROM currval(seq) THEN NEW.id := nextval(seq); END IF;
+              EXCEPTION WHEN object_not_in_prerequisite_state THEN NEW.id := nextval(seq);
+              END;
+              RETURN NEW;
+            END $$""",
+        *(f"CREATE TRIGGER {t}_sequence_id BEFORE INSERT ON {t} FOR EACH ROW "
+          f"EXECUTE FUNCTION {PG_SCHEMA}.sequence_id()" for t in TABLES)),
 }
 
 
