@@ -1146,3 +1146,44 @@ def test_every_command_that_records_takes_the_serial(tmp_path, monkeypatch):
     rc, out, err = run("kinematics", "--from", "fit.json", "-o", "E2.txt", "--record", "--serial", "a b",
                        "--db", db)
     assert rc == 2 and "serial" in err and not (tmp_path / "E2.txt").exists(), err
+
+
+@pytest.mark.parametrize("scale", [1.0, 8.0 / 1.7], ids=["the example's EXC:h2", "EXC:h2 of 8 um"])
+def test_an_unchanged_machine_calibrated_with_an_effect_checks_unchanged(tmp_path, monkeypatch, scale):
+    """A calibration that added an error motion (the example's EXC:h2, 1.5/0.8 µm, and one
+    of 8 µm) is checked three times, K4 alone, on three days, the machine unchanged. The
+    check fits the calibration's model (its added effect refitted where K4 allows, else held)
+    and says so: every location error within 3σ of the calibration, no drift flagged, the
+    residual at the calibration's noise, PASS. Before, the check fitted the location errors
+    alone: ZOA, YOC, COA 6σ off on every check, drifts flagged after three, and with 8 µm
+    "check the set-up"."""
+    monkeypatch.chdir(tmp_path)
+    machine = load_machine("ac-trunnion-itnc530")
+    truth = read_truth(ROOT / "examples" / "truth-seed-session.json", machine)
+    truth = {n: v * (scale if n.startswith("EXC") else 1.0) for n, v in truth.items()}
+    cal = _session(machine, truth, ["K4", "K1", "K2"], 51, "cal.csv")
+    (tmp_path / "cal.csv").write_text(format_rtest(machine, cal))
+    rc, out, err = run("fit", "--machine", "ac-trunnion-itnc530", "cal.csv", "--add", "EXC:h2", "-o",
+                       "cal.json", "--record", "--date", "2026-11-01T08:00")
+    assert rc == 0 and "recorded as calibration" in out and "NOT accepted" not in out, out + err
+    rc, out, err = run("kinematics", "--from", "cal.json", "-o", "KIN.txt", "--record", "--date",
+                       "2026-11-01T09:00")
+    assert rc == 0 and "recorded the edit" in out, out + err
+    corrects = corrected_by(machine, load_fit("cal.json"), controller("itnc530"))
+    after = {n: v - corrects.get(n, 0.0) for n, v in truth.items()}      # the control holds the edit
+    for day, seed in ((2, 52), (3, 53), (4, 54)):
+        k4 = _session(machine, after, ["K4"], seed, "k")
+        (tmp_path / f"k{day}.csv").write_text(format_rtest(machine, k4))
+        rc, out, err = run("check", "--machine", "ac-trunnion-itnc530", f"k{day}.csv", "--date",
+                           f"2026-11-0{day}T08:00", "--json")
+        doc = json.loads(out)
+        _meets_schema(doc, "check")
+        worst = max(doc["changes"], key=lambda c: abs(c["change"]) / c["std"])
+        assert all(c["status"] == "pass" for c in doc["changes"]), (day, worst, doc["advice"])
+        assert rc == (0 if scale == 1 else 1) and doc["passed"] == (scale == 1), (day, doc["paths"])
+        assert abs(worst["change"]) < 3 * worst["std"], (day, worst)
+        assert doc["flags"] == [] and doc["sigma_um"] < 0.7, (day, doc["flags"], doc["sigma_um"])
+        assert doc["model"]["effects"] == ["EXC:h2c", "EXC:h2s"], doc["model"]
+    (tmp_path / "k5.csv").write_text(format_rtest(machine, _session(machine, after, ["K4"], 55, "k")))
+    rc, out, err = run("check", "--machine", "ac-trunnion-itnc530", "k5.csv", "--date", "2026-11-05T08:00")
+    assert "set-up and EXC:h2c, EXC:h2s, refitted from these data" in out, out + err

@@ -14,9 +14,7 @@ from ..controllers.advice import Advisor
 from ..data.rtest import device_of
 from ..errors import CompgenError, one_line
 from ..files import read_text, write_atomically
-from ..model.effects import location_model
 from ..statistics.gate import fit_gate
-from ..statistics.identify import identify
 from ..statistics.results import load_fit
 from ..units import number
 from .cli_common import DB, FILE, FORCE, MACHINE, OUTPUT, SERIAL, progress, said, warn
@@ -208,14 +206,14 @@ def check_cmd(machine_file, data, serial, taken, operator, as_json, machine_chan
     """Check a short measurement (e.g. K4 only) against the machine's last accepted
     calibration: each location error's change with its σ, pass or fail, what to do next.
     The check is recorded in the history."""
-    from ..history import check, last_calibration, record_check, taken_at
+    from ..history import calibration_fit, check, fit_as_calibrated, last_calibration, record_check, taken_at
     machine = load_machine(machine_file)
     sets = [read_data(p, machine, warn=warn) for p in data]
     when = taken_at(taken)
     store = history_store(db, create=False)
     calibration, entries, edits = last_calibration(store, machine, serial, before=when)
-    fit = identify(machine, sets, location_model(machine), advisor=Advisor)
-    result = check(machine, fit, sets, calibration, entries, edits, when, serial, machine_changed)
+    fit, model = fit_as_calibrated(machine, sets, calibration_fit(store, calibration), advisor=Advisor)
+    result = check(machine, fit, sets, calibration, entries, edits, when, serial, machine_changed, model)
     record_check(store, result, fit, machine, serial=serial, operator=operator)
     click.echo(json.dumps(result.summary(), indent=2, ensure_ascii=False) if as_json else result.text(),
                nl=as_json)

@@ -15,14 +15,17 @@ from __future__ import annotations
 
 from .checks import (  # noqa: F401
     Change,
+    CheckModel,
     CheckResult,
     check,
+    fit_as_calibrated,
     record_check,
 )
 from .drift import (  # noqa: F401
     Entry,
     Flag,
     Trend,
+    calibration_fit,
     flags,
     fleet,
     last_calibration,

@@ -39,6 +39,51 @@ class Change:
 
 
 @dataclass(frozen=True)
+class CheckModel:
+    """What a check fitted beyond the location errors: the calibration's own effects (an
+    error motion it added, a declared shape), and how: "refitted" from the check's data, or
+    "held" at the calibration's values."""
+    effects: tuple[str, ...] = ()
+    how: str = ""
+
+    def words(self) -> str:
+        if not self.effects:
+            return "the calibration's model: location errors and set-up"
+        how = ("refitted from these data" if self.how == "refitted" else
+               "held at the calibration's values (these data do not determine them as well as the "
+               "location errors need)")
+        return f"the calibration's model: location errors, set-up and {', '.join(self.effects)}, {how}"
+
+
+def fit_as_calibrated(machine: Machine, data, calibration: FitResult, advisor=None) -> tuple[FitResult,
+                                                                                              CheckModel]:
+    """A check is the calibration's model measured again: the same parameters, those the
+    calibration held held at its values, its added effects refitted where the check's data
+    determine them without costing the location errors (each one's σ at most twice what it
+    is with the effects held), else held at the calibration's values. Fitted with the
+    location errors alone, a check of an unchanged machine read the effect as location
+    errors moved (6σ on the example's 1.5 µm 2/rev) and flagged drifts."""
+    from ..statistics.identify import identify
+
+    model = list(calibration.model)
+    held_then = {n: calibration.parameters[n].value for n in model if n not in calibration.free}
+    effects = [n for n in model if effect_of_param(machine, n).basis.kind != "const" and n not in held_then]
+    base = [n for n in model if n not in effects and n not in held_then]
+    at_calibration = {n: calibration.parameters[n].value for n in effects}
+    held = identify(machine, data, base, {**held_then, **at_calibration}, advisor=advisor)
+    if not effects:
+        return held, CheckModel()
+    try:
+        free = identify(machine, data, [n for n in model if n not in held_then], held_then)
+    except CompgenError:
+        return held, CheckModel(tuple(effects), "held")
+    located = [n for n in machine_params(machine, base) if n in held.free]
+    if all(free.parameters[n].std <= 2 * held.parameters[n].std for n in located):
+        return free, CheckModel(tuple(effects), "refitted")
+    return held, CheckModel(tuple(effects), "held")
+
+
+@dataclass(frozen=True)
 class CheckResult:
     machine: str
     serial: str
@@ -51,6 +96,7 @@ class CheckResult:
     flags: list[Flag]
     advice: list[str]
     machine_changed: bool = False    # checked with another machine file than the calibration's
+    model: CheckModel = CheckModel()
 
     @property
     def passed(self) -> bool:
@@ -68,6 +114,7 @@ class CheckResult:
                              "limit": c.limit, "status": c.status} for c in self.changes],
                 "flags": [f.text() for f in self.flags], "advice": self.advice,
                 "machine_file_changed": self.machine_changed,
+                "model": {"effects": list(self.model.effects), "effects_were": self.model.how},
                 **({"recorded_by": self.against.recorded_by} if self.against.recorded_by else {})}
 
     def text(self) -> str:
@@ -77,6 +124,7 @@ class CheckResult:
                  f"measured {self.taken[:16]}",
                  f"  against the calibration of {self.against.taken[:16]} ({self.against.marker}{who}), "
                  "corrections written since counted"]
+        lines.append(f"  fitted with {self.model.words()}")
         if self.machine_changed:
             lines.append("  with a machine file changed since that calibration (--machine-changed)")
         lines += ["", f"  {'param':<6}{'change':>9}   {'σ':<12}{'':<16}{'status':<7}"]
@@ -92,7 +140,7 @@ class CheckResult:
 
 def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: Sequence[Entry],
           edits: Sequence[dict], taken: str, serial: str | None = None,
-          machine_changed: bool = False) -> CheckResult:
+          machine_changed: bool = False, model: CheckModel = CheckModel()) -> CheckResult:
     """A short measurement's fit against the last accepted calibration: each location
     error's change (machine values: the corrections written since are counted) with its σ,
     the paths against ``[tolerances]``, and a drift or step it completes. A machine file
@@ -161,19 +209,27 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
         advice.append(f"check the set-up: the residual σ̂ is {fit.residual['sigma_um']:.2f} µm against the "
                       f"calibration's {calibration.sigma_um:.2f} µm (ball stem, nest, temperature, a loose "
                       "magnet base)")
+    edited = any(e.get("marker") == calibration.marker for e in edits)
     if any(v.startswith("FAIL") for v in paths.values()):
-        advice.append("a path is beyond its tolerance: re-calibrate, then compare the predicted residual"
-                      if failed else
-                      "the location errors are where the last calibration found them, but a path is beyond "
-                      f"its tolerance: that calibration ({calibration.marker}, {calibration.taken[:10]}) "
-                      "is not corrected on the control; write the edit from its fit.json with kinematics, "
-                      "and load it")
+        if failed:
+            advice.append("a path is beyond its tolerance: re-calibrate, then compare the predicted residual")
+        elif edited:      # the edit is loaded: what stays is what no edit of this control corrects
+            advice.append("the location errors are where the last calibration left them and its edit is "
+                          "recorded, but a path is beyond its tolerance: what the edit could not correct"
+                          + (f" ({', '.join(model.effects)}, which the calibration found)" if model.effects
+                             else "") + "; compare, on the calibration's fit.json, says what stays "
+                          "uncompensable, and diagnose whether the model misses an effect")
+        else:
+            advice.append("the location errors are where the last calibration found them, but a path "
+                          f"is beyond its tolerance: that calibration ({calibration.marker}, "
+                          f"{calibration.taken[:10]}) is not corrected on the control; write the edit from "
+                          "its fit.json with kinematics, and load it")
     for f in new_flags:
         if f.kind == "drift":
             advice.append(f"{f.param} drifts steadily ({f.text().split('  ', 1)[1]}): plan the next "
                           "calibration before it reaches its limit, and look for its cause (warm-up, season)")
     return CheckResult(name, serial, calibration, fit.marker, taken, changes, fit.residual["sigma_um"],
-                       paths, new_flags, advice, changed)
+                       paths, new_flags, advice, changed, model)
 
 
 def record_check(store: Store, result: CheckResult, fit: FitResult, machine: Machine, *,

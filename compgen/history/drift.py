@@ -227,14 +227,15 @@ def last_calibration(store: Store, machine: Machine, serial: str | None = None,
         raise CompgenError("no accepted calibration of this machine is recorded (each recorded fit "
                            "has a reason it should not reach the control)", where=store.where,
                            hint=f"{me()} history show --machine {file_ref(machine)} lists them")
-    _as_fitted(store, accepted[-1])
+    calibration_fit(store, accepted[-1])
     return accepted[-1], entries, edits
 
 
-def _as_fitted(store: Store, entry: Entry) -> None:
-    """A reference is trusted only as its own fit wrote it: its values, model and marker
-    recomputed from the fit.json kept with it. A row whose values were written by hand (a
-    writer of the database can append one) is named and refused, never compared against."""
+def calibration_fit(store: Store, entry: Entry) -> FitResult:
+    """The fit a reference was recorded from, trusted only as its own fit wrote it: its
+    values, model and marker recomputed from the fit.json kept with it. A row whose values
+    were written by hand (a writer of the database can append one) is named and refused,
+    never compared against."""
     row = store.rows("SELECT model, parameters, fit_json FROM fits WHERE id = ?", (entry.id,))[0]
     who = f", recorded by {one_line(entry.recorded_by)}" if entry.recorded_by else ""
     try:
@@ -250,6 +251,7 @@ def _as_fitted(store: Store, entry: Entry) -> None:
                            "was not written by compgen's fit", where=store.where,
                            hint="ask the store's owner to look at that row; compgen checks against no "
                                 "calibration it cannot trust")
+    return fit
 
 
 def fleet(store: Store, every_days: float, today: str | None = None) -> list[dict]:
