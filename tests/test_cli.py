@@ -8,6 +8,11 @@ import numpy as np
 import pytest
 from conftest import BC_MACHINE, ROOT, SEED_MACHINE, TABLE4, run
 
+from compgen.configuration.machine_file import load_machine
+from compgen.data.rtest import format_rtest
+from compgen.data.simulate import simulate
+from compgen.model.paths import generate
+
 GOOD_HEADER = "path,t,X,Y,Z,A,C,dX,dY,dZ"
 GOOD_ROW = "K4,0.000,-217.5040,-0.2790,241.3310,0.0000,0.0000,-7.8617,2.7427,-6.7288"
 
@@ -507,3 +512,33 @@ def test_a_fit_with_nothing_to_fit_or_too_few_readings_is_refused(hidden_session
     assert code == 2 and "3 poses give 9 readings for 11 parameters" in err, err
     assert "Measure more poses" in err
     assert not out.exists()
+
+
+def test_a_machine_with_nothing_to_correct_gets_no_edit(tmp_path):
+    """Every location error within its noise (a machine already corrected, measured again):
+    kinematics says so in one line and writes nothing, unless --anyway; compare and the report
+    say it too. A machine with one error beyond its noise gets its edit."""
+    machine = load_machine(SEED_MACHINE)
+    clean = simulate(machine, {}, generate(machine, ["K4", "K1", "K2"]), 0.5, np.random.default_rng(61))
+    (tmp_path / "clean.csv").write_text(format_rtest(machine, clean))
+    assert run("fit", "--machine", SEED_MACHINE, tmp_path / "clean.csv", "-o", tmp_path / "f.json")[0] == 0
+    code, out, err = run("kinematics", "--from", tmp_path / "f.json", "-o", tmp_path / "KIN.txt")
+    assert code == 0 and out.startswith("nothing to correct: every correction an edit would write is within "
+                                        "3 σ"), out
+    assert "no edit written (--anyway writes it)" in out and len(out.strip().splitlines()) == 1, out
+    assert not list(tmp_path.glob("KIN*"))
+    code, out, err = run("compare", "--from", tmp_path / "f.json")
+    assert code == 0 and "nothing to correct" in out.splitlines()[1], out
+    code, out, err = run("compare", "--from", tmp_path / "f.json", "--json")
+    assert json.loads(out)["nothing_to_correct"].startswith("nothing to correct"), out
+    code, _, err = run("report", "--from", tmp_path / "f.json", "-o", tmp_path / "r.html")
+    assert code == 0 and "Nothing to correct" in (tmp_path / "r.html").read_text(), err
+    code, out, err = run("kinematics", "--from", tmp_path / "f.json", "-o", tmp_path / "KIN.txt", "--anyway")
+    assert code == 0 and (tmp_path / "KIN.txt").exists(), err
+    # one location error beyond its noise: the edit is written
+    moved = simulate(machine, {"XOC": 3e-3}, generate(machine, ["K4", "K1", "K2"]), 0.5,
+                     np.random.default_rng(62))
+    (tmp_path / "moved.csv").write_text(format_rtest(machine, moved))
+    assert run("fit", "--machine", SEED_MACHINE, tmp_path / "moved.csv", "-o", tmp_path / "g.json")[0] == 0
+    code, out, err = run("kinematics", "--from", tmp_path / "g.json", "-o", tmp_path / "K2.txt")
+    assert code == 0 and "nothing to correct" not in out and (tmp_path / "K2.txt").exists(), out + err

@@ -16,7 +16,7 @@ from .. import __version__, me
 from ..configuration.machine_file import load_machine
 from ..configuration.session import fit_machine, fit_request, machine_ref, read_data, reload
 from ..controllers.advice import Advisor
-from ..controllers.kinematics import corrected_by, kinematics_edit
+from ..controllers.kinematics import corrected_by, kinematics_edit, nothing_to_correct
 from ..controllers.probing import probe_program, with_sphere
 from ..controllers.programs import (
     MODES,
@@ -456,12 +456,14 @@ def check_program_cmd(machine_file, program, controller_name, ball, nest, mode, 
                    "edit's header and in the history).")
 @click.option("--beyond-limits", "beyond", is_flag=True,
               help="Write corrections larger than the machine file's [limits].")
+@click.option("--anyway", is_flag=True,
+              help="Write the edit although every correction is within its noise (nothing to correct).")
 @RECORD
 @SERIAL
 @DATE
 @DB
-def kinematics_cmd(base, controller_name, current, measured, output, force, despite, beyond, record, serial,
-                   taken, db):
+def kinematics_cmd(base, controller_name, current, measured, output, force, despite, beyond, anyway, record,
+                   serial, taken, db):
     """Write the controller's kinematics edit for a fit, with a sign check and a backup step."""
     fit = load_fit(base)
     machine, sets = reload(fit)
@@ -475,6 +477,16 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
     reasons = gate_edit(machine, sets, fit, base, despite)
     if reasons:
         warn("writing an edit despite the fit gate: " + "; ".join(reasons))
+    nothing = nothing_to_correct(machine, fit, ctl.name)
+    if nothing and not anyway:     # an edit of noise moves the control by noise, round after round
+        if record:
+            from ..history import record_fit, taken_at
+            store = history_store(db)
+            fid = record_fit(store, fit, machine, serial=serial, taken=taken_at(taken), verdict=reasons,
+                             exist_ok=True)
+            nothing += f"; recorded the fit as calibration #{fid} in {store.where}"
+        click.echo(f"{nothing}; no edit written (--anyway writes it)")
+        return
     out = Path(output)
     name = program_name(out.stem, room=len("_SIGN"))
     emitted = kinematics_edit(machine, fit, ctl.name, text, ", ".join(current), name, __version__,

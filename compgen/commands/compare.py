@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..controllers.correction import plan
+from ..controllers.kinematics import nothing_to_correct
 from ..controllers.registry import controller
 from ..data.rtest import Measurements, RTestData
 from ..errors import CompgenError
@@ -39,12 +40,13 @@ class Comparison:
     warnings: tuple[str, ...] = ()      # what the prediction says against the edit
     assumes: tuple[str, ...] = ()       # what the prediction takes as done besides loading files
     tolerances: dict = field(default_factory=dict)   # path → largest range allowed, µm
+    nothing: str = ""                   # "nothing to correct: ...", where the edit would write noise
 
     def to_dict(self) -> dict:
         out = {"format": "compgen.compare/1", "controller": self.controller, "before": self.before,
                "predicted_post": self.predicted_post, "not_compensated": list(self.not_compensated),
                "setup_left_out": list(self.setup), "warnings": list(self.warnings),
-               "assumes": list(self.assumes)}
+               "assumes": list(self.assumes), "nothing_to_correct": self.nothing}
         if self.measured_post is not None:
             out["measured_post"] = self.measured_post
         return out
@@ -68,6 +70,8 @@ class Comparison:
     def report(self) -> str:
         ctl = controller(self.controller).words
         lines = [f"compgen compare: after the kinematics edit for {ctl}",
+                 *([f"  {self.nothing}: kinematics writes no edit (--anyway writes it)"]
+                   if self.nothing else []),
                  "  misfit beyond the set-up (the ball's offset XOW YOW ZOW fitted out at each of its "
                  "mountings, and each later nest's), µm:", "",
                  f"  {'path':<8}{'before RMS':>11}{'predicted':>11}"
@@ -122,7 +126,8 @@ def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, control
         assumes += (f"no edit is written for a head yet: the prediction is for the fitted location errors "
                     f"entered by hand into the {ctl.words}'s kinematics, as compgen models it for a table",)
     return Comparison(ctl.name, before, pred, tuple(not_held), tuple(p.setup), measured,
-                      tuple(_warnings(machine, fit, pred)), assumes, dict(machine.tolerances))
+                      tuple(_warnings(machine, fit, pred)), assumes, dict(machine.tolerances),
+                      nothing_to_correct(machine, fit, controller_name) or "")
 
 
 def _warnings(machine: Machine, fit: FitResult, pred: dict) -> list[str]:

@@ -9,16 +9,17 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CompgenError
-from ..model.effects import effect_of_param
+from ..model.effects import effect_name, effect_of_param
 from ..model.kinematics import Model, Poses, inverse
 from ..model.lines import controller_inverse
 from ..model.machine import Machine
 from ..statistics.results import FitResult
+from ..units import shown
 from . import Emitted, ascii_text
 from .base import Controller, EditContext
 from .correction import Plan, lines_text, plan, rest
 from .programs import measure_program, program_name
-from .registry import for_machine
+from .registry import controller, for_machine
 
 SIGN_SEEN_UM = 1.0     # a change of the reading an R-test shows for certain at a sign-check pose
 
@@ -83,6 +84,29 @@ def corrected_by(machine: Machine, fit: FitResult, ctl: Controller) -> dict[str,
         if ctl.corrects(machine, e):
             out[n] = fit.parameters[n].value
     return out
+
+
+NOTHING_K = 3.0       # a correction within this many σ of zero is the fit's noise, not the machine's
+
+
+def nothing_to_correct(machine: Machine, fit: FitResult, controller_name: str) -> str | None:
+    """One line where no correction an edit of ``fit`` would write on the control is beyond
+    NOTHING_K σ of zero (an edit of noise moves the table by noise: a second calibration of a
+    machine that needs nothing would write one every time), else None."""
+    ctl = controller(controller_name)
+    p = plan(machine, fit, force=True)
+    written = [*corrected_by(machine, fit, ctl),
+               *(n for n in fit.model if effect_name(n) in p.tables and n in fit.free)]
+    if not written:
+        return "nothing to correct: the fit holds no correction this control takes"
+    score = {n: abs(fit.parameters[n].value) / fit.parameters[n].std if fit.parameters[n].std > 0
+             else float("inf") for n in written}
+    worst = max(score, key=score.get)
+    if score[worst] > NOTHING_K:
+        return None
+    value, unit = shown(fit.parameters[worst].value, fit.parameters[worst].unit)
+    return (f"nothing to correct: every correction an edit would write is within {NOTHING_K:g} σ of zero "
+            f"(the largest, {worst} {value:+.2f} {unit}, is {score[worst]:.1f} σ)")
 
 
 def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, current: str | None,
