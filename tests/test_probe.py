@@ -526,3 +526,51 @@ def test_the_probe_defaults_are_those_the_machine_file_doc_gives(tmp_path):
     got = load_machine(tmp_path / "m.toml").probe
     assert {k: float(getattr(got, k)) for k in documented} == documented
     assert documented == {k: float(getattr(ProbeSetup(25.4, 3.0, 120.0), k)) for k in documented}
+
+
+@pytest.mark.parametrize("ctl, current, main", [
+    ("itnc530", ROOT / "examples" / "itnc530-current.TAB", ".TAB"),
+    ("linuxcnc", None, ".hal"),
+])
+def test_a_second_probing_round_of_an_unchanged_machine_changes_nothing(tmp_path, ctl, current, main):
+    """The probing program moves the axes by compgen's inverse of the machine file, without
+    TCP: the control's table does not act, and the probe reads the machine against the
+    machine file, before the first edit is loaded and after. The second round's edit, over
+    the first one loaded, sets the control where the first did, to within 3 σ of the
+    two rounds' σ. (Before, the second edit added the same correction again: Y0A 0.029 -> 0.058 mm.)"""
+    machine = tmp_path / "m.toml"
+    machine.write_text(SEED_MACHINE.read_text().replace('controller = "itnc530"', f'controller = "{ctl}"'))
+    truth = ROOT / "examples" / "truth-table4.json"
+    if current is None:            # LinuxCNC: a HAL file holding the nominal pins
+        from compgen.controllers import linuxcnc
+        m = load_machine(machine)
+        module, tilt, c = linuxcnc.trt_module(m)
+        current = tmp_path / "now.hal"
+        current.write_text("".join(f"setp {module}.{n} {v:.6f}\n"
+                                   for n, v in linuxcnc.nominal_pins(m, tilt, c).items()))
+    state, fits = current, []
+    for k in (1, 2):
+        code, _, err = run("simulate", "--machine", machine, "--truth", truth, "--device", "probe",
+                           "--noise-um", "1", "--seed", str(k), "-o", tmp_path / f"log{k}.csv",
+                           *(["--edit", state, "--current", current] if k == 2 else []))
+        assert code == 0 and (k == 1 or "runs without TCP" in err), err
+        fitted = tmp_path / f"f{k}.json"
+        assert run("fit", "--machine", machine, tmp_path / f"log{k}.csv", "-o", fitted)[0] == 0
+        code, out, err = run("kinematics", "--from", tmp_path / f"f{k}.json", "--current", state, "-o",
+                             tmp_path / f"K{k}{main}")
+        written = "".join(f.read_text() for f in tmp_path.glob(f"K{k}*"))
+        assert code == 0 and "measured without TCP (a probing program)" in written, out + err
+        state = tmp_path / f"K{k}{main}"
+        fits.append(json.loads((tmp_path / f"f{k}.json").read_text())["parameters"])
+    from compgen.controllers.registry import read_edits, read_state
+    m = load_machine(machine)
+    held = [read_edits(m, {str(tmp_path / f"K{k}{main}"): read_state(str(tmp_path / f"K{k}{main}"))},
+                       read_state(str(current))) for k in (1, 2)]
+    for a in ("A", "C"):
+        first, second = held[0].lines[a], held[1].lines[a]
+        moved = np.abs(second.offset - first.offset).max()
+        # two independent rounds' estimates differ by their difference's σ, hypot(σ1, σ2)
+        sigma = max(np.hypot(fits[0][n]["std"], fits[1][n]["std"]) for n in fits[1]
+                    if n.endswith(a) and n[0] in "XYZ" and fits[1][n]["unit"] == "mm")
+        assert moved < 3 * sigma, (a, moved, sigma)
+        assert np.abs(first.offset).max() > 10 * sigma                    # the first edit did correct

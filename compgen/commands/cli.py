@@ -139,7 +139,12 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
         poses = generate(machine, names, ball=at, start_s=start_s, back=back, rate_hz=rate_hz, feed=feed,
                          nest=nest_mm(nest))
     drive = None
-    if edits:
+    if edits and device == "probe":
+        # the probing program moves the axes by compgen's inverse of the machine file, without
+        # TCP: no kinematics edit moves it, and the probe reads the machine against that file
+        warn("a probing program runs without TCP: the edit does not move its axes, and the session reads "
+             "the machine against the machine file as before")
+    elif edits:
         held = read_edits(machine, {e: read_state(e) for e in edits},
                           read_state(current) if current else None)
         drive = partial(held.drive, machine)
@@ -489,10 +494,16 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
         return
     out = Path(output)
     name = program_name(out.stem, room=len("_SIGN"))
+    devices = {d.device for d in fit.data}
+    if len(devices) > 1:     # a probe measures against the machine file, an R-test against the table
+        raise CompgenError("the fit joins data measured under TCP (R-test) and without (probe log): they "
+                           "measured against different geometries, so no edit holds both",
+                           hint="fit each device's data alone, and write the edit from one of them")
     emitted = kinematics_edit(machine, fit, ctl.name, text, ", ".join(current), name, __version__,
                               date.today().isoformat(), beyond,
                               read_state(measured) if measured else None, out.stem, ", ".join(measured),
-                              str(out.absolute().parent), despite=tuple(reasons))
+                              str(out.absolute().parent), despite=tuple(reasons),
+                              without_tcp=devices == {"probe"})
     main_key = ctl.main_suffix(text)
     if output != STDOUT and out.suffix.lower() != main_key.lower():
         # the file the notes name is the file written: a .hal holding an INI would be started as

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import CompgenError
 from ..model.lines import AxisLine
 from ..model.machine import Machine, ProbeSetup
 from ..setup.motion import Block, Check, run
@@ -225,6 +226,14 @@ class Controller:
         """What the control holds now (``current``) beyond the state the data were measured
         in (``measured``): lines and squareness, relative."""
         raise NotImplementedError
+
+    def beyond_nominal(self, machine: Machine, current: str, where: str) -> Held:
+        """What the control holds now (``current``) beyond the machine file's geometry: lines
+        and squareness, relative. Data measured without TCP (a probing program) measured the
+        machine against the machine file, so their edit sets the control to that geometry
+        plus the fit: this is taken off it."""
+        raise CompgenError(f"compgen does not read what the {self.words} holds beyond the machine file's "
+                           "geometry", hint="give data measured under TCP, or no --current")
 
     def reads(self, text: str) -> bool:
         """Whether ``text`` is one of the edit files this controller writes."""

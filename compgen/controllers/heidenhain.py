@@ -463,6 +463,10 @@ class Heidenhain(Controller):
         sq_now, sq_then = (read_squareness(t, machine) for t in (current, measured))
         return Held(lines, {k: sq_now.get(k, 0.0) - sq_then.get(k, 0.0) for k in {**sq_now, **sq_then}})
 
+    def beyond_nominal(self, machine: Machine, current: str, where: str) -> Held:
+        # the ISO-named rows hold the deviations from the machine's geometry: none is nominal
+        return Held(read_lines(current, machine, nominal_lines(machine)), read_squareness(current, machine))
+
     def tool_word(self, tool: str) -> str:
         return tool if tool.isdigit() else f'"{tool}"'
 

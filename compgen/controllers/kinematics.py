@@ -113,14 +113,19 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
                     current_where: str, name: str, version: str, date: str, force: bool = False,
                     measured: str | None = None, stem: str | None = None,
                     measured_where: str = "--measured-with", folder: str = "",
-                    despite: tuple[str, ...] = ()) -> Emitted:
+                    despite: tuple[str, ...] = (), without_tcp: bool = False) -> Emitted:
     """The files of a kinematics edit for one control, with the sign check and notes.
 
     ``measured`` is the control's state while the data were measured, when it differs from
     ``current`` (part of a correction already loaded, say): the edit then writes the rest.
     ``stem``: the file stem its files are written under, where one file names another;
     ``folder``: the folder they are written to; ``despite``: the fit gate's reasons, where the
-    edit is written although the fit does not explain its data (its header says so).
+    edit is written although the fit does not explain its data (its header says so);
+    ``without_tcp``: the data were measured without the control's kinematics acting (a
+    probing program moves the axes by compgen's inverse of the machine file), so they hold
+    the machine against the machine file: the edit sets the control to the machine file's
+    geometry plus the fit, taking off what ``current`` holds beyond that geometry, where one
+    measured under TCP adds to what the control held while measuring.
     """
     ctl = for_machine(controller_name, machine, edit=True)
     for text in (current, measured):
@@ -130,6 +135,13 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
                                hint="measure again and fit the new data; or give the state the data "
                                     "were measured in with --measured-with")
     p = plan(machine, fit, force)
+    if without_tcp and measured is not None:
+        raise CompgenError("data measured without TCP (a probing program) are the machine against the "
+                           "machine file, whatever the control held: --measured-with does not apply",
+                           hint="leave out --measured-with; give the state the control holds now as "
+                                "--current")
+    if without_tcp and current is not None:
+        p = rest(machine, p, ctl.beyond_nominal(machine, current, current_where), force)
     if measured is not None:
         if current is None:
             raise CompgenError("the state the data were measured in only counts against --current",
@@ -154,7 +166,9 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
               f"from {fit.marker}: machine file {ascii_text(Path(fit.machine['file']).name)}, data "
               + ", ".join(ascii_text(Path(d.file).name) for d in fit.data),
               *(f"WRITTEN DESPITE THE FIT GATE: {ascii_text(r)}" for r in despite),
-              "corrections add to the kinematics active while the R-test ran under TCPM/TRAORI",
+              ("measured without TCP (a probing program): the machine against the machine file's geometry; "
+               "the edit sets the control to that geometry plus the fit" if without_tcp else
+               "corrections add to the kinematics active while the R-test ran under TCPM/TRAORI"),
               "BACKUP FIRST: " + ctl.backup,
               f"then run the sign check {sign_name}: see its expected changes" if signcheck else
               "then make the sign check by hand at the poses named: see their expected changes")

@@ -855,6 +855,9 @@ class LinuxCNC(Controller):
     def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
         return Held(read_lines(current, machine, measured, nominal_lines(machine)), {})
 
+    def beyond_nominal(self, machine: Machine, current: str, where: str) -> Held:
+        return Held(read_lines(current, machine, None, nominal_lines(machine)), {})
+
     def state(self, path: str, text: str) -> str | None:
         # an INI (inivar finds a section by the start of its line): LinuxCNC's whole configuration
         return bundle(path, text) if re.search(r"(?m)^[ \t]*\[HAL\]", text) else None

@@ -657,6 +657,15 @@ class Sinumerik840D(Controller):
         then = read_carr(measured, where, machine.sinumerik["tcarr"])
         return Held(read_lines(current, machine, then, nominal_lines(machine)), {})
 
+    def beyond_nominal(self, machine: Machine, current: str, where: str) -> Held:
+        # the record at the machine file's geometry: fine offsets zero, the vectors it holds
+        if machine.sinumerik is None:
+            raise CompgenError(f"machine file {machine.source} has no [sinumerik] section")
+        nominal = {n: 0.0 for idx in FINE.values() for n in idx}
+        for i, a in enumerate(carr_axes(machine), start=1):
+            nominal.update(zip(VECTOR[i], machine.sinumerik["vectors"][a.name], strict=True))
+        return Held(read_lines(current, machine, nominal, nominal_lines(machine)), {})
+
     def reads(self, text: str) -> bool:
         return "$TC_CARR" in text or "$AN_CEC" in text
 
