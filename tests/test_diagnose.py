@@ -7,10 +7,12 @@ from itertools import combinations
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, TABLE4, UM
+from conftest import ARCSEC, SEED_MACHINE, TABLE4, UM
 
+from compgen import me
+from compgen.configuration.machine_file import load_machine
 from compgen.controllers.advice import Advisor
-from compgen.data.rtest import RTestData
+from compgen.data.rtest import RTestData, format_rtest
 from compgen.data.simulate import ar1_noise, simulate
 from compgen.model.effects import compose, location_model
 from compgen.model.paths import generate
@@ -1472,3 +1474,34 @@ def test_the_separations_take_each_mounting_of_the_ball_with_its_own_offset(seed
         want = A - N @ np.linalg.lstsq(N, A, rcond=None)[0]
         gram = want.T @ want
         np.testing.assert_allclose(R.T @ R, gram, rtol=1e-7, atol=1e-9 * np.abs(gram).max(), err_msg=label)
+
+
+def test_diagnoses_first_line_is_its_verdict_on_every_kind_of_conclusion(tmp_path):
+    """The conclusion first, in one line, the same as the JSON's verdict: on the bundled
+    example without the noise (noise unknown: give it), with it (found EXC:h2, the command
+    that adds it), once it is added (explained to the noise), K4 alone with a hidden 2/rev
+    tilt (rivals, what to measure) and a 5 mm ball-screw period (unexplained)."""
+    from conftest import ROOT, run
+    session = ROOT / "examples" / "seed-session.csv"
+    assert run("fit", "--machine", "ac-trunnion-itnc530", session, "-o", tmp_path / "ex.json")[0] == 0
+    assert run("fit", "--from", tmp_path / "ex.json", "--add", "EXC:h2", "-o", tmp_path / "ex2.json")[0] == 0
+    machine = load_machine(SEED_MACHINE)
+    for name, hidden, paths in (("rivals", {"EAC+EBC:h2c": 8 * ARCSEC}, ["K4"]),
+                                ("screw", {"EXX:w5c": 1.2 * UM, "EXX:w5s": -1.6 * UM}, ["K4", "K1", "K2"])):
+        d = simulate(machine, {**TABLE4, **hidden}, generate(machine, paths), 0.5, np.random.default_rng(3))
+        (tmp_path / f"{name}.csv").write_text(format_rtest(machine, d))
+        fitted = tmp_path / f"{name}.json"
+        assert run("fit", "--machine", SEED_MACHINE, tmp_path / f"{name}.csv", "-o", fitted)[0] == 0
+    cases = [("ex.json", [], "noise unknown", "give --noise-um"),
+             ("ex.json", ["--noise-um", "0.5"], "found", "found EXC:h2 (against the given noise 0.5 µm"),
+             ("ex2.json", ["--noise-um", "0.5"], "explained", "explained to the noise"),
+             ("rivals.json", ["--noise-um", "0.5"], "rivals", "not told apart:"),
+             ("screw.json", ["--noise-um", "0.5"], "unexplained", "unexplained:")]
+    for fit, more, kind, says in cases:
+        code, out, err = run("diagnose", "--from", tmp_path / fit, *more)
+        assert code == 0 and out.startswith("VERDICT: ") and says in out.splitlines()[0], (fit, out[:600])
+        code, js, err = run("diagnose", "--from", tmp_path / fit, *more, "--json")
+        assert json.loads(js)["verdict"] == kind, (fit, json.loads(js)["verdict"])
+    found = run("diagnose", "--from", tmp_path / "ex.json", "--noise-um", "0.5")[1]
+    assert f"add it: {me()} fit --from " in found.splitlines()[0], found.splitlines()[0]
+    assert found.count("add it:") == 2         # the verdict's and the best's; never the others'

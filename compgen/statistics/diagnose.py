@@ -194,6 +194,28 @@ class Diagnosis:
         return by_label[best], tuple(shows[best])
 
     @property
+    def verdict(self) -> str:
+        """The conclusion in one word, as the text's first line says it: "device" (the R-test's
+        own parameter explains the misfit), "found", "rivals" (not told apart), "unexplained",
+        "not separable" (the best is seen but not separable whole), "noise unknown" (a best
+        candidate, but no noise to test what it leaves against), or "explained" (to the
+        noise, or to these data's own scatter where the noise is unknown)."""
+        best = self.significant[0] if self.significant else None
+        if self.device_blamed is not None:
+            return "device"
+        if self.found is not None:
+            return "found"
+        if self.rivals:
+            return "rivals"
+        if self.unexplained:
+            return "unexplained"
+        if best is not None and not best.separable:
+            return "not separable"
+        if best is not None or self.misfit or self.significant_devices:
+            return "noise unknown" if self.device_noise_um is None else "unexplained"
+        return "explained"
+
+    @property
     def found(self) -> str | None:
         """The effect named as missing: significant, first, with no rival, one that ``fit
         --add`` accepts on these data, and not a small part of an unexplained misfit, which
@@ -210,7 +232,7 @@ class Diagnosis:
             "format": "compgen.diagnose/1", "machine": self.machine, "fit": self.fit_file,
             "model": list(self.model), "rms_um": self.rms_um, "sigma_um": self.sigma_um,
             "readings": self.readings, "tested": self.tested, "alpha": self.alpha,
-            "explained_to_noise": self.explained_to_noise,
+            "verdict": self.verdict, "explained_to_noise": self.explained_to_noise,
             "device_noise_um": self.device_noise_um,
             "device_noise_from": self.noise_from,
             "repeats": self.repeats and {**asdict(self.repeats), "words": self.repeats.words()},

@@ -20,9 +20,9 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
     """The diagnosis as text: residual, candidates, rivals, what these data cannot see, and
     the next command for each."""
     fit, after = shlex.quote(fit_path), shlex.quote(next_name(fit_path))
-    lines = [f"compgen diagnose: {d.machine}", f"  fit {d.fit_file}: {len(d.model)} "
-             f"parameters; residual RMS {d.rms_um:.3f} µm (σ̂ {d.sigma_um:.3f} µm) over "
-             f"{d.readings} readings", "",
+    lines = [conclusion(d, fit, after), f"compgen diagnose: {d.machine}",
+             f"  fit {d.fit_file}: {len(d.model)} parameters; residual RMS {d.rms_um:.3f} µm "
+             f"(σ̂ {d.sigma_um:.3f} µm) over {d.readings} readings", "",
              f"  {'residual per path (µm)':<24}{three_header(('RMS dX', 'dY', 'dZ'))}"]
     for name, p in d.per_path.items():
         lines.append(f"    {name:<22}{three(p['rms_um'])}")
@@ -59,6 +59,9 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
             lines.append("      it fits a part of the unexplained misfit (see below): not advised on its own")
         elif c.significant and d.device_blamed:
             lines.append(f"      the device explains these data as well ({d.device_blamed}): see below")
+        elif c.significant and c.separable and c is not d.significant[0]:
+            lines.append("      significant beside the best, with which it shares misfit: add the best "
+                         "first, then diagnose again")
         elif c.significant and c.separable:
             lines.append(f"      add it: {me()} fit --from {fit} --add {c.effect} -o {after}")
         elif c.significant:
@@ -134,7 +137,8 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
             lines.append(f"    {c.effect:<12} {c.description}: {what}; {where}")
         m, shows = d.next_measurement
         if m is not None:
-            lines.append(f"  to look for them, {m.label} would show the most ({len(shows)}: "
+            lines.append(f"  {'optional, the data being explained: ' if d.verdict == 'explained' else ''}"
+                         f"to look for them, {m.label} would show the most ({len(shows)}: "
                          f"{', '.join(shows[:6])}{', …' if len(shows) > 6 else ''}):")
             lines.append(f"    {m.label}: {_measure(d, m)}")
             lines += _then([m], fit, after)
@@ -151,6 +155,47 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
             lines.append(f"    {name:<6} {per_um[worst]:+6.2f} {d.bias_units[name]} per µm of "
                          f"{effect_name(worst)}")
     return "\n".join([*lines, *d.notes]) + "\n"
+
+def _noise_said(d: Diagnosis) -> str:
+    """Where the noise the tests used came from, in words."""
+    return {"given": f"the given noise {d.device_noise_um:.3g} µm ([rtest] noise_um or --noise-um)",
+            "touches": f"the probe's noise {d.device_noise_um:.3g} µm, from its touches",
+            "repeats": f"the noise {d.device_noise_um:.3g} µm from {d.repeats.words() if d.repeats else ''}",
+            None: "no noise given"}[d.noise_from]
+
+
+def conclusion(d: Diagnosis, fit: str, after: str) -> str:
+    """The first line: what diagnose concludes, and the one next step."""
+    best = d.significant[0].effect if d.significant else None
+    add = f"{me()} fit --from {fit} --add {best} -o {after}"
+    kind = d.verdict
+    if kind == "device":
+        return (f"VERDICT: the device explains the misfit ({d.blamed.description}, {d.device_blamed}): "
+                "calibrate that sensor and measure again")
+    if kind == "found":
+        return f"VERDICT: found {best} (against {_noise_said(d)}); add it: {add}"
+    if kind == "rivals":
+        plan = d.rivals_separated_by
+        return (f"VERDICT: not told apart: {' vs '.join((best, *d.rivals))}; "
+                + (f"measure: {', '.join(m.label for m in plan)} (below)" if plan else
+                   "no set-up of this machine tells them apart (below)"))
+    if kind == "unexplained":
+        return ("VERDICT: unexplained: the residual exceeds the noise and no catalogue effect accounts for "
+                "it; declare its shape (below)")
+    if kind == "not separable":
+        c = d.significant[0]
+        return (f"VERDICT: {best} is seen but not separable whole on these data; "
+                + (f"measure: {c.separated_by[0].label} (below)" if c.separated_by else
+                   "no set-up of this machine separates it"))
+    if kind == "noise unknown":
+        return (f"VERDICT: {best or 'a misfit'} is the best explanation, but the noise is unknown, so "
+                "nothing is named found: give --noise-um (the device's calibration), or measure a path "
+                "twice, and diagnose again")
+    if d.device_noise_um is None:
+        return (f"VERDICT: explained to these data's own scatter (σ̂ {d.sigma_um:.2f} µm); the noise is "
+                "unknown: give --noise-um, or measure a path twice, to test it")
+    return f"VERDICT: explained to the noise ({_noise_said(d)}); nothing to add"
+
 
 CARRIES_SHOWN = 0.2     # µm or ″: smaller shifts of a location error are not listed
 
