@@ -79,3 +79,8 @@ def three(v, width: int = 9) -> str:
 
 def three_header(words: tuple[str, str, str], width: int = 9) -> str:
     return "".join(f"{w:>{width}}" for w in words)
+
+
+# a device's noise per reading beyond this is no measurement compgen reads (its readings stay
+# within 5 mm, an R-test's noise is 0.1-5 µm): a larger figure is a unit or a typing error
+NOISE_MAX_UM = 1000.0

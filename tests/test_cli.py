@@ -157,7 +157,7 @@ def test_existing_output_needs_force(tmp_path, good_csv, truth):
     (["--paths", "K9"], "defines no path 'K9'"),
     (["--noise-um", "-1"], "noise"),
     (["--noise-um", "0.5", "--noise-rho", "1"], "ρ must be in [0, 1)"),
-    (["--noise-um", "0.5", "--noise-rho", "nan"], "ρ must be in [0, 1)"),
+    (["--noise-um", "0.5", "--noise-rho", "nan"], "'nan' is not a finite number"),
     (["--ball", "1,2"], "three numbers"),
     (["--ball", "0,0,900"], "outside its travel"),
 ])

@@ -273,3 +273,44 @@ def test_what_no_controller_reads_and_a_folder_not_there_are_refused(fit, tmp_pa
              "--fix XOC=12furlong: unknown unit 'furlong'. Use one of mm, um", tmp_path, "f.json")
     _refused(["fit", "--from", fit, "--fix", "XOC=twelve", "-o", tmp_path / "f.json"],
              "cannot read 'twelve' as a number with a unit", tmp_path, "f.json")
+
+
+@pytest.mark.parametrize("store, says", [
+    (":memory:", "SQLite's name for a store kept nowhere"),
+    ("file:h.sqlite", "SQLite's name for a store kept nowhere"),
+    ("", "--db is empty"),
+    ("dangling.sqlite", "a link to a file that is not there"),
+    ("fifo", "not a regular file"),
+    ("gone/h.sqlite", "the history store's folder does not exist"),
+    ("postgresql+psycopg://u:s3cret@127.0.0.1:1/db", "a URL compgen does not read"),
+])
+def test_a_store_path_no_history_can_be_kept_at_is_refused_in_one_line(fit, tmp_path, monkeypatch, store,
+                                                                       says):
+    """Every kind of --db the held-out round found taken as a store, or crashing: each
+    refused in one line, exit 2, nothing recorded anywhere (not the default store either)."""
+    import os
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "dangling.sqlite").symlink_to(tmp_path / "nowhere" / "x.sqlite")
+    os.mkfifo(tmp_path / "fifo")
+    _refused(["history", "add", fit, "--db", store], says, tmp_path)
+    assert not (tmp_path / "compgen-history.sqlite").exists() and "s3cret" not in says
+    code, out, err = run("history", "add", fit, "--db", store)
+    assert "s3cret" not in out + err
+
+
+@pytest.mark.parametrize("args, says", [
+    (["diagnose", "--noise-um", "1e308"], "is not in the range"),
+    (["diagnose", "--noise-um", "nan"], "not a finite number"),
+    (["history", "fleet", "--every-days", "inf"], "is not in the range"),
+    (["history", "fleet", "--every-days", "nan"], "not a finite number"),
+    (["simulate", "--noise-rho", "nan"], "not a finite number"),
+    (["simulate", "--stylus-error-um", "inf"], "not a finite number"),
+])
+def test_a_number_option_out_of_its_range_or_not_finite_is_refused(fit, tmp_path, args, says):
+    """click's ranges let NaN through and a plain float takes inf: every number option is a
+    finite number within its range (a noise of 1e308 µm overflowed, a due date at inf too)."""
+    cmd, *rest = args
+    more = {"diagnose": ["--from", fit], "history": ["--db", tmp_path / "h.sqlite"],
+            "simulate": ["--machine", "ac-trunnion-itnc530", "--truth",
+                         ROOT / "examples" / "truth-table4.json", "-o", tmp_path / "s.csv"]}[cmd]
+    _refused([cmd, *rest, *more], says, tmp_path, "s.csv")

@@ -53,8 +53,8 @@ def test_a_feed_the_axis_cannot_reach_is_refused_and_nothing_written(tmp_path):
 
 
 @pytest.mark.parametrize("rate, feed, said", [
-    ("0", "600", "finite number > 0 Hz"), ("nan", "600", "finite number > 0 Hz"),
-    ("inf", "600", "finite number > 0 Hz"), ("100", "0", "finite number > 0 deg/min"),
+    ("0", "600", "finite number > 0 Hz"), ("nan", "600", "'nan' is not a finite number"),
+    ("inf", "600", "'inf' is not a finite number"), ("100", "0", "finite number > 0 deg/min"),
     ("1e-9", "600", "fewer than two readings"),               # a rate no path can be sampled at
     ("1e9", "3000", "more than 2796202 readings"),            # a session no data file could hold
 ])

@@ -44,6 +44,7 @@ from ..statistics.diagnose_text import report as diagnosis_text
 from ..statistics.gate import gate_edit, unit_suspicion
 from ..statistics.identify import identify, mountings_note
 from ..statistics.results import load_fit
+from ..units import NOISE_MAX_UM
 from .checklist import checklist, markdown
 from .cli_common import (
     CONTROLLER_NAMES,
@@ -56,6 +57,7 @@ from .cli_common import (
     PROBE_LENGTH,
     RECORD,
     SERIAL,
+    Finite,
     Group,
     encoded_like,
     named_paths,
@@ -83,9 +85,9 @@ def main():
               help='JSON {"parameters": {NAME: {"value": v, "unit": u}}}, or a fit.json.')
 @click.option("--paths", "path_names", default="K4,K1,K2", show_default=True,
               help="Comma-separated path names from the machine file.")
-@click.option("--noise-um", type=float, default=0.0, show_default=True,
+@click.option("--noise-um", type=Finite(min=0, max=NOISE_MAX_UM), default=0.0, show_default=True,
               help="Noise σ per reading, µm (white unless --noise-rho).")
-@click.option("--noise-rho", type=float, default=0.0, show_default=True,
+@click.option("--noise-rho", type=Finite(), default=0.0, show_default=True,
               help="Correlation of the noise from one reading to the next, AR(1), 0 ≤ ρ < 1: "
                    "drift of a real set-up.")
 @click.option("--seed", type=int, default=None, help="Random seed, for a repeatable noise draw.")
@@ -93,10 +95,10 @@ def main():
                                             "(default: the machine file's).")
 @click.option("--there-and-back", "back", is_flag=True, help="Run each path there and back.")
 @PROBE_LENGTH
-@click.option("--rate-hz", type=float, default=None,
+@click.option("--rate-hz", type=Finite(), default=None,
               help="A continuous session: a reading every 1/RATE s while each path runs (an R-test "
                    "sampling on the fly), instead of the path's n poses.")
-@click.option("--feed", type=float, default=None,
+@click.option("--feed", type=Finite(), default=None,
               help="With --rate-hz: each path's pace, deg/min of its most-travelled rotary axis "
                    "(default the path's own: n poses of seconds_per_pose).")
 @click.option("--edit", "edits", type=FILE, multiple=True,
@@ -108,9 +110,9 @@ def main():
 @click.option("--device", type=click.Choice(["rtest", "probe"]), default="rtest", show_default=True,
               help="probe: a touch-probe log v1 of the machine file's [probe] (its poses per path, "
                    "its touches); --noise-um is then the trigger noise per touch.")
-@click.option("--stylus-error-um", type=float, default=0.0, show_default=True,
+@click.option("--stylus-error-um", type=Finite(), default=0.0, show_default=True,
               help="With --device probe: the stylus's real diameter minus the one the log states, µm.")
-@click.option("--start-s", "start_s", type=float, default=0.0, show_default=True,
+@click.option("--start-s", "start_s", type=Finite(), default=0.0, show_default=True,
               help="Time of the first reading, s on the session's clock: a follow-up measured right "
                    "after an earlier file, its clock running on (a drift needs one clock).")
 @OUTPUT
@@ -244,7 +246,8 @@ def _warn_about_data(machine, names, sets) -> None:
                    "and the rivals on the measurement that tells them apart.")
 @click.option("--before", type=FILE, default=None,
               help="An earlier fit.json of the same data, drawn beside this one in the plots.")
-@click.option("--noise-um", "noise_um", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--noise-um", "noise_um", type=Finite(min=0, max=NOISE_MAX_UM, min_open=True),
+              default=None,
               help="The R-test's own noise, 1σ per reading, µm (default: the machine file's "
                    "[rtest] noise_um). With it, the residual is tested against it per path and "
                    "direction, and what no catalogue effect explains is called unexplained.")

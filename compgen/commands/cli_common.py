@@ -4,6 +4,7 @@ readers of option values. The commands are cli.py's and cli_history.py's."""
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 
@@ -101,6 +102,19 @@ MACHINE = click.option("--machine", "machine_file", type=FILE, required=True,
                             "bc-table-sinumerik840d, bc-swivel-head-table, bc-fork-head.")
 OUTPUT = click.option("-o", "--output", type=FILE, required=True, help="File to write.")
 FORCE = click.option("--force", is_flag=True, help="Overwrite an existing output file.")
+
+
+class Finite(click.FloatRange):
+    """A number option: finite, within its range. click's ranges let NaN through (every
+    comparison with it is false), and an unbounded float takes inf and nan as numbers."""
+
+    def convert(self, value, param, ctx):
+        v = super().convert(value, param, ctx)
+        if not math.isfinite(v):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return v
+
+
 DB = click.option("--db", default=None, metavar="STORE",
                   help="The history store: an SQLite file (default: $COMPGEN_DB, else "
                        "compgen-history.sqlite here) or postgresql://user@host/db.")

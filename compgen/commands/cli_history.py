@@ -17,7 +17,7 @@ from ..files import read_text, write_atomically
 from ..statistics.gate import fit_gate
 from ..statistics.results import load_fit
 from ..units import number
-from .cli_common import DB, FILE, FORCE, MACHINE, OUTPUT, SERIAL, progress, said, warn
+from .cli_common import DB, FILE, FORCE, MACHINE, OUTPUT, SERIAL, Finite, progress, said, warn
 
 
 def history_store(db: str | None, create: bool = True):
@@ -26,6 +26,9 @@ def history_store(db: str | None, create: bool = True):
     store = open_store(db, create)
     click.get_current_context().call_on_close(store.close)
     return store
+
+
+EVERY_DAYS_MAX = 3653.0       # ten years: a check due later is no plan (and the calendar ends)
 
 
 @click.group("history")
@@ -171,8 +174,9 @@ def history_import_cmd(export_file, db):
 
 
 @history_cmd.command("fleet")
-@click.option("--every-days", type=click.FloatRange(min=0, min_open=True), default=90.0, show_default=True,
-              help="A check is due this long after a machine's last measurement.")
+@click.option("--every-days", type=Finite(min=0, max=EVERY_DAYS_MAX, min_open=True), default=90.0,
+              show_default=True, help="A check is due this long after a machine's last measurement (at most "
+                                      "ten years).")
 @click.option("--json", "as_json", is_flag=True)
 @DB
 def history_fleet_cmd(every_days, as_json, db):

@@ -30,6 +30,7 @@ from ..model.machine import (
     check_ball,
     identifier,
 )
+from ..units import NOISE_MAX_UM
 
 TOP_KEYS = {"name", "serial", "drift", "controller", "workpiece", "tool", "rtest", "paths", "program",
             "probe", "limits",
@@ -115,7 +116,7 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
         workpiece=chains["workpiece"], tool=chains["tool"],
         ball=ball, probe_length=_positive(rtest, "probe_length"), setup=setup,
         source=source, sha256=sha256,
-        noise_um=_positive(rtest, "noise_um") if "noise_um" in rtest.doc else None,
+        noise_um=_noise(rtest) if "noise_um" in rtest.doc else None,
         gain_u=_gain_u(rtest) if "gain_u" in rtest.doc else 0.0,
     )
     paths = {}
@@ -213,6 +214,14 @@ def _positive(g: _Getter, key: str, zero_ok: bool = False) -> float:
     v = g.number(key)
     if v < 0 or (v == 0 and not zero_ok):
         raise CompgenError(f"must be {'≥' if zero_ok else '>'} 0", where=g.at(key))
+    return v
+
+
+def _noise(g: _Getter) -> float:
+    v = _positive(g, "noise_um")
+    if not v <= NOISE_MAX_UM:
+        raise CompgenError(f"{v:g} µm is no device's noise per reading (at most {NOISE_MAX_UM:g} µm)",
+                           where=g.at("noise_um"), hint="give the device's calibrated noise in µm, e.g. 0.5")
     return v
 
 

@@ -132,8 +132,39 @@ def now() -> str:
 
 
 def store_url(given: str | None) -> str:
-    """``--db``, else $COMPGEN_DB, else the SQLite file beside the job (the current folder)."""
+    """``--db``, else $COMPGEN_DB, else the SQLite file beside the job (the current folder).
+    An empty --db is refused: it would be taken for "not given" and record into the default
+    (an empty $COMPGEN_DB is the shell's unset)."""
+    if given is not None and not str(given).strip():
+        raise CompgenError("--db is empty", hint=f"name the store, or leave --db out for {DEFAULT_FILE} in "
+                                                 "this folder")
     return str(given or os.environ.get(ENV) or DEFAULT_FILE)
+
+
+def _sqlite_path(url: str, create: bool) -> Path:
+    """The SQLite file a --db names, refused where no file store can be kept: SQLite's own
+    in-memory and URI names (a history kept nowhere), a link to nowhere, a FIFO or device,
+    a folder that is not there or not writable."""
+    name = url.removeprefix("sqlite:///") if url.startswith("sqlite:///") else url
+    if name == ":memory:" or name.startswith("file:"):
+        raise CompgenError(f"--db {name!r} is SQLite's name for a store kept nowhere (in memory, or a URI)",
+                           hint="give a file name: the history is to outlive the command")
+    path = Path(name)
+    if path.is_symlink() and not path.exists():
+        raise CompgenError("the history store is a link to a file that is not there", where=str(path),
+                           hint="give the file itself, or make the link point at one")
+    if path.exists() and not path.is_dir() and not path.is_file():
+        raise CompgenError("the history store is not a regular file (a FIFO or a device)", where=str(path),
+                           hint="give a file")
+    folder = (path.resolve().parent if path.exists() else path.absolute().parent)
+    if not path.exists() and create:
+        if not folder.is_dir():
+            raise CompgenError("the history store's folder does not exist", where=str(path),
+                               hint=f"make {folder} first, or give another --db")
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise CompgenError("the history store's folder is not writable: no store can be made there",
+                               where=str(path), hint="give a folder you can write, or another --db")
+    return path
 
 
 def _is_postgres(url: str) -> bool:
@@ -375,7 +406,7 @@ def open_store(given: str | None = None, create: bool = True) -> Store:
             store.close()
             raise
         return store
-    path = Path(url.removeprefix("sqlite:///") if url.startswith("sqlite:///") else url)
+    path = _sqlite_path(url, create)
     if path.is_dir():
         raise CompgenError("the history store is a folder", where=str(path),
                            hint=f"give a file, e.g. --db {path / DEFAULT_FILE}")
@@ -388,8 +419,11 @@ def open_store(given: str | None = None, create: bool = True) -> Store:
                 raise CompgenError("this file is not an SQLite history store", where=str(path),
                                    hint="give another --db")
     reading(path)             # no command writes a file over the store it opened
-    db = sqlite3.connect(path, timeout=60.0, isolation_level=None)
-    db.execute("PRAGMA foreign_keys = ON")
+    try:
+        db = sqlite3.connect(path, timeout=60.0, isolation_level=None)
+        db.execute("PRAGMA foreign_keys = ON")
+    except sqlite3.Error as exc:          # a folder or file the system refuses: one line
+        raise CompgenError(f"cannot open the history store: {exc}", where=str(path)) from None
     store = Store(str(path), db, postgres=False)
     try:
         store.migrate()
