@@ -314,3 +314,18 @@ def test_a_number_option_out_of_its_range_or_not_finite_is_refused(fit, tmp_path
             "simulate": ["--machine", "ac-trunnion-itnc530", "--truth",
                          ROOT / "examples" / "truth-table4.json", "-o", tmp_path / "s.csv"]}[cmd]
     _refused([cmd, *rest, *more], says, tmp_path, "s.csv")
+
+
+def test_a_record_number_that_is_no_whole_number_and_an_implausible_temperature_are_refused(fit, tmp_path):
+    """[sinumerik] tcarr = 1.5 was read as record 1 (int()), and a temperature of 10⁶ °C was
+    recorded: each refused in one line at its key."""
+    from conftest import BC_MACHINE
+    bad = tmp_path / "bc.toml"
+    text = BC_MACHINE.read_text()
+    assert "tcarr = 1 " in text
+    bad.write_text(text.replace("tcarr = 1 ", "tcarr = 1.5 ", 1))
+    _refused(["measure-program", "--machine", bad, "--path", "K4", "-o", tmp_path / "x.MPF"],
+             "tcarr: must be the record's number, a whole number from 1, not 1.5", tmp_path, "x.MPF")
+    for value in ("1e6", "-500", "nan"):
+        _refused(["history", "add", fit, "--db", tmp_path / "h.sqlite", "--temperature", f"spindle={value}"],
+                 "--temperature spindle", tmp_path, "h.sqlite")

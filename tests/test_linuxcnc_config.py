@@ -615,3 +615,19 @@ def test_a_joint_table_number_compgen_cannot_read_as_linuxcnc_does_is_refused(tm
                     a__hal=_setp(module, nominal), y__comp="-100 0 0\n0 0x1p-10 0\n100 0 0\n")
     with pytest.raises(CompgenError, match="hexadecimal"):
         linuxcnc.loaded_joint_tables(seed_machine, state)
+
+
+def test_a_long_machine_name_makes_a_configuration_compgen_reads_back(tmp_path, trt, seed_machine):
+    """The name goes into every file's header: a 300-character one made a KIN.ini whose line
+    compgen's own reader (and inivar) refuse; the header lines are cut to the line read."""
+    from dataclasses import replace
+    module, nominal = trt
+    machine = replace(seed_machine, name="Machine " + "x" * 292)
+    state = _config(tmp_path, "[HAL]\nHALFILE = a.hal\n", a__hal=_setp(module, nominal))
+    fit = identify(machine, [simulate(machine, TRUTH, generate(machine, ["K4", "K1", "K2"]))],
+                   location_model(machine))
+    out = _edit_ini(machine, fit, state, tmp_path)
+    for suffix, text in out.files.items():
+        (tmp_path / f"N{suffix}").write_text(text)
+    assert max(len(ln) for ln in out.files[".ini"].splitlines()) <= 255
+    assert _pins(read_state(str(tmp_path / "N.ini")), module) != pytest.approx(nominal, abs=1e-6)

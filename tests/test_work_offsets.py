@@ -139,4 +139,28 @@ def test_the_guard_moves_after_the_tool_change_is_refused(linuxcnc_seed, tmp_pat
 def test_every_line_of_the_guards_fits_linuxcncs_line_length():
     heads = [g for m in linuxcnc.HEAD_MODULES for g in linuxcnc.head_guard(m.module)]
     for line in [*linuxcnc.offsets_guard(), *heads]:
-        assert len(line) <= linuxcnc.LINELEN, line
+        assert len(line) <= linuxcnc.LINE_MAX, line
+
+
+def test_a_machine_name_of_300_characters_makes_programs_and_a_configuration_linuxcnc_reads(tmp_path):
+    """A 300-character machine name once made header lines rs274 refuses ("Command too long")
+    and a KIN.ini compgen itself refused: comments are cut to the line LinuxCNC reads, the
+    probe log leaves a name it cannot carry out, and check-program refuses a longer line."""
+    name = "Machine " + "x" * 292
+    path = tmp_path / "long.toml"
+    path.write_text(re.sub(r'(?m)^name = ".*"$', f'name = "{name}"', SEED_MACHINE.read_text())
+                    .replace('controller = "itnc530"', 'controller = "linuxcnc"'))
+    assert load_machine(path).name == name
+    for args, out, tool in ((["measure-program", "--mode", "tcpm"], "RT.ngc", "T99 P1 Z184.67 ;nest"),
+                            (["probe-program"], "PR.ngc", "T98 P1 Z120 ;probe")):
+        code, _, err = run(*args, "--machine", path, "--path", "K2", "-o", tmp_path / out)
+        assert code == 0, err
+        text = (tmp_path / out).read_text()
+        assert max(len(ln) for ln in text.splitlines()) <= linuxcnc.LINE_MAX
+        canon, done = rs274(tmp_path, out, tool)
+        said = done.stdout + done.stderr
+        assert done.returncode == 0 and "Command too long" not in said, said[-300:]
+    text = (tmp_path / "RT.ngc").read_text()
+    (tmp_path / "BAD.ngc").write_text(text.replace("; mode TCPM", "; " + "y" * 300 + "\n; mode TCPM", 1))
+    code, _, err = run("check-program", "--machine", path, "--mode", "tcpm", tmp_path / "BAD.ngc")
+    assert code == 2 and "Command too long" in err, err

@@ -28,6 +28,7 @@ def history_store(db: str | None, create: bool = True):
     return store
 
 
+TEMPERATURE_C = (-50.0, 200.0)   # a hall, a coolant, a spindle: beyond these a unit or typing error
 EVERY_DAYS_MAX = 3653.0       # ten years: a check due later is no plan (and the calendar ends)
 
 
@@ -64,6 +65,10 @@ def record_fit_file(db, fit_file, machine_file, serial, taken, device, operator,
             raise CompgenError(f"--temperature takes NAME=°C, not {item!r}",
                                hint="e.g. --temperature spindle=23.5")
         temps[key.strip()] = number(value, f"--temperature {key.strip()}", "")
+        if not TEMPERATURE_C[0] <= temps[key.strip()] <= TEMPERATURE_C[1]:
+            raise CompgenError(f"--temperature {key.strip()}={value}: no temperature of a machine or its "
+                               f"hall ({TEMPERATURE_C[0]:g} to {TEMPERATURE_C[1]:g} °C)",
+                               hint="give it in °C, e.g. --temperature spindle=23.5")
     measured = device_of(fit.data)
     if device is not None and device != measured:
         raise CompgenError(f"--device {device}, but the fit's data are {measured} data",

@@ -458,7 +458,9 @@ def read_comp(text: str, machine: Machine, where: str) -> CompTable:
 
 
 POSITION = {"5420": "X", "5421": "Y", "5422": "Z", "5423": "A", "5424": "B", "5425": "C"}
-LINELEN = 255                # rs274ngc.hh: a longer line is "Command too long"
+# rs274ngc reads a line into LINELEN (255) characters with its line end and the string's end:
+# a line of 253 characters or more is "Command too long" (rs274, tried: 252 runs)
+LINE_MAX = 252
 HAL_NAME = re.compile(r"[A-Za-z0-9._+-]+")      # a file name every reader of a configuration carries
 
 # LinuxCNC applies G92 (and G52, which shares its parameters) and the active G5x offset to a
@@ -469,7 +471,7 @@ HAL_NAME = re.compile(r"[A-Za-z0-9._+-]+")      # a file name every reader of a 
 # G54's offsets (and its XY rotation) are zero on the axes the program moves or the
 # kinematics read (W: the head modules lengthen the pivot by it). An abort's text expands
 # #n as a DEBUG does (rs274, tried); it holds no ";", which compgen's reader takes for a
-# comment. Each line stays within LINELEN.
+# comment. Each line stays within LINE_MAX.
 OFFSET_WORDS = {"G92": (5211, "XYZABCW"), "G54": (5221, "XYZABCWR")}
 PARAM_OF = dict(zip("XYZABCUVWR", range(10), strict=True))
 
@@ -541,6 +543,10 @@ def program_blocks(text: str, tcp: bool, head: str | None = None) -> list[Block]
     lines = text.splitlines()
     guard_at, read_to = None, 0
     for k, raw in enumerate(lines, start=1):
+        if len(raw) > LINE_MAX:
+            raise CompgenError(f"line {k}: {len(raw)} characters; LinuxCNC reads {LINE_MAX} of a line and "
+                               "stops the program there (\"Command too long\")",
+                               hint="give the program compgen wrote")
         b = raw.split(";", 1)[0].strip()
         if guard_at is not None and k in (guard_at + 1, guard_at + 2) or k <= read_to:
             continue                        # a guard's abort and endif, read with it

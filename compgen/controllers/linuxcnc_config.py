@@ -30,6 +30,7 @@ from ..files import read_text
 from .linuxcnc_files import (
     BUNDLE_MARK,
     HALLIB,
+    INI_LINE_MAX,
     LIBRARY,
     MARK,
     NAME_WORDS,
@@ -528,7 +529,8 @@ def configuration_files(
                 text[place.line - 1] = _replace_word(text[place.line - 1], old, new, last, place)
         for place in sorted((p for p in after if p.file == file), key=lambda p: -p.line):
             text[place.line : place.line] = after[place]
-        body = [f"# {h}" for h in header] + text  # '#' opens a comment in an INI and in HAL
+        # '#' opens a comment in an INI and in HAL; a line past INI_LINE_MAX is read as two
+        body = [f"# {h}"[:INI_LINE_MAX] for h in header] + text
         suffix = ".ini" if file == cfg.ini_path else renamed[file][len(stem):]
         out[suffix] = "\n".join(body) + "\n"
     return out

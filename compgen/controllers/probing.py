@@ -153,6 +153,7 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
 # LOG comment, which ends at ")"; a SINUMERIK string ends at '"'; HEIDENHAIN's FN 16 format
 # reads "%" as a format and "\"" as the text's end; ";" starts a comment in two of them
 LOG_WORD = re.compile(r"[A-Za-z0-9_][A-Za-z0-9 _.,:+/-]*")
+LOGGED_MAX = 200        # a free text on a log line: "(LOG,# machine = ...)" within LinuxCNC's 255
 # the operator sees, before the stylus first goes down, that the sphere is where the preset
 # puts it (one line under the 124 characters a SINUMERIK message shows)
 PROBE_PRESET_CHECK = ("PRESET CHECK: the stylus tip is {approach} mm above the sphere and the sphere must be "
@@ -160,5 +161,6 @@ PROBE_PRESET_CHECK = ("PRESET CHECK: the stylus tip is {approach} mm above the s
 
 
 def _loggable(text: str) -> bool:
-    """Whether every control's log line carries ``text`` as written (else it is left out)."""
-    return LOG_WORD.fullmatch(text) is not None
+    """Whether every control's log line carries ``text`` as written (else it is left out):
+    its characters, and its length within LinuxCNC's 255 characters of a line."""
+    return LOG_WORD.fullmatch(text) is not None and len(text) <= LOGGED_MAX

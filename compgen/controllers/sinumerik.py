@@ -453,7 +453,12 @@ class Sinumerik840D(Controller):
         get.only({"tcarr", "vectors", "machine_axes", "modulo", "fine_correction", "fine_limit_mm",
                   "offsets"})
         get.sub("vectors").only({a.name for a in machine.rotary_axes})
-        record = int(get.number("tcarr"))
+        number_given = get.number("tcarr")
+        if not (number_given == int(number_given) and 1 <= number_given <= 9999):
+            # a record is a whole number: int() read 1.5 as record 1, another record than meant
+            raise CompgenError(f"must be the record's number, a whole number from 1, not {number_given:g}",
+                               where=get.at("tcarr"), hint="the n of $TC_CARR1[n]")
+        record = int(number_given)
         kinds = {a.name: "P" if a.side == "workpiece" else "T" for a in machine.rotary_axes}
         vectors = {}
         for a in machine.rotary_axes:
