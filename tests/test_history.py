@@ -1187,3 +1187,15 @@ def test_an_unchanged_machine_calibrated_with_an_effect_checks_unchanged(tmp_pat
     (tmp_path / "k5.csv").write_text(format_rtest(machine, _session(machine, after, ["K4"], 55, "k")))
     rc, out, err = run("check", "--machine", "ac-trunnion-itnc530", "k5.csv", "--date", "2026-11-05T08:00")
     assert "set-up and EXC:h2c, EXC:h2s, refitted from these data" in out, out + err
+
+
+def test_an_edit_dated_before_its_recorded_fit_is_refused_before_its_files_are_written(tmp_path, monkeypatch):
+    """The fit recorded on 1 December, its edit with --record dated 1 November: refused in
+    one line with nothing written (the four files of the edit were left behind)."""
+    monkeypatch.chdir(tmp_path)
+    assert run("fit", "--machine", "ac-trunnion-itnc530", ROOT / "examples" / "seed-session.csv", "--add",
+               "EXC:h2", "-o", "fit.json")[0] == 0
+    assert run("history", "add", "fit.json", "--date", "2026-12-01")[0] == 0
+    rc, out, err = run("kinematics", "--from", "fit.json", "-o", "KIN.txt", "--record", "--date", "2026-11-01")
+    assert rc == 2 and "an edit cannot come before the fit it was written from" in err, out + err
+    assert not list(tmp_path.glob("KIN*"))

@@ -524,7 +524,7 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
         taken = taken_at(taken)      # before a store is opened (or made) for it
         store = history_store(db)
         try:
-            refuse_second_edit(store, fit, machine, written, serial)
+            refuse_second_edit(store, fit, machine, written, serial, taken)
         except Recorded as exc:
             recorded = exc.message
     write_all(files, force, inputs=(base, *current, *measured, machine.source, *(d.file for d in fit.data)))

@@ -208,9 +208,18 @@ def record_edit(store: Store, fit: FitResult, machine: Machine, controller: str,
 
 
 def refuse_second_edit(store: Store, fit: FitResult, machine: Machine, written: Mapping[str, str],
-                        serial: str | None) -> None:
+                        serial: str | None, taken: str | None = None) -> None:
     """Before any file is written: the same edit again is ``Recorded``; another edit from a
-    fit whose edit is recorded would count its correction twice in every later value."""
+    fit whose edit is recorded would count its correction twice in every later value; an
+    edit dated before its fit as recorded is refused here too, not after its files are
+    written."""
+    if taken is not None:
+        name, key = machine_key(machine, serial)
+        rows = _fit_rows(store, fit.marker, name, key)
+        if rows and taken < utc(rows[0]["taken"]):
+            raise CompgenError("an edit cannot come before the fit it was written from",
+                               where=store.where, hint=f"the fit was measured {rows[0]['taken']}: give a "
+                                                       "--date after it")
     had = edit_of(store, fit, machine, serial)
     if had is None:
         return
