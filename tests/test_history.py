@@ -1196,6 +1196,7 @@ def test_an_edit_dated_before_its_recorded_fit_is_refused_before_its_files_are_w
     assert run("fit", "--machine", "ac-trunnion-itnc530", ROOT / "examples" / "seed-session.csv", "--add",
                "EXC:h2", "-o", "fit.json")[0] == 0
     assert run("history", "add", "fit.json", "--date", "2026-12-01")[0] == 0
-    rc, out, err = run("kinematics", "--from", "fit.json", "-o", "KIN.txt", "--record", "--date", "2026-11-01")
+    rc, out, err = run("kinematics", "--from", "fit.json", "-o", "KIN.txt", "--record", "--date",
+                       "2026-11-01")
     assert rc == 2 and "an edit cannot come before the fit it was written from" in err, out + err
     assert not list(tmp_path.glob("KIN*"))
