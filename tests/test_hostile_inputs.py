@@ -329,3 +329,19 @@ def test_a_record_number_that_is_no_whole_number_and_an_implausible_temperature_
     for value in ("1e6", "-500", "nan"):
         _refused(["history", "add", fit, "--db", tmp_path / "h.sqlite", "--temperature", f"spindle={value}"],
                  "--temperature spindle", tmp_path, "h.sqlite")
+
+
+@pytest.mark.parametrize("edit, says", [
+    (("touches = 5", "touches = 100000"), "at most 25 touches a pose"),
+    (("poses = 12", "poses = 5000"), "a path needs 4 to 120 poses"),
+    (("[probe]", "[effects.shapes.many]\nat = [" + ", ".join(str(k) for k in range(-200, 201, 2))
+      + "]\n\n[probe]"), "a spline of 201 knots: at most 64"),
+])
+def test_a_machine_file_asking_for_hours_of_work_is_refused_at_its_key(tmp_path, edit, says):
+    """Held-out inputs that ran for minutes (a spline of hundreds of knots, a probe of 10⁵
+    touches a pose): refused in one line at the key, before anything runs."""
+    text = SEED_MACHINE.read_text()
+    assert edit[0] in text
+    path = tmp_path / "m.toml"
+    path.write_text(text.replace(edit[0], edit[1], 1))
+    _refused(["effects", "--machine", path], says, tmp_path)

@@ -188,8 +188,11 @@ def _probe(g: _Getter) -> ProbeSetup:
     if values.get("touches", 5) < 5:
         raise CompgenError("a pose needs 5 touches or more (4 fix a centre; the fifth finds a bad one)",
                            where=g.at("touches"))
-    if values.get("poses", 12) < 4:
-        raise CompgenError("a path needs 4 poses or more", where=g.at("poses"))
+    if values.get("touches", 5) > TOUCHES_MAX:
+        raise CompgenError(f"at most {TOUCHES_MAX} touches a pose (more add hours of probing, not accuracy: "
+                           "repeat a path instead)", where=g.at("touches"))
+    if not 4 <= values.get("poses", 12) <= POSES_MAX:
+        raise CompgenError(f"a path needs 4 to {POSES_MAX} poses", where=g.at("poses"))
     if not 10 <= values.get("elevation", 30.0) <= 60:
         raise CompgenError("the side touches' elevation must be 10° to 60° above the horizontal",
                            where=g.at("elevation"))
@@ -358,6 +361,11 @@ class _Getter:
         return _Getter(self.list(key)[index], f"{self.at(key)}[{index}]")
 
 
+TOUCHES_MAX = 25      # touches a probed pose
+POSES_MAX = 120       # probed poses a path
+KNOTS_MAX = 64        # a spline's knots: one parameter each
+
+
 def _shapes(get: _Getter) -> dict[str, Shape]:
     """``[effects.shapes.NAME]``: ``at`` alone (a spline's knots) or ``at`` and ``values``
     (a lookup table), positions strictly increasing in the axis's unit (mm, deg)."""
@@ -369,6 +377,10 @@ def _shapes(get: _Getter) -> dict[str, Shape]:
         g = get.sub(name)
         g.only({"at", "values"})
         at = g.series("at", 2 if "values" in g.doc else 3)     # a spline is zero at its first knot
+        if "values" not in g.doc and len(at) > KNOTS_MAX:
+            raise CompgenError(f"a spline of {len(at)} knots: at most {KNOTS_MAX} (each knot is a parameter "
+                               "of the fit: more are not determined by a session, and take minutes)",
+                               where=g.at("at"), hint="give fewer knots, or a lookup table (at and values)")
         if not all(b > a for a, b in zip(at[:-1], at[1:], strict=True)):
             raise CompgenError("positions must increase strictly", where=g.at("at"))
         values = tuple(g.numbers("values", len(at))) if "values" in g.doc else ()
