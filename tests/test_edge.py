@@ -55,7 +55,7 @@ BAD_MACHINE_EDITS = {
     "probe without its sphere": ("sphere_diameter = 25.4 ", "", "[probe] needs sphere_diameter (mm)"),
     "half a touch": ("touches = 5 ", "touches = 5.5 ", "must be a whole number"),
     "four touches": ("touches = 5 ", "touches = 4 ", "a pose needs 5 touches or more"),
-    "three probed poses": ("poses = 12 ", "poses = 3 ", "a path needs 4 poses or more"),
+    "three probed poses": ("poses = 12 ", "poses = 3 ", "a path needs 4 to 120 poses"),
     "touches from too high": ("touches = 5 ", "elevation = 70.0\ntouches = 5 ",
                               "elevation must be 10° to 60° above the horizontal"),
 }

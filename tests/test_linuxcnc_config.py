@@ -631,3 +631,12 @@ def test_a_long_machine_name_makes_a_configuration_compgen_reads_back(tmp_path, 
         (tmp_path / f"N{suffix}").write_text(text)
     assert max(len(ln) for ln in out.files[".ini"].splitlines()) <= 255
     assert _pins(read_state(str(tmp_path / "N.ini")), module) != pytest.approx(nominal, abs=1e-6)
+
+
+def test_an_ini_whose_hal_section_comes_from_an_include_is_read_as_the_configuration(tmp_path, trt,
+                                                                                   seed_machine):
+    """An INI whose [HAL] stands in an included file was taken for a HAL file and refused."""
+    module, nominal = trt
+    state = _config(tmp_path, "[EMC]\nVERSION = 1.1\n#INCLUDE hal.inc\n", hal__inc="[HAL]\nHALFILE = a.hal\n",
+                    a__hal=_setp(module, nominal))
+    assert _pins(state, module) == pytest.approx(nominal)

@@ -865,8 +865,11 @@ class LinuxCNC(Controller):
         return Held(read_lines(current, machine, None, nominal_lines(machine)), {})
 
     def state(self, path: str, text: str) -> str | None:
-        # an INI (inivar finds a section by the start of its line): LinuxCNC's whole configuration
-        return bundle(path, text) if re.search(r"(?m)^[ \t]*\[HAL\]", text) else None
+        # an INI (inivar finds a section by the start of its line; its [HAL] may come from an
+        # #INCLUDE): LinuxCNC's whole configuration. No HAL file (nor another control's
+        # table, whose last line is [END]) has a [HAL] or an #INCLUDE line
+        ini = re.search(r"(?m)^[ \t]*\[HAL\]|^#INCLUDE[ \t]", text)
+        return bundle(path, text) if ini else None
 
     def reads(self, text: str) -> bool:
         return (is_bundle(text) or SETP.search(text) is not None or COMP_NOTE.search(text) is not None
