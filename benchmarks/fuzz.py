@@ -41,6 +41,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 SEED = ROOT / "machines" / "ac-trunnion-itnc530.toml"
 HEAD = ROOT / "machines" / "bc-swivel-head-table.toml"
+BC = ROOT / "machines" / "bc-table-sinumerik840d.toml"
 HEAD_TAB = (ROOT / "examples" / "swivel-head-itnc530.TAB").read_text()
 SESSION = ROOT / "examples" / "seed-session.csv"
 TAB = ROOT / "examples" / "itnc530-current.TAB"
@@ -56,7 +57,8 @@ class Case:
     args: list[str]                       # the command; {dir} is the case folder
     expect: str                           # "refuse" or "accept"
     outputs: list[str] = field(default_factory=list)   # files that must not exist after a refusal
-    special: str = ""                     # "fifo": the data file is a FIFO
+    special: str = ""                     # "fifo": the data file is a FIFO; "fifo-store",
+                                          # "dangling": the store is a FIFO, a link to nowhere
     secret: str = ""                      # must appear in no output, message or file name
     unchanged: list[str] = field(default_factory=list)  # files byte for byte as given, after a refusal
 
@@ -502,6 +504,92 @@ def nest_cases(wings: dict[str, Path]) -> list[Case]:
     return out
 
 
+def shop_cases(wings: dict[str, Path]) -> list[Case]:
+    """Issue 65's kinds, each a rule at its input: store paths and URLs, INI corners as the
+    start script reads them, CEC states, number options out of range, and long names."""
+    add = ["history", "add", "{dir}/fit.json", "--db"]
+    stores = ((":memory:", ""), ("", ""), ("file:h.sqlite", ""), ("{dir}/gone/h.sqlite", ""),
+              ("{dir}/link.sqlite", "dangling"), ("{dir}/pipe.sqlite", "fifo-store"), ("{dir}", ""))
+    out = [Case("store", f"--db {db!r}", {}, [*add, db], "refuse", special=special) for db, special in stores]
+    at = "@127.0.0.1:1/db"
+    out += [Case("store", f"--db {url!r}", {}, [*add, url], "refuse", secret=SECRET)
+            for url in (f"postgresql+psycopg://u:{SECRET}{at}", f"postgresql:/u:{SECRET}{at}",
+                        f"postgresql:u:{SECRET}{at}", f"mysql://u:{SECRET}{at}")]
+    out.append(Case("store", "--db a new file (good)", {}, [*add, "{dir}/h.sqlite"], "accept"))
+    # number options: finite, within their range
+    sim = ["simulate", "--machine", str(SEED), "--truth", str(ROOT / "examples" / "truth-table4.json"),
+           "-o", "{dir}/s.csv"]
+    fleet = ["history", "fleet", "--db", "{dir}/h.sqlite", "--every-days"]
+    for args in (["diagnose", "--from", "{dir}/fit.json", "--noise-um", "1e308"],
+                 ["diagnose", "--from", "{dir}/fit.json", "--noise-um", "nan"],
+                 [*fleet, "inf"], [*fleet, "nan"], [*sim, "--noise-rho", "nan"],
+                 [*sim, "--device", "probe", "--stylus-error-um", "inf"],
+                 [*add, "{dir}/h.sqlite", "--temperature", "spindle=1e6"],
+                 [*add, "{dir}/h.sqlite", "--temperature", "hall=-500"]):
+        out.append(Case("number", " ".join(args[:1] + args[-2:]), {}, args, "refuse", ["s.csv", "h.sqlite"]))
+    # machine files asking for hours of work, or for another record than meant
+    seed, bc = SEED.read_text(), BC.read_text()
+    knots = ", ".join(str(k) for k in range(-200, 201, 2))
+    for name, text in (("touches = 100000", seed.replace("touches = 5", "touches = 100000")),
+                       ("poses = 5000", seed.replace("poses = 12", "poses = 5000")),
+                       ("a spline of 201 knots", seed + f"\n[effects.shapes.many]\nat = [{knots}]\n"),
+                       ("tcarr = 1.5", bc.replace("tcarr = 1 ", "tcarr = 1.5 "))):
+        out.append(Case("limits", name, {"m.toml": text}, ["effects", "--machine", "{dir}/m.toml"], "refuse"))
+    # a 300-character machine name: programs LinuxCNC reads, a probe log without it
+    long = re.sub(r'(?m)^name = ".*"$', 'name = "Machine ' + "x" * 292 + '"', seed)
+    for command in (["measure-program", "--controller", "linuxcnc", "--path", "K2", "-o", "{dir}/RT.ngc"],
+                    ["probe-program", "--controller", "linuxcnc", "--path", "K2", "-o", "{dir}/PR.ngc"],
+                    ["measure-program", "--path", "K2", "-o", "{dir}/RT.H"]):
+        out.append(Case("long", f"a 300-character name: {command[0]} {command[-1][6:]}", {"m.toml": long},
+                        [command[0], "--machine", "{dir}/m.toml", *command[1:]], "accept"))
+    # LinuxCNC's configuration as its start script reads it
+    hal = hal_good()
+    rot = "".join(ln + "\n" for ln in hal.splitlines() if "rot-point" in ln)
+    rest = "".join(ln + "\n" for ln in hal.splitlines() if "rot-point" not in ln)
+    kin = ["kinematics", "--from", "{dir}/fit.json", "--controller", "linuxcnc", "--current",
+           "{dir}/m.ini", "-o"]
+    plain = {"m.ini": "[HAL]\nHALFILE = a.hal\n", "a.hal": hal}
+    inc = "[HAL]\nHALFILE = a.hal\n#INCLUDE x.inc\n"
+    for name, files, o, expect in (
+            ("good", plain, "KIN.ini", "accept"),
+            ("#INCLUDE, last line without its end",
+             {"m.ini": inc + "[KINS]\nX = 1", "a.hal": hal, "x.inc": "[TRT]\n"}, "KIN.ini", "refuse"),
+            ("#INCLUDE and a backslash",
+             {"m.ini": inc + "[X]\nY = a\\b\n", "a.hal": hal, "x.inc": "[TRT]\n"}, "KIN.ini", "refuse"),
+            ("an included file without its last line end",
+             {"m.ini": inc, "a.hal": hal, "x.inc": "[TRT]\nX = 1"}, "KIN.ini", "refuse"),
+            ("a tab before HALFILE arguments",
+             {"m.ini": "[HAL]\nHALFILE = a.hal\targ\n", "a.hal": hal}, "KIN.ini", "refuse"),
+            ("a source loop",
+             {**plain, "a.hal": hal + "source b.hal\n", "b.hal": "source a.hal\n"}, "KIN.ini", "refuse"),
+            ("two files of one name (good)",
+             {"m.ini": "[HAL]\nHALFILE = x/p.hal\nHALFILE = y/p.hal\n", "x/p.hal": rot, "y/p.hal": rest},
+             "KIN.ini", "accept"),
+            ("[HAL] from an #INCLUDE (good)",
+             {"m.ini": "[EMC]\nVERSION = 1.1\n#INCLUDE h.inc\n", "h.inc": "[HAL]\nHALFILE = a.hal\n",
+              "a.hal": hal}, "KIN.ini", "accept"),
+            ("-o with a '#'", plain, "K#1.ini", "refuse"),
+            ("-o a .hal for an INI", plain, "KIN.hal", "refuse")):
+        out.append(Case("ini-corner", name, files, [*kin, "{dir}/" + o], expect, [o]))
+    # CEC state kept whole, the record's kind compared
+    cec, carr = wings["cec"].read_text(), wings["carr"].read_text()
+    first = next(ln for ln in cec.splitlines() if ln.startswith("$AN_CEC_DIRECTION["))
+    extra = ("".join(f"$AN_CEC[7,{k}]=0.00{k}\n" for k in range(3))
+             + "$AN_CEC_INPUT_AXIS[7]=(X1)\n$AN_CEC_OUTPUT_AXIS[7]=(Z1)\n$AN_CEC_STEP[7]=100\n"
+               "$AN_CEC_MIN[7]=-100\n$AN_CEC_MAX[7]=100\n$AN_CEC_DIRECTION[7]=1\n"
+               "$AN_CEC_MULT_BY_TABLE[7]=2\n$AN_CEC_IS_MODULO[7]=0\n")
+    cecs = ["kinematics", "--from", str(wings["bcfit"]), "--current", "{dir}/A.MPF", "--current",
+            "{dir}/cec.INI", "-o", "{dir}/K.MPF"]
+    for name, c, r, expect in (
+            ("a table this round adds to acts one way", cec.replace(first, first.replace("=0", "=1")), carr,
+             "refuse"),
+            ("an untouched table acts one way (good)", cec.removesuffix("M17\n") + extra + "M17\n", carr,
+             "accept"),
+            ("the record of another kind", cec, carr + '$TC_CARR23[1]="T"\n', "refuse")):
+        out.append(Case("cec-state", name, {"cec.INI": c, "A.MPF": r}, cecs, expect, ["K.MPF"]))
+    return out
+
+
 def wing_inputs(work: Path, compgen: list[str]) -> dict[str, Path]:
     """The wings' valid inputs, made as a user makes them: a probe log, a history export and
     another store to import it into, a B/C machine's CEC tables and the fit for a second
@@ -557,6 +645,10 @@ def run_case(case: Case, work: Path, compgen: list[str]) -> tuple[Case, str, str
         (folder / name).write_bytes(content if isinstance(content, bytes) else content.encode("utf-8"))
     if case.special == "fifo":
         os.mkfifo(folder / "data.csv")
+    elif case.special == "fifo-store":
+        os.mkfifo(folder / "pipe.sqlite")
+    elif case.special == "dangling":
+        (folder / "link.sqlite").symlink_to(folder / "nowhere" / "x.sqlite")
     args = [a.replace("{dir}", str(folder)) for a in case.args]
     steps, current = [], []
     for a in args:
@@ -628,7 +720,8 @@ def main() -> None:
     wings = wing_inputs(work, compgen)
     rng = random.Random(args.seed)
     cases = [*csv_cases(rng), *machine_cases(), *fit_cases(), *current_cases(), *output_cases(),
-             *history_cases(), *nest_cases(wings), *derived_cases(rng, programs, args.generated, wings)]
+             *history_cases(), *nest_cases(wings), *shop_cases(wings),
+             *derived_cases(rng, programs, args.generated, wings)]
     t0 = time.perf_counter()
     with ThreadPoolExecutor(args.jobs) as pool:
         results = list(pool.map(lambda c: run_case(c, work, compgen), cases))
