@@ -323,3 +323,26 @@ def test_an_implausible_current_state_is_refused_with_its_file_and_line(seed_mac
         kinematics_edit(seed_machine, seed_fit, "linuxcnc", hal + hal.splitlines()[0] + "\n", "h", "KIN", "0",
                         DATE)
     assert kinematics_edit(seed_machine, seed_fit, "linuxcnc", hal, "h", "KIN", "0", DATE).files[".hal"]
+
+
+def test_an_edit_of_a_long_oem_table_says_the_reported_entry_limit(tmp_path, fit_file):
+    """An OEM table of 54 entries passes an edit that adds its rows (with squareness more): the
+    notes say the table holds more than the 50 entries a description is reported to take
+    (unconfirmed, U19); a short table's edit says nothing of it."""
+    rows = CURRENT_TAB.splitlines()
+    at = next(i for i, ln in enumerate(rows) if "MachBase" in ln)
+    padded = rows[:at] + [f"0   Trans     X     +0           OEM element {k}" for k in range(45)] + rows[at:]
+    renumbered, n = [], 0
+    for ln in padded:
+        if re.match(r"^\d+\s", ln):
+            ln = f"{n:<4}{ln.split(None, 1)[1]}"        # NR in its column, the rest as it stood
+            n += 1
+        renumbered.append(ln)
+    (tmp_path / "long.TAB").write_text("\n".join(renumbered) + "\n")
+    code, out, err = run("kinematics", "--from", fit_file, "--current", tmp_path / "long.TAB", "-o",
+                         tmp_path / "K.TAB")
+    assert code == 0, err
+    assert "more than the 50 a kinematics description is reported to take (UNCONFIRMED U19)" in out, out
+    code, out, err = run("kinematics", "--from", fit_file, "--current",
+                         ROOT / "examples" / "itnc530-current.TAB", "-o", tmp_path / "S.TAB")
+    assert code == 0 and "U19" not in out, out + err

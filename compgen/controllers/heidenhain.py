@@ -39,6 +39,10 @@ ROW = re.compile(r"^\s*(?:\d+\s+)?(?:Trans\s+([XYZABC])\s+(\S+)\s+(-?[XYZABC]0[A
                  r"|(-?[XYZABC]0[A-Z])\s+Trans\s+([XYZABC])\s+(\S+))", re.MULTILINE)
 
 
+# the entries a description table takes: reported (issue 65), in no manual read (U19)
+DESCRIPTION_ROWS = 50
+
+
 @dataclass(frozen=True)
 class Row:
     """One ``Trans`` row: ``doc`` is its ISO name (``Y0A``, ``-Y0A`` after the axis)."""
@@ -443,6 +447,10 @@ class Heidenhain(Controller):
             diff = edit_table(table, rows, where, ctx.marker, dict(ctx.sigma))
             files[".TAB"] = table.text()
             notes += ["table changes:", *diff, *([skipped] if skipped else []), *_resolution(table)]
+            if len(table.rows) > DESCRIPTION_ROWS:
+                notes.append(f"the table holds {len(table.rows)} entries, more than the {DESCRIPTION_ROWS} a "
+                             "kinematics description is reported to take (UNCONFIRMED U19): check that the "
+                             "control loads it before the sign check, else thin the OEM's rows with the OEM")
         files[".txt"] = render(
             "heidenhain/kinematics.txt.j2", header=ctx.header, controller=self.name,
             rows=[{"axis": a, "before": [_row(r) for r in b], "after": [_row(r) for r in f]}
