@@ -542,3 +542,21 @@ def test_a_machine_with_nothing_to_correct_gets_no_edit(tmp_path):
     assert run("fit", "--machine", SEED_MACHINE, tmp_path / "moved.csv", "-o", tmp_path / "g.json")[0] == 0
     code, out, err = run("kinematics", "--from", tmp_path / "g.json", "-o", tmp_path / "K2.txt")
     assert code == 0 and "nothing to correct" not in out and (tmp_path / "K2.txt").exists(), out + err
+
+
+def test_every_commands_help_line_is_whole():
+    """`compgen-cli --help` lists each command with its docstring's first sentence: one that
+    held "e.g." was cut inside its parentheses ("Check a short measurement (e.g.")."""
+    import click
+
+    from compgen.commands.cli import main
+
+    def commands(group, prefix=""):
+        for name, cmd in group.commands.items():
+            yield prefix + name, cmd
+            if isinstance(cmd, click.Group):
+                yield from commands(cmd, prefix + name + " ")
+
+    for name, cmd in commands(main):
+        line = cmd.get_short_help_str(limit=300)
+        assert line.count("(") == line.count(")") and not line.endswith(("e.g.", "i.e.")), (name, line)

@@ -219,6 +219,11 @@ def test_a_reader_gone_before_the_first_line_is_ordinary_use(tmp_path):
      "compgen. Run again with COMPGEN_DEBUG=1 for the traceback and report it"),
     # Ctrl-C is the user's, not a bug; 130 as the shell's own, not check's 1 for a failed check
     (KeyboardInterrupt(), 130, "compgen: interrupted"),
+    # another Python than compgen's (a hint pasted outside its venv): a package missing, not a bug
+    (ModuleNotFoundError("No module named 'matplotlib'", name="matplotlib"), 2,
+     f"compgen: error: this Python ({sys.executable}) lacks the package 'matplotlib' compgen needs: run "
+     "compgen from the environment it was installed in, or install it there: "
+     f"{sys.executable} -m pip install matplotlib"),
 ])
 def test_a_bug_and_an_interrupt_are_one_line_with_their_exit_codes(monkeypatch, raised, code, said):
     from compgen.commands import cli

@@ -6,7 +6,7 @@ import shlex
 
 import numpy as np
 import pytest
-from conftest import BC_MACHINE, SEED_MACHINE, TABLE4, UM, rs274, run
+from conftest import BC_MACHINE, ROOT, SEED_MACHINE, TABLE4, UM, rs274, run
 
 from compgen.configuration.machine_file import load_machine
 from compgen.data.probe import read_probe_log, sphere_centres
@@ -311,3 +311,22 @@ def test_names_that_a_control_would_expand_in_its_log_stay_out_of_it(tmp_path):
     poses = Poses(poses.q, poses.ball, poses.t, np.full(len(poses), "K#4", dtype=object))
     with pytest.raises(Exception, match="path label 'K#4' cannot stand in the control's log"):
         probe_program(machine, poses, "K4", "linuxcnc", "P", "0", "d")
+
+
+@pytest.mark.parametrize("ctl", ["itnc530", "sinumerik840d", "linuxcnc"])
+@pytest.mark.parametrize("writer", ["measure-program", "probe-program"])
+def test_every_pose_list_compgen_writes_is_read_back_by_predict(tmp_path, ctl, writer):
+    """Everything compgen writes, compgen reads: a probing program's pose list had +nan in
+    every row's A_side and C_side (a probe's poses have no side), which predict and
+    measure-program --poses refused. A side is +1 or -1, or its column is left out."""
+    fit = tmp_path / "f.json"
+    assert run("fit", "--machine", SEED_MACHINE, ROOT / "examples" / "seed-session.csv", "-o", fit)[0] == 0
+    ext = {"itnc530": ".H", "sinumerik840d": ".MPF", "linuxcnc": ".ngc"}[ctl]
+    code, _, err = run(writer, "--machine", SEED_MACHINE, "--path", "K2", "--controller", ctl,
+                       "-o", tmp_path / f"P{ext}")
+    assert code == 0, err
+    listed = (tmp_path / "P.poses.csv").read_text()
+    assert "nan" not in listed.lower()
+    code, _, err = run("predict", "--from", fit, "--poses", tmp_path / "P.poses.csv", "-o",
+                       tmp_path / "pred.csv")
+    assert code == 0, err

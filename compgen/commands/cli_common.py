@@ -71,6 +71,10 @@ class Group(click.Group):
             raise Failed(f"{exc.filename or 'standard output'}: {exc.strerror or exc}") from None
         except (click.exceptions.Exit, click.ClickException, click.Abort, SystemExit, KeyboardInterrupt):
             raise
+        except ModuleNotFoundError as exc:   # another Python than compgen's (a hint pasted elsewhere)
+            raise Failed(f"this Python ({sys.executable}) lacks the package {exc.name!r} compgen needs: run "
+                         "compgen from the environment it was installed in, or install it there: "
+                         f"{sys.executable} -m pip install {exc.name}") from None
         except Exception as exc:     # a bug of compgen's: one line, and the way to the details
             if os.environ.get("COMPGEN_DEBUG"):
                 raise

@@ -212,7 +212,7 @@ def history_fleet_cmd(every_days, as_json, db):
                    "tolerance or a limit); said in the check.")
 @DB
 def check_cmd(machine_file, data, serial, taken, operator, as_json, machine_changed, db):
-    """Check a short measurement (e.g. K4 only) against the machine's last accepted
+    """Check a short measurement (K4 alone will do) against the machine's last accepted
     calibration: each location error's change with its σ, pass or fail, what to do next.
     The check is recorded in the history."""
     from ..history import calibration_fit, check, fit_as_calibrated, last_calibration, record_check, taken_at

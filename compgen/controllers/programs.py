@@ -349,7 +349,10 @@ def pose_list(machine: Machine, poses: Poses) -> str:
     Each rotary axis's side at each pose (``A_side``: the direction it last moved, as the
     program runs the poses) tells fit where its backlash was; ``probe_length``, where the
     session's nest is not the machine file's, its length (``machine`` is the one at that nest)."""
-    sides = {name: machine.index(axis) for name, axis in side_columns(machine).items()}
+    # a side is +1 or -1, or its column is left out (a probing program's poses have none): the
+    # readers take nothing else, as format_rtest writes them
+    sides = {name: machine.index(axis) for name, axis in side_columns(machine).items()
+             if not np.isnan(poses.side[:, machine.index(axis)]).any()}
     nest = not np.isnan(poses.nest).all()
     head = ["path", *machine.axis_names, *BALL, *[NEST] * nest, *sides]
     lines = [",".join(head)]
