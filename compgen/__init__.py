@@ -18,6 +18,7 @@ def me() -> str:
 def called_as(argv0: str, executable: str) -> None:
     """Remember how compgen was called, for ``me``."""
     import os
+    import shlex
     import shutil
 
     global _program
@@ -26,6 +27,10 @@ def called_as(argv0: str, executable: str) -> None:
         python = "python" if shutil.which("python") == executable else executable
         _program = f"{python} -m compgen"
     elif name == "compgen" and os.sep in argv0:
-        _program = argv0
+        _program = shlex.quote(argv0)
     elif name.startswith("compgen"):
-        _program = "compgen-cli"
+        # the alias where the shell finds this very program by it; else the path it was called
+        # by (.venv/bin/compgen-cli with the venv not active: "compgen-cli" is not found)
+        found = shutil.which("compgen-cli")
+        same = found and os.sep in argv0 and os.path.realpath(found) == os.path.realpath(argv0)
+        _program = shlex.quote(argv0) if os.sep in argv0 and not same else "compgen-cli"

@@ -2,6 +2,7 @@
 output file written. Good input: the commands do what the README says."""
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -560,3 +561,41 @@ def test_every_commands_help_line_is_whole():
     for name, cmd in commands(main):
         line = cmd.get_short_help_str(limit=300)
         assert line.count("(") == line.count(")") and not line.endswith(("e.g.", "i.e.")), (name, line)
+
+
+def test_a_hint_names_compgen_the_way_it_was_called(tmp_path, monkeypatch):
+    """.venv/bin/compgen-cli called by its path with the venv not active: every hint said
+    "compgen-cli …", which bash then does not find. A hint names the path where the alias on
+    PATH is not this program, the alias where it is, and python -m compgen with its Python."""
+    import subprocess
+    import sys
+
+    venv_bin = Path(sys.executable).parent
+    alias = venv_bin / "compgen-cli"
+    if not alias.exists():
+        pytest.skip("compgen-cli is not installed beside this Python")
+    path_without = ":".join(p for p in os.environ["PATH"].split(":")
+                            if Path(p).resolve() != venv_bin.resolve())
+    for path, hint in ((path_without, str(alias)), (f"{venv_bin}:{path_without}", "compgen-cli")):
+        done = subprocess.run([str(alias), "probe-program", "--machine", "ac-trunnion-itnc530", "--path",
+                               "K2", "-o", tmp_path / "P.H", "--force"], capture_output=True, text=True,
+                              env={**os.environ, "PATH": path})
+        said = done.stdout + done.stderr
+        assert done.returncode == 0 and f"check it: {hint} check-program" in said, said
+
+
+def test_a_fit_file_moved_alone_still_finds_its_machine_file_and_data(tmp_path):
+    """fit.json keeps its files relative to itself (the job folder can move) and absolute (the
+    fit file can move alone): moved to another folder, it found neither ("cannot read"); a
+    file changed at that path is still refused by its checksum."""
+    job, elsewhere = tmp_path / "job", tmp_path / "elsewhere"
+    job.mkdir(), elsewhere.mkdir()
+    (job / "m.toml").write_text(SEED_MACHINE.read_text())
+    (job / "s.csv").write_text((ROOT / "examples" / "seed-session.csv").read_text())
+    assert run("fit", "--machine", job / "m.toml", job / "s.csv", "-o", job / "fit.json")[0] == 0
+    (job / "fit.json").rename(elsewhere / "fit.json")
+    code, out, err = run("compare", "--from", elsewhere / "fit.json")
+    assert code == 0, err
+    (job / "m.toml").write_text(SEED_MACHINE.read_text() + "\n# changed\n")
+    code, _, err = run("compare", "--from", elsewhere / "fit.json")
+    assert code == 2 and "machine file changed since the fit" in err, err

@@ -125,12 +125,17 @@ class FitResult:
         def rel(file: str) -> str:
             return os.path.relpath(file, folder) if folder is not None and file else file
 
+        def where(file: str) -> dict:
+            # relative, so that the job folder can move; absolute too, so that the fit file can
+            # move alone (each is taken only with its checksum unchanged)
+            return {"file": rel(file), "absolute": os.path.abspath(file)} if file else {"file": file}
+
         return {
             "format": FORMAT,
             "compgen_version": self.version,
-            "machine": {**self.machine, "file": self.machine["file"] if self.machine.get("bundled")
-                        else rel(self.machine["file"])},
-            "data": [{**d.__dict__, "file": rel(d.file)} for d in self.data],
+            "machine": {**self.machine, **({"file": self.machine["file"]} if self.machine.get("bundled")
+                                           else where(self.machine["file"]))},
+            "data": [{**d.__dict__, **where(d.file)} for d in self.data],
             "sign": self.sign,
             "model": list(self.model),
             "effects": list(dict.fromkeys(effect_name(p) for p in self.model)),
@@ -160,8 +165,14 @@ class FitResult:
                                hint=f"make one with `{me()} fit`")
         base = Path(where).parent
 
-        def file(name: str) -> str:      # relative to the fit file; older fits hold absolute paths
-            return str(base / name) if name else name
+        def file(name: str, absolute=None) -> str:
+            # relative to the fit file (older fits hold absolute paths); where the fit file moved
+            # alone, the absolute path it was written with
+            if not name:
+                return name
+            if not (base / name).exists() and isinstance(absolute, str) and Path(absolute).exists():
+                return absolute
+            return str(base / name)
 
         model = d.get("model")
         if not isinstance(model, list) or not model or not all(isinstance(n, str) for n in model):
@@ -177,9 +188,11 @@ class FitResult:
                                    f"({(odd or model)[0]})", where=where,
                                    hint="give the fit.json compgen fit wrote")
             return cls(
-                machine={**d["machine"], "file": d["machine"]["file"] if d["machine"].get("bundled") is True
-                         else file(d["machine"]["file"])},
-                data=tuple(DataRef(**{**x, "file": file(x["file"])}) for x in d["data"]),
+                machine={**{k: v for k, v in d["machine"].items() if k != "absolute"},
+                         "file": d["machine"]["file"] if d["machine"].get("bundled") is True
+                         else file(d["machine"]["file"], d["machine"].get("absolute"))},
+                data=tuple(DataRef(**{**{k: v for k, v in x.items() if k != "absolute"},
+                                      "file": file(x["file"], x.get("absolute"))}) for x in d["data"]),
                 model=tuple(d["model"]), parameters=params,
                 free=tuple(d["correlation"]["names"]),
                 correlation=np.array(d["correlation"]["matrix"], float).reshape(
