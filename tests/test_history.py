@@ -810,6 +810,18 @@ def test_a_writer_can_neither_break_the_schema_nor_pass_a_forged_calibration_to_
         for ahead in range(1, 4):
             db.execute("INSERT INTO compgen.machines (id, name, serial, recorded) OVERRIDING SYSTEM VALUE "
                        "VALUES (%s, %s, '', 'now')", (last + ahead, f"squatter {ahead}"))
+        # a row no reader can read: refused by PostgreSQL itself
+        for bad in ("INSERT INTO compgen.sessions (machine_id, taken, device, operator, temperatures, "
+                    "machine_sha256, data, recorded) SELECT machine_id, 'not a date', device, operator, "
+                    "temperatures, machine_sha256, data, recorded FROM compgen.sessions LIMIT 1",
+                    "INSERT INTO compgen.sessions (machine_id, taken, device, operator, temperatures, "
+                    "machine_sha256, data, recorded) SELECT machine_id, taken, device, operator, '{', "
+                    "machine_sha256, data, recorded FROM compgen.sessions LIMIT 1",
+                    "INSERT INTO compgen.fits (session_id, marker, kind, model, parameters, sigma_um, "
+                    "rms_um, verdict, fit_json, recorded) SELECT session_id, marker, kind, model, "
+                    "parameters, 'NaN', rms_um, verdict, fit_json, recorded FROM compgen.fits LIMIT 1"):
+            with pytest.raises((psycopg.errors.CheckViolation, psycopg.errors.InvalidTextRepresentation)):
+                db.execute(bad)
     with open_store(writer) as store:
         other = replace(machine, name="another machine")
         H.record_fit(store, load_fit(fit_file), other, taken="2026-01-03T09:00Z")
@@ -1200,3 +1212,24 @@ def test_an_edit_dated_before_its_recorded_fit_is_refused_before_its_files_are_w
                        "2026-11-01")
     assert rc == 2 and "an edit cannot come before the fit it was written from" in err, out + err
     assert not list(tmp_path.glob("KIN*"))
+
+
+def test_one_unreadable_row_breaks_the_fleet_for_no_one(tmp_path, year):
+    """A row an SQLite store's other writer appended with a date that is none (a file's
+    writers are not held by the database): the fleet names that machine's row as
+    unreadable and lists the others; it was an internal error for everyone."""
+    import sqlite3
+    db = tmp_path / "h.sqlite"
+    _record(db, year, months=2).close()
+    with sqlite3.connect(db) as raw:
+        raw.execute("INSERT INTO machines (name, serial, recorded) VALUES ('other', '', 'x')")
+        mid = raw.execute("SELECT id FROM machines WHERE name = 'other'").fetchone()[0]
+        sid = raw.execute("INSERT INTO sessions (machine_id, taken, device, operator, temperatures, "
+                          "machine_sha256, data, recorded) VALUES (?, 'not a date', 'rtest', '', '{}', 'x', "
+                          "'[]', 'x') RETURNING id", (mid,)).fetchone()[0]
+        raw.execute("INSERT INTO fits (session_id, marker, kind, model, parameters, sigma_um, rms_um, "
+                    "verdict, fit_json, recorded) VALUES (?, 'fit:000000', 'calibration', '[]', '{}', 1, 1, "
+                    "'accepted', '{}', 'x')", (sid,))
+    code, out, err = run("history", "fleet", "--db", db)
+    assert code == 0 and "UNREADABLE: a stored date 'not a date' is not one compgen writes" in out, out + err
+    assert "A/C trunnion" in out, out

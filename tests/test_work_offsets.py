@@ -164,3 +164,20 @@ def test_a_machine_name_of_300_characters_makes_programs_and_a_configuration_lin
     (tmp_path / "BAD.ngc").write_text(text.replace("; mode TCPM", "; " + "y" * 300 + "\n; mode TCPM", 1))
     code, _, err = run("check-program", "--machine", path, "--mode", "tcpm", tmp_path / "BAD.ngc")
     assert code == 2 and "Command too long" in err, err
+
+
+def test_check_program_takes_the_mode_from_compgens_header(linuxcnc_seed, tmp_path):
+    """check-program on a LinuxCNC program refused without --mode although the header says
+    "mode TCPM": the header's mode is checked; --mode must agree with it; a program whose
+    header says none still needs --mode."""
+    code, _, err = run("measure-program", "--machine", linuxcnc_seed, "--path", "K2", "--mode", "axes",
+                       "-o", tmp_path / "RT.ngc")
+    assert code == 0, err
+    code, out, err = run("check-program", "--machine", linuxcnc_seed, tmp_path / "RT.ngc")
+    assert code == 0 and "OK" in out, err
+    code, out, err = run("check-program", "--machine", linuxcnc_seed, "--mode", "tcpm", tmp_path / "RT.ngc")
+    assert code == 2 and "written for mode AXES (its header)" in err, err
+    text = re.sub(r"(?m)^; mode AXES.*\n", "", (tmp_path / "RT.ngc").read_text())
+    (tmp_path / "NOMODE.ngc").write_text(text)
+    code, out, err = run("check-program", "--machine", linuxcnc_seed, tmp_path / "NOMODE.ngc")
+    assert code == 2 and "header does not say which it was written for" in err, err

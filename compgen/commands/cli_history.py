@@ -197,7 +197,8 @@ def history_fleet_cmd(every_days, as_json, db):
         name, serial = one_line(r["machine"])[:39], one_line(r["serial"])[:13]
         click.echo(f"{name:<40}{serial:<14}{(r['last_calibration'] or '-')[:10]:<12}"
                    f"{(r['last_check'] or '-')[:10]:<12}{check:<7}{(r['due'] or '-'):<12}"
-                   + ("OVERDUE" if r["overdue"] else ""))
+                   + ("OVERDUE" if r["overdue"] else "")
+                   + (f"UNREADABLE: {one_line(r['unreadable'])}" if r.get("unreadable") else ""))
 
 
 @click.command("check")

@@ -728,12 +728,17 @@ class LinuxCNC(Controller):
 
     def blocks(self, text: str, mode: str | None = None) -> list[Block]:
         written = ("tcpm" if self.tcpm_on.search(text) else
-                   "axes" if re.search(r"(?m)^; mode AXES", text) else mode)
+                   "axes" if re.search(r"(?m)^; mode AXES", text) else None)
+        # the kinematics are the configuration's: the program's header (compgen's) says which it
+        # was written for, and that is what it is checked under; --mode says it where the header
+        # does not, or must agree with it
+        mode = mode or written
         if mode is None:
-            raise CompgenError("a LinuxCNC program's kinematics are the configuration's, not the program's: "
-                               "say which it runs under",
+            raise CompgenError("a LinuxCNC program's kinematics are the configuration's, and this program's "
+                               "header does not say which it was written for",
                                hint="give --mode tcpm (its kinematics module active: trt, maxkins or "
                                     "5axiskins) or --mode axes (identity kinematics)")
+        written = written or mode
         if mode != written:
             raise CompgenError(f"the program was written for mode {written.upper()} (its header) and is to "
                                f"run under {mode.upper()}: its positions mean other things there",

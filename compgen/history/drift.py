@@ -267,8 +267,14 @@ def fleet(store: Store, every_days: float, today: str | None = None) -> list[dic
                             "ORDER BY s.taken, c.id",
                             (m["id"],))
         edits = store.rows("SELECT taken FROM edits WHERE machine_id = ? ORDER BY taken", (m["id"],))
-        for row in (*fits, *checks, *edits):
-            row["taken"] = utc(row["taken"])
+        try:
+            for row in (*fits, *checks, *edits):
+                row["taken"] = utc(row["taken"])
+        except CompgenError as exc:     # one machine's unreadable row: it says so, the rest go on
+            out.append({"machine": m["name"], "serial": m["serial"], "fits": len(fits),
+                        "last_calibration": None, "last_check": None, "last_check_passed": None,
+                        "last_edit": None, "due": None, "overdue": False, "unreadable": exc.message})
+            continue
         fits.sort(key=lambda f: f["taken"])
         checks.sort(key=lambda c: c["taken"])
         edits.sort(key=lambda e: e["taken"])

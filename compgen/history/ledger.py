@@ -56,7 +56,11 @@ def taken_at(text: str | None) -> str:
 def utc(text: str) -> str:
     """A stored date as the UTC instant ``taken_at`` keeps (rows of an older compgen kept
     the offset they were given; this compgen's rows come back as they are)."""
-    t = datetime.fromisoformat(text)
+    try:
+        t = datetime.fromisoformat(text)
+    except (TypeError, ValueError):      # a row compgen did not write: named, never a crash
+        raise CompgenError(f"a stored date {str(text)[:40]!r} is not one compgen writes",
+                           hint="ask the store's owner to look at that row") from None
     return (t if t.tzinfo else t.replace(tzinfo=UTC)).astimezone(UTC).isoformat(timespec="seconds")
 
 

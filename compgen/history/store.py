@@ -76,6 +76,8 @@ MIGRATIONS: tuple[tuple[int, tuple[str, ...]], ...] = (
     (4, ()),
 )
 VERSION = MIGRATIONS[-1][0]
+# an instant as compgen stores it (UTC; an older compgen kept the offset it was given)
+INSTANT_PG = r"^[0-9]{4}-[0-9]{2}-[0-9]{2}T[0-9]{2}:[0-9]{2}:[0-9]{2}[+-][0-9]{2}:[0-9]{2}$"
 # What PostgreSQL adds to a migration: the role that writes a row is the database's word
 POSTGRES_MIGRATIONS: dict[int, tuple[str, ...]] = {
     3: (f"""CREATE OR REPLACE FUNCTION {PG_SCHEMA}.recorded_by() RETURNS trigger LANGUAGE plpgsql AS $$
@@ -103,7 +105,19 @@ POSTGRES_MIGRATIONS: dict[int, tuple[str, ...]] = {
               RETURN NEW;
             END $$""",
         *(f"CREATE TRIGGER {t}_sequence_id BEFORE INSERT ON {t} FOR EACH ROW "
-          f"EXECUTE FUNCTION {PG_SCHEMA}.sequence_id()" for t in TABLES)),
+          f"EXECUTE FUNCTION {PG_SCHEMA}.sequence_id()" for t in TABLES),
+        # a row every reader can read: one a writer appends with a date that is none, a JSON
+        # column that is no JSON or a σ that is no number broke fleet and export for everyone.
+        # NOT VALID: rows already there are read as they are (and named where unreadable)
+        *(f"ALTER TABLE {t} ADD CONSTRAINT {t}_{c}_readable CHECK ({rule}) NOT VALID" for t, c, rule in (
+            ("sessions", "taken", f"taken ~ '{INSTANT_PG}'"), ("edits", "taken", f"taken ~ '{INSTANT_PG}'"),
+            ("sessions", "json", "temperatures::jsonb IS NOT NULL AND data::jsonb IS NOT NULL"),
+            ("fits", "json", "model::jsonb IS NOT NULL AND parameters::jsonb IS NOT NULL "
+                             "AND fit_json::jsonb IS NOT NULL"),
+            ("fits", "numbers", "sigma_um >= 0 AND sigma_um < 'Infinity'::float8 AND rms_um >= 0 "
+                                "AND rms_um < 'Infinity'::float8"),
+            ("edits", "json", "corrects::jsonb IS NOT NULL AND written::jsonb IS NOT NULL "
+                              "AND loaded::jsonb IS NOT NULL")))),
 }
 
 
