@@ -605,6 +605,15 @@ def _first(tables, name):
     (lambda t: _first(t, "machines").update(id="1"), "machines row '1': no whole-number id"),
     (lambda t: _first(t, "edits").update(corrects="[]"), "corrects is not a JSON dict"),
     (lambda t: t.pop("edits"), r"incomplete or damaged \(KeyError\('edits'\)\)"),
+    # rows each well formed, but changed against what they hold (issue 65's held-out round)
+    (lambda t: _first(t, "edits").update(corrects=json.dumps(
+        {n: v * 2 for n, v in json.loads(_first(t, "edits")["corrects"]).items()})),
+     "it corrects values its fit does not hold: the row was changed"),
+    (lambda t: _first(t, "fits").update(kind="check"), r"its kind \(check\) is not what the checks say"),
+    (lambda t: _first(t, "fits").update(fit_json=json.dumps(
+        {**json.loads(_first(t, "fits")["fit_json"]), "residual": {
+            **json.loads(_first(t, "fits")["fit_json"])["residual"], "sigma_um": 4.0}}), verdict="accepted"),
+     "accepted with σ̂ 4.00 µm, beyond the fit gate's 3 µm: the verdict was changed"),
     # rows each valid, twice: what the store keeps once, refused before a store is opened
     (lambda t: t["fits"].append({**_first(t, "fits"), "id": 10 ** 6}),
      "fit fit:[0-9a-f]+ of .* is in the export twice"),
@@ -1233,3 +1242,24 @@ def test_one_unreadable_row_breaks_the_fleet_for_no_one(tmp_path, year):
     code, out, err = run("history", "fleet", "--db", db)
     assert code == 0 and "UNREADABLE: a stored date 'not a date' is not one compgen writes" in out, out + err
     assert "A/C trunnion" in out, out
+
+
+def test_an_edit_filed_under_another_machine_counts_for_no_machine(tmp_path, year):
+    """A writer appends an edit whose fit is another machine's under this machine's id, with
+    a correction that would make a crashed machine pass: it counts for neither (the trend's
+    values and the check go by edits whose fit is the machine's own)."""
+    import sqlite3
+    machine = year[0]
+    db = tmp_path / "h.sqlite"
+    with _record(db, year, months=8) as store:
+        other = replace(machine, name="another machine")
+        fid = H.record_fit(store, year[2][0][1], other, taken="2026-01-05T09:00Z")
+        before = {e.taken: e.machine_value("BOA") for e in H.trend(store, machine).entries}
+    with sqlite3.connect(db) as raw:
+        mid = raw.execute("SELECT id FROM machines WHERE name = ?", (machine.name,)).fetchone()[0]
+        raw.execute("INSERT INTO edits (machine_id, fit_id, controller, corrects, written, loaded, taken, "
+                    "recorded) VALUES (?, ?, 'itnc530', ?, '{}', '{}', '2026-02-01T00:00:00+00:00', 'x')",
+                    (mid, fid, json.dumps({"BOA": -30 * ARCSEC})))
+    with open_store(db) as store:
+        after = {e.taken: e.machine_value("BOA") for e in H.trend(store, machine).entries}
+    assert after == before

@@ -96,9 +96,12 @@ def _entries(store: Store, mid: int) -> tuple[list[Entry], list[dict]]:
                       "f.recorded_by, s.taken, s.device, s.machine_sha256 FROM fits f "
                       "JOIN sessions s ON s.id = f.session_id WHERE s.machine_id = ? "
                       "ORDER BY s.taken, f.id", (mid,))
+    # an edit counts for a machine only where its fit is that machine's: one filed under another
+    # machine (a writer can append it so) would add its corrections to this one's values
     edits = store.rows("SELECT e.id, e.taken, e.controller, e.corrects, e.written, e.loaded, e.fit_id, "
                        "f.marker, f.verdict FROM edits e JOIN fits f ON f.id = e.fit_id "
-                       "WHERE e.machine_id = ? ORDER BY e.taken, e.id", (mid,))
+                       "JOIN sessions s ON s.id = f.session_id "
+                       "WHERE e.machine_id = ? AND s.machine_id = ? ORDER BY e.taken, e.id", (mid, mid))
     for e in edits:
         e["corrects"] = json.loads(e["corrects"])
         e["written"], e["loaded"] = json.loads(e["written"]), json.loads(e["loaded"])

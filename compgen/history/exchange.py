@@ -12,6 +12,7 @@ from .. import me
 from ..controllers.registry import CONTROLLERS
 from ..errors import CompgenError, one_line
 from ..model.machine import identifier
+from ..statistics.gate import SIGMA_PLAUSIBLE_UM
 from ..statistics.results import FitResult
 from .ledger import content_key, lookup_machine, taken_at
 from .store import Store, now
@@ -181,19 +182,46 @@ def _valid_rows(t: dict[str, list], where: str) -> None:
             bad("fits", f, "its model or parameters are not its fit_json's: the row was changed")
         if marker != f.get("marker"):
             bad("fits", f, f"its marker {f.get('marker')!r} is not its fit's ({marker}): the row was changed")
+    fitted = {f["id"]: f for f in t["fits"]}
+    sessions = {x["id"]: x for x in t["sessions"]}
     for e in t["edits"]:
         if e.get("controller") not in CONTROLLERS:
             bad("edits", e, "controller is none compgen knows")
         for key in ("corrects", "written", "loaded"):
             doc("edits", e, key, dict)
+        # an edit corrects its fit's own values (kinematics.corrected_by): any other figure, or
+        # an edit filed under another machine than its fit's, was changed after it was written
+        values = json.loads(fitted[e["fit_id"]]["parameters"]) if isinstance(
+            fitted[e["fit_id"]]["parameters"], str) else fitted[e["fit_id"]]["parameters"]
+        corrects = doc("edits", e, "corrects", dict)
+        if any(n not in values or v != values[n]["value"] for n, v in corrects.items()):
+            bad("edits", e, "it corrects values its fit does not hold: the row was changed")
+        if sessions[fitted[e["fit_id"]]["session_id"]]["machine_id"] != e["machine_id"]:
+            bad("edits", e, "it is filed under another machine than its fit's")
         try:
             e["taken"] = taken_at(text("edits", e, "taken"))
         except CompgenError as exc:
             bad("edits", e, exc.message)
+    checked = {c.get("fit_id") for c in t["checks"]}
     for c in t["checks"]:
         if c.get("passed") not in (0, 1) or isinstance(c.get("passed"), bool):
             bad("checks", c, "passed is neither 0 nor 1")
         doc("checks", c, "summary", dict)
+        if fitted[c["fit_id"]]["kind"] != "check" or fitted[c["against_fit_id"]]["kind"] != "calibration":
+            bad("checks", c, "its fit is not a check, or what it was checked against not a calibration: a "
+                             "fit was relabelled")
+        if fitted[c["fit_id"]]["verdict"] != ("check passed" if c["passed"] else "check failed"):
+            bad("checks", c, "its verdict is not its fit's: the row was changed")
+    for f in t["fits"]:
+        # a check's fit is a check row's fit; a calibration's never: a relabelled one is refused
+        if (f["kind"] == "check") != (f["id"] in checked):
+            bad("fits", f, f"its kind ({f['kind']}) is not what the checks say of it: the row was relabelled")
+        # a calibration whose own fit says its residual is no R-test's cannot have been accepted
+        sigma = json.loads(f["fit_json"])["residual"]["sigma_um"] if isinstance(f["fit_json"], str) \
+            else f["fit_json"]["residual"]["sigma_um"]
+        if f["verdict"] == "accepted" and not sigma <= SIGMA_PLAUSIBLE_UM:
+            bad("fits", f, f"accepted with σ̂ {sigma:.2f} µm, beyond the fit gate's {SIGMA_PLAUSIBLE_UM:g} "
+                           "µm: the verdict was changed")
     # what the store keeps once (its content keys): twice in one export is refused here, before
     # any store is opened or made for it
     _, of_session = _machine_keys(t)

@@ -197,7 +197,7 @@ def record_edit(store: Store, fit: FitResult, machine: Machine, controller: str,
             raise CompgenError(f"the edit's fit ({fit.marker}) is not in the history", where=store.where,
                                hint=f"record it first: {me()} history add FIT.json")
         when = taken_at(taken)
-        if when < rows[0]["taken"]:
+        if when < utc(rows[0]["taken"]):       # instants, not text (an older row kept its offset)
             raise CompgenError("an edit cannot come before the fit it was written from",
                                hint=f"the fit was measured {rows[0]['taken']}")
         refuse_second_edit(store, fit, machine, written, serial)
