@@ -330,3 +330,16 @@ def test_every_pose_list_compgen_writes_is_read_back_by_predict(tmp_path, ctl, w
     code, _, err = run("predict", "--from", fit, "--poses", tmp_path / "P.poses.csv", "-o",
                        tmp_path / "pred.csv")
     assert code == 0, err
+
+
+def test_a_linuxcnc_program_name_is_a_file_name_not_a_controls_24_characters(tmp_path):
+    """LinuxCNC runs a program by its path: a name past 24 characters (the HEIDENHAIN and
+    SINUMERIK limit) was refused for it; it still is for those controls."""
+    long = "K2_WITH_THE_BALL_AT_HALF_ITS_RADIUS"          # 35 characters
+    for writer in ("measure-program", "probe-program"):
+        code, _, err = run(writer, "--machine", SEED_MACHINE, "--path", "K2", "--controller", "linuxcnc",
+                           "-o", tmp_path / f"{long}.ngc", "--force")
+        assert code == 0, err
+        code, _, err = run(writer, "--machine", SEED_MACHINE, "--path", "K2", "-o", tmp_path / f"{long}.H")
+        assert code == 2 and "the control keeps" in err, err
+    assert f"(LOGOPEN,{long}_LOG.log)" in (tmp_path / f"{long}.ngc").read_text()

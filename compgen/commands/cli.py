@@ -332,7 +332,7 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, nest, 
         label = "+".join(names) + "_BACK" * back
     ctl = for_machine(controller_name or machine.controller, machine)
     output = None if output == STDOUT else output      # -o - is stdout, as no -o
-    name = program_name(Path(output).stem if output else f"RTEST_{label}"[:NAME_MAX])
+    name = program_name(Path(output).stem if output else f"RTEST_{label}"[:NAME_MAX], most=ctl.name_max)
     emitted = measure_program(machine, poses, label, ctl.name, mode, name, __version__,
                               date.today().isoformat(), Path(output).stem if output else None)
     program = emitted.files[ctl.program_ext]
@@ -371,7 +371,7 @@ def probe_program_cmd(machine_file, path_names, ball, controller_name, output, f
     names = named_paths(machine, path_names)
     poses = probe_poses(machine, names, vec3(ball, "--ball") if ball is not None else None)
     out = Path(output)
-    name = program_name(out.stem, room=4)
+    name = program_name(out.stem, room=4, most=ctl.name_max)
     emitted = probe_program(machine, poses, "+".join(names), ctl.name, name, __version__,
                             date.today().isoformat())
     files = emitted.paths(out, name, ctl.program_ext)
@@ -496,7 +496,7 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
         click.echo(f"{nothing}; no edit written (--anyway writes it)")
         return
     out = Path(output)
-    name = program_name(out.stem, room=len("_SIGN"))
+    name = program_name(out.stem, room=len("_SIGN"), most=ctl.name_max)
     devices = {d.device for d in fit.data}
     if len(devices) > 1:     # a probe measures against the machine file, an R-test against the table
         raise CompgenError("the fit joins data measured under TCP (R-test) and without (probe log): they "

@@ -73,6 +73,7 @@ class Controller:
     family = ""               # folder of its templates
     words = ""                # how people name it
     program_ext = ""          # suffix of its programs
+    name_max = 24             # characters of a program name it keeps (HEIDENHAIN, SINUMERIK: 24)
     comment = ";"             # what starts a comment line in its files
     tcp_words = ""            # its name for tool-centre-point control
     backup = ""               # what to save before an edit

@@ -157,7 +157,7 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
                                "measured with: compgen adds this round's tables to the ones loaded while "
                                "measuring", hint="measure again with the tables now loaded, or give the "
                                                  "same tables in both")
-    sign_name = program_name(f"{name}_SIGN")
+    sign_name = program_name(f"{name}_SIGN", most=ctl.name_max)
     signcheck, expect = sign_check(machine, p, ctl, sign_name, version, date)
     # the sign check and the files it names by its name (NAME_SIGN_MSG.A)
     named = {f"_SIGN{k}": v for k, v in signcheck.files.items() if k in signcheck.named} if signcheck else {}

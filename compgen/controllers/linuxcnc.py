@@ -625,6 +625,7 @@ class LinuxCNC(Controller):
     family = "linuxcnc"
     words = "LinuxCNC (trt kinematics)"
     program_ext = ".ngc"
+    name_max = 200            # LinuxCNC runs a program by its path: the file system's name, with room
     comment = "#"
     tcp_words = "trt kinematics"
     backup = "a copy of the configuration's folder (its INI, HAL files and joint tables)"

@@ -110,7 +110,7 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
                                                 ANGLE_DECIMALS if n in names else LINEAR_DECIMALS, machine)
                                   for n, v in s["axes"].items())
             before.update(s["axes"])
-    log_name = name[:20] + "_LOG"
+    log_name = name[:ctl.name_max - 4] + "_LOG"     # a name the control keeps, one per program
     header = [
         f"compgen {version} probing program, {date}",
         f"machine: {ascii_text(machine.name)}; controller: {ctl.label(machine)}",

@@ -92,15 +92,16 @@ def at_ball(machine: Machine, ball) -> Machine:
     return machine if ball == tuple(machine.ball) else replace(machine, ball=ball)
 
 
-def program_name(text: str, room: int = 0) -> str:
+def program_name(text: str, room: int = 0, most: int = NAME_MAX) -> str:
     """A name every control accepts: upper-case letters, digits, underscore, a letter first.
-    A name longer than the controls keep (less ``room`` for a suffix compgen adds) is
-    refused, not cut: two cut names could be one program and one pose list."""
+    A name longer than the control keeps (``most``, its ``Controller.name_max``, less
+    ``room`` for a suffix compgen adds) is refused, not cut: two cut names could be one
+    program and one pose list."""
     name = re.sub(r"[^A-Z0-9_]", "_", text.upper()) or "RTEST"
     name = name if name[0].isalpha() else f"P{name}"
-    if len(name) > NAME_MAX - room:
+    if len(name) > most - room:
         raise CompgenError(f"program name {name} is {len(name)} characters; the control keeps "
-                           f"{NAME_MAX - room}", hint="give a shorter output file name")
+                           f"{most - room}", hint="give a shorter output file name")
     return name
 
 
