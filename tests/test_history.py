@@ -1205,6 +1205,7 @@ def test_an_unchanged_machine_calibrated_with_an_effect_checks_unchanged(tmp_pat
         assert abs(worst["change"]) < 3 * worst["std"], (day, worst)
         assert doc["flags"] == [] and doc["sigma_um"] < 0.7, (day, doc["flags"], doc["sigma_um"])
         assert doc["model"]["effects"] == ["EXC:h2c", "EXC:h2s"], doc["model"]
+        assert doc["nothing_to_correct"].startswith("nothing to correct"), doc["nothing_to_correct"]
     (tmp_path / "k5.csv").write_text(format_rtest(machine, _session(machine, after, ["K4"], 55, "k")))
     rc, out, err = run("check", "--machine", "ac-trunnion-itnc530", "k5.csv", "--date", "2026-11-05T08:00")
     assert "set-up and EXC:h2c, EXC:h2s, refitted from these data" in out, out + err

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from .. import me
+from ..controllers.kinematics import nothing_to_correct
 from ..controllers.registry import controller
 from ..data.rtest import Measurements, device_of
 from ..errors import CompgenError, one_line
@@ -97,6 +98,7 @@ class CheckResult:
     advice: list[str]
     machine_changed: bool = False    # checked with another machine file than the calibration's
     model: CheckModel = CheckModel()
+    nothing: str = ""                # "nothing to correct: ...", where an edit of this check would be noise
 
     @property
     def passed(self) -> bool:
@@ -115,6 +117,7 @@ class CheckResult:
                 "flags": [f.text() for f in self.flags], "advice": self.advice,
                 "machine_file_changed": self.machine_changed,
                 "model": {"effects": list(self.model.effects), "effects_were": self.model.how},
+                "nothing_to_correct": self.nothing,
                 **({"recorded_by": self.against.recorded_by} if self.against.recorded_by else {})}
 
     def text(self) -> str:
@@ -134,6 +137,8 @@ class CheckResult:
         lines += [f"  {p}: {v} µm range beyond the set-up" for p, v in self.paths.items()]
         lines += [f"  flagged: {f.text()}" for f in self.flags]
         lines += ["", "PASS: the machine is where its last calibration left it" if self.passed else "FAIL"]
+        if self.nothing:
+            lines.append(f"  {self.nothing}: an edit from this check would write noise")
         lines += [f"  next: {a}" for a in self.advice]
         return "\n".join(lines) + "\n"
 
@@ -228,8 +233,9 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
         if f.kind == "drift":
             advice.append(f"{f.param} drifts steadily ({f.text().split('  ', 1)[1]}): plan the next "
                           "calibration before it reaches its limit, and look for its cause (warm-up, season)")
+    nothing = nothing_to_correct(machine, fit, machine.controller) or ""
     return CheckResult(name, serial, calibration, fit.marker, taken, changes, fit.residual["sigma_um"],
-                       paths, new_flags, advice, changed, model)
+                       paths, new_flags, advice, changed, model, nothing)
 
 
 def record_check(store: Store, result: CheckResult, fit: FitResult, machine: Machine, *,
