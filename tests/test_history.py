@@ -1231,7 +1231,7 @@ def test_one_unreadable_row_breaks_the_fleet_for_no_one(tmp_path, year):
     import sqlite3
     db = tmp_path / "h.sqlite"
     _record(db, year, months=2).close()
-    with sqlite3.connect(db) as raw:
+    with contextlib.closing(sqlite3.connect(db)) as raw, raw:    # closed, not only committed
         raw.execute("INSERT INTO machines (name, serial, recorded) VALUES ('other', '', 'x')")
         mid = raw.execute("SELECT id FROM machines WHERE name = 'other'").fetchone()[0]
         sid = raw.execute("INSERT INTO sessions (machine_id, taken, device, operator, temperatures, "
@@ -1256,7 +1256,7 @@ def test_an_edit_filed_under_another_machine_counts_for_no_machine(tmp_path, yea
         other = replace(machine, name="another machine")
         fid = H.record_fit(store, year[2][0][1], other, taken="2026-01-05T09:00Z")
         before = {e.taken: e.machine_value("BOA") for e in H.trend(store, machine).entries}
-    with sqlite3.connect(db) as raw:
+    with contextlib.closing(sqlite3.connect(db)) as raw, raw:    # closed, not only committed
         mid = raw.execute("SELECT id FROM machines WHERE name = ?", (machine.name,)).fetchone()[0]
         raw.execute("INSERT INTO edits (machine_id, fit_id, controller, corrects, written, loaded, taken, "
                     "recorded) VALUES (?, ?, 'itnc530', ?, '{}', '{}', '2026-02-01T00:00:00+00:00', 'x')",

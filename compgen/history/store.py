@@ -435,8 +435,12 @@ def open_store(given: str | None = None, create: bool = True) -> Store:
     reading(path)             # no command writes a file over the store it opened
     try:
         db = sqlite3.connect(path, timeout=60.0, isolation_level=None)
-        db.execute("PRAGMA foreign_keys = ON")
     except sqlite3.Error as exc:          # a folder or file the system refuses: one line
+        raise CompgenError(f"cannot open the history store: {exc}", where=str(path)) from None
+    try:
+        db.execute("PRAGMA foreign_keys = ON")
+    except sqlite3.Error as exc:
+        db.close()
         raise CompgenError(f"cannot open the history store: {exc}", where=str(path)) from None
     store = Store(str(path), db, postgres=False)
     try:
