@@ -599,3 +599,18 @@ def test_a_fit_file_moved_alone_still_finds_its_machine_file_and_data(tmp_path):
     (job / "m.toml").write_text(SEED_MACHINE.read_text() + "\n# changed\n")
     code, _, err = run("compare", "--from", elsewhere / "fit.json")
     assert code == 2 and "machine file changed since the fit" in err, err
+
+
+def test_fit_model_takes_effects_as_add_does(tmp_path):
+    """--model took parameter names (EXC:h2c,EXC:h2s) where --add takes effects (EXC:h2): an
+    effect's name in --model now stands for its parameters, and gives the same fit."""
+    session = ROOT / "examples" / "seed-session.csv"
+    base = "XOW,YOW,ZOW,YOA,ZOA,BOA,COA,XOC,YOC,AOC,BOC"
+    for model, out in ((f"{base},EXC:h2", "a.json"), (f"{base},EXC:h2c,EXC:h2s", "b.json")):
+        code, _, err = run("fit", "--machine", SEED_MACHINE, session, "--model", model, "-o", tmp_path / out)
+        assert code == 0, err
+    a, b = (json.loads((tmp_path / n).read_text()) for n in ("a.json", "b.json"))
+    assert a["model"] == b["model"] and a["parameters"] == b["parameters"]
+    code, _, err = run("fit", "--machine", SEED_MACHINE, session, "--model", f"{base},EXC:h9x", "-o",
+                       tmp_path / "c.json")
+    assert code == 2 and "EXC" in err and len(err.strip().splitlines()) == 1, err

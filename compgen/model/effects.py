@@ -434,8 +434,15 @@ def location_model(machine: Machine) -> tuple[str, ...]:
 def compose(machine: Machine, params: Sequence[str], add: Sequence[str] = (),
             remove: Sequence[str] = ()) -> tuple[str, ...]:
     """``params`` with the effects ``add`` appended and the effects ``remove`` taken out
-    (effect names, e.g. ``ECC:h2``; a parameter name takes out its whole effect)."""
-    out = [canonical(p) for p in params]
+    (effect names, e.g. ``ECC:h2``; a parameter name takes out its whole effect). ``params``
+    take both words too: an effect's name stands for all its parameters (``EXC:h2`` for
+    ``EXC:h2c, EXC:h2s``), as ``--add`` reads it."""
+    out = []
+    for p in params:
+        if ":" in p and effect_name(p) == p:       # an effect's name, not one of its parameters
+            out += resolve(machine, p).params
+        else:
+            out.append(canonical(p))
     present = {effect_name(p) for p in out}
     for name in add:
         effect = resolve(machine, name)
