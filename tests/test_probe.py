@@ -574,3 +574,14 @@ def test_a_second_probing_round_of_an_unchanged_machine_changes_nothing(tmp_path
                     if n.endswith(a) and n[0] in "XYZ" and fits[1][n]["unit"] == "mm")
         assert moved < 3 * sigma, (a, moved, sigma)
         assert np.abs(first.offset).max() > 10 * sigma                    # the first edit did correct
+
+
+def test_diagnose_on_probe_data_names_the_probes_stylus_not_an_r_test_nest(tmp_path):
+    """For a probe log, diagnose listed the R-test nest's offset among what it cannot see: the
+    tool side's set-up offset is the probe's stylus tip's there."""
+    log, fit = tmp_path / "p.csv", tmp_path / "p.json"
+    assert run("simulate", "--machine", SEED_MACHINE, "--truth", ROOT / "examples" / "truth-table4.json",
+               "--device", "probe", "--noise-um", "1", "-o", log)[0] == 0
+    assert run("fit", "--machine", SEED_MACHINE, log, "-o", fit)[0] == 0
+    code, out, err = run("diagnose", "--from", fit)
+    assert code == 0 and "R-test nest" not in out and "probe's stylus tip offset in X" in out, out

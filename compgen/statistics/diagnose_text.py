@@ -50,7 +50,7 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
         verdict = "SIGNIFICANT" if c.significant else "not significant"
         p = said_p(c.p_value)
         lines.append(f"  {i:>2}. {c.effect:<12} RMS → {c.rms_after_um:.3f} µm   {p}  {verdict}")
-        lines.append(f"      {c.description} (≈ {amp} {c.unit}); likely cause: {c.cause}")
+        lines.append(f"      {_said(d, c.description)} (≈ {amp} {c.unit}); likely cause: {c.cause}")
         if c.confounded_with:
             lines.append(f"      partly absorbed by {', '.join(c.confounded_with)}")
         if d.rivals and (c.effect in d.rivals or c is d.significant[0]):
@@ -134,7 +134,7 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
                      else "no path or ball position this machine can measure separates it: it "
                           "needs an independent reference")
             what = "moves no reading here" if c.silent else f"absorbed by {', '.join(c.confounded_with)}"
-            lines.append(f"    {c.effect:<12} {c.description}: {what}; {where}")
+            lines.append(f"    {c.effect:<12} {_said(d, c.description)}: {what}; {where}")
         m, shows = d.next_measurement
         if m is not None:
             lines.append(f"  {'optional, the data being explained: ' if d.verdict == 'explained' else ''}"
@@ -155,6 +155,12 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
             lines.append(f"    {name:<6} {per_um[worst]:+6.2f} {d.bias_units[name]} per µm of "
                          f"{effect_name(worst)}")
     return "\n".join([*lines, *d.notes]) + "\n"
+
+def _said(d: Diagnosis, words: str) -> str:
+    """An effect's words for these data: a probe's set-up offset on the tool side is its
+    stylus tip's, where an R-test's is its nest's."""
+    return words.replace("R-test nest", "probe's stylus tip") if d.data_device == "probe" else words
+
 
 def _noise_said(d: Diagnosis) -> str:
     """Where the noise the tests used came from, in words."""
