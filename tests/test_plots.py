@@ -264,3 +264,26 @@ def test_the_trend_draws_each_value_with_its_two_sigma_band_edits_and_flags(seed
         assert fig.get_size_inches()[0] == pytest.approx(sheet["figure.figsize"][0])
     finally:
         plt.close(fig)
+
+
+def test_the_trend_draws_the_drift_limit_about_the_last_calibration(seed_machine):
+    """The band a check judges against: the last accepted calibration's machine value ± the
+    [drift] limit of the parameter's class, a step at each calibration (it drew ±2σ only)."""
+    t0 = datetime(2026, 11, 2, 8, 0)
+    when = [(t0 + timedelta(days=7 * i)).isoformat() for i in range(4)]
+    kinds = ("calibration", "check", "calibration", "check")
+    entries = [Entry(i, w, f"m{i}", kind, "rtest", "accepted", 0.5, values={"XOC": (5 + i) * UM},
+                     std={"XOC": 0.4 * UM}, units={"XOC": "mm"}, corrected={})
+               for i, (w, kind) in enumerate(zip(when, kinds, strict=True))]
+    t = SimpleNamespace(machine="m", params=("XOC",), entries=entries, edits=[], flags=[])
+    fig = plots.trend_figure(t, {"XOC": 5 * UM})
+    try:
+        ax = fig.axes[0]
+        dotted = [x for x in ax.get_lines() if x.get_linestyle() == ":"]
+        assert len(dotted) == 2 and "dotted: the [drift] limit" in ax.get_title()
+        low, high = sorted(dotted, key=lambda x: float(np.nanmean(x.get_ydata())))
+        # references 5, 5, 7, 7 µm: ± 5 µm
+        np.testing.assert_allclose(low.get_ydata(), [0, 0, 2, 2], atol=1e-9)
+        np.testing.assert_allclose(high.get_ydata(), [10, 10, 12, 12], atol=1e-9)
+    finally:
+        plt.close(fig)

@@ -608,10 +608,10 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
     steps = checklist(machine, folder or Path(base).parent, comparison.to_dict())
     past = png = None
     if with_history:
-        from ..history import trend
+        from ..history import drift_limits, trend
         from .plots import trend_png
         past = trend(history_store(db, create=False), machine)
-        png = trend_png(past)
+        png = trend_png(past, drift_limits(machine, past))
     html = report_html(machine, fit, found, images, comparison, emitted, steps, __version__,
                        date.today().isoformat(), past, png)
     write_atomically(output, html, force, inputs=(base, before, *post_files, *emitted))

@@ -138,10 +138,12 @@ def history_trend_cmd(machine_file, serial, params, plot, as_json, force, db):
     with its σ, the edits, and the steps and drifts flagged against [drift]."""
     from ..history import trend, trend_dict, trend_text
     names = [n.strip() for n in params.split(",") if n.strip()] if params else None
-    t = trend(history_store(db, create=False), load_machine(machine_file), serial, names)
+    machine = load_machine(machine_file)
+    t = trend(history_store(db, create=False), machine, serial, names)
     if plot:
+        from ..history import drift_limits
         from .plots import trend_png
-        write_atomically(plot, trend_png(t), force)
+        write_atomically(plot, trend_png(t, drift_limits(machine, t)), force)
     click.echo(json.dumps(trend_dict(t), indent=2, ensure_ascii=False) if as_json else trend_text(t),
                nl=as_json)
 

@@ -226,16 +226,19 @@ def _png(fig) -> bytes:
     return buffer.getvalue()
 
 
-def trend_png(t) -> bytes:
+def trend_png(t, limits: dict[str, float] | None = None) -> bytes:
     """A machine's history (``history.Trend``) as a PNG (``trend_figure``)."""
-    return _png(trend_figure(t))
+    return _png(trend_figure(t, limits))
 
 
 @_styled
-def trend_figure(t):
+def trend_figure(t, limits: dict[str, float] | None = None):
     """A machine's history (``history.Trend``): each location error's machine value over
     time (in the unit it is shown in) with its ±2σ band; edits as vertical lines, flagged
-    fits circled in red. One panel per parameter, each as tall whatever their number."""
+    fits circled in red. ``limits`` (parameter → the ``[drift]`` limit of its class, mm or
+    rad): the band a check judges against, the last accepted calibration's machine value ±
+    the limit, a step at each calibration. One panel per parameter, each as tall whatever
+    their number."""
     from datetime import datetime
 
     n = len(t.params)
@@ -249,12 +252,25 @@ def trend_figure(t):
         unit = shown(1.0, rows[0].units[name])[1] if rows else ""
         ax.fill_between(when, v - 2 * s, v + 2 * s, alpha=0.25, step=None, label="±2σ")
         ax.plot(when, v, "o-")
+        if limits and name in limits and rows:
+            # the reference of each fit: the last accepted calibration at or before it
+            ref, refs = None, []
+            for e, value in zip(rows, v, strict=True):
+                if e.kind == "calibration" and e.verdict == "accepted":
+                    ref = value
+                refs.append(np.nan if ref is None else ref)
+            lim = shown(limits[name], rows[0].units[name])[0]
+            refs = np.array(refs)
+            for sign in (-1, 1):
+                ax.step(when, refs + sign * lim, where="post", color="0.4", lw=0.8, ls=":",
+                        label="[drift] limit" if sign == 1 else None)
         for e in t.edits:
             ax.axvline(datetime.fromisoformat(e["taken"]), color="k", ls="--", lw=0.8)
         bad = [i for i, e in enumerate(rows) if any(f.param == name and f.taken == e.taken for f in t.flags)]
         if bad:
             ax.plot([when[i] for i in bad], v[bad], "o", ms=10, mfc="none", mec="red")
         ax.set_ylabel(f"{name} ({unit})")
-    axes[0, 0].set_title(f"{one_line(t.machine)}: machine values over time (dashed: edits; red: flagged)")
+    axes[0, 0].set_title(f"{one_line(t.machine)}: machine values over time (dashed: edits; red: flagged"
+                         + ("; dotted: the [drift] limit about the last calibration" if limits else "") + ")")
     fig.autofmt_xdate()
     return fig

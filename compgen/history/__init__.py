@@ -26,6 +26,7 @@ from .drift import (  # noqa: F401
     Flag,
     Trend,
     calibration_fit,
+    drift_limits,
     flags,
     fleet,
     last_calibration,

@@ -135,6 +135,12 @@ def machine_params(machine: Machine, names: Sequence[str]) -> tuple[str, ...]:
                  and effect_of_param(machine, n).basis.kind == "const")
 
 
+def drift_limits(machine: Machine, t: Trend) -> dict[str, float]:
+    """Each parameter of the trend's ``[drift]`` limit (mm or rad, by its class)."""
+    return {n: limit_of(machine, next(e.units[n] for e in t.entries if n in e.units))
+            for n in t.params if any(n in e.units for e in t.entries)}
+
+
 def limit_of(machine: Machine, unit: str, per_month: bool = False) -> float:
     d = machine.drift
     if unit == "mm":
