@@ -510,22 +510,27 @@ HEAD_PROGRAM = re.compile(r"^; LinuxCNC: (\S+kins) \(", re.MULTILINE)    # a pro
 PIN_GUARD = re.compile(r"o101 if \[ABS\[#<_hal\[(\S+kins)\.pivot-length\]> - (\S+)\] GT (\S+)\]")
 
 
-STATE_GUARDS = {"offsets": {"": offsets_guard()},
-                "head state": {m.module: head_guard(m.module) for m in HEAD_MODULES}}
+def _blocks_of(lines: list[str]) -> list[str]:
+    """Lines as the reader compares them: the comment after ";" off, white space trimmed."""
+    return [ln.split(";", 1)[0].strip() for ln in lines]
+
+
+# compgen's state guards as the reader compares them: kind, module, their blocks
+STATE_GUARDS = (("offsets", "", _blocks_of(offsets_guard())),
+                *(("head state", m.module, _blocks_of(head_guard(m.module))) for m in HEAD_MODULES))
+GUARD_LINES = max(len(blocks) for _, _, blocks in STATE_GUARDS)
 
 
 def _state_guard(lines: list[str], k: int) -> tuple[str, str, int] | None:
     """Whether line ``k`` starts one of compgen's state guards (the work offsets, a head
     module's W and type): its kind, module and last line; a line that starts one but does
     not go on as compgen writes it is refused (a guard edited is no guard)."""
-    got = [ln.split(";", 1)[0].strip() for ln in lines[k - 1:]]
+    got = _blocks_of(lines[k - 1:k - 1 + GUARD_LINES])
     starts = False
-    for kind, guards in STATE_GUARDS.items():
-        for module, guard in guards.items():
-            want = [g.split(";", 1)[0].strip() for g in guard]
-            if got[:len(want)] == want:
-                return kind, module, k + len(want) - 1
-            starts |= got[0] == want[0]
+    for kind, module, want in STATE_GUARDS:
+        if got[:len(want)] == want:
+            return kind, module, k + len(want) - 1
+        starts |= got[0] == want[0]
     if starts or re.match(r"o10[2-5] ", got[0]):
         raise CompgenError(f"line {k}: {lines[k - 1].strip()!r} is not compgen's guard (of the work offsets "
                            "or a head module's state: each condition, its abort and endif)",
