@@ -162,6 +162,7 @@ def _valid_rows(t: dict[str, list], where: str) -> None:
         if not all(isinstance(v, int | float) and math.isfinite(v) for v in temps.values()):
             bad("sessions", s, "a temperature is not a finite number")
         doc("sessions", s, "data", list)
+    values, sigma = {}, {}    # each fit's parameters and σ̂ as parsed here, for its edits and verdict
     for f in t["fits"]:
         if f.get("kind") not in ("calibration", "check"):
             bad("fits", f, "kind is neither calibration nor check")
@@ -177,6 +178,7 @@ def _valid_rows(t: dict[str, list], where: str) -> None:
         except (CompgenError, KeyError, TypeError, ValueError):
             bad("fits", f, "fit_json is not a fit compgen wrote")
         marker = fit.marker
+        values[f["id"]], sigma[f["id"]] = params, fit.residual["sigma_um"]
         if model != list(fit.model) or params != {n: {"value": e.value, "std": e.std, "unit": e.unit}
                                                   for n, e in fit.parameters.items()}:
             bad("fits", f, "its model or parameters are not its fit_json's: the row was changed")
@@ -187,14 +189,12 @@ def _valid_rows(t: dict[str, list], where: str) -> None:
     for e in t["edits"]:
         if e.get("controller") not in CONTROLLERS:
             bad("edits", e, "controller is none compgen knows")
-        for key in ("corrects", "written", "loaded"):
-            doc("edits", e, key, dict)
+        corrects = doc("edits", e, "corrects", dict)
+        doc("edits", e, "written", dict), doc("edits", e, "loaded", dict)
         # an edit corrects its fit's own values (kinematics.corrected_by): any other figure, or
         # an edit filed under another machine than its fit's, was changed after it was written
-        values = json.loads(fitted[e["fit_id"]]["parameters"]) if isinstance(
-            fitted[e["fit_id"]]["parameters"], str) else fitted[e["fit_id"]]["parameters"]
-        corrects = doc("edits", e, "corrects", dict)
-        if any(n not in values or v != values[n]["value"] for n, v in corrects.items()):
+        held = values[e["fit_id"]]
+        if any(n not in held or v != held[n]["value"] for n, v in corrects.items()):
             bad("edits", e, "it corrects values its fit does not hold: the row was changed")
         if sessions[fitted[e["fit_id"]]["session_id"]]["machine_id"] != e["machine_id"]:
             bad("edits", e, "it is filed under another machine than its fit's")
@@ -217,10 +217,8 @@ def _valid_rows(t: dict[str, list], where: str) -> None:
         if (f["kind"] == "check") != (f["id"] in checked):
             bad("fits", f, f"its kind ({f['kind']}) is not what the checks say of it: the row was relabelled")
         # a calibration whose own fit says its residual is no R-test's cannot have been accepted
-        sigma = json.loads(f["fit_json"])["residual"]["sigma_um"] if isinstance(f["fit_json"], str) \
-            else f["fit_json"]["residual"]["sigma_um"]
-        if f["verdict"] == "accepted" and not sigma <= SIGMA_PLAUSIBLE_UM:
-            bad("fits", f, f"accepted with σ̂ {sigma:.2f} µm, beyond the fit gate's {SIGMA_PLAUSIBLE_UM:g} "
+        if f["verdict"] == "accepted" and not (s_hat := sigma[f["id"]]) <= SIGMA_PLAUSIBLE_UM:
+            bad("fits", f, f"accepted with σ̂ {s_hat:.2f} µm, beyond the fit gate's {SIGMA_PLAUSIBLE_UM:g} "
                            "µm: the verdict was changed")
     # what the store keeps once (its content keys): twice in one export is refused here, before
     # any store is opened or made for it
