@@ -497,16 +497,10 @@ def kinematics_cmd(base, controller_name, current, measured, output, force, desp
         return
     out = Path(output)
     name = program_name(out.stem, room=len("_SIGN"), most=ctl.name_max)
-    devices = {d.device for d in fit.data}
-    if len(devices) > 1:     # a probe measures against the machine file, an R-test against the table
-        raise CompgenError("the fit joins data measured under TCP (R-test) and without (probe log): they "
-                           "measured against different geometries, so no edit holds both",
-                           hint="fit each device's data alone, and write the edit from one of them")
     emitted = kinematics_edit(machine, fit, ctl.name, text, ", ".join(current), name, __version__,
                               date.today().isoformat(), beyond,
                               read_state(measured) if measured else None, out.stem, ", ".join(measured),
-                              str(out.absolute().parent), despite=tuple(reasons),
-                              without_tcp=devices == {"probe"})
+                              str(out.absolute().parent), despite=tuple(reasons))
     main_key = ctl.main_suffix(text)
     if output != STDOUT and out.suffix.lower() != main_key.lower():
         # the file the notes name is the file written: a .hal holding an INI would be started as

@@ -113,20 +113,27 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
                     current_where: str, name: str, version: str, date: str, force: bool = False,
                     measured: str | None = None, stem: str | None = None,
                     measured_where: str = "--measured-with", folder: str = "",
-                    despite: tuple[str, ...] = (), without_tcp: bool = False) -> Emitted:
+                    despite: tuple[str, ...] = ()) -> Emitted:
     """The files of a kinematics edit for one control, with the sign check and notes.
 
     ``measured`` is the control's state while the data were measured, when it differs from
     ``current`` (part of a correction already loaded, say): the edit then writes the rest.
     ``stem``: the file stem its files are written under, where one file names another;
     ``folder``: the folder they are written to; ``despite``: the fit gate's reasons, where the
-    edit is written although the fit does not explain its data (its header says so);
-    ``without_tcp``: the data were measured without the control's kinematics acting (a
-    probing program moves the axes by compgen's inverse of the machine file), so they hold
-    the machine against the machine file: the edit sets the control to the machine file's
-    geometry plus the fit, taking off what ``current`` holds beyond that geometry, where one
-    measured under TCP adds to what the control held while measuring.
+    edit is written although the fit does not explain its data (its header says so).
+
+    Probe data are measured without the control's kinematics acting (a probing program moves
+    the axes by compgen's inverse of the machine file), so they hold the machine against the
+    machine file: their edit sets the control to the machine file's geometry plus the fit,
+    taking off what ``current`` holds beyond that geometry, where R-test data, measured under
+    TCP, add to what the control held while measuring.
     """
+    devices = {d.device for d in fit.data}
+    if len(devices) > 1:     # a probe measures against the machine file, an R-test against the table
+        raise CompgenError("the fit joins data measured under TCP (R-test) and without (probe log): they "
+                           "measured against different geometries, so no edit holds both",
+                           hint="fit each device's data alone, and write the edit from one of them")
+    without_tcp = devices == {"probe"}
     ctl = for_machine(controller_name, machine, edit=True)
     for text in (current, measured):
         if text is not None and re.search(rf"\b{fit.marker}\b", text):
