@@ -40,7 +40,7 @@ from .linuxcnc_files import (
     Place,
     Setting,
     expand_includes,
-    start_script_words,
+    start_script_name,
 )
 
 
@@ -243,7 +243,7 @@ def _evaluate(ini_path: str, ini_text: str, load: Loader) -> Configuration:
         )
     run = _Hal(cfg, load)
     for entry in ini.all("HAL", "HALFILE"):
-        run.file("HALFILE", start_script_words(entry.value)[0], entry.place)
+        run.file("HALFILE", start_script_name(entry.value), entry.place)
     for entry in ini.all("HAL", "HALCMD"):
         run.halcmd(entry)
     for entry in ini.all("HAL", "POSTGUI_HALFILE"):

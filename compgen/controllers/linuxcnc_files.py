@@ -170,22 +170,22 @@ def _as_read_by_the_start_script(path: str, text: str, lines: list[str]) -> None
             )
 
 
-def start_script_words(value: str) -> tuple[str, str]:
-    """A HALFILE value split as the start script splits it (``IFS='\\ ' read CFGFILE
-    CFGFILE_ARGS``): backslash escapes taken, then the first word up to a space; a tab is
-    part of the name (the file is then not found, and LinuxCNC stops)."""
-    words, escaped, k = [[], []], False, 0
+def start_script_name(value: str) -> str:
+    """The file a HALFILE value names, as the start script splits it (``IFS='\\ ' read
+    CFGFILE CFGFILE_ARGS``): backslash escapes taken, then the first word up to a space; a
+    tab is part of the name (the file is then not found, and LinuxCNC stops)."""
+    name, escaped = [], False
     for ch in value.lstrip(" "):
         if escaped:                       # an escaped character is the character, never a space
-            words[k].append(ch)
+            name.append(ch)
             escaped = False
         elif ch == "\\":
             escaped = True
-        elif ch == " " and k == 0:
-            k = 1
+        elif ch == " ":                   # the rest is the file's arguments
+            break
         else:
-            words[k].append(ch)
-    return "".join(words[0]), "".join(words[1]).strip(" ")
+            name.append(ch)
+    return "".join(name)
 
 
 Loader = Callable[[str, str, Place | None], tuple[str, str | None]]
