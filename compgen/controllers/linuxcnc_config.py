@@ -518,8 +518,8 @@ def configuration_files(
         while (name := f"{stem}.{base}" if n == 1 else f"{stem}.{n}.{base}") in renamed.values():
             n += 1
         renamed[file] = name
-        for place, name in cfg.named_at.get(file, []):
-            change(place, name, renamed[file], last=False)
+        for place, written in cfg.named_at.get(file, []):
+            change(place, written, renamed[file], last=False)
             todo.add(place.file)
     out = {}
     for file in {p.file for p in changed} | {p.file for p in after} | {cfg.ini_path}:

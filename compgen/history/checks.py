@@ -214,11 +214,11 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
         advice.append(f"check the set-up: the residual σ̂ is {fit.residual['sigma_um']:.2f} µm against the "
                       f"calibration's {calibration.sigma_um:.2f} µm (ball stem, nest, temperature, a loose "
                       "magnet base)")
-    edited = any(e.get("marker") == calibration.marker for e in edits)
     if any(v.startswith("FAIL") for v in paths.values()):
         if failed:
             advice.append("a path is beyond its tolerance: re-calibrate, then compare the predicted residual")
-        elif edited:      # the edit is loaded: what stays is what no edit of this control corrects
+        elif any(e.get("marker") == calibration.marker for e in edits):
+            # the edit is loaded: what stays is what no edit of this control corrects
             advice.append("the location errors are where the last calibration left them and its edit is "
                           "recorded, but a path is beyond its tolerance: what the edit could not correct"
                           + (f" ({', '.join(model.effects)}, which the calibration found)" if model.effects

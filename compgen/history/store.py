@@ -170,8 +170,8 @@ def _sqlite_path(url: str, create: bool) -> Path:
     if path.exists() and not path.is_dir() and not path.is_file():
         raise CompgenError("the history store is not a regular file (a FIFO or a device)", where=str(path),
                            hint="give a file")
-    folder = (path.resolve().parent if path.exists() else path.absolute().parent)
     if not path.exists() and create:
+        folder = path.absolute().parent
         if not folder.is_dir():
             raise CompgenError("the history store's folder does not exist", where=str(path),
                                hint=f"make {folder} first, or give another --db")

@@ -156,6 +156,7 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
                          f"{effect_name(worst)}")
     return "\n".join([*lines, *d.notes]) + "\n"
 
+
 def _said(d: Diagnosis, words: str) -> str:
     """An effect's words for these data: a probe's set-up offset on the tool side is its
     stylus tip's, where an R-test's is its nest's."""
