@@ -11,6 +11,7 @@ from conftest import BC_MACHINE, ROOT, SEED_MACHINE, rs274, run
 
 from compgen.configuration.machine_file import load_machine
 from compgen.controllers.registry import controller
+from compgen.controllers.state_guards import heidenhain_guard
 from compgen.errors import CompgenError
 from compgen.model.frames import frames, safe_height
 from compgen.model.kinematics import inverse
@@ -411,9 +412,13 @@ def test_heidenhain_tcpm_forms_the_check_does_not_model_are_refused(tmp_path, fo
     assert code == 2 and f"{form!r}: only" in err and "not modelled" not in out, (code, out, err)
 
 
+# the control's state guard (heidenhain_guard) after the program's first two lines: the
+# blocks below it are GUARDED file lines further down
+GUARD = "".join(f"1 {b}\n" for b in heidenhain_guard())
+GUARDED = len(heidenhain_guard())
 PROGRAM_TIMED = """0 BEGIN PGM T MM
 1 FUNCTION RESET TCPM
-2 TOOL CALL 99 Z S0
+""" + GUARD + """2 TOOL CALL 99 Z S0
 3 L Z+378.0000 R0 FMAX
 4 L X+0.0000 Y+0.0000 A+0.0000 C+0.0000 R0 FMAX
 5 L C+30.0000 R0 F1000
@@ -438,15 +443,17 @@ def test_the_check_adds_the_programs_time_and_names_its_closest_approach():
     assert check.findings == () and check.blocks == 6
     back = 60.5 / m.axis("X").feed_max * 60.0
     assert check.seconds == pytest.approx(1.8 + 6.0 + 2.0 + back, abs=1e-9)
-    assert re.fullmatch(r"(housing|spindle) / (ball|stem|table), line (6|7|10|11)", check.closest_at), \
+    assert re.fullmatch(r"(housing|spindle) / (ball|stem|table), line (\d+)", check.closest_at) and \
+        int(check.closest_at.rsplit(" ", 1)[1]) - GUARDED in (6, 7, 10, 11), \
         check.closest_at                                    # the lines of the file, counted from 1
     # outside travel: the finding names the position of every axis, mm and deg
     far = ctl.check(m, ctl.blocks(text.replace("X+60.0000 R0 F600", "X+999.0000 R0 F600"), None))
     out = next(f for f in far.findings if f.rule == "outside travel")
-    assert out.line == 7 and out.depth_mm == 0.0
+    assert out.line == 7 + GUARDED and out.depth_mm == 0.0
     assert re.fullmatch(r"X\+\d+\.\d{3} Y\+0\.000 Z\+378\.000 A\+0\.000 C\+30\.000", out.axes), out.axes
     assert float(out.axes.split()[0][1:]) > m.axis("X").travel[1]
-    assert out.text("T.H").startswith("T.H:7: outside travel: X reaches ")      # no depth: not a collision
+    # no depth: not a collision
+    assert out.text("T.H").startswith(f"T.H:{7 + GUARDED}: outside travel: X reaches ")
     # a feed move at exactly X's feed_max is within it; 1 % above it is not, and the finding
     # stands at the move's end
     top = m.axis("X").feed_max
@@ -585,7 +592,7 @@ def test_a_part_near_a_solid_is_within_the_margin_not_inside_it():
         z = 100.0 - gap + above
         text = PROGRAM_TIMED.replace("6 L X+60.0000 R0 F600", f"6 L Z{z:+.4f} R0 F600")
         found = [f for f in ctl.check(m, ctl.blocks(text, None)).findings
-                 if "table" in f.rule and f.line == 7]         # the block that goes down
+                 if "table" in f.rule and f.line == 7 + GUARDED]         # the block that goes down
         assert [f.rule for f in found] == [expected]
         assert found[0].depth_mm == pytest.approx(max(-above, 0.0), abs=0.02)
         assert (" by " in found[0].text("T.H")) == (above < 0)

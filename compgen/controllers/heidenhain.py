@@ -24,6 +24,7 @@ from ..units import number
 from . import fmt_signed, render
 from .base import Controller, EditContext, EditFiles
 from .correction import Held, Plan, nominal_lines, pivot_of
+from .state_guards import heidenhain_guard, heidenhain_state, require_guard
 from .tab import MM_PER, TabTable
 
 MM_DECIMALS = 5          # 0.01 µm
@@ -333,14 +334,24 @@ def program_blocks(text: str) -> list[Block]:
     out, name = [], None
     at: dict[str, float] = {}          # the linear axes' last written values
     direction = None
-    for k, raw in enumerate(text.splitlines(), start=1):
-        body = raw.split(";", 1)[0].strip()
-        m = re.fullmatch(r"\d+\s*(.*)", body)
-        if m is None:
-            if body:
+    raws = text.splitlines()
+    bodies = [raw.split(";", 1)[0].strip() for raw in raws]
+    numbered = [re.fullmatch(r"\d+\s*(.*)", body) for body in bodies]
+    blocks = [m[1].strip() if m else "" for m in numbered]
+    skip = 0
+    for k, raw in enumerate(raws, start=1):
+        if skip:
+            skip -= 1
+            continue
+        if numbered[k - 1] is None:
+            if bodies[k - 1]:
                 raise unknown(k, raw)
             continue
-        b = m[1].strip()
+        b = blocks[k - 1]
+        if (taken := heidenhain_state(blocks, k - 1)) is not None:
+            out.append(Block(k, raw, "offsets"))        # compgen's state guard: no motion
+            skip = taken - 1
+            continue
         if (d := re.fullmatch(r"(BEGIN|END) PGM (\S+) (\S+)", b)) is not None:
             if d[3] != "MM":       # compgen's positions are mm; an INCH program reads them as inches
                 raise CompgenError(f"line {k}: {b!r}: only programs in MM are checked", where=None,
@@ -431,6 +442,14 @@ class Heidenhain(Controller):
 
     def blocks(self, text: str, mode: str | None = None) -> list[Block]:
         return program_blocks(text)
+
+    def program_context(self, machine: Machine) -> dict:
+        return {"state_guard": heidenhain_guard()}
+
+    def check(self, machine: Machine, blocks: list[Block], probe=None):
+        require_guard(blocks, "HEIDENHAIN", "stop unless no basic rotation, rotation, mirrored axis or "
+                      "scaling is active")
+        return super().check(machine, blocks, probe)
 
     def edits_head(self, machine: Machine) -> bool:
         # pairs around a head's MachAxis as around a table's (U18)

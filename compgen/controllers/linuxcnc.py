@@ -44,6 +44,7 @@ from .correction import (
 )
 from .linuxcnc_config import Configuration, bundle, configuration_files, evaluate, hal_file, is_bundle, then
 from .linuxcnc_files import Setting
+from .state_guards import require_guard
 
 # the value is the rest of the line (a comment aside): halcmd takes one word, so "1.0 junk"
 # is refused as a value rather than read as 1.0
@@ -613,18 +614,6 @@ def program_blocks(text: str, tcp: bool, head: str | None = None) -> list[Block]
     return out
 
 
-def _guarded_first(blocks: list[Block], kind: str, name: str, what: str, before=("tool", "move")) -> None:
-    """Refuse a program that does not ``what`` (a state guard of ``kind`` for ``name``)
-    before the first block of a kind in ``before`` (its tool change, its first move)."""
-    first = next((b for b in blocks if b.kind in (*before, kind)), None)
-    if first is None or first.kind != kind or first.name != name:
-        at = f"line {first.line}: " if first is not None and first.kind != kind else ""
-        said = " and ".join({"tool": "its tool change", "move": "any move"}[k] for k in before)
-        raise CompgenError(f"{at}a LinuxCNC program must {what} before {said}",
-                           hint=f"write it again with {me()} measure-program (or probe-program) for this "
-                                "machine file")
-
-
 class LinuxCNC(Controller):
     name = "linuxcnc"
     family = "linuxcnc"
@@ -723,13 +712,13 @@ class LinuxCNC(Controller):
             raise CompgenError(f"line {pins[0].line}: the program was written for a head on "
                                f"{next(iter(pins[0].target)).split('.')[0]}, which this machine file is not",
                                hint="check it against the machine file it was written for")
-        _guarded_first(blocks, "offsets", "", "stop unless G54's and G92's offsets are zero (LinuxCNC "
-                       "applies them before its kinematics: an offset left set moves every pose)")
+        require_guard(blocks, "LinuxCNC", "stop unless G54's and G92's offsets are zero (LinuxCNC applies "
+                      "them before its kinematics: an offset left set moves every pose)")
         if head:
-            _guarded_first(blocks, "head state", head[0].module, f"stop unless W is at 0 ({head[0].module} "
-                           "lengthens the pivot by W)" + (" and motion.switchkins-type is 0"
-                                                          if head[0].module == "5axiskins" else ""),
-                           before=("move",))
+            switch = " and motion.switchkins-type is 0" if head[0].module == "5axiskins" else ""
+            require_guard(blocks, "LinuxCNC", f"stop unless W is at 0 ({head[0].module} lengthens the pivot "
+                          f"by W){switch}",
+                          before=("move",), kind="head state", name=head[0].module)
         return super().check(machine, blocks, probe)
 
     def blocks(self, text: str, mode: str | None = None) -> list[Block]:

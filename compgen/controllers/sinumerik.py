@@ -29,6 +29,7 @@ from .correction import (
     nominal_lines,
     unrolled,
 )
+from .state_guards import FRAME_IF, require_frame_guard, sinumerik_guard, sinumerik_terms
 
 MM_DECIMALS = 5
 VECTOR_DECIMALS = 10
@@ -395,6 +396,15 @@ def program_blocks(text: str) -> list[Block]:
             out.append(replace(move, probe=True))
             expect = ["STOPRE", "IF $AC_MEA[1]==0"]
             continue
+        if (d := FRAME_IF.fullmatch(b)) is not None:         # compgen's frame guard: no motion
+            body = lines[k:k + len(GUARD_BODY)]
+            if len(body) < len(GUARD_BODY) or not all(
+                    p.fullmatch(t) for p, t in zip(GUARD_BODY, body, strict=True)):
+                raise CompgenError(f"line {k}: {b!r} is not compgen's guard (a message, M0, M30, ENDIF)",
+                                   hint="give the program compgen wrote")
+            skip = len(GUARD_BODY)
+            out.append(Block(k, raw, "offsets", target=sinumerik_terms(d[1])))
+            continue
         if GUARD.fullmatch(b):
             raise CompgenError(f"line {k}: {b!r} stands where no probing move or WRITE precedes it",
                                hint="give the program compgen wrote")
@@ -507,6 +517,13 @@ class Sinumerik840D(Controller):
 
     def tables(self, machine: Machine, p: Plan) -> list[CompTable]:
         return [self._plain(machine, t) for t in super().tables(machine, p)]
+
+    def program_context(self, machine: Machine) -> dict:
+        return {"state_guard": sinumerik_guard(machine)}
+
+    def check(self, machine: Machine, blocks: list[Block], probe=None):
+        require_frame_guard(machine, blocks)
+        return super().check(machine, blocks, probe)
 
     def check_setup(self, machine: Machine) -> None:
         turning = [a.name for a in machine.rotary_axes if a.full_turn]
