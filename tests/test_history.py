@@ -1264,3 +1264,68 @@ def test_an_edit_filed_under_another_machine_counts_for_no_machine(tmp_path, yea
     with open_store(db) as store:
         after = {e.taken: e.machine_value("BOA") for e in H.trend(store, machine).entries}
     assert after == before
+
+
+def _colliding(fit):
+    """Two fits that differ only in YOC's value and whose 6-digit markers are the same (the
+    birthday bound: a few thousand tries)."""
+    seen = {}
+    for k in range(1, 200_000):
+        e = fit.parameters["YOC"]
+        other = replace(fit, parameters={**fit.parameters, "YOC": replace(e, value=e.value + k * 1e-6)})
+        if (had := seen.get(other.marker)) is not None and had.record_marker != other.record_marker:
+            return had, other
+        seen[other.marker] = other
+    raise AssertionError("no collision found")
+
+
+def test_two_fits_whose_short_markers_collide_are_two_rows_and_each_keeps_its_edit(tmp_path, year):
+    """The store keeps a fit by its 16-digit record marker: two fits with the same 6 digits
+    (one in 4 000 distinct fits met it) are both recorded, each edit goes to its own fit,
+    and an export of both imports whole. Six digits refused the second as "already in the
+    history" and gave its edit to the first."""
+    machine = year[0]
+    first, second = _colliding(year[2][0][1])
+    assert first.marker == second.marker and first.record_marker != second.record_marker
+    db = tmp_path / "h.sqlite"
+    with open_store(db) as store:
+        a = H.record_fit(store, first, machine, taken="2026-01-05T09:00Z")
+        b = H.record_fit(store, second, machine, taken="2026-01-06T09:00Z")
+        assert a != b
+        H.record_edit(store, second, machine, "itnc530", {"YOC": second.parameters["YOC"].value}, {}, {},
+                      taken="2026-01-06T10:00Z")
+        edited = store.rows("SELECT fit_id FROM edits")
+        assert [r["fit_id"] for r in edited] == [b]
+        assert H.edit_of(store, first, machine) is None
+    out = tmp_path / "x.json"
+    assert run("history", "export", "--db", db, "-o", out)[0] == 0
+    code, _, err = run("history", "import", out, "--db", tmp_path / "other.sqlite")
+    assert code == 0, err
+    with open_store(tmp_path / "other.sqlite") as store:
+        assert len(store.rows("SELECT id FROM fits")) == 2
+
+
+def test_a_fit_an_older_compgen_recorded_by_six_digits_is_still_that_fit(tmp_path, year):
+    """Rows written before the 16-digit record marker keep their 6 digits: the same fit is
+    found there (recorded again: refused; its edit: attached to it), and an export holding
+    it imports into a store that holds the same fit by 16 digits as "already here"."""
+    machine, fit = year[0], year[2][0][1]
+    db = tmp_path / "old.sqlite"
+    with open_store(db) as store, store.writing():
+        mid = H.lookup_machine(store, machine.name, "", create=True)
+        fid = H.session_and_fit(store, mid, fit, machine, "2026-01-05T09:00:00+00:00", "rtest", "", {},
+                                "calibration", "accepted")
+    with contextlib.closing(sqlite3.connect(db)) as raw, raw:
+        raw.execute("DROP TRIGGER IF EXISTS fits_no_update")
+        raw.execute("UPDATE fits SET marker = ? WHERE id = ?", (fit.marker, fid))
+    with open_store(db) as store:
+        assert store.rows("SELECT marker FROM fits")[0]["marker"] == fit.marker      # as 6 digits
+        with pytest.raises(CompgenError, match="already in the history"):
+            H.record_fit(store, fit, machine)
+        H.record_edit(store, fit, machine, "itnc530", {}, {}, {}, taken="2026-01-06T10:00Z")
+        assert H.edit_of(store, fit, machine)["id"]
+    assert run("history", "export", "--db", db, "-o", tmp_path / "old.json")[0] == 0
+    with open_store(tmp_path / "new.sqlite") as store:
+        H.record_fit(store, fit, machine, taken="2026-01-05T09:00Z")
+    code, _, err = run("history", "import", tmp_path / "old.json", "--db", tmp_path / "new.sqlite")
+    assert code == 2 and "already here" in err, err

@@ -249,7 +249,7 @@ def calibration_fit(store: Store, entry: Entry) -> FitResult:
     who = f", recorded by {one_line(entry.recorded_by)}" if entry.recorded_by else ""
     try:
         fit = FitResult.from_dict(json.loads(row["fit_json"]))
-        same = (json.loads(row["model"]) == list(fit.model) and fit.marker == entry.marker
+        same = (json.loads(row["model"]) == list(fit.model) and fit.holds_marker(entry.marker)
                 and json.loads(row["parameters"]) == {n: {"value": e.value, "std": e.std, "unit": e.unit}
                                                       for n, e in fit.parameters.items()})
     except (CompgenError, KeyError, TypeError, ValueError):

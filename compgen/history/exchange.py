@@ -177,13 +177,13 @@ def _valid_rows(t: dict[str, list], where: str) -> None:
             fit = FitResult.from_dict(doc("fits", f, "fit_json", dict))
         except (CompgenError, KeyError, TypeError, ValueError):
             bad("fits", f, "fit_json is not a fit compgen wrote")
-        marker = fit.marker
         values[f["id"]], sigma[f["id"]] = params, fit.residual["sigma_um"]
         if model != list(fit.model) or params != {n: {"value": e.value, "std": e.std, "unit": e.unit}
                                                   for n, e in fit.parameters.items()}:
             bad("fits", f, "its model or parameters are not its fit_json's: the row was changed")
-        if marker != f.get("marker"):
-            bad("fits", f, f"its marker {f.get('marker')!r} is not its fit's ({marker}): the row was changed")
+        if not fit.holds_marker(f.get("marker")):
+            bad("fits", f, f"its marker {f.get('marker')!r} is not its fit's ({fit.record_marker}): the row "
+                           "was changed")
     fitted = {f["id"]: f for f in t["fits"]}
     sessions = {x["id"]: x for x in t["sessions"]}
     for e in t["edits"]:
@@ -242,6 +242,9 @@ def _machine_keys(t: dict[str, list]) -> tuple[dict[int, tuple], dict[int, tuple
     return machines, {s["id"]: machines[s["machine_id"]] for s in t["sessions"]}
 
 
+SHORT = len("fit:000000")      # a marker an older compgen recorded: 6 hex digits
+
+
 def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str, int]:
     """Another store's export, appended in one transaction with its origin recorded. Refused:
     this store's own rows, an export already imported, or a fit this store already holds
@@ -270,10 +273,15 @@ def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str
                                "of the same name?", where=where,
                                hint="give each machine its serial in its machine file, or import into "
                                     "another store; nothing was imported")
-    mine = {((r["name"], r["serial"]), r["marker"]) for r in store.rows(
-        "SELECT m.name, m.serial, f.marker FROM fits f JOIN sessions s ON s.id = f.session_id "
-        "JOIN machines m ON m.id = s.machine_id")}
-    twice = sorted(held & mine)
+    # the same fit: the same record marker, or the same 6 digits where a row is an older
+    # compgen's (its marker has no more)
+    mine: dict[tuple, set] = {}
+    for r in store.rows("SELECT m.name, m.serial, f.marker FROM fits f JOIN sessions s "
+                        "ON s.id = f.session_id JOIN machines m ON m.id = s.machine_id"):
+        mine.setdefault(((r["name"], r["serial"]), r["marker"][:SHORT]), set()).add(r["marker"])
+    twice = sorted((key, marker) for key, marker in held
+                   if any(marker == m or SHORT in (len(marker), len(m))
+                          for m in mine.get((key, marker[:SHORT]), ())))
     if twice:
         raise CompgenError(f"{len(twice)} fit(s) of the export are already here (first: {twice[0][1]} of "
                            f"{twice[0][0][0]!r})", where=where,

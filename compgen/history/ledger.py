@@ -135,13 +135,14 @@ def record_fit(store: Store, fit: FitResult, machine: Machine, *, serial: str | 
     except Recorded:
         if not exist_ok:
             raise
-        return int(_fit_rows(store, fit.marker, name, serial)[0]["id"])
+        return int(_fit_rows(store, fit, name, serial)[0]["id"])
 
 
-def _fit_rows(store: Store, marker: str, name: str, serial: str) -> list[dict]:
+def _fit_rows(store: Store, fit: FitResult, name: str, serial: str) -> list[dict]:
+    """The machine's rows of ``fit``: by its record marker (or an older row's short one)."""
     return store.rows("SELECT f.id, s.taken FROM fits f JOIN sessions s ON s.id = f.session_id "
-                      "JOIN machines m ON m.id = s.machine_id WHERE f.marker = ? AND m.name = ? "
-                      "AND m.serial = ? ORDER BY f.id", (marker, name, serial))
+                      "JOIN machines m ON m.id = s.machine_id WHERE f.marker IN (?, ?) AND m.name = ? "
+                      "AND m.serial = ? ORDER BY f.id", (fit.record_marker, fit.marker, name, serial))
 
 
 def session_and_fit(store: Store, mid: int, fit: FitResult, machine: Machine, taken: str, device: str,
@@ -154,7 +155,7 @@ def session_and_fit(store: Store, mid: int, fit: FitResult, machine: Machine, ta
     twice = Recorded(
         f"this fit ({fit.marker}) is already in the history", where=store.where,
         hint=f"{me()} history show --machine {file_ref(machine)} lists it")
-    if _fit_rows(store, fit.marker, name, serial):
+    if _fit_rows(store, fit, name, serial):
         raise twice
     sid = store.insert("sessions", {
         "machine_id": mid, "taken": taken, "device": device, "operator": operator,
@@ -162,12 +163,12 @@ def session_and_fit(store: Store, mid: int, fit: FitResult, machine: Machine, ta
         "data": [{"file": d.file, "sha256": d.sha256, "rows": d.rows} for d in fit.data],
         "recorded": now()})
     fid = store.insert("fits", {
-        "session_id": sid, "marker": fit.marker, "kind": kind, "model": list(fit.model),
+        "session_id": sid, "marker": fit.record_marker, "kind": kind, "model": list(fit.model),
         "parameters": {n: {"value": e.value, "std": e.std, "unit": e.unit}
                        for n, e in fit.parameters.items()},
         "sigma_um": fit.residual["sigma_um"], "rms_um": fit.residual["rms_um"], "verdict": verdict,
         "fit_json": fit.to_dict(), "recorded": now(),
-        "content_sha256": content_key("fit", name, serial, fit.marker)}, unique="content_sha256")
+        "content_sha256": content_key("fit", name, serial, fit.record_marker)}, unique="content_sha256")
     if fid is None:
         raise twice
     return fid
@@ -177,8 +178,8 @@ def edit_of(store: Store, fit: FitResult, machine: Machine, serial: str | None =
     """The edit recorded from ``fit``, if any: its id, when, and the files' checksums."""
     name, serial = machine_key(machine, serial)
     rows = store.rows("SELECT e.id, e.taken, e.written FROM edits e JOIN fits f ON f.id = e.fit_id "
-                      "JOIN machines m ON m.id = e.machine_id WHERE f.marker = ? AND m.name = ? "
-                      "AND m.serial = ? ORDER BY e.id", (fit.marker, name, serial))
+                      "JOIN machines m ON m.id = e.machine_id WHERE f.marker IN (?, ?) AND m.name = ? "
+                      "AND m.serial = ? ORDER BY e.id", (fit.record_marker, fit.marker, name, serial))
     return {**rows[0], "written": json.loads(rows[0]["written"])} if rows else None
 
 
@@ -192,7 +193,7 @@ def record_edit(store: Store, fit: FitResult, machine: Machine, controller: str,
     not count twice), another edit from the same fit is refused."""
     name, serial = machine_key(machine, serial)
     with store.writing():
-        rows = _fit_rows(store, fit.marker, name, serial)
+        rows = _fit_rows(store, fit, name, serial)
         if not rows:
             raise CompgenError(f"the edit's fit ({fit.marker}) is not in the history", where=store.where,
                                hint=f"record it first: {me()} history add FIT.json")
@@ -205,7 +206,7 @@ def record_edit(store: Store, fit: FitResult, machine: Machine, controller: str,
             "machine_id": lookup_machine(store, name, serial, create=False), "fit_id": rows[0]["id"],
             "controller": controller, "corrects": dict(corrects), "written": dict(written),
             "loaded": dict(loaded), "taken": when, "recorded": now(),
-            "content_sha256": content_key("edit", name, serial, fit.marker)}, unique="content_sha256")
+            "content_sha256": content_key("edit", name, serial, fit.record_marker)}, unique="content_sha256")
         if eid is None:         # another writer recorded it a moment ago
             raise Recorded(f"the edit from {fit.marker} is already in the history", where=store.where)
         return eid
@@ -219,7 +220,7 @@ def refuse_second_edit(store: Store, fit: FitResult, machine: Machine, written: 
     written."""
     if taken is not None:
         name, key = machine_key(machine, serial)
-        rows = _fit_rows(store, fit.marker, name, key)
+        rows = _fit_rows(store, fit, name, key)
         if rows and taken < utc(rows[0]["taken"]):
             raise CompgenError("an edit cannot come before the fit it was written from",
                                where=store.where, hint=f"the fit was measured {rows[0]['taken']}: give a "
