@@ -438,6 +438,11 @@ def test_another_stores_history_is_imported_only_when_asked_and_only_once(year, 
     assert rc == 2 and "not a compgen history export" in err and not (tmp_path / "new.sqlite").exists()
     _record(tmp_path / "b.sqlite", year).close()                      # the same fits, recorded again
     rc, _, err = run("history", "import", "a.json", "--db", "b.sqlite")
+    # a machine without a serial is not merged by its name alone (another plant's, with the
+    # same bundled machine file, would be): the user says it is the same one
+    assert rc == 2 and "has no serial, and this store holds a machine of that name" in err, err
+    assert f"--same-machine '{year[0].name}'" in err
+    rc, _, err = run("history", "import", "a.json", "--db", "b.sqlite", "--same-machine", year[0].name)
     assert rc == 2 and "12 fit(s) of the export are already here" in err
     # another plant's machine of the same name (no serial), measured with its own machine file
     (tmp_path / "other.toml").write_text((ROOT / "machines" / "ac-trunnion-itnc530.toml").read_text()
@@ -447,8 +452,21 @@ def test_another_stores_history_is_imported_only_when_asked_and_only_once(year, 
         other = load_machine(str(tmp_path / "other.toml"))
         H.record_fit(c, replace(fit, machine={**fit.machine, "sha256": ""}), other, taken="2025-06-01")
     before = (tmp_path / "c.sqlite").read_bytes()
-    rc, _, err = run("history", "import", "a.json", "--db", "c.sqlite")
+    rc, _, err = run("history", "import", "a.json", "--db", "c.sqlite", "--same-machine", year[0].name)
     assert rc == 2 and "another machine of the same name" in err, err
+    assert (tmp_path / "c.sqlite").read_bytes() == before
+    # another plant's machine of the same name with the same bundled machine file: a name and a
+    # file do not make one machine; the user's word does
+    with open_store(tmp_path / "d.sqlite") as d:
+        e = fit.parameters["YOC"]
+        H.record_fit(d, replace(fit, parameters={**fit.parameters, "YOC": replace(e, value=e.value + 1e-3)}),
+                     year[0], taken="2025-06-01")
+    rc, _, err = run("history", "import", "a.json", "--db", "d.sqlite")
+    assert rc == 2 and "has no serial" in err, err
+    rc, _, err = run("history", "import", "a.json", "--db", "d.sqlite", "--same-machine", "no such")
+    assert rc == 2 and "holds no machine of that name without a serial" in err, err
+    rc, out, err = run("history", "import", "a.json", "--db", "d.sqlite", "--same-machine", year[0].name)
+    assert rc == 0 and "12 fits" in out, err
     assert (tmp_path / "c.sqlite").read_bytes() == before
 
 
@@ -1327,5 +1345,6 @@ def test_a_fit_an_older_compgen_recorded_by_six_digits_is_still_that_fit(tmp_pat
     assert run("history", "export", "--db", db, "-o", tmp_path / "old.json")[0] == 0
     with open_store(tmp_path / "new.sqlite") as store:
         H.record_fit(store, fit, machine, taken="2026-01-05T09:00Z")
-    code, _, err = run("history", "import", tmp_path / "old.json", "--db", tmp_path / "new.sqlite")
+    code, _, err = run("history", "import", tmp_path / "old.json", "--db", tmp_path / "new.sqlite",
+                       "--same-machine", machine.name)
     assert code == 2 and "already here" in err, err

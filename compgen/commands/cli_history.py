@@ -164,8 +164,11 @@ def history_export_cmd(machine_name, output, force, db):
 
 @history_cmd.command("import")
 @click.argument("export_file", type=FILE)
+@click.option("--same-machine", "same", multiple=True, metavar="NAME",
+              help="A machine without a serial that this store holds too, under this name: it is the same "
+                   "machine (without it such a machine is refused: a name alone may be another plant's).")
 @DB
-def history_import_cmd(export_file, db):
+def history_import_cmd(export_file, same, db):
     """Append another store's history (a `history export -o H.json`) to this one, its origin
     recorded; refused if it is this store's own, was imported before, or shares a fit."""
     import hashlib
@@ -176,7 +179,7 @@ def history_import_cmd(export_file, db):
     doc = read_json(export_file, "history export")
     check_export(doc, export_file)          # before a store is made for it
     store = history_store(db)
-    counts = import_history(store, doc, hashlib.sha256(raw).hexdigest(), export_file)
+    counts = import_history(store, doc, hashlib.sha256(raw).hexdigest(), export_file, same)
     click.echo(f"imported into {store.where}: " + ", ".join(f"{n} {k}" for k, n in counts.items()))
 
 

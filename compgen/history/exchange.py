@@ -7,6 +7,8 @@ import csv
 import io
 import json
 import math
+import shlex
+from collections.abc import Collection
 
 from .. import me
 from ..controllers.registry import CONTROLLERS
@@ -245,10 +247,13 @@ def _machine_keys(t: dict[str, list]) -> tuple[dict[int, tuple], dict[int, tuple
 SHORT = len("fit:000000")      # a marker an older compgen recorded: 6 hex digits
 
 
-def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str, int]:
+def import_history(store: Store, doc: dict, sha256: str, where: str,
+                   same: Collection[str] = ()) -> dict[str, int]:
     """Another store's export, appended in one transaction with its origin recorded. Refused:
     this store's own rows, an export already imported, or a fit this store already holds
-    (for the same machine): nothing is merged silently, and nothing twice."""
+    (for the same machine): nothing is merged silently, and nothing twice. A machine without
+    a serial whose name this store holds is merged only when named in ``same``: a name alone
+    does not tell one machine from another plant's (with the same bundled machine file)."""
     t = check_export(doc, where)
     if doc.get("store_id") == store.store_id():
         raise CompgenError("this export is this store's own history", where=where,
@@ -270,11 +275,25 @@ def import_history(store: Store, doc: dict, sha256: str, where: str) -> dict[str
         if key in files_here and s["machine_sha256"] not in files_here[key]:
             raise CompgenError(f"machine {key[0]!r}{f' serial {key[1]}' if key[1] else ''} of the export was "
                                "measured with a machine file this store never saw for it: another machine "
-                               "of the same name?", where=where,
+                               "of the same name", where=where,
                                hint="give each machine its serial in its machine file, or import into "
                                     "another store; nothing was imported")
     # the same fit: the same record marker, or the same 6 digits where a row is an older
     # compgen's (its marker has no more)
+    named = {(r["name"], r["serial"]) for r in store.rows("SELECT name, serial FROM machines")}
+    unknown = [n for n in same if (n, "") not in machines.values()]
+    if unknown:
+        raise CompgenError(f"--same-machine {unknown[0]!r}: the export holds no machine of that name "
+                           "without a serial", where=where,
+                           hint="name a machine the export holds; nothing was imported")
+    for name, serial in sorted(set(machines.values())):
+        if not serial and (name, serial) in named and name not in same:
+            raise CompgenError(f"machine {name!r} has no serial, and this store holds a machine of that "
+                               "name: a name alone does not tell one machine from another plant's",
+                               where=where, hint=f"if they are one machine, add --same-machine "
+                                                 f"{shlex.quote(name)} to this import; else give each its "
+                                                 "serial ([machine] serial) and record with --serial; "
+                                                 "nothing was imported")
     mine: dict[tuple, set] = {}
     for r in store.rows("SELECT m.name, m.serial, f.marker FROM fits f JOIN sessions s "
                         "ON s.id = f.session_id JOIN machines m ON m.id = s.machine_id"):
