@@ -91,9 +91,13 @@ def _no_constant(name: str):
     raise ValueError(f"{name} is not a number compgen accepts")
 
 
-def read_json(path: str | Path, what: str) -> dict:
+def read_json(path: str | Path, what: str, limit: int = MAX_BYTES) -> dict:
     """A JSON object from a user's file: NaN and Infinity refused, nesting bounded."""
-    text = read_text(path, what)[0]
+    return json_object(read_text(path, what, limit=limit)[0], what, path)
+
+
+def json_object(text: str, what: str, path: str | Path) -> dict:
+    """A JSON object from a file's text (``read_json``'s rules)."""
     try:
         doc = json.loads(text, parse_constant=_no_constant)
     except (json.JSONDecodeError, ValueError) as exc:

@@ -1348,3 +1348,17 @@ def test_a_fit_an_older_compgen_recorded_by_six_digits_is_still_that_fit(tmp_pat
     code, _, err = run("history", "import", tmp_path / "old.json", "--db", tmp_path / "new.sqlite",
                        "--same-machine", machine.name)
     assert code == 2 and "already here" in err, err
+
+
+def test_an_export_beyond_the_64_mb_of_a_control_file_imports(tmp_path, year, monkeypatch):
+    """A plant's years are 140 MB of export (10 000 fits: benchmarks/history_import_scale.py);
+    the import reads up to the data files' 256 MB (it refused anything past 64 MB, an
+    export compgen itself had written). Here a small export padded past 64 MB with the white
+    space JSON allows."""
+    monkeypatch.chdir(tmp_path)
+    _record(tmp_path / "a.sqlite", year, months=2).close()
+    assert run("history", "export", "--db", "a.sqlite", "-o", "a.json")[0] == 0
+    with open(tmp_path / "a.json", "a") as f:
+        f.write(" " * (65 * 2**20))
+    rc, out, err = run("history", "import", "a.json", "--db", "b.sqlite")
+    assert rc == 0 and "2 fits" in out, err

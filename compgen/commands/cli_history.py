@@ -173,13 +173,16 @@ def history_import_cmd(export_file, same, db):
     recorded; refused if it is this store's own, was imported before, or shares a fit."""
     import hashlib
 
-    from ..files import read_json
+    from ..files import MAX_DATA_BYTES, json_object
     from ..history import check_export, import_history
-    raw = read_text(export_file, "history export")[1]
-    doc = read_json(export_file, "history export")
+    text, raw = read_text(export_file, "history export", limit=MAX_DATA_BYTES)   # a plant's years: 140 MB
+    sha256 = hashlib.sha256(raw).hexdigest()
+    del raw                                 # held once: 10 000 fits are 140 MB of text
+    doc = json_object(text, "history export", export_file)
+    del text
     check_export(doc, export_file)          # before a store is made for it
     store = history_store(db)
-    counts = import_history(store, doc, hashlib.sha256(raw).hexdigest(), export_file, same)
+    counts = import_history(store, doc, sha256, export_file, same)
     click.echo(f"imported into {store.where}: " + ", ".join(f"{n} {k}" for k, n in counts.items()))
 
 
