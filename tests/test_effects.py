@@ -236,7 +236,8 @@ def test_the_catalogue_offers_the_orders_it_says():
     """Per symbol of the seed machine, the orders catalogue() offers: harmonics 1-4 of the
     turning C and of the tilting A (an encoder's 4/rev shows over A's tilt), compounds both
     ways, polynomials 1-3 (a straightness from 2: its order 1 is a squareness), drift in
-    hours 1-2 and τ 5, 15, 45 min."""
+    hours 1-2 and τ 5, 15, 45 min; a location error in time, linear (t1) or saturating; the
+    ball's stem saturating only."""
     names = {e.name for e in catalogue(SEED)}
     have = lambda prefix: sorted(n[len(prefix):] for n in names if n.startswith(prefix))  # noqa: E731
     assert have("ECC:") == ["h1", "h2", "h3", "h4", "r1"]
@@ -245,7 +246,7 @@ def test_the_catalogue_offers_the_orders_it_says():
     assert have("EYA+EZA:") == ["h-1", "h-2", "h-3", "h-4", "h1", "h2", "h3", "h4"]
     assert have("EXX:") == ["p1", "p2", "p3", "r1"] and have("EYX:") == ["p2", "p3"]
     assert have("drift_X:") == ["e15", "e45", "e5", "t1", "t2"]
-    assert have("XOC:") == ["e15", "e45", "e5"] and "XOC" in names
+    assert have("XOC:") == ["e15", "e45", "e5", "t1"] and "XOC" in names
     assert have("ZOW:") == ["e15", "e45", "e5"] and "ZOW" in names      # the ball's stem warming
 
 

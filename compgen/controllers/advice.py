@@ -46,6 +46,9 @@ NESTS = ((" with the nest 100 mm longer", "NEST100", 100.0),)
 MODE = "tcpm"      # measure-program's default: the command printed does not name a mode
 
 
+AGAIN = " again, right after these data"     # a repeat's label, after its run's
+
+
 @dataclass(frozen=True, eq=False)
 class Measurement:
     """A measurement that could be added: a path of the machine file with the ball at
@@ -61,6 +64,11 @@ class Measurement:
     device: str = "rtest"        # "probe": made with a touch probe (probe-program)
     again: bool = False          # a repeat of what was measured, right after it: for time
     nest: float | None = None    # mm below the gauge line, where not the machine file's
+
+    @property
+    def run_label(self) -> str:
+        """The label of the run it makes (a repeat's without "again, right after these data")."""
+        return self.label.removesuffix(AGAIN)
 
     def to_dict(self) -> dict:
         return {"label": self.label, "path": self.path, "ball": [round(v, 4) for v in self.ball],
@@ -169,7 +177,7 @@ def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest")
             poses = poses.starting_at(start)
             label, stem = f"{name}{where}", f"{name}_{tag}" if tag else name
             if again:
-                label, stem = f"{label} again, right after these data", f"{stem}_AGAIN"
+                label, stem = f"{label}{AGAIN}", f"{stem}_AGAIN"
             out.append(Measurement(label, name, tuple(float(v) for v in at), poses, back, stem, device,
                                    again, nest))
     return out

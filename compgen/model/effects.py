@@ -25,6 +25,8 @@ letter O as in the seed report; ``X0C`` and ``E_X0C`` are accepted at input):
                        where the axis moves both ways (a path run there and back)
 ``XOC:e15``            a location error (or ``drift_Z``) growing as 1 − exp(−t/τ) with τ =
                        15 min: thermal growth that saturates (the value it tends to)
+``XOC:t1``             an axis's location error growing linearly in the session time, per
+                       hour: a growth that has not begun to saturate
 ``nest_X``             R-test nest (tool side) set-up offset along the spindle frame X
 ``EXX:w5``             declared, never in the candidate list unless the machine file's
                        ``[effects] declared`` names it: a periodic component error of a
@@ -210,9 +212,10 @@ def _axis_symbols(axis: Axis) -> dict:
             if not own:
                 about = "tilt about" if e in ROTATIONS else "offset in"
                 ref = TRANSLATIONS[ROTATIONS.index(e)].upper() if e in ROTATIONS else E
-                out[f"{E}O{L}"] = (L, "loc", e, ("const", "e"), f"{L} axis line {about} {ref}",
+                out[f"{E}O{L}"] = (L, "loc", e, ("const", "e", "t"), f"{L} axis line {about} {ref}",
                                    "assembly or kinematics table not matching the machine; "
-                                   "with a time constant: its thermal growth", 0)
+                                   "with a time constant: its thermal growth; in time (t1): a "
+                                   "growth that has not begun to saturate", 0)
             if e == ROT_OF[d]:
                 words = f"angular positioning error of {L}"
                 cause = "encoder eccentricity (1/rev), worm or scale error (2/rev and up)" + (
@@ -409,6 +412,8 @@ def catalogue(machine: Machine) -> tuple[Effect, ...]:
                 orders = list(TAUS_MIN)
             elif kind == "r":
                 orders = [1]
+            elif kind == "t" and first == 0:
+                orders = [1]        # a location error in time: linear (its constant is the error)
             else:
                 orders = list(range(first, MAX_ORDER[kind] + 1))
                 if len(direction) == 2:

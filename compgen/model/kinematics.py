@@ -265,8 +265,9 @@ def nominal(machine: Machine, poses: Poses) -> np.ndarray:
 
 
 def coordinate(machine: Machine, effect: Effect, poses: Poses) -> np.ndarray:
-    """The coordinate an effect's basis runs in: rad, position per 1000 mm, or hours."""
-    if effect.carrier == "time" or effect.basis.kind == "e":
+    """The coordinate an effect's basis runs in: rad, position per 1000 mm, or hours (a
+    drift, and any effect in time: ``e`` and ``t``)."""
+    if effect.carrier == "time" or effect.basis.kind in ("e", "t"):
         if np.isnan(poses.t).any():
             raise CompgenError(f"{effect.name} needs the time column t in every data row")
         return poses.t / TIME_SCALE_S

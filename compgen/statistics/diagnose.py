@@ -140,12 +140,16 @@ class Diagnosis:
     device_blamed: str | None = None    # the one that explains the misfit as well as the machine's best
     # for rivals: what adding each puts into the fitted parameters, first order, shown units
     carries: dict[str, dict[str, float]] = field(default_factory=dict)
+    # the repeats that were to tell the rivals apart, made REPEATS_TRIED times, leaving them
+    # tied: the loop ends unexplained
+    exhausted: tuple[str, ...] = ()
 
     @property
     def unexplained(self) -> bool:
         """No catalogue effect accounts for the misfit (``_unexplained``)."""
-        return _unexplained(self.misfit, bool(self.significant or self.significant_devices),
-                            self.best_share_of_excess, self.outside_line)
+        return bool(self.exhausted) or _unexplained(
+            self.misfit, bool(self.significant or self.significant_devices), self.best_share_of_excess,
+            self.outside_line)
 
     @property
     def outside_line(self) -> Line | None:
@@ -205,7 +209,7 @@ class Diagnosis:
             return "device"
         if self.found is not None:
             return "found"
-        if self.rivals:
+        if self.rivals and not self.exhausted:
             return "rivals"
         if self.unexplained:
             return "unexplained"
@@ -248,6 +252,7 @@ class Diagnosis:
             "device_blamed": self.device_blamed,
             "device_effects": [d.to_dict() for d in self.devices],
             "rivals_equivalent": bool(self.rivals and not self.rivals_separated_by),
+            "rivals_exhausted_by": list(self.exhausted),
             "next_measurement": None if self.next_measurement[0] is None else {
                 **self.next_measurement[0].to_dict(), "would_show": list(self.next_measurement[1])},
             "rivals_separated_by": [{**m.to_dict(), "leaves_open": [list(p) for p in self.rivals_open.get(
@@ -516,7 +521,7 @@ def _to_try(machine: Machine, fit: FitResult, candidates: Sequence[str] | None,
                            else [resolve(machine, c) for c in candidates]) if e.name not in in_model]
     notes = ()
     if candidates is None and np.isnan(poses.t).any():   # a drift needs the time of every reading
-        timed = [e.name for e in effects if e.carrier == "time" or e.basis.kind == "e"]
+        timed = [e.name for e in effects if e.carrier == "time" or e.basis.kind in ("e", "t")]
         effects = [e for e in effects if e.name not in timed]
         if timed:
             notes = (f"  not tried: {', '.join(timed)} (they need the time t of every reading; "
@@ -669,6 +674,8 @@ def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dic
         if group:
             by_rival, separated_by, left_open = telling_apart(measured, group, res.rss / res.dof, advising)
             out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
+    exhausted = tuple(m.run_label for m in separated_by
+                      if m.again and _times_measured(machine, res.poses, m) >= REPEATS_TRIED)
     if rival_names and not separated_by:
         # equivalent everywhere: put first the one the location errors absorb least, so
         # that adding it leaves them where an effect without that absorbed part has them.
@@ -682,7 +689,23 @@ def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dic
             out.insert(out.index(next(c for c in out if c.effect == best.effect.name)), first)
             rival_names = tuple(c.effect for c in out if c.effect in named and c is not first)
     return out, {**rival, "rivals": rival_names, "rivals_separated_by": separated_by,
-                 "rivals_open": left_open}
+                 "rivals_open": left_open, "exhausted": exhausted}
+
+
+# A repeat advised to tell rivals apart, found in the data this often (the first run and two
+# repeats made as advised) with the rivals still tied: measuring it again would not end the
+# loop. What moves with them is outside the shapes tried (two effects drifting at once, say).
+REPEATS_TRIED = 3
+
+
+def _times_measured(machine: Machine, poses: Poses, m: Measurement) -> int:
+    """How many runs of ``poses`` are ``m``'s: its path, its ball, its nest."""
+    run = runs(poses)
+    first = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+    nest = np.where(np.isnan(poses.nest), machine.probe_length, poses.nest)
+    want = machine.probe_length if m.nest is None else m.nest
+    return sum(1 for i in first if str(poses.path[i]) == m.path and abs(nest[i] - want) < 1e-3
+               and np.allclose(poses.ball[i], m.ball, atol=1e-3))
 
 
 def _carries(fit: FitResult, out: Sequence[Candidate], ranked: dict[str, Row],

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from .. import me
 from ..model.effects import effect_name
 from ..units import three, three_header
-from .diagnose import Diagnosis
+from .diagnose import REPEATS_TRIED, Diagnosis
 from .significance import said_p
 
 if TYPE_CHECKING:        # the type only: advice writes programs, a layer above
@@ -186,6 +186,10 @@ def conclusion(d: Diagnosis, fit: str, after: str) -> str:
         return (f"VERDICT: not told apart: {' vs '.join((best, *d.rivals))}; "
                 + (f"measure: {', '.join(m.label for m in plan)} (below)" if plan else
                    "no set-up of this machine tells them apart (below)"))
+    if kind == "unexplained" and d.exhausted:
+        return (f"VERDICT: unexplained: {' vs '.join((best, *d.rivals))} stay tied with "
+                f"{' and '.join(d.exhausted)} measured {REPEATS_TRIED} times to tell them apart; something "
+                "outside the shapes tried moves with them (below)")
     if kind == "unexplained":
         return ("VERDICT: unexplained: the residual exceeds the noise and no catalogue effect accounts for "
                 "it; declare its shape (below)")
@@ -232,6 +236,17 @@ def _lines_text(d: Diagnosis) -> list[str]:
 def _unexplained(d: Diagnosis, fit: str, after: str) -> list[str]:
     """What no catalogue effect accounts for: where, its shape, and how a user who knows the
     cause declares it."""
+    if d.exhausted:
+        tied = (d.significant[0].effect, *d.rivals)
+        runs = " and ".join(d.exhausted)
+        return ["", f"  UNEXPLAINED: {' vs '.join(tied)} explain these data alike, and the runs advised "
+                    f"to tell them apart ({runs}) are in the data {REPEATS_TRIED} times: "
+                    "measuring again would not end this. What moves with them is outside the shapes tried "
+                    "(two effects drifting at once, say, or a drift whose time constant is none of the "
+                    "catalogue's). No edit should be written from these data (the gate refuses it); the "
+                    "location errors may be off by what each would move them:", *_carries(d),
+                "  measure again on a machine at a steady temperature (after its warm-up), or declare the "
+                "effects you know and fit them together"]
     if d.misfit:
         out = ["", f"  UNEXPLAINED: the residual exceeds the {_device(d)} noise ({d.device_noise_um:.3g} µm) "
                    "and "

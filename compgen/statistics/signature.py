@@ -158,7 +158,7 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
                 Gm = G[:m]
                 # each block of Q on its own, as Qᵀc of the model's Q must not depend on what is
                 # carried beside it (a screened pass and a plain one give the same numbers)
-                Ys = [q[3 * b:3 * end].reshape(m, 3, -1) for q in Qs]
+                Ys = [q[3 * b:3 * end].reshape(m, 3, q.shape[1]) for q in Qs]   # a Q may have no column
                 y = r[3 * b:3 * end].reshape(m, 3)
                 if white:                      # WᵀY, as Qᵀ_w C_w = (WᵀQ_w)ᵀ C
                     Ys = [_transposed_white(q, diag, off, b, end, pairs) for q in Qs]
@@ -219,6 +219,7 @@ def _transposed_white(q: np.ndarray, diag: np.ndarray, off: np.ndarray, b: int, 
     order: each reading's Wₘ,ₘ times itself, plus Wₘ₊₁,ₘ (``off``) times the next reading
     in its segment (``pairs`` of them here)."""
     m = end - b
-    out = diag[b:end, :, None] * q[3 * b:3 * end].reshape(m, 3, -1)
-    out[:pairs] += off[b:b + pairs, :, None] * q[3 * b + 3:3 * (b + 1 + pairs)].reshape(pairs, 3, -1)
+    k = q.shape[1]                  # it may be 0: a Q with no column (reshape's -1 cannot say)
+    out = diag[b:end, :, None] * q[3 * b:3 * end].reshape(m, 3, k)
+    out[:pairs] += off[b:b + pairs, :, None] * q[3 * b + 3:3 * (b + 1 + pairs)].reshape(pairs, 3, k)
     return out
