@@ -22,7 +22,8 @@ cg simulate --machine $m --truth examples/truth-seed-session.json --device probe
   --seed 2026 -o "$work/PROBE_LOG.csv" --force
 cg fit --machine $m "$work/PROBE_LOG.csv" -o "$work/fit.json" --force
 
-echo "== 3. where does the model fail? (it names C's 2/rev radial motion: add it and fit again)"
+echo "== 3. where does the model fail? (36 poses do not tell C's 2/rev radial motion from two rivals;"
+echo "   this session's truth, EXC:h2, is added here: on a machine, follow what diagnose says of rivals)"
 cg diagnose --from "$work/fit.json" || true
 cg fit --from "$work/fit.json" --add EXC:h2 -o "$work/fit2.json" --force
 cg diagnose --from "$work/fit2.json"

@@ -15,7 +15,7 @@ from ..controllers.registry import CONTROLLERS
 from ..errors import CompgenError, one_line
 from ..model.machine import identifier
 from ..statistics.gate import SIGMA_PLAUSIBLE_UM
-from ..statistics.results import FitResult
+from ..statistics.results import SHORT_MARKER, FitResult
 from .ledger import content_key, lookup_machine, taken_at
 from .store import Store, now
 
@@ -244,9 +244,6 @@ def _machine_keys(t: dict[str, list]) -> tuple[dict[int, tuple], dict[int, tuple
     return machines, {s["id"]: machines[s["machine_id"]] for s in t["sessions"]}
 
 
-SHORT = len("fit:000000")      # a marker an older compgen recorded: 6 hex digits
-
-
 def import_history(store: Store, doc: dict, sha256: str, where: str,
                    same: Collection[str] = ()) -> dict[str, int]:
     """Another store's export, appended in one transaction with its origin recorded. Refused:
@@ -297,10 +294,10 @@ def import_history(store: Store, doc: dict, sha256: str, where: str,
     mine: dict[tuple, set] = {}
     for r in store.rows("SELECT m.name, m.serial, f.marker FROM fits f JOIN sessions s "
                         "ON s.id = f.session_id JOIN machines m ON m.id = s.machine_id"):
-        mine.setdefault(((r["name"], r["serial"]), r["marker"][:SHORT]), set()).add(r["marker"])
+        mine.setdefault(((r["name"], r["serial"]), r["marker"][:SHORT_MARKER]), set()).add(r["marker"])
     twice = sorted((key, marker) for key, marker in held
-                   if any(marker == m or SHORT in (len(marker), len(m))
-                          for m in mine.get((key, marker[:SHORT]), ())))
+                   if any(marker == m or SHORT_MARKER in (len(marker), len(m))
+                          for m in mine.get((key, marker[:SHORT_MARKER]), ())))
     if twice:
         raise CompgenError(f"{len(twice)} fit(s) of the export are already here (first: {twice[0][1]} of "
                            f"{twice[0][0][0]!r})", where=where,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ..errors import one_line
+from ..statistics.results import SHORT_MARKER
 from ..units import shown
 from .drift import Trend, timeline
 from .store import Store
@@ -47,7 +48,8 @@ def trend_text(t: Trend) -> str:
     for e in timeline(t.entries, t.edits):
         if isinstance(e, dict):
             lines.append(f"{e['taken'][:10]:<12}{'edit':<11}{e['controller'][:11]:<12}corrects "
-                         + ", ".join(map(one_line, e["corrects"])) + f" (from {one_line(e['marker'])}"
+                         + ", ".join(map(one_line, e["corrects"]))
+                         + f" (from {one_line(e['marker'][:SHORT_MARKER])}"
                          + (f", written despite the fit gate: {one_line(e['verdict'])})"
                             if e["verdict"] != "accepted"
                             else ")"))
@@ -61,7 +63,8 @@ def trend_text(t: Trend) -> str:
             s, _ = shown(e.std[n], e.units[n])
             mark = "*" if any(f.param == n and f.taken == e.taken for f in t.flags) else " "
             cells.append(f"{v:>10.2f} ± {s:<4.2f}{mark}")
-        lines.append(f"{e.taken[:10]:<12}{one_line(e.marker):<11}{e.kind:<12}{''.join(cells)}")
+        # the marker as the edit files carry it (6 digits): the column's width
+        lines.append(f"{e.taken[:10]:<12}{one_line(e.marker[:SHORT_MARKER]):<11}{e.kind:<12}{''.join(cells)}")
     lines.append("")
     lines += [f"flagged: {f.text()}" for f in t.flags] or ["nothing flagged against [drift]"]
     return "\n".join(lines) + "\n"

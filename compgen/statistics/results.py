@@ -27,9 +27,16 @@ FORMAT = "compgen.fit/1"
 # The finest step any output of a fit prints (fit.json's repr aside): 1 nm and 1e-9 rad
 # (0.0002″), a thousandth of the finest a control's table holds (0.1 µm, 0.0001°)
 MARKER_QUANTUM = {"mm": 1e-6, "rad": 1e-9}
+SHORT_MARKER = len("fit:000000")      # the marker edit files carry: 6 of the record marker's digits
 
 if TYPE_CHECKING:
     from ..model.machine import Machine
+
+
+def _here(file: str) -> str:
+    """A data file as the user names it from here: relative below the working folder."""
+    near = os.path.relpath(file) if file else file
+    return near if near and not near.startswith("..") else file
 
 
 @dataclass(frozen=True)
@@ -101,7 +108,7 @@ class FitResult:
     def marker(self) -> str:
         """The record marker's first 6 hex digits: what every edit file carries (a control's
         comment has little room), so that applying the same fit twice can be refused."""
-        return self.record_marker[:10]
+        return self.record_marker[:SHORT_MARKER]
 
     def holds_marker(self, marker: object) -> bool:
         """Whether a row's marker is this fit's: its record marker, or (a row an older
@@ -226,7 +233,7 @@ class FitResult:
         for d in self.data:
             counts = ", ".join(f"{k} {v}" for k, v in d.paths.items())
             device = " by touch probe" if d.device == "probe" else ""
-            lines.append(f"  data  {d.file}: {d.rows} poses{device} ({counts})")
+            lines.append(f"  data  {_here(d.file)}: {d.rows} poses{device} ({counts})")
         lines.append(f"  model {len(self.model)} parameters ({len(self.free)} fitted), method "
                      f"{self.method}, {self.iterations} iteration(s)")
         lines += ["", f"  {'parameter':<12}{'value':>9}    {'std. unc.':<13}meaning"]
