@@ -427,3 +427,14 @@ def test_a_program_for_another_nest_is_checked_with_the_nest_its_header_names(tm
     code, out, err = run("check-program", "--machine", SEED_MACHINE, "--controller", controller, *args,
                          tmp_path / f"P{ext}")
     assert code == 0 and "nest 150 mm below the gauge line (from the program's header)" in out, (out, err)
+
+
+def test_a_path_named_twice_is_refused_in_one_line(tmp_path):
+    """--path K2,K2 was one run whose C turned 360° between the two, refused for its step
+    (or, simulated, read back as one run): a file holds one run of a path."""
+    for command in (["measure-program", "--path", "K2,K2", "-o", tmp_path / "KK.H"],
+                    ["simulate", "--truth", ROOT / "examples" / "truth-table4.json", "--paths", "K4,K2,K4",
+                     "-o", tmp_path / "KK.csv"]):
+        code, _, err = run(*command[:1], "--machine", SEED_MACHINE, *command[1:])
+        assert code == 2 and "is named twice" in err and "save each run's readings" in err, err
+        assert len(err.strip().splitlines()) == 1 and not list(tmp_path.iterdir())

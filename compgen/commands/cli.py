@@ -123,7 +123,7 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
     TRUTH errors would give."""
     machine = load_machine(machine_file)
     errors = read_truth(truth, machine)
-    names = [p for p in path_names.split(",") if p.strip()]
+    names = named_paths(machine, path_names)
     if not names:
         raise CompgenError("--paths names no path")
     at = vec3(ball, "--ball") if ball is not None else None

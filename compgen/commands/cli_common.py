@@ -151,10 +151,18 @@ def sha256_of(body: str | bytes) -> str:
 
 
 def named_paths(machine, text: str) -> list[str]:
-    """--path: a comma list of the machine file's paths, or 'all'."""
+    """--path: a comma list of the machine file's paths, or 'all'. A path named twice is
+    refused: a file's runs are told apart by their path (and ball), so two runs of one path
+    in one file would be read as one, its 360° turn between them refused."""
     if text.strip().lower() == "all":
         return list(machine.paths)
-    return [p.strip() for p in text.split(",") if p.strip()]
+    names = [p.strip() for p in text.split(",") if p.strip()]
+    twice = next((p for i, p in enumerate(names) if p in names[:i]), None)
+    if twice is not None:
+        raise CompgenError(f"{twice} is named twice: one file holds one run of a path",
+                           hint="to measure it twice, write and run it again, and save each run's readings "
+                                "in a file of its own")
+    return names
 
 
 PROBE_LENGTH = click.option(
