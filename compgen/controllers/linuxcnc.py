@@ -737,8 +737,8 @@ class LinuxCNC(Controller):
         if mode != written:
             raise CompgenError(f"the program was written for mode {written.upper()} (its header) and is to "
                                f"run under {mode.upper()}: its positions mean other things there",
-                               hint=f"write it again for mode {mode.upper()}: measure-program with --mode {mode}, "
-                                    "and the machine file and path (or --poses) it was written with")
+                               hint=f"write it again for mode {mode.upper()}: measure-program with --mode "
+                                    f"{mode}, and the machine file and path (or --poses) it was written with")
         head = HEAD_PROGRAM.search(text)
         return program_blocks(text, mode == "tcpm", head and head[1])
 
