@@ -8,7 +8,7 @@ import re
 
 import numpy as np
 import pytest
-from conftest import SEED_MACHINE, TABLE4, UM
+from conftest import ROOT, SEED_MACHINE, TABLE4, UM, run
 
 from compgen.commands.checklist import checklist, markdown
 from compgen.commands.compare import compare
@@ -119,6 +119,27 @@ def test_checklist_knows_each_controllers_files(linuxcnc_machine, tmp_path):
     (work / "KIN.hal").write_text(emitted.files[".hal"])
     steps = {s.title: s for s in checklist(linuxcnc_machine, work)}
     assert steps["Kinematics edit emitted (with backup step and sign check)"].status == "done"
+
+
+def test_a_probing_folder_gets_the_probes_checklist(tmp_path):
+    """A folder of probing work (a probing program, its log, a fit of it) is ticked against a
+    probe's steps: no R-test set-up or R-test CSV asked for, and the sign check said to
+    need what a probe cannot give (a probing program runs without the control's
+    kinematics). --device rtest forces the R-test's steps."""
+    for args in (["probe-program", "--path", "K1", "-o", tmp_path / "P.H"],
+                 ["simulate", "--truth", ROOT / "examples" / "truth-table4.json", "--device", "probe",
+                  "--paths", "K4,K1,K2", "-o", tmp_path / "P_LOG.csv"]):
+        assert run(args[0], "--machine", SEED_MACHINE, *args[1:])[0] == 0
+    code, out, err = run("checklist", "--machine", SEED_MACHINE, "--dir", tmp_path)
+    assert code == 0, err
+    assert "Probing programs written" in out and "R-test" not in out.split("Sign check")[0], out
+    assert "[x] Probed: the program's probe log saved" in out and "Next: " in out and " fit --machine " in out
+    assert run("fit", "--machine", SEED_MACHINE, tmp_path / "P_LOG.csv", "-o", tmp_path / "fit.json")[0] == 0
+    steps = {s.title: s for s in checklist(load_machine(SEED_MACHINE), tmp_path)}
+    assert steps["Fit"].status == "done"
+    assert "cannot see the edit" in steps["Sign check of the loaded edit"].note
+    forced = {s.title for s in checklist(load_machine(SEED_MACHINE), tmp_path, device="rtest")}
+    assert "K4, K1, K2 measured (R-test CSV with dX dY dZ)" in forced
 
 
 @pytest.mark.parametrize("name", ["itnc530", "tnc640", "sinumerik840d", "linuxcnc"])

@@ -2,7 +2,9 @@
 
 A step is ``done`` only when a file proves it (recognised by content, not by name), ``open``
 when none does yet, and ``by hand`` when no file can prove it (warm-up, sensor check, loading
-the edit, signing off): compgen never ticks those for the engineer.
+the edit, signing off): compgen never ticks those for the engineer. Its steps are the
+device's: an R-test's, or a touch probe's on a calibration sphere (the folder's probing
+programs, probe logs or a fit of probe data say which, or ``device``).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from shlex import quote
 
 from .. import me
 from ..controllers.registry import comment_marks, controller
+from ..data.probe import MAGIC as PROBE_LOG
 from ..errors import CompgenError
 from ..model.machine import Machine
 
@@ -47,6 +50,8 @@ class _Found:
     edits: list[Path] = field(default_factory=list)
     signchecks: list[Path] = field(default_factory=list)
     compares: list[tuple[Path, dict]] = field(default_factory=list)
+    probe_programs: list[Path] = field(default_factory=list)
+    probe_logs: list[Path] = field(default_factory=list)
 
 
 def _scan(folder: Path) -> _Found:
@@ -60,6 +65,10 @@ def _scan(folder: Path) -> _Found:
         head = text[:2000]
         if re.search(rf"(?m)^(?:\d+ )?[{marks}] compgen \S+ R-test measurement program", head):
             (found.signchecks if "path sign check" in head else found.programs).append(path)
+        elif re.search(rf"(?m)^(?:\d+ )?[{marks}] compgen \S+ probing program", head):
+            found.probe_programs.append(path)
+        elif path.suffix.lower() == ".csv" and head.startswith(PROBE_LOG):
+            found.probe_logs.append(path)
         elif re.search(rf"(?m)^[{marks}] compgen \S+ kinematics edit", head):
             found.edits.append(path)
         elif path.suffix.lower() == ".csv" and _is_rtest(head):
@@ -84,14 +93,27 @@ def _is_rtest(head: str) -> bool:
     return {"dX", "dY", "dZ"} <= {c.strip() for c in header.split(",")}
 
 
-def checklist(machine: Machine, folder: str | Path, comparison: dict | None = None) -> list[Step]:
+def device_of(f: _Found, fit: dict | None) -> str:
+    """The device the folder's work is done with: the newest fit's data's, else a probe's
+    where only probing programs or logs are there, else the R-test's."""
+    devices = {d.get("device", "rtest") for d in (fit or {}).get("data", []) if isinstance(d, dict)}
+    if devices:
+        return "probe" if devices == {"probe"} else "rtest"
+    return "probe" if (f.probe_programs or f.probe_logs) and not (f.programs or f.data) else "rtest"
+
+
+def checklist(machine: Machine, folder: str | Path, comparison: dict | None = None,
+              device: str | None = None) -> list[Step]:
     """The steps, ticked from the files in ``folder`` (and from ``comparison``, a compare
     result's dict, when the caller has just made one); every command it suggests writes
-    into ``folder``."""
+    into ``folder``. ``device``: "rtest" or "probe" (default: what the folder shows)."""
     folder = Path(folder)
     if not folder.is_dir():
         raise CompgenError("no such folder", where=str(folder), hint="give the work folder with --dir")
     f = _scan(folder)
+    newest = max(f.fits, key=lambda x: x[0].stat().st_mtime, default=None)
+    if (device or device_of(f, newest and newest[1])) == "probe":
+        return _probe_steps(machine, folder, f, newest)
     m = quote(machine.source)
     fit = max(f.fits, key=lambda x: x[0].stat().st_mtime, default=None)
     fit_path = quote(str(fit[0])) if fit else quote(str(folder / "fit.json"))
@@ -156,6 +178,50 @@ def checklist(machine: Machine, folder: str | Path, comparison: dict | None = No
                   "not ready: no comparison yet, or a path out of tolerance or not as predicted"),
     ]
     return steps
+
+
+def _probe_steps(machine: Machine, folder: Path, f: _Found, fit: tuple[Path, dict] | None) -> list[Step]:
+    """A touch probe's steps: its programs run without the control's kinematics (they measure
+    the machine against the machine file), its log is the data, and no compgen program
+    checks a loaded edit with a probe yet (the sign check is an R-test's)."""
+    ctl = controller(machine.controller)
+    m = quote(machine.source)
+    fit_path = quote(str(fit[0])) if fit else quote(str(folder / "fit.json"))
+
+    def out(name: str) -> str:
+        return quote(str(folder / name))
+    writes = ctl.writes_programs(machine)
+    return [
+        Step("Warm-up: spindle and axes at working temperature", BY_HAND,
+             note="thermal drift over a probing run can reach several µm"),
+        Step("Probe set-up: calibration sphere on the table, touch probe calibrated (stylus ball, trigger)",
+             BY_HAND, note=f"sphere where [rtest] ball says: {machine.ball} mm; [probe] in the machine file "
+                           "holds the sphere's and the stylus's diameters"),
+        Step("Probing programs written", DONE if f.probe_programs else OPEN, _names(f.probe_programs),
+             f"{me()} probe-program --machine {m} --path all -o {out('PROBE' + _ext(machine))}")
+        if writes else Step("Probing programs written", BY_HAND, note=HEAD_PROGRAMS),
+        Step("Preset checked at the program's stop: the stylus above the sphere's centre", BY_HAND,
+             note="every probing program stops once before its first touch"),
+        Step("Probed: the program's probe log saved (probe log v1)", DONE if f.probe_logs else OPEN,
+             _names(f.probe_logs), "run the program; copy the log it writes on the control beside it"),
+        Step("Fit", DONE if fit else OPEN, _names([fit[0]] if fit else []),
+             f"{me()} fit --machine {m} {' '.join(map(quote, _names(f.probe_logs))) or 'PROBE_LOG.csv'} "
+             f"-o {out('fit.json')}"),
+        Step("Diagnose: where the model fails", DONE if f.diagnoses else OPEN, _names(f.diagnoses),
+             f"{me()} diagnose --from {fit_path} --json > {out('diagnose.json')}"),
+        Step("Kinematics edit emitted (with backup step)", DONE if f.edits else OPEN, _names(f.edits),
+             f"{me()} kinematics --from {fit_path}" + (" --current CURRENT" if ctl.takes_current else "")
+             + f" -o {out('KIN')}"),
+        Step("Backup taken, edit loaded", BY_HAND,
+             note="; ".join(n for n in ("the edit sets the control to the machine file's geometry plus the "
+                                        "fit: a second probing round then changes nothing", ctl.load_note)
+                            if n)),
+        Step("Sign check of the loaded edit", BY_HAND,
+             note="compgen's sign check runs with an R-test (the edit's _SIGN program): a probing program "
+                  "runs without the control's kinematics and cannot see the edit. With a probe only, check "
+                  "the loaded kinematics with the control's own cycle, or an R-test"),
+        Step("Sign-off", BY_HAND, note="after the sign check"),
+    ]
 
 
 def _names(paths) -> tuple[str, ...]:

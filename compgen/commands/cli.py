@@ -558,11 +558,13 @@ def compare_cmd(base, controller_name, post_files, as_json):
 @MACHINE
 @click.option("--dir", "folder", type=click.Path(file_okay=False), default=".", show_default=True,
               help="Work folder whose artefacts tick the steps.")
+@click.option("--device", type=click.Choice(["rtest", "probe"]), default=None,
+              help="The device's steps: R-test or touch probe (default: what the folder's files show).")
 @click.option("--json", "as_json", is_flag=True, help="Print the checklist as JSON.")
-def checklist_cmd(machine_file, folder, as_json):
+def checklist_cmd(machine_file, folder, device, as_json):
     """The commissioning checklist as Markdown, ticked from the files in --dir."""
     machine = load_machine(machine_file)
-    steps = checklist(machine, folder)
+    steps = checklist(machine, folder, device=device)
     if as_json:
         click.echo(json.dumps({"format": "compgen.checklist/1", "machine": machine.name,
                                "steps": [s.__dict__ for s in steps]}, indent=2, ensure_ascii=False))

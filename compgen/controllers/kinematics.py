@@ -178,7 +178,10 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
                "corrections add to the kinematics active while the R-test ran under TCPM/TRAORI"),
               "BACKUP FIRST: " + ctl.backup,
               f"then run the sign check {sign_name}: see its expected changes" if signcheck else
-              "then make the sign check by hand at the poses named: see their expected changes")
+              "then make the sign check by hand at the poses named: see their expected changes",
+              *(("the sign check runs with an R-test nest: a probing program runs without the control's "
+                 "kinematics and cannot see the edit (with a probe only: the control's own check)",)
+                if without_tcp else ()))
     words = lines_text(p)
     ctx = EditContext(name, header, tuple(words), tuple(expect), version, date, fit.marker, stem or name,
                       tuple((n, e.std) for n, e in fit.parameters.items()), folder)
@@ -189,6 +192,7 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
     notes += edit.notes
     if p.not_compensable:
         notes.append(f"not compensable on {ctl.words} by compgen: " + ", ".join(p.not_compensable))
-    notes += ["sign check, expected change of the reading after the edit:", *expect]
+    whose = " (an R-test's: a probing program cannot see the edit)" if without_tcp else ""
+    notes += [f"sign check, expected change of the reading after the edit{whose}:", *expect]
     sign = {f"_SIGN{ctl.program_ext}": signcheck.files[ctl.program_ext]} if signcheck else {}
     return Emitted({**edit.files, **sign, **named}, tuple(notes), frozenset(named))
