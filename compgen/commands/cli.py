@@ -554,6 +554,24 @@ def compare_cmd(base, controller_name, post_files, as_json):
                else result.report(), nl=as_json)
 
 
+@main.command("verdict")
+@click.option("--from", "base", type=FILE, required=True, help="A fit.json.")
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
+@click.option("--post", "post_files", type=FILE, multiple=True,
+              help="R-test data after the edit. Repeatable.")
+@click.option("--json", "as_json", is_flag=True)
+def verdict_cmd(base, controller_name, post_files, as_json):
+    """One screen: each location error before and after the edit against its limit, each
+    path's range against its tolerance, what stays, and the next step."""
+    from .verdict import verdict, verdict_json
+    fit = load_fit(base)
+    machine, sets = reload(fit)
+    post = [read_data(p, machine, fit.sign, warn) for p in post_files]
+    v = verdict(machine, sets, fit, base, controller_name or machine.controller, post)
+    click.echo(verdict_json(v) if as_json else v.text(), nl=as_json)
+
+
 @main.command("checklist")
 @MACHINE
 @click.option("--dir", "folder", type=click.Path(file_okay=False), default=".", show_default=True,
@@ -602,6 +620,8 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
     progress("3/3 plots")
     images = figures(machine, sets, fit, load_fit(before) if before else None, found)
     steps = checklist(machine, folder or Path(base).parent, comparison.to_dict())
+    from .verdict import verdict
+    screen = verdict(machine, sets, fit, base, controller_name or machine.controller, post, comparison, found)
     past = png = None
     if with_history:
         from ..history import drift_limits, trend
@@ -609,7 +629,7 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
         past = trend(history_store(db, create=False), machine)
         png = trend_png(past, drift_limits(machine, past))
     html = report_html(machine, fit, found, images, comparison, emitted, steps, __version__,
-                       date.today().isoformat(), past, png)
+                       date.today().isoformat(), past, png, screen)
     write_atomically(output, html, force, inputs=(base, before, *post_files, *emitted))
     said(output, f"wrote {output}")
 

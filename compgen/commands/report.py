@@ -18,8 +18,10 @@ from .compare import Comparison
 
 def report_html(machine: Machine, fit: FitResult, diagnosis: Diagnosis, images: dict[str, bytes],
                 comparison: Comparison | None, emitted: Sequence[str], steps: Sequence[Step],
-                version: str, date: str, history=None, history_png: bytes | None = None) -> str:
-    """The report; with ``history`` (a ``history.Trend``) and its plot, the machine's history too."""
+                version: str, date: str, history=None, history_png: bytes | None = None,
+                screen=None) -> str:
+    """The report; with ``history`` (a ``history.Trend``) and its plot, the machine's history
+    too; with ``screen`` (a ``verdict.Verdict``), the one screen on its first page."""
     from jinja2 import Environment, FileSystemLoader, StrictUndefined, select_autoescape
 
     env = Environment(loader=FileSystemLoader(template_dir()), undefined=StrictUndefined,
@@ -46,5 +48,6 @@ def report_html(machine: Machine, fit: FitResult, diagnosis: Diagnosis, images: 
         hidden=[c for c in diagnosis.candidates if not c.visible and (not c.silent or c.separated_by)],
         images={k: base64.b64encode(v).decode("ascii") for k, v in images.items()},
         comparison=comparison, compare_rows=compare_rows, files=files, steps=steps, version=version,
+        verdict=screen,
         date=date, history={"trend": history, "png": base64.b64encode(history_png).decode("ascii")}
         if history is not None and history_png else None)

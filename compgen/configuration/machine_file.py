@@ -13,7 +13,7 @@ from pathlib import Path
 from ..controllers.registry import CONTROLLERS
 from ..errors import CompgenError
 from ..files import read_text
-from ..model.effects import SHAPE_NAME, resolve
+from ..model.effects import SHAPE_NAME, location_model, resolve
 from ..model.machine import (
     DIRECTIONS,
     LINEAR,
@@ -147,7 +147,8 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
     if "drift" in doc:
         g = get.sub("drift")
         g.only(set(Drift.__dataclass_fields__))
-        drift = Drift(**{k: _positive(g, k) for k in Drift.__dataclass_fields__ if k in g.doc})
+        limits_ = {k: _positive(g, k) for k in Drift.__dataclass_fields__ if k in g.doc and k != "each"}
+        drift = Drift(**limits_, each=_each(g, machine) if "each" in g.doc else ())
     sections = {ctl.section: ctl.read_section(get.sub(ctl.section), machine)   # each control its own
                 for ctl in CONTROLLERS.values() if ctl.section and ctl.section in doc}
     tolerances = {}
@@ -211,6 +212,14 @@ def _gain_u(g: _Getter) -> float:
                            where=g.at("gain_u"), hint="give the relative standard uncertainty of the "
                                                       "sensors' gain from the R-test's calibration")
     return v
+
+
+def _each(g: _Getter, machine) -> tuple[tuple[str, float], ...]:
+    """``[drift] each``: a location error's own limit (µm for an offset, ″ for a tilt)."""
+    e = g.sub("each")
+    names = location_model(machine)
+    e.only(set(names))
+    return tuple((n, _positive(e, n)) for n in names if n in e.doc)
 
 
 def _positive(g: _Getter, key: str, zero_ok: bool = False) -> float:

@@ -194,6 +194,7 @@ class Controller:
     squareness_as = "rows"    # "rows" of its kinematics, "tables" (compensation), or "" (none)
     tables_by_hand = False    # its tables' values are entered by hand (no file compgen writes loads)
     takes_current = True      # its edit reads the control's state as --current (a file it holds)
+    needs_current = False     # and cannot write an edit without it
 
     def tables(self, machine: Machine, p: Plan) -> list[CompTable]:
         """The compensation tables its edit loads, as the control applies them (none of a

@@ -454,6 +454,7 @@ class Sinumerik840D(Controller):
     squareness_as = "tables"      # CEC tables hold squareness and every single-axis table
     section = "sinumerik"
     state_files = "the record's $TC_CARR lines, and the CEC tables' file"
+    needs_current = True
     load_note = ("SD42974 $SC_TOCARR_FINE_CORRECTION = 1, or the fine offsets do nothing; each within "
                  "MD20188 $MC_TOCARR_FINE_LIM_LIN (W1 function manual 08/2005 p. 2-91)")
 

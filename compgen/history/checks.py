@@ -178,7 +178,7 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
     for n in names:
         change = now_entry.machine_value(n) - calibration.machine_value(n)
         std = math.hypot(now_entry.std[n], calibration.std[n])
-        limit = limit_of(machine, now_entry.units[n])
+        limit = limit_of(machine, now_entry.units[n], name=n)
         status = "pass" if abs(change) <= limit else ("fail" if abs(change) > k * std else "unsure")
         changes.append(Change(n, change, std, now_entry.units[n], limit, status,
                               effect_of_param(machine, n).words))

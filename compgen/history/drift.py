@@ -137,12 +137,17 @@ def machine_params(machine: Machine, names: Sequence[str]) -> tuple[str, ...]:
 
 def drift_limits(machine: Machine, t: Trend) -> dict[str, float]:
     """Each parameter of the trend's ``[drift]`` limit (mm or rad, by its class)."""
-    return {n: limit_of(machine, next(e.units[n] for e in t.entries if n in e.units))
+    return {n: limit_of(machine, next(e.units[n] for e in t.entries if n in e.units), name=n)
             for n in t.params if any(n in e.units for e in t.entries)}
 
 
-def limit_of(machine: Machine, unit: str, per_month: bool = False) -> float:
+def limit_of(machine: Machine, unit: str, per_month: bool = False, name: str | None = None) -> float:
+    """A location error's ``[drift]`` limit (mm or rad): its own (``each``), else its class's;
+    per month: its class's steady drift."""
     d = machine.drift
+    own = dict(d.each).get(name) if not per_month else None
+    if own is not None:
+        return own * 1e-3 if unit == "mm" else math.radians(own / 3600.0)
     if unit == "mm":
         return (d.per_month_um if per_month else d.offset_um) * 1e-3
     return math.radians((d.per_month_arcsec if per_month else d.tilt_arcsec) / 3600.0)
@@ -179,7 +184,7 @@ def flags(machine: Machine, entries: Sequence[Entry], names: Sequence[str]) -> l
             a, b = run[i - 1], run[i]
             change = b.machine_value(n) - a.machine_value(n)
             std = math.hypot(a.std[n], b.std[n])
-            if abs(change) > limit_of(machine, b.units[n]) and abs(change) > k * std:
+            if abs(change) > limit_of(machine, b.units[n], name=n) and abs(change) > k * std:
                 out.append(Flag("step", n, b.taken, change, std, b.units[n]))
                 line, drifting = _Line(b.taken), False
                 line.add(b, n)

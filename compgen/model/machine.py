@@ -192,6 +192,9 @@ class Drift:
     per_month_arcsec: float = 2.0
     k_sigma: float = 3.0
     every_days: float = 90.0       # a check is due this long after the last measurement
+    # a location error's own limit, in place of its class's (µm for an offset, ″ for a tilt):
+    # (name, limit) pairs, e.g. (("BOA", 5.0),)
+    each: tuple[tuple[str, float], ...] = ()
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from .. import me
 from ..data.rtest import Measurements, RTestData
 from ..errors import CompgenError
 from ..model.machine import Machine
-from .diagnose import diagnose
+from .diagnose import Diagnosis, diagnose
 from .results import FitResult
 
 # An R-test's sphere-centre repeatability is 0.5–1 µm and drift adds a few µm over a run
@@ -32,6 +32,11 @@ def unit_suspicion(data: Sequence[RTestData]) -> str | None:
 def fit_gate(machine: Machine, data: Sequence[RTestData], fit: FitResult) -> list[str]:
     """Why this fit should not reach a controller: what a user must settle first (empty when
     the fit explains its data to an R-test's noise with nothing significant missing)."""
+    return gate_reasons(data, fit, diagnose(machine, data, fit))
+
+
+def gate_reasons(data: Sequence[RTestData], fit: FitResult, found: Diagnosis) -> list[str]:
+    """``fit_gate``'s reasons from a diagnosis of ``fit`` already made (``found``)."""
     reasons = []
     suspicion = unit_suspicion(data)
     if suspicion:
@@ -41,7 +46,6 @@ def fit_gate(machine: Machine, data: Sequence[RTestData], fit: FitResult) -> lis
         reasons.append(f"the fit leaves σ̂ = {sigma:.2f} µm, above the {SIGMA_PLAUSIBLE_UM:g} µm an R-test's "
                        "noise allows: the model misses an effect, or the data are wrong (columns "
                        "swapped, a sign, a mismatched machine file)")
-    found = diagnose(machine, data, fit)
     if found.unexplained:
         where = (f"the residual exceeds the R-test's noise ({found.misfit[0]['direction']} of "
                  f"{found.misfit[0]['path']}: {found.misfit[0]['rms_um']:.2f} µm against "
