@@ -1,0 +1,68 @@
+"""A guarded size (issue 67): a module of compgen holds at most MODULE_LINES lines and a
+function at most FUNCTION_LINES. The limits eroded in three days when nothing held them.
+Those over them today are listed with their size now, as a ceiling: none may grow, and one
+brought within the limit must leave the list (the list only shrinks)."""
+
+import ast
+
+import pytest
+from conftest import ROOT
+
+MODULE_LINES, FUNCTION_LINES = 600, 80
+
+# over the limits on 2026-12-07, each at its size then: to be split (issue 67), never to grow
+MODULES_OVER = {
+    "compgen/controllers/linuxcnc.py": 907,
+    "compgen/statistics/diagnose.py": 788,
+    "compgen/controllers/sinumerik.py": 705,
+    "compgen/commands/cli.py": 673,
+    "compgen/model/kinematics.py": 652,
+    "compgen/setup/motion.py": 602,
+}
+FUNCTIONS_OVER = {
+    ("compgen/statistics/signature.py", "products"): 142,
+    ("compgen/statistics/diagnose_text.py", "report"): 139,
+    ("compgen/history/exchange.py", "_valid_rows"): 138,
+    ("compgen/setup/motion.py", "run"): 127,
+    ("compgen/data/probe.py", "sphere_centres"): 117,
+    ("compgen/statistics/identify.py", "identify"): 110,
+    ("compgen/controllers/programs.py", "_steps"): 109,
+    ("compgen/controllers/probing.py", "probe_program"): 106,
+    ("compgen/controllers/sinumerik.py", "edit"): 102,
+    ("compgen/configuration/machine_file.py", "_machine_from_dict"): 99,
+    ("compgen/controllers/programs.py", "checked_program"): 98,
+    ("compgen/controllers/heidenhain.py", "program_blocks"): 97,
+    ("compgen/statistics/diagnose.py", "diagnose"): 96,
+    ("compgen/history/exchange.py", "import_history"): 96,
+    ("compgen/history/checks.py", "check"): 93,
+    ("compgen/controllers/kinematics.py", "kinematics_edit"): 87,
+    ("compgen/controllers/sinumerik.py", "program_blocks"): 83,
+}
+
+
+def _modules():
+    return sorted(p for p in (ROOT / "compgen").rglob("*.py"))
+
+
+def _sizes():
+    modules, functions = {}, {}
+    for path in _modules():
+        name = path.relative_to(ROOT).as_posix()
+        text = path.read_text()
+        modules[name] = len(text.splitlines())
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                functions[(name, node.name)] = max(functions.get((name, node.name), 0),
+                                                   node.end_lineno - node.lineno + 1)
+    return modules, functions
+
+
+@pytest.mark.parametrize("what", ["modules", "functions"])
+def test_no_module_or_function_grows_past_its_limit(what):
+    modules, functions = _sizes()
+    sizes, over, limit = ((modules, MODULES_OVER, MODULE_LINES) if what == "modules"
+                          else (functions, FUNCTIONS_OVER, FUNCTION_LINES))
+    grown = {k: (n, over.get(k, limit)) for k, n in sizes.items() if n > over.get(k, limit)}
+    assert not grown, f"over the limit (lines, allowed): {grown}"
+    within = [k for k, ceiling in over.items() if sizes.get(k, 0) <= limit]
+    assert not within, f"within the limit now: take them off the list in tests/test_sizes.py: {within}"
