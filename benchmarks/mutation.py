@@ -54,11 +54,12 @@ TESTS = {
     "compgen/controllers/sinumerik.py": [*EDITS, "tests/test_edge.py", *PROGRAMS,
                                          "tests/test_probe_programs.py", "tests/test_table_rounds.py"],
     # a head module's senses are seen only by LinuxCNC itself running compgen's program
-    "compgen/controllers/linuxcnc.py": [*EDITS, "tests/test_edge.py", *PROGRAMS,
-                                        "tests/test_probe_programs.py", "tests/test_table_rounds.py",
-                                        "tests/test_linuxcnc_config.py",
-                                        "tests/test_linuxcnc.py::test_a_head_modules_edit_runs_compgens_program_"
-                                        "where_compgen_puts_it"],
+    **{f"compgen/controllers/linuxcnc/{m}.py": [*EDITS, "tests/test_edge.py", *PROGRAMS,
+                                                 "tests/test_probe_programs.py", "tests/test_table_rounds.py",
+                                                 "tests/test_linuxcnc_config.py",
+                                                 "tests/test_linuxcnc.py::test_a_head_modules_edit_runs_"
+                                                 "compgens_program_where_compgen_puts_it"]
+       for m in ("controller", "heads", "pins", "reader", "tables")},
     # probes, angle senses
     "compgen/setup/motion.py": [*HOSTILE, "tests/test_probe_programs.py", "tests/test_trt.py"],
     "compgen/controllers/programs.py": [*HOSTILE, "tests/test_trt.py"],        # read back under trt's senses
@@ -104,9 +105,9 @@ TESTS = {
     "compgen/controllers/base.py": ["tests/test_controllers.py", *EDITS],
     "compgen/controllers/kinematics.py": ["tests/test_controllers.py", *EDITS, "tests/test_heads.py"],
     "compgen/controllers/registry.py": ["tests/test_controllers.py", "tests/test_imports.py", *EDITS],
-    "compgen/controllers/linuxcnc_config.py": ["tests/test_linuxcnc_config.py", "tests/test_trt.py",
+    "compgen/controllers/linuxcnc/config.py": ["tests/test_linuxcnc_config.py", "tests/test_trt.py",
                                                "tests/test_table_rounds.py"],
-    "compgen/controllers/linuxcnc_files.py": ["tests/test_linuxcnc_config.py", "tests/test_trt.py",
+    "compgen/controllers/linuxcnc/files.py": ["tests/test_linuxcnc_config.py", "tests/test_trt.py",
                                               "tests/test_table_rounds.py"],
     "compgen/statistics/diagnose_text.py": ["tests/test_diagnose.py", "tests/test_loop.py"],
     "compgen/statistics/gate.py": ["tests/test_history.py", "tests/test_diagnose.py", "tests/test_edge.py"],
@@ -137,7 +138,7 @@ TESTS = {
 # significance.py and spectrum.py, which are mutated whole)
 ONLY_FUNCTIONS: dict[str, set[str]] = {}
 # LinuxCNC's real runs (2½ minutes a mutant) stay out of the rest of the suite; a selection
-# may name one (linuxcnc.py's: the head modules' senses)
+# may name one (the LinuxCNC package's: the head modules' senses)
 SKIP = ["--deselect", "tests/test_linuxcnc.py"]
 
 

@@ -124,7 +124,7 @@ def test_linuxcnc_second_round_reads_the_configuration_through_its_ini(seed_mach
     Edit B, given A.ini, lands where one edit of A + B lands; over the configuration
     without A it would undo A."""
     from compgen.controllers import linuxcnc
-    from compgen.controllers.linuxcnc_config import evaluate
+    from compgen.controllers.linuxcnc.config import evaluate
     from compgen.controllers.registry import read_state
     module, tilt, c = linuxcnc.trt_module(seed_machine)
     nominal = linuxcnc.nominal_pins(seed_machine, tilt, c)

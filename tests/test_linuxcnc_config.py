@@ -14,7 +14,7 @@ from conftest import ARCSEC, SEED_MACHINE, UM, run
 from compgen.configuration.machine_file import load_machine
 from compgen.controllers import linuxcnc
 from compgen.controllers.kinematics import kinematics_edit
-from compgen.controllers.linuxcnc_config import evaluate, hal_file, then
+from compgen.controllers.linuxcnc.config import evaluate, hal_file, then
 from compgen.controllers.registry import read_state
 from compgen.data.rtest import format_rtest
 from compgen.data.simulate import simulate

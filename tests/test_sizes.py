@@ -12,7 +12,6 @@ MODULE_LINES, FUNCTION_LINES = 600, 80
 
 # over the limits on 2026-12-07, each at its size then: to be split (issue 67), never to grow
 MODULES_OVER = {
-    "compgen/controllers/linuxcnc.py": 907,
     "compgen/statistics/diagnose.py": 788,
     "compgen/controllers/sinumerik.py": 705,
     "compgen/commands/cli.py": 673,

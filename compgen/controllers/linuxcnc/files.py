@@ -1,7 +1,7 @@
 """What a LinuxCNC configuration is made of, as LinuxCNC reads it: the INI as ``inivar``
 reads it (``Ini``), its ``#INCLUDE`` lines expanded one level as the start script does, the
 names of LinuxCNC's own HAL library, and the place (file and line) each setting comes from.
-``linuxcnc_config`` evaluates a configuration from these."""
+``config`` evaluates a configuration from these."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import CompgenError
+from ...errors import CompgenError
 
 # Debian's HALLIB_DIR; the start script searches ".:$HALLIB_DIR" for a plain HALFILE name
 HALLIB = Path("/usr/share/linuxcnc/hallib")

@@ -25,9 +25,9 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import CompgenError
-from ..files import read_text
-from .linuxcnc_files import (
+from ...errors import CompgenError
+from ...files import read_text
+from .files import (
     BUNDLE_MARK,
     HALLIB,
     INI_LINE_MAX,
