@@ -51,8 +51,10 @@ TESTS = {
                                           "tests/test_probe_programs.py"],
     "compgen/controllers/tab.py": ["tests/test_tab.py", "tests/test_kinematics_edit.py"],
     # each control's probing programs, second rounds and configuration are its writer's too
-    "compgen/controllers/sinumerik.py": [*EDITS, "tests/test_edge.py", *PROGRAMS,
-                                         "tests/test_probe_programs.py", "tests/test_table_rounds.py"],
+    **{f"compgen/controllers/sinumerik/{m}.py": [*EDITS, "tests/test_edge.py", *PROGRAMS,
+                                                  "tests/test_probe_programs.py",
+                                                  "tests/test_table_rounds.py"]
+       for m in ("controller", "carr", "cec", "reader")},
     # a head module's senses are seen only by LinuxCNC itself running compgen's program
     **{f"compgen/controllers/linuxcnc/{m}.py": [*EDITS, "tests/test_edge.py", *PROGRAMS,
                                                  "tests/test_probe_programs.py", "tests/test_table_rounds.py",

@@ -13,7 +13,6 @@ MODULE_LINES, FUNCTION_LINES = 600, 80
 # over the limits on 2026-12-07, each at its size then: to be split (issue 67), never to grow
 MODULES_OVER = {
     "compgen/statistics/diagnose.py": 788,
-    "compgen/controllers/sinumerik.py": 705,
     "compgen/commands/cli.py": 673,
     "compgen/model/kinematics.py": 652,
     "compgen/setup/motion.py": 602,
@@ -27,7 +26,7 @@ FUNCTIONS_OVER = {
     ("compgen/statistics/identify.py", "identify"): 110,
     ("compgen/controllers/programs.py", "_steps"): 109,
     ("compgen/controllers/probing.py", "probe_program"): 106,
-    ("compgen/controllers/sinumerik.py", "edit"): 102,
+    ("compgen/controllers/sinumerik/controller.py", "edit"): 102,
     ("compgen/configuration/machine_file.py", "_machine_from_dict"): 99,
     ("compgen/controllers/programs.py", "checked_program"): 98,
     ("compgen/controllers/heidenhain.py", "program_blocks"): 97,
@@ -35,7 +34,7 @@ FUNCTIONS_OVER = {
     ("compgen/history/exchange.py", "import_history"): 96,
     ("compgen/history/checks.py", "check"): 93,
     ("compgen/controllers/kinematics.py", "kinematics_edit"): 87,
-    ("compgen/controllers/sinumerik.py", "program_blocks"): 83,
+    ("compgen/controllers/sinumerik/reader.py", "program_blocks"): 83,
 }
 
 
