@@ -406,7 +406,7 @@ def test_a_line_along_a_linear_axis_is_outside_the_catalogue_by_each_of_its_rule
     removes and LINE_SHARE = 10 % of the residual; each rule alone keeps it out."""
     from dataclasses import replace
 
-    from compgen.statistics.diagnose import _outside_line
+    from compgen.statistics.diagnosis import _outside_line
     from compgen.statistics.spectrum import Line
     line = Line("X", "dX", 5.0, "mm", 0.15, 0.15, 1e-6, 3.0)     # 0.15 µm, 15 %, 3.0 against 2 × 1.4
     others = [Line("C", "dY", 2.0, "/rev", 1.0, 0.9, 1e-9, 50.0)]      # a rotary line never counts

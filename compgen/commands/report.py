@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..controllers import template_dir
 from ..model.machine import Machine
-from ..statistics.diagnose import Diagnosis
+from ..statistics.diagnosis import Diagnosis
 from ..statistics.results import FitResult
 from ..units import shown
 from .checklist import Step

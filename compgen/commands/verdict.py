@@ -19,7 +19,7 @@ from ..data.rtest import RTestData
 from ..history.drift import limit_of
 from ..model.effects import effect_of_param, location_model
 from ..model.machine import Machine
-from ..statistics.diagnose import Diagnosis
+from ..statistics.diagnosis import Diagnosis
 from ..statistics.gate import fit_gate, gate_reasons
 from ..statistics.results import FitResult
 from ..units import shown

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from .. import me
 from ..model.effects import effect_name
 from ..units import three, three_header
-from .diagnose import REPEATS_TRIED, Diagnosis
+from .diagnosis import REPEATS_TRIED, Diagnosis
 from .significance import said_p
 
 if TYPE_CHECKING:        # the type only: advice writes programs, a layer above

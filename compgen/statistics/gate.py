@@ -8,7 +8,8 @@ from .. import me
 from ..data.rtest import Measurements, RTestData
 from ..errors import CompgenError
 from ..model.machine import Machine
-from .diagnose import Diagnosis, diagnose
+from .diagnose import diagnose
+from .diagnosis import Diagnosis
 from .results import FitResult
 
 # An R-test's sphere-centre repeatability is 0.5–1 µm and drift adds a few µm over a run
