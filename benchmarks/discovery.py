@@ -45,8 +45,9 @@ from compgen.controllers.advice import Advisor  # noqa: E402
 from compgen.data.rtest import RTestData  # noqa: E402
 from compgen.data.simulate import ar1_noise  # noqa: E402
 from compgen.model.effects import compose, effect_name, location_model  # noqa: E402
-from compgen.model.kinematics import Model, Poses  # noqa: E402
+from compgen.model.kinematics import Model  # noqa: E402
 from compgen.model.paths import generate  # noqa: E402
+from compgen.model.poses import Poses  # noqa: E402
 from compgen.model.sides import SETUP  # noqa: E402
 from compgen.statistics.budget import with_budget  # noqa: E402
 from compgen.statistics.diagnose import diagnose  # noqa: E402

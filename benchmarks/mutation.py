@@ -42,6 +42,7 @@ TESTS = {
                                        "tests/test_probe.py"],        # two devices' variance components
     "compgen/model/kinematics.py": ["tests/test_kinematics.py", "tests/test_effects.py",
                                     "tests/test_identify.py"],
+    "compgen/model/poses.py": ["tests/test_kinematics.py", "tests/test_noise.py", "tests/test_identify.py"],
     # the reversal sides: the start sides' constants are fitted by identify and diagnose
     "compgen/model/sides.py": ["tests/test_kinematics.py", "tests/test_identify.py", "tests/test_diagnose.py",
                                "tests/test_programs.py"],

@@ -103,8 +103,9 @@ def measured_under(machine, truth: dict, lines: dict, poses, rng, noise_um: floa
     control holding the axis ``lines`` (and ``squareness``): the axes where that control drives
     them under TCPM, read by the true machine, with ``noise_um`` of white noise."""
     from compgen.data.rtest import RTestData
-    from compgen.model.kinematics import Model, Poses
+    from compgen.model.kinematics import Model
     from compgen.model.lines import controller_inverse
+    from compgen.model.poses import Poses
     rot = poses.q[:, [machine.index(a.name) for a in machine.rotary_axes]]
     q = controller_inverse(machine, lines, rot, poses.ball, squareness)
     reading = Model(machine, list(truth)).relative(Poses(q, poses.ball, poses.t, poses.path),

@@ -16,9 +16,9 @@ from compgen.data.rtest import RTestData
 from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
 from compgen.model.effects import location_model
-from compgen.model.kinematics import Poses
 from compgen.model.lines import AxisLine
 from compgen.model.paths import generate
+from compgen.model.poses import Poses
 from compgen.statistics.identify import SETUP, beyond_setup, identify
 
 NOISE_UM = 0.5

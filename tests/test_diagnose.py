@@ -377,7 +377,8 @@ UNMEASURED_BALLS = ([-150.0, 120.0, 180.0], [120.0, -100.0, 260.0])   # mm, tabl
 def _periodic(machine, poses, axis, pitch_mm, amp_um, phase=0.3):
     """A machine compgen's model does not know: ``axis`` off by a sine of its position (a
     ball-screw period), made by moving the nominal machine, not through any effect."""
-    from compgen.model.kinematics import Model, Poses
+    from compgen.model.kinematics import Model
+    from compgen.model.poses import Poses
     q = poses.q.copy()
     i = machine.index(axis)
     q[:, i] += amp_um * 1e-3 * np.sin(2 * np.pi * q[:, i] / pitch_mm + phase)
@@ -481,7 +482,7 @@ def test_without_a_given_noise_a_repeated_run_says_it_and_an_outside_effect_is_u
 def test_repeats_are_poses_reached_the_same_way(seed_machine):
     """A backlash is not scatter: a pose counts as a repeat of another only reached from the
     same side on every axis; a dwell's samples are told as such; too few say nothing."""
-    from compgen.model.kinematics import Poses, runs
+    from compgen.model.poses import Poses, runs
     from compgen.model.sides import same_pose
     from compgen.statistics.noise import repeats
     q = np.radians([[0, 0, 0, -10, 0], [0, 0, 0, -20, 0], [0, 0, 0, -10, 0], [0, 0, 0, -20, 0],
@@ -637,7 +638,7 @@ def test_backlash_of_a_tilting_axis_is_found_from_the_side_each_pose_was_reached
     from conftest import SEED_MACHINE, run
 
     from compgen.data.rtest import format_rtest
-    from compgen.model.kinematics import Poses
+    from compgen.model.poses import Poses
     from compgen.model.sides import unknown_sides
 
     truth = {"EAA:r1": 5 * ARCSEC}
@@ -698,7 +699,7 @@ def test_a_reversal_seen_only_through_its_start_sides_is_invisible(seed_machine)
     fits it: invisible (its column alone differed between K1 and K2: 0.37 visible), and fit
     refuses it."""
     from compgen.errors import CompgenError
-    from compgen.model.kinematics import Poses
+    from compgen.model.poses import Poses
     a = seed_machine.index("A")
 
     def drive(p):
@@ -738,7 +739,7 @@ def test_a_linear_axis_side_is_never_asked_for_as_a_column(seed_machine):
     """compgen reads no X_side column and its pose lists carry none: beside a rotary axis's
     missing column the warning says a linear axis's side rests on the moves, and asks for no
     column; a linear axis's side alone is nothing the user can act on, and is not warned of."""
-    from compgen.model.kinematics import Poses
+    from compgen.model.poses import Poses
     from compgen.model.sides import unknown_sides
     made = generate(seed_machine, ["K4", "K1", "K2"])
     poses = Poses(made.q, made.ball, made.t, made.path)          # a foreign program's: no sides
@@ -1381,7 +1382,7 @@ def test_equally_short_measurements_are_advised_by_how_far_they_tell_the_rivals_
     size, leaves the larger misfit in a fit of the other: computed here by stacked least
     squares on the poses with each measurement added, not by diagnose's R factors."""
     from compgen.model.effects import effect_of_param, resolve
-    from compgen.model.kinematics import Poses
+    from compgen.model.poses import Poses
     from compgen.statistics.signature import columns
     from compgen.units import shown
     poses = generate(seed_machine, ["K4"])
@@ -1442,7 +1443,8 @@ def test_the_separations_take_each_mounting_of_the_ball_with_its_own_offset(seed
     from types import SimpleNamespace
 
     from compgen.model.effects import effect_of_param, resolve
-    from compgen.model.kinematics import Model, Poses
+    from compgen.model.kinematics import Model
+    from compgen.model.poses import Poses
     from compgen.model.sides import NEST, SETUP
     from compgen.statistics.separation import Measured
     names = list(location_model(seed_machine))

@@ -110,8 +110,9 @@ def test_products_a_block_at_a_time_equal_those_of_the_whole_columns(seed_machin
     """``signature.products`` (blocks of poses, whitening carried across them) against cᵀc,
     Qᵀc and cᵀr of each effect's whole columns, plain and made white with AR(1) ρ."""
     from compgen.model.effects import Basis, Effect, catalogue
-    from compgen.model.kinematics import Model, SlotGains, coordinate, effect_gains, runs
+    from compgen.model.kinematics import Model, SlotGains, coordinate, effect_gains
     from compgen.model.paths import generate
+    from compgen.model.poses import runs
     from compgen.statistics import signature
     from compgen.statistics.noise import whiten
     poses = generate(seed_machine, ["K4", "K1", "K2"])
@@ -192,8 +193,8 @@ def test_a_periodic_drift_in_a_dense_session_is_found_at_its_period_in_seconds()
     """13 000 poses (denser than the scan's 12 000: scanned on an even subset, refined and
     judged on all): a 2 µm sine in time of period 900 s is the time line, its period in s."""
     from compgen.configuration.machine_file import load_machine
-    from compgen.model.kinematics import Poses
     from compgen.model.paths import generate
+    from compgen.model.poses import Poses
     from compgen.statistics.spectrum import SCAN_POSES, strongest_lines
 
     machine = load_machine("ac-trunnion-itnc530")
@@ -233,8 +234,9 @@ def test_each_line_is_the_documented_scan_judged_by_the_joint_least_squares():
     from scipy import stats
 
     from compgen.configuration.machine_file import load_machine
-    from compgen.model.kinematics import Model, Poses
+    from compgen.model.kinematics import Model
     from compgen.model.paths import generate
+    from compgen.model.poses import Poses
     from compgen.statistics.spectrum import strongest_lines
 
     machine = load_machine("ac-trunnion-itnc530")

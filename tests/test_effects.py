@@ -8,8 +8,9 @@ from conftest import SEED_MACHINE
 from compgen.configuration.machine_file import load_machine
 from compgen.errors import CompgenError
 from compgen.model.effects import canonical, catalogue, location_model, resolve
-from compgen.model.kinematics import Model, Poses
+from compgen.model.kinematics import Model
 from compgen.model.paths import generate
+from compgen.model.poses import Poses
 
 SEED = load_machine(SEED_MACHINE)
 ULPS_AT_100_MM = 1e-13   # mm: a few units in the last place of a 100 mm coordinate

@@ -35,9 +35,10 @@ from compgen.data.rtest import read_poses as read_rtest_poses
 from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
 from compgen.model.effects import catalogue, compose, location_model
-from compgen.model.kinematics import Model, Poses, inverse
+from compgen.model.kinematics import Model, inverse
 from compgen.model.lines import controller_inverse
 from compgen.model.paths import generate
+from compgen.model.poses import Poses
 from compgen.statistics.diagnose import diagnose
 from compgen.statistics.diagnose_text import report
 from compgen.statistics.identify import beyond_setup, identify

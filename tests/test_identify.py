@@ -151,7 +151,7 @@ def test_a_nearly_singular_problem_names_its_condition_and_the_pair(seed_machine
 
 def test_a_parameter_that_moves_no_reading_is_named(seed_machine):
     """drift over a session whose readings all carry t = 0 moves nothing."""
-    from compgen.model.kinematics import Poses
+    from compgen.model.poses import Poses
     poses = generate(seed_machine, ["K4"])
     still = Poses(poses.q, poses.ball, np.zeros(len(poses)), poses.path)
     with pytest.raises(CompgenError, match="drift_X:t1 does not change any reading on these poses"):
@@ -160,7 +160,7 @@ def test_a_parameter_that_moves_no_reading_is_named(seed_machine):
 
 def test_residual_statistics_per_path_by_hand():
     """RMS, range and largest magnitude per path and direction (µm), on numbers done by hand."""
-    from compgen.model.kinematics import Poses
+    from compgen.model.poses import Poses
     from compgen.statistics.identify import residual_stats
     r = np.array([[1.0, -2.0, 0.0], [3.0, 2.0, 0.0], [-4.0, 0.0, 1.0]]) * 1e-3    # mm
     poses = Poses(np.zeros((3, 5)), np.zeros((3, 3)), np.zeros(3), np.array(["K4", "K4", "K1"], dtype=object))
@@ -268,7 +268,8 @@ def test_a_correlated_residual_gets_the_covariance_of_least_squares_under_ar1_no
     (JᵀJ)⁻¹JᵀΣJ(JᵀJ)⁻¹ with Σ written out here entry by entry (σ² ρ^|i−j| within a run and
     direction, each one's own σ² and compgen's ρ̂, matched beyond J's span) — larger than
     σ̂²(JᵀJ)⁻¹'s."""
-    from compgen.model.kinematics import Model, runs
+    from compgen.model.kinematics import Model
+    from compgen.model.poses import runs
     from compgen.statistics.noise import ar1
     data = read_rtest(ROOT / "examples" / "seed-session.csv", seed_machine)
     fit = identify(seed_machine, [data])
@@ -487,7 +488,7 @@ def test_a_ball_position_that_changes_from_row_to_row_is_refused_with_what_to_do
     """Each change of the ball's position is a mounting with an offset of its own: a file
     whose bx drifts from row to row leaves no reading for the parameters. fit and compare's
     set-up figures refuse it alike, naming the constants and what to give each row."""
-    from compgen.model.kinematics import Poses
+    from compgen.model.poses import Poses
     from compgen.statistics.identify import beyond_setup
     p = generate(seed_machine, ["K4"])
     drifting = Poses(p.q, p.ball + np.arange(len(p))[:, None] * [1e-3, 0.0, 0.0], p.t, p.path)
@@ -513,7 +514,8 @@ def test_a_measurement_advised_beside_mounted_data_is_taken_as_the_fit_would_tak
     with a longer nest (continuing the mounting, a nest of its own), K1 back at the first
     position (a third mounting)."""
     from compgen.model.effects import location_model
-    from compgen.model.kinematics import Model, Poses
+    from compgen.model.kinematics import Model
+    from compgen.model.poses import Poses
     from compgen.model.sides import NEST, SETUP, FreeConstants
     from compgen.statistics.identify import _with_extra
     names = list(location_model(seed_machine))

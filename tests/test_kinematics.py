@@ -9,8 +9,9 @@ from conftest import ARCSEC, TABLE4, UM, vector
 
 from compgen.data.rtest import read_rtest
 from compgen.model.effects import catalogue
-from compgen.model.kinematics import SLOT_INDEX, Model, Poses, SlotGains, inverse, relative, slot_gains
+from compgen.model.kinematics import SLOT_INDEX, Model, SlotGains, inverse, relative, slot_gains
 from compgen.model.paths import generate
+from compgen.model.poses import Poses
 from compgen.transforms import rot_exact
 
 ATOL_VECTORS_UM = 1e-4   # contract: shared vectors (issue 2)
@@ -187,7 +188,7 @@ def test_the_side_of_a_reversal_by_hand():
     """±1 by the direction of the move that reached the pose, standing still keeps it; the
     poses before the first move take its direction (a program approaches a path's start
     so); 0 throughout a run that never moves the axis; runs end at a new label."""
-    from compgen.model.kinematics import motion_direction
+    from compgen.model.poses import motion_direction
     q = np.array([0.0, 1, 2, 2, 1, 0, 5, 5, 4, 3, 3, 3, 3, 4])
     run = np.array([0, 0, 0, 0, 0, 0, 1, 1, 1, 2, 2, 3, 3, 3])
     np.testing.assert_allclose(motion_direction(q, run), [1, 1, 1, 1, -1, -1, -1, -1, -1, 0, 0, 1, 1, 1])
@@ -221,7 +222,7 @@ def test_a_free_constant_stands_for_the_side_of_a_path_that_holds_the_axis(seed_
 
 
 def test_runs_end_at_a_new_file_ball_or_label():
-    from compgen.model.kinematics import runs
+    from compgen.model.poses import runs
     p = Poses.concat([Poses(np.zeros((3, 5)), np.zeros((3, 3)), np.arange(3.0),
                             np.full(3, "K2", dtype=object))] * 2)
     assert runs(p).tolist() == [1, 1, 1, 2, 2, 2]                     # the time starts again

@@ -14,8 +14,9 @@ from compgen.data.rtest import RTestData
 from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
 from compgen.model.effects import location_model
-from compgen.model.kinematics import Model, Poses
+from compgen.model.kinematics import Model
 from compgen.model.paths import generate
+from compgen.model.poses import Poses
 from compgen.statistics.identify import identify
 
 CURRENT_TAB = (ROOT / "examples" / "itnc530-current.TAB").read_text()

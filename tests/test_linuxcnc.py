@@ -36,10 +36,11 @@ from compgen.controllers.registry import read_edits, read_state
 from compgen.data.rtest import RTestData
 from compgen.data.simulate import simulate
 from compgen.model.effects import location_model
-from compgen.model.kinematics import Model, Poses, inverse
+from compgen.model.kinematics import Model, inverse
 from compgen.model.lines import controller_inverse
 from compgen.model.machine import at_nest
 from compgen.model.paths import generate
+from compgen.model.poses import Poses
 from compgen.statistics.identify import identify
 
 HERE = ROOT / "tests" / "linuxcnc"

@@ -159,7 +159,8 @@ def test_the_stem_points_down_the_table_at_every_pose(machines):
     """table_axis_down (where a probe's stem stands from its sphere) against the walk of the
     chains: a table point 1 mm lower on the stem moves the reading by minus that vector."""
     from compgen.model.frames import table_axis_down
-    from compgen.model.kinematics import Model, Poses
+    from compgen.model.kinematics import Model
+    from compgen.model.poses import Poses
     for key in ("seed", "bc"):
         m = load_machine(machines[key])
         rng = np.random.default_rng(2)

@@ -8,7 +8,7 @@ from compgen.statistics.noise import OUTLIER_MIN_UM, ar1, outliers, whiten
 
 
 def test_segments_break_at_a_new_file_or_path():
-    from compgen.model.kinematics import Poses, runs
+    from compgen.model.poses import Poses, runs
     poses = Poses(np.zeros((6, 5)), np.zeros((6, 3)), np.full(6, np.nan),     # no time column
                   np.array(["K4", "K4", "K1", "K1", "K1", "K1"], dtype=object))
     seg = runs(poses, np.array([0, 0, 0, 0, 1, 1]))
@@ -198,8 +198,8 @@ def test_poses_repeat_only_with_the_same_ball_and_axes_to_the_csvs_resolution(se
     pose repeats one of the other session; K4 run twice at one ball repeats pose for pose,
     but its first; a ball or an X 2 µm off (beyond the CSV's 1e-6 mm) is another pose, 0.4 nm
     off the same; C 2e-6° off (beyond the CSV's 1e-6°) another, 3e-7° off the same."""
-    from compgen.model.kinematics import Poses, runs
     from compgen.model.paths import generate
+    from compgen.model.poses import Poses, runs
     from compgen.model.sides import same_pose
     k4 = generate(seed_machine, ["K4"])
     x, c = seed_machine.index("X"), seed_machine.index("C")

@@ -392,7 +392,7 @@ def _touches():
 def test_a_log_without_times_is_written_without_its_t_column_and_reads_back(tmp_path):
     """Poses with no times (a pose list without t): the log's header drops t with the rows."""
     from compgen.data.probe import format_probe_log, need_probe, probe_poses, simulate_touches
-    from compgen.model.kinematics import Poses
+    from compgen.model.poses import Poses
 
     machine = load_machine(SEED_MACHINE)
     timed = probe_poses(machine, ["K4"])

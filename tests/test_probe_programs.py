@@ -310,7 +310,7 @@ def test_names_that_a_control_would_expand_in_its_log_stay_out_of_it(tmp_path):
             files = probe_program(machine, probe_poses(machine, ["K4"]), "K4", ctl, "P", "0", "d").files
             assert "# machine =" not in "\n".join(files.values()), (odd, ctl)
     machine = load_machine(SEED_MACHINE)
-    from compgen.model.kinematics import Poses
+    from compgen.model.poses import Poses
     poses = probe_poses(machine, ["K4"])
     poses = Poses(poses.q, poses.ball, poses.t, np.full(len(poses), "K#4", dtype=object))
     with pytest.raises(Exception, match="path label 'K#4' cannot stand in the control's log"):

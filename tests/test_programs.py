@@ -11,8 +11,9 @@ from compgen.controllers.programs import measure_program, read_program
 from compgen.controllers.registry import CONTROLLERS
 from compgen.data.rtest import read_rtest
 from compgen.errors import CompgenError
-from compgen.model.kinematics import Model, Poses
+from compgen.model.kinematics import Model
 from compgen.model.paths import generate
+from compgen.model.poses import Poses
 
 FORMAT_MM = 5.01e-5      # four decimals in the program
 FORMAT_DEG = 5.01e-5

@@ -19,9 +19,10 @@ from compgen.controllers.correction import plan
 from compgen.controllers.kinematics import kinematics_edit
 from compgen.data.simulate import simulate
 from compgen.model.effects import location_model
-from compgen.model.kinematics import Model, Poses
+from compgen.model.kinematics import Model
 from compgen.model.lines import AxisLine
 from compgen.model.paths import generate
+from compgen.model.poses import Poses
 from compgen.statistics.identify import identify
 
 NOISE_UM = 0.5

@@ -13,7 +13,6 @@ MODULE_LINES, FUNCTION_LINES = 600, 80
 # over the limits on 2026-12-07, each at its size then: to be split (issue 67), never to grow
 MODULES_OVER = {
     "compgen/commands/cli.py": 673,
-    "compgen/model/kinematics.py": 652,
     "compgen/setup/motion.py": 602,
 }
 FUNCTIONS_OVER = {

@@ -20,8 +20,9 @@ from ..controllers.kinematics import nothing_to_correct
 from ..controllers.registry import controller
 from ..data.rtest import Measurements, RTestData
 from ..errors import CompgenError
-from ..model.kinematics import Model, Poses
+from ..model.kinematics import Model
 from ..model.machine import Machine
+from ..model.poses import Poses
 from ..statistics.diagnose import diagnose
 from ..statistics.identify import beyond_setup, identify
 from ..statistics.results import FitResult

@@ -19,9 +19,9 @@ import numpy as np
 
 from ..data.probe import probe_poses
 from ..errors import CompgenError
-from ..model.kinematics import Poses, motion_direction, runs
 from ..model.machine import Machine
 from ..model.paths import GAP_S, generate
+from ..model.poses import Poses, motion_direction, runs
 from .probing import probe_program
 from .programs import checked_program
 from .registry import controller

@@ -21,9 +21,10 @@ import numpy as np
 
 from ..errors import CompgenError
 from ..model.effects import POLY_SCALE_MM, ROT_OF, TRANSLATIONS, effect_name, effect_of_param
-from ..model.kinematics import Model, Poses
+from ..model.kinematics import Model
 from ..model.lines import AxisLine, axis_lines, controller_inverse, nominal_pivot
 from ..model.machine import Machine
+from ..model.poses import Poses
 from ..statistics.results import FitResult
 
 ARCSEC = np.pi / 648000.0

@@ -10,9 +10,10 @@ import numpy as np
 
 from ..errors import CompgenError
 from ..model.effects import effect_name, effect_of_param
-from ..model.kinematics import Model, Poses, inverse
+from ..model.kinematics import Model, inverse
 from ..model.lines import controller_inverse
 from ..model.machine import Machine
+from ..model.poses import Poses
 from ..statistics.results import FitResult
 from ..units import shown
 from . import Emitted, ascii_text

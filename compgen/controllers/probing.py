@@ -28,8 +28,9 @@ from ..data.probe import DIRECTION, MAGIC, need_probe, touch_directions
 from ..data.rtest import BALL
 from ..errors import CompgenError
 from ..model.frames import safe_height
-from ..model.kinematics import Poses, inverse
+from ..model.kinematics import inverse
 from ..model.machine import Machine, check_travel
+from ..model.poses import Poses
 from . import Emitted, ascii_text, render
 from .programs import ANGLE_DECIMALS, BALL_HEADER, LINEAR_DECIMALS, at_ball, pose_list
 from .registry import for_machine

@@ -20,8 +20,9 @@ import numpy as np
 from ..data.rtest import BALL, NEST, axis_cells, side_columns
 from ..errors import CompgenError
 from ..model.frames import along_tool, at_height, safe_height, world
-from ..model.kinematics import Poses, head_offset, inverse
+from ..model.kinematics import head_offset, inverse
 from ..model.machine import Machine, at_nest, check_ball, check_travel
+from ..model.poses import Poses
 from ..model.sides import APPROACH_DEG, program_sides
 from ..setup import motion
 from ..units import number

@@ -20,8 +20,9 @@ import numpy as np
 from ..errors import CompgenError, one_line
 from ..files import read_text
 from ..model.frames import table_axis_down
-from ..model.kinematics import Poses, inverse
+from ..model.kinematics import inverse
 from ..model.machine import Machine, ProbeSetup
+from ..model.poses import Poses
 from ..units import number
 from .rtest import BALL, READING_MAX_MM, RTestData, axis_cells, read_table
 

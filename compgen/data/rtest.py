@@ -18,8 +18,9 @@ import numpy as np
 
 from ..errors import CompgenError, one_line
 from ..files import MAX_DATA_BYTES, read_text
-from ..model.kinematics import Poses, head_offset, inverse, nominal, solved
+from ..model.kinematics import head_offset, inverse, nominal, solved
 from ..model.machine import IDENTIFIERS, NEST_RANGE_MM, Machine, check_ball, check_travel, identifier
+from ..model.poses import Poses
 from ..units import NUMBER
 
 DEVIATION = ("dX", "dY", "dZ")

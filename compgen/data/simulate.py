@@ -11,8 +11,9 @@ import numpy as np
 from ..errors import CompgenError
 from ..files import read_json
 from ..model.effects import effect_of_param
-from ..model.kinematics import Model, Poses
+from ..model.kinematics import Model
 from ..model.machine import Machine
+from ..model.poses import Poses
 from ..units import to_inside
 from .rtest import RTestData
 

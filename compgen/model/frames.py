@@ -8,8 +8,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..transforms import apply
-from .kinematics import Poses, chain_transform, head_offset, inverse, nest_centre
+from .kinematics import chain_transform, head_offset, inverse, nest_centre
 from .machine import Machine
+from .poses import Poses
 
 
 def safe_height(machine: Machine) -> float:

@@ -23,8 +23,9 @@ import numpy as np
 
 from ..transforms import UNIT, rot_exact
 from .effects import effect_of_param
-from .kinematics import Model, Poses, inverse
+from .kinematics import Model, inverse
 from .machine import Machine
+from .poses import Poses
 
 
 @dataclass(frozen=True, eq=False)

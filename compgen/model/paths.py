@@ -13,8 +13,9 @@ import numpy as np
 
 from ..errors import CompgenError
 from ..files import MAX_DATA_BYTES
-from .kinematics import Poses, inverse
+from .kinematics import inverse
 from .machine import Machine, PathDef, at_nest, check_travel
+from .poses import Poses
 from .sides import program_sides
 
 GAP_S = 20.0   # pause between two paths of one session (re-positioning), s

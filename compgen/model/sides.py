@@ -12,8 +12,9 @@ from functools import partial
 import numpy as np
 
 from .effects import Effect, effect_of_param
-from .kinematics import Poses, SlotGains, effect_gains, last_moves, motion_direction, runs
+from .kinematics import SlotGains, effect_gains
 from .machine import Machine
+from .poses import Poses, last_moves, motion_direction, runs
 
 SETUP = ("XOW", "YOW", "ZOW")      # the ball's offset: what every mounting of the ball has anew
 NEST = ("nest_X", "nest_Y", "nest_Z")   # the nest's offset: what every nest put in the spindle has anew

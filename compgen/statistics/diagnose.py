@@ -24,8 +24,9 @@ import numpy as np
 from ..data.rtest import Measurements, RTestData
 from ..errors import CompgenError
 from ..model.effects import Effect, catalogue, effect_of_param, resolve
-from ..model.kinematics import Model, Poses, runs
+from ..model.kinematics import Model
 from ..model.machine import Machine
+from ..model.poses import Poses, runs
 from ..model.sides import FreeConstants, same_pose, span
 from ..units import shown
 from .device import DeviceCandidate, device_candidates, device_columns

@@ -17,8 +17,9 @@ from .. import __version__
 from ..data.rtest import Measurements, RTestData, refuse_twice
 from ..errors import CompgenError
 from ..model.effects import canonical, effect_of_param, location_model
-from ..model.kinematics import Model, Poses, runs
+from ..model.kinematics import Model
 from ..model.machine import Machine
+from ..model.poses import Poses, runs
 from ..model.sides import NEST, SETUP, FreeConstants, both_sides, continues, mountings, nest_mountings
 from ..units import parse_quantity, shown
 from .noise import ar1, ar1_covariance

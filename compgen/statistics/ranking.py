@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.effects import Effect
-from ..model.kinematics import Poses
 from ..model.machine import Machine
+from ..model.poses import Poses
 from ..model.sides import FreeConstants
 from .noise import whiten
 from .signature import columns

@@ -20,7 +20,8 @@ from .. import me
 from ..errors import CompgenError
 from ..files import read_json
 from ..model.effects import effect_name
-from ..model.kinematics import Model, Poses
+from ..model.kinematics import Model
+from ..model.poses import Poses
 from ..units import LENGTH, shown, three, three_header, to_inside
 
 FORMAT = "compgen.fit/1"

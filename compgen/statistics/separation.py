@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..model.effects import Effect, effect_of_param
-from ..model.kinematics import Poses
 from ..model.machine import Machine
+from ..model.poses import Poses
 from ..model.sides import NEST, SETUP, both_sides, continues, mountings, nest_mountings, span
 from .ranking import Row
 from .signature import r_factor

@@ -9,8 +9,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..model.effects import Effect
-from ..model.kinematics import Poses, SlotGains, coordinate, effect_gains, in_halves
+from ..model.kinematics import SlotGains, coordinate, effect_gains, in_halves
 from ..model.machine import Machine
+from ..model.poses import Poses
 
 CHUNK_BYTES = 8 << 20  # the basis values of every candidate held at once: ~2 500 poses of ~400 columns
 BLOCK = 4096           # poses a walk of the chain serves: its slots' gains held

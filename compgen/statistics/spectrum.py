@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.kinematics import Poses
 from ..model.machine import Machine
+from ..model.poses import Poses
 from ..search import golden_least
 from .significance import f_sf, said_p
 
