@@ -65,6 +65,7 @@ TESTS = {
        for m in ("controller", "heads", "pins", "reader", "tables")},
     # probes, angle senses
     "compgen/setup/motion.py": [*HOSTILE, "tests/test_probe_programs.py", "tests/test_trt.py"],
+    "compgen/setup/blocks.py": [*HOSTILE, "tests/test_probe_programs.py"],
     "compgen/controllers/programs.py": [*HOSTILE, "tests/test_trt.py"],        # read back under trt's senses
     "compgen/model/effects.py": ["tests/test_effects.py", "tests/test_kinematics.py", "tests/test_shapes.py"],
     # diagnose and its statistics: the closed-form tests first (quick to fail), the distributions

@@ -480,7 +480,7 @@ def test_the_check_adds_the_programs_time_and_names_its_closest_approach():
 
 def test_address_words_are_read_once_each_and_a_feed_above_zero_is_a_feed():
     from compgen.errors import CompgenError
-    from compgen.setup.motion import words
+    from compgen.setup.blocks import words
     assert words(["X+1.5", "A-90", "F0.5"], 3) == {"X": 1.5, "A": -90.0, "F": 0.5}
     for bad in (["X+1", "X+2"], ["F0"], ["F-500"], ["Q7"]):
         with pytest.raises(CompgenError, match="line 3: "):
@@ -504,7 +504,8 @@ def test_address_words_are_read_once_each_and_a_feed_above_zero_is_a_feed():
     ("+", np.nan, 400.0, 40.0),            # from an unknown place: to the value, modulo 360
 ])
 def test_a_modulo_axis_turns_the_way_its_block_says(how, now, value, end):
-    from compgen.setup.motion import Block, _turned
+    from compgen.setup.blocks import Block
+    from compgen.setup.motion import _turned
     b = Block(4, "C", "move", turn={"C": how})
     assert _turned(("C",), b, "C", value, now) == pytest.approx(end, abs=1e-6)
     assert _turned((), Block(4, "C", "move"), "C", value, now) == value       # not modulo: as written
@@ -605,7 +606,8 @@ def test_where_rounding_ends_and_a_limit_begins():
     where C stands is a turn (0.5e-6°: where it is); 1.5e-9 mm past either end of travel is
     outside (the end itself is in); 1.5e-9 mm of X Y Z travel is a move (1e-9: only turns,
     F in deg/min); a speed 1.5e-9 of itself over feed_max is over it."""
-    from compgen.setup.motion import Block, _per_segment, _Segment, _turned, feed_minutes
+    from compgen.setup.blocks import Block
+    from compgen.setup.motion import _per_segment, _Segment, _turned, feed_minutes
     b = Block(4, "C", "move", turn={"C": "+"})
     assert _turned(("C",), b, "C", 90.0 + 1.5e-6, 90.0) == pytest.approx(90.0 + 1.5e-6, abs=1e-12)
     assert _turned(("C",), b, "C", 90.0 + 0.5e-6, 90.0) == 90.0
@@ -639,7 +641,8 @@ def test_a_probing_tip_may_touch_the_sphere_to_a_micrometre_not_enter_it(depth_u
     """While probing, the stylus tip touches the sphere: 0.5 µm inside is the touch (its
     rounding), 1.5 µm inside enters it (TOUCH_MM, 1 µm; pinned at half and 1.5 times)."""
     from compgen.data.probe import probe_poses
-    from compgen.setup.motion import Block, _check_collisions, _Segment
+    from compgen.setup.blocks import Block
+    from compgen.setup.motion import _check_collisions, _Segment
     m = load_machine(SEED_MACHINE)
     q = np.array(probe_poses(m, ["K4"]).q[0])                # the stylus tip at the sphere's centre
     reach = (m.probe.sphere_diameter + m.probe.stylus_diameter) / 2
@@ -712,7 +715,8 @@ def test_every_move_is_sampled_as_its_own_straight_line():
     of it (≤ 1 mm and ≤ 0.5° apart, its ends exact), an axis not yet positioned goes straight
     to its target, and a TCP move is sampled in TCP coordinates, then converted."""
     from compgen.model.frames import from_world, world
-    from compgen.setup.motion import Block, _paths, _Segment
+    from compgen.setup.blocks import Block
+    from compgen.setup.motion import _paths, _Segment
     m = load_machine(SEED_MACHINE)
     linear = [m.index(c) for c in "XYZ"]
     rotary = [m.index(a.name) for a in m.rotary_axes]

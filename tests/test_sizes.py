@@ -1,7 +1,8 @@
 """A guarded size (issue 67): a module of compgen holds at most MODULE_LINES lines and a
 function at most FUNCTION_LINES. The limits eroded in three days when nothing held them.
-Those over them today are listed with their size now, as a ceiling: none may grow, and one
-brought within the limit must leave the list (the list only shrinks)."""
+Every module is within its limit; the functions over theirs today are listed with their size
+now, as a ceiling: none may grow, and one brought within the limit must leave the list (the
+list only shrinks)."""
 
 import ast
 
@@ -10,11 +11,8 @@ from conftest import ROOT
 
 MODULE_LINES, FUNCTION_LINES = 600, 80
 
-# over the limits on 2026-12-07, each at its size then: to be split (issue 67), never to grow
-MODULES_OVER = {
-    "compgen/commands/cli.py": 673,
-    "compgen/setup/motion.py": 602,
-}
+# over the limit on 2026-12-07, each at its size then: to be split (issue 67), never to grow
+MODULES_OVER: dict[str, int] = {}
 FUNCTIONS_OVER = {
     ("compgen/statistics/signature.py", "products"): 142,
     ("compgen/statistics/diagnose_text.py", "report"): 139,

@@ -14,7 +14,8 @@ import numpy as np
 from ..errors import CompgenError
 from ..model.lines import AxisLine
 from ..model.machine import Machine, ProbeSetup
-from ..setup.motion import Block, Check, run
+from ..setup.blocks import Block
+from ..setup.motion import Check, run
 from . import fmt_plain
 from .correction import CompTable, Held, Plan, comp_tables, squareness_tables
 

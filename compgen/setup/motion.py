@@ -21,8 +21,7 @@ machine datum lies; it is a finding.
 
 from __future__ import annotations
 
-import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -30,32 +29,13 @@ from ..errors import CompgenError
 from ..model.frames import frames, from_world, head_pivots, safe_height, world
 from ..model.machine import Machine, ProbeSetup
 from ..search import golden_least
+from .blocks import Block
 
 STEP_MM, STEP_DEG = 1.0, 0.5
 SEARCH_MM = 0.01         # the closest point along housing and spindle axes, found to this
 TOUCH_MM = 1e-3          # a probing stylus tip this far into the sphere: rounding, not a crash
 ONLY_TURNS_MM = 1e-9     # X Y Z travel at or below this (rounding): the block only turns
 OVER_FEED = 1 + 1e-9     # a speed this much over feed_max is rounding of the feed, not over it
-
-
-@dataclass(frozen=True)
-class Block:
-    """One line as the control executes it. ``target`` maps axis letters to the written
-    values (mm, deg) of a move; ``on`` is the state a tcp or length block switches to."""
-
-    line: int
-    text: str
-    kind: str                    # move, dwell, tcp, tool, length, require, stop, units, offset, end;
-                                 # a control's own guards (offsets, head state, pin, sync)
-    target: dict = field(default_factory=dict)
-    rapid: bool = False
-    feed: float | None = None    # mm/min (deg/min for a block that only turns)
-    machine_coords: bool = False
-    seconds: float = 0.0
-    on: bool = False             # tcp / length: switched on (True) or off
-    turn: dict = field(default_factory=dict)   # modulo axis letter → "+", "-" or "short"
-    name: str = ""               # offset: the work offset the block selects (G54, ...)
-    probe: bool = False          # a probing move: it stops where the stylus touches the sphere
 
 
 @dataclass(frozen=True)
@@ -83,57 +63,6 @@ class Check:
         """The first finding's text, and how many more there are."""
         more = len(self.findings) - 1
         return self.findings[0].text(where) + (f" (and {more} more)" if more else "")
-
-
-WORD = re.compile(r"^([A-Z])([+-]?(?:\d{1,7}(?:\.\d{0,9})?|\.\d{1,9}))$", re.ASCII)
-SECONDS = re.compile(r"\d{1,5}(?:\.\d{0,6})?", re.ASCII)     # a dwell, as compgen writes it
-
-
-def words(tokens: list[str], line: int, allowed: str = "XYZABCF") -> dict[str, float]:
-    """Address words (``X+1.5``, ``A-90``, ``F500``) of a block; anything else is refused:
-    a malformed or over-long number, a word twice, a feed that is not positive."""
-    out = {}
-    for t in tokens:
-        m = WORD.match(t)
-        if not m or m[1] not in allowed or m[1] in out:
-            raise CompgenError(f"line {line}: {_cut(t)!r} is not a word this check reads in a move",
-                               hint="check-program reads the blocks compgen writes; edit nothing else in")
-        out[m[1]] = float(m[2])
-    if "F" in out and not out["F"] > 0:
-        raise CompgenError(f"line {line}: F{out['F']:g}: a feed must be above zero", hint="write the feed in "
-                           "mm/min (deg/min for a block that only turns)")
-    return out
-
-
-def dwell(text: str, line: int, raw: str) -> Block:
-    """A dwell block of ``text`` seconds, as compgen writes it, or a refusal."""
-    if not SECONDS.fullmatch(text):
-        raise unknown(line, raw)
-    return Block(line, raw, "dwell", seconds=float(text))
-
-
-def gcode_move(raw: str, line: int, tokens: list[str], modal: str | None, feed: float | None,
-               machine_word: str, skip: tuple[str, ...] = ()) -> tuple[Block, str, float | None]:
-    """A G-code move block (modal G0/G1, modal F); ``machine_word`` (SUPA, G53) marks a
-    block in machine coordinates. Returns the block and the modal state after it."""
-    modal = next((t for t in reversed(tokens) if t in ("G0", "G1")), modal)
-    w = words([t for t in tokens if t not in ("G0", "G1", machine_word, *skip)], line)
-    feed = w.pop("F", feed)
-    if not w or modal is None:
-        raise unknown(line, raw)
-    return (Block(line, raw, "move", target=w, rapid=modal == "G0", feed=feed,
-                  machine_coords=machine_word in tokens), modal, feed)
-
-
-def _cut(text: str, most: int = 60) -> str:
-    """A user's text in a message: no longer than a line can show."""
-    return text if len(text) <= most else text[:most] + "..."
-
-
-def unknown(line: int, text: str) -> CompgenError:
-    return CompgenError(f"line {line}: {_cut(text.strip())!r} is not a block this check knows",
-                        hint="check-program reads the blocks compgen writes; a program with other "
-                             "blocks cannot be shown safe")
 
 
 def tooling(machine: Machine,

@@ -1,0 +1,191 @@
+"""The program commands: measure-program, probe-program, check-program (a thin layer over
+``controllers.programs``, ``controllers.probing`` and each control's reader)."""
+
+from __future__ import annotations
+
+import json
+import shlex
+from datetime import date
+from pathlib import Path
+
+import click
+
+from .. import __version__, me
+from ..configuration.machine_file import load_machine
+from ..controllers.probing import probe_program, with_sphere
+from ..controllers.programs import (
+    MODES,
+    NAME_MAX,
+    at_ball,
+    lines_of,
+    measure_program,
+    program_ball,
+    program_name,
+    program_nest,
+)
+from ..controllers.registry import for_machine, for_program
+from ..data.probe import probe_poses
+from ..data.rtest import read_poses
+from ..errors import CompgenError
+from ..files import STDOUT, read_text, write_all
+from ..model.machine import at_nest
+from ..model.paths import generate
+from .cli_common import (
+    CONTROLLER_NAMES,
+    FILE,
+    FORCE,
+    MACHINE,
+    PROBE_LENGTH,
+    named_paths,
+    nest_mm,
+    vec3,
+)
+
+
+@click.command("measure-program")
+@MACHINE
+@click.option("--path", "path_names", default=None,
+              help="K1, K2, K4 (or BK1…), a comma list, or 'all': paths of the machine file.")
+@click.option("--poses", "poses_file", type=FILE, default=None,
+              help="A CSV of poses (rotary axes in deg; path, bx, by, bz optional) instead of --path.")
+@click.option("--ball", default=None, help="With --path: the ball centre in the table frame, mm, "
+                                            "X,Y,Z (default: the machine file's).")
+@click.option("--there-and-back", "back", is_flag=True,
+              help="With --path: run each path there and back, so that every axis reverses "
+                   "(what a reversal error, backlash, needs to be seen).")
+@PROBE_LENGTH
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
+@click.option("--mode", type=click.Choice(MODES), default="tcpm", show_default=True,
+              help="tcpm: the control's kinematics (FUNCTION TCPM / TRAORI); axes: compgen's.")
+@click.option("-o", "--output", type=FILE, default=None,
+              help="Program file; its pose list goes beside it as <stem>.poses.csv. Default: stdout.")
+@FORCE
+def measure_program_cmd(machine_file, path_names, poses_file, ball, back, nest, controller_name, mode,
+                        output, force):
+    """Write an R-test measurement program for the control, checked against travel and feed."""
+    machine = load_machine(machine_file)
+    if bool(path_names) == bool(poses_file):
+        raise CompgenError("give either --path or --poses")
+    if (ball or back or nest) and poses_file:
+        raise CompgenError("--ball, --there-and-back and --probe-length go with --path: a pose list gives "
+                           "its own poses, ball and nest")
+    if poses_file:
+        poses, label = read_poses(poses_file, machine), Path(poses_file).stem
+    else:
+        names = named_paths(machine, path_names)
+        poses = generate(machine, names, ball=vec3(ball, "--ball") if ball is not None else None, back=back,
+                         nest=nest_mm(nest))
+        label = "+".join(names) + "_BACK" * back
+    ctl = for_machine(controller_name or machine.controller, machine)
+    output = None if output == STDOUT else output      # -o - is stdout, as no -o
+    name = program_name(Path(output).stem if output else f"RTEST_{label}"[:NAME_MAX], most=ctl.name_max)
+    emitted = measure_program(machine, poses, label, ctl.name, mode, name, __version__,
+                              date.today().isoformat(), Path(output).stem if output else None)
+    program = emitted.files[ctl.program_ext]
+    if not output:
+        click.echo(program, nl=False)
+        click.echo("compgen: the pose list was not written" + "".join(f" (nor {name}{k}, which the program "
+                                                                      "shows its messages from)"
+                                                                      for k in sorted(emitted.named))
+                   + "; give -o FILE to get it beside the program", err=True)
+        return
+    out = Path(output)
+    files = emitted.paths(out, name, ctl.program_ext)
+    write_all(files, force, inputs=(machine_file, poses_file))
+    click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, {mode} mode, "
+               f"{ctl.label(machine)}", err=True)
+
+
+@click.command("probe-program")
+@MACHINE
+@click.option("--path", "path_names", required=True,
+              help="K1, K2, K4, a comma list, or 'all': paths of the machine file, each probed at "
+                   "[probe] poses of its poses.")
+@click.option("--ball", default=None, help="The sphere's centre in the table frame, mm, X,Y,Z (default: "
+                                            "the machine file's [rtest] ball).")
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
+@click.option("-o", "--output", type=FILE, required=True,
+              help="Program file; its pose list goes beside it as <stem>.poses.csv (HEIDENHAIN: and the "
+                   "F-PRINT format files <stem>_<path>.A).")
+@FORCE
+def probe_program_cmd(machine_file, path_names, ball, controller_name, output, force):
+    """Write a probing program: a touch probe on the calibration sphere at each pose, every
+    touch logged on the control as a probe log v1; checked with the probe in the set-up."""
+    machine = load_machine(machine_file)
+    ctl = for_machine(controller_name or machine.controller, machine)
+    names = named_paths(machine, path_names)
+    poses = probe_poses(machine, names, vec3(ball, "--ball") if ball is not None else None)
+    out = Path(output)
+    name = program_name(out.stem, room=4, most=ctl.name_max)
+    emitted = probe_program(machine, poses, "+".join(names), ctl.name, name, __version__,
+                            date.today().isoformat())
+    files = emitted.paths(out, name, ctl.program_ext)
+    write_all(files, force, inputs=(machine_file,))
+    click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, "
+               f"{machine.probe.touches} touches "
+               f"each, {ctl.words}; check it: {me()} check-program --machine {shlex.quote(machine_file)} "
+               f"{shlex.quote(str(out))}"
+               + (" --mode axes" if not ctl.tcp_switchable else ""), err=True)
+
+
+@click.command("check-program")
+@MACHINE
+@click.argument("program", type=FILE)
+@click.option("--controller", "controller_name", default=None, metavar="NAME",
+              help=f"{CONTROLLER_NAMES}. Default: from the file's suffix.")
+@click.option("--ball", default=None,
+              help="The ball centre in the table frame, mm, X,Y,Z (default: the one the program's "
+                   "header names, else the machine file's).")
+@PROBE_LENGTH
+@click.option("--mode", type=click.Choice(MODES), default=None,
+              help="LinuxCNC: the kinematics the configuration runs the program under (tcpm: trt "
+                   "kinematics; axes: identity). The other controls' programs switch TCP themselves.")
+@click.option("--json", "as_json", is_flag=True, help="Print the check as JSON.")
+def check_program_cmd(machine_file, program, controller_name, ball, nest, mode, as_json):
+    """Simulate PROGRAM block by block against the R-test set-up, travel and feeds."""
+    machine = load_machine(machine_file)
+    ctl = (for_machine(controller_name, machine) if controller_name
+           else for_program(Path(program).suffix, machine))
+    if mode is not None and ctl.tcp_switchable:
+        raise CompgenError(f"--mode is for controls whose configuration decides TCP; {ctl.words} programs "
+                           "switch it themselves", hint="leave --mode out")
+    text = read_text(program, "program", ansi_ok=True)[0]
+    with lines_of(program):
+        header = None if ball is not None else program_ball(text)   # --ball overrides the header
+        # the nest the program was written for: a head's programs and motion follow its length
+        nest_given = nest is not None
+        nest = nest_mm(nest) if nest_given else program_nest(text)
+        blocks = ctl.blocks(text, mode)
+    at, source = ((vec3(ball, "--ball"), "--ball") if ball is not None else
+                  (header, "the program's header") if header is not None else
+                  (machine.ball, "the machine file"))
+    machine = at_nest(machine, nest, "--probe-length" if nest is not None else program)
+    probing = any(b.probe for b in blocks)     # a probing program: the probe and its sphere
+    if probing:
+        machine = with_sphere(machine)
+    result = ctl.check(at_ball(machine, at), blocks, probe=machine.probe if probing else None)
+    if as_json:
+        click.echo(json.dumps({
+            "format": "compgen.check-program/1", "program": program, "controller": ctl.name,
+            "ok": not result.findings,
+            "ball_mm": list(at), "ball_from": source, "probe_length_mm": machine.probe_length,
+            "moves": result.blocks, "seconds": result.seconds,
+            "closest_mm": result.closest_mm, "closest_at": result.closest_at,
+            "findings": [{**f.__dict__, "text": f.text(program)} for f in result.findings]},
+            indent=2, ensure_ascii=False))
+        if result.findings:
+            raise SystemExit(1)
+        return
+    for finding in result.findings:
+        click.echo(finding.text(program))
+    where = f"ball at {', '.join(f'{v:g}' for v in at)} mm (from {source})" + (
+        "" if nest is None else f"; nest {nest:g} mm below the gauge line (from "
+        f"{'--probe-length' if nest_given else 'the program' + chr(39) + 's header'})")
+    if result.findings:
+        click.echo(f"{program}: checked with the {where}", err=True)
+        raise SystemExit(1)
+    click.echo(f"{program}: OK ({ctl.label(machine)}): {result.blocks} moves, about "
+               f"{result.seconds / 60:.1f} min; closest approach {result.closest_mm:.1f} mm "
+               f"({result.closest_at}); {where}")
