@@ -1510,28 +1510,46 @@ def test_diagnoses_first_line_is_its_verdict_on_every_kind_of_conclusion(tmp_pat
     assert found.count("add it:") == 2         # the verdict's and the best's; never the others'
 
 
-def test_two_drifts_at_once_end_unexplained_never_named_wrong(seed_machine, poses):
+def test_two_drifts_at_once_end_unexplained_never_named_wrong(seed_machine, poses, tmp_path):
     """Issue 66: YOC and AOC both drifting linearly (4 µm/h, 6″/h). Followed as a user
     would, the advice never names a wrong effect as found; the rivals it cannot tell apart
     (AOC:t1, the truth's first half, against a saturating AOC) stay tied while the second
     drift is missing, and once the run advised to tell them apart is in the data three
-    times the loop ends unexplained, and the gate refuses an edit. (It went on advising "K4
+    times the loop ends unexplained, and the gate refuses an edit. Every advised command pastes
+    into bash as printed, each repeat under a file name of its own (issue 68: a remark in
+    parentheses after the command was a syntax error, and a second "K2 again" reused
+    K2_AGAIN). (It went on advising "K4
     again" four times, then named AOC:e45 and YOC:e45, the location errors 11–20 σ off.)"""
+    import subprocess
+    import sys
+    from pathlib import Path
+
     from compgen.statistics.gate import fit_gate
     truth = {"YOC:t1": 4 * UM, "AOC:t1": 6 * ARCSEC}
     data, model, rng, verdicts = [_session(seed_machine, poses, truth)], location_model(seed_machine), 8, []
+    names, env = [], {"PATH": f"{Path(sys.executable).parent}:/usr/bin:/bin"}
     for _ in range(8):
         fit = identify(seed_machine, data, model)
-        found = diagnose(seed_machine, data, fit, noise_um=NOISE_UM, advisor=Advisor)
+        found = diagnose(seed_machine, data, fit, noise_um=NOISE_UM, advisor=Advisor,
+                         machine_ref=str(SEED_MACHINE))
         verdicts.append(found.verdict)
         if found.found:
             assert found.found in truth, (found.found, verdicts)
             model = compose(seed_machine, model, [found.found])
         elif found.verdict == "rivals":
+            m = found.rivals_separated_by[0]
+            names.append(m.name)
+            # the advised command, as its line prints it (a remark after it is a bash comment),
+            # runs pasted into bash: a repeat's program gets a file name of its own each time
+            line = next(ln.strip() for ln in report(found).splitlines() if f" -o {m.name}." in ln)
+            done = subprocess.run(["bash", "-c", line], cwd=tmp_path, capture_output=True, text=True, env=env,
+                                  timeout=120)
+            assert done.returncode == 0, (line, done.stderr)
             rng += 1
-            data.append(_session(seed_machine, found.rivals_separated_by[0].poses, truth, seed=rng))
+            data.append(_session(seed_machine, m.poses, truth, seed=rng))
         else:
             break
+    assert len(set(names)) == len(names) and "K2_AGAIN_2" in names, names
     assert verdicts[-1] == "unexplained" and found.exhausted, verdicts
     assert report(found).startswith("VERDICT: unexplained:") and "measured 3 times" in report(found)
     assert fit_gate(seed_machine, data, fit)          # no edit from these data

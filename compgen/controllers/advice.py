@@ -13,6 +13,7 @@ stand. What fails is not offered. Data from a touch probe get probing programs
 from __future__ import annotations
 
 import shlex
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -141,7 +142,7 @@ def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest")
     another ball position (a τ of 5 and of 45 min differ only in when the readings were
     made)."""
     ball = np.asarray(machine.ball, dtype=float)
-    done, turned = set(), set()
+    done, turned, runs_of = set(), set(), Counter()
     timed = measured is not None and len(measured) > 0 and not np.isnan(measured.t).any()
     start = float(measured.t.max()) + GAP_S if timed else 0.0
     if measured is not None:
@@ -151,7 +152,7 @@ def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest")
         nest = np.where(np.isnan(measured.nest), machine.probe_length, measured.nest)
         where_ = [(str(measured.path[i]), tuple(np.round(measured.ball[i], 3)), round(float(nest[i]), 3))
                   for i in first]
-        done = set(where_)
+        done, runs_of = set(where_), Counter(where_)
         for a in machine.rotary_axes:
             d = motion_direction(measured.q[:, machine.index(a.name)], run)
             back = np.add.reduceat(d > 0, first) & np.add.reduceat(d < 0, first)     # both ways in a run
@@ -177,7 +178,10 @@ def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest")
             poses = poses.starting_at(start)
             label, stem = f"{name}{where}", f"{name}_{tag}" if tag else name
             if again:
-                label, stem = f"{label}{AGAIN}", f"{stem}_AGAIN"
+                # each repeat its own file: the first K2_AGAIN, then K2_AGAIN_2 (the data holding
+                # K2 twice), so that no advised program or reading overwrites one already fitted
+                n = runs_of[key]
+                label, stem = f"{label}{AGAIN}", f"{stem}_AGAIN" + (f"_{n}" if n > 1 else "")
             out.append(Measurement(label, name, tuple(float(v) for v in at), poses, back, stem, device,
                                    again, nest))
     return out

@@ -286,8 +286,9 @@ def next_name(path: str) -> str:
 
 def _measure(d: Diagnosis, m: Measurement) -> str:
     command = m.command(me(), d.machine_ref, d.program_ext)
-    return command + ("  (then run it at once, the R-test's clock running on: its t column continues "
-                      "these data's)" if m.again else "")
+    # a remark after the command is a bash comment: the line pastes and runs as printed
+    return command + ("  # then run it at once, the R-test's clock running on: its t column continues "
+                      "these data's" if m.again else "")
 
 
 def _told(d: Diagnosis, m: Measurement) -> set[tuple[str, str]]:
