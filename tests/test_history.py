@@ -512,7 +512,7 @@ def test_a_store_of_the_first_schema_is_migrated_and_keeps_its_rows(tmp_path, fi
                     old.insert(table, row)
             assert old.version() == 1
     with open_store(tmp_path / "old.sqlite") as new:
-        assert new.version() == S.VERSION == 4
+        assert new.version() == S.VERSION == 5
         assert new.rows("SELECT import_id FROM sessions") == [{"import_id": None}]
         assert new.rows("SELECT content_sha256 FROM fits") == [{"content_sha256": None}]
         assert _counts(new) == {"machines": 1, "sessions": 1, "fits": 1}
@@ -855,8 +855,13 @@ def test_a_writer_can_neither_break_the_schema_nor_pass_a_forged_calibration_to_
         ids = [r["id"] for r in store.rows("SELECT id FROM machines ORDER BY id")]
         assert len(ids) == 5 and ids == list(range(ids[0], ids[0] + 5)), ids
     with open_store(pg_db) as store:
-        assert store.version() == 4           # the store still opens for everyone
+        assert store.version() == 5           # the store still opens for everyone
         assert {r["recorded_by"] for r in store.rows("SELECT recorded_by FROM fits")} == {"forger"}
+        # who and when are the database's: a writer's "now" is its clock's instant, by its role
+        squat = store.rows("SELECT recorded, recorded_by FROM machines WHERE name LIKE ?", ("squatter%",))
+        assert len(squat) == 3 and {r["recorded_by"] for r in squat} == {"forger"}, squat
+        instant = r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\+00:00"
+        assert all(re.fullmatch(instant, r["recorded"]) for r in squat), squat
         with pytest.raises(CompgenError, match=r"recorded by forger\).*does not hold the values its own fit"):
             H.last_calibration(store, machine)
 

@@ -32,6 +32,7 @@ ENV = "COMPGEN_DB"
 PG_SCHEMA = "compgen"
 TABLES = ("machines", "sessions", "fits", "edits", "checks", "imports")
 
+AUTHORED = ("machines", "sessions", "checks", "imports")     # the tables given an author in schema 5
 # Each migration: (version, DDL with {id} for the key column, {json} for JSON text). A new
 # version appends; nothing earlier changes once released.
 MIGRATIONS: tuple[tuple[int, tuple[str, ...]], ...] = (
@@ -74,6 +75,9 @@ MIGRATIONS: tuple[tuple[int, tuple[str, ...]], ...] = (
     )),
     # (PostgreSQL only, below) every row's id from the database's own sequence
     (4, ()),
+    # every row's author, not only a fit's and an edit's (and, on PostgreSQL, below: every
+    # row's time of recording is the database's clock, whatever a writer's INSERT says)
+    (5, tuple(f"ALTER TABLE {t} ADD COLUMN recorded_by TEXT" for t in AUTHORED)),
 )
 VERSION = MIGRATIONS[-1][0]
 # an instant as compgen stores it (UTC; an older compgen kept the offset it was given)
@@ -118,6 +122,14 @@ POSTGRES_MIGRATIONS: dict[int, tuple[str, ...]] = {
                                 "AND rms_um < 'Infinity'::float8"),
             ("edits", "json", "corrects::jsonb IS NOT NULL AND written::jsonb IS NOT NULL "
                               "AND loaded::jsonb IS NOT NULL")))),
+    # who and when, by the database: a writer's clock or a forged "recorded" says neither
+    5: (*(f"CREATE TRIGGER {t}_recorded_by BEFORE INSERT ON {t} FOR EACH ROW "
+          f"EXECUTE FUNCTION {PG_SCHEMA}.recorded_by()" for t in AUTHORED),
+        f"""CREATE OR REPLACE FUNCTION {PG_SCHEMA}.recorded_at() RETURNS trigger LANGUAGE plpgsql AS $$
+            BEGIN NEW.recorded := to_char(clock_timestamp() AT TIME ZONE 'UTC',
+                                          'YYYY-MM-DD"T"HH24:MI:SS"+00:00"'); RETURN NEW; END $$""",
+        *(f"CREATE TRIGGER {t}_recorded_at BEFORE INSERT ON {t} FOR EACH ROW "
+          f"EXECUTE FUNCTION {PG_SCHEMA}.recorded_at()" for t in TABLES)),
 }
 
 
