@@ -1368,3 +1368,30 @@ def test_an_export_beyond_the_64_mb_of_a_control_file_imports(tmp_path, year, mo
         f.write(" " * (65 * 2**20))
     rc, out, err = run("history", "import", "a.json", "--db", "b.sqlite")
     assert rc == 0 and "2 fits" in out, err
+
+
+def test_a_calibration_marked_accepted_is_judged_again_on_its_own_data(tmp_path, monkeypatch):
+    """A writer (or a library caller) can record "accepted" for a fit compgen's gate refuses:
+    the bundled session fitted without its hidden EXC:h2 (σ̂ 0.77 µm, plausible by its own
+    numbers, so no check of the row alone can tell). check runs the gate again on the
+    calibration's own data files (by their checksums) and refuses it; where those files are
+    gone, it says the verdict stands as recorded."""
+    monkeypatch.chdir(tmp_path)
+    data = tmp_path / "session.csv"
+    data.write_bytes((ROOT / "examples" / "seed-session.csv").read_bytes())
+    assert run("fit", "--machine", SEED_MACHINE, data, "-o", "fit.json")[0] == 0
+    machine = load_machine(SEED_MACHINE)
+    with open_store(tmp_path / "h.sqlite") as store:
+        # recorded "accepted": no gate's reason given
+        H.record_fit(store, load_fit(tmp_path / "fit.json"), machine, taken="2026-01-05T09:00Z")
+    truth = ROOT / "examples" / "truth-seed-session.json"
+    assert run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "--paths", "K4", "--seed", "3",
+               "--noise-um", "0.5", "-o", "k4.csv")[0] == 0
+    code, _, err = run("check", "--machine", SEED_MACHINE, "k4.csv", "--date", "2026-02-01",
+                       "--db", tmp_path / "h.sqlite")
+    assert code == 2 and "fails compgen's fit gate on its own data" in err and "EXC:h2" in err, err
+    data.rename(tmp_path / "elsewhere.csv")
+    code, out, err = run("check", "--machine", SEED_MACHINE, "k4.csv", "--date", "2026-02-01", "--json",
+                         "--db", tmp_path / "h.sqlite")
+    assert code in (0, 1), err
+    assert json.loads(out)["calibration_accepted"].startswith("accepted as recorded (its data are not here")

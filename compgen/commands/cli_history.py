@@ -224,14 +224,25 @@ def check_cmd(machine_file, data, serial, taken, operator, as_json, machine_chan
     """Check a short measurement (K4 alone will do) against the machine's last accepted
     calibration: each location error's change with its σ, pass or fail, what to do next.
     The check is recorded in the history."""
-    from ..history import calibration_fit, check, fit_as_calibrated, last_calibration, record_check, taken_at
+    from ..history import (
+        calibration_accepted,
+        calibration_fit,
+        check,
+        fit_as_calibrated,
+        last_calibration,
+        record_check,
+        taken_at,
+    )
     machine = load_machine(machine_file)
     sets = [read_data(p, machine, warn=warn) for p in data]
     when = taken_at(taken)
     store = history_store(db, create=False)
     calibration, entries, edits = last_calibration(store, machine, serial, before=when)
-    fit, model = fit_as_calibrated(machine, sets, calibration_fit(store, calibration), advisor=Advisor)
-    result = check(machine, fit, sets, calibration, entries, edits, when, serial, machine_changed, model)
+    reference = calibration_fit(store, calibration)
+    accepted = calibration_accepted(machine, calibration, reference)
+    fit, model = fit_as_calibrated(machine, sets, reference, advisor=Advisor)
+    result = check(machine, fit, sets, calibration, entries, edits, when, serial, machine_changed, model,
+                   accepted)
     record_check(store, result, fit, machine, serial=serial, operator=operator)
     click.echo(json.dumps(result.summary(), indent=2, ensure_ascii=False) if as_json else result.text(),
                nl=as_json)

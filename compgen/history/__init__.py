@@ -17,6 +17,7 @@ from .checks import (  # noqa: F401
     Change,
     CheckModel,
     CheckResult,
+    calibration_accepted,
     check,
     fit_as_calibrated,
     record_check,

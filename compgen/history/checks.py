@@ -99,6 +99,7 @@ class CheckResult:
     machine_changed: bool = False    # checked with another machine file than the calibration's
     model: CheckModel = CheckModel()
     nothing: str = ""                # "nothing to correct: ...", where an edit of this check would be noise
+    accepted: str = ""               # how the calibration's "accepted" stands (``calibration_accepted``)
 
     @property
     def passed(self) -> bool:
@@ -117,7 +118,7 @@ class CheckResult:
                 "flags": [f.text() for f in self.flags], "advice": self.advice,
                 "machine_file_changed": self.machine_changed,
                 "model": {"effects": list(self.model.effects), "effects_were": self.model.how},
-                "nothing_to_correct": self.nothing,
+                "nothing_to_correct": self.nothing, "calibration_accepted": self.accepted,
                 **({"recorded_by": self.against.recorded_by} if self.against.recorded_by else {})}
 
     def text(self) -> str:
@@ -128,6 +129,8 @@ class CheckResult:
                  f"  against the calibration of {self.against.taken[:16]} ({self.against.marker}{who}), "
                  "corrections written since counted"]
         lines.append(f"  fitted with {self.model.words()}")
+        if self.accepted:
+            lines.append(f"  that calibration's verdict: {self.accepted}")
         if self.machine_changed:
             lines.append("  with a machine file changed since that calibration (--machine-changed)")
         lines += ["", f"  {'param':<6}{'change':>9}   {'σ':<12}{'':<16}{'status':<7}"]
@@ -143,9 +146,30 @@ class CheckResult:
         return "\n".join(lines) + "\n"
 
 
+def calibration_accepted(machine: Machine, calibration: Entry, fit: FitResult) -> str:
+    """The calibration's "accepted", recomputed: compgen's fit gate run again on the
+    calibration's own data where its files are at hand (each by its checksum). A row whose
+    gate refuses its own fit (a writer can append one) is refused; else how the verdict
+    stands, in words: recomputed, or as recorded where its data are not here."""
+    from ..configuration.session import reload
+    from ..statistics.gate import fit_gate
+    try:
+        _, data = reload(fit, machine.source)
+    except CompgenError as exc:
+        return f"accepted as recorded (its data are not here to recompute it: {one_line(exc.message)})"
+    reasons = fit_gate(machine, data, fit)
+    if reasons:
+        who = f", recorded by {one_line(calibration.recorded_by)}" if calibration.recorded_by else ""
+        raise CompgenError(f"the last calibration marked accepted (fit #{calibration.id}, "
+                           f"{one_line(calibration.marker)}, {calibration.taken[:16]}{who}) fails compgen's "
+                           f"fit gate on its own data: {reasons[0]}; the row's verdict is not compgen's",
+                           hint="calibrate again, and record the fit compgen accepts")
+    return "accepted, recomputed on its own data"
+
+
 def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: Sequence[Entry],
           edits: Sequence[dict], taken: str, serial: str | None = None,
-          machine_changed: bool = False, model: CheckModel = CheckModel()) -> CheckResult:
+          machine_changed: bool = False, model: CheckModel = CheckModel(), accepted: str = "") -> CheckResult:
     """A short measurement's fit against the last accepted calibration: each location
     error's change (machine values: the corrections written since are counted) with its σ,
     the paths against ``[tolerances]``, and a drift or step it completes. A machine file
@@ -235,7 +259,7 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
                           "calibration before it reaches its limit, and look for its cause (warm-up, season)")
     nothing = nothing_to_correct(machine, fit, machine.controller) or ""
     return CheckResult(name, serial, calibration, fit.marker, taken, changes, fit.residual["sigma_um"],
-                       paths, new_flags, advice, changed, model, nothing)
+                       paths, new_flags, advice, changed, model, nothing, accepted)
 
 
 def record_check(store: Store, result: CheckResult, fit: FitResult, machine: Machine, *,
