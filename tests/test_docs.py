@@ -107,3 +107,11 @@ def test_no_doc_calls_the_bash_builtin():
     bare = [(path.name, line) for path in DOCS for block in _blocks(path) for line in block.splitlines()
             if BUILTIN.search(line)]
     assert not bare, bare
+
+
+def test_the_docs_speak_of_the_project_not_of_its_issues():
+    """docs/ and the README say what compgen does and why; which issue asked for it is the
+    history's (git), not the reader's."""
+    said = [(path.name, m.group(0)) for path in DOCS
+            for m in re.finditer(r"\b[Ii]ssues? \d+", path.read_text())]
+    assert not said, said

@@ -1,4 +1,4 @@
-"""The one screen (issue 66): per location error, what the fit found and what the control
+"""The one screen: per location error, what the fit found and what the control
 holds after the edit, each with its σ and its own limit (``[drift]``: its class's, or its
 own under ``each``); per path, the deviation range against its tolerance, predicted and,
 with data measured after the edit, measured; the RMS predicted after the edit; what stays

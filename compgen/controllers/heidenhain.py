@@ -40,7 +40,7 @@ ROW = re.compile(r"^\s*(?:\d+\s+)?(?:Trans\s+([XYZABC])\s+(\S+)\s+(-?[XYZABC]0[A
                  r"|(-?[XYZABC]0[A-Z])\s+Trans\s+([XYZABC])\s+(\S+))", re.MULTILINE)
 
 
-# the entries a description table takes: reported (issue 65), in no manual read (U19)
+# the entries a description table takes: reported by a user, in no manual read (U19)
 DESCRIPTION_ROWS = 50
 
 

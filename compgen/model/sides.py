@@ -244,7 +244,7 @@ def unknown_sides(machine: Machine, names: Iterable[str], *poses: Poses) -> str 
     rotary = [a for a in axes if a in {r.name for r in machine.rotary_axes}]
     linear = [a for a in axes if a not in rotary and any(b == a for b, _ in held)]
     axes = rotary + linear
-    if not rotary:        # a linear axis's side alone: nothing the user can act on (issue 71)
+    if not rotary:        # a linear axis's side alone: nothing the user can act on
         return None
     held = [(b, path) for b, path in held if b in axes]
     where = "; ".join(f"{a}: {', '.join(dict.fromkeys(path or '(no label)' for b, path in held if b == a))}"
