@@ -246,7 +246,11 @@ def fit_cases() -> list[Case]:
     variant("residual NaN-free but text", lambda doc: doc["residual"].update(sigma_um="0.5"))
     variant("format", lambda doc: doc.update(format="compgen.fit/9"))
     variant("machine gone", lambda doc: doc["machine"].update(file="nowhere.toml"))
-    variant("data gone", lambda doc: doc["data"][0].update(file="nowhere.csv"))
+    # a fit keeps each file's absolute path beside its relative one (taken only with its
+    # checksum): the data are gone only where both lead nowhere
+    variant("data gone", lambda doc: doc["data"][0].update(file="nowhere.csv", absolute="/nowhere/data.csv"))
+    variant("data found by its absolute path (good)", lambda doc: doc["data"][0].update(file="nowhere.csv"),
+            "accept")
     variant("checksum", lambda doc: doc["data"][0].update(sha256="0" * 64))
     variant("deep nesting", None, raw="[" * 100_000 + "]" * 100_000)
     variant("not an object", None, raw="[1, 2, 3]")
@@ -504,6 +508,36 @@ def nest_cases(wings: dict[str, Path]) -> list[Case]:
     return out
 
 
+def second_look_cases() -> list[Case]:
+    """The second look's inputs, each a rule at its input: a location error's own limit
+    ([drift] each), a path named twice, verdict's and checklist's options, an import's
+    --same-machine."""
+    seed = SEED.read_text()
+    truth = str(ROOT / "examples" / "truth-table4.json")
+    out = [Case("second-look", f"[drift] each = {each}", {"m.toml": seed + f"\n[drift]\neach = {each}\n"},
+                ["effects", "--machine", "{dir}/m.toml"], expect)
+           for each, expect in (("{ QOZ = 1.0 }", "refuse"), ("{ BOA = -1.0 }", "refuse"),
+                                ('{ BOA = "5" }', "refuse"), ("{ BOA = { x = 1 } }", "refuse"),
+                                ("{ BOA = nan }", "refuse"), ("{ XOW = 1.0 }", "accept"),
+                                ("{ BOA = 5.0, XOC = 3.0 }", "accept"))]
+    out += [Case("second-look", f"{args[0]} {args[-3]} {args[-2]}", {}, args, "refuse", [args[-1][6:]])
+            for args in (["measure-program", "--machine", str(SEED), "--path", "K2,K2", "-o", "{dir}/P.H"],
+                         ["probe-program", "--machine", str(SEED), "--path", "K1,K2,K1", "-o", "{dir}/Q.H"],
+                         ["simulate", "--machine", str(SEED), "--truth", truth, "--paths", "K4,K4",
+                          "-o", "{dir}/s.csv"])]
+    out += [Case("second-look", "checklist --device nope", {},
+                 ["checklist", "--machine", str(SEED), "--device", "nope", "--dir", "{dir}"], "refuse"),
+            Case("second-look", "verdict --post a ragged CSV", {"post.csv": "path,A,C,dX\nK4,0,0\n"},
+                 ["verdict", "--from", "{dir}/fit.json", "--post", "{dir}/post.csv"], "refuse"),
+            Case("second-look", "verdict --controller fanuc", {},
+                 ["verdict", "--from", "{dir}/fit.json", "--controller", "fanuc"], "refuse"),
+            Case("second-look", "verdict (good)", {}, ["verdict", "--from", "{dir}/fit.json"], "accept"),
+            Case("second-look", "history import --same-machine of no export", {"x.json": "{}"},
+                 ["history", "import", "{dir}/x.json", "--same-machine", "A", "--db", "{dir}/h.sqlite"],
+                 "refuse", ["h.sqlite"])]
+    return out
+
+
 def shop_cases(wings: dict[str, Path]) -> list[Case]:
     """Issue 65's kinds, each a rule at its input: store paths and URLs, INI corners as the
     start script reads them, CEC states, number options out of range, and long names."""
@@ -720,7 +754,7 @@ def main() -> None:
     wings = wing_inputs(work, compgen)
     rng = random.Random(args.seed)
     cases = [*csv_cases(rng), *machine_cases(), *fit_cases(), *current_cases(), *output_cases(),
-             *history_cases(), *nest_cases(wings), *shop_cases(wings),
+             *history_cases(), *nest_cases(wings), *shop_cases(wings), *second_look_cases(),
              *derived_cases(rng, programs, args.generated, wings)]
     t0 = time.perf_counter()
     with ThreadPoolExecutor(args.jobs) as pool:

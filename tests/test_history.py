@@ -1395,3 +1395,21 @@ def test_a_calibration_marked_accepted_is_judged_again_on_its_own_data(tmp_path,
                          "--db", tmp_path / "h.sqlite")
     assert code in (0, 1), err
     assert json.loads(out)["calibration_accepted"].startswith("accepted as recorded (its data are not here")
+
+
+@pytest.mark.parametrize("store_id", [None, 7, "", "not a store"])
+def test_an_export_that_names_no_store_is_refused_in_one_line(tmp_path, year, monkeypatch, store_id):
+    """Found by the generated fuzz: an export whose store_id line was deleted was an internal
+    error (KeyError) once every row had been checked."""
+    monkeypatch.chdir(tmp_path)
+    _record(tmp_path / "a.sqlite", year, months=1).close()
+    assert run("history", "export", "--db", "a.sqlite", "-o", "a.json")[0] == 0
+    doc = json.loads((tmp_path / "a.json").read_text())
+    if store_id is None:
+        del doc["store_id"]
+    else:
+        doc["store_id"] = store_id
+    (tmp_path / "a.json").write_text(json.dumps(doc))
+    code, _, err = run("history", "import", "a.json", "--db", "b.sqlite")
+    assert code == 2 and "names no store it came from" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "b.sqlite").exists()

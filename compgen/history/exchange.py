@@ -7,6 +7,7 @@ import csv
 import io
 import json
 import math
+import re
 import shlex
 from collections.abc import Collection
 
@@ -88,6 +89,10 @@ def check_export(doc, where: str) -> dict[str, list]:
             or not isinstance(doc.get("tables"), dict)):
         raise CompgenError("not a compgen history export", where=where,
                            hint=f"make one with {me()} history export -o H.json on the other store")
+    # the store it came from: recorded with every row imported, the one key an import is told by
+    if not isinstance(doc.get("store_id"), str) or not re.fullmatch(r"[0-9a-f]{32}", doc["store_id"]):
+        raise CompgenError("the export names no store it came from (store_id); nothing was imported",
+                           where=where, hint="import an export compgen wrote, unchanged")
     try:
         t = {name: list(doc["tables"][name]) for name in _COLUMNS}
     except (KeyError, TypeError) as exc:
