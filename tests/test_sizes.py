@@ -30,7 +30,6 @@ FUNCTIONS_OVER = {
     ("compgen/history/exchange.py", "import_history"): 96,
     ("compgen/history/checks.py", "check"): 93,
     ("compgen/controllers/kinematics.py", "kinematics_edit"): 87,
-    ("compgen/controllers/sinumerik/reader.py", "program_blocks"): 83,
 }
 
 

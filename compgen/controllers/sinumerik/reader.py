@@ -24,6 +24,16 @@ GUARD = re.compile(r"IF (\$AC_MEA\[1\]==0|ERR<>0)")
 GUARD_BODY = (re.compile(r'MSG\("[^"]+"\)'), re.compile("M0"), re.compile("M30"), re.compile("ENDIF"))
 
 
+def _guard_body(lines: list[str], k: int, b: str) -> int:
+    """The lines after a guard's IF (line ``k``): compgen's message, M0, M30, ENDIF, or a
+    refusal (a guard that does not stop is no guard); how many they are."""
+    body = lines[k:k + len(GUARD_BODY)]
+    if len(body) < len(GUARD_BODY) or not all(p.fullmatch(t) for p, t in zip(GUARD_BODY, body, strict=True)):
+        raise CompgenError(f"line {k}: {b!r} is not compgen's guard (a message, M0, M30, ENDIF)",
+                           hint="give the program compgen wrote")
+    return len(GUARD_BODY)
+
+
 def program_blocks(text: str) -> list[Block]:
     """A SINUMERIK part program as the control executes it (the blocks compgen writes). In a
     probing program every MEAS block is followed by STOPRE and the switch's guard, every
@@ -46,12 +56,7 @@ def program_blocks(text: str) -> list[Block]:
                                         "program compgen wrote")
             expect.pop(0)
             if b.startswith("IF "):
-                body = lines[k:k + len(GUARD_BODY)]
-                if len(body) < len(GUARD_BODY) or not all(
-                        p.fullmatch(t) for p, t in zip(GUARD_BODY, body, strict=True)):
-                    raise CompgenError(f"line {k}: {b!r} is not compgen's guard (a message, M0, M30, ENDIF)",
-                                       hint="give the program compgen wrote")
-                skip = len(GUARD_BODY)
+                skip = _guard_body(lines, k, b)
                 out.append(Block(k, raw, "log"))
             continue
         if b == "STOPRE":
@@ -66,12 +71,7 @@ def program_blocks(text: str) -> list[Block]:
             expect = ["STOPRE", "IF $AC_MEA[1]==0"]
             continue
         if (d := FRAME_IF.fullmatch(b)) is not None:         # compgen's frame guard: no motion
-            body = lines[k:k + len(GUARD_BODY)]
-            if len(body) < len(GUARD_BODY) or not all(
-                    p.fullmatch(t) for p, t in zip(GUARD_BODY, body, strict=True)):
-                raise CompgenError(f"line {k}: {b!r} is not compgen's guard (a message, M0, M30, ENDIF)",
-                                   hint="give the program compgen wrote")
-            skip = len(GUARD_BODY)
+            skip = _guard_body(lines, k, b)
             out.append(Block(k, raw, "offsets", target=sinumerik_terms(d[1])))
             continue
         if GUARD.fullmatch(b):
