@@ -24,6 +24,39 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
              f"  fit {d.fit_file}: {len(d.model)} parameters; residual RMS {d.rms_um:.3f} µm "
              f"(σ̂ {d.sigma_um:.3f} µm) over {d.readings} readings", "",
              f"  {'residual per path (µm)':<24}{three_header(('RMS dX', 'dY', 'dZ'))}"]
+    lines += _residuals(d)
+    lines += _candidates(d, fit, after, top)
+    lines += _devices(d)
+    lines += _rivals_text(d, fit, after)
+    if d.significant and not d.rivals and not d.unexplained and d.device_noise_um is None:
+        lines += ["", f"  Not named as found: the R-test's noise is not given, so whether "
+                      f"{d.significant[0].effect} leaves no more than noise cannot be tested (σ̂ is "
+                      "these data's own scatter, which an effect outside the catalogue inflates too). "
+                      "Set [rtest] noise_um in the machine file (the device's calibration), or "
+                      "--noise-um, and diagnose again."]
+    lines += _lines_text(d)
+    if d.unexplained:
+        lines += _unexplained(d, fit, after)
+    elif not d.significant:
+        lines += ["", "  No candidate is significant: the model explains these data to the "
+                  + (f"{_device(d)} noise ({d.device_noise_um:.3g} µm)." if d.device_noise_um is not None else
+                     f"noise level (their own scatter, σ̂ {d.sigma_um:.2f} µm). The R-test's noise is not "
+                     "given: set [rtest] noise_um in the machine file, or --noise-um, to test the "
+                     "residual against it.")]
+    elif len(d.significant) > 1:
+        best = d.significant[0].effect
+        lines += ["", f"  Effects share misfit: once {best} is added, "
+                      + (f"still significant: {', '.join(d.after_best)}." if d.after_best
+                         else "no other candidate stays significant.")
+                      + " Add one effect at a time and diagnose again."]
+    lines += _unseen(d, fit, after)
+    return "\n".join([*lines, *d.notes]) + "\n"
+
+
+def _residuals(d: Diagnosis) -> list[str]:
+    """The residual per path and against each axis, the outliers left out, the noise's
+    correlation."""
+    lines: list[str] = []
     for name, p in d.per_path.items():
         lines.append(f"    {name:<22}{three(p['rms_um'])}")
     if d.outliers:
@@ -42,6 +75,12 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
     for axis, a in d.per_axis.items():
         for term, amp in a.items():
             lines.append(f"    {axis:<3}{term:<19}{three(amp)}")
+    return lines
+
+
+def _candidates(d: Diagnosis, fit: str, after: str, top: int) -> list[str]:
+    """The visible candidates, most residual removed first, each with what to do about it."""
+    lines: list[str] = []
     visible = [c for c in d.candidates if c.visible]
     lines += ["", f"  candidate effects, most residual removed first ({d.tested} tried; F test, "
                   f"Bonferroni-corrected, α = {d.alpha:g}):"]
@@ -70,7 +109,12 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
                          + (f"measure {c.separated_by[0].label} first: {_measure(d, c.separated_by[0])}"
                             if c.separated_by else
                             "no set-up this machine can measure separates it"))
-    lines += _devices(d)
+    return lines
+
+
+def _rivals_text(d: Diagnosis, fit: str, after: str) -> list[str]:
+    """The best's rivals: what would tell them apart, or why nothing does."""
+    lines: list[str] = []
     if d.rivals:
         best = d.significant[0].effect
         verb = "explains" if len(d.rivals) == 1 else "explain"
@@ -104,27 +148,13 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
                       "  which of them is the physical cause stays open (it needs another "
                       "reference), and the location errors written to a control depend on the "
                       "choice:", *_carries(d)]
-    if d.significant and not d.rivals and not d.unexplained and d.device_noise_um is None:
-        lines += ["", f"  Not named as found: the R-test's noise is not given, so whether "
-                      f"{d.significant[0].effect} leaves no more than noise cannot be tested (σ̂ is "
-                      "these data's own scatter, which an effect outside the catalogue inflates too). "
-                      "Set [rtest] noise_um in the machine file (the device's calibration), or "
-                      "--noise-um, and diagnose again."]
-    lines += _lines_text(d)
-    if d.unexplained:
-        lines += _unexplained(d, fit, after)
-    elif not d.significant:
-        lines += ["", "  No candidate is significant: the model explains these data to the "
-                  + (f"{_device(d)} noise ({d.device_noise_um:.3g} µm)." if d.device_noise_um is not None else
-                     f"noise level (their own scatter, σ̂ {d.sigma_um:.2f} µm). The R-test's noise is not "
-                     "given: set [rtest] noise_um in the machine file, or --noise-um, to test the "
-                     "residual against it.")]
-    elif len(d.significant) > 1:
-        best = d.significant[0].effect
-        lines += ["", f"  Effects share misfit: once {best} is added, "
-                      + (f"still significant: {', '.join(d.after_best)}." if d.after_best
-                         else "no other candidate stays significant.")
-                      + " Add one effect at a time and diagnose again."]
+    return lines
+
+
+def _unseen(d: Diagnosis, fit: str, after: str) -> list[str]:
+    """What these data cannot see, the measurement that would show the most of it, and the
+    fragile parameters."""
+    lines: list[str] = []
     hidden = [c for c in d.candidates if not c.visible and (not c.silent or c.separated_by)]
     if hidden:
         lines += ["", "  not visible in these data (never reported as found; the fit absorbs them):"]
@@ -154,7 +184,7 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
         if worst is not None:
             lines.append(f"    {name:<6} {per_um[worst]:+6.2f} {d.bias_units[name]} per µm of "
                          f"{effect_name(worst)}")
-    return "\n".join([*lines, *d.notes]) + "\n"
+    return lines
 
 
 def _said(d: Diagnosis, words: str) -> str:
