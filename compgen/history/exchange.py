@@ -107,139 +107,181 @@ def _valid_rows(t: dict[str, list], where: str) -> None:
     (a row the store would keep forever must not break every later read): dates (normalised to
     UTC), one-line names, JSON columns, finite numbers, kinds, controllers, ids that exist,
     and each fit's marker recomputed from its own fit_json."""
-    def bad(table, row, what):
+    rows = _Rows(t, where)
+    rows.shape()
+    rows.machines()
+    rows.sessions()
+    values, sigma = rows.fits()
+    rows.edits(values)
+    rows.checks(sigma)
+    rows.once()
+
+
+class _Rows:
+    """An export's tables being checked: each check refuses the whole import, naming its row."""
+
+    def __init__(self, t: dict[str, list], where: str):
+        self.t, self.where = t, where
+
+    def bad(self, table, row, what):
         rid = row.get("id") if isinstance(row, dict) else None
-        raise CompgenError(f"{table} row {rid!r}: {what}; nothing was imported", where=where,
+        raise CompgenError(f"{table} row {rid!r}: {what}; nothing was imported", where=self.where,
                            hint="import an export compgen wrote, unchanged")
 
-    def text(table, row, key, line=True):
+    def text(self, table, row, key, line=True):
         v = row.get(key)
         if not isinstance(v, str) or (line and one_line(v) != v):
-            bad(table, row, f"{key} is not one line of text")
+            self.bad(table, row, f"{key} is not one line of text")
         return v
 
-    def doc(table, row, key, kind):
+    def doc(self, table, row, key, kind):
         v = row.get(key)
         try:
             v = json.loads(v) if isinstance(v, str) else v
         except ValueError:
-            bad(table, row, f"{key} is not JSON")
+            self.bad(table, row, f"{key} is not JSON")
         if not isinstance(v, kind):
-            bad(table, row, f"{key} is not a JSON {kind.__name__}")
+            self.bad(table, row, f"{key} is not a JSON {kind.__name__}")
         return v
 
-    def finite(table, row, key):
+    def finite(self, table, row, key):
         v = row.get(key)
         if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            bad(table, row, f"{key} is not a finite number")
+            self.bad(table, row, f"{key} is not a finite number")
 
-    for table, rows in t.items():
-        seen = set()
-        for row in rows:
-            if not isinstance(row, dict) or type(row.get("id")) is not int:
-                bad(table, row if isinstance(row, dict) else {}, "no whole-number id")
-            if row["id"] in seen:
-                bad(table, row, "its id is another row's")
-            seen.add(row["id"])
-            if set(row) != set(_COLUMNS[table]):
-                odd = sorted(set(row) ^ set(_COLUMNS[table]))
-                bad(table, row, f"its columns are not a {table[:-1]}'s ({', '.join(odd)})")
-    ids = {table: {r["id"] for r in rows} for table, rows in t.items()}
-    for table, refs in (("sessions", {"machine_id": "machines"}), ("fits", {"session_id": "sessions"}),
-                        ("edits", {"machine_id": "machines", "fit_id": "fits"}),
-                        ("checks", {"machine_id": "machines", "fit_id": "fits", "against_fit_id": "fits"})):
-        for row in t[table]:
-            for key, other in refs.items():
-                if row.get(key) not in ids[other]:
-                    bad(table, row, f"{key} names no {other[:-1]} of the export")
-    for m in t["machines"]:
-        text("machines", m, "name")
-        if text("machines", m, "serial"):
+    def instant(self, table, row):
+        """The row's ``taken``, normalised to UTC in place."""
+        try:
+            row["taken"] = taken_at(self.text(table, row, "taken"))
+        except CompgenError as exc:
+            self.bad(table, row, exc.message)
+
+    def shape(self) -> None:
+        """Whole-number ids, each once; a table's own columns; references that exist."""
+        t, bad = self.t, self.bad
+        for table, rows in t.items():
+            seen = set()
+            for row in rows:
+                if not isinstance(row, dict) or type(row.get("id")) is not int:
+                    bad(table, row if isinstance(row, dict) else {}, "no whole-number id")
+                if row["id"] in seen:
+                    bad(table, row, "its id is another row's")
+                seen.add(row["id"])
+                if set(row) != set(_COLUMNS[table]):
+                    odd = sorted(set(row) ^ set(_COLUMNS[table]))
+                    bad(table, row, f"its columns are not a {table[:-1]}'s ({', '.join(odd)})")
+        ids = {table: {r["id"] for r in rows} for table, rows in t.items()}
+        for table, refs in (("sessions", {"machine_id": "machines"}), ("fits", {"session_id": "sessions"}),
+                            ("edits", {"machine_id": "machines", "fit_id": "fits"}),
+                            ("checks", {"machine_id": "machines", "fit_id": "fits",
+                                        "against_fit_id": "fits"})):
+            for row in t[table]:
+                for key, other in refs.items():
+                    if row.get(key) not in ids[other]:
+                        bad(table, row, f"{key} names no {other[:-1]} of the export")
+
+    def machines(self) -> None:
+        for m in self.t["machines"]:
+            self.text("machines", m, "name")
+            if self.text("machines", m, "serial"):
+                try:
+                    identifier("serial", m["serial"], "serial")
+                except CompgenError as exc:
+                    self.bad("machines", m, exc.message)
+
+    def sessions(self) -> None:
+        for s in self.t["sessions"]:
+            self.instant("sessions", s)
+            self.text("sessions", s, "device"), self.text("sessions", s, "operator")
+            temps = self.doc("sessions", s, "temperatures", dict)
+            if not all(isinstance(v, int | float) and math.isfinite(v) for v in temps.values()):
+                self.bad("sessions", s, "a temperature is not a finite number")
+            self.doc("sessions", s, "data", list)
+
+    def fits(self) -> tuple[dict, dict]:
+        """Each fit's parameters and σ̂ as parsed here (for its edits and its verdict), every
+        fit recomputed from its own fit_json."""
+        bad, values, sigma = self.bad, {}, {}
+        for f in self.t["fits"]:
+            if f.get("kind") not in ("calibration", "check"):
+                bad("fits", f, "kind is neither calibration nor check")
+            self.finite("fits", f, "sigma_um"), self.finite("fits", f, "rms_um")
+            self.text("fits", f, "verdict")
+            model, params = self.doc("fits", f, "model", list), self.doc("fits", f, "parameters", dict)
+            for q in params.values():
+                if not isinstance(q, dict) or not all(
+                        isinstance(q.get(k), int | float) and math.isfinite(q[k]) for k in ("value", "std")):
+                    bad("fits", f, "a parameter's value or σ is not a finite number")
             try:
-                identifier("serial", m["serial"], "serial")
-            except CompgenError as exc:
-                bad("machines", m, exc.message)
-    for s in t["sessions"]:
-        try:
-            s["taken"] = taken_at(text("sessions", s, "taken"))
-        except CompgenError as exc:
-            bad("sessions", s, exc.message)
-        text("sessions", s, "device"), text("sessions", s, "operator")
-        temps = doc("sessions", s, "temperatures", dict)
-        if not all(isinstance(v, int | float) and math.isfinite(v) for v in temps.values()):
-            bad("sessions", s, "a temperature is not a finite number")
-        doc("sessions", s, "data", list)
-    values, sigma = {}, {}    # each fit's parameters and σ̂ as parsed here, for its edits and verdict
-    for f in t["fits"]:
-        if f.get("kind") not in ("calibration", "check"):
-            bad("fits", f, "kind is neither calibration nor check")
-        finite("fits", f, "sigma_um"), finite("fits", f, "rms_um")
-        text("fits", f, "verdict")
-        model, params = doc("fits", f, "model", list), doc("fits", f, "parameters", dict)
-        for q in params.values():
-            if not isinstance(q, dict) or not all(isinstance(q.get(k), int | float) and math.isfinite(q[k])
-                                                  for k in ("value", "std")):
-                bad("fits", f, "a parameter's value or σ is not a finite number")
-        try:
-            fit = FitResult.from_dict(doc("fits", f, "fit_json", dict))
-        except (CompgenError, KeyError, TypeError, ValueError):
-            bad("fits", f, "fit_json is not a fit compgen wrote")
-        values[f["id"]], sigma[f["id"]] = params, fit.residual["sigma_um"]
-        if model != list(fit.model) or params != {n: {"value": e.value, "std": e.std, "unit": e.unit}
-                                                  for n, e in fit.parameters.items()}:
-            bad("fits", f, "its model or parameters are not its fit_json's: the row was changed")
-        if not fit.holds_marker(f.get("marker")):
-            bad("fits", f, f"its marker {f.get('marker')!r} is not its fit's ({fit.record_marker}): the row "
-                           "was changed")
-    fitted = {f["id"]: f for f in t["fits"]}
-    sessions = {x["id"]: x for x in t["sessions"]}
-    for e in t["edits"]:
-        if e.get("controller") not in CONTROLLERS:
-            bad("edits", e, "controller is none compgen knows")
-        corrects = doc("edits", e, "corrects", dict)
-        doc("edits", e, "written", dict), doc("edits", e, "loaded", dict)
-        # an edit corrects its fit's own values (kinematics.corrected_by): any other figure, or
-        # an edit filed under another machine than its fit's, was changed after it was written
-        held = values[e["fit_id"]]
-        if any(n not in held or v != held[n]["value"] for n, v in corrects.items()):
-            bad("edits", e, "it corrects values its fit does not hold: the row was changed")
-        if sessions[fitted[e["fit_id"]]["session_id"]]["machine_id"] != e["machine_id"]:
-            bad("edits", e, "it is filed under another machine than its fit's")
-        try:
-            e["taken"] = taken_at(text("edits", e, "taken"))
-        except CompgenError as exc:
-            bad("edits", e, exc.message)
-    checked = {c.get("fit_id") for c in t["checks"]}
-    for c in t["checks"]:
-        if c.get("passed") not in (0, 1) or isinstance(c.get("passed"), bool):
-            bad("checks", c, "passed is neither 0 nor 1")
-        doc("checks", c, "summary", dict)
-        if fitted[c["fit_id"]]["kind"] != "check" or fitted[c["against_fit_id"]]["kind"] != "calibration":
-            bad("checks", c, "its fit is not a check, or what it was checked against not a calibration: a "
-                             "fit was relabelled")
-        if fitted[c["fit_id"]]["verdict"] != ("check passed" if c["passed"] else "check failed"):
-            bad("checks", c, "its verdict is not its fit's: the row was changed")
-    for f in t["fits"]:
-        # a check's fit is a check row's fit; a calibration's never: a relabelled one is refused
-        if (f["kind"] == "check") != (f["id"] in checked):
-            bad("fits", f, f"its kind ({f['kind']}) is not what the checks say of it: the row was relabelled")
-        # a calibration whose own fit says its residual is no R-test's cannot have been accepted
-        if f["verdict"] == "accepted" and not (s_hat := sigma[f["id"]]) <= SIGMA_PLAUSIBLE_UM:
-            bad("fits", f, f"accepted with σ̂ {s_hat:.2f} µm, beyond the fit gate's {SIGMA_PLAUSIBLE_UM:g} "
-                           "µm: the verdict was changed")
-    # what the store keeps once (its content keys): twice in one export is refused here, before
-    # any store is opened or made for it
-    _, of_session = _machine_keys(t)
-    fits, edited = set(), set()
-    for f in t["fits"]:
-        key = (of_session[f["session_id"]], f["marker"])
-        if key in fits:
-            bad("fits", f, f"fit {f['marker']} of {key[0][0]!r} is in the export twice")
-        fits.add(key)
-    for e in t["edits"]:
-        if e["fit_id"] in edited:
-            bad("edits", e, "a second edit from one fit (the store keeps one per fit)")
-        edited.add(e["fit_id"])
+                fit = FitResult.from_dict(self.doc("fits", f, "fit_json", dict))
+            except (CompgenError, KeyError, TypeError, ValueError):
+                bad("fits", f, "fit_json is not a fit compgen wrote")
+            values[f["id"]], sigma[f["id"]] = params, fit.residual["sigma_um"]
+            if model != list(fit.model) or params != {n: {"value": e.value, "std": e.std, "unit": e.unit}
+                                                      for n, e in fit.parameters.items()}:
+                bad("fits", f, "its model or parameters are not its fit_json's: the row was changed")
+            if not fit.holds_marker(f.get("marker")):
+                bad("fits", f, f"its marker {f.get('marker')!r} is not its fit's ({fit.record_marker}): the "
+                               "row was changed")
+        return values, sigma
+
+    def edits(self, values: dict) -> None:
+        t, bad = self.t, self.bad
+        fitted = {f["id"]: f for f in t["fits"]}
+        sessions = {x["id"]: x for x in t["sessions"]}
+        for e in t["edits"]:
+            if e.get("controller") not in CONTROLLERS:
+                bad("edits", e, "controller is none compgen knows")
+            corrects = self.doc("edits", e, "corrects", dict)
+            self.doc("edits", e, "written", dict), self.doc("edits", e, "loaded", dict)
+            # an edit corrects its fit's own values (kinematics.corrected_by): any other figure,
+            # or an edit filed under another machine than its fit's, was changed after it was written
+            held = values[e["fit_id"]]
+            if any(n not in held or v != held[n]["value"] for n, v in corrects.items()):
+                bad("edits", e, "it corrects values its fit does not hold: the row was changed")
+            if sessions[fitted[e["fit_id"]]["session_id"]]["machine_id"] != e["machine_id"]:
+                bad("edits", e, "it is filed under another machine than its fit's")
+            self.instant("edits", e)
+
+    def checks(self, sigma: dict) -> None:
+        """Each check's verdict its fit's; each fit labelled as the checks say of it; no
+        calibration accepted beyond the gate's σ̂."""
+        t, bad = self.t, self.bad
+        fitted = {f["id"]: f for f in t["fits"]}
+        checked = {c.get("fit_id") for c in t["checks"]}
+        for c in t["checks"]:
+            if c.get("passed") not in (0, 1) or isinstance(c.get("passed"), bool):
+                bad("checks", c, "passed is neither 0 nor 1")
+            self.doc("checks", c, "summary", dict)
+            if fitted[c["fit_id"]]["kind"] != "check" or fitted[c["against_fit_id"]]["kind"] != "calibration":
+                bad("checks", c, "its fit is not a check, or what it was checked against not a calibration: "
+                                 "a fit was relabelled")
+            if fitted[c["fit_id"]]["verdict"] != ("check passed" if c["passed"] else "check failed"):
+                bad("checks", c, "its verdict is not its fit's: the row was changed")
+        for f in t["fits"]:
+            # a check's fit is a check row's fit; a calibration's never: a relabelled one is refused
+            if (f["kind"] == "check") != (f["id"] in checked):
+                bad("fits", f, f"its kind ({f['kind']}) is not what the checks say of it: the row was "
+                               "relabelled")
+            # a calibration whose own fit says its residual is no R-test's cannot have been accepted
+            if f["verdict"] == "accepted" and not (s_hat := sigma[f["id"]]) <= SIGMA_PLAUSIBLE_UM:
+                bad("fits", f, f"accepted with σ̂ {s_hat:.2f} µm, beyond the fit gate's "
+                               f"{SIGMA_PLAUSIBLE_UM:g} µm: the verdict was changed")
+
+    def once(self) -> None:
+        """What the store keeps once (its content keys): twice in one export is refused here,
+        before any store is opened or made for it."""
+        _, of_session = _machine_keys(self.t)
+        fits, edited = set(), set()
+        for f in self.t["fits"]:
+            key = (of_session[f["session_id"]], f["marker"])
+            if key in fits:
+                self.bad("fits", f, f"fit {f['marker']} of {key[0][0]!r} is in the export twice")
+            fits.add(key)
+        for e in self.t["edits"]:
+            if e["fit_id"] in edited:
+                self.bad("edits", e, "a second edit from one fit (the store keeps one per fit)")
+            edited.add(e["fit_id"])
 
 
 def _machine_keys(t: dict[str, list]) -> tuple[dict[int, tuple], dict[int, tuple]]:
