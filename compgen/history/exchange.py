@@ -305,6 +305,14 @@ def import_history(store: Store, doc: dict, sha256: str, where: str,
     if store.rows("SELECT id FROM imports WHERE file_sha256 = ?", (sha256,)):
         raise CompgenError("this export has been imported here already", where=where,
                            hint="nothing to import")
+    _refuse_merges(store, t, where, same)
+    _append(store, t, str(doc["store_id"]), sha256, where)
+    return {name: len(t[name]) for name in _COLUMNS}
+
+
+def _refuse_merges(store: Store, t: dict[str, list], where: str, same: Collection[str]) -> None:
+    """What the import must not merge: another machine under a known name (another machine
+    file, or no serial without ``same``), and a fit this store holds already."""
     machines, session_machine = _machine_keys(t)
     held = {(session_machine[f["session_id"]], f["marker"]) for f in t["fits"]}
     # a machine of the same name and serial here is the same machine only if it was measured
@@ -349,9 +357,14 @@ def import_history(store: Store, doc: dict, sha256: str, where: str,
         raise CompgenError(f"{len(twice)} fit(s) of the export are already here (first: {twice[0][1]} of "
                            f"{twice[0][0][0]!r})", where=where,
                            hint="the two stores share history: import into a fresh store, or keep them apart")
+
+
+def _append(store: Store, t: dict[str, list], origin: str, sha256: str, where: str) -> None:
+    """The export's rows appended in one transaction, each with its new ids and its origin."""
+    machines, session_machine = _machine_keys(t)
     ids: dict[str, dict] = {name: {} for name in _COLUMNS}
     with store.writing():
-        imp = store.insert("imports", {"origin_store": str(doc["store_id"]), "file_sha256": sha256,
+        imp = store.insert("imports", {"origin_store": origin, "file_sha256": sha256,
                                        "recorded": now()})
         for m in t["machines"]:
             ids["machines"][m["id"]] = lookup_machine(store, m["name"], m["serial"], create=True)
@@ -386,4 +399,3 @@ def import_history(store: Store, doc: dict, sha256: str, where: str,
                                     "machine_id": ids["machines"][c["machine_id"]],
                                     "fit_id": ids["fits"][c["fit_id"]],
                                     "against_fit_id": ids["fits"][c["against_fit_id"]]})
-    return {name: len(t[name]) for name in _COLUMNS}
