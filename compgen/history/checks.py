@@ -176,8 +176,6 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
     other than the calibration's is refused: its nominal geometry, limits or tolerances may
     differ, and the changes would be measured against another machine; ``machine_changed``
     checks anyway and says so."""
-    from ..statistics.identify import beyond_setup
-
     name, serial = machine_key(machine, serial)
     changed = bool(calibration.machine_sha256) and calibration.machine_sha256 != machine.sha256
     if changed and not machine_changed:
@@ -187,6 +185,20 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
                            hint="check with the machine file of then; or, if the change is known (a "
                                 "tolerance, a limit), add --machine-changed; after a change of geometry, "
                                 "calibrate again")
+    now_entry, names, changes = _changes(machine, fit, calibration, edits, taken)
+    paths = _paths(machine, data)
+    series = [e for e in entries if e.taken <= taken] + [now_entry]
+    new_flags = [f for f in flags(machine, series, names) if f.taken == taken]
+    advice = _advice(machine, fit, calibration, edits, changes, paths, new_flags, model)
+    nothing = nothing_to_correct(machine, fit, machine.controller) or ""
+    return CheckResult(name, serial, calibration, fit.marker, taken, changes, fit.residual["sigma_um"],
+                       paths, new_flags, advice, changed, model, nothing, accepted)
+
+
+def _changes(machine: Machine, fit: FitResult, calibration: Entry, edits: Sequence[dict],
+             taken: str) -> tuple[Entry, list[str], list[Change]]:
+    """The check as an entry of the history (the corrections written since counted), the
+    location errors both hold, and each one's change against the calibration."""
     k = machine.drift.k_sigma
     corrected: dict[str, float] = {}
     for e in edits:
@@ -206,6 +218,13 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
         status = "pass" if abs(change) <= limit else ("fail" if abs(change) > k * std else "unsure")
         changes.append(Change(n, change, std, now_entry.units[n], limit, status,
                               effect_of_param(machine, n).words))
+    return now_entry, names, changes
+
+
+def _paths(machine: Machine, data) -> dict[str, str]:
+    """Each path's deviation range beyond the set-up against its ``[tolerances]``."""
+    from ..statistics.identify import beyond_setup
+
     joined = Measurements.concat(data)
     got = beyond_setup(machine, joined.poses, joined.deviation)
     paths = {}
@@ -214,8 +233,13 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
             worst = max(stats["range_um"])
             tol = machine.tolerances[p]
             paths[p] = f"PASS {worst:.2f} <= {tol:g}" if worst <= tol else f"FAIL {worst:.2f} > {tol:g}"
-    series = [e for e in entries if e.taken <= taken] + [now_entry]
-    new_flags = [f for f in flags(machine, series, names) if f.taken == taken]
+    return paths
+
+
+def _advice(machine: Machine, fit: FitResult, calibration: Entry, edits: Sequence[dict],
+            changes: list[Change], paths: dict[str, str], new_flags: list[Flag],
+            model: CheckModel) -> list[str]:
+    """What to do next, from what failed, what is unsure, the residual and the drifts."""
     advice = []
     failed = [c for c in changes if c.status == "fail"]
     if failed:
@@ -257,9 +281,7 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
         if f.kind == "drift":
             advice.append(f"{f.param} drifts steadily ({f.text().split('  ', 1)[1]}): plan the next "
                           "calibration before it reaches its limit, and look for its cause (warm-up, season)")
-    nothing = nothing_to_correct(machine, fit, machine.controller) or ""
-    return CheckResult(name, serial, calibration, fit.marker, taken, changes, fit.residual["sigma_um"],
-                       paths, new_flags, advice, changed, model, nothing, accepted)
+    return advice
 
 
 def record_check(store: Store, result: CheckResult, fit: FitResult, machine: Machine, *,
