@@ -25,7 +25,6 @@ FUNCTIONS_OVER = {
     ("compgen/controllers/programs.py", "checked_program"): 98,
     ("compgen/controllers/heidenhain.py", "program_blocks"): 97,
     ("compgen/statistics/diagnose.py", "diagnose"): 96,
-    ("compgen/controllers/kinematics.py", "kinematics_edit"): 87,
 }
 
 

@@ -142,6 +142,35 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
                                "applying it again would double it",
                                hint="measure again and fit the new data; or give the state the data "
                                     "were measured in with --measured-with")
+    p = _plan_against(machine, fit, ctl, current, current_where, measured, measured_where, without_tcp,
+                      force, name, version, date, stem)
+    sign_name = program_name(f"{name}_SIGN", most=ctl.name_max)
+    signcheck, expect = sign_check(machine, p, ctl, sign_name, version, date)
+    # the sign check and the files it names by its name (NAME_SIGN_MSG.A)
+    named = {f"_SIGN{k}": v for k, v in signcheck.files.items() if k in signcheck.named} if signcheck else {}
+    header = _header(machine, ctl, fit, sign_name, signcheck, despite, without_tcp, version, date)
+    words = lines_text(p)
+    ctx = EditContext(name, header, tuple(words), tuple(expect), version, date, fit.marker, stem or name,
+                      tuple((n, e.std) for n, e in fit.parameters.items()), folder)
+    edit = ctl.edit(machine, p, current, current_where, ctx)
+    notes = [*words]
+    if p.setup:
+        notes.append("left out, set-up not machine: " + ", ".join(p.setup))
+    notes += edit.notes
+    if p.not_compensable:
+        notes.append(f"not compensable on {ctl.words} by compgen: " + ", ".join(p.not_compensable))
+    whose = " (an R-test's: a probing program cannot see the edit)" if without_tcp else ""
+    notes += [f"sign check, expected change of the reading after the edit{whose}:", *expect]
+    sign = {f"_SIGN{ctl.program_ext}": signcheck.files[ctl.program_ext]} if signcheck else {}
+    return Emitted({**edit.files, **sign, **named}, tuple(notes), frozenset(named))
+
+
+def _plan_against(machine: Machine, fit: FitResult, ctl: Controller, current: str | None, current_where: str,
+                  measured: str | None, measured_where: str, without_tcp: bool, force: bool, name: str,
+                  version: str, date: str, stem: str | None) -> Plan:
+    """What the edit corrects, against what the control holds: probe data against the machine
+    file's geometry (what ``current`` holds beyond it taken off), R-test data on what the
+    control held while measuring (``measured``, where it differs from ``current``)."""
     p = plan(machine, fit, force)
     if without_tcp and measured is not None:
         raise CompgenError("data measured without TCP (a probing program) are the machine against the "
@@ -165,11 +194,14 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
                                "measured with: compgen adds this round's tables to the ones loaded while "
                                "measuring", hint="measure again with the tables now loaded, or give the "
                                                  "same tables in both")
-    sign_name = program_name(f"{name}_SIGN", most=ctl.name_max)
-    signcheck, expect = sign_check(machine, p, ctl, sign_name, version, date)
-    # the sign check and the files it names by its name (NAME_SIGN_MSG.A)
-    named = {f"_SIGN{k}": v for k, v in signcheck.files.items() if k in signcheck.named} if signcheck else {}
-    header = (f"compgen {version} kinematics edit, {date}",
+    return p
+
+
+def _header(machine: Machine, ctl: Controller, fit: FitResult, sign_name: str, signcheck,
+            despite: tuple[str, ...], without_tcp: bool, version: str, date: str) -> tuple[str, ...]:
+    """What every file of the edit says first: what it is, from which fit, what it adds to,
+    and what comes next."""
+    return (f"compgen {version} kinematics edit, {date}",
               f"machine: {ascii_text(machine.name)}; controller: {ctl.label(machine)}",
               f"from {fit.marker}: machine file {ascii_text(Path(fit.machine['file']).name)}, data "
               + ", ".join(ascii_text(Path(d.file).name) for d in fit.data),
@@ -183,17 +215,3 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
               *(("the sign check runs with an R-test nest: a probing program runs without the control's "
                  "kinematics and cannot see the edit (with a probe only: the control's own check)",)
                 if without_tcp else ()))
-    words = lines_text(p)
-    ctx = EditContext(name, header, tuple(words), tuple(expect), version, date, fit.marker, stem or name,
-                      tuple((n, e.std) for n, e in fit.parameters.items()), folder)
-    edit = ctl.edit(machine, p, current, current_where, ctx)
-    notes = [*words]
-    if p.setup:
-        notes.append("left out, set-up not machine: " + ", ".join(p.setup))
-    notes += edit.notes
-    if p.not_compensable:
-        notes.append(f"not compensable on {ctl.words} by compgen: " + ", ".join(p.not_compensable))
-    whose = " (an R-test's: a probing program cannot see the edit)" if without_tcp else ""
-    notes += [f"sign check, expected change of the reading after the edit{whose}:", *expect]
-    sign = {f"_SIGN{ctl.program_ext}": signcheck.files[ctl.program_ext]} if signcheck else {}
-    return Emitted({**edit.files, **sign, **named}, tuple(notes), frozenset(named))
