@@ -77,6 +77,58 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
     get = _Getter(doc, source)
     get.only(TOP_KEYS | {ctl.section for ctl in CONTROLLERS.values() if ctl.section})
 
+    controller, chains = _chains(get, source)
+    rtest = get.sub("rtest")
+    ball = rtest.vec3("ball")
+    fields = set(Setup.__dataclass_fields__)
+    rtest.only(fields | {"ball", "probe_length", "noise_um", "gain_u"})
+    solids = {k: rtest.number(k) if k == "table_top" else _positive(rtest, k)
+              for k in fields if k in rtest.doc}
+    solids.setdefault("table_radius", math.hypot(ball[0], ball[1]) + 50.0)
+    setup = Setup(**solids)
+    check_ball(setup, ball, rtest.at("ball"))
+    machine = Machine(
+        name=get.str("name"), controller=controller,
+        workpiece=chains["workpiece"], tool=chains["tool"],
+        ball=ball, probe_length=_positive(rtest, "probe_length"), setup=setup,
+        source=source, sha256=sha256,
+        noise_um=_noise(rtest) if "noise_um" in rtest.doc else None,
+        gain_u=_gain_u(rtest) if "gain_u" in rtest.doc else 0.0,
+    )
+    paths = {}
+    for name in get.table("paths", optional=True):
+        paths[name] = _path(get.sub("paths").sub(name), name, machine)
+    program = _program(get.sub("program")) if "program" in doc else None
+    probe = _probe(get.sub("probe")) if "probe" in doc else None
+    limits = Limits()
+    if "limits" in doc:
+        g = get.sub("limits")
+        g.only(set(Limits.__dataclass_fields__))
+        limits = Limits(**{k: _positive(g, k) for k in Limits.__dataclass_fields__ if k in g.doc})
+    drift = Drift()
+    if "drift" in doc:
+        g = get.sub("drift")
+        g.only(set(Drift.__dataclass_fields__))
+        limits_ = {k: _positive(g, k) for k in Drift.__dataclass_fields__ if k in g.doc and k != "each"}
+        drift = Drift(**limits_, each=_each(g, machine) if "each" in g.doc else ())
+    sections = {ctl.section: ctl.read_section(get.sub(ctl.section), machine)   # each control its own
+                for ctl in CONTROLLERS.values() if ctl.section and ctl.section in doc}
+    tolerances = {}
+    if "tolerances" in doc:
+        g = get.sub("tolerances")
+        g.only(set(paths))
+        tolerances = {name: _positive(g, name) for name in g.doc}
+    declared, shapes = (), {}
+    if "effects" in doc:
+        machine, declared, shapes = _effects(get.sub("effects"), machine)
+    serial = identifier("serial", doc["serial"], get.at("serial")) if "serial" in doc else ""
+    return replace(machine, paths=paths, program=program, probe=probe, limits=limits, tolerances=tolerances,
+                   declared=declared, shapes=shapes, drift=drift, serial=serial, **sections)
+
+
+def _chains(get: _Getter, source: str) -> tuple[str, dict]:
+    """The controller and the two chains of axes, each checked: one linear axis along each
+    of x, y, z, a rotary axis at least, a head's rotary axes after its linear ones."""
     controller = get.str("controller")
     if controller not in CONTROLLERS:
         raise CompgenError(f"unknown controller {controller!r}", where=f"{source}: controller",
@@ -102,76 +154,39 @@ def _machine_from_dict(doc: dict, source: str, sha256: str) -> Machine:
         raise CompgenError(f"a linear axis follows the head {tool[head].name} in the [[tool]] chain: compgen "
                            "models heads carried by the linear axes", where=f"{source}: tool",
                            hint="list the tool side's linear axes first, then its rotary axes")
-    rtest = get.sub("rtest")
-    ball = rtest.vec3("ball")
-    fields = set(Setup.__dataclass_fields__)
-    rtest.only(fields | {"ball", "probe_length", "noise_um", "gain_u"})
-    solids = {k: rtest.number(k) if k == "table_top" else _positive(rtest, k)
-              for k in fields if k in rtest.doc}
-    solids.setdefault("table_radius", math.hypot(ball[0], ball[1]) + 50.0)
-    setup = Setup(**solids)
-    check_ball(setup, ball, rtest.at("ball"))
-    machine = Machine(
-        name=get.str("name"), controller=controller,
-        workpiece=chains["workpiece"], tool=chains["tool"],
-        ball=ball, probe_length=_positive(rtest, "probe_length"), setup=setup,
-        source=source, sha256=sha256,
-        noise_um=_noise(rtest) if "noise_um" in rtest.doc else None,
-        gain_u=_gain_u(rtest) if "gain_u" in rtest.doc else 0.0,
-    )
-    paths = {}
-    for name in get.table("paths", optional=True):
-        paths[name] = _path(get.sub("paths").sub(name), name, machine)
-    program = None
-    if "program" in doc:
-        g = get.sub("program")
-        if "safe_z" in g.doc:
-            raise CompgenError("safe_z (a height in machine coordinates) is no longer read: compgen "
-                               "derives the safe height from the [rtest] set-up and checks it",
-                               where=g.at("safe_z"), hint="delete the line; describe the set-up in [rtest]")
-        g.only(set(ProgramSetup.__dataclass_fields__))
-        tool = g._get("tool")
-        program = ProgramSetup(tool=identifier("tool", str(tool) if isinstance(tool, int) else tool,
-                                               g.at("tool")),
-                               feed=_positive(g, "feed"), dwell=_positive(g, "dwell", zero_ok=True),
-                               clearance=_positive(g, "clearance"),
-                               work_offset=identifier("work_offset", g.doc.get("work_offset", "G54"),
-                                                      g.at("work_offset")))
-    probe = _probe(get.sub("probe")) if "probe" in doc else None
-    limits = Limits()
-    if "limits" in doc:
-        g = get.sub("limits")
-        g.only(set(Limits.__dataclass_fields__))
-        limits = Limits(**{k: _positive(g, k) for k in Limits.__dataclass_fields__ if k in g.doc})
-    drift = Drift()
-    if "drift" in doc:
-        g = get.sub("drift")
-        g.only(set(Drift.__dataclass_fields__))
-        limits_ = {k: _positive(g, k) for k in Drift.__dataclass_fields__ if k in g.doc and k != "each"}
-        drift = Drift(**limits_, each=_each(g, machine) if "each" in g.doc else ())
-    sections = {ctl.section: ctl.read_section(get.sub(ctl.section), machine)   # each control its own
-                for ctl in CONTROLLERS.values() if ctl.section and ctl.section in doc}
-    tolerances = {}
-    if "tolerances" in doc:
-        g = get.sub("tolerances")
-        g.only(set(paths))
-        tolerances = {name: _positive(g, name) for name in g.doc}
-    declared, shapes = (), {}
-    if "effects" in doc:
-        g = get.sub("effects")
-        g.only({"declared", "shapes"})
-        if "shapes" in g.doc:
-            shapes = _shapes(g.sub("shapes"))
-            machine = replace(machine, shapes=shapes)
-        declared = tuple(g.names("declared")) if "declared" in g.doc else ()
-        for i, name in enumerate(declared):
-            try:
-                resolve(machine, name)
-            except CompgenError as exc:
-                raise CompgenError(exc.message, where=f"{g.at('declared')}[{i}]", hint=exc.hint) from None
-    serial = identifier("serial", doc["serial"], get.at("serial")) if "serial" in doc else ""
-    return replace(machine, paths=paths, program=program, probe=probe, limits=limits, tolerances=tolerances,
-                   declared=declared, shapes=shapes, drift=drift, serial=serial, **sections)
+    return controller, chains
+
+
+def _program(g: _Getter) -> ProgramSetup:
+    """``[program]``: how measurement programs run."""
+    if "safe_z" in g.doc:
+        raise CompgenError("safe_z (a height in machine coordinates) is no longer read: compgen "
+                           "derives the safe height from the [rtest] set-up and checks it",
+                           where=g.at("safe_z"), hint="delete the line; describe the set-up in [rtest]")
+    g.only(set(ProgramSetup.__dataclass_fields__))
+    tool = g._get("tool")
+    return ProgramSetup(tool=identifier("tool", str(tool) if isinstance(tool, int) else tool, g.at("tool")),
+                        feed=_positive(g, "feed"), dwell=_positive(g, "dwell", zero_ok=True),
+                        clearance=_positive(g, "clearance"),
+                        work_offset=identifier("work_offset", g.doc.get("work_offset", "G54"),
+                                               g.at("work_offset")))
+
+
+def _effects(g: _Getter, machine: Machine) -> tuple[Machine, tuple[str, ...], dict]:
+    """``[effects]``: the shapes a user declares and the effects diagnose tries beside the
+    catalogue's, each resolved on ``machine`` (which the shapes are added to)."""
+    shapes = {}
+    g.only({"declared", "shapes"})
+    if "shapes" in g.doc:
+        shapes = _shapes(g.sub("shapes"))
+        machine = replace(machine, shapes=shapes)
+    declared = tuple(g.names("declared")) if "declared" in g.doc else ()
+    for i, name in enumerate(declared):
+        try:
+            resolve(machine, name)
+        except CompgenError as exc:
+            raise CompgenError(exc.message, where=f"{g.at('declared')}[{i}]", hint=exc.hint) from None
+    return machine, declared, shapes
 
 
 def _probe(g: _Getter) -> ProbeSetup:
