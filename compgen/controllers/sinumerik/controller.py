@@ -42,6 +42,58 @@ from .cec import _cec_text, _machine_axes, cec_modes, cec_places, read_cec
 from .reader import program_blocks
 
 
+def _cec_files(machine: Machine, tables: list[CompTable], loaded: list[CompTable], current: str, where: str,
+               ctx: EditContext) -> tuple[dict[str, str], list[str]]:
+    """This round's CEC tables composed with those loaded (``tables``), their file and the
+    file that restores them, and what loading them needs; refused where a loaded table acts
+    one way or through another's factor (this round's trims act both ways and alone)."""
+    files: dict[str, str] = {}
+    notes: list[str] = []
+    names = _machine_axes(machine)
+    placed = cec_places(tables)
+    modes = cec_modes(current, where)
+    for k, t in placed:
+        if t not in loaded and any(float(v) != 0 for v in modes.get(k, {}).values()):
+            # this round's trims act both ways and alone: added to a table that acts one
+            # way, or is multiplied by another, they would not be what compgen predicts
+            raise CompgenError(f"CEC table {k} ({t.input}->{t.output}) acts "
+                               + " and ".join(f"with $AN_CEC{key}[{k}]={v}"
+                                              for key, v in modes[k].items() if float(v) != 0)
+                               + ": compgen does not add this round's correction to it",
+                               where=where, hint="give this round a table of its own with the "
+                                                 "OEM, or correct that table by hand")
+    files["_CEC.INI"] = render("sinumerik/cec.INI.j2", header=ctx.header, raw=[],
+                               points=max(len(t.values) for t in tables),
+                               tables=[_cec_text(t, k, names, modes.get(k)) for k, t in placed])
+    slots = {t.effect for t in loaded}
+    zero = [_cec_text(replace(t, values=(0.0,) * len(t.values), effect="(none)", words="not loaded"),
+                      k, names) for k, t in placed if t.effect not in slots]
+    raw = [line.strip() for _, line in state_lines(current, where) if CEC.match(line.strip())]
+    files["_CEC_RESTORE.INI"] = render(
+        "sinumerik/cec.INI.j2", raw=raw, tables=zero, points=max(len(t.values) for t in tables),
+        header=[f"compgen {ctx.version}: restores the CEC tables as they were read"
+                + (" (tables not loaded before: zero)" if zero else ""), *ctx.header[1:3]])
+    notes.append("CEC tables: " + "; ".join(
+        f"table {k} {t.input}->{t.output}: "
+        + (f"{t.words} (the loaded table with this round's added)" if t.effect in slots else t.effect)
+        for k, t in placed if t.effect not in slots or t not in loaded))
+    if not loaded:
+        notes.append("no CEC tables were read from --current: they hold this round's correction "
+                     "alone; if the control holds CEC tables, give their file as a further --current")
+    outputs = sorted({names[t.output] for _, t in placed})
+    notes.append("load the CEC file with MD32710 $MA_CEC_ENABLE = 0 on " + ", ".join(outputs)
+                 + " (K3 03/2013 p.237: tables load only with the compensation off), then set it to "
+                   "1 "
+                   "and NEWCONF")
+    for k, t in placed:
+        if t.effect not in slots:      # a table the control has not held: its data first
+            notes.append(f"CEC table {k} is new: MD18342 $MN_MM_CEC_MAX_POINTS[{k}] >= "
+                         f"{len(t.values)} "
+                         "(static memory, formatted at the next run-up: archive first), SD41300 "
+                         f"$SN_CEC_TABLE_ENABLE[{k}] = 1 (K3 03/2013 p.245)")
+    return files, notes
+
+
 class Sinumerik840D(Controller):
     name = "sinumerik840d"
     family = "sinumerik"
@@ -212,48 +264,9 @@ class Sinumerik840D(Controller):
                  f"the largest here is {largest:.4f} mm"
                  + ("" if limit is not None else " (give fine_limit_mm in [sinumerik] to have it checked)")]
         if new:
-            names = _machine_axes(machine)
-            placed = cec_places(tables)
-            modes = cec_modes(current, where)
-            for k, t in placed:
-                if t not in loaded and any(float(v) != 0 for v in modes.get(k, {}).values()):
-                    # this round's trims act both ways and alone: added to a table that acts one
-                    # way, or is multiplied by another, they would not be what compgen predicts
-                    raise CompgenError(f"CEC table {k} ({t.input}->{t.output}) acts "
-                                       + " and ".join(f"with $AN_CEC{key}[{k}]={v}"
-                                                      for key, v in modes[k].items() if float(v) != 0)
-                                       + ": compgen does not add this round's correction to it",
-                                       where=where, hint="give this round a table of its own with the "
-                                                         "OEM, or correct that table by hand")
-            files["_CEC.INI"] = render("sinumerik/cec.INI.j2", header=ctx.header, raw=[],
-                                       points=max(len(t.values) for t in tables),
-                                       tables=[_cec_text(t, k, names, modes.get(k)) for k, t in placed])
-            slots = {t.effect for t in loaded}
-            zero = [_cec_text(replace(t, values=(0.0,) * len(t.values), effect="(none)", words="not loaded"),
-                              k, names) for k, t in placed if t.effect not in slots]
-            raw = [line.strip() for _, line in state_lines(current, where) if CEC.match(line.strip())]
-            files["_CEC_RESTORE.INI"] = render(
-                "sinumerik/cec.INI.j2", raw=raw, tables=zero, points=max(len(t.values) for t in tables),
-                header=[f"compgen {ctx.version}: restores the CEC tables as they were read"
-                        + (" (tables not loaded before: zero)" if zero else ""), *ctx.header[1:3]])
-            notes.append("CEC tables: " + "; ".join(
-                f"table {k} {t.input}->{t.output}: "
-                + (f"{t.words} (the loaded table with this round's added)" if t.effect in slots else t.effect)
-                for k, t in placed if t.effect not in slots or t not in loaded))
-            if not loaded:
-                notes.append("no CEC tables were read from --current: they hold this round's correction "
-                             "alone; if the control holds CEC tables, give their file as a further --current")
-            outputs = sorted({names[t.output] for _, t in placed})
-            notes.append("load the CEC file with MD32710 $MA_CEC_ENABLE = 0 on " + ", ".join(outputs)
-                         + " (K3 03/2013 p.237: tables load only with the compensation off), then set it to "
-                           "1 "
-                           "and NEWCONF")
-            for k, t in placed:
-                if t.effect not in slots:      # a table the control has not held: its data first
-                    notes.append(f"CEC table {k} is new: MD18342 $MN_MM_CEC_MAX_POINTS[{k}] >= "
-                                 f"{len(t.values)} "
-                                 "(static memory, formatted at the next run-up: archive first), SD41300 "
-                                 f"$SN_CEC_TABLE_ENABLE[{k}] = 1 (K3 03/2013 p.245)")
+            cec, more = _cec_files(machine, tables, loaded, current, where, ctx)
+            files.update(cec)
+            notes += more
         if p.squareness:
             notes.append("squareness goes to linear CEC tables: " + ", ".join(p.squareness))
         return EditFiles(files, tuple(notes))
