@@ -479,6 +479,9 @@ def test_checks_failed_and_passed_travel_with_an_export(year, tmp_path, monkeypa
             H.record_check(a, result, fit, year[0])
         want = [(c["passed"], c["summary"]) for c in a.rows("SELECT passed, summary FROM checks ORDER BY id")]
     assert [p for p, _ in want] == [0, 1]
+    with open_store(tmp_path / "a.sqlite") as a:     # each check's path ranges, for the trend's panels
+        ranges = H.trend(a, year[0]).ranges
+    assert len(ranges) == 2 and all(set(r) == {"K4"} and r["K4"] > 0 for _, r in ranges), ranges
     assert run("history", "export", "--db", "a.sqlite", "-o", "a.json")[0] == 0
     rc, out, err = run("history", "import", "a.json", "--db", "b.sqlite")
     assert rc == 0, out + err

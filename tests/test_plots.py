@@ -287,3 +287,25 @@ def test_the_trend_draws_the_drift_limit_about_the_last_calibration(seed_machine
         np.testing.assert_allclose(high.get_ydata(), [10, 10, 12, 12], atol=1e-9)
     finally:
         plt.close(fig)
+
+
+def test_the_trend_draws_each_checked_paths_range_against_its_tolerance(seed_machine):
+    """A panel per path the checks measured: its largest deviation range at each check, and
+    the [tolerances] line it is judged against (the trend drew the location errors only)."""
+    t0 = datetime(2026, 11, 2, 8, 0)
+    when = [(t0 + timedelta(days=7 * i)).isoformat() for i in range(3)]
+    entries = [Entry(i, w, f"m{i}", "check", "rtest", "check passed", 0.5, values={"XOC": 5 * UM},
+                     std={"XOC": 0.4 * UM}, units={"XOC": "mm"}, corrected={}) for i, w in enumerate(when)]
+    ranges = [(w, {"K4": 6.0 + i, "K2": 3.0}) for i, w in enumerate(when)]
+    t = SimpleNamespace(machine="m", params=("XOC",), entries=entries, edits=[], flags=[], ranges=ranges)
+    fig = plots.trend_figure(t, None, {"K4": 10.0, "K1": 8.0})
+    try:
+        assert [ax.get_ylabel() for ax in fig.axes] == ["XOC (µm)", "K4 range (µm)"]   # K1: never checked
+        ax = fig.axes[1]
+        checked = next(x for x in ax.get_lines() if x.get_marker() == "s")
+        np.testing.assert_allclose(checked.get_ydata(), [6, 7, 8])
+        tolerance = next(x for x in ax.get_lines() if x.get_linestyle() == ":")
+        assert list(tolerance.get_ydata()) == [10.0, 10.0]
+        assert "[tolerances]" in fig.axes[0].get_title()
+    finally:
+        plt.close(fig)

@@ -469,7 +469,7 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
         from ..history import drift_limits, trend
         from .plots import trend_png
         past = trend(history_store(db, create=False), machine)
-        png = trend_png(past, drift_limits(machine, past))
+        png = trend_png(past, drift_limits(machine, past), machine.tolerances)
     html = report_html(machine, fit, found, images, comparison, emitted, steps, __version__,
                        date.today().isoformat(), past, png, screen)
     write_atomically(output, html, force, inputs=(base, before, *post_files, *emitted))

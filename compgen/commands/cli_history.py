@@ -143,7 +143,7 @@ def history_trend_cmd(machine_file, serial, params, plot, as_json, force, db):
     if plot:
         from ..history import drift_limits
         from .plots import trend_png
-        write_atomically(plot, trend_png(t, drift_limits(machine, t)), force)
+        write_atomically(plot, trend_png(t, drift_limits(machine, t), machine.tolerances), force)
     click.echo(json.dumps(trend_dict(t), indent=2, ensure_ascii=False) if as_json else trend_text(t),
                nl=as_json)
 

@@ -226,25 +226,32 @@ def _png(fig) -> bytes:
     return buffer.getvalue()
 
 
-def trend_png(t, limits: dict[str, float] | None = None) -> bytes:
+def trend_png(t, limits: dict[str, float] | None = None, tolerances: dict[str, float] | None = None) -> bytes:
     """A machine's history (``history.Trend``) as a PNG (``trend_figure``)."""
-    return _png(trend_figure(t, limits))
+    return _png(trend_figure(t, limits, tolerances))
 
 
 @_styled
-def trend_figure(t, limits: dict[str, float] | None = None):
+def trend_figure(t, limits: dict[str, float] | None = None, tolerances: dict[str, float] | None = None):
     """A machine's history (``history.Trend``): each location error's machine value over
     time (in the unit it is shown in) with its ±2σ band; edits as vertical lines, flagged
     fits circled in red. ``limits`` (parameter → the ``[drift]`` limit of its class, mm or
     rad): the band a check judges against, the last accepted calibration's machine value ±
-    the limit, a step at each calibration. One panel per parameter, each as tall whatever
-    their number."""
+    the limit, a step at each calibration. ``tolerances`` (path → µm, the machine file's
+    ``[tolerances]``): a panel per path that checks measured, its largest deviation range at
+    each check against the tolerance. One panel each, each as tall whatever their number."""
     from datetime import datetime
 
-    n = len(t.params)
+    paths = [p for p in (tolerances or {}) if any(p in r for _, r in t.ranges)]
+    n = len(t.params) + len(paths)
     width = plt.rcParams["figure.figsize"][0]
     fig, axes = plt.subplots(n, 1, figsize=(width, PANEL_IN * n + TITLE_IN), sharex=True, squeeze=False)
-    for ax, name in zip(axes[:, 0], t.params, strict=True):
+    for ax, path in zip(axes[len(t.params):, 0], paths, strict=True):
+        seen = [(datetime.fromisoformat(taken), r[path]) for taken, r in t.ranges if path in r]
+        ax.plot([w for w, _ in seen], [v for _, v in seen], "s-", label="check")
+        ax.axhline(tolerances[path], color="0.4", lw=0.8, ls=":", label="[tolerances]")
+        ax.set_ylabel(f"{path} range (µm)")
+    for ax, name in zip(axes[:len(t.params), 0], t.params, strict=True):
         rows = [e for e in t.entries if name in e.values]
         when = [datetime.fromisoformat(e.taken) for e in rows]
         v = np.array([shown(e.machine_value(name), e.units[name])[0] for e in rows])
@@ -271,6 +278,7 @@ def trend_figure(t, limits: dict[str, float] | None = None):
             ax.plot([when[i] for i in bad], v[bad], "o", ms=10, mfc="none", mec="red")
         ax.set_ylabel(f"{name} ({unit})")
     axes[0, 0].set_title(f"{one_line(t.machine)}: machine values over time (dashed: edits; red: flagged"
-                         + ("; dotted: the [drift] limit about the last calibration" if limits else "") + ")")
+                         + ("; dotted: the [drift] limit about the last calibration" if limits else "")
+                         + ("; a path's range against its [tolerances]" if paths else "") + ")")
     fig.autofmt_xdate()
     return fig

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from .. import me
 from ..controllers.kinematics import nothing_to_correct
@@ -100,6 +100,7 @@ class CheckResult:
     model: CheckModel = CheckModel()
     nothing: str = ""                # "nothing to correct: ...", where an edit of this check would be noise
     accepted: str = ""               # how the calibration's "accepted" stands (``calibration_accepted``)
+    ranges: dict = field(default_factory=dict)   # path → its largest deviation range beyond the set-up, µm
 
     @property
     def passed(self) -> bool:
@@ -119,6 +120,7 @@ class CheckResult:
                 "machine_file_changed": self.machine_changed,
                 "model": {"effects": list(self.model.effects), "effects_were": self.model.how},
                 "nothing_to_correct": self.nothing, "calibration_accepted": self.accepted,
+                "path_ranges_um": self.ranges,
                 **({"recorded_by": self.against.recorded_by} if self.against.recorded_by else {})}
 
     def text(self) -> str:
@@ -186,13 +188,13 @@ def check(machine: Machine, fit: FitResult, data, calibration: Entry, entries: S
                                 "tolerance, a limit), add --machine-changed; after a change of geometry, "
                                 "calibrate again")
     now_entry, names, changes = _changes(machine, fit, calibration, edits, taken)
-    paths = _paths(machine, data)
+    paths, ranges = _paths(machine, data)
     series = [e for e in entries if e.taken <= taken] + [now_entry]
     new_flags = [f for f in flags(machine, series, names) if f.taken == taken]
     advice = _advice(machine, fit, calibration, edits, changes, paths, new_flags, model)
     nothing = nothing_to_correct(machine, fit, machine.controller) or ""
     return CheckResult(name, serial, calibration, fit.marker, taken, changes, fit.residual["sigma_um"],
-                       paths, new_flags, advice, changed, model, nothing, accepted)
+                       paths, new_flags, advice, changed, model, nothing, accepted, ranges)
 
 
 def _changes(machine: Machine, fit: FitResult, calibration: Entry, edits: Sequence[dict],
@@ -221,19 +223,20 @@ def _changes(machine: Machine, fit: FitResult, calibration: Entry, edits: Sequen
     return now_entry, names, changes
 
 
-def _paths(machine: Machine, data) -> dict[str, str]:
-    """Each path's deviation range beyond the set-up against its ``[tolerances]``."""
+def _paths(machine: Machine, data) -> tuple[dict[str, str], dict[str, float]]:
+    """Each path's largest deviation range beyond the set-up (µm), and against its
+    ``[tolerances]`` its verdict."""
     from ..statistics.identify import beyond_setup
 
     joined = Measurements.concat(data)
     got = beyond_setup(machine, joined.poses, joined.deviation)
+    ranges = {p: float(max(stats["range_um"])) for p, stats in got["per_path"].items()}
     paths = {}
-    for p, stats in got["per_path"].items():
+    for p, worst in ranges.items():
         if p in machine.tolerances:
-            worst = max(stats["range_um"])
             tol = machine.tolerances[p]
             paths[p] = f"PASS {worst:.2f} <= {tol:g}" if worst <= tol else f"FAIL {worst:.2f} > {tol:g}"
-    return paths
+    return paths, ranges
 
 
 def _advice(machine: Machine, fit: FitResult, calibration: Entry, edits: Sequence[dict],

@@ -70,6 +70,8 @@ class Trend:
     entries: list[Entry]
     edits: list[dict]
     flags: list[Flag] = field(default_factory=list)
+    # each check's largest deviation range per path (µm), in time order: (taken, {path: range})
+    ranges: list[tuple[str, dict]] = field(default_factory=list)
 
 
 def edit_key(edit: dict, fit_taken: Mapping[int, str]) -> tuple:
@@ -164,7 +166,24 @@ def trend(store: Store, machine: Machine, serial: str | None = None,
     if missing:
         raise CompgenError(f"no recorded fit holds {', '.join(missing)}",
                            hint="recorded: " + ", ".join(seen))
-    return Trend(name, serial, names, entries, edits, flags(machine, entries, names))
+    return Trend(name, serial, names, entries, edits, flags(machine, entries, names),
+                 _check_ranges(store, machine_id(store, machine, serial)))
+
+
+def _check_ranges(store: Store, mid: int) -> list[tuple[str, dict]]:
+    """Each check's path ranges (µm) as its summary keeps them, in time order; checks an
+    older compgen recorded without them, and rows no reader can read, are left out."""
+    out = []
+    for r in store.rows("SELECT c.summary, s.taken FROM checks c JOIN fits f ON f.id = c.fit_id "
+                        "JOIN sessions s ON s.id = f.session_id WHERE c.machine_id = ? "
+                        "ORDER BY s.taken, c.id", (mid,)):
+        try:
+            ranges = json.loads(r["summary"]).get("path_ranges_um") or {}
+        except (TypeError, ValueError, AttributeError):
+            continue
+        if isinstance(ranges, dict) and all(isinstance(v, int | float) for v in ranges.values()):
+            out.append((utc(r["taken"]), ranges))
+    return out
 
 
 def flags(machine: Machine, entries: Sequence[Entry], names: Sequence[str]) -> list[Flag]:
