@@ -515,7 +515,7 @@ def test_a_store_of_the_first_schema_is_migrated_and_keeps_its_rows(tmp_path, fi
                     old.insert(table, row)
             assert old.version() == 1
     with open_store(tmp_path / "old.sqlite") as new:
-        assert new.version() == S.VERSION == 5
+        assert new.version() == S.VERSION == 6
         assert new.rows("SELECT import_id FROM sessions") == [{"import_id": None}]
         assert new.rows("SELECT content_sha256 FROM fits") == [{"content_sha256": None}]
         assert _counts(new) == {"machines": 1, "sessions": 1, "fits": 1}
@@ -858,7 +858,7 @@ def test_a_writer_can_neither_break_the_schema_nor_pass_a_forged_calibration_to_
         ids = [r["id"] for r in store.rows("SELECT id FROM machines ORDER BY id")]
         assert len(ids) == 5 and ids == list(range(ids[0], ids[0] + 5)), ids
     with open_store(pg_db) as store:
-        assert store.version() == 5           # the store still opens for everyone
+        assert store.version() == 6           # the store still opens for everyone
         assert {r["recorded_by"] for r in store.rows("SELECT recorded_by FROM fits")} == {"forger"}
         # who and when are the database's: a writer's "now" is its clock's instant, by its role
         squat = store.rows("SELECT recorded, recorded_by FROM machines WHERE name LIKE ?", ("squatter%",))
@@ -1416,3 +1416,31 @@ def test_an_export_that_names_no_store_is_refused_in_one_line(tmp_path, year, mo
     code, _, err = run("history", "import", "a.json", "--db", "b.sqlite")
     assert code == 2 and "names no store it came from" in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "b.sqlite").exists()
+
+
+@pytest.mark.parametrize("kind", ["sqlite", "postgresql"])
+def test_a_store_of_schema_5_has_its_older_dates_normalised_to_utc_once(tmp_path, year, monkeypatch, request,
+                                                                        kind):
+    """Rows an older compgen kept with the offset it was given ("2026-03-01T10:00:00+02:00")
+    are rewritten once, by the migration the store records (version 6), as the UTC instant
+    (08:00); the append-only rule holds again after it, and rows already in UTC are untouched."""
+    import compgen.history.store as S
+    url = str(tmp_path / "h.sqlite") if kind == "sqlite" else request.getfixturevalue("pg_db")
+    machine, fit = year[0], year[2][0][1]
+    with monkeypatch.context() as m:
+        m.setattr(S, "MIGRATIONS", S.MIGRATIONS[:5])
+        m.setattr(S, "VERSION", 5)
+        with init(url)[0] as store:
+            H.record_fit(store, fit, machine, taken="2026-03-01T09:00:00+00:00")
+            session = store.rows("SELECT * FROM sessions")[0]
+            with store.writing():
+                store.insert("sessions", {k: v for k, v in session.items()
+                                          if k not in ("id", "recorded_by", "import_id")}
+                             | {"taken": "2026-03-01T10:00:00+02:00"})
+            assert store.version() == 5
+    with init(url)[0] as store:
+        assert store.version() == 6
+        assert sorted(r["taken"] for r in store.rows("SELECT taken FROM sessions")) == [
+            "2026-03-01T08:00:00+00:00", "2026-03-01T09:00:00+00:00"]
+        with pytest.raises(CompgenError, match="append-only"), store.writing():
+            store.db.execute("UPDATE sessions SET taken = 'x'")

@@ -78,10 +78,29 @@ MIGRATIONS: tuple[tuple[int, tuple[str, ...]], ...] = (
     # every row's author, not only a fit's and an edit's (and, on PostgreSQL, below: every
     # row's time of recording is the database's clock, whatever a writer's INSERT says)
     (5, tuple(f"ALTER TABLE {t} ADD COLUMN recorded_by TEXT" for t in AUTHORED)),
+    # (each database its own, below) the dates an older compgen kept with the offset it was
+    # given, normalised once to UTC instants: every row's date then compares as text too
+    (6, ()),
 )
+DATED = ("sessions", "edits")        # the tables whose ``taken`` is a measurement's instant
 VERSION = MIGRATIONS[-1][0]
 # an instant as compgen stores it (UTC; an older compgen kept the offset it was given)
 INSTANT_PG = r"^[0-9]{4}-[0-9]{2}-[0-9]{2}T[0-9]{2}:[0-9]{2}:[0-9]{2}[+-][0-9]{2}:[0-9]{2}$"
+# What SQLite adds to a migration: version 6 rewrites dates, so the append-only triggers step
+# aside for it (inside the migration's transaction) and are made again as they were
+def sqlite_refusal(table: str, op: str) -> str:
+    """The SQLite trigger that refuses ``op`` (UPDATE, DELETE) on ``table``."""
+    return (f"CREATE TRIGGER {table}_no_{op.lower()} BEFORE {op} ON {table} BEGIN "
+            f"SELECT RAISE(ABORT, 'compgen history is append-only: {op} on {table} refused'); END")
+
+
+SQLITE_MIGRATIONS: dict[int, tuple[str, ...]] = {
+    6: tuple(s for t in DATED for s in (
+        f"DROP TRIGGER IF EXISTS {t}_no_update",
+        f"UPDATE {t} SET taken = strftime('%Y-%m-%dT%H:%M:%S+00:00', taken) WHERE taken NOT LIKE '%+00:00' "
+        "AND strftime('%Y-%m-%dT%H:%M:%S+00:00', taken) IS NOT NULL",
+        sqlite_refusal(t, "UPDATE"))),
+}
 # What PostgreSQL adds to a migration: the role that writes a row is the database's word
 POSTGRES_MIGRATIONS: dict[int, tuple[str, ...]] = {
     3: (f"""CREATE OR REPLACE FUNCTION {PG_SCHEMA}.recorded_by() RETURNS trigger LANGUAGE plpgsql AS $$
@@ -130,6 +149,13 @@ POSTGRES_MIGRATIONS: dict[int, tuple[str, ...]] = {
                                           'YYYY-MM-DD"T"HH24:MI:SS"+00:00"'); RETURN NEW; END $$""",
         *(f"CREATE TRIGGER {t}_recorded_at BEFORE INSERT ON {t} FOR EACH ROW "
           f"EXECUTE FUNCTION {PG_SCHEMA}.recorded_at()" for t in TABLES)),
+    # older rows' dates to UTC, by the owner, the append-only trigger off for this one update
+    6: tuple(s for t in DATED for s in (
+        f"ALTER TABLE {t} DISABLE TRIGGER {t}_append_only",
+        f"""UPDATE {t} SET taken = to_char(taken::timestamptz AT TIME ZONE 'UTC',
+                                        'YYYY-MM-DD"T"HH24:MI:SS"+00:00"')
+            WHERE taken ~ '{INSTANT_PG}' AND taken NOT LIKE '%+00:00'""",
+        f"ALTER TABLE {t} ENABLE TRIGGER {t}_append_only")),
 }
 
 
@@ -337,7 +363,7 @@ class Store:
                 for statement in ddl:
                     self.db.execute(statement.format(id=ident, json=kind))
                 self._append_only([t for t in TABLES if f"CREATE TABLE {t} " in "".join(ddl)])
-                for statement in POSTGRES_MIGRATIONS.get(v, ()) if self.postgres else ():
+                for statement in (POSTGRES_MIGRATIONS if self.postgres else SQLITE_MIGRATIONS).get(v, ()):
                     self.db.execute(statement)
                 self.db.execute(self._sql("INSERT INTO compgen_schema VALUES (?, ?, ?, ?)"),
                                 (APP, v, store_id, now()))
@@ -357,9 +383,7 @@ class Store:
                                 f"FOR EACH STATEMENT EXECUTE FUNCTION {PG_SCHEMA}.append_only()")
             else:
                 for op in ("UPDATE", "DELETE"):
-                    self.db.execute(f"CREATE TRIGGER {t}_no_{op.lower()} BEFORE {op} ON {t} BEGIN "
-                                    f"SELECT RAISE(ABORT, 'compgen history is append-only: {op} on {t} "
-                                    "refused'); END")
+                    self.db.execute(sqlite_refusal(t, op))
 
     def grant(self, role: str) -> None:
         """PostgreSQL: let ``role`` read and append, nothing more (run by the owner)."""
