@@ -58,6 +58,16 @@ def frames(machine: Machine, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
             np.einsum("nji,nj->ni", R, tool[:, :3, 2]))
 
 
+def sensor_axes(machine: Machine, q: np.ndarray) -> np.ndarray | None:
+    """The R-test nest's sensor directions at poses ``q`` (n, 3, 3: column s is sensor s, in
+    the machine frame): they turn with the tool, so on a head they are the tool's turned
+    axes; None where no head turns the tool (the machine's own X, Y, Z)."""
+    if not machine.heads:
+        return None
+    zero = np.zeros((len(q), 6))
+    return chain_transform(machine, machine.tool, Poses.at(q, np.zeros(3)), {}, zero)[:, :3, :3]
+
+
 def along_tool(machine: Machine, q: np.ndarray, d: float) -> np.ndarray:
     """Poses ``q`` (n, k) with the nest moved ``d`` mm along the tool axis, away from the
     table (the rotary axes held): machine Z where no head tilts the tool."""

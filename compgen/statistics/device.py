@@ -1,13 +1,15 @@
 """The measuring device as a candidate cause of misfit, beside the machine's effects.
 
 An R-test's sensor that reads (1 + g) of the ball's displacement (a gain error) adds g·yₐ
-to each reading in its own direction. To first order the column of a gain is that share of
-the true displacement, which the fit's prediction ŷ estimates without the readings' noise
-(the readings themselves would correlate with their own noise and look significant on any
-dense session). The three gains are tested as the machine's candidates are (visible beyond
-the model, the residual each removes, an F test in the same Bonferroni family), and never
-added to a model: a device out of calibration is calibrated and its data measured again; a
-control is never corrected for it.
+to each reading in its own direction: the machine's X, Y or Z under a fixed spindle, the
+tool's turned axis where the nest turns with a head (``frames.sensor_axes``). To first
+order the column of a gain is that share of the true displacement, which the fit's
+prediction ŷ estimates without the readings' noise (the readings themselves would
+correlate with their own noise and look significant on any dense session). The three gains
+are tested as the machine's candidates are (visible beyond the model, the residual each
+removes, an F test in the same Bonferroni family), and never added to a model: a device
+out of calibration is calibrated and its data measured again; a control is never corrected
+for it.
 
 What the data cannot show: all three gains equal (the readings scaled) is exactly a scale
 of the location errors; it stays in the budget (``budget.py``: ``[rtest] gain_u``). Two
@@ -53,20 +55,27 @@ class DeviceCandidate:
                 "p_value": self.p_value, "significant": self.significant}
 
 
-def device_columns(pred: np.ndarray, rtest: np.ndarray) -> dict[str, np.ndarray]:
+def device_columns(pred: np.ndarray, rtest: np.ndarray,
+                   axes: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Each gain's column (3n,), mm per 1 of gain, from the fit's prediction ``pred`` (n, 3)
-    on the readings an R-test made (``rtest``, (n,))."""
+    on the readings an R-test made (``rtest``, (n,)). A sensor reads along its own axis:
+    ``axes`` (n, 3, 3, column s sensor s in the machine frame) where the nest turns with a
+    head, else the machine's X, Y, Z."""
     y = np.where(rtest[:, None], pred, 0.0)
     out = {}
     for a, s in enumerate(SENSORS):
-        c = np.zeros_like(y)
-        c[:, a] = y[:, a]
+        if axes is None:
+            c = np.zeros_like(y)
+            c[:, a] = y[:, a]
+        else:                   # the displacement's share along the sensor, read along it
+            u = axes[:, :, a]
+            c = u * np.einsum("ni,ni->n", u, y)[:, None]
         out[f"gain_{s}"] = c.ravel()
     return out
 
 
 def device_candidates(pred: np.ndarray, rtest: np.ndarray, Q: np.ndarray, r: np.ndarray, noise,
-                      sigma2_w: float) -> list[DeviceCandidate]:
+                      sigma2_w: float, axes: np.ndarray | None = None) -> list[DeviceCandidate]:
     """The device parameters' numbers (p-values left to the caller, who knows the family):
     ``Q``, ``r`` the model's columns and the residual beyond them; ``noise`` the diagnosis's
     ``Whitening``; ``sigma2_w`` the whitened residual's variance. None when no reading is an
@@ -75,7 +84,7 @@ def device_candidates(pred: np.ndarray, rtest: np.ndarray, Q: np.ndarray, r: np.
         return []
     rw = noise.residual(r)
     out = []
-    for name, c in device_columns(pred, rtest).items():
+    for name, c in device_columns(pred, rtest, axes).items():
         cc, qc, cr = np.array([[c @ c]]), (Q.T @ c)[:, None], np.array([c @ r])
         vis, drop, amp = explained(cc, qc, cr)
         cw = noise.white(c)

@@ -24,6 +24,7 @@ import numpy as np
 from ..data.rtest import Measurements, RTestData
 from ..errors import CompgenError
 from ..model.effects import Effect, catalogue, effect_of_param, resolve
+from ..model.frames import sensor_axes
 from ..model.kinematics import Model
 from ..model.machine import Machine
 from ..model.poses import Poses, runs
@@ -78,6 +79,7 @@ class _Residual:
     r3: np.ndarray      # (n, 3) the residual as the fit left it (before Q's projection)
     pred: np.ndarray    # (n, 3) the fit's prediction of the readings
     rtest: np.ndarray   # (n,) the reading is an R-test's (not a probe's sphere centre)
+    axes: np.ndarray | None   # (n, 3, 3) the nest's sensor axes where a head turns them, else None
     Q: np.ndarray
     R: np.ndarray
     bad: np.ndarray
@@ -123,7 +125,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     ranked, noise, made, carried = _ranked(machine, fit, effects, res)
     rss_w = noise.rss(r)
     # the device beside the machine, in one Bonferroni family with it
-    devices = device_candidates(res.pred, res.rtest, res.Q, r, noise, rss_w / dof)
+    devices = device_candidates(res.pred, res.rtest, res.Q, r, noise, rss_w / dof, res.axes)
     tested = (sum(1 for row in ranked.values() if row.k_eff)
               + sum(1 for d in devices if d.visibility >= VISIBLE))
     devices = [replace(d, p_value=p, significant=bool(d.visibility >= VISIBLE and p < alpha))
@@ -216,7 +218,7 @@ def _told_beside(devices: list[DeviceCandidate], beside: np.ndarray, res: _Resid
     (p 0.006), and beside a Z gain of −1.5 % read 2.5 % itself; a calibrated R-test beside an
     unmodelled 15″ 2/rev angle of C read X −56 ± 1.7 % (p < 1e-300), and beside the best of
     three machine effects X was significant, where the other two took it back."""
-    cols = {e: noise.white(c)[:, None] for e, c in device_columns(res.pred, res.rtest).items()}
+    cols = {e: noise.white(c)[:, None] for e, c in device_columns(res.pred, res.rtest, res.axes).items()}
     rw = noise.residual(res.r)
     machine = span(noise.off(beside))     # rivals among second effects are one column
 
@@ -300,7 +302,8 @@ def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residu
     Q, R = tall_qr((J if starts is None else starts(J)).reshape(r.size, -1))
     if starts is not None:
         Q = np.hstack([starts.basis(len(poses)), Q])
-    return _Residual(poses, seg, r - Q @ (Q.T @ r), r3, pred, rtest, Q, R, bad, size)
+    return _Residual(poses, seg, r - Q @ (Q.T @ r), r3, pred, rtest, sensor_axes(machine, poses.q), Q, R, bad,
+                     size)
 
 
 def _to_try(machine: Machine, fit: FitResult, candidates: Sequence[str] | None,
