@@ -88,6 +88,9 @@ CASES = {
     # two drifts at once: YOC and AOC growing through the session
     "two drifts: YOC 3 µm and AOC 6″, τ = 15 min": ({"YOC:e15": 3 * UM, "AOC:e15": 6 * ARCSEC},
                                                    frozenset({"YOC:e15", "AOC:e15"})),
+    # two drifts at once, linear in time (not saturating): the loop ends unexplained, or names them
+    "two linear drifts: YOC 4 µm/h and AOC 6″/h": ({"YOC:t1": 4 * UM, "AOC:t1": 6 * ARCSEC},
+                                                  frozenset({"YOC:t1", "AOC:t1"})),
     # the device and the machine at once: the gain told beside the machine's best
     "X sensor gain 1.5 % and C 2/rev angular 15″": ({"gain_X": 0.015, "ECC:h2c": 15 * ARCSEC},
                                                     frozenset({"gain_X", "ECC:h2"})),
