@@ -21,7 +21,6 @@ FUNCTIONS_OVER = {
     ("compgen/controllers/programs.py", "_steps"): 109,
     ("compgen/controllers/probing.py", "probe_program"): 106,
     ("compgen/controllers/programs.py", "checked_program"): 98,
-    ("compgen/controllers/heidenhain.py", "program_blocks"): 97,
     ("compgen/statistics/diagnose.py", "diagnose"): 96,
 }
 

@@ -366,35 +366,8 @@ def program_blocks(text: str) -> list[Block]:
             else:
                 out.append(Block(k, raw, "end"))
             continue
-        if not b or b in ("M30", "M126", "PLANE RESET STAY", "CYCL DEF 7.0 DATUM SHIFT",
-                          "CYCL DEF 9.0 DWELL TIME"):
-            continue
-        if b == "STOP":                    # the preset check: the operator continues (U11)
-            out.append(Block(k, raw, "stop"))
-        elif b == "FUNCTION RESET TCPM":
-            out.append(Block(k, raw, "tcp", on=False))
-        elif b == TCPM:
-            out.append(Block(k, raw, "tcp", on=True))
-        elif b.startswith("FUNCTION TCPM"):
-            # F TCP: the feed is the tool point's speed relative to the workpiece, which is
-            # zero where only the table turns (undefined there); AXIS SPAT: rotary words are
-            # spatial angles. Neither is what this check models.
-            raise CompgenError(f"line {k}: {b!r}: only {TCPM!r} is modelled (F CONT: the feed of the "
-                               "axes programmed; AXIS POS: rotary words are axis positions)",
-                               hint=f"write the program with {me()} measure-program")
-        elif (d := re.fullmatch(r"CYCL DEF 7\.[123] [XYZ]([+-]?\d{1,7}(?:\.\d{0,9})?)", b)) is not None:
-            if float(d[1]) != 0:
-                raise CompgenError(f"line {k}: a datum shift moves the preset compgen's positions are in")
-        elif TOOL_CALL.fullmatch(b):
-            out += [Block(k, raw, "tool"), Block(k, raw, "length", on=True)]
-        elif b.startswith("TOOL CALL "):
-            raise CompgenError(f"line {k}: {b!r}: a tool called by name needs double quotes (TOOL CALL "
-                               "\"NAME\" Z): the control rejects the block",
-                               hint="write the program with compgen")
-        elif MESSAGE.fullmatch(b):              # the preset check's message, shown in a window (U16)
-            out.append(Block(k, raw, "log"))
-        elif (d := re.fullmatch(r"CYCL DEF 9\.1 DWELL (\S+)", b)) is not None:
-            out.append(dwell(d[1], k, raw))
+        if (plain := _plain_block(k, raw, b)) is not None:
+            out += plain
         elif b.startswith("L "):
             tokens = b.split()[1:]
             rapid, m91 = "FMAX" in tokens, "M91" in tokens
@@ -402,8 +375,6 @@ def program_blocks(text: str) -> list[Block]:
             feed = w.pop("F", None)
             out.append(Block(k, raw, "move", target=w, rapid=rapid, feed=feed, machine_coords=m91))
             at.update({c: v for c, v in w.items() if c in "XYZ"})
-        elif b in ("TCH PROBE 4.0 MEASURING IN 3-D", "TCH PROBE 4.1 Q1"):
-            continue
         elif (d := PROBE_DIRECTION.fullmatch(b)) is not None:
             direction = np.array([float(v) for v in d.groups()])
             if not 0.999 < np.linalg.norm(direction) < 1.001:
@@ -418,12 +389,48 @@ def program_blocks(text: str) -> list[Block]:
             target = {c: at[c] + float(d[1]) * v for c, v in zip("XYZ", direction, strict=True)}
             out.append(Block(k, raw, "move", target=target, feed=float(d[2]), probe=True))
             at, direction = {}, None            # where it stopped is the touch's: unknown here
-        elif re.fullmatch(r"FN 0: Q1[0-5] = [+-]\d{1,6}(?:\.\d{1,9})?", b) or re.fullmatch(
-                r"FN 16: F-PRINT TNC:\\[\w.]+ / TNC:\\[\w.]+", b):
-            out.append(Block(k, raw, "log"))
         else:
             raise unknown(k, raw)
     return out
+
+
+def _plain_block(k: int, raw: str, b: str) -> list[Block] | None:
+    """A block whose meaning holds alone (no axis position or probing direction carried from
+    the blocks before): what it is ([] for a block that does nothing checked), or None."""
+    if not b or b in ("M30", "M126", "PLANE RESET STAY", "CYCL DEF 7.0 DATUM SHIFT",
+                      "CYCL DEF 9.0 DWELL TIME", "TCH PROBE 4.0 MEASURING IN 3-D", "TCH PROBE 4.1 Q1"):
+        return []
+    if b == "STOP":                    # the preset check: the operator continues (U11)
+        return [Block(k, raw, "stop")]
+    if b == "FUNCTION RESET TCPM":
+        return [Block(k, raw, "tcp", on=False)]
+    if b == TCPM:
+        return [Block(k, raw, "tcp", on=True)]
+    if b.startswith("FUNCTION TCPM"):
+        # F TCP: the feed is the tool point's speed relative to the workpiece, which is
+        # zero where only the table turns (undefined there); AXIS SPAT: rotary words are
+        # spatial angles. Neither is what this check models.
+        raise CompgenError(f"line {k}: {b!r}: only {TCPM!r} is modelled (F CONT: the feed of the "
+                           "axes programmed; AXIS POS: rotary words are axis positions)",
+                           hint=f"write the program with {me()} measure-program")
+    if (d := re.fullmatch(r"CYCL DEF 7\.[123] [XYZ]([+-]?\d{1,7}(?:\.\d{0,9})?)", b)) is not None:
+        if float(d[1]) != 0:
+            raise CompgenError(f"line {k}: a datum shift moves the preset compgen's positions are in")
+        return []
+    if TOOL_CALL.fullmatch(b):
+        return [Block(k, raw, "tool"), Block(k, raw, "length", on=True)]
+    if b.startswith("TOOL CALL "):
+        raise CompgenError(f"line {k}: {b!r}: a tool called by name needs double quotes (TOOL CALL "
+                           "\"NAME\" Z): the control rejects the block",
+                           hint="write the program with compgen")
+    if MESSAGE.fullmatch(b):              # the preset check's message, shown in a window (U16)
+        return [Block(k, raw, "log")]
+    if (d := re.fullmatch(r"CYCL DEF 9\.1 DWELL (\S+)", b)) is not None:
+        return [dwell(d[1], k, raw)]
+    if re.fullmatch(r"FN 0: Q1[0-5] = [+-]\d{1,6}(?:\.\d{1,9})?", b) or re.fullmatch(
+            r"FN 16: F-PRINT TNC:\\[\w.]+ / TNC:\\[\w.]+", b):
+        return [Block(k, raw, "log")]
+    return None
 
 
 class Heidenhain(Controller):
