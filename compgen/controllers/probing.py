@@ -29,9 +29,10 @@ from ..data.rtest import BALL
 from ..errors import CompgenError
 from ..model.frames import safe_height
 from ..model.kinematics import inverse
-from ..model.machine import Machine, check_travel
+from ..model.machine import Machine, ProbeSetup, check_travel
 from ..model.poses import Poses
 from . import Emitted, ascii_text, render
+from .base import Controller
 from .programs import ANGLE_DECIMALS, BALL_HEADER, LINEAR_DECIMALS, at_ball, pose_list
 from .registry import for_machine
 
@@ -62,11 +63,53 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
     angles = np.radians(np.round(np.degrees(poses.q[:, rotary]), ANGLE_DECIMALS))
     poses = Poses(inverse(machine, angles, poses.ball), poses.ball, poses.t, poses.path)
     check_travel(machine, poses.q, label)
+    safe = safe_height(machine)
+    names = [a.name for a in machine.rotary_axes]
+    steps, count, reach = _touch_steps(machine, poses, setup, rotary, linear, names, safe)
+    q = np.repeat(poses.q, setup.touches * 3, axis=0)
+    q[:, linear] = np.array(reach)
+    check_travel(machine, q, f"{label} (the touches' start and end points)")
+    before: dict[str, float] = {}
+    for s in steps:
+        if "axes" in s:
+            s["words"] = " ".join(ctl.axis_word(n, v, before.get(n), s["kind"] != "rapid",
+                                                ANGLE_DECIMALS if n in names else LINEAR_DECIMALS, machine)
+                                  for n, v in s["axes"].items())
+            before.update(s["axes"])
+    log_name = name[:ctl.name_max - 4] + "_LOG"     # a name the control keeps, one per program
+    header = _probe_header(machine, ctl, setup, poses, label, log_name, safe, version, date)
+    log_head = [MAGIC, f"# sphere_diameter = {setup.sphere_diameter:.4f}",
+                f"# stylus_diameter = {setup.stylus_diameter:.4f}",
+                *([f"# machine = {machine.name}"] if _loggable(machine.name) else []),
+                ",".join(["path", "pose", *names, "X", "Y", "Z", *DIRECTION, *BALL])]
+    # where the sphere stood, on every touch's line (the contract's bx, by, bz): a log of the
+    # sphere moved as a diagnosis advised is fitted where it was, not where the machine file has it
+    ball = ",".join(f"{v:.4f}" for v in poses.ball[0])
+    text = render(f"{ctl.family}/probe{ctl.program_ext}.j2", name=name, header=header, steps=steps,
+                  tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}", probe_feed=f"{setup.probe_feed:g}",
+                  work_offset=machine.program.work_offset, log_name=log_name, log_head=log_head,
+                  rotary=names, number=ctl.number, retract=ctl.number(setup.approach, 4), ball=ball,
+                  **ctl.program_context(machine))
+    named = {**ctl.message_files(name, [s["note"] for s in steps if s["kind"] == "stop"]),
+             **ctl.log_files(log_head, list(count), names, ball)}
+    files = {ctl.program_ext: text, ".poses.csv": pose_list(machine, poses), **named}
+    result = ctl.check(machine, ctl.blocks(text, "axes"), probe=setup)
+    if result.findings:     # nothing unsafe leaves this function
+        raise CompgenError(f"the machine cannot probe {label} with the sphere at "
+                           f"{', '.join(f'{v:g}' for v in poses.ball[0])} mm: {result.first(name)}",
+                           hint="move the sphere, change [probe] (elevation, approach, stylus_length) or "
+                                "choose another path")
+    return Emitted(files, named=frozenset(named))
+
+
+def _touch_steps(machine: Machine, poses: Poses, setup: ProbeSetup, rotary: list[int], linear: list[int],
+                 names: list[str], safe: float) -> tuple[list[dict], dict[str, int], list]:
+    """Each pose's steps: the turn at the safe height, then each touch from its start out on
+    the line from the centre, probing inwards, logged, and back the way it came; the poses
+    counted per path, and every point the stylus goes to (for the travel check)."""
     rho = (setup.sphere_diameter + setup.stylus_diameter) / 2
     hub = rho + setup.approach                # above the centre: the start of the touch from above
     u = touch_directions(machine, poses, setup)
-    safe = safe_height(machine)
-    names = [a.name for a in machine.rotary_axes]
     steps: list[dict] = [{"kind": "rapid", "axes": {"Z": safe}, "note": "up to the safe height"}]
     count: dict[str, int] = {}
     reach = []                                 # every point the stylus goes to, for the travel check
@@ -101,18 +144,13 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
                 steps.append({"kind": "feed", "axes": dict(zip("XYZ", over, strict=True))})
             reach += [start, over, target]
         steps.append({"kind": "rapid", "axes": {"Z": safe}, "note": "up to the safe height"})
-    q = np.repeat(poses.q, setup.touches * 3, axis=0)
-    q[:, linear] = np.array(reach)
-    check_travel(machine, q, f"{label} (the touches' start and end points)")
-    before: dict[str, float] = {}
-    for s in steps:
-        if "axes" in s:
-            s["words"] = " ".join(ctl.axis_word(n, v, before.get(n), s["kind"] != "rapid",
-                                                ANGLE_DECIMALS if n in names else LINEAR_DECIMALS, machine)
-                                  for n, v in s["axes"].items())
-            before.update(s["axes"])
-    log_name = name[:ctl.name_max - 4] + "_LOG"     # a name the control keeps, one per program
-    header = [
+    return steps, count, reach
+
+
+def _probe_header(machine: Machine, ctl: Controller, setup: ProbeSetup, poses: Poses, label: str,
+                  log_name: str, safe: float, version: str, date: str) -> list[str]:
+    """The probing program's header lines: what it is, its mode, its log, the sphere, the probe."""
+    return [
         f"compgen {version} probing program, {date}",
         f"machine: {ascii_text(machine.name)}; controller: {ctl.label(machine)}",
         "mode AXES: X Y Z from compgen's inverse kinematics; no TCP",
@@ -126,28 +164,6 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
         f"{setup.overtravel:g} mm in; positioning {setup.feed:g} mm/min; safe height Z {safe:g} mm",
         "first run: single block, feed override low, the probe's stylus clear of the sphere",
     ]
-    log_head = [MAGIC, f"# sphere_diameter = {setup.sphere_diameter:.4f}",
-                f"# stylus_diameter = {setup.stylus_diameter:.4f}",
-                *([f"# machine = {machine.name}"] if _loggable(machine.name) else []),
-                ",".join(["path", "pose", *names, "X", "Y", "Z", *DIRECTION, *BALL])]
-    # where the sphere stood, on every touch's line (the contract's bx, by, bz): a log of the
-    # sphere moved as a diagnosis advised is fitted where it was, not where the machine file has it
-    ball = ",".join(f"{v:.4f}" for v in poses.ball[0])
-    text = render(f"{ctl.family}/probe{ctl.program_ext}.j2", name=name, header=header, steps=steps,
-                  tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}", probe_feed=f"{setup.probe_feed:g}",
-                  work_offset=machine.program.work_offset, log_name=log_name, log_head=log_head,
-                  rotary=names, number=ctl.number, retract=ctl.number(setup.approach, 4), ball=ball,
-                  **ctl.program_context(machine))
-    named = {**ctl.message_files(name, [s["note"] for s in steps if s["kind"] == "stop"]),
-             **ctl.log_files(log_head, list(count), names, ball)}
-    files = {ctl.program_ext: text, ".poses.csv": pose_list(machine, poses), **named}
-    result = ctl.check(machine, ctl.blocks(text, "axes"), probe=setup)
-    if result.findings:     # nothing unsafe leaves this function
-        raise CompgenError(f"the machine cannot probe {label} with the sphere at "
-                           f"{', '.join(f'{v:g}' for v in poses.ball[0])} mm: {result.first(name)}",
-                           hint="move the sphere, change [probe] (elevation, approach, stylus_length) or "
-                                "choose another path")
-    return Emitted(files, named=frozenset(named))
 
 
 # what every control's log line carries as written: LinuxCNC expands "#" (a parameter) in a
