@@ -439,3 +439,16 @@ def test_a_path_named_twice_is_refused_in_one_line(tmp_path):
         code, _, err = run(*command[:1], "--machine", SEED_MACHINE, *command[1:])
         assert code == 2 and "is named twice" in err and "save each run's readings" in err, err
         assert len(err.strip().splitlines()) == 1 and not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("command, output, says", [
+    ("measure-program", "K.x", "a HEIDENHAIN iTNC 530 program is a .H file. Give -o K.H"),
+    ("probe-program", "P.ngc", "a HEIDENHAIN iTNC 530 program is a .H file. Give -o P.H"),
+])
+def test_a_program_is_written_under_its_controls_suffix(tmp_path, command, output, says):
+    """A HEIDENHAIN program written as K.x was a file the control does not list as a program,
+    and check-program would have taken its control from the suffix: refused in one line,
+    nothing written."""
+    code, _, err = run(command, "--machine", SEED_MACHINE, "--path", "K2", "-o", tmp_path / output)
+    assert code == 2 and says in err and len(err.strip().splitlines()) == 1, err
+    assert not list(tmp_path.iterdir())

@@ -42,6 +42,14 @@ from .cli_common import (
 )
 
 
+def program_suffix(output: str | None, ctl) -> None:
+    """A program is written under its control's suffix (.H, .MPF, .ngc): the control lists
+    and runs it by that, and check-program takes the control from it."""
+    if output and Path(output).suffix.lower() != ctl.program_ext.lower():
+        raise CompgenError(f"-o {Path(output).name}: a {ctl.words} program is a {ctl.program_ext} file",
+                           hint=f"give -o {Path(output).stem}{ctl.program_ext}")
+
+
 @click.command("measure-program")
 @MACHINE
 @click.option("--path", "path_names", default=None,
@@ -79,6 +87,7 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, nest, 
         label = "+".join(names) + "_BACK" * back
     ctl = for_machine(controller_name or machine.controller, machine)
     output = None if output == STDOUT else output      # -o - is stdout, as no -o
+    program_suffix(output, ctl)
     name = program_name(Path(output).stem if output else f"RTEST_{label}"[:NAME_MAX], most=ctl.name_max)
     emitted = measure_program(machine, poses, label, ctl.name, mode, name, __version__,
                               date.today().isoformat(), Path(output).stem if output else None)
@@ -115,6 +124,7 @@ def probe_program_cmd(machine_file, path_names, ball, controller_name, output, f
     touch logged on the control as a probe log v1; checked with the probe in the set-up."""
     machine = load_machine(machine_file)
     ctl = for_machine(controller_name or machine.controller, machine)
+    program_suffix(output, ctl)
     names = named_paths(machine, path_names)
     poses = probe_poses(machine, names, vec3(ball, "--ball") if ball is not None else None)
     out = Path(output)
