@@ -19,7 +19,6 @@ FUNCTIONS_OVER = {
     ("compgen/data/probe.py", "sphere_centres"): 117,
     ("compgen/statistics/identify.py", "identify"): 110,
     ("compgen/controllers/programs.py", "_steps"): 109,
-    ("compgen/controllers/programs.py", "checked_program"): 98,
     ("compgen/statistics/diagnose.py", "diagnose"): 96,
 }
 

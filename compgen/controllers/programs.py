@@ -27,6 +27,7 @@ from ..model.sides import APPROACH_DEG, program_sides
 from ..setup import motion
 from ..units import number
 from . import Emitted, ascii_text, render
+from .base import Controller
 from .registry import for_machine
 
 MODES = ("tcpm", "axes")
@@ -177,23 +178,46 @@ def checked_program(machine: Machine, poses: Poses, label: str, controller_name:
     up[linear[2]] = safe
     check_travel(machine, up[None], f"the safe height Z {safe:g} above the rotary axes")
     steps = _steps(machine, poses, segments, mode, ctl.tcp_switchable, safe, setup.clearance, label)
-    fmt = ctl.number
     before: dict[str, float] = {}
     for step in steps:
         step["words"] = " ".join(ctl.axis_word(n, v, before.get(n), step["kind"] == "feed",
                                                ANGLE_DECIMALS if n in ROT else LINEAR_DECIMALS, machine)
                                  for n, v in step.get("axes", {}).items())
         before.update(step.get("axes", {}))
-    span = {c: (poses.q[:, j].min(), poses.q[:, j].max()) for c, j in zip("XYZ", linear, strict=True)}
     ball = poses.ball[0]
-    header = [
+    header = _program_header(machine, ctl, poses, label, mode, list_name or name, nest, file_nest, safe,
+                             version, date, notes)
+    text = render(f"{ctl.family}/program{ctl.program_ext}.j2", name=name, header=header, mode=mode,
+                  tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}",
+                  dwell=f"{setup.dwell:g}" if setup.dwell else "",
+                  work_offset=setup.work_offset, max_step=f"{machine.limits.max_step_deg:g}",
+                  steps=steps, rotary=[a.name for a in machine.rotary_axes], **ctl.program_context(machine))
+    result = ctl.check(machine, ctl.blocks(text, mode))
+    if result.findings:     # compgen's own safety net: nothing unsafe leaves this function
+        at = ", ".join(f"{v:g}" for v in ball)
+        raise CompgenError(f"the machine cannot run {label} with the ball at {at} mm: {result.first(name)}",
+                           hint="put the ball higher on its stem or nearer the rotary axes, or choose "
+                                "another path; the set-up's solids are the machine file's [rtest]")
+    return text, machine, poses, [s["note"] for s in steps if s["kind"] == "stop"]
+
+
+def _program_header(machine: Machine, ctl: Controller, poses: Poses, label: str, mode: str, list_name: str,
+                    nest: float | None, file_nest: float, safe: float, version: str, date: str,
+                    notes: tuple[str, ...]) -> list[str]:
+    """A measurement program's header: what it is, its mode, its poses and ball, the nest,
+    the preset, feeds and heights, the travel checked, and how to run it the first time."""
+    setup, fmt, ball = machine.program, ctl.number, poses.ball[0]
+    linear = [machine.index(c) for c in "XYZ"]
+    rotary = [machine.index(a.name) for a in machine.rotary_axes]
+    span = {c: (poses.q[:, j].min(), poses.q[:, j].max()) for c, j in zip("XYZ", linear, strict=True)}
+    return [
         f"compgen {version} R-test measurement program, {date}",
         f"machine: {ascii_text(machine.name)}; controller: {ctl.label(machine)}",
         (f"mode TCPM: {ctl.tcp_label(machine)}, the control's kinematics moves X Y Z (tests the control)"
          if mode == "tcpm" else
          "mode AXES: X Y Z from compgen's inverse kinematics (tests compgen's nominal model)"),
         f"path {ascii_text(label)}: {len(poses)} poses; pose list "
-        f"{ascii_text(list_name or name)}.poses.csv, same order",
+        f"{ascii_text(list_name)}.poses.csv, same order",
         f"{BALL_HEADER} "
         + " ".join(f"{c}{fmt(v, LINEAR_DECIMALS)}" for c, v in zip("XYZ", ball, strict=True))
         + f" mm; nest on tool {setup.tool}"
@@ -210,19 +234,6 @@ def checked_program(machine: Machine, poses: Poses, label: str, controller_name:
         "first run: single block, feed override low, nest and ball clear of clamps",
         *(ascii_text(n) for n in notes),
     ]
-    text = render(f"{ctl.family}/program{ctl.program_ext}.j2", name=name, header=header, mode=mode,
-                  tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}",
-                  dwell=f"{setup.dwell:g}" if setup.dwell else "",
-                  work_offset=setup.work_offset, max_step=f"{machine.limits.max_step_deg:g}",
-                  steps=steps, rotary=[a.name for a in machine.rotary_axes], **ctl.program_context(machine))
-    result = ctl.check(machine, ctl.blocks(text, mode))
-    if result.findings:     # compgen's own safety net: nothing unsafe leaves this function
-        at = ", ".join(f"{v:g}" for v in ball)
-        raise CompgenError(f"the machine cannot run {label} with the ball at {at} mm: {result.first(name)}",
-                           hint="put the ball higher on its stem or nearer the rotary axes, or choose "
-                                "another path; the set-up's solids are the machine file's [rtest]")
-    return text, machine, poses, [s["note"] for s in steps if s["kind"] == "stop"]
-
 
 ROT = set("ABC")
 # The programs trust the active preset; before the nest first goes down, the operator sees
