@@ -257,57 +257,75 @@ def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool
     (LinuxCNC's trt kinematics) gets every point in TCP coordinates, with turns in small
     steps so that the nest stays where it is.
     """
-    linear = [machine.index(c) for c in "XYZ"]
-    rotary = [machine.index(a.name) for a in machine.rotary_axes]
-    names = [a.name for a in machine.rotary_axes]
-    tcp_always = mode == "tcpm" and not switchable
-    steps: list[dict] = []
-    state = {"q": None}
+    w = _Steps(machine, mode == "tcpm" and not switchable, safe, clearance)
+    w.start()
+    for seg in segments:
+        w.segment(poses, seg, mode, switchable, label, first_segment=seg is segments[0])
+    return w.finish()
 
-    def at(q, rapid=True, note="", pose=None, tcp=tcp_always):
+
+class _Steps:
+    """The steps being laid out, and where the nest stands after the last (``q``)."""
+
+    def __init__(self, machine: Machine, tcp_always: bool, safe: float, clearance: float):
+        self.machine, self.tcp_always, self.safe = machine, tcp_always, safe
+        self.linear = [machine.index(c) for c in "XYZ"]
+        self.rotary = [machine.index(a.name) for a in machine.rotary_axes]
+        self.names = [a.name for a in machine.rotary_axes]
+        self.steps: list[dict] = []
+        self.q = None
+        # a head tilts the nest's axis: off the ball along it, the housing's end must clear the
+        # ball before the nest moves across its axis (a tool that never tilts only goes up)
+        s = machine.setup
+        self.approach = max(clearance, s.nest_below + s.ball_diameter / 2 + s.nest_radius + s.margin) \
+            if machine.heads else clearance
+        self.origin = np.zeros(len(machine.axes))
+        self.origin[self.linear[2]] = safe
+
+    def at(self, q, rapid=True, note="", pose=None, tcp=None):
         """A move to the machine pose ``q`` (nest centre), written in the active frame (TCP
-        coordinates are filled in below, all at once)."""
-        axes = {**dict(zip("XYZ", q[linear], strict=True)),
-                **{n: np.degrees(q[i]) for n, i in zip(names, rotary, strict=True)}}
-        steps.append({"kind": "rapid" if rapid else "feed", "axes": axes, "note": note, "pose": pose,
-                      "q": q if tcp else None})
-        state["q"] = q
+        coordinates are filled in at the end, all at once)."""
+        tcp = self.tcp_always if tcp is None else tcp
+        axes = {**dict(zip("XYZ", q[self.linear], strict=True)),
+                **{n: np.degrees(q[i]) for n, i in zip(self.names, self.rotary, strict=True)}}
+        self.steps.append({"kind": "rapid" if rapid else "feed", "axes": axes, "note": note, "pose": pose,
+                           "q": q if tcp else None})
+        self.q = q
 
-    def lifted(q, z):               # the nest at height z, the rotary axes held
-        return at_height(machine, q[None], z)[0]
+    def lifted(self, q, z):          # the nest at height z, the rotary axes held
+        return at_height(self.machine, q[None], z)[0]
 
-    def off(q):                     # the nest off the ball along its own axis
-        return along_tool(machine, q[None], approach)[0]
+    def off(self, q):                # the nest off the ball along its own axis
+        return along_tool(self.machine, q[None], self.approach)[0]
 
-    # a head tilts the nest's axis: off the ball along it, the housing's end must clear the
-    # ball before the nest moves across its axis (a tool that never tilts only goes up)
-    s = machine.setup
-    approach = max(clearance, s.nest_below + s.ball_diameter / 2 + s.nest_radius + s.margin) \
-        if machine.heads else clearance
-
-    def turn_to(target):
+    def turn_to(self, target):
         """At the safe height: turn the rotary axes to ``target``'s, the nest kept in place."""
-        q = state["q"]
+        q, rotary, linear, machine = self.q, self.rotary, self.linear, self.machine
         delta = np.degrees(np.abs(target[rotary] - q[rotary])).max()
-        n = int(np.ceil(delta / TURN_STEP_DEG)) if tcp_always else 1     # 0: already there
-        nest = q[linear] + head_offset(machine, q[None, rotary])[0] if tcp_always else None
+        n = int(np.ceil(delta / TURN_STEP_DEG)) if self.tcp_always else 1     # 0: already there
+        nest = q[linear] + head_offset(machine, q[None, rotary])[0] if self.tcp_always else None
         for k in range(1, n + 1):
             step = q.copy()
             step[rotary] = q[rotary] + (target[rotary] - q[rotary]) * k / n
-            if tcp_always:          # the nest stays: a head's turn is taken off its axes
+            if self.tcp_always:          # the nest stays: a head's turn is taken off its axes
                 step[linear] = nest - head_offset(machine, step[None, rotary])[0]
-            at(step, note="turn at the safe height" if k == n else "")
+            self.at(step, note="turn at the safe height" if k == n else "")
 
-    start = np.zeros(len(machine.axes))
-    start[linear[2]] = safe
-    if tcp_always:   # TCP coordinates equal machine ones only with the rotary axes at zero
-        steps.append({"kind": "require_zero", "axes": {}})
-    steps.append({"kind": "rapid", "axes": {"Z": safe}, "note": "nest up along its axis to the safe height"})
-    state["q"] = start.copy()
-    state["q"][linear[:2]] = np.nan
-    if tcp_always:
-        at(start, note="above the rotary axes")
-    for seg in segments:
+    def start(self) -> None:
+        if self.tcp_always:   # TCP coordinates equal machine ones only with the rotary axes at zero
+            self.steps.append({"kind": "require_zero", "axes": {}})
+        self.steps.append({"kind": "rapid", "axes": {"Z": self.safe},
+                           "note": "nest up along its axis to the safe height"})
+        self.q = self.origin.copy()
+        self.q[self.linear[:2]] = np.nan
+        if self.tcp_always:
+            self.at(self.origin, note="above the rotary axes")
+
+    def segment(self, poses: Poses, seg, mode: str, switchable: bool, label: str,
+                first_segment: bool) -> None:
+        """One run of one path: approached from its declared sides, the nest onto the ball,
+        each pose with its dwell, and off it."""
+        machine, rotary, linear, steps = self.machine, self.rotary, self.linear, self.steps
         first, last = poses.q[seg[0]], poses.q[seg[-1]]
         steps.append({"kind": "comment", "note": f"---- {ascii_text(str(poses.path[seg[0]]) or label)}: "
                                                  f"poses {seg[0] + 1} to {seg[-1] + 1}"})
@@ -316,45 +334,47 @@ def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool
         before = first.copy()
         before[rotary] -= poses.side[seg[0], rotary] * np.radians(APPROACH_DEG)
         for target, note in ((before, f"approach from {APPROACH_DEG:g} deg before"), (first, "")):
-            if not np.isnan(state["q"][linear[:2]]).any():
-                turn_to(target)
+            if not np.isnan(self.q[linear[:2]]).any():
+                self.turn_to(target)
             else:                        # XY not yet known: turn in place at the safe height
                 steps.append({"kind": "rapid", "axes": {n: np.degrees(target[i]) for n, i in
-                                                        zip(names, rotary, strict=True)},
+                                                        zip(self.names, rotary, strict=True)},
                               "note": note or "turn at the safe height"})
-                state["q"] = state["q"].copy()
-                state["q"][rotary] = target[rotary]
-        at(lifted(off(first), safe), note="above the first pose")
-        at(off(first))
-        if seg is segments[0]:      # the preset and the ball, seen before the nest goes down
+                self.q = self.q.copy()
+                self.q[rotary] = target[rotary]
+        self.at(self.lifted(self.off(first), self.safe), note="above the first pose")
+        self.at(self.off(first))
+        if first_segment:      # the preset and the ball, seen before the nest goes down
             steps.append({"kind": "stop", "note": (HEAD_PRESET_CHECK if machine.heads else PRESET_CHECK)
-                          .format(clearance=f"{approach:g}")})
-        at(first, rapid=False, note="nest onto the ball, along its axis")
+                          .format(clearance=f"{self.approach:g}")})
+        self.at(first, rapid=False, note="nest onto the ball, along its axis")
         if mode == "tcpm" and switchable:
             steps.append({"kind": "tcp_on"})
         for i in seg:
-            q = poses.q[i]
-            at(q, rapid=False, pose=f"pose {i + 1} {ascii_text(str(poses.path[i]))}",
-               tcp=mode == "tcpm")    # the ball centre in TCP coordinates
+            self.at(poses.q[i], rapid=False, pose=f"pose {i + 1} {ascii_text(str(poses.path[i]))}",
+                    tcp=mode == "tcpm")    # the ball centre in TCP coordinates
             steps.append({"kind": "dwell"})
         if mode == "tcpm" and switchable:
             steps.append({"kind": "tcp_off"})
-        at(off(last), rapid=False, note="nest off the ball, along its axis")
-        at(lifted(off(last), safe))
-        if tcp_always:
+        self.at(self.off(last), rapid=False, note="nest off the ball, along its axis")
+        self.at(self.lifted(self.off(last), self.safe))
+        if self.tcp_always:
             above = last.copy()
-            above[linear] = start[linear]
-            at(above, note="above the rotary axes")
-    if tcp_always:
-        zero = state["q"].copy()
-        zero[rotary] = 0.0
-        turn_to(zero)
-    tcp = [s for s in steps if s.get("q") is not None]
-    if tcp:
-        xyz = world(machine, np.array([s["q"] for s in tcp]))
-        for s, w in zip(tcp, xyz, strict=True):
-            s["axes"].update(zip("XYZ", w, strict=True))
-    return steps
+            above[linear] = self.origin[linear]
+            self.at(above, note="above the rotary axes")
+
+    def finish(self) -> list[dict]:
+        """The rotary axes back to zero under TCP, and every TCP point in TCP coordinates."""
+        if self.tcp_always:
+            zero = self.q.copy()
+            zero[self.rotary] = 0.0
+            self.turn_to(zero)
+        tcp = [s for s in self.steps if s.get("q") is not None]
+        if tcp:
+            xyz = world(self.machine, np.array([s["q"] for s in tcp]))
+            for s, w in zip(tcp, xyz, strict=True):
+                s["axes"].update(zip("XYZ", w, strict=True))
+        return self.steps
 
 
 def pose_list(machine: Machine, poses: Poses) -> str:
