@@ -18,7 +18,6 @@ FUNCTIONS_OVER = {
     ("compgen/setup/motion.py", "run"): 127,
     ("compgen/data/probe.py", "sphere_centres"): 117,
     ("compgen/statistics/identify.py", "identify"): 110,
-    ("compgen/statistics/diagnose.py", "diagnose"): 96,
 }
 
 

@@ -130,17 +130,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
               + sum(1 for d in devices if d.visibility >= VISIBLE))
     devices = [replace(d, p_value=p, significant=bool(d.visibility >= VISIBLE and p < alpha))
                for d in devices for p in [p_value(d.drop_w, 1, rss_w, dof, tested)]]
-    out = []
-    for e in effects:
-        row = ranked[e.name]
-        p = p_value(row.drop_w, row.k_eff, rss_w, dof, tested) if row.k_eff else 1.0
-        out.append(Candidate(
-            effect=e.name, description=e.words, cause=e.cause, visibility=row.vis,
-            rms_after_um=float(np.sqrt(max(rss - row.drop, 0.0) / r.size)) * 1e3, p_value=p,
-            significant=bool(row.k_eff and p < alpha), confounded_with=row.names,
-            amplitude=tuple(shown(a, e.unit)[0] for a in row.amp), unit=shown(1.0, e.unit)[1],
-            silent=row.silent, share=row.share, condition=row.cond))
-    out.sort(key=lambda c: (not c.visible, -c.share))
+    out = _candidates(effects, ranked, rss, r.size, rss_w, dof, tested, alpha)
     model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
     advising = advisor(machine, poses, kind) if advisor is not None else None
     if advising is not None and advising.unable:      # said, never taken for "none would tell"
@@ -156,13 +146,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         devices = _told_beside(devices, np.empty((r.size, 0)), res, noise, alpha, blamed)
     seen = [d for d in devices if d.significant]
     best_sum_sq = max([ranked[c.effect].drop for c in significant[:1]] + [d.drop for d in seen], default=0.0)
-    misfit, share = (), None
-    if device is not None:
-        free = 1.0 - np.einsum("ij,ij->i", res.Q, res.Q).reshape(-1, 3)     # 1 − each reading's leverage
-        misfit = tuple(lack_of_fit(r.reshape(-1, 3), poses.path, device, noise.rho, free, alpha))
-        excess = rss - dof * (device * 1e-3) ** 2
-        if best_sum_sq > 0 and excess > 0:
-            share = min(1.0, best_sum_sq / excess)
+    misfit, share = _misfit(res, noise, device, best_sum_sq, alpha)
     lines = strongest_lines(machine, poses, r.reshape(-1, 3), res.Q)
     unexplained = _unexplained(misfit, bool(significant or seen), share,
                                _outside_line(lines, device, misfit, alpha, best_sum_sq))
@@ -190,6 +174,37 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         repeats=said, misfit=misfit,
         lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, notes=notes,
         data_device=kind, devices=tuple(devices), device_blamed=blamed)
+
+
+def _candidates(effects: Sequence[Effect], ranked: dict[str, Row], rss: float, readings: int, rss_w: float,
+                dof: int, tested: int, alpha: float) -> list[Candidate]:
+    """Step 4: each effect tried as a candidate, its p in the family of ``tested``, the
+    visible ones first, most of the residual removed first."""
+    out = []
+    for e in effects:
+        row = ranked[e.name]
+        p = p_value(row.drop_w, row.k_eff, rss_w, dof, tested) if row.k_eff else 1.0
+        out.append(Candidate(
+            effect=e.name, description=e.words, cause=e.cause, visibility=row.vis,
+            rms_after_um=float(np.sqrt(max(rss - row.drop, 0.0) / readings)) * 1e3, p_value=p,
+            significant=bool(row.k_eff and p < alpha), confounded_with=row.names,
+            amplitude=tuple(shown(a, e.unit)[0] for a in row.amp), unit=shown(1.0, e.unit)[1],
+            silent=row.silent, share=row.share, condition=row.cond))
+    out.sort(key=lambda c: (not c.visible, -c.share))
+    return out
+
+
+def _misfit(res: _Residual, noise: Whitening, device: float | None, best_sum_sq: float,
+            alpha: float) -> tuple[tuple, float | None]:
+    """Against the device's noise (where known): each path and direction whose residual
+    exceeds it, and the share of the excess the best explanation removes."""
+    if device is None:
+        return (), None
+    free = 1.0 - np.einsum("ij,ij->i", res.Q, res.Q).reshape(-1, 3)     # 1 − each reading's leverage
+    misfit = tuple(lack_of_fit(res.r.reshape(-1, 3), res.poses.path, device, noise.rho, free, alpha))
+    excess = res.rss - res.dof * (device * 1e-3) ** 2
+    share = min(1.0, best_sum_sq / excess) if best_sum_sq > 0 and excess > 0 else None
+    return misfit, share
 
 
 def _blamed(devices: Sequence[DeviceCandidate], best: Row | None, sigma2_w: float,
