@@ -151,39 +151,8 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
                                hint="re-probe the pose, or delete its lines")
     fitted = _centres(log, groups, rho)
     for g, (c, u, weakest) in zip(groups, fitted, strict=True):
-        at = _at(log, g)
-        if np.ptp(log.rotary[g], axis=0).max() > math.radians(1e-4):
-            off = np.abs(log.rotary[g] - np.median(log.rotary[g], axis=0)).max(axis=1)
-            raise CompgenError(f"the touches of {at} are at different rotary positions",   # the odd one named
-                               where=f"{where}:{log.lines[g[np.argmax(off)]]}",
-                               hint="every touch of one pose shares its rotary axes; number the poses apart")
-        moved = np.flatnonzero(np.abs(log.ball[g] - log.ball[g[0]]).max(axis=1) > 1e-6)
-        if moved.size:      # one centre is fitted from all its touches: one sphere, one place
-            raise CompgenError(f"the touches of {at} name different sphere centres (bx, by, bz)",
-                               where=f"{where}:{log.lines[g[moved[0]]]}",
-                               hint="every touch of one pose probes one sphere where it stands; "
-                                    "number the poses apart")
+        _check_pose(log, g, u, weakest, usual, warnings)
         p = log.tip[g]
-        # on a known radius, touches in one plane still fix the centre (four side touches
-        # without the top one) unless they all look at it from one plane through it: the
-        # directions, not the points, must span space
-        if weakest < FLAT:
-            raise CompgenError(f"the {len(g)} touches of {at} all come from about one plane through the "
-                               f"centre (out of it by {weakest:.2f} rms of a unit direction): the centre is "
-                               "not fixed across it",
-                               where=f"{where}:{log.lines[g[0]]}",
-                               hint="probe it from above as well as around (compgen probe-program does)")
-        off = np.einsum("ij,ij->i", u, log.direction[g])
-        if off.min() < RADIAL_COS:
-            k = int(np.argmin(off))
-            raise CompgenError(f"touch of {at} moved {math.degrees(math.acos(np.clip(off[k], -1, 1))):.0f}° "
-                               "off the line to the fitted centre: not a radial touch of this sphere",
-                               where=f"{where}:{log.lines[g[k]]}",
-                               hint="check nx, ny, nz (the direction the tip moved) and that the line "
-                                    "belongs to this pose")
-        if len(g) < usual:
-            warnings.append(f"{where}:{log.lines[g[0]]}: {at} has {len(g)} touches where the others have "
-                            f"{usual}: a touch is missing (its centre is fitted from the rest)")
         centres.append(c)
         normals.append(u)
         residuals.append(np.linalg.norm(p - c, axis=1) - rho)
@@ -194,18 +163,7 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
     robust = 1.4826 * float(np.median(np.abs(r_all))) * math.sqrt(counts.sum() / dof)
     scale = max(robust, 1e-7)
     inverse_info = [np.linalg.inv(u.T @ u) for u in normals]     # (JᵀJ)⁻¹ of each pose
-    for g, u, r, G in zip(groups, normals, residuals, inverse_info, strict=True):
-        h = np.einsum("ij,jk,ik->i", u, G, u)
-        room = 1 - h
-        deleted = np.where(room > 1e-6, r / np.maximum(room, 1e-6), 0.0)
-        z = np.where(room > 1e-6, np.abs(r) / (scale * np.sqrt(np.maximum(room, 1e-6))), 0.0)
-        k = int(np.argmax(z))
-        if z[k] > OUTLIER_K and abs(deleted[k]) * 1e3 > OUTLIER_UM:
-            raise CompgenError(f"a touch of {_at(log, g)} lies {deleted[k] * 1e3:+.1f} µm off the sphere its "
-                               f"other touches fit ({z[k]:.0f}σ of the log's {scale * 1e3:.2f} µm trigger "
-                               "noise): a "
-                               "chip on the sphere or a bad trigger", where=f"{where}:{log.lines[g[k]]}",
-                               hint="clean the sphere and re-probe the pose, or delete the line")
+    _check_outliers(log, groups, normals, residuals, inverse_info, scale)
     # one stylus for the whole log: its radius error is common to every pose
     num = den = 0.0
     for u, r, G in zip(normals, residuals, inverse_info, strict=True):
@@ -253,6 +211,64 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
                      device="probe", cov=cov)
     return Centres(data, centre, math.sqrt(s2) * 1e3, dof, radius_offset * 1e3, radius_sigma * 1e3,
                    tuple(warnings))
+
+
+def _check_pose(log: ProbeLog, g: np.ndarray, u: np.ndarray, weakest: float, usual: int,
+                warnings: list[str]) -> None:
+    """One pose's touches as one centre needs them: one rotary position, one sphere place,
+    directions that span space, each touch radial to the fitted centre; a pose with fewer
+    touches than the others is warned of."""
+    where = log.source
+    at = _at(log, g)
+    if np.ptp(log.rotary[g], axis=0).max() > math.radians(1e-4):
+        off = np.abs(log.rotary[g] - np.median(log.rotary[g], axis=0)).max(axis=1)
+        raise CompgenError(f"the touches of {at} are at different rotary positions",   # the odd one named
+                           where=f"{where}:{log.lines[g[np.argmax(off)]]}",
+                           hint="every touch of one pose shares its rotary axes; number the poses apart")
+    moved = np.flatnonzero(np.abs(log.ball[g] - log.ball[g[0]]).max(axis=1) > 1e-6)
+    if moved.size:      # one centre is fitted from all its touches: one sphere, one place
+        raise CompgenError(f"the touches of {at} name different sphere centres (bx, by, bz)",
+                           where=f"{where}:{log.lines[g[moved[0]]]}",
+                           hint="every touch of one pose probes one sphere where it stands; "
+                                "number the poses apart")
+    # on a known radius, touches in one plane still fix the centre (four side touches
+    # without the top one) unless they all look at it from one plane through it: the
+    # directions, not the points, must span space
+    if weakest < FLAT:
+        raise CompgenError(f"the {len(g)} touches of {at} all come from about one plane through the "
+                           f"centre (out of it by {weakest:.2f} rms of a unit direction): the centre is "
+                           "not fixed across it",
+                           where=f"{where}:{log.lines[g[0]]}",
+                           hint="probe it from above as well as around (compgen probe-program does)")
+    off = np.einsum("ij,ij->i", u, log.direction[g])
+    if off.min() < RADIAL_COS:
+        k = int(np.argmin(off))
+        raise CompgenError(f"touch of {at} moved {math.degrees(math.acos(np.clip(off[k], -1, 1))):.0f}° "
+                           "off the line to the fitted centre: not a radial touch of this sphere",
+                           where=f"{where}:{log.lines[g[k]]}",
+                           hint="check nx, ny, nz (the direction the tip moved) and that the line "
+                                "belongs to this pose")
+    if len(g) < usual:
+        warnings.append(f"{where}:{log.lines[g[0]]}: {at} has {len(g)} touches where the others have "
+                        f"{usual}: a touch is missing (its centre is fitted from the rest)")
+
+
+def _check_outliers(log: ProbeLog, groups, normals, residuals, inverse_info, scale: float) -> None:
+    """No touch off the sphere its pose's other touches fit by more than OUTLIER_K of the
+    log's robust trigger scatter and OUTLIER_UM (a chip, a bad trigger)."""
+    where = log.source
+    for g, u, r, G in zip(groups, normals, residuals, inverse_info, strict=True):
+        h = np.einsum("ij,jk,ik->i", u, G, u)
+        room = 1 - h
+        deleted = np.where(room > 1e-6, r / np.maximum(room, 1e-6), 0.0)
+        z = np.where(room > 1e-6, np.abs(r) / (scale * np.sqrt(np.maximum(room, 1e-6))), 0.0)
+        k = int(np.argmax(z))
+        if z[k] > OUTLIER_K and abs(deleted[k]) * 1e3 > OUTLIER_UM:
+            raise CompgenError(f"a touch of {_at(log, g)} lies {deleted[k] * 1e3:+.1f} µm off the sphere its "
+                               f"other touches fit ({z[k]:.0f}σ of the log's {scale * 1e3:.2f} µm trigger "
+                               "noise): a "
+                               "chip on the sphere or a bad trigger", where=f"{where}:{log.lines[g[k]]}",
+                               hint="clean the sphere and re-probe the pose, or delete the line")
 
 
 def _poses(log: ProbeLog) -> list[np.ndarray]:
