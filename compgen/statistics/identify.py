@@ -107,6 +107,41 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
         raw = project.remove(raw, weights.apply(raw))
     dof = readings - p - (constants.rank if constants is not None else 0)
     sigma2 = float(r @ r) / dof
+    std, corr, sv, rho = _uncertainty(poses, data, project, starts, normal, r, dof, sigma2, p)
+    return _fit_result(machine, data, m, names, free, x, (std, corr, sv),
+                       residual_stats(poses, raw, dof, rho), method, iterations, sign, starts.mounts)
+
+
+def _fit_result(machine: Machine, data: Sequence[RTestData], m: Model, names: list[str], free: list[int],
+                x: np.ndarray, spread: tuple, residual: dict, method: str, iterations: int, sign: str,
+                mounts: int) -> FitResult:
+    """The fit as fit.json keeps it: each parameter's value and σ (a fixed one's σ 0), their
+    correlation and singular values (``spread``), what was fitted to what, and how."""
+    std, corr, sv = spread
+    params = {}
+    for i, n in enumerate(names):
+        e = m.effects[i]
+        k = free.index(i) if i in free else None
+        params[n] = Estimate(float(x[i]), 0.0 if k is None else float(std[k]), e.unit, k is None)
+    return FitResult(
+        machine={"name": machine.name, "file": machine.bundled or _absolute(machine.source),
+                 "sha256": machine.sha256, **({"bundled": True} if machine.bundled else {})},
+        data=tuple(DataRef(_absolute(d.source), d.sha256, len(d), _counts(d.poses.path), d.device)
+                   for d in data),
+        model=tuple(names), parameters=params, free=tuple(names[i] for i in free),
+        correlation=np.clip(corr, -1.0, 1.0), singular_values=sv,
+        residual=residual,
+        method=method, iterations=iterations, sign=sign, version=__version__,
+        descriptions={n: e.words + (f", at the first of the ball's {mounts + 1} mountings"
+                                    if mounts and n in SETUP else "")
+                      for n, e in zip(names, m.effects, strict=True)})
+
+
+def _uncertainty(poses: Poses, data: Sequence[RTestData], project, starts: FreeConstants, normal: Normal,
+                 r: np.ndarray, dof: int, sigma2: float, p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                          np.ndarray]:
+    """Each estimate's σ, their correlation, the singular values, and the noise's AR(1) ρ
+    per run and direction."""
     # readings taken close together (an R-test sampling at 100 Hz, or a set-up drifting
     # between poses) are not independent: the noise's AR(1) ρ of each run and direction
     # from the residual (``noise.ar1``: zero unless significant), and where it is not zero
@@ -123,23 +158,7 @@ def identify(machine: Machine, data: Sequence[RTestData], model: Sequence[str] |
     corr = cov / np.outer(std, std) if np.all(std > 0) else np.eye(p)
     sv = normal.singular_values()
 
-    params = {}
-    for i, n in enumerate(names):
-        e = m.effects[i]
-        k = free.index(i) if i in free else None
-        params[n] = Estimate(float(x[i]), 0.0 if k is None else float(std[k]), e.unit, k is None)
-    return FitResult(
-        machine={"name": machine.name, "file": machine.bundled or _absolute(machine.source),
-                 "sha256": machine.sha256, **({"bundled": True} if machine.bundled else {})},
-        data=tuple(DataRef(_absolute(d.source), d.sha256, len(d), _counts(d.poses.path), d.device)
-                   for d in data),
-        model=tuple(names), parameters=params, free=tuple(names[i] for i in free),
-        correlation=np.clip(corr, -1.0, 1.0), singular_values=sv,
-        residual=residual_stats(poses, raw, dof, rho),
-        method=method, iterations=iterations, sign=sign, version=__version__,
-        descriptions={n: e.words + (f", at the first of the ball's {starts.mounts + 1} mountings"
-                                    if starts.mounts and n in SETUP else "")
-                      for n, e in zip(names, m.effects, strict=True)})
+    return std, corr, sv, rho
 
 
 def _enough(poses: Poses, readings: int, p: int, free: FreeConstants | None = None) -> None:
