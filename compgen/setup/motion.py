@@ -176,99 +176,128 @@ def run(machine: Machine, blocks: list[Block], modulo: tuple[str, ...] = (),
     ±1, how the control's words turn it against the machine file (``Controller.angle_sense``).
     ``probe``: the program holds probing moves made with this probe (the machine's set-up
     ball is its sphere); each stops where the stylus tip meets the sphere."""
-    sense = sense or {}
-
-    def sensed(letter: str, v: float) -> float:     # a word's angle as the machine file turns it
-        return -v if sense.get(letter) == -1 else v
-
-    k = len(machine.axes)
-    linear = [machine.index(c) for c in "XYZ"]
-    rotary = [machine.index(a.name) for a in machine.rotary_axes]
-    letters = {a.name: machine.index(a.name) for a in machine.axes}
-    q = np.full(k, np.nan)         # machine pose; under TCP, valid only where ``w`` is None
-    w = None                       # TCP coordinates while TCP is on and known
-    tcp = tool = length = False
-    seconds, findings, segments = 0.0, [], []
-    safe = safe_height(machine)
-
-    def settle():                  # the machine pose behind the TCP coordinates
-        nonlocal q
-        if w is not None:
-            q = from_world(machine, w[None, :3], w[None, 3:])[0]
-
+    walk = _Walk(machine, modulo, sense or {}, probe)
     _frame(machine, blocks)
-    for b in blocks:
-        if b.kind == "require":      # the program stops unless these axes are at these values
-            settle()
-            w = None
-            missing = sorted(set(b.target) - set(letters))
-            if missing:
-                raise CompgenError(f"line {b.line}: the guard reads {', '.join(missing)}, which this machine "
-                                   "lacks", hint="the program was written for another machine")
-            for letter, v in b.target.items():
-                q[letters[letter]] = np.radians(sensed(letter, v)) if letters[letter] in rotary else v
-        elif b.kind == "tcp":
-            settle()
-            w, tcp = None, b.on
-        elif b.kind == "tool":
-            tool = True
-        elif b.kind == "length":
-            length = b.on
-        elif b.kind == "dwell":
-            seconds += b.seconds
-        if b.kind != "move":
-            continue
+    walk.through(blocks)
+    return _checked(machine, walk.segments, walk.seconds, walk.findings, probe)
+
+
+class _Walk:
+    """The blocks walked once: where each move starts and ends (a machine pose, or TCP
+    coordinates while TCP is on and known), the dwells' time, and what is found on the way."""
+
+    def __init__(self, machine: Machine, modulo: tuple[str, ...], sense: dict[str, int],
+                 probe: ProbeSetup | None):
+        self.machine, self.modulo, self.sense, self.probe = machine, modulo, sense, probe
+        self.linear = [machine.index(c) for c in "XYZ"]
+        self.rotary = [machine.index(a.name) for a in machine.rotary_axes]
+        self.letters = {a.name: machine.index(a.name) for a in machine.axes}
+        self.q = np.full(len(machine.axes), np.nan)   # machine pose; under TCP, valid only where w is None
+        self.w = None                  # TCP coordinates while TCP is on and known
+        self.tcp = self.tool = self.length = False
+        self.seconds, self.findings, self.segments = 0.0, [], []
+
+    def sensed(self, letter: str, v: float) -> float:     # a word's angle as the machine file turns it
+        return -v if self.sense.get(letter) == -1 else v
+
+    def settle(self) -> None:          # the machine pose behind the TCP coordinates
+        if self.w is not None:
+            self.q = from_world(self.machine, self.w[None, :3], self.w[None, 3:])[0]
+
+    def through(self, blocks: list[Block]) -> None:
+        """Every block in order; a move the check cannot place ends the walk (its finding said)."""
+        for b in blocks:
+            if b.kind == "require":      # the program stops unless these axes are at these values
+                self.settle()
+                self.w = None
+                missing = sorted(set(b.target) - set(self.letters))
+                if missing:
+                    raise CompgenError(f"line {b.line}: the guard reads {', '.join(missing)}, which this "
+                                       "machine lacks", hint="the program was written for another machine")
+                for letter, v in b.target.items():
+                    i = self.letters[letter]
+                    self.q[i] = np.radians(self.sensed(letter, v)) if i in self.rotary else v
+            elif b.kind == "tcp":
+                self.settle()
+                self.w, self.tcp = None, b.on
+            elif b.kind == "tool":
+                self.tool = True
+            elif b.kind == "length":
+                self.length = b.on
+            elif b.kind == "dwell":
+                self.seconds += b.seconds
+            if b.kind == "move" and not self.move(b):
+                break
+
+    def move(self, b: Block) -> bool:
+        """One move's segment; False where the walk cannot go on from it."""
+        q, linear, rotary = self.q, self.linear, self.rotary
         if b.machine_coords:
-            findings.append(Finding(b.line, "machine coordinates", "the machine file does not say where the "
-                                    "machine datum lies against the set-up: this move cannot be checked",
-                                    b.text.strip()))
-            continue
-        if not (tool and length):
-            findings.append(Finding(b.line, "no tool call or length compensation", "the nest's length is not "
-                                    "active: every position would be off by its length", b.text.strip()))
-            break
-        unknown_axes = sorted(set(b.target) - set(letters))
+            self.findings.append(Finding(b.line, "machine coordinates", "the machine file does not say where "
+                                         "the machine datum lies against the set-up: this move cannot be "
+                                         "checked", b.text.strip()))
+            return True
+        if not (self.tool and self.length):
+            self.findings.append(Finding(b.line, "no tool call or length compensation", "the nest's length "
+                                         "is not active: every position would be off by its length",
+                                         b.text.strip()))
+            return False
+        unknown_axes = sorted(set(b.target) - set(self.letters))
         if unknown_axes:
             raise CompgenError(f"line {b.line} moves {', '.join(unknown_axes)}, which this machine lacks")
         # with the rotary axes at zero, TCP coordinates are machine coordinates
-        zero_turn = w is None and not np.isnan(q[rotary]).any() and not q[rotary].any()
-        if tcp and not (zero_turn and np.isnan(q[linear]).any()):
-            if b.probe:
-                raise CompgenError(f"line {b.line}: a probing move under TCP is not checked",
-                                   hint="probing programs run in machine axes (compgen probe-program)")
-            if w is None:
-                if np.isnan(q).any():
-                    findings.append(Finding(b.line, "TCP before positioning", "TCP is on before every axis "
-                                            "has been positioned", b.text.strip()))
-                    break
-                w = np.concatenate([world(machine, q[None])[0], q[rotary]])
-            end = w.copy()
-            for letter, v in b.target.items():
-                i = letters[letter]
-                if i in linear:
-                    end[linear.index(i)] = v
-                else:
-                    now = w[3 + rotary.index(i)]
-                    v = _turned(modulo, b, letter, sensed(letter, v), np.degrees(now))
-                    end[3 + rotary.index(i)] = np.radians(v)
-            segments.append(_Segment(b, True, w, end, False))
-            w = end
-            continue
-        settle()
-        w = None
+        zero_turn = self.w is None and not np.isnan(q[rotary]).any() and not q[rotary].any()
+        if self.tcp and not (zero_turn and np.isnan(q[linear]).any()):
+            return self.tcp_move(b)
+        self.settle()
+        q, self.w = self.q, None
         end = q.copy()
         for letter, v in b.target.items():
-            i = letters[letter]
-            end[i] = (np.radians(_turned(modulo, b, letter, sensed(letter, v), np.degrees(q[i])))
+            i = self.letters[letter]
+            end[i] = (np.radians(_turned(self.modulo, b, letter, self.sensed(letter, v), np.degrees(q[i])))
                       if i in rotary else v)
         if b.probe:
-            end = _touch(machine, probe, b, q, end, findings)
+            end = _touch(self.machine, self.probe, b, q, end, self.findings)
             if end is None:
-                break
-        after_touch = bool(segments) and segments[-1].block.probe
-        segments.append(_Segment(b, False, q, end, bool((np.isnan(q) & ~np.isnan(end)).any()),
-                                 probing=b.probe or after_touch))
-        q = end
+                return False
+        after_touch = bool(self.segments) and self.segments[-1].block.probe
+        self.segments.append(_Segment(b, False, q, end, bool((np.isnan(q) & ~np.isnan(end)).any()),
+                                      probing=b.probe or after_touch))
+        self.q = end
+        return True
+
+    def tcp_move(self, b: Block) -> bool:
+        """A move in TCP coordinates (its ends in TCP xyz and the rotary axes)."""
+        if b.probe:
+            raise CompgenError(f"line {b.line}: a probing move under TCP is not checked",
+                               hint="probing programs run in machine axes (compgen probe-program)")
+        if self.w is None:
+            if np.isnan(self.q).any():
+                self.findings.append(Finding(b.line, "TCP before positioning", "TCP is on before every axis "
+                                             "has been positioned", b.text.strip()))
+                return False
+            self.w = np.concatenate([world(self.machine, self.q[None])[0], self.q[self.rotary]])
+        w, end = self.w, self.w.copy()
+        for letter, v in b.target.items():
+            i = self.letters[letter]
+            if i in self.linear:
+                end[self.linear.index(i)] = v
+            else:
+                now = w[3 + self.rotary.index(i)]
+                v = _turned(self.modulo, b, letter, self.sensed(letter, v), np.degrees(now))
+                end[3 + self.rotary.index(i)] = np.radians(v)
+        self.segments.append(_Segment(b, True, w, end, False))
+        self.w = end
+        return True
+
+
+def _checked(machine: Machine, segments: list[_Segment], seconds: float, findings: list[Finding],
+             probe: ProbeSetup | None) -> Check:
+    """The segments sampled and checked together: travel, feeds and time, moves from
+    unknown places, and every collision; the closest approach."""
+    linear = [machine.index(c) for c in "XYZ"]
+    rotary = [machine.index(a.name) for a in machine.rotary_axes]
+    safe = safe_height(machine)
     _paths(machine, segments, linear, rotary)
     closest = (np.inf, "")
     checkable = []
