@@ -26,7 +26,7 @@ from compgen.controllers.registry import controller
 from compgen.data.rtest import format_rtest
 from compgen.data.simulate import read_truth, simulate
 from compgen.errors import CompgenError
-from compgen.history.store import init, open_store
+from compgen.history.store import PG_SCHEMA, TABLES, init, open_store
 from compgen.model.effects import compose, location_model
 from compgen.model.paths import generate
 from compgen.statistics.gate import fit_gate
@@ -84,6 +84,47 @@ def _record(url, year, months=12):
             H.record_edit(store, fit, machine, "itnc530", corrects, {"EDIT.TAB": "0" * 64}, {},
                           taken=EDIT_DATE)
     return store
+
+
+STORES = ["sqlite", "postgresql"]
+
+
+def _store(kind, request, tmp_path, name="h"):
+    """A fresh, empty store of ``kind`` for one test: an SQLite file, or a PostgreSQL
+    database made by its owner (``name`` gives a test a second one)."""
+    if kind == "sqlite":
+        url = str(tmp_path / f"{name}.sqlite")
+    else:
+        import psycopg
+        url = request.getfixturevalue("pg_db")
+        if name != "h":
+            server, base = url.rsplit("/", 1)
+            with psycopg.connect(f"{server}/postgres", autocommit=True) as db:
+                db.execute(f"DROP DATABASE IF EXISTS {base}_{name}")
+                db.execute(f"CREATE DATABASE {base}_{name}")
+            url = f"{url}_{name}"
+    init(url)[0].close()
+    return url
+
+
+@contextlib.contextmanager
+def _raw(url):
+    """Another writer's connection, outside compgen (an SQLite file's writers are not held by
+    the database; on PostgreSQL, its owner's): ``execute(sql, args)`` with ``?`` marks."""
+    if str(url).startswith("postgresql"):
+        import psycopg
+        with psycopg.connect(url, autocommit=True) as db:
+            db.execute(f"SET search_path TO {PG_SCHEMA}")
+            yield lambda sql, args=(): db.execute(sql.replace("?", "%s"), args)
+    else:
+        with contextlib.closing(sqlite3.connect(url)) as db, db:     # closed, not only committed
+            yield db.execute
+
+
+def _contents(url):
+    """Every row of every table in id order: the store as it is."""
+    with open_store(url) as store:
+        return {t: store.rows(f"SELECT * FROM {t} ORDER BY id") for t in TABLES}
 
 
 def _check(store, year, when, seed, moved=None, noise_um=0.5):
@@ -293,7 +334,7 @@ from dataclasses import replace
 from compgen import history as H
 from compgen.configuration.machine_file import load_machine
 from compgen.statistics.results import load_fit
-from compgen.history.store import init, open_store
+from compgen.history.store import PG_SCHEMA, TABLES, init, open_store
 url, fit_file, worker = sys.argv[1], sys.argv[2], int(sys.argv[3])
 machine = load_machine("ac-trunnion-itnc530")
 base = load_fit(fit_file)
@@ -470,22 +511,27 @@ def test_another_stores_history_is_imported_only_when_asked_and_only_once(year, 
     assert (tmp_path / "c.sqlite").read_bytes() == before
 
 
-def test_checks_failed_and_passed_travel_with_an_export(year, tmp_path, monkeypatch):
-    """A store's checks, the failed one too, come across an export and import as they were."""
+@pytest.mark.parametrize("kind", STORES)
+def test_checks_failed_and_passed_travel_with_an_export(year, tmp_path, monkeypatch, request, kind):
+    """A store's checks, the failed one too, come across an export and import as they were
+    (and none is left out of the export as unreadable)."""
     monkeypatch.chdir(tmp_path)
-    with _record(tmp_path / "a.sqlite", year) as a:
+    a_db = _store(kind, request, tmp_path, "a")
+    with _record(a_db, year) as a:
         for when, seed in (("2026-06-20T10:00", 102), ("2026-07-20T10:00", 101)):   # crashed, healthy
             result, fit = _checked(a, year, when, seed)
             H.record_check(a, result, fit, year[0])
         want = [(c["passed"], c["summary"]) for c in a.rows("SELECT passed, summary FROM checks ORDER BY id")]
     assert [p for p, _ in want] == [0, 1]
-    with open_store(tmp_path / "a.sqlite") as a:     # each check's path ranges, for the trend's panels
+    with open_store(a_db) as a:     # each check's path ranges, for the trend's panels
         ranges = H.trend(a, year[0]).ranges
     assert len(ranges) == 2 and all(set(r) == {"K4"} and r["K4"] > 0 for _, r in ranges), ranges
-    assert run("history", "export", "--db", "a.sqlite", "-o", "a.json")[0] == 0
-    rc, out, err = run("history", "import", "a.json", "--db", "b.sqlite")
+    rc, out, err = run("history", "export", "--db", a_db, "-o", "a.json")
+    assert rc == 0 and not err and "left out" not in out, out + err
+    b_db = _store(kind, request, tmp_path, "b")
+    rc, out, err = run("history", "import", "a.json", "--db", b_db)
     assert rc == 0, out + err
-    with open_store(tmp_path / "b.sqlite") as b:
+    with open_store(b_db) as b:
         got = [(c["passed"], c["summary"]) for c in b.rows("SELECT passed, summary FROM checks ORDER BY id")]
     assert got == want
     # a check's verdict is 0 or 1 and its summary a JSON dict, or the import is refused
@@ -578,12 +624,13 @@ def test_a_date_no_measurement_was_taken_on_is_refused(text):
         H.taken_at(text)
 
 
-def test_an_edit_is_ordered_against_its_fit_in_time_not_as_text(tmp_path, year):
+@pytest.mark.parametrize("kind", STORES)
+def test_an_edit_is_ordered_against_its_fit_in_time_not_as_text(tmp_path, year, request, kind):
     """A fit taken 10:00 at +02:00 (08:00 UTC) and an edit at 09:00 at +00:00: the edit comes
     after the fit and is recorded; at 07:30 UTC given as 09:30+02:00 it comes before, refused
     (as text, "09:30+02:00" > "08:00" and "09:00+00:00" < "10:00+02:00" said the opposite)."""
     machine, _, fits, (efit, corrects) = year
-    store = init(tmp_path / "h.sqlite")[0]
+    store = open_store(_store(kind, request, tmp_path))
     try:
         H.record_fit(store, efit, machine, taken="2026-03-01T10:00+02:00")
         with pytest.raises(CompgenError, match="cannot come before the fit"):
@@ -641,26 +688,31 @@ def _first(tables, name):
     (lambda t: t["edits"].append({**_first(t, "edits"), "id": 10 ** 6}), "a second edit from one fit"),
     (lambda t: t["sessions"].append({**_first(t, "sessions")}), "sessions row 1: its id is another row's"),
 ])
+@pytest.mark.parametrize("kind", STORES)
 def test_an_import_with_a_damaged_row_is_refused_and_leaves_the_store_as_it_was(tmp_path, year, monkeypatch,
-                                                                               damage, says):
+                                                                               request, kind, damage, says):
     """Each row is checked before the import's transaction: a bad date, text in a number,
-    broken JSON, a kind, an id, a changed fit: one line, and the store byte for byte as it was."""
+    broken JSON, a kind, an id, a changed fit: one line, and the store as it was (an SQLite
+    file byte for byte; every row of a PostgreSQL store)."""
     monkeypatch.chdir(tmp_path)
     _record(tmp_path / "a.sqlite", year).close()
     assert run("history", "export", "--db", "a.sqlite", "-o", "a.json")[0] == 0
     doc = json.loads((tmp_path / "a.json").read_text())
     damage(doc["tables"])
     (tmp_path / "bad.json").write_text(json.dumps(doc))
-    assert run("history", "init", "--db", "b.sqlite")[0] == 0
-    before = (tmp_path / "b.sqlite").read_bytes()
-    rc, _, err = run("history", "import", "bad.json", "--db", "b.sqlite")
+    b = _store(kind, request, tmp_path, "b")
+    before, rows = (tmp_path / "b.sqlite").read_bytes() if kind == "sqlite" else None, _contents(b)
+    rc, _, err = run("history", "import", "bad.json", "--db", b)
     assert rc == 2 and re.search(says, err) and "nothing was imported" in err, err
     assert len(err.splitlines()) == 1
-    assert (tmp_path / "b.sqlite").read_bytes() == before
-    rc, _, err = run("history", "import", "bad.json", "--db", "new.sqlite")   # nor is a store made for it
-    assert rc == 2 and not (tmp_path / "new.sqlite").exists(), err
-    rc, out, err = run("history", "import", "a.json", "--db", "b.sqlite")     # the export as written imports
+    assert _contents(b) == rows
+    if kind == "sqlite":
+        assert (tmp_path / "b.sqlite").read_bytes() == before
+        rc, _, err = run("history", "import", "bad.json", "--db", "new.sqlite")   # nor is a store made for it
+        assert rc == 2 and not (tmp_path / "new.sqlite").exists(), err
+    rc, out, err = run("history", "import", "a.json", "--db", b)     # the export as written imports
     assert rc == 0, err
+    assert len(_contents(b)["fits"]) == len(rows["fits"]) + 12
 
 
 @pytest.mark.parametrize("dsn, shown", [
@@ -1170,11 +1222,12 @@ def test_the_first_check_after_an_edit_recorded_with_its_fit_passes(tmp_path, mo
     assert all(abs(c["change"]) < 4 * c["std"] for c in doc["changes"]), worst
 
 
-def test_every_command_that_records_takes_the_serial(tmp_path, monkeypatch):
+@pytest.mark.parametrize("kind", STORES)
+def test_every_command_that_records_takes_the_serial(tmp_path, monkeypatch, request, kind):
     """fit --record and kinematics --record take --serial as history add does: the edit goes
     to the machine its fit was recorded under, and no other machine is made."""
     monkeypatch.chdir(tmp_path)
-    db = str(tmp_path / "h.sqlite")
+    db = _store(kind, request, tmp_path)
     machine = load_machine("ac-trunnion-itnc530")
     from conftest import TABLE4
     (tmp_path / "pre.csv").write_text(format_rtest(machine, _session(machine, TABLE4, ["K4", "K1", "K2"], 41,
@@ -1251,44 +1304,67 @@ def test_an_edit_dated_before_its_recorded_fit_is_refused_before_its_files_are_w
     assert not list(tmp_path.glob("KIN*"))
 
 
-def test_one_unreadable_row_breaks_the_fleet_for_no_one(tmp_path, year):
-    """A row an SQLite store's other writer appended with a date that is none (a file's
-    writers are not held by the database): the fleet names that machine's row as
-    unreadable and lists the others; it was an internal error for everyone."""
-    import sqlite3
-    db = tmp_path / "h.sqlite"
+NO_NUMBER = "a parameter's value or σ is not a finite number"
+
+
+@pytest.mark.parametrize("kind, taken, parameters, says", [
+    ("sqlite", "not a date", "{}", "a stored date 'not a date' is not one compgen writes"),
+    ("sqlite", "2026-03-01T00:00:00+00:00", '{"XOC": 5}', NO_NUMBER),
+    ("postgresql", "2026-03-01T00:00:00+00:00", '{"XOC": 5}', NO_NUMBER),
+    ("postgresql", "2026-03-01T00:00:00+00:00", "[]", "parameters is not a JSON dict"),
+], ids=["sqlite, no date", "sqlite, a parameter no number", "postgresql, a parameter no number",
+        "postgresql, parameters a list"])
+def test_one_unreadable_row_breaks_the_fleet_and_the_export_for_no_one(tmp_path, year, request, kind, taken,
+                                                                       parameters, says):
+    """A row another writer appended that compgen cannot read: a date that is none (an SQLite
+    file's writers are not held by the database), parameters that are JSON but no fit's
+    (PostgreSQL holds the types and the JSON, not what it says). The fleet lists the others;
+    the export leaves the row out with the rows that name it, says so, and imports. Both
+    were an internal error for everyone."""
+    db = _store(kind, request, tmp_path)
     _record(db, year, months=2).close()
-    with contextlib.closing(sqlite3.connect(db)) as raw, raw:    # closed, not only committed
-        raw.execute("INSERT INTO machines (name, serial, recorded) VALUES ('other', '', 'x')")
-        mid = raw.execute("SELECT id FROM machines WHERE name = 'other'").fetchone()[0]
-        sid = raw.execute("INSERT INTO sessions (machine_id, taken, device, operator, temperatures, "
-                          "machine_sha256, data, recorded) VALUES (?, 'not a date', 'rtest', '', '{}', 'x', "
-                          "'[]', 'x') RETURNING id", (mid,)).fetchone()[0]
-        raw.execute("INSERT INTO fits (session_id, marker, kind, model, parameters, sigma_um, rms_um, "
-                    "verdict, fit_json, recorded) VALUES (?, 'fit:000000', 'calibration', '[]', '{}', 1, 1, "
-                    "'accepted', '{}', 'x')", (sid,))
+    with _raw(db) as execute:
+        execute("INSERT INTO machines (name, serial, recorded) VALUES ('other', '', 'x')")
+        mid = execute("SELECT id FROM machines WHERE name = 'other'").fetchone()[0]
+        sid = execute("INSERT INTO sessions (machine_id, taken, device, operator, temperatures, "
+                      "machine_sha256, data, recorded) VALUES (?, ?, 'rtest', '', '{}', 'x', '[]', 'x') "
+                      "RETURNING id", (mid, taken)).fetchone()[0]
+        fid = execute("INSERT INTO fits (session_id, marker, kind, model, parameters, sigma_um, rms_um, "
+                      "verdict, fit_json, recorded) VALUES (?, 'fit:000000', 'calibration', '[]', ?, 1, 1, "
+                      "'accepted', '{}', 'x') RETURNING id", (sid, parameters)).fetchone()[0]
     code, out, err = run("history", "fleet", "--db", db)
-    assert code == 0 and "UNREADABLE: a stored date 'not a date' is not one compgen writes" in out, out + err
-    assert "A/C trunnion" in out, out
+    assert code == 0 and "A/C trunnion" in out, out + err
+    if taken == "not a date":
+        assert f"UNREADABLE: {says}" in out, out
+    for output in ("e.json", "e.csv"):
+        code, out, err = run("history", "export", "--db", db, "-o", tmp_path / output)
+        row = (f"sessions row {sid}: 'not a date' is not a date (and 1 row(s) that name it)"
+                    if taken == "not a date" else (f"fits row {fid}: {says}"))
+        assert code == 0 and f"warning: left out {row}" in err, out + err
+        assert "1 unreadable row(s) left out" in out and "wrote 22 rows" in out, out
+    other = _store(kind, request, tmp_path, "b")
+    code, out, err = run("history", "import", tmp_path / "e.json", "--db", other)
+    assert code == 0 and "2 fits" in out, out + err
 
 
-def test_an_edit_filed_under_another_machine_counts_for_no_machine(tmp_path, year):
+@pytest.mark.parametrize("kind", STORES)
+def test_an_edit_filed_under_another_machine_counts_for_no_machine(tmp_path, year, request, kind):
     """A writer appends an edit whose fit is another machine's under this machine's id, with
     a correction that would make a crashed machine pass: it counts for neither (the trend's
     values and the check go by edits whose fit is the machine's own)."""
-    import sqlite3
     machine = year[0]
-    db = tmp_path / "h.sqlite"
+    db = _store(kind, request, tmp_path)
     with _record(db, year, months=8) as store:
         other = replace(machine, name="another machine")
         fid = H.record_fit(store, year[2][0][1], other, taken="2026-01-05T09:00Z")
         before = {e.taken: e.machine_value("BOA") for e in H.trend(store, machine).entries}
-    with contextlib.closing(sqlite3.connect(db)) as raw, raw:    # closed, not only committed
-        mid = raw.execute("SELECT id FROM machines WHERE name = ?", (machine.name,)).fetchone()[0]
-        raw.execute("INSERT INTO edits (machine_id, fit_id, controller, corrects, written, loaded, taken, "
-                    "recorded) VALUES (?, ?, 'itnc530', ?, '{}', '{}', '2026-02-01T00:00:00+00:00', 'x')",
-                    (mid, fid, json.dumps({"BOA": -30 * ARCSEC})))
+    with _raw(db) as execute:
+        mid = execute("SELECT id FROM machines WHERE name = ?", (machine.name,)).fetchone()[0]
+        execute("INSERT INTO edits (machine_id, fit_id, controller, corrects, written, loaded, taken, "
+                "recorded) VALUES (?, ?, 'itnc530', ?, '{}', '{}', '2026-02-01T00:00:00+00:00', 'x')",
+                (mid, fid, json.dumps({"BOA": -30 * ARCSEC})))
     with open_store(db) as store:
+        assert len(store.rows("SELECT id FROM edits")) == 2          # the writer's row is there
         after = {e.taken: e.machine_value("BOA") for e in H.trend(store, machine).entries}
     assert after == before
 
@@ -1306,7 +1382,9 @@ def _colliding(fit):
     raise AssertionError("no collision found")
 
 
-def test_two_fits_whose_short_markers_collide_are_two_rows_and_each_keeps_its_edit(tmp_path, year):
+@pytest.mark.parametrize("kind", STORES)
+def test_two_fits_whose_short_markers_collide_are_two_rows_and_each_keeps_its_edit(tmp_path, year, request,
+                                                                                    kind):
     """The store keeps a fit by its 16-digit record marker: two fits with the same 6 digits
     (one in 4 000 distinct fits met it) are both recorded, each edit goes to its own fit,
     and an export of both imports whole. Six digits refused the second as "already in the
@@ -1314,7 +1392,7 @@ def test_two_fits_whose_short_markers_collide_are_two_rows_and_each_keeps_its_ed
     machine = year[0]
     first, second = _colliding(year[2][0][1])
     assert first.marker == second.marker and first.record_marker != second.record_marker
-    db = tmp_path / "h.sqlite"
+    db = _store(kind, request, tmp_path)
     with open_store(db) as store:
         a = H.record_fit(store, first, machine, taken="2026-01-05T09:00Z")
         b = H.record_fit(store, second, machine, taken="2026-01-06T09:00Z")
@@ -1326,25 +1404,30 @@ def test_two_fits_whose_short_markers_collide_are_two_rows_and_each_keeps_its_ed
         assert H.edit_of(store, first, machine) is None
     out = tmp_path / "x.json"
     assert run("history", "export", "--db", db, "-o", out)[0] == 0
-    code, _, err = run("history", "import", out, "--db", tmp_path / "other.sqlite")
+    other = _store(kind, request, tmp_path, "other")
+    code, _, err = run("history", "import", out, "--db", other)
     assert code == 0, err
-    with open_store(tmp_path / "other.sqlite") as store:
+    with open_store(other) as store:
         assert len(store.rows("SELECT id FROM fits")) == 2
 
 
-def test_a_fit_an_older_compgen_recorded_by_six_digits_is_still_that_fit(tmp_path, year):
+@pytest.mark.parametrize("kind", STORES)
+def test_a_fit_an_older_compgen_recorded_by_six_digits_is_still_that_fit(tmp_path, year, request, kind):
     """Rows written before the 16-digit record marker keep their 6 digits: the same fit is
     found there (recorded again: refused; its edit: attached to it), and an export holding
     it imports into a store that holds the same fit by 16 digits as "already here"."""
     machine, fit = year[0], year[2][0][1]
-    db = tmp_path / "old.sqlite"
+    db = _store(kind, request, tmp_path, "old")
     with open_store(db) as store, store.writing():
         mid = H.lookup_machine(store, machine.name, "", create=True)
         fid = H.session_and_fit(store, mid, fit, machine, "2026-01-05T09:00:00+00:00", "rtest", "", {},
                                 "calibration", "accepted")
-    with contextlib.closing(sqlite3.connect(db)) as raw, raw:
-        raw.execute("DROP TRIGGER IF EXISTS fits_no_update")
-        raw.execute("UPDATE fits SET marker = ? WHERE id = ?", (fit.marker, fid))
+    with _raw(db) as execute:      # the row as an older compgen wrote it: the append-only rule off once
+        execute("DROP TRIGGER IF EXISTS fits_no_update" if kind == "sqlite"
+                else "ALTER TABLE fits DISABLE TRIGGER fits_append_only")
+        execute("UPDATE fits SET marker = ? WHERE id = ?", (fit.marker, fid))
+        if kind == "postgresql":
+            execute("ALTER TABLE fits ENABLE TRIGGER fits_append_only")
     with open_store(db) as store:
         assert store.rows("SELECT marker FROM fits")[0]["marker"] == fit.marker      # as 6 digits
         with pytest.raises(CompgenError, match="already in the history"):
@@ -1352,14 +1435,16 @@ def test_a_fit_an_older_compgen_recorded_by_six_digits_is_still_that_fit(tmp_pat
         H.record_edit(store, fit, machine, "itnc530", {}, {}, {}, taken="2026-01-06T10:00Z")
         assert H.edit_of(store, fit, machine)["id"]
     assert run("history", "export", "--db", db, "-o", tmp_path / "old.json")[0] == 0
-    with open_store(tmp_path / "new.sqlite") as store:
+    new = _store(kind, request, tmp_path, "new")
+    with open_store(new) as store:
         H.record_fit(store, fit, machine, taken="2026-01-05T09:00Z")
-    code, _, err = run("history", "import", tmp_path / "old.json", "--db", tmp_path / "new.sqlite",
+    code, _, err = run("history", "import", tmp_path / "old.json", "--db", new,
                        "--same-machine", machine.name)
     assert code == 2 and "already here" in err, err
 
 
-def test_an_export_beyond_the_64_mb_of_a_control_file_imports(tmp_path, year, monkeypatch):
+@pytest.mark.parametrize("kind", STORES)
+def test_an_export_beyond_the_64_mb_of_a_control_file_imports(tmp_path, year, monkeypatch, request, kind):
     """A plant's years are 140 MB of export (10 000 fits: benchmarks/history_import_scale.py);
     the import reads up to the data files' 256 MB (it refused anything past 64 MB, an
     export compgen itself had written). Here a small export padded past 64 MB with the white
@@ -1369,11 +1454,12 @@ def test_an_export_beyond_the_64_mb_of_a_control_file_imports(tmp_path, year, mo
     assert run("history", "export", "--db", "a.sqlite", "-o", "a.json")[0] == 0
     with open(tmp_path / "a.json", "a") as f:
         f.write(" " * (65 * 2**20))
-    rc, out, err = run("history", "import", "a.json", "--db", "b.sqlite")
+    rc, out, err = run("history", "import", "a.json", "--db", _store(kind, request, tmp_path, "b"))
     assert rc == 0 and "2 fits" in out, err
 
 
-def test_a_calibration_marked_accepted_is_judged_again_on_its_own_data(tmp_path, monkeypatch):
+@pytest.mark.parametrize("kind", STORES)
+def test_a_calibration_marked_accepted_is_judged_again_on_its_own_data(tmp_path, monkeypatch, request, kind):
     """A writer (or a library caller) can record "accepted" for a fit compgen's gate refuses:
     the bundled session fitted without its hidden EXC:h2 (σ̂ 0.77 µm, plausible by its own
     numbers, so no check of the row alone can tell). check runs the gate again on the
@@ -1384,18 +1470,18 @@ def test_a_calibration_marked_accepted_is_judged_again_on_its_own_data(tmp_path,
     data.write_bytes((ROOT / "examples" / "seed-session.csv").read_bytes())
     assert run("fit", "--machine", SEED_MACHINE, data, "-o", "fit.json")[0] == 0
     machine = load_machine(SEED_MACHINE)
-    with open_store(tmp_path / "h.sqlite") as store:
+    db = _store(kind, request, tmp_path)
+    with open_store(db) as store:
         # recorded "accepted": no gate's reason given
         H.record_fit(store, load_fit(tmp_path / "fit.json"), machine, taken="2026-01-05T09:00Z")
     truth = ROOT / "examples" / "truth-seed-session.json"
     assert run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "--paths", "K4", "--seed", "3",
                "--noise-um", "0.5", "-o", "k4.csv")[0] == 0
-    code, _, err = run("check", "--machine", SEED_MACHINE, "k4.csv", "--date", "2026-02-01",
-                       "--db", tmp_path / "h.sqlite")
+    code, _, err = run("check", "--machine", SEED_MACHINE, "k4.csv", "--date", "2026-02-01", "--db", db)
     assert code == 2 and "fails compgen's fit gate on its own data" in err and "EXC:h2" in err, err
     data.rename(tmp_path / "elsewhere.csv")
     code, out, err = run("check", "--machine", SEED_MACHINE, "k4.csv", "--date", "2026-02-01", "--json",
-                         "--db", tmp_path / "h.sqlite")
+                         "--db", db)
     assert code in (0, 1), err
     assert json.loads(out)["calibration_accepted"].startswith("accepted as recorded (its data are not here")
 

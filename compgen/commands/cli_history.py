@@ -157,9 +157,13 @@ def history_export_cmd(machine_name, output, force, db):
     """Every fit's parameters, one row each, as CSV; a .json file holds the whole history
     too (sessions, fits, edits, checks), which `history import` reads into another store."""
     from ..history import export_text
-    count, text = export_text(history_store(db, create=False), machine_name, output.endswith(".json"))
+    store = history_store(db, create=False)
+    count, text, left_out = export_text(store, machine_name, output.endswith(".json"))
+    for row in left_out:
+        warn(f"left out {row}: a row compgen cannot read, which an import would refuse")
     write_atomically(output, text, force)
-    said(output, f"wrote {count} rows to {output}")
+    said(output, f"wrote {count} rows to {output}"
+                 + (f"; {len(left_out)} unreadable row(s) left out (above)" if left_out else ""))
 
 
 @history_cmd.command("import")

@@ -21,14 +21,19 @@ from .ledger import content_key, lookup_machine, taken_at
 from .store import Store, now
 
 
-def export_rows(store: Store, machine_name: str | None = None) -> list[dict]:
-    """One row per fit and parameter: the flat table a spreadsheet or a plant's database takes."""
-    sql = ("SELECT m.name, m.serial, s.taken, s.device, s.operator, f.marker, f.kind, f.verdict, f.sigma_um, "
-           "f.parameters FROM fits f JOIN sessions s ON s.id = f.session_id "
+def export_rows(store: Store, machine_name: str | None = None,
+                fits: Collection[int] | None = None) -> list[dict]:
+    """One row per fit and parameter: the flat table a spreadsheet or a plant's database takes
+    (of the fits whose ids are ``fits``, where given: the readable ones)."""
+    sql = ("SELECT f.id, m.name, m.serial, s.taken, s.device, s.operator, f.marker, f.kind, f.verdict, "
+           "f.sigma_um, f.parameters FROM fits f JOIN sessions s ON s.id = f.session_id "
            "JOIN machines m ON m.id = s.machine_id"
            + (" WHERE m.name = ?" if machine_name else "") + " ORDER BY m.name, m.serial, s.taken, f.id")
     out = []
     for r in store.rows(sql, (machine_name,) if machine_name else ()):
+        fid = r.pop("id")
+        if fits is not None and fid not in fits:
+            continue
         for n, p in json.loads(r.pop("parameters")).items():
             out.append({**r, "parameter": n, "value": p["value"], "std": p["std"], "unit": p["unit"]})
     return out
@@ -38,18 +43,18 @@ EXPORT_FIELDS = ["name", "serial", "taken", "device", "operator", "marker", "kin
                  "parameter", "value", "std", "unit"]
 
 
-def export_text(store: Store, machine_name: str | None, whole: bool) -> tuple[int, str]:
-    """The export's rows counted and its text: JSON, the whole history (what ``import``
-    reads) with the flat rows, when ``whole``; else the flat rows as CSV."""
+def export_text(store: Store, machine_name: str | None, whole: bool) -> tuple[int, str, list[str]]:
+    """The export's rows counted, its text, and the rows it left out (each said as why):
+    JSON, the whole history (what ``import`` reads) with the flat rows, when ``whole``; else
+    the flat rows as CSV."""
+    doc = export_all(store, machine_name)
     if whole:
-        doc = export_all(store, machine_name)
-        return len(doc["rows"]), json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
-    rows = export_rows(store, machine_name)
+        return len(doc["rows"]), json.dumps(doc, indent=2, ensure_ascii=False) + "\n", doc["left_out"]
     out = io.StringIO()
     w = csv.DictWriter(out, EXPORT_FIELDS, lineterminator="\n")
     w.writeheader()
-    w.writerows({k: r[k] for k in EXPORT_FIELDS} for r in rows)
-    return len(rows), out.getvalue()
+    w.writerows({k: r[k] for k in EXPORT_FIELDS} for r in doc["rows"])
+    return len(doc["rows"]), out.getvalue(), doc["left_out"]
 
 
 EXPORT_FORMAT = "compgen.history-export/1"
@@ -69,7 +74,10 @@ _COLUMNS = {
 
 def export_all(store: Store, machine_name: str | None = None) -> dict:
     """The store's rows (of one machine, or all), with the store's id: what ``import_history``
-    takes, and the flat rows a spreadsheet takes."""
+    takes, and the flat rows a spreadsheet takes. A row compgen cannot read (another writer's
+    to an SQLite file, which the database does not hold) is left out with every row that
+    names it, and said in ``left_out``: one such row broke the export for everyone, and an
+    export holding it would not import."""
     mids = [r["id"] for r in store.rows("SELECT id, name FROM machines ORDER BY id")
             if machine_name is None or r["name"] == machine_name]
     keep = ",".join(str(int(m)) for m in mids) or "NULL"
@@ -78,8 +86,42 @@ def export_all(store: Store, machine_name: str | None = None) -> dict:
              "edits": f"machine_id IN ({keep})", "checks": f"machine_id IN ({keep})"}
     tables = {t: store.rows(f"SELECT {', '.join(c)} FROM {t} WHERE {where[t]} ORDER BY id")
               for t, c in _COLUMNS.items()}
+    left_out = _readable(tables, store.where)
     return {"format": EXPORT_FORMAT, "store_id": store.store_id(), "exported": now(), "tables": tables,
-            "rows": export_rows(store, machine_name)}
+            "rows": export_rows(store, machine_name, {f["id"] for f in tables["fits"]}), "left_out": left_out}
+
+
+# the rows that name a row of each table: a row left out takes them with it
+_NAMED_BY = {"machines": (("sessions", "machine_id"), ("edits", "machine_id"), ("checks", "machine_id")),
+             "sessions": (("fits", "session_id"),),
+             "fits": (("edits", "fit_id"), ("checks", "fit_id"), ("checks", "against_fit_id")),
+             "edits": (), "checks": ()}
+
+
+def _readable(tables: dict[str, list], where: str) -> list[str]:
+    """``tables`` cut, in place, to the rows an import accepts (``_valid_rows``), checked on
+    copies (the check normalises dates in place); each row left out said once, with how
+    many rows that name it went with it."""
+    left_out = []
+    while True:
+        try:
+            _valid_rows({t: [dict(r) for r in rows] for t, rows in tables.items()}, where)
+            return left_out
+        except _BadRow as bad:
+            gone = _drop(tables, bad.table, bad.rid)
+            left_out.append(f"{bad.table} row {bad.rid}: {bad.what}"
+                            + (f" (and {gone} row(s) that name it)" if gone else ""))
+
+
+def _drop(tables: dict[str, list], table: str, rid: int) -> int:
+    """Row ``rid`` of ``table`` taken out with the rows that name it, theirs too: how many
+    of those went."""
+    tables[table][:] = [r for r in tables[table] if r["id"] != rid]
+    gone = 0
+    for other, key in _NAMED_BY[table]:
+        for r in [r for r in tables[other] if r.get(key) == rid]:
+            gone += 1 + _drop(tables, other, r["id"])
+    return gone
 
 
 def check_export(doc, where: str) -> dict[str, list]:
@@ -117,6 +159,15 @@ def _valid_rows(t: dict[str, list], where: str) -> None:
     rows.once()
 
 
+class _BadRow(CompgenError):
+    """A row an import refuses: its table, its id and why."""
+
+    def __init__(self, table: str, rid, what: str, where: str):
+        super().__init__(f"{table} row {rid!r}: {what}; nothing was imported", where=where,
+                         hint="import an export compgen wrote, unchanged")
+        self.table, self.rid, self.what = table, rid, what
+
+
 class _Rows:
     """An export's tables being checked: each check refuses the whole import, naming its row."""
 
@@ -124,9 +175,7 @@ class _Rows:
         self.t, self.where = t, where
 
     def bad(self, table, row, what):
-        rid = row.get("id") if isinstance(row, dict) else None
-        raise CompgenError(f"{table} row {rid!r}: {what}; nothing was imported", where=self.where,
-                           hint="import an export compgen wrote, unchanged")
+        raise _BadRow(table, row.get("id") if isinstance(row, dict) else None, what, self.where)
 
     def text(self, table, row, key, line=True):
         v = row.get(key)
