@@ -1348,6 +1348,48 @@ def test_one_unreadable_row_breaks_the_fleet_and_the_export_for_no_one(tmp_path,
 
 
 @pytest.mark.parametrize("kind", STORES)
+@pytest.mark.parametrize("table, column, value, says", [
+    ("fits", "parameters", '{"XOC": 5}', "its parameters are not a fit's"),
+    ("fits", "parameters", '{"XOC": {"value": "a", "std": 1, "unit": "mm"}}', "values or σ are not finite"),
+    ("fits", "parameters", "[]", "its parameters are not a fit's"),
+    ("edits", "corrects", '{"BOA": "-30"}', "its corrections are not finite numbers"),
+    ("edits", "corrects", '[]', "its corrections are not finite numbers"),
+])
+def test_a_machines_row_compgen_cannot_read_is_named_by_show_trend_and_check(tmp_path, year, request,
+                                                                             monkeypatch, kind, table, column,
+                                                                             value, says):
+    """A fit or an edit another writer appended for this machine, JSON of the wrong shape
+    (PostgreSQL holds the JSON, not what it says): show, trend and check name the row and
+    who recorded it, in one line; each was an internal error. Left out in silence, a machine
+    value or a correction would be wrong."""
+    monkeypatch.chdir(tmp_path)
+    db = _store(kind, request, tmp_path)
+    _record(db, year, months=8).close()
+    with _raw(db) as execute:
+        mid = execute("SELECT id FROM machines").fetchone()[0]
+        sid = execute("INSERT INTO sessions (machine_id, taken, device, operator, temperatures, "
+                      "machine_sha256, data, recorded) VALUES (?, '2026-09-01T00:00:00+00:00', 'rtest', '', "
+                      "'{}', 'x', '[]', 'x') RETURNING id", (mid,)).fetchone()[0]
+        params = value if column == "parameters" else "{}"
+        fid = execute("INSERT INTO fits (session_id, marker, kind, model, parameters, sigma_um, rms_um, "
+                      "verdict, fit_json, recorded) VALUES (?, 'fit:000000', 'calibration', '[]', ?, 1, 1, "
+                      "'accepted', '{}', 'x') RETURNING id", (sid, params)).fetchone()[0]
+        rid = fid
+        if table == "edits":
+            rid = execute("INSERT INTO edits (machine_id, fit_id, controller, corrects, written, loaded, "
+                          "taken, recorded) VALUES (?, ?, 'itnc530', ?, '{}', '{}', "
+                          "'2026-09-02T00:00:00+00:00', 'x') RETURNING id", (mid, fid, value)).fetchone()[0]
+    truth = ROOT / "examples" / "truth-table4.json"
+    assert run("simulate", "--machine", "ac-trunnion-itnc530", "--truth", truth, "--paths", "K4", "-o",
+               "k4.csv")[0] == 0
+    who = ", recorded by compgen_owner" if kind == "postgresql" else ""
+    for argv in (["history", "show"], ["history", "trend"], ["check", "k4.csv", "--date", "2026-10-01"]):
+        code, out, err = run(*argv, "--machine", "ac-trunnion-itnc530", "--db", db)
+        assert code == 2 and f"{table[:-1]} #{rid}{who} cannot be read: " in err and says in err, (argv, err)
+        assert len(err.strip().splitlines()) == 1 and "internal error" not in err, err
+
+
+@pytest.mark.parametrize("kind", STORES)
 def test_an_edit_filed_under_another_machine_counts_for_no_machine(tmp_path, year, request, kind):
     """A writer appends an edit whose fit is another machine's under this machine's id, with
     a correction that would make a crashed machine pass: it counts for neither (the trend's

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
@@ -101,15 +102,20 @@ def _entries(store: Store, mid: int) -> tuple[list[Entry], list[dict]]:
     # an edit counts for a machine only where its fit is that machine's: one filed under another
     # machine (a writer can append it so) would add its corrections to this one's values
     edits = store.rows("SELECT e.id, e.taken, e.controller, e.corrects, e.written, e.loaded, e.fit_id, "
+                       "e.recorded_by, "
                        "f.marker, f.verdict FROM edits e JOIN fits f ON f.id = e.fit_id "
                        "JOIN sessions s ON s.id = f.session_id "
                        "WHERE e.machine_id = ? AND s.machine_id = ? ORDER BY e.taken, e.id", (mid, mid))
     for e in edits:
-        e["corrects"] = json.loads(e["corrects"])
-        e["written"], e["loaded"] = json.loads(e["written"]), json.loads(e["loaded"])
-        e["taken"] = utc(e["taken"])
+        with _read(store, "edit", e):
+            e["corrects"] = _numbers(json.loads(e["corrects"]), "its corrections")
+            e["written"], e["loaded"] = json.loads(e["written"]), json.loads(e["loaded"])
+            e["taken"] = utc(e["taken"])
     for f in fits:
-        f["taken"] = utc(f["taken"])
+        with _read(store, "fit", f):
+            f["taken"] = utc(f["taken"])
+            f["parameters"] = _parameters(f["parameters"])
+            _numbers({"σ̂": f["sigma_um"]}, "its σ̂")
     fits.sort(key=lambda f: (f["taken"], f["id"]))       # as instants: rows an older compgen kept
     at = {f["id"]: f["taken"] for f in fits}
     edits.sort(key=lambda e: (edit_key(e, at), e["id"]))      # with their offsets order as time does
@@ -121,13 +127,50 @@ def _entries(store: Store, mid: int) -> tuple[list[Entry], list[dict]]:
             for n, v in edits[done]["corrects"].items():
                 corrected[n] = corrected.get(n, 0.0) + v
             done += 1
-        p = json.loads(f["parameters"])
+        p = f["parameters"]
         out.append(Entry(f["id"], f["taken"], f["marker"], f["kind"], f["device"], f["verdict"],
                          f["sigma_um"],
                          {n: q["value"] for n, q in p.items()}, {n: q["std"] for n, q in p.items()},
                          {n: q["unit"] for n, q in p.items()}, dict(corrected),
                          f["recorded_by"] or "", f["machine_sha256"]))
     return out, edits
+
+
+@contextmanager
+def _read(store: Store, what: str, row: dict):
+    """A row read as compgen writes it, or named: another writer's row (an SQLite file's
+    writers are not held by the database; PostgreSQL holds types and JSON, not what the JSON
+    says) is refused in one line, never a crash and never left out in silence (a machine value
+    or a correction would be wrong without it)."""
+    try:
+        yield
+    except (CompgenError, ValueError, TypeError, KeyError, AttributeError) as exc:
+        why = exc.message if isinstance(exc, CompgenError) else (
+            str(exc) if isinstance(exc, ValueError) else "a column is not what compgen writes")
+        who = f", recorded by {one_line(row['recorded_by'])}" if row.get("recorded_by") else ""
+        hint = ("ask the store's owner to look at that row (compgen did not write it); the machine's "
+                "history is not shown without it")
+        raise CompgenError(f"{what} #{row['id']}{who} cannot be read: {one_line(why)[:120]}",
+                           where=store.where, hint=hint) from None
+
+
+def _numbers(d, what: str) -> dict:
+    """``d`` when it is a dict of finite numbers."""
+    if not isinstance(d, dict) or not all(isinstance(v, int | float) and not isinstance(v, bool)
+                                          and math.isfinite(v) for v in d.values()):
+        raise ValueError(f"{what} are not finite numbers")
+    return d
+
+
+def _parameters(text: str) -> dict:
+    """A fit row's parameters: each a value and a σ (finite numbers) and a unit."""
+    p = json.loads(text)
+    if not isinstance(p, dict) or not all(isinstance(q, dict) and isinstance(q.get("unit"), str)
+                                          for q in p.values()):
+        raise ValueError("its parameters are not a fit's")
+    for q in p.values():
+        _numbers({k: q.get(k) for k in ("value", "std")}, "its parameters' values or σ")
+    return p
 
 
 def machine_params(machine: Machine, names: Sequence[str]) -> tuple[str, ...]:
