@@ -25,6 +25,7 @@ was due), injected lines, hangs, and wrong refusals of good input. Outside CI: a
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import random
@@ -624,6 +625,86 @@ def shop_cases(wings: dict[str, Path]) -> list[Case]:
     return out
 
 
+# a column another writer fills, and what it may hold (JSON of any shape, or no JSON at all)
+FOREIGN = {("fits", "parameters"): "json", ("fits", "model"): "json", ("fits", "fit_json"): "json",
+           ("fits", "sigma_um"): "number", ("fits", "verdict"): "text", ("fits", "marker"): "text",
+           ("sessions", "taken"): "text", ("sessions", "temperatures"): "json",
+           ("sessions", "device"): "text", ("edits", "corrects"): "json", ("edits", "written"): "json",
+           ("edits", "taken"): "text", ("edits", "controller"): "text", ("checks", "summary"): "json",
+           ("checks", "passed"): "number", ("machines", "name"): "text"}
+FOREIGN_TEXT = ("not a date", "2026-13-01", "", "x" * 5000, "a\nb", "\x1b[2J", "2026-04-01T00:00+14:00",
+                "9999-12-31T23:59:59+00:00", "fit:000000")
+
+
+def _foreign_value(rng: random.Random, what: str):
+    """A value a writer outside compgen may append: well-typed for the column, any content."""
+    def json_value(depth=0):
+        shapes = [lambda: None, lambda: True, lambda: rng.choice([0, -1, 1e308, 2.5]), lambda: "x\n\x1b",
+                  lambda: [json_value(depth + 1)], lambda: {"XOC": json_value(depth + 1)},
+                  lambda: {"XOC": {"value": json_value(depth + 1), "std": json_value(depth + 1),
+                                   "unit": "mm"}}]
+        return rng.choice(shapes[:4] if depth >= 2 else shapes)()
+    if what == "json":
+        return rng.choice([json.dumps(json_value()), json.dumps(json_value()), "{", "", "NaN"])
+    if what == "number":
+        return rng.choice([float("nan"), float("inf"), -1, 2, "text", 1e30])
+    return rng.choice(FOREIGN_TEXT)
+
+
+def _foreign_store(store: Path, folder: Path, table: str, column: str, value) -> bytes:
+    """``store`` with a session, its fit, an edit and a check of its machine (or a machine)
+    appended by another writer, ``table``'s ``column`` holding ``value``."""
+    import sqlite3
+    db = folder / "h.sqlite"
+    shutil.copy(store, db)
+    with contextlib.closing(sqlite3.connect(db)) as raw, raw:
+        raw.row_factory = sqlite3.Row
+        fit = dict(raw.execute("SELECT * FROM fits ORDER BY id").fetchone())
+        ids: dict[str, int] = {}
+        for t in ("sessions", "fits", "edits", "checks", "machines"):
+            if t in ("checks", "machines") and t != table:
+                continue
+            row = {"sessions": {"machine_id": 1, "taken": "2026-04-01T00:00:00+00:00", "device": "rtest",
+                                "operator": "", "temperatures": "{}", "machine_sha256": "x", "data": "[]",
+                                "recorded": "x"},
+                   "fits": {**{k: v for k, v in fit.items() if k not in ("id", "content_sha256")},
+                            "session_id": ids.get("sessions"), "marker": "fit:" + "0" * 16},
+                   "edits": {"machine_id": 1, "fit_id": ids.get("fits"), "controller": "itnc530",
+                             "corrects": "{}", "written": "{}", "loaded": "{}",
+                             "taken": "2026-04-02T00:00:00+00:00", "recorded": "x"},
+                   "checks": {"machine_id": 1, "fit_id": ids.get("fits"), "against_fit_id": fit["id"],
+                              "passed": 1, "summary": "{}", "recorded": "x"},
+                   "machines": {"name": "other", "serial": "", "recorded": "x"}}[t]
+            if t == table:
+                row[column] = value
+            marks = ", ".join("?" * len(row))
+            ids[t] = raw.execute(f"INSERT INTO {t} ({', '.join(row)}) VALUES ({marks})", list(row.values())
+                                 ).lastrowid
+    return db.read_bytes()
+
+
+def foreign_row_cases(rng: random.Random, wings: dict[str, Path], per_column: int = 2) -> list[Case]:
+    """A row another writer appended to an SQLite store (its writers are not held by the
+    database), one column hostile: every command that reads the store either works or
+    names the row in one line."""
+    import sqlite3
+    reads = (["history", "show", "--machine", str(SEED)], ["history", "trend", "--machine", str(SEED)],
+             ["history", "fleet"], ["history", "list"], ["history", "export", "-o", "{dir}/x.json"],
+             ["check", "--machine", str(SEED), str(wings["k4"]), "--date", "2026-06-01"])
+    out = []
+    folder = Path(tempfile.mkdtemp(dir=wings["store"].parent))
+    for (table, column), what in FOREIGN.items():
+        for _ in range(per_column):
+            value = _foreign_value(rng, what)
+            try:
+                store = _foreign_store(wings["store"], folder, table, column, value)
+            except sqlite3.IntegrityError:       # the database holds this one itself (NOT NULL)
+                continue
+            out += [Case("foreign-row", f"{table}.{column} = {str(value)[:40]!r}: {' '.join(args[:2])}",
+                         {"h.sqlite": store}, [*args, "--db", "{dir}/h.sqlite"], "either") for args in reads]
+    return out
+
+
 def wing_inputs(work: Path, compgen: list[str]) -> dict[str, Path]:
     """The wings' valid inputs, made as a user makes them: a probe log, a history export and
     another store to import it into, a B/C machine's CEC tables and the fit for a second
@@ -643,6 +724,7 @@ def wing_inputs(work: Path, compgen: list[str]) -> dict[str, Path]:
     run("kinematics", "--from", FIT, "-o", "E.txt", "--record", "--db", "a.sqlite", "--date", "2026-03-02",
         "--despite-gate")
     run("history", "export", "--db", "a.sqlite", "-o", "h.json")
+    run("simulate", "--machine", SEED, "--truth", truth, "--paths", "K4", "-o", "k4.csv")
     run("history", "init", "--db", "target.sqlite")
     (work / "bt.json").write_text('{"parameters": {"ECC:h2c": {"value": 4e-5, "unit": "rad"}, '
                                   '"EYY:p1": {"value": 0.015, "unit": "mm"}}}')
@@ -668,7 +750,7 @@ def wing_inputs(work: Path, compgen: list[str]) -> dict[str, Path]:
             "nprogram": work / "N.ngc",
             "probe": work / "probe.log", "export": work / "h.json", "target": work / "target.sqlite",
             "cec": work / "A_CEC.INI", "carr": work / "A.MPF", "bcfit": work / "bcfit2.json",
-            "trt": work / "trt", "head": work / "head.csv"}
+            "trt": work / "trt", "head": work / "head.csv", "store": work / "a.sqlite", "k4": work / "k4.csv"}
 
 
 def run_case(case: Case, work: Path, compgen: list[str]) -> tuple[Case, str, str]:
@@ -755,6 +837,7 @@ def main() -> None:
     rng = random.Random(args.seed)
     cases = [*csv_cases(rng), *machine_cases(), *fit_cases(), *current_cases(), *output_cases(),
              *history_cases(), *nest_cases(wings), *shop_cases(wings), *second_look_cases(),
+             *foreign_row_cases(rng, wings),
              *derived_cases(rng, programs, args.generated, wings)]
     t0 = time.perf_counter()
     with ThreadPoolExecutor(args.jobs) as pool:

@@ -1308,19 +1308,27 @@ NO_NUMBER = "a parameter's value or σ is not a finite number"
 
 
 @pytest.mark.parametrize("kind, taken, parameters, says", [
-    ("sqlite", "not a date", "{}", "a stored date 'not a date' is not one compgen writes"),
+    ("sqlite", "not a date", "{}", ("a stored date 'not a date' is not one compgen writes",
+                                    "'not a date' is not a date")),
+    ("sqlite", "9999-12-31T23:59:59+00:00", "{}", ("a stored date '9999-12-31T23:59:59' lies after today",
+                                                   "'9999-12-31T23:59:59+00:00' is not a date a measurement "
+                                                   "was taken on")),
     ("sqlite", "2026-03-01T00:00:00+00:00", '{"XOC": 5}', NO_NUMBER),
+    ("postgresql", "9999-12-31T23:59:59+00:00", "{}", ("a stored date '9999-12-31T23:59:59' lies after today",
+                                                       "'9999-12-31T23:59:59+00:00' is not a date a "
+                                                       "measurement was taken on")),
     ("postgresql", "2026-03-01T00:00:00+00:00", '{"XOC": 5}', NO_NUMBER),
     ("postgresql", "2026-03-01T00:00:00+00:00", "[]", "parameters is not a JSON dict"),
-], ids=["sqlite, no date", "sqlite, a parameter no number", "postgresql, a parameter no number",
-        "postgresql, parameters a list"])
+], ids=["sqlite, no date", "sqlite, the year 9999", "sqlite, a parameter no number",
+        "postgresql, the year 9999", "postgresql, a parameter no number", "postgresql, parameters a list"])
 def test_one_unreadable_row_breaks_the_fleet_and_the_export_for_no_one(tmp_path, year, request, kind, taken,
                                                                        parameters, says):
     """A row another writer appended that compgen cannot read: a date that is none (an SQLite
-    file's writers are not held by the database), parameters that are JSON but no fit's
-    (PostgreSQL holds the types and the JSON, not what it says). The fleet lists the others;
-    the export leaves the row out with the rows that name it, says so, and imports. Both
-    were an internal error for everyone."""
+    file's writers are not held by the database), the year 9999 (a date, past the calendar's
+    end once a due date is added), parameters that are JSON but no fit's (PostgreSQL holds
+    the types and the JSON, not what it says). The fleet lists the others; the export leaves
+    the row out with the rows that name it, says so, and imports. Each was an internal error
+    for everyone."""
     db = _store(kind, request, tmp_path)
     _record(db, year, months=2).close()
     with _raw(db) as execute:
@@ -1334,12 +1342,11 @@ def test_one_unreadable_row_breaks_the_fleet_and_the_export_for_no_one(tmp_path,
                       "'accepted', '{}', 'x') RETURNING id", (sid, parameters)).fetchone()[0]
     code, out, err = run("history", "fleet", "--db", db)
     assert code == 0 and "A/C trunnion" in out, out + err
-    if taken == "not a date":
-        assert f"UNREADABLE: {says}" in out, out
+    if isinstance(says, tuple):              # a date: the fleet names it
+        assert f"UNREADABLE: {says[0]}" in out, out
     for output in ("e.json", "e.csv"):
         code, out, err = run("history", "export", "--db", db, "-o", tmp_path / output)
-        row = (f"sessions row {sid}: 'not a date' is not a date (and 1 row(s) that name it)"
-                    if taken == "not a date" else (f"fits row {fid}: {says}"))
+        row = (f"sessions row {sid}: {says[1]}" if isinstance(says, tuple) else f"fits row {fid}: {says}")
         assert code == 0 and f"warning: left out {row}" in err, out + err
         assert "1 unreadable row(s) left out" in out and "wrote 22 rows" in out, out
     other = _store(kind, request, tmp_path, "b")
@@ -1387,6 +1394,30 @@ def test_a_machines_row_compgen_cannot_read_is_named_by_show_trend_and_check(tmp
         code, out, err = run(*argv, "--machine", "ac-trunnion-itnc530", "--db", db)
         assert code == 2 and f"{table[:-1]} #{rid}{who} cannot be read: " in err and says in err, (argv, err)
         assert len(err.strip().splitlines()) == 1 and "internal error" not in err, err
+
+
+@pytest.mark.parametrize("fit_json", ["NaN", "[]", "5", '"text"'])
+def test_a_calibration_whose_fit_json_is_json_of_another_shape_is_refused_in_one_line(tmp_path, year,
+                                                                                     monkeypatch, fit_json):
+    """Found by the fuzzer's foreign rows: a last accepted calibration whose fit_json is JSON
+    but no object (json reads "NaN" as a number) was an internal error in check."""
+    monkeypatch.chdir(tmp_path)
+    db = _store("sqlite", None, tmp_path)
+    _record(db, year, months=2).close()
+    with _raw(db) as execute:
+        sid = execute("INSERT INTO sessions (machine_id, taken, device, operator, temperatures, "
+                      "machine_sha256, data, recorded) VALUES (1, '2026-04-01T00:00:00+00:00', 'rtest', '', "
+                      "'{}', 'x', '[]', 'x') RETURNING id").fetchone()[0]
+        execute("INSERT INTO fits (session_id, marker, kind, model, parameters, sigma_um, rms_um, "
+                "verdict, fit_json, recorded) VALUES (?, 'fit:000000', 'calibration', '[]', '{}', 1, 1, "
+                "'accepted', ?, 'x')", (sid, fit_json))
+    truth = ROOT / "examples" / "truth-table4.json"
+    assert run("simulate", "--machine", "ac-trunnion-itnc530", "--truth", truth, "--paths", "K4", "-o",
+               "k4.csv")[0] == 0
+    code, _, err = run("check", "--machine", "ac-trunnion-itnc530", "k4.csv", "--date", "2026-06-01",
+                       "--db", db)
+    assert code == 2 and "does not hold the values its own fit gives" in err, err
+    assert len(err.strip().splitlines()) == 1
 
 
 @pytest.mark.parametrize("kind", STORES)

@@ -8,7 +8,7 @@ import math
 from collections.abc import Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 
 import numpy as np
 
@@ -319,7 +319,7 @@ def calibration_fit(store: Store, entry: Entry) -> FitResult:
         same = (json.loads(row["model"]) == list(fit.model) and fit.holds_marker(entry.marker)
                 and json.loads(row["parameters"]) == {n: {"value": e.value, "std": e.std, "unit": e.unit}
                                                       for n, e in fit.parameters.items()})
-    except (CompgenError, KeyError, TypeError, ValueError):
+    except (CompgenError, AttributeError, KeyError, TypeError, ValueError):   # JSON of any shape
         same = False
     if not same:
         raise CompgenError(f"the last accepted calibration (fit #{entry.id}, {one_line(entry.marker)}, "
@@ -334,6 +334,7 @@ def fleet(store: Store, every_days: float, today: str | None = None) -> list[dic
     """Every machine: its last calibration and check, the last edit, and when a check is due."""
     out = []
     today = taken_at(today)
+    latest = (datetime.now(UTC) + timedelta(days=1)).isoformat(timespec="seconds")    # as taken_at allows
     for m in store.rows("SELECT id, name, serial FROM machines ORDER BY name, serial"):
         fits = store.rows("SELECT f.kind, f.verdict, s.taken FROM fits f "
                           "JOIN sessions s ON s.id = f.session_id "
@@ -346,6 +347,9 @@ def fleet(store: Store, every_days: float, today: str | None = None) -> list[dic
         try:
             for row in (*fits, *checks, *edits):
                 row["taken"] = utc(row["taken"])
+                if row["taken"] > latest:       # no due date follows from it (9999: past the calendar)
+                    raise CompgenError(f"a stored date {row['taken'][:19]!r} lies after today: not one "
+                                       "compgen writes")
         except CompgenError as exc:     # one machine's unreadable row: it says so, the rest go on
             out.append({"machine": m["name"], "serial": m["serial"], "fits": len(fits),
                         "last_calibration": None, "last_check": None, "last_check_passed": None,
