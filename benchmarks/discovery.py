@@ -18,8 +18,9 @@ prediction of K4 at two ball positions never measured, against the truth (RMS, �
 constant per set-up aside).
 
 Then the false alarms: clean data (the location model is the truth) under AR(1) noise,
-Student-t noise and three 20 µm outliers, with the share of data sets in which diagnose
-flags any effect; and the power under AR(1) noise for a 15″ 2/rev angular error of C.
+Student-t noise and three 20 µm outliers, and clean probing sessions whose noise diagnose
+takes from the touches, with the share of data sets in which diagnose flags any effect;
+and the power under AR(1) noise for a 15″ 2/rev angular error of C.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+import tempfile
 import time
 from dataclasses import replace
 from functools import partial
@@ -42,8 +44,15 @@ from conftest import ARCSEC, SEED_MACHINE, TABLE4, UM  # noqa: E402
 
 from compgen.configuration.machine_file import load_machine  # noqa: E402
 from compgen.controllers.advice import Advisor  # noqa: E402
+from compgen.data.probe import (  # noqa: E402
+    format_probe_log,
+    probe_poses,
+    read_probe_log,
+    simulate_touches,
+    sphere_centres,
+)
 from compgen.data.rtest import RTestData  # noqa: E402
-from compgen.data.simulate import ar1_noise  # noqa: E402
+from compgen.data.simulate import ar1_noise, simulate  # noqa: E402
 from compgen.model.effects import compose, effect_name, location_model  # noqa: E402
 from compgen.model.kinematics import Model  # noqa: E402
 from compgen.model.paths import generate  # noqa: E402
@@ -231,6 +240,17 @@ def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
             "invisible": [c.effect for c in found.candidates if not c.visible and not c.silent]}
 
 
+def probe_session(machine, seed: int, path: Path) -> RTestData:
+    """A clean probing session (the seed's Table 4, 1 µm per touch) as `simulate --device
+    probe` writes it, read back as compgen reads a probe log."""
+    rng = np.random.default_rng(3000 + seed)
+    poses = probe_poses(machine, ["K4", "K1", "K2"])
+    data = simulate(machine, TABLE4, poses, 0.0, rng)
+    tips, directions = simulate_touches(machine, poses, data.deviation, 1.0, rng)
+    path.write_text(format_probe_log(machine, machine.probe, poses, tips, directions, ("clean",)))
+    return sphere_centres(read_probe_log(path, machine), machine).data
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=20, help="data sets per false-alarm case")
@@ -291,6 +311,15 @@ def main() -> None:
             outliers.append(len(found.outliers))
         print(f"  {kind:<10} flagged {flagged}/{args.draws} (unexplained {unexplained}, a gain {gains}); "
               f"outliers listed per set: median {int(np.median(outliers))}, max {max(outliers)}")
+    flagged = unexplained = 0
+    work = Path(tempfile.mkdtemp(prefix="compgen-probe-"))
+    for seed in range(args.draws):           # the probe's noise from its own touches, as diagnose takes it
+        data = [probe_session(machine, seed, work / "p.log")]
+        found = diagnose(machine, data, identify(machine, data))
+        flagged += bool(found.significant) or any(g.significant for g in found.devices) or found.unexplained
+        unexplained += found.unexplained
+    print(f"  {'probe':<10} flagged {flagged}/{args.draws} (unexplained {unexplained}): K4 + K1 + K2 probed, "
+          "1 µm per touch, the noise from the touches")
     found_ecc = 0
     for seed in range(args.draws):
         rng = np.random.default_rng(2000 + seed)

@@ -454,3 +454,27 @@ def test_a_reversals_visibility_beyond_its_start_sides_does_not_depend_on_its_sc
         assert got[0] == pytest.approx(want, rel=1e-9) and 0 < want < 1
     C = np.column_stack([np.zeros(60), B])          # an axis that never reverses: nothing seen
     assert beyond_starts(C.T @ C, Q.T @ C, 1)[0] == 0.0
+
+
+def test_a_noise_estimated_from_few_degrees_of_freedom_is_tested_as_one():
+    """A probe's noise comes from its log's own touches (72 degrees of freedom for K4 + K1 +
+    K2): taken as a known σ, a χ² test calls clean groups misfit whenever the estimate came
+    out low (34 of 1000 clean sessions of 9 groups of 12 readings, α 0.01). Tested as the
+    ratio of two estimates, F(k, 72): 8 of 1000; a group at 1.6× the noise is still named
+    in 245 of them (12 readings hold little power)."""
+    from compgen.statistics.significance import lack_of_fit
+    n, noise_um, nu = 12, 1.0, 72
+    groups, rho = np.repeat(["K4", "K1", "K2"], n), np.zeros((3 * n, 3))
+    rng = np.random.default_rng(5)
+    called = {"chi2": 0, "F": 0}
+    named = 0
+    for _ in range(1000):
+        r = rng.normal(0, noise_um * 1e-3, (3 * n, 3))
+        said = noise_um * np.sqrt(rng.chisquare(nu) / nu)          # the noise as the touches estimate it
+        called["chi2"] += bool(lack_of_fit(r, groups, said, rho, 1.0, 0.01))
+        called["F"] += bool(lack_of_fit(r, groups, said, rho, 1.0, 0.01, nu))
+        r[:n, 0] *= 1.6
+        named += ("K4", "dX") in [(m["path"], m["direction"]) for m in lack_of_fit(r, groups, said, rho, 1.0,
+                                                                                    0.01, nu)]
+    assert called["F"] <= 10 < called["chi2"], called
+    assert named > 100, named

@@ -208,7 +208,7 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
     t = np.array([np.nanmin(log.t[g]) if not np.isnan(log.t[g]).all() else np.nan for g in groups])
     poses = Poses(q, ball, t, log.path[first])
     data = RTestData(poses, reading, log.source, log.sha256, tuple(int(log.lines[i]) for i in first),
-                     device="probe", cov=cov)
+                     device="probe", cov=cov, cov_dof=dof)
     return Centres(data, centre, math.sqrt(s2) * 1e3, dof, radius_offset * 1e3, radius_sigma * 1e3,
                    tuple(warnings))
 

@@ -47,6 +47,8 @@ class RTestData:
     lines: tuple[int, ...] = ()     # the CSV line of each reading (header = 1), when read from one
     device: str = "rtest"           # "probe": readings are sphere centres from a probe log
     cov: np.ndarray | None = None   # (n, 3, 3) mm², each reading's covariance when it is known
+    cov_dof: int | None = None      # the degrees of freedom cov's scale was estimated with (a probe
+                                    # log's pooled touches), None where it is known
 
     def __len__(self) -> int:
         return len(self.poses)

@@ -111,15 +111,12 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     accounts for is called unexplained."""
     joined = Measurements.concat(data)
     kind = joined.device
-    device = noise_um if noise_um is not None else machine.noise_um
-    if kind == "probe" and noise_um is None:   # a probe's centres carry their noise from the touches
-        cov = joined.covariance(np.zeros((3, 3)))
-        device = float(np.sqrt(np.einsum("nii->", cov) / (3 * len(cov)))) * 1e3
+    device, device_dof = _device_noise(machine, joined, noise_um)
     res = _residual(machine, joined, fit)
     poses, r, rss, dof = res.poses, res.r, res.rss, res.dof
     # no noise given: what the data repeat says it, where they repeat enough
     said = repeats(same_pose(machine, poses, res.seg), res.r3, res.seg) if device is None else None
-    device = said.sigma_um if said is not None else device
+    device, device_dof = (said.sigma_um, said.dof) if said is not None else (device, device_dof)
 
     effects, notes = _to_try(machine, fit, candidates, poses)
     ranked, noise, made, carried = _ranked(machine, fit, effects, res)
@@ -146,7 +143,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         devices = _told_beside(devices, np.empty((r.size, 0)), res, noise, alpha, blamed)
     seen = [d for d in devices if d.significant]
     best_sum_sq = max([ranked[c.effect].drop for c in significant[:1]] + [d.drop for d in seen], default=0.0)
-    misfit, share = _misfit(res, noise, device, best_sum_sq, alpha)
+    misfit, share = _misfit(res, noise, device, best_sum_sq, alpha, device_dof)
     lines = strongest_lines(machine, poses, r.reshape(-1, 3), res.Q)
     unexplained = _unexplained(misfit, bool(significant or seen), share,
                                _outside_line(lines, device, misfit, alpha, best_sum_sq))
@@ -194,14 +191,29 @@ def _candidates(effects: Sequence[Effect], ranked: dict[str, Row], rss: float, r
     return out
 
 
+def _device_noise(machine: Machine, joined: Measurements, noise_um: float | None
+                  ) -> tuple[float | None, int | None]:
+    """The device's noise (µm) and the degrees of freedom it is estimated with (None: known,
+    as given by --noise-um or the machine file from the device's calibration); a probe's
+    centres carry theirs from the log's pooled touches."""
+    if noise_um is not None or joined.device != "probe":
+        return (noise_um if noise_um is not None else machine.noise_um), None
+    cov = joined.covariance(np.zeros((3, 3)))
+    dofs = [d.cov_dof for d in joined.sets]
+    return (float(np.sqrt(np.einsum("nii->", cov) / (3 * len(cov)))) * 1e3,
+            sum(dofs) if None not in dofs else None)
+
+
 def _misfit(res: _Residual, noise: Whitening, device: float | None, best_sum_sq: float,
-            alpha: float) -> tuple[tuple, float | None]:
-    """Against the device's noise (where known): each path and direction whose residual
-    exceeds it, and the share of the excess the best explanation removes."""
+            alpha: float, device_dof: int | None = None) -> tuple[tuple, float | None]:
+    """Against the device's noise (where known; estimated with ``device_dof`` degrees of
+    freedom, or None where given): each path and direction whose residual exceeds it, and
+    the share of the excess the best explanation removes."""
     if device is None:
         return (), None
     free = 1.0 - np.einsum("ij,ij->i", res.Q, res.Q).reshape(-1, 3)     # 1 − each reading's leverage
-    misfit = tuple(lack_of_fit(res.r.reshape(-1, 3), res.poses.path, device, noise.rho, free, alpha))
+    misfit = tuple(lack_of_fit(res.r.reshape(-1, 3), res.poses.path, device, noise.rho, free, alpha,
+                               device_dof))
     excess = res.rss - res.dof * (device * 1e-3) ** 2
     share = min(1.0, best_sum_sq / excess) if best_sum_sq > 0 and excess > 0 else None
     return misfit, share

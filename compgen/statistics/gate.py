@@ -39,6 +39,7 @@ def fit_gate(machine: Machine, data: Sequence[RTestData], fit: FitResult) -> lis
 def gate_reasons(data: Sequence[RTestData], fit: FitResult, found: Diagnosis) -> list[str]:
     """``fit_gate``'s reasons from a diagnosis of ``fit`` already made (``found``)."""
     reasons = []
+    device = "the probe" if found.data_device == "probe" else "the R-test"   # whose noise, whose error
     suspicion = unit_suspicion(data)
     if suspicion:
         reasons.append(suspicion + "; check the CSV's dX dY dZ unit")
@@ -48,21 +49,21 @@ def gate_reasons(data: Sequence[RTestData], fit: FitResult, found: Diagnosis) ->
                        "noise allows: the model misses an effect, or the data are wrong (columns "
                        "swapped, a sign, a mismatched machine file)")
     if found.unexplained:
-        where = (f"the residual exceeds the R-test's noise ({found.misfit[0]['direction']} of "
+        where = (f"the residual exceeds {device}'s noise ({found.misfit[0]['direction']} of "
                  f"{found.misfit[0]['path']}: {found.misfit[0]['rms_um']:.2f} µm against "
-                 f"{found.misfit[0]['noise_um']:g} µm)" if found.misfit else
+                 f"{found.misfit[0]['noise_um']:.2f} µm)" if found.misfit else
                  f"the residual holds a periodic line no catalogue effect has ({found.outside_line.text()})")
         reasons.append(f"{where} and no catalogue effect explains it (run diagnose: it shows where and its "
                        "shape, and how to declare it)")
     elif c := found.blamed:
-        reasons.append(f"the R-test itself explains the misfit as well as any machine effect ({c.text()}): "
+        reasons.append(f"{device} itself explains the misfit as well as any machine effect ({c.text()}): "
                        "calibrate the device and measure again")
     elif found.significant:
         reasons.append("diagnose finds effects the model misses: "
                        + ", ".join(c.effect for c in found.significant[:3])
                        + " (run diagnose, add the effect with fit --add, and refit)")
         if found.significant_devices:       # a second cause, the device's: no refit removes it
-            reasons.append("the R-test's own " + ", ".join(c.text() for c in found.significant_devices)
+            reasons.append(f"{device}'s own " + ", ".join(c.text() for c in found.significant_devices)
                            + " stays significant beside them: calibrate the device and measure again")
     return reasons
 

@@ -233,6 +233,12 @@ class Repeats:
     poses: int          # poses read more than once
     dwell: int          # of those, read only one reading after another (a dwell's samples)
 
+    @property
+    def dof(self) -> int:
+        """The degrees of freedom of ``sigma_um``: each repeat beyond a pose's first, in three
+        directions."""
+        return 3 * (self.readings - self.poses)
+
     def words(self) -> str:
         told = f"{self.readings} readings of {self.poses} poses read more than once"
         if self.dwell == self.poses:

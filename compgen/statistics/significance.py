@@ -125,7 +125,7 @@ def chi2_sf(x: float, k: int) -> float:
 
 
 def lack_of_fit(r: np.ndarray, groups: np.ndarray, noise_um: float, rho: np.ndarray, free,
-                alpha: float) -> list[dict]:
+                alpha: float, noise_dof: int | None = None) -> list[dict]:
     """Where the residual ``r`` (n, 3; mm) exceeds the R-test's own noise: per group (a path)
     and direction, a χ² test of its sum of squares against ``noise_um``, Bonferroni over the
     groups tested. ``free``: each reading's share the fit left free (1 − its leverage, (n, 3),
@@ -134,8 +134,11 @@ def lack_of_fit(r: np.ndarray, groups: np.ndarray, noise_um: float, rho: np.ndar
     of an AR(1) series varies (1 + ρ²)/(1 − ρ²) times more) and with tails heavier than a
     normal's: a sum of squares varies (κ − 1)/2 times more with the residual's kurtosis κ
     (Box, 1953), which the test takes from the group's own residual where it exceeds a
-    normal's 3 (a missing effect's misfit has κ below 3 and keeps the normal's). Returns the
-    groups that fail, worst first."""
+    normal's 3 (a missing effect's misfit has κ below 3 and keeps the normal's). Where the
+    noise is itself estimated with ``noise_dof`` degrees of freedom (a probe's pooled touches,
+    a pose's repeats), the ratio of the two estimates is tested as F(k, noise_dof): as a
+    known σ, a noise estimated on 72 touches' degrees of freedom called 2 clean probe
+    sessions in 30 unexplained. Returns the groups that fail, worst first."""
     out, tests = [], []
     sigma2 = (noise_um * 1e-3) ** 2
     free = np.broadcast_to(np.asarray(free, float), r.shape)
@@ -149,7 +152,8 @@ def lack_of_fit(r: np.ndarray, groups: np.ndarray, noise_um: float, rho: np.ndar
             ratio = float(np.sum(rg**2) / fg / sigma2)
             tests.append((g, "XYZ"[d], k, ratio, float(np.sqrt(m2)) * 1e3))
     for g, d, k, ratio, rms in tests:
-        p = min(1.0, chi2_sf(k * ratio, k) * len(tests))
+        tail = chi2_sf(k * ratio, k) if noise_dof is None else f_sf(ratio, k, noise_dof)
+        p = min(1.0, tail * len(tests))
         if p < alpha:
             out.append({"path": str(g), "direction": f"d{d}", "rms_um": rms, "noise_um": noise_um,
                         "p_value": p})
