@@ -1421,6 +1421,55 @@ def test_a_calibration_whose_fit_json_is_json_of_another_shape_is_refused_in_one
 
 
 @pytest.mark.parametrize("kind", STORES)
+def test_a_calibration_whose_values_a_writer_changed_is_never_checked_against(tmp_path, year, request, kind):
+    """A writer appends the real calibration's row again, later, with BOA moved 100″ and its
+    fit_json as it was (or the marker recomputed by hand): check refuses that calibration,
+    naming it, on both stores; it never passes a crashed machine against it."""
+    machine = year[0]
+    db = _store(kind, request, tmp_path)
+    _record(db, year, months=6).close()
+    with _raw(db) as execute:
+        cols = ("marker", "kind", "model", "parameters", "sigma_um", "rms_um", "verdict", "fit_json",
+                "recorded")
+        row = execute(f"SELECT {', '.join(cols)} FROM fits ORDER BY id DESC LIMIT 1").fetchone()
+        params = json.loads(row[3])
+        params["BOA"]["value"] += 100 * ARCSEC
+        sid = execute("INSERT INTO sessions (machine_id, taken, device, operator, temperatures, "
+                      "machine_sha256, data, recorded) SELECT machine_id, '2026-06-10T09:00:00+00:00', "
+                      "device, operator, temperatures, machine_sha256, data, recorded FROM sessions ORDER BY "
+                      "id DESC LIMIT 1 RETURNING id").fetchone()[0]
+        execute(f"INSERT INTO fits (session_id, {', '.join(cols)}) VALUES (?, {', '.join('?' * len(cols))})",
+                (sid, row[0], *row[1:3], json.dumps(params), *row[4:]))
+    with open_store(db) as store, pytest.raises(CompgenError, match=r"does not hold the values its own fit"):
+        H.last_calibration(store, machine, before=H.taken_at("2026-06-20T10:00"))
+
+
+@pytest.mark.parametrize("kind", STORES)
+def test_another_plants_machine_of_the_same_name_is_merged_only_when_the_user_says_so(tmp_path, year, request,
+                                                                                      monkeypatch, kind):
+    """Two plants' serial-less machines of one name, measured with the same bundled machine
+    file: the import refuses to merge them without --same-machine and leaves the store as
+    it was, on both stores; with it, the fits join that machine."""
+    monkeypatch.chdir(tmp_path)
+    _record(tmp_path / "a.sqlite", year, months=3).close()
+    assert run("history", "export", "--db", "a.sqlite", "-o", "a.json")[0] == 0
+    d = _store(kind, request, tmp_path, "d")
+    with open_store(d) as store:
+        fit = year[2][0][1]
+        e = fit.parameters["YOC"]
+        moved = {**fit.parameters, "YOC": replace(e, value=e.value + 1e-3)}
+        H.record_fit(store, replace(fit, parameters=moved), year[0], taken="2025-06-01")
+    rows = _contents(d)
+    rc, _, err = run("history", "import", "a.json", "--db", d)
+    assert rc == 2 and "has no serial, and this store holds a machine of that name" in err, err
+    assert _contents(d) == rows
+    rc, out, err = run("history", "import", "a.json", "--db", d, "--same-machine", year[0].name)
+    assert rc == 0 and "3 fits" in out, err
+    with open_store(d) as store:
+        assert len(store.rows("SELECT id FROM machines")) == 1 and len(store.rows("SELECT id FROM fits")) == 4
+
+
+@pytest.mark.parametrize("kind", STORES)
 def test_an_edit_filed_under_another_machine_counts_for_no_machine(tmp_path, year, request, kind):
     """A writer appends an edit whose fit is another machine's under this machine's id, with
     a correction that would make a crashed machine pass: it counts for neither (the trend's
