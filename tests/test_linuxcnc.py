@@ -58,9 +58,10 @@ TRUTH = {
 TABLES = {"xyzac": ["ECC:h2c", "ECC:h2s", "EAA:p1"], "xyzbc": ["ECC:h2c", "ECC:h2s", "EYY:p1"]}
 INI_LINE = re.compile(r"^#\s+\[JOINT_(\d)\] COMP_FILE = (\S+), COMP_FILE_TYPE = (\d)$", re.MULTILINE)
 
-pytestmark = pytest.mark.skipif(
-    shutil.which("linuxcnc") is None and not os.environ.get("COMPGEN_REQUIRE_LINUXCNC"),
-    reason="LinuxCNC is not installed (apt-get install linuxcnc-uspace)")
+pytestmark = [pytest.mark.slow,      # every test here starts LinuxCNC
+              pytest.mark.skipif(
+                  shutil.which("linuxcnc") is None and not os.environ.get("COMPGEN_REQUIRE_LINUXCNC"),
+                  reason="LinuxCNC is not installed (apt-get install linuxcnc-uspace)")]
 
 
 @pytest.fixture(scope="module", params=["xyzac", "xyzbc"])
