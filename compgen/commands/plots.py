@@ -18,7 +18,7 @@ matplotlib.rcParams["text.parse_math"] = False
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..controllers.advice import Measurement  # noqa: E402
+from ..controllers.advice import Proposal  # noqa: E402
 from ..data.rtest import Measurements, RTestData  # noqa: E402
 from ..errors import CompgenError, one_line  # noqa: E402
 from ..model.effects import effect_of_param, resolve  # noqa: E402
@@ -183,7 +183,7 @@ def _rivals(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosis, re
 
 
 def rival_curves(machine: Machine, poses: Poses, fit: FitResult, found: Diagnosis,
-                 extra: Measurement) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+                 extra: Proposal) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """For the best candidate and each rival at its fitted size: the misfit (µm, (n, 3)) the
     fit's model leaves of it on the measured poses, and the misfit it would leave on
     ``extra`` once that is measured too (first order): alike on the first, apart on the

@@ -51,7 +51,7 @@ AGAIN = " again, right after these data"     # a repeat's label, after its run's
 
 
 @dataclass(frozen=True, eq=False)
-class Measurement:
+class Proposal:
     """A measurement that could be added: a path of the machine file with the ball at
     ``ball`` (mm, table frame, as a CSV's bx, by, bz), run there and back or not, and its
     poses. ``name`` is the file stem its program and data are advised under."""
@@ -104,13 +104,13 @@ class Advisor:
         self.candidates = [] if self.unable else _candidates(machine, measured, device)
         self._why: dict[str, str | None] = {}
 
-    def why_not(self, m: Measurement) -> str | None:
+    def why_not(self, m: Proposal) -> str | None:
         """Why ``measure-program`` would refuse ``m`` on this machine, or None."""
         if m.label not in self._why:
             self._why[m.label] = _refusal(self.machine, m)
         return self._why[m.label]
 
-    def runnable(self, ms, most: int | None = None) -> tuple[Measurement, ...]:
+    def runnable(self, ms, most: int | None = None) -> tuple[Proposal, ...]:
         """Those of ``ms`` the machine can make, in their order; at most ``most``."""
         out = []
         for m in ms:
@@ -121,7 +121,7 @@ class Advisor:
         return tuple(out)
 
 
-def _refusal(machine: Machine, m: Measurement) -> str | None:
+def _refusal(machine: Machine, m: Proposal) -> str | None:
     try:
         if m.device == "probe":
             probe_program(machine, m.poses, m.path, machine.controller, "ADVICE", "", "")
@@ -132,7 +132,7 @@ def _refusal(machine: Machine, m: Measurement) -> str | None:
     return None
 
 
-def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest") -> list[Measurement]:
+def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest") -> list[Proposal]:
     """Every place for every path, less what would leave the travel and what ``measured``
     holds already (same path, same ball; there and back where the axes turned back).
 
@@ -182,6 +182,6 @@ def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest")
                 # K2 twice), so that no advised program or reading overwrites one already fitted
                 n = runs_of[key]
                 label, stem = f"{label}{AGAIN}", f"{stem}_AGAIN" + (f"_{n}" if n > 1 else "")
-            out.append(Measurement(label, name, tuple(float(v) for v in at), poses, back, stem, device,
+            out.append(Proposal(label, name, tuple(float(v) for v in at), poses, back, stem, device,
                                    again, nest))
     return out

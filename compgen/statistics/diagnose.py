@@ -17,7 +17,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,6 +29,7 @@ from ..model.machine import Machine
 from ..model.poses import Poses, runs
 from ..model.sides import FreeConstants, same_pose, span
 from ..units import shown
+from .advising import Advising, Proposal
 from .device import DeviceCandidate, device_candidates, device_columns
 from .diagnosis import REPEATS_TRIED, Candidate, Diagnosis, _outside_line, _unexplained
 from .noise import ar1, outliers, repeats
@@ -48,9 +48,6 @@ from .significance import (
     tall_qr,
 )
 from .spectrum import strongest_lines
-
-if TYPE_CHECKING:        # the type only: advice writes programs, a layer above
-    from ..controllers.advice import Advisor, Measurement
 
 # Beyond this many poses the first pass carries the best it expects, found on about this
 # many of them: step 5 then needs no pass of its own (5 of 27 s at 720 000 readings)
@@ -96,7 +93,7 @@ class _Residual:
 
 def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
              candidates: Sequence[str] | None = None, alpha: float = ALPHA,
-             fit_file: str = "", advisor: Callable[..., Advisor] | None = None, machine_ref: str = "",
+             fit_file: str = "", advisor: Callable[..., Advising] | None = None, machine_ref: str = "",
              noise_um: float | None = None) -> Diagnosis:
     """Rank the effects not in ``fit``'s model by how much of its residual they explain.
 
@@ -477,7 +474,7 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], firs
 
 
 def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dict[str, Row], rival: dict,
-             model_effects: Sequence[Effect], advising: Advisor | None) -> tuple[list[Candidate], dict]:
+             model_effects: Sequence[Effect], advising: Advising | None) -> tuple[list[Candidate], dict]:
     """Step 6: what would separate what these data cannot (``separation.py``, one R factor of
     the measured poses for both): a candidate the model absorbs, or a part of it (fit --add
     refuses it), and the best's rivals. Equivalent rivals reordered. Returns the candidates
@@ -515,7 +512,7 @@ def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dic
 
 
 
-def _times_measured(machine: Machine, poses: Poses, m: Measurement) -> int:
+def _times_measured(machine: Machine, poses: Poses, m: Proposal) -> int:
     """How many runs of ``poses`` are ``m``'s: its path, its ball, its nest."""
     run = runs(poses)
     first = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])

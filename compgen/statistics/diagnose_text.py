@@ -4,16 +4,13 @@ from __future__ import annotations
 
 import shlex
 from itertools import combinations
-from typing import TYPE_CHECKING
 
 from .. import me
 from ..model.effects import effect_name
 from ..units import three, three_header
+from .advising import Proposal
 from .diagnosis import REPEATS_TRIED, Diagnosis
 from .significance import said_p
-
-if TYPE_CHECKING:        # the type only: advice writes programs, a layer above
-    from ..controllers.advice import Measurement
 
 
 def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
@@ -314,14 +311,14 @@ def next_name(path: str) -> str:
     return f"{stem}+1.json"
 
 
-def _measure(d: Diagnosis, m: Measurement) -> str:
+def _measure(d: Diagnosis, m: Proposal) -> str:
     command = m.command(me(), d.machine_ref, d.program_ext)
     # a remark after the command is a bash comment: the line pastes and runs as printed
     return command + ("  # then run it at once, the R-test's clock running on: its t column continues "
                       "these data's" if m.again else "")
 
 
-def _told(d: Diagnosis, m: Measurement) -> set[tuple[str, str]]:
+def _told(d: Diagnosis, m: Proposal) -> set[tuple[str, str]]:
     """The pairs of rivals ``m`` tells apart on its own."""
     group = (d.significant[0].effect, *d.rivals)
     return set(combinations(group, 2)) - set(map(tuple, d.rivals_open.get(m.label, ())))

@@ -6,18 +6,14 @@ are ``diagnose_text``'s."""
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .advising import Proposal
 from .device import DeviceCandidate
 from .noise import Repeats
 from .significance import ALPHA, COND_LIMIT, VISIBLE
 from .spectrum import Line
-
-if TYPE_CHECKING:        # the type only: advice writes programs, a layer above
-    from ..controllers.advice import Measurement
-
 
 # Where the residual exceeds the R-test's own noise, the best candidate must remove this
 # share of the excess to be named: a catalogue curve that fits a little of an effect outside
@@ -50,7 +46,7 @@ class Candidate:
     confounded_with: tuple[str, ...]
     amplitude: tuple[float, ...]     # first-order estimate, in its shown unit
     unit: str
-    separated_by: tuple[Measurement, ...] = ()
+    separated_by: tuple[Proposal, ...] = ()
     silent: bool = False    # moves no reading at all on these poses (no lever arm)
     share: float = 0.0      # of the (whitened) residual sum of squares it removes: the ranking
     condition: float = 0.0  # of the model with it added, as fit --add computes it
@@ -82,7 +78,7 @@ class Diagnosis:
     tested: int
     after_best: tuple[str, ...] = ()    # still significant once the best candidate is added
     rivals: tuple[str, ...] = ()        # explain almost as much as the best: not told apart
-    rivals_separated_by: tuple[Measurement, ...] = ()
+    rivals_separated_by: tuple[Proposal, ...] = ()
     alpha: float = ALPHA
     notes: tuple[str, ...] = field(default_factory=tuple)
     outliers: tuple[dict, ...] = ()     # {"file", "line", "path", "size_um"}: left out of the tests
@@ -143,7 +139,7 @@ class Diagnosis:
         return next((d for d in self.devices if d.effect == self.device_blamed), None)
 
     @property
-    def next_measurement(self) -> tuple[Measurement | None, tuple[str, ...]]:
+    def next_measurement(self) -> tuple[Proposal | None, tuple[str, ...]]:
         """The one measurement that would show the most effects these data cannot see
         (shortest first among equals), and those effects."""
         shows: dict[str, list[str]] = {}

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from itertools import combinations
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -15,12 +14,10 @@ from ..model.effects import Effect, effect_of_param
 from ..model.machine import Machine
 from ..model.poses import Poses
 from ..model.sides import NEST, SETUP, both_sides, continues, mountings, nest_mountings, span
+from .advising import Advising, Proposal
 from .ranking import Row
 from .signature import r_factor
 from .significance import COND_LIMIT, condition
-
-if TYPE_CHECKING:        # the type only: advice writes programs, a layer above
-    from ..controllers.advice import Advisor, Measurement
 
 SEPARATES = 0.05      # visibility an extra measurement must give to count as separating
 TELLS_APART = 25.0    # σ̂² of misfit a measurement must add between two rivals (5 σ)
@@ -108,7 +105,7 @@ class Measured:
     def _stacked(parts: Sequence[np.ndarray]) -> np.ndarray:
         return parts[0] if len(parts) == 1 else np.linalg.qr(np.vstack(parts), mode="r")
 
-    def with_extra(self, extra: Measurement) -> np.ndarray:
+    def with_extra(self, extra: Proposal) -> np.ndarray:
         """R with ``extra``'s poses measured too (a program holds one ball position and one
         nest throughout): its new mounting's and nest's offsets laid out after the data's,
         zero on the data's rows."""
@@ -126,13 +123,13 @@ class Measured:
 
 
 def separating(measured: Measured, effects: Sequence[Effect],
-               advisor: Advisor) -> dict[str, tuple[Measurement, ...]]:
+               advisor: Advising) -> dict[str, tuple[Proposal, ...]]:
     """For effects these data cannot tell from the model's (or not whole): the
     measurements the machine can make after which they could, shortest first, at most
     ``ADVISED``: each column then visible (``SEPARATES``) and the model with the effect
     separable as fit --add judges it."""
     machine, poses, p = measured.machine, measured.poses, measured.p
-    found: dict[str, list[Measurement]] = {e.name: [] for e in effects}
+    found: dict[str, list[Proposal]] = {e.name: [] for e in effects}
     for extra in sorted(advisor.candidates, key=lambda m: len(m.poses)):
         R = measured.with_extra(extra)
         for e in effects:
@@ -145,8 +142,8 @@ def separating(measured: Measured, effects: Sequence[Effect],
     return {k: advisor.runnable(v, most=ADVISED) for k, v in found.items()}
 
 
-def telling_apart(measured: Measured, group: Sequence[Row], sigma2: float, advisor: Advisor
-                  ) -> tuple[dict[str, tuple[Measurement, ...]], tuple[Measurement, ...], dict]:
+def telling_apart(measured: Measured, group: Sequence[Row], sigma2: float, advisor: Advising
+                  ) -> tuple[dict[str, tuple[Proposal, ...]], tuple[Proposal, ...], dict]:
     """Which measurements, not made yet and that the machine can make, tell the best
     (``group[0]``) and its rivals apart: a pair is told apart when, at their fitted sizes,
     they would differ by ``TELLS_APART`` σ̂² more than now (each hypothesis, were it true,

@@ -1,0 +1,41 @@
+"""What the statistics read of the measurements they may advise. The caller hands in an
+advisor (``controllers.advice.Advisor``), which proposes the measurements a machine can
+make and checks each as its program would be checked; the statistics name only these
+protocols, so no controller's type reaches them, even for a type checker."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Protocol
+
+from ..model.poses import Poses
+
+
+class Proposal(Protocol):
+    """A measurement that could be added: a path of the machine file with the ball at
+    ``ball`` (mm, table frame) and its poses; ``label`` is how a text names it, ``nest`` the
+    nest's length where it is not the machine file's (mm), ``again`` a repeat of a run
+    already made, right after it."""
+
+    label: str
+    path: str
+    ball: tuple[float, float, float]
+    poses: Poses
+    again: bool
+    nest: float | None
+
+    def to_dict(self) -> dict: ...
+
+    def command(self, me: str, machine_ref: str, program_ext: str) -> str: ...
+
+
+class Advising(Protocol):
+    """The measurements one machine can make (``candidates``), and which of a list it can
+    (``runnable``); ``unable`` says why it advises none, ``program_ext`` is the suffix of
+    the programs its commands write."""
+
+    program_ext: str
+    unable: str
+    candidates: Sequence[Proposal]
+
+    def runnable(self, ms: Sequence[Proposal], most: int | None = None) -> tuple[Proposal, ...]: ...
