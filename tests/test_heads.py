@@ -821,3 +821,35 @@ def test_a_sensor_gain_on_a_head_is_blamed_in_the_frame_the_nest_turns_in(machin
     assert d.device_blamed == "gain_X" and d.found is None, (d.verdict, d.devices)
     gain = d.blamed
     assert abs(gain.value - 2.0) < 3 * gain.std and gain.std < 0.4, gain
+
+
+def test_a_heads_error_motion_no_table_holds_is_named_by_the_edit_and_never_sent_to_a_comp_csv(tmp_path):
+    """The fork head on a TNC 640 with a 2/rev angular motion of C (ECC:h2) fitted: the
+    edit writes no table for a head's own error motion; it names it as not compensable
+    (it vanished without a word), and compare no longer tells the user to enter the values
+    of a .comp.csv that was never written. A table machine's positioning table still goes
+    to its .comp.csv, and compare still says so."""
+    truth = tmp_path / "t.json"
+    truth.write_text('{"parameters": {"ECC:h2c": {"value": 4e-5, "unit": "rad"}, '
+                     '"YOC": {"value": -0.008, "unit": "mm"}}}')
+    assert run("simulate", "--machine", FORK_MACHINE, "--truth", truth, "--noise-um", "0.5", "-o",
+               tmp_path / "s.csv")[0] == 0
+    assert run("fit", "--machine", FORK_MACHINE, tmp_path / "s.csv", "--add", "ECC:h2", "-o",
+               tmp_path / "f.json")[0] == 0
+    code, out, err = run("kinematics", "--from", tmp_path / "f.json", "-o", tmp_path / "KIN.txt")
+    assert code == 0 and "not compensable on HEIDENHAIN TNC 640 by compgen: ECC:h2" in out, out + err
+    assert "; Not compensable on this control by compgen: ECC:h2" in (tmp_path / "KIN.txt").read_text()
+    assert not (tmp_path / "KIN.comp.csv").exists()
+    code, out, err = run("compare", "--from", tmp_path / "f.json")
+    assert code == 0 and ".comp.csv" not in out and "cannot hold it from compgen's files: ECC:h2" in out, out
+    # a table machine: C's 1/rev positioning error goes to the .comp.csv, entered by hand
+    table = tmp_path / "table.json"
+    table.write_text('{"parameters": {"ECC:h1s": {"value": 4e-5, "unit": "rad"}}}')
+    assert run("simulate", "--machine", SEED_MACHINE, "--truth", table, "--noise-um", "0.5", "-o",
+               tmp_path / "t.csv")[0] == 0
+    assert run("fit", "--machine", SEED_MACHINE, tmp_path / "t.csv", "--add", "ECC:h1", "-o",
+               tmp_path / "g.json")[0] == 0
+    code, out, err = run("kinematics", "--from", tmp_path / "g.json", "-o", tmp_path / "T.txt")
+    assert code == 0 and (tmp_path / "T.comp.csv").exists() and "not compensable" not in out, out + err
+    code, out, err = run("compare", "--from", tmp_path / "g.json")
+    assert "the compensation values of the edit's .comp.csv (ECC:h1) are entered" in out, out

@@ -120,8 +120,9 @@ def compare(machine: Machine, data: Sequence[RTestData], fit: FitResult, control
     before = beyond_setup(machine, poses, y)
     pred = beyond_setup(machine, after, predicted)
     measured = _measured(machine, fit, post, pred) if post else None
-    by_hand = ctl.tables_by_hand and p.tables
-    assumes = ((f"the compensation values of the edit's .comp.csv ({', '.join(p.tables)}) are entered "
+    # the tables the edit writes: a head's own error motions get none (they stay, not_held)
+    by_hand = [t.effect for t in ctl.tables(machine, p)] if ctl.tables_by_hand else []
+    assumes = ((f"the compensation values of the edit's .comp.csv ({', '.join(by_hand)}) are entered "
                 f"into the {ctl.words}'s compensation tables by hand",) if by_hand else ())
     if machine.heads and not ctl.edits_head(machine):   # compgen's model of the control, no file
         assumes += (f"no edit is written for a head yet: the prediction is for the fitted location errors "

@@ -216,9 +216,14 @@ class Controller:
     def not_held(self, machine: Machine, p: Plan) -> list[str]:
         """What of ``p`` stays in the machine after the edit, in words."""
         tilts = [] if self.holds_tilts else [f"{n} tilt" for n, line in p.lines.items() if line.tilt.any()]
+        return [*tilts, *([] if self.squareness_as else p.squareness), *self.not_tabled(machine, p),
+                *p.not_compensable]
+
+    def not_tabled(self, machine: Machine, p: Plan) -> list[str]:
+        """The effects of ``p`` a table would hold that its edit writes no table for (a
+        head's own error motions): they stay in the machine, and its edit says so."""
         in_tables = {t.effect for t in self.tables(machine, p)}
-        return [*tilts, *([] if self.squareness_as else p.squareness),
-                *(e for e in p.tables if e not in in_tables), *p.not_compensable]
+        return [e for e in p.tables if e not in in_tables]
 
     def loaded_tables(self, machine: Machine, state: str, where: str) -> list[CompTable]:
         """The compensation tables the control holds in ``state``, each named (``effect``) by

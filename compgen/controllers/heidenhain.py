@@ -484,7 +484,7 @@ class Heidenhain(Controller):
             lines=ctx.lines, expect=ctx.expect,
             tables=[{"effect": t.effect, "words": t.words, "output": t.output, "unit": t.unit,
                      "range": f"{t.input} {t.start:g}..{t.stop:g} step {t.step:g}"} for t in tables],
-            other=p.not_compensable, setup=p.setup, head=bool(machine.heads))
+            other=[*p.not_compensable, *self.not_tabled(machine, p)], setup=p.setup, head=bool(machine.heads))
         if tables:
             files[".comp.csv"] = _comp_csv(tables)
         return EditFiles(files, tuple(notes))

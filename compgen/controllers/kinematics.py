@@ -157,8 +157,10 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
     if p.setup:
         notes.append("left out, set-up not machine: " + ", ".join(p.setup))
     notes += edit.notes
-    if p.not_compensable:
-        notes.append(f"not compensable on {ctl.words} by compgen: " + ", ".join(p.not_compensable))
+    # a table's effect the edit writes no table for (a head's own error motion) is said too
+    unheld = [*p.not_compensable, *ctl.not_tabled(machine, p)]
+    if unheld:
+        notes.append(f"not compensable on {ctl.words} by compgen: " + ", ".join(unheld))
     whose = " (an R-test's: a probing program cannot see the edit)" if without_tcp else ""
     notes += [f"sign check, expected change of the reading after the edit{whose}:", *expect]
     sign = {f"_SIGN{ctl.program_ext}": signcheck.files[ctl.program_ext]} if signcheck else {}
