@@ -44,3 +44,15 @@ def test_no_module_or_function_grows_past_its_limit(what):
     assert not grown, f"over the limit (lines, allowed): {grown}"
     within = [k for k, ceiling in over.items() if sizes.get(k, 0) <= limit]
     assert not within, f"within the limit now: take them off the list in tests/test_sizes.py: {within}"
+
+
+def test_every_public_result_type_says_what_it_is():
+    """A dataclass or class of compgen that other modules read (no leading underscore) has a
+    docstring saying what it holds and how to read it: ``Diagnosis`` had 33 fields and none."""
+    bare = []
+    for path in _modules():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if (isinstance(node, ast.ClassDef) and not node.name.startswith("_")
+                    and not ast.get_docstring(node)):
+                bare.append(f"{path.relative_to(ROOT)}: {node.name}")
+    assert not bare, "\n".join(bare)

@@ -27,6 +27,9 @@ MAX_READ = 5_000_000   # bytes: larger files are not R-test artefacts
 
 @dataclass(frozen=True)
 class Step:
+    """One step of the commissioning checklist: its title, its status (done, open, by hand),
+    the files that show it (``evidence``), the command that does it and a note."""
+
     title: str
     status: str
     evidence: tuple[str, ...] = ()

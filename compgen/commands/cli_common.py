@@ -19,6 +19,8 @@ from ..units import number
 
 
 class Failed(click.ClickException):
+    """A refusal: one line on stderr, ``compgen: error: …``, exit 2."""
+
     exit_code = 2
 
     def show(self, file=None):
@@ -26,6 +28,8 @@ class Failed(click.ClickException):
 
 
 class Internal(Failed):
+    """An error compgen did not foresee: one line naming it as a bug, exit 3."""
+
     exit_code = 3
 
 

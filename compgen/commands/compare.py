@@ -32,6 +32,12 @@ AS_PREDICTED = (1.25, 0.2)   # measured RMS within 1.25 × predicted + 0.2 µm c
 
 @dataclass(frozen=True, eq=False)
 class Comparison:
+    """Measured against predicted: each path's RMS and range before the edit, as predicted after
+    it (``predicted_post``) and, with post data, as measured (µm, beyond the set-up); what the
+    edit cannot compensate, what it takes as done besides loading its files (``assumes``), the
+    warnings the prediction itself gives, and "nothing to correct" where the edit would write
+    noise. ``to_dict`` is ``compare --json``."""
+
     controller: str
     before: dict
     predicted_post: dict

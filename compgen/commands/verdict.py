@@ -53,6 +53,10 @@ class Row:
 
 @dataclass(frozen=True)
 class Verdict:
+    """The one screen of ``compgen verdict``: each location error before and after the edit with
+    its σ and its own limit (``rows``), each path against its tolerance (``comparison``), the
+    fit gate's reasons and the next step, a command that runs as printed."""
+
     machine: str
     controller: str
     fit_file: str

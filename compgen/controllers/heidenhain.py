@@ -434,6 +434,10 @@ def _plain_block(k: int, raw: str, b: str) -> list[Block] | None:
 
 
 class Heidenhain(Controller):
+    """HEIDENHAIN's controls: programs in conversational dialog (.H) under FUNCTION TCPM, the
+    kinematics edit as rows of the kinematics description around each MachAxis, position-
+    dependent errors as the values of a .comp.csv entered by hand."""
+
     family = "heidenhain"
     tcp_switchable = True
     program_ext = ".H"
@@ -523,12 +527,17 @@ class Heidenhain(Controller):
 
 
 class ITNC530(Heidenhain):
+    """The iTNC 530: its kinematics in a description table (*.TAB), which --current edits."""
+
     name = "itnc530"
     words = "HEIDENHAIN iTNC 530"
     backup = "copy the kinematics description table (*.TAB), or Cycle 450 SAVE KINEMATICS"
 
 
 class TNC640(Heidenhain):
+    """The TNC 640: its kinematics in the configuration editor, entered by hand from the edit's
+    .txt (no file of the control to edit)."""
+
     name = "tnc640"
     words = "HEIDENHAIN TNC 640"
     backup = "save the machine configuration, or Cycle 450 SAVE KINEMATICS"

@@ -181,6 +181,9 @@ def read_poses(path: str | Path, machine: Machine) -> Poses:
 
 @dataclass(frozen=True, eq=False)
 class Table:
+    """An R-test CSV as read, before it is checked into poses: its columns (by header name),
+    the path label of each row, each row's line in the file, and the file's checksum."""
+
     where: str
     sha256: str
     columns: dict[str, np.ndarray]

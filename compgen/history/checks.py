@@ -23,6 +23,9 @@ from .store import Store, now
 
 @dataclass(frozen=True)
 class Change:
+    """One location error in a check: its machine value now minus at the calibration (mm or rad)
+    ± σ, its limit, and "pass", "fail" or "unsure" (beyond the limit, not beyond k σ)."""
+
     param: str
     change: float          # machine value now minus at the calibration (mm, rad)
     std: float
@@ -86,6 +89,10 @@ def fit_as_calibrated(machine: Machine, data, calibration: FitResult, advisor=No
 
 @dataclass(frozen=True)
 class CheckResult:
+    """A check against the last accepted calibration: each location error's change
+    (``changes``), each path against its tolerance, the drifts flagged, the advice, and what the
+    check fitted beyond the location errors (``model``); ``passed`` is the verdict."""
+
     machine: str
     serial: str
     against: Entry

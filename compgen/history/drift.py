@@ -46,6 +46,9 @@ class Entry:
 
 @dataclass(frozen=True)
 class Flag:
+    """A step (a machine value moved beyond its limit and k σ from one fit to the next) or a
+    drift (its slope since the last step, per month) of one location error."""
+
     kind: str             # "step" or "drift"
     param: str
     taken: str            # the fit at which it shows
@@ -65,6 +68,9 @@ class Flag:
 
 @dataclass(frozen=True)
 class Trend:
+    """A machine's history: its fits in time order with the corrections written before each
+    (``entries``), its edits, the steps and drifts flagged, and each check's path ranges."""
+
     machine: str
     serial: str
     params: tuple[str, ...]

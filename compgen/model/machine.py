@@ -199,6 +199,10 @@ class Drift:
 
 @dataclass(frozen=True)
 class Machine:
+    """A machine as its machine file describes it: the chain of axes from the table
+    (``workpiece``) and from the spindle (``tool``), the R-test set-up, its paths, programs,
+    probe, limits, drift limits and tolerances, and its control."""
+
     name: str
     controller: str
     workpiece: tuple[Axis, ...]

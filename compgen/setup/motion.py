@@ -40,6 +40,9 @@ OVER_FEED = 1 + 1e-9     # a speed this much over feed_max is rounding of the fe
 
 @dataclass(frozen=True)
 class Finding:
+    """What the motion check found at a program line: the rule broken, in words, the axes'
+    positions there, and how deep a part enters a solid (0: not a collision)."""
+
     line: int
     rule: str
     detail: str
@@ -53,6 +56,9 @@ class Finding:
 
 @dataclass(frozen=True)
 class Check:
+    """A program moved through the set-up: its blocks, its time (s), the closest approach of
+    the moving parts outside the measuring exemption (mm, and where), and every finding."""
+
     blocks: int
     seconds: float
     closest_mm: float            # smallest clearance outside the measuring exemption

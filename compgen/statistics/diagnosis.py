@@ -36,6 +36,11 @@ REPEATS_TRIED = 3
 
 @dataclass(frozen=True)
 class Candidate:
+    """An effect not in the fit's model, tried against its residual: how visible it is on these
+    poses, the RMS it would leave, its p-value (Bonferroni) and whether it is significant, its
+    first-order amplitude, what it is confounded with, and the measurements that would show it
+    (``separated_by``)."""
+
     effect: str
     description: str
     cause: str
@@ -63,6 +68,12 @@ class Candidate:
 
 @dataclass(frozen=True, eq=False)
 class Diagnosis:
+    """What diagnose found in one fit's residual: the candidates ranked; the verdict in one
+    word (``verdict``: found, rivals, unexplained, not separable, noise unknown, explained,
+    device); the rivals and what tells them apart; the misfit against the device's noise and
+    where that noise came from; the device's own candidates; the residual per path and per
+    axis. ``diagnose_text.report`` words it; ``to_dict`` is ``diagnose --json``."""
+
     machine: str
     fit_file: str
     model: tuple[str, ...]

@@ -52,6 +52,8 @@ class Estimate:
 
 @dataclass(frozen=True)
 class DataRef:
+    """A data file a fit was made from: its name, checksum, rows, rows per path and device."""
+
     file: str
     sha256: str
     rows: int

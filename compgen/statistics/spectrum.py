@@ -34,6 +34,9 @@ SCAN_POSES = 12_000    # a denser session is scanned and its peak refined at thi
 
 @dataclass(frozen=True)
 class Line:
+    """A periodic line in the residual: its direction, what it runs against (an axis or time),
+    its period and amplitude, the share of the residual it removes and its p-value."""
+
     against: str          # an axis name, or "time"
     direction: str        # "dX", "dY" or "dZ"
     period: float         # mm (linear axis), an order per revolution (rotary), s (time)

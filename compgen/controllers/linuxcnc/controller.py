@@ -39,6 +39,10 @@ from .tables import (
 
 
 class LinuxCNC(Controller):
+    """LinuxCNC: G-code programs (.ngc) under the trt kinematics (or a head's module), the edit
+    as the module's HAL pins and joint compensation tables, written as LinuxCNC's start
+    script reads its configuration."""
+
     name = "linuxcnc"
     family = "linuxcnc"
     words = "LinuxCNC (trt kinematics)"

@@ -81,6 +81,8 @@ class Setting:
 
 @dataclass(frozen=True)
 class IniEntry:
+    """A key's value in the expanded INI and the place (file, line) it was read from."""
+
     value: str
     place: Place
 

@@ -95,6 +95,9 @@ def _cec_files(machine: Machine, tables: list[CompTable], loaded: list[CompTable
 
 
 class Sinumerik840D(Controller):
+    """The SINUMERIK 840D sl: programs (.MPF) under TRAORI, the edit as the orientable
+    toolholder's $TC_CARR record and CEC compensation tables."""
+
     name = "sinumerik840d"
     family = "sinumerik"
     words = "SIEMENS SINUMERIK 840D sl"
