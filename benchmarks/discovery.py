@@ -251,6 +251,40 @@ def probe_session(machine, seed: int, path: Path) -> RTestData:
     return sphere_centres(read_probe_log(path, machine), machine).data
 
 
+def two_files(machine, first_truth, second_truth, seed: int) -> list[RTestData]:
+    """K4 + K1 in a.csv, then, two minutes later, K2 + K4 in b.csv at the same ball position."""
+    rng = np.random.default_rng(4000 + seed)
+    first = generate(machine, ["K4", "K1"])
+    then = generate(machine, ["K2", "K4"], start_s=float(np.nanmax(first.t)) + 120.0)
+    return [replace(simulate(machine, first_truth, first, SIGMA_UM, rng), source="a.csv", sha256="1" * 64),
+            replace(simulate(machine, second_truth, then, SIGMA_UM, rng), source="b.csv", sha256="2" * 64)]
+
+
+def set_up_events(machine, draws: int) -> None:
+    """A ball mounted again at its place between two files, against real warmings that span
+    them and clean data: how each diagnosis ends (a step is never to be named a warming)."""
+    print(f"\nset-up events between two files at one ball position ({draws} data sets each, verdicts)")
+    step = dict(zip(SETUP, (3.0, -2.0, 1.5), strict=True))
+    moved = {**TABLE4, **{n: TABLE4.get(n, 0.0) + v * UM for n, v in step.items()}}
+    small = {**TABLE4, "XOW": TABLE4.get("XOW", 0.0) + 0.5 * UM}
+    for name, first, second, truth in (
+            ("ball mounted again, 3 −2 1.5 µm", TABLE4, moved, None),
+            ("ball mounted again, 0.5 µm in X", TABLE4, small, None),
+            ("ball warming XOW:e45 4 µm over both", {**TABLE4, "XOW:e45": 4 * UM},
+             {**TABLE4, "XOW:e45": 4 * UM}, "XOW:e45"),
+            ("stem warming ZOW:e15 3 µm over both", {**TABLE4, "ZOW:e15": 3 * UM},
+             {**TABLE4, "ZOW:e15": 3 * UM}, "ZOW:e15"),
+            ("clean", TABLE4, TABLE4, None)):
+        verdicts, wrong = {}, 0
+        for seed in range(draws):
+            data = two_files(machine, first, second, seed)
+            d = diagnose(machine, data, identify(machine, data), noise_um=SIGMA_UM)
+            verdicts[d.verdict] = verdicts.get(d.verdict, 0) + 1
+            wrong += d.found is not None and d.found != truth
+        print(f"  {name:<38} " + ", ".join(f"{v} {n}" for v, n in sorted(verdicts.items()))
+              + f"; a wrong effect found {wrong}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=20, help="data sets per false-alarm case")
@@ -320,6 +354,7 @@ def main() -> None:
         unexplained += found.unexplained
     print(f"  {'probe':<10} flagged {flagged}/{args.draws} (unexplained {unexplained}): K4 + K1 + K2 probed, "
           "1 µm per touch, the noise from the touches")
+    set_up_events(machine, args.draws)
     found_ecc = 0
     for seed in range(args.draws):
         rng = np.random.default_rng(2000 + seed)

@@ -1554,3 +1554,42 @@ def test_two_drifts_at_once_end_unexplained_never_named_wrong(seed_machine, pose
     assert report(found).startswith("VERDICT: unexplained:") and "measured 3 times" in report(found)
     assert fit_gate(seed_machine, data, fit)          # no edit from these data
     assert len(verdicts) <= 6, verdicts
+
+
+def _two_files(machine, first_truth, second_truth, seed):
+    """K4 + K1 in a.csv, then, two minutes later, K2 + K4 in b.csv at the same ball position,
+    each file with its truth (time runs on from a.csv into b.csv)."""
+    from dataclasses import replace
+    rng = np.random.default_rng(seed)
+    first = generate(machine, ["K4", "K1"])
+    then = generate(machine, ["K2", "K4"], start_s=float(np.nanmax(first.t)) + 120.0)
+    return [replace(simulate(machine, first_truth, first, NOISE_UM, rng), source="a.csv", sha256="1" * 64),
+            replace(simulate(machine, second_truth, then, NOISE_UM, rng), source="b.csv", sha256="2" * 64)]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_ball_mounted_again_at_its_place_between_two_files_is_never_read_as_a_warming(seed_machine, seed):
+    """The ball taken off and put back between a.csv and b.csv, 3, −2, 1.5 µm from where it
+    was (the same nominal position: one mounting to the fit). A warming of the ball
+    (XOW:e45) fits most of the step and was named found; now the step between the files is
+    its rival, said in the first line with its size, and the gate refuses an edit. A real
+    warming spanning the two files is still found, and clean data stay explained."""
+    from compgen.statistics.gate import gate_reasons
+    moved = {**TABLE4, **{n: TABLE4.get(n, 0.0) + v * UM for n, v in zip(("XOW", "YOW", "ZOW"), (3, -2, 1.5),
+                                                                          strict=True)}}
+    data = _two_files(seed_machine, TABLE4, moved, seed)
+    fit = identify(seed_machine, data, location_model(seed_machine))
+    d = diagnose(seed_machine, data, fit, noise_um=NOISE_UM)
+    assert d.verdict == "set-up step" and d.found is None, (d.verdict, d.found)
+    assert d.setup_step.before == "b.csv" and np.allclose(d.setup_step.ball_um, (3, -2, 1.5), atol=0.4), \
+        d.setup_step
+    first = report(d).splitlines()[0]
+    assert first.startswith(f"VERDICT: not told apart: {d.significant[0].effect} vs the ball or the nest "
+                            "mounted again before b.csv (ball +"), first
+    assert any("mounted again before b.csv" in r for r in gate_reasons(data, fit, d))
+    assert d.to_dict()["setup_step"]["rivals_best"] is True
+    for truth, verdict in (({**TABLE4, "XOW:e45": 4 * UM}, "found"), (TABLE4, "explained")):
+        data = _two_files(seed_machine, truth, truth, seed)
+        d = diagnose(seed_machine, data, identify(seed_machine, data, location_model(seed_machine)),
+                     noise_um=NOISE_UM)
+        assert d.verdict == verdict and (verdict != "found" or d.found == "XOW:e45"), (d.verdict, d.found)

@@ -36,6 +36,7 @@ from .noise import ar1, outliers, repeats
 from .ranking import Row, Whitening, effect_columns, rank, started_reversals
 from .results import FitResult
 from .separation import Measured, separating, telling_apart
+from .setup_step import setup_step
 from .signature import products
 from .significance import (
     ALPHA,
@@ -119,11 +120,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     ranked, noise, made, carried = _ranked(machine, fit, effects, res)
     rss_w = noise.rss(r)
     # the device beside the machine, in one Bonferroni family with it
-    devices = device_candidates(res.pred, res.rtest, res.Q, r, noise, rss_w / dof, res.axes)
-    tested = (sum(1 for row in ranked.values() if row.k_eff)
-              + sum(1 for d in devices if d.visibility >= VISIBLE))
-    devices = [replace(d, p_value=p, significant=bool(d.visibility >= VISIBLE and p < alpha))
-               for d in devices for p in [p_value(d.drop_w, 1, rss_w, dof, tested)]]
+    devices, tested = _devices(res, ranked, noise, rss_w, dof, alpha)
     out = _candidates(effects, ranked, rss, r.size, rss_w, dof, tested, alpha)
     model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
     advising = advisor(machine, poses, kind) if advisor is not None else None
@@ -132,6 +129,9 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     bias, units, signature_um = _bias(fit, res, effects, ranked)
 
     significant = [c for c in out if c.significant]
+    best = ranked[significant[0].effect] if significant else None
+    step = setup_step(machine, res.poses, np.delete(joined.set_of, res.bad), joined.sets, res.r, noise,
+                      (best.drop_w, best.k_eff) if best is not None else None, rss_w, dof, alpha)
     # the best machine effect's whitened columns: its rivals and second effects are tested
     # beside it, and so are the gains with them
     first = noise.white(_columns(machine, res, made, significant[0].effect)) if significant else None
@@ -167,7 +167,18 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         program_ext=advising.program_ext if advising is not None else "", device_noise_um=device,
         repeats=said, misfit=misfit,
         lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, notes=notes,
-        data_device=kind, devices=tuple(devices), device_blamed=blamed)
+        data_device=kind, devices=tuple(devices), device_blamed=blamed, setup_step=step)
+
+
+def _devices(res: _Residual, ranked: dict[str, Row], noise: Whitening, rss_w: float, dof: int,
+             alpha: float) -> tuple[list[DeviceCandidate], int]:
+    """The device beside the machine, in one Bonferroni family with it: its candidates, and
+    how many the family holds."""
+    devices = device_candidates(res.pred, res.rtest, res.Q, res.r, noise, rss_w / dof, res.axes)
+    tested = (sum(1 for row in ranked.values() if row.k_eff)
+              + sum(1 for d in devices if d.visibility >= VISIBLE))
+    return [replace(d, p_value=p, significant=bool(d.visibility >= VISIBLE and p < alpha))
+            for d in devices for p in [p_value(d.drop_w, 1, rss_w, dof, tested)]], tested
 
 
 def _candidates(effects: Sequence[Effect], ranked: dict[str, Row], rss: float, readings: int, rss_w: float,

@@ -206,6 +206,10 @@ def conclusion(d: Diagnosis, fit: str, after: str) -> str:
     if kind == "device":
         return (f"VERDICT: the device explains the misfit ({d.blamed.description}, {d.device_blamed}): "
                 "calibrate that sensor and measure again")
+    if kind == "set-up step":
+        return (f"VERDICT: not told apart: {best} vs {d.setup_step.text()}; measure a path again right "
+                "after these data without touching the ball or the nest: a warming or a drift goes on, a "
+                "step does not")
     if kind == "found":
         return f"VERDICT: found {best} (against {_noise_said(d)}); add it: {add}"
     if kind == "rivals":

@@ -12,6 +12,7 @@ import numpy as np
 from .advising import Proposal
 from .device import DeviceCandidate
 from .noise import Repeats
+from .setup_step import SetupStep
 from .significance import ALPHA, COND_LIMIT, VISIBLE
 from .spectrum import Line
 
@@ -106,6 +107,7 @@ class Diagnosis:
     best_sum_sq: float = 0.0        # the residual sum of squares the best significant candidate removes, mm²
     devices: tuple[DeviceCandidate, ...] = ()   # the R-test's own parameters, tested beside the machine's
     device_blamed: str | None = None    # the one that explains the misfit as well as the machine's best
+    setup_step: SetupStep | None = None   # a set-up event between two files, against the best
     # for rivals: what adding each puts into the fitted parameters, first order, shown units
     carries: dict[str, dict[str, float]] = field(default_factory=dict)
     # the repeats that were to tell the rivals apart, made REPEATS_TRIED times, leaving them
@@ -169,12 +171,15 @@ class Diagnosis:
     def verdict(self) -> str:
         """The conclusion in one word, as the text's first line says it: "device" (the R-test's
         own parameter explains the misfit), "found", "rivals" (not told apart), "unexplained",
+        "set-up step" (a set-up event between two files explains them as well as the best),
         "not separable" (the best is seen but not separable whole), "noise unknown" (a best
         candidate, but no noise to test what it leaves against), or "explained" (to the
         noise, or to these data's own scatter where the noise is unknown)."""
         best = self.significant[0] if self.significant else None
         if self.device_blamed is not None:
             return "device"
+        if self.step_rivals:
+            return "set-up step"
         if self.found is not None:
             return "found"
         if self.rivals and not self.exhausted:
@@ -196,8 +201,14 @@ class Diagnosis:
         candidate (an A encoder's 4/rev was named EZA:h2)."""
         best = self.significant[0] if self.significant else None
         named = (best is not None and not self.rivals and best.separable and not self.unexplained
-                 and self.device_noise_um is not None and self.device_blamed is None)
+                 and self.device_noise_um is not None and self.device_blamed is None and not self.step_rivals)
         return best.effect if named else None
+
+    @property
+    def step_rivals(self) -> bool:
+        """A set-up event between two files explains these data as well as the machine's best
+        candidate: the best is not named found (a step is never read as a warming)."""
+        return bool(self.significant and self.setup_step is not None and self.setup_step.rival)
 
     def to_dict(self) -> dict:
         return {
@@ -219,6 +230,7 @@ class Diagnosis:
             "found": self.found,
             "device_blamed": self.device_blamed,
             "device_effects": [d.to_dict() for d in self.devices],
+            "setup_step": self.setup_step.to_dict() if self.setup_step is not None else None,
             "rivals_equivalent": bool(self.rivals and not self.rivals_separated_by),
             "rivals_exhausted_by": list(self.exhausted),
             "next_measurement": None if self.next_measurement[0] is None else {

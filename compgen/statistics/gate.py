@@ -58,6 +58,10 @@ def gate_reasons(data: Sequence[RTestData], fit: FitResult, found: Diagnosis) ->
     elif c := found.blamed:
         reasons.append(f"{device} itself explains the misfit as well as any machine effect ({c.text()}): "
                        "calibrate the device and measure again")
+    elif found.step_rivals:
+        reasons.append(f"{found.setup_step.text()} explains the misfit as well as "
+                       f"{found.significant[0].effect}: measure again without touching the set-up, and fit "
+                       "the data of one mounting")
     elif found.significant:
         reasons.append("diagnose finds effects the model misses: "
                        + ", ".join(c.effect for c in found.significant[:3])
