@@ -1583,7 +1583,9 @@ def test_a_ball_mounted_again_at_its_place_between_two_files_is_never_read_as_a_
     assert d.verdict == "set-up step" and d.found is None, (d.verdict, d.found)
     assert d.setup_step.before == "b.csv" and np.allclose(d.setup_step.ball_um, (3, -2, 1.5), atol=0.4), \
         d.setup_step
-    first = report(d).splitlines()[0]
+    text = report(d)
+    assert "add it:" not in text and "explains these data as well: not named found" in text, text
+    first = text.splitlines()[0]
     assert first.startswith(f"VERDICT: not told apart: {d.significant[0].effect} vs the ball or the nest "
                             "mounted again before b.csv (ball +"), first
     assert any("mounted again before b.csv" in r for r in gate_reasons(data, fit, d))

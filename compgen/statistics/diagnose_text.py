@@ -95,6 +95,9 @@ def _candidates(d: Diagnosis, fit: str, after: str, top: int) -> list[str]:
             lines.append("      it fits a part of the unexplained misfit (see below): not advised on its own")
         elif c.significant and d.device_blamed:
             lines.append(f"      the device explains these data as well ({d.device_blamed}): see below")
+        elif d.step_rivals and c is d.significant[0]:
+            lines.append(f"      {d.setup_step.text()} explains these data as well: not named found "
+                         "(see the first line)")
         elif c.significant and c.separable and c is not d.significant[0]:
             lines.append("      significant beside the best, with which it shares misfit: add the best "
                          "first, then diagnose again")
