@@ -853,3 +853,22 @@ def test_a_heads_error_motion_no_table_holds_is_named_by_the_edit_and_never_sent
     assert code == 0 and (tmp_path / "T.comp.csv").exists() and "not compensable" not in out, out + err
     code, out, err = run("compare", "--from", tmp_path / "g.json")
     assert "the compensation values of the edit's .comp.csv (ECC:h1) are entered" in out, out
+
+
+def test_a_nest_put_back_at_its_length_between_two_files_is_no_machine_effect(head_machine):
+    """The nest taken out and put back between a.csv (K4) and b.csv (K2 + K4), 2 µm off in Y:
+    one nest to the fit (the same length). Nothing is named found: the step between the
+    files rivals the best candidate, the first line says so."""
+    from dataclasses import replace
+
+    from compgen.statistics.diagnose import diagnose
+    truth = {"XOC": 0.01, "YOC": -0.008}
+    rng = np.random.default_rng(3)
+    first = generate(head_machine, ["K4"])
+    then = generate(head_machine, ["K2", "K4"], start_s=float(np.nanmax(first.t)) + 120.0)
+    data = [replace(simulate(head_machine, truth, first, NOISE_UM, rng), source="a.csv", sha256="1" * 64),
+            replace(simulate(head_machine, {**truth, "nest_Y": 2 * UM}, then, NOISE_UM, rng), source="b.csv",
+                    sha256="2" * 64)]
+    d = diagnose(head_machine, data, identify(head_machine, data), noise_um=NOISE_UM)
+    assert d.verdict == "set-up step" and d.found is None and d.setup_step.before == "b.csv", d.verdict
+    assert abs(d.setup_step.nest_um[1] - 2.0) < 0.3, d.setup_step        # told as the nest's, in size
