@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from compgen.configuration.machine_file import load_machine
-from compgen.controllers.advice import Advisor
 from compgen.data.simulate import read_truth, simulate
 from compgen.model.effects import catalogue
 from compgen.model.paths import generate
+from compgen.planning.advice import Advisor
 from compgen.statistics.diagnose import diagnose
 from compgen.statistics.identify import identify
 

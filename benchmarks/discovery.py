@@ -43,7 +43,6 @@ sys.path.insert(0, str(ROOT / "tests"))
 from conftest import ARCSEC, SEED_MACHINE, TABLE4, UM  # noqa: E402
 
 from compgen.configuration.machine_file import load_machine  # noqa: E402
-from compgen.controllers.advice import Advisor  # noqa: E402
 from compgen.data.probe import (  # noqa: E402
     format_probe_log,
     probe_poses,
@@ -58,6 +57,7 @@ from compgen.model.kinematics import Model  # noqa: E402
 from compgen.model.paths import generate  # noqa: E402
 from compgen.model.poses import Poses  # noqa: E402
 from compgen.model.sides import SETUP  # noqa: E402
+from compgen.planning.advice import Advisor  # noqa: E402
 from compgen.statistics.budget import with_budget  # noqa: E402
 from compgen.statistics.diagnose import diagnose  # noqa: E402
 from compgen.statistics.identify import identify  # noqa: E402

@@ -64,8 +64,8 @@ TESTS = {
                                                  "compgens_program_where_compgen_puts_it"]
        for m in ("controller", "heads", "pins", "reader", "tables")},
     # probes, angle senses
-    "compgen/setup/motion.py": [*HOSTILE, "tests/test_probe_programs.py", "tests/test_trt.py"],
-    "compgen/setup/blocks.py": [*HOSTILE, "tests/test_probe_programs.py"],
+    "compgen/motion/check.py": [*HOSTILE, "tests/test_probe_programs.py", "tests/test_trt.py"],
+    "compgen/motion/blocks.py": [*HOSTILE, "tests/test_probe_programs.py"],
     "compgen/controllers/programs.py": [*HOSTILE, "tests/test_trt.py"],        # read back under trt's senses
     "compgen/model/effects.py": ["tests/test_effects.py", "tests/test_kinematics.py", "tests/test_shapes.py"],
     # diagnose and its statistics: the closed-form tests first (quick to fail), the distributions
@@ -104,7 +104,7 @@ TESTS = {
     "compgen/files.py": ["tests/test_edge.py", "tests/test_hostile_inputs.py", "tests/test_cli.py"],
     "compgen/errors.py": ["tests/test_edge.py", "tests/test_cli.py"],
     "compgen/search.py": ["tests/test_controllers.py", "tests/test_edge.py", *PROGRAMS],
-    "compgen/controllers/advice.py": ["tests/test_diagnose.py", "tests/test_loop.py",
+    "compgen/planning/advice.py": ["tests/test_diagnose.py", "tests/test_loop.py",
                                       "tests/test_probe_programs.py"],
     "compgen/controllers/base.py": ["tests/test_controllers.py", *EDITS],
     "compgen/controllers/kinematics.py": ["tests/test_controllers.py", *EDITS, "tests/test_heads.py"],
@@ -122,15 +122,15 @@ TESTS = {
     "compgen/commands/cli_common.py": ["tests/test_cli.py", "tests/test_edge.py",
                                        "tests/test_hostile_inputs.py"],     # a closed pipe, a bug's exit
     "compgen/commands/cli_history.py": ["tests/test_history.py"],
-    "compgen/commands/checklist.py": ["tests/test_cli.py", "tests/test_controllers.py",
+    "compgen/reports/checklist.py": ["tests/test_cli.py", "tests/test_controllers.py",
                                       "tests/test_report.py"],
-    "compgen/commands/compare.py": ["tests/test_compare.py"],
-    "compgen/commands/plots.py": ["tests/test_plots.py", "tests/test_report.py",
+    "compgen/reports/compare.py": ["tests/test_compare.py"],
+    "compgen/reports/plots.py": ["tests/test_plots.py", "tests/test_report.py",
                                   "tests/test_streaming.py::test_a_dense_sessions_plots_draw_thinned_series_"
                                   "and_count_every_reading",
                                   "tests/test_diagnose.py::test_ambiguous_scale_is_reported_with_the_"
                                   "measurement_that_resolves_it"],
-    "compgen/commands/report.py": ["tests/test_report.py"],
+    "compgen/reports/report.py": ["tests/test_report.py"],
     "compgen/statistics/noise.py": ["tests/test_noise.py", "tests/test_identify.py",
                                     "tests/test_diagnose_stats.py",
                                     *(f"tests/test_diagnose.py::test_{t}" for t in (

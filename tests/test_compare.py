@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, FORK_MACHINE, ROOT, TABLE4, UM
 
-from compgen.commands.compare import compare
 from compgen.configuration.machine_file import load_machine
 from compgen.controllers.correction import Held
 from compgen.controllers.kinematics import kinematics_edit
@@ -19,6 +18,7 @@ from compgen.model.effects import location_model
 from compgen.model.lines import AxisLine
 from compgen.model.paths import generate
 from compgen.model.poses import Poses
+from compgen.reports.compare import compare
 from compgen.statistics.identify import SETUP, beyond_setup, identify
 
 NOISE_UM = 0.5
@@ -203,7 +203,7 @@ def test_as_predicted_is_1_25_times_and_0_2_um_and_beyond_it_names_what_is_left(
     1.25 × the predicted + 0.2 µm. On each side of that line, 0.001 µm away; beyond it, the
     post data are fitted with the fit's model and diagnosed, and the text names the effect
     that model misses (a 2/rev angle error of C, appeared since)."""
-    from compgen.commands.compare import _measured
+    from compgen.reports.compare import _measured
     truth, poses, pre, fit = session
     since = {"ECC:h2c": 3 * ARCSEC, "ECC:h2s": -1.5 * ARCSEC}
     post = simulate(seed_machine, {**TABLE4, **HIDDEN, **since}, poses, NOISE_UM, np.random.default_rng(8))

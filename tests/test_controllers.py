@@ -10,8 +10,6 @@ import numpy as np
 import pytest
 from conftest import ROOT, SEED_MACHINE, TABLE4, UM, run
 
-from compgen.commands.checklist import checklist, markdown
-from compgen.commands.compare import compare
 from compgen.configuration.machine_file import load_machine
 from compgen.controllers.base import Controller, EditContext, EditFiles
 from compgen.controllers.correction import Held, Plan
@@ -22,6 +20,8 @@ from compgen.data.rtest import RTestData
 from compgen.data.simulate import simulate
 from compgen.model.lines import AxisLine
 from compgen.model.paths import generate
+from compgen.reports.checklist import checklist, markdown
+from compgen.reports.compare import compare
 from compgen.statistics.identify import identify
 
 NOISE_UM = 0.5

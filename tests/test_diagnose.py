@@ -11,11 +11,11 @@ from conftest import ARCSEC, SEED_MACHINE, TABLE4, UM
 
 from compgen import me
 from compgen.configuration.machine_file import load_machine
-from compgen.controllers.advice import Advisor
 from compgen.data.rtest import RTestData, format_rtest
 from compgen.data.simulate import ar1_noise, simulate
 from compgen.model.effects import compose, location_model
 from compgen.model.paths import generate
+from compgen.planning.advice import Advisor
 from compgen.statistics.choice import with_choices
 from compgen.statistics.diagnose import _per_axis, diagnose
 from compgen.statistics.diagnose_text import report
@@ -79,9 +79,9 @@ def test_ambiguous_scale_is_reported_with_the_measurement_that_resolves_it(seed_
     advice = [m for m in found.rivals_separated_by if "half its radius" in m.label]
     assert advice
     # what the plots draw: alike on the measured poses, apart on the advised measurement
-    from compgen.commands import plots
-    from compgen.commands.plots import _png as plots_png
-    from compgen.commands.plots import figures, rival_curves
+    from compgen.reports import plots
+    from compgen.reports.plots import _png as plots_png
+    from compgen.reports.plots import figures, rival_curves
     fit = identify(seed_machine, data)
     curves = rival_curves(seed_machine, poses, fit, found, found.rivals_separated_by[0])
     best, scale = curves[found.significant[0].effect], curves["EXX:p1"]
@@ -529,7 +529,7 @@ def test_the_residual_is_drawn_against_each_linear_axis_with_its_strongest_line(
     names the line diagnose found there (pitch 5.00… mm), as the text and JSON do."""
     import matplotlib.axes
 
-    from compgen.commands.plots import figures
+    from compgen.reports.plots import figures
     data = [_outside_session(seed_machine, poses, "X", 5.0)]
     fit = identify(seed_machine, data)
     found = diagnose(seed_machine, data, fit)

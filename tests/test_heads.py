@@ -23,10 +23,8 @@ from conftest import (
 )
 from scipy.spatial.transform import Rotation
 
-from compgen.commands.compare import compare
 from compgen.configuration.machine_file import load_machine
 from compgen.controllers import linuxcnc
-from compgen.controllers.advice import Advisor
 from compgen.controllers.correction import plan
 from compgen.controllers.kinematics import corrected_by, kinematics_edit
 from compgen.controllers.registry import controller, read_edits
@@ -39,6 +37,8 @@ from compgen.model.kinematics import Model, inverse
 from compgen.model.lines import controller_inverse
 from compgen.model.paths import generate
 from compgen.model.poses import Poses
+from compgen.planning.advice import Advisor
+from compgen.reports.compare import compare
 from compgen.statistics.diagnose import diagnose
 from compgen.statistics.diagnose_text import report
 from compgen.statistics.identify import beyond_setup, identify
@@ -136,7 +136,7 @@ def test_the_heads_body_is_kept_from_the_ball_and_stem_as_described(case, rng):
     ball's stem (a vertical segment from the table top to the ball) and to the table (a disc),
     written here in the table's frame (the swivel's C turns the table, the fork's ball stands
     still), equals compgen's to 1e-9 mm at poses across the travel."""
-    from compgen.setup.motion import clearances
+    from compgen.motion.check import clearances
     machine, hand, poses = case
     s = machine.setup
     q = poses.q[rng.choice(len(poses), 40, replace=False)].copy()

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from conftest import ARCSEC, ROOT, TABLE4, UM, vector
 
-from compgen.controllers.advice import Advisor
 from compgen.data.rtest import read_rtest
 from compgen.data.simulate import simulate
 from compgen.errors import CompgenError
 from compgen.model.paths import generate
+from compgen.planning.advice import Advisor
 from compgen.statistics.identify import identify
 from compgen.statistics.results import FitResult
 

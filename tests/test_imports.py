@@ -82,8 +82,8 @@ def test_the_graph_reader_sees_lazy_imports():
     made the old circle through machine.py)."""
     graph = _graph()
     assert "compgen.controllers.registry" in graph["compgen.configuration.machine_file"]
-    assert "compgen.controllers.programs" in graph["compgen.controllers.advice"]
-    assert "compgen.commands.plots" in graph["compgen.commands.cli"]      # imported inside a command
+    assert "compgen.controllers.programs" in graph["compgen.planning.advice"]
+    assert "compgen.reports.plots" in graph["compgen.commands.cli"]      # imported inside a command
 
 
 def _reach(graph: dict[str, set[str]], start: str) -> set[str]:
@@ -101,8 +101,7 @@ def test_the_statistics_load_no_controller_program_motion_store_or_history():
     writes programs), so importing them, at the top or inside any function, reaches none
     of the layers above."""
     graph = _graph()
-    above = tuple(f"compgen.{folder}" for folder in ("setup", "controllers", "configuration", "history",
-                                                     "commands"))
+    above = tuple(f"compgen.{folder}" for folder in LAYERS[LAYERS.index("statistics") + 1:])
     for statistics in (m for m in graph if m.startswith("compgen.statistics")):
         up = sorted(m for m in _reach(graph, statistics) if m.startswith(above))
         assert not up, f"{statistics} reaches {up}"
@@ -119,8 +118,8 @@ def test_the_graph_reader_tells_type_only_imports():
 # its top are the base; ``python -m compgen`` runs the commands), and a module imports only
 # from its own layer or those below (docs/layout.md draws it). The statistics take their
 # advisor from their caller; a machine file names its control, so configuration sits above.
-LAYERS = ["base", "model", "data", "statistics", "setup", "controllers", "configuration", "history",
-          "commands"]
+LAYERS = ["base", "model", "data", "statistics", "motion", "controllers", "configuration", "planning",
+          "history", "reports", "commands"]
 
 
 def _layer(module: str) -> str:
@@ -150,6 +149,6 @@ def test_every_module_is_in_a_layer_folder_and_no_import_points_up():
 def test_the_layer_test_sees_an_arrow_up():
     """The statistics importing the advice (what they did before) is named."""
     graph = _graph()
-    graph["compgen.statistics.identify"] |= {"compgen.controllers.advice"}
+    graph["compgen.statistics.identify"] |= {"compgen.planning.advice"}
     assert _arrows_up(graph) == [
-        "compgen.statistics.identify (statistics) -> compgen.controllers.advice (controllers)"]
+        "compgen.statistics.identify (statistics) -> compgen.planning.advice (planning)"]

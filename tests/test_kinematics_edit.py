@@ -286,7 +286,7 @@ def test_a_sinumerik_edit_needs_the_fine_offsets_switched_on_and_within_their_li
         machine = load_machine(tmp_path / f"{name}.toml")
         with pytest.raises(CompgenError, match=expect[name]):
             kinematics_edit(machine, bc_fit, "sinumerik840d", CURRENT_CARR, "c", "KIN", "0", DATE)
-    from compgen.commands.checklist import checklist
+    from compgen.reports.checklist import checklist
     steps = checklist(load_machine(BC_MACHINE), tmp_path)
     assert any("SD42974" in s.note for s in steps)
 

@@ -15,8 +15,8 @@ from compgen.controllers.state_guards import heidenhain_guard
 from compgen.errors import CompgenError
 from compgen.model.frames import frames, safe_height
 from compgen.model.kinematics import inverse
-from compgen.setup import motion
-from compgen.setup.motion import clearances
+from compgen.motion import check as motion
+from compgen.motion.check import clearances
 
 PROGRAMS = [(m, c, mode, path) for m in ("seed", "bc") for c in ("itnc530", "sinumerik840d", "linuxcnc")
             for mode in ("tcpm", "axes") for path in ("K4", "K1,K2", "all")]
@@ -480,7 +480,7 @@ def test_the_check_adds_the_programs_time_and_names_its_closest_approach():
 
 def test_address_words_are_read_once_each_and_a_feed_above_zero_is_a_feed():
     from compgen.errors import CompgenError
-    from compgen.setup.blocks import words
+    from compgen.motion.blocks import words
     assert words(["X+1.5", "A-90", "F0.5"], 3) == {"X": 1.5, "A": -90.0, "F": 0.5}
     for bad in (["X+1", "X+2"], ["F0"], ["F-500"], ["Q7"]):
         with pytest.raises(CompgenError, match="line 3: "):
@@ -504,8 +504,8 @@ def test_address_words_are_read_once_each_and_a_feed_above_zero_is_a_feed():
     ("+", np.nan, 400.0, 40.0),            # from an unknown place: to the value, modulo 360
 ])
 def test_a_modulo_axis_turns_the_way_its_block_says(how, now, value, end):
-    from compgen.setup.blocks import Block
-    from compgen.setup.motion import _turned
+    from compgen.motion.blocks import Block
+    from compgen.motion.check import _turned
     b = Block(4, "C", "move", turn={"C": how})
     assert _turned(("C",), b, "C", value, now) == pytest.approx(end, abs=1e-6)
     assert _turned((), Block(4, "C", "move"), "C", value, now) == value       # not modulo: as written
@@ -516,7 +516,7 @@ def test_every_move_is_sampled_at_least_every_mm_and_half_degree_end_to_end():
     larger of the millimetres and the half-degrees moved (rounded up), from start to end;
     TCP moves in TCP coordinates, each converted to its own machine poses."""
     from compgen.model.frames import from_world
-    from compgen.setup.motion import _paths, _Segment
+    from compgen.motion.check import _paths, _Segment
     m = load_machine(SEED_MACHINE)
     linear = [m.index(c) for c in "XYZ"]
     rotary = [m.index(a.name) for a in m.rotary_axes]
@@ -541,7 +541,7 @@ def test_every_move_is_sampled_at_least_every_mm_and_half_degree_end_to_end():
 
 
 def test_a_finding_says_how_deep_a_part_enters_and_only_then():
-    from compgen.setup.motion import Finding
+    from compgen.motion.check import Finding
     assert Finding(5, "housing enters the table", "L X+1", "X+1.000", 0.4).text("P.H") == \
         "P.H:5: housing enters the table by 0.4 mm: L X+1 (at X+1.000)"
     assert Finding(5, "outside travel", "X reaches 999", "X+999.000").text("P.H") == \
@@ -552,7 +552,7 @@ def test_a_finding_says_how_deep_a_part_enters_and_only_then():
 def test_segment_distance_in_closed_form_for_parts_of_any_length(length):
     """``_to_segment`` against a brute force for a part (a segment along random axes) of the
     given length, to a point and to a segment, including parallel ones."""
-    from compgen.setup.motion import _to_segment
+    from compgen.motion.check import _to_segment
     rng = np.random.default_rng(int(length * 10))
     n = 100
     p0 = rng.uniform(-20, 20, (n, 3))
@@ -573,7 +573,7 @@ def test_segment_distance_in_closed_form_for_parts_of_any_length(length):
 
 
 def test_a_check_tells_its_first_finding_and_how_many_more():
-    from compgen.setup.motion import Check, Finding
+    from compgen.motion.check import Check, Finding
     one = Finding(3, "outside travel", "X reaches 999", "X+999.000")
     assert Check(1, 0.0, 1.0, "", (one,)).first("P.H") == one.text("P.H")
     assert Check(1, 0.0, 1.0, "", (one, one, one)).first("P.H") == one.text("P.H") + " (and 2 more)"
@@ -583,7 +583,7 @@ def test_a_part_near_a_solid_is_within_the_margin_not_inside_it():
     """The nest lowered over the table's centre until its housing is 0.5 mm above the face:
     a finding "within 0.5 mm of the table (margin …)", no depth; 0.5 mm lower it enters.
     (The moves after it stay down there: their findings are not this test's.)"""
-    from compgen.setup.motion import clearances
+    from compgen.motion.check import clearances
     m = load_machine(SEED_MACHINE)
     ctl = controller("itnc530")
     q = np.zeros((1, len(m.axes)))
@@ -606,8 +606,8 @@ def test_where_rounding_ends_and_a_limit_begins():
     where C stands is a turn (0.5e-6°: where it is); 1.5e-9 mm past either end of travel is
     outside (the end itself is in); 1.5e-9 mm of X Y Z travel is a move (1e-9: only turns,
     F in deg/min); a speed 1.5e-9 of itself over feed_max is over it."""
-    from compgen.setup.blocks import Block
-    from compgen.setup.motion import _per_segment, _Segment, _turned, feed_minutes
+    from compgen.motion.blocks import Block
+    from compgen.motion.check import _per_segment, _Segment, _turned, feed_minutes
     b = Block(4, "C", "move", turn={"C": "+"})
     assert _turned(("C",), b, "C", 90.0 + 1.5e-6, 90.0) == pytest.approx(90.0 + 1.5e-6, abs=1e-12)
     assert _turned(("C",), b, "C", 90.0 + 0.5e-6, 90.0) == 90.0
@@ -641,8 +641,8 @@ def test_a_probing_tip_may_touch_the_sphere_to_a_micrometre_not_enter_it(depth_u
     """While probing, the stylus tip touches the sphere: 0.5 µm inside is the touch (its
     rounding), 1.5 µm inside enters it (TOUCH_MM, 1 µm; pinned at half and 1.5 times)."""
     from compgen.data.probe import probe_poses
-    from compgen.setup.blocks import Block
-    from compgen.setup.motion import _check_collisions, _Segment
+    from compgen.motion.blocks import Block
+    from compgen.motion.check import _check_collisions, _Segment
     m = load_machine(SEED_MACHINE)
     q = np.array(probe_poses(m, ["K4"]).q[0])                # the stylus tip at the sphere's centre
     reach = (m.probe.sphere_diameter + m.probe.stylus_diameter) / 2
@@ -715,8 +715,8 @@ def test_every_move_is_sampled_as_its_own_straight_line():
     of it (≤ 1 mm and ≤ 0.5° apart, its ends exact), an axis not yet positioned goes straight
     to its target, and a TCP move is sampled in TCP coordinates, then converted."""
     from compgen.model.frames import from_world, world
-    from compgen.setup.blocks import Block
-    from compgen.setup.motion import _paths, _Segment
+    from compgen.motion.blocks import Block
+    from compgen.motion.check import _paths, _Segment
     m = load_machine(SEED_MACHINE)
     linear = [m.index(c) for c in "XYZ"]
     rotary = [m.index(a.name) for a in m.rotary_axes]

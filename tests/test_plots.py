@@ -11,7 +11,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from compgen.commands import plots
+from compgen.reports import plots
 from compgen.controllers import template_dir
 from compgen.data.simulate import simulate
 from compgen.errors import CompgenError, one_line

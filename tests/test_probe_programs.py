@@ -202,8 +202,8 @@ def test_a_probing_move_stops_where_the_tip_meets_the_sphere(start, end, said):
     finding that says why."""
     from compgen.model.frames import table_point
     from compgen.model.kinematics import inverse
-    from compgen.setup.blocks import Block
-    from compgen.setup.motion import _touch
+    from compgen.motion.blocks import Block
+    from compgen.motion.check import _touch
     m = load_machine(SEED_MACHINE)
     ball, rho = np.asarray(m.ball), (m.setup.ball_diameter + m.probe.stylus_diameter) / 2
     at = [ball + [rho + p[0], p[1], p[2]] for p in (start, end)]
@@ -226,8 +226,8 @@ def test_a_grazing_probing_move_touches():
     discriminant is tiny but positive)."""
     from compgen.model.frames import table_point
     from compgen.model.kinematics import inverse
-    from compgen.setup.blocks import Block
-    from compgen.setup.motion import _touch
+    from compgen.motion.blocks import Block
+    from compgen.motion.check import _touch
     m = load_machine(SEED_MACHINE)
     ball, rho = np.asarray(m.ball), (m.setup.ball_diameter + m.probe.stylus_diameter) / 2
     h = rho - 3e-4

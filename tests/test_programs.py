@@ -166,7 +166,7 @@ def test_every_program_stops_once_for_the_preset_check_before_the_nest_goes_down
 def _sides_as_run(machine, controller, text, mode):
     """Each rotary axis's direction of its last turn at every pose (a dwell follows each),
     from the program as the control reads it: its blocks, its modulo rule and its sense."""
-    from compgen.setup import motion
+    from compgen.motion import check as motion
 
     ctl = CONTROLLERS[controller]
     modulo, sense = ctl.modulo_axes(machine), ctl.angle_sense(machine)
@@ -251,7 +251,7 @@ def test_a_pose_block_that_only_turns_runs_at_f_deg_per_min_in_both_checks(seed_
 
     from compgen.controllers.programs import _check_feed
     from compgen.errors import CompgenError
-    from compgen.setup import motion
+    from compgen.motion import check as motion
     slow = replace(seed_machine, workpiece=tuple(replace(a, feed_max=20.0) if a.name == "C" else a
                                                  for a in seed_machine.workpiece))
     _check_feed(slow, _two_poses(slow, 0.0, 0.5), 15.0, "P", "axes")            # 15 deg/min: fine

@@ -27,8 +27,8 @@ def _imported_by(statement: str) -> list[str]:
 
 def test_the_cli_and_the_fit_import_nothing_heavy():
     assert _imported_by("import compgen.commands.cli") == []
-    assert _imported_by("import compgen.statistics.diagnose, compgen.commands.compare, "
-                        "compgen.commands.report") == []
+    assert _imported_by("import compgen.statistics.diagnose, compgen.reports.compare, "
+                        "compgen.reports.report") == []
 
 
 def test_diagnose_needs_no_scipy(tmp_path):

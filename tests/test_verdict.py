@@ -92,9 +92,9 @@ def test_a_location_errors_own_limit_replaces_its_class(loop, tmp_path):
     """[drift] each: BOA held to 20″ on LinuxCNC (which cannot correct it) is within its own
     limit where its class's 10″ puts it beyond; a name that is no location error of the
     machine is refused in one line."""
-    from compgen.commands.verdict import verdict
     from compgen.configuration.machine_file import load_machine
     from compgen.configuration.session import reload
+    from compgen.reports.verdict import verdict
     from compgen.statistics.results import load_fit
     fit = load_fit(loop / "fit2.json")
     machine, sets = reload(fit)

@@ -1,2 +1,1 @@
-"""The command line (click: parse, call, print) and what only commands assemble: the
-comparison with post data, the HTML report, its plots, the checklist."""
+"""The command line (click: parse, call, print): a thin layer over the library's API."""

@@ -14,7 +14,6 @@ import numpy as np
 from .. import __version__
 from ..configuration.machine_file import load_machine
 from ..configuration.session import fit_machine, fit_request, machine_ref, read_data, reload
-from ..controllers.advice import Advisor
 from ..controllers.kinematics import corrected_by, kinematics_edit, nothing_to_correct
 from ..controllers.programs import (
     program_name,
@@ -28,6 +27,10 @@ from ..files import STDOUT, read_text, write_all, write_atomically
 from ..model.effects import catalogue, compose, location_model
 from ..model.paths import generate
 from ..model.sides import unknown_sides, unpredicted_sides
+from ..planning.advice import Advisor
+from ..reports.checklist import checklist, markdown
+from ..reports.compare import compare
+from ..reports.report import report_html
 from ..statistics.budget import with_budget
 from ..statistics.diagnose import diagnose
 from ..statistics.diagnose_text import report as diagnosis_text
@@ -35,7 +38,6 @@ from ..statistics.gate import gate_edit, unit_suspicion
 from ..statistics.identify import identify, mountings_note
 from ..statistics.results import load_fit
 from ..units import NOISE_MAX_UM
-from .checklist import checklist, markdown
 from .cli_common import (
     CONTROLLER_NAMES,
     DATE,
@@ -60,8 +62,6 @@ from .cli_common import (
 )
 from .cli_history import check_cmd, history_cmd, history_store, record_fit_file
 from .cli_programs import check_program_cmd, measure_program_cmd, probe_program_cmd
-from .compare import compare
-from .report import report_html
 
 
 @click.group(cls=Group)
@@ -254,7 +254,7 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um):
     named = compose(machine, fit.model, [c.effect for c in result.candidates if c.significant])
     _warn_about_data(machine, named, sets)
     if plots_dir:
-        from .plots import write_plots  # matplotlib only when asked for
+        from ..reports.plots import write_plots  # matplotlib only when asked for
         earlier = load_fit(before) if before else None
         for path in write_plots(plots_dir, machine, sets, fit, earlier, result):
             click.echo(f"wrote {path}", err=as_json)
@@ -406,7 +406,7 @@ def compare_cmd(base, controller_name, post_files, as_json):
 def verdict_cmd(base, controller_name, post_files, as_json):
     """One screen: each location error before and after the edit against its limit, each
     path's range against its tolerance, what stays, and the next step."""
-    from .verdict import verdict, verdict_json
+    from ..reports.verdict import verdict, verdict_json
     fit = load_fit(base)
     machine, sets = reload(fit)
     post = [read_data(p, machine, fit.sign, warn) for p in post_files]
@@ -449,7 +449,7 @@ def checklist_cmd(machine_file, folder, device, as_json):
 @FORCE
 def report_cmd(base, controller_name, post_files, before, emitted, folder, with_history, db, output, force):
     """One self-contained HTML report: fit, diagnose, plots, comparison, files, checklist."""
-    from .plots import figures  # matplotlib only when asked for
+    from ..reports.plots import figures  # matplotlib only when asked for
     fit = load_fit(base)
     machine, sets = reload(fit)
     for path in emitted:
@@ -462,12 +462,12 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
     progress("3/3 plots")
     images = figures(machine, sets, fit, load_fit(before) if before else None, found)
     steps = checklist(machine, folder or Path(base).parent, comparison.to_dict())
-    from .verdict import verdict
+    from ..reports.verdict import verdict
     screen = verdict(machine, sets, fit, base, controller_name or machine.controller, post, comparison, found)
     past = png = None
     if with_history:
         from ..history import drift_limits, trend
-        from .plots import trend_png
+        from ..reports.plots import trend_png
         past = trend(history_store(db, create=False), machine)
         png = trend_png(past, drift_limits(machine, past), machine.tolerances)
     html = report_html(machine, fit, found, images, comparison, emitted, steps, __version__,

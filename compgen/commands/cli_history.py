@@ -10,10 +10,10 @@ import click
 
 from ..configuration.machine_file import load_machine
 from ..configuration.session import read_data, reload
-from ..controllers.advice import Advisor
 from ..data.rtest import device_of
 from ..errors import CompgenError, one_line
 from ..files import read_text, write_atomically
+from ..planning.advice import Advisor
 from ..statistics.gate import fit_gate
 from ..statistics.results import load_fit
 from ..units import number
@@ -142,7 +142,7 @@ def history_trend_cmd(machine_file, serial, params, plot, as_json, force, db):
     t = trend(history_store(db, create=False), machine, serial, names)
     if plot:
         from ..history import drift_limits
-        from .plots import trend_png
+        from ..reports.plots import trend_png
         write_atomically(plot, trend_png(t, drift_limits(machine, t), machine.tolerances), force)
     click.echo(json.dumps(trend_dict(t), indent=2, ensure_ascii=False) if as_json else trend_text(t),
                nl=as_json)

@@ -14,8 +14,8 @@ import numpy as np
 from ..errors import CompgenError
 from ..model.lines import AxisLine
 from ..model.machine import Machine, ProbeSetup
-from ..setup.blocks import Block
-from ..setup.motion import Check, run
+from ..motion.blocks import Block
+from ..motion.check import Check, run
 from . import fmt_plain
 from .correction import CompTable, Held, Plan, comp_tables, squareness_tables
 

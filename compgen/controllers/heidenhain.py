@@ -18,7 +18,7 @@ from ..errors import CompgenError
 from ..model.effects import ROT_OF, ROTATIONS, TRANSLATIONS
 from ..model.lines import AxisLine
 from ..model.machine import Machine
-from ..setup.blocks import Block, dwell, unknown, words
+from ..motion.blocks import Block, dwell, unknown, words
 from ..transforms import rot_axis
 from ..units import number
 from . import fmt_signed, render

@@ -24,7 +24,7 @@ from ..model.kinematics import head_offset, inverse
 from ..model.machine import Machine, at_nest, check_ball, check_travel
 from ..model.poses import Poses
 from ..model.sides import APPROACH_DEG, program_sides
-from ..setup import motion
+from ..motion import check as motion
 from ..units import number
 from . import Emitted, ascii_text, render
 from .base import Controller

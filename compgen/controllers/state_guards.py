@@ -31,7 +31,7 @@ import re
 from .. import me
 from ..errors import CompgenError
 from ..model.machine import Machine
-from ..setup.blocks import Block
+from ..motion.blocks import Block
 
 # HEIDENHAIN: (what, FN 18 item, the neutral value); each is read into its own Q parameter
 HEIDENHAIN_STATES = (("a basic rotation (the preset's ROT)", "ID210 NR1", "+0"),

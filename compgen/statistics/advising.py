@@ -1,5 +1,5 @@
 """What the statistics read of the measurements they may advise. The caller hands in an
-advisor (``controllers.advice.Advisor``), which proposes the measurements a machine can
+advisor (``planning.advice.Advisor``), which proposes the measurements a machine can
 make and checks each as its program would be checked; the statistics name only these
 protocols, so no controller's type reaches them, even for a type checker."""
 

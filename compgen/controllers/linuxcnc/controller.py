@@ -12,7 +12,7 @@ import numpy as np
 from ... import me
 from ...errors import CompgenError
 from ...model.machine import Machine
-from ...setup.blocks import Block
+from ...motion.blocks import Block
 from .. import render
 from ..base import Controller, EditContext, EditFiles
 from ..correction import (

@@ -7,7 +7,7 @@ import re
 from dataclasses import replace
 
 from ...errors import CompgenError
-from ...setup.blocks import Block, dwell, gcode_move
+from ...motion.blocks import Block, dwell, gcode_move
 from ...units import NUMBER
 from .heads import HEAD_MODULES
 

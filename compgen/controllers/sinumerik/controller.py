@@ -10,7 +10,7 @@ import numpy as np
 
 from ...errors import CompgenError
 from ...model.machine import Machine
-from ...setup.blocks import Block
+from ...motion.blocks import Block
 from .. import fmt_plain, render
 from ..base import Controller, EditContext, EditFiles, state_lines
 from ..correction import (

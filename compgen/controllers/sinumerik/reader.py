@@ -7,7 +7,7 @@ import re
 from dataclasses import replace
 
 from ...errors import CompgenError
-from ...setup.blocks import Block, dwell, gcode_move
+from ...motion.blocks import Block, dwell, gcode_move
 from ..state_guards import FRAME_IF, sinumerik_terms
 
 # A 360° modulo rotary axis (MD30310 ROT_IS_MODULO) moves to a plain absolute position the way

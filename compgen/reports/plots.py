@@ -18,12 +18,12 @@ matplotlib.rcParams["text.parse_math"] = False
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..controllers.advice import Proposal  # noqa: E402
 from ..data.rtest import Measurements, RTestData  # noqa: E402
 from ..errors import CompgenError, one_line  # noqa: E402
 from ..model.effects import effect_of_param, resolve  # noqa: E402
 from ..model.machine import Machine  # noqa: E402
 from ..model.poses import Poses  # noqa: E402
+from ..planning.advice import Proposal  # noqa: E402
 from ..statistics.diagnosis import Diagnosis  # noqa: E402
 from ..statistics.identify import Normal, fitted  # noqa: E402
 from ..statistics.results import FitResult  # noqa: E402

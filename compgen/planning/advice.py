@@ -18,14 +18,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..controllers.probing import probe_program
+from ..controllers.programs import checked_program
+from ..controllers.registry import controller
 from ..data.probe import probe_poses
 from ..errors import CompgenError
 from ..model.machine import Machine
 from ..model.paths import GAP_S, generate
 from ..model.poses import Poses, motion_direction, runs
-from .probing import probe_program
-from .programs import checked_program
-from .registry import controller
 
 # Where the ball may go for a further measurement: (label, file-name tag, ball scale in
 # x, y; dz mm; there and back). A tilt of an axis scales with radius and height, an offset
