@@ -1,6 +1,6 @@
 """Every measuring program compgen writes for the bundled machines, checked by the motion
 simulator: moves, estimated run time, closest approach to the set-up, time of the check.
-A benchmark, not a test (tests/test_motion.py checks the same programs pass).
+A benchmark, not a test (tests/motion/test_motion.py checks the same programs pass).
 
     python benchmarks/check_programs.py
 """

@@ -31,119 +31,130 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-EDITS = ["tests/test_kinematics_edit.py", "tests/test_compose.py", "tests/test_signs.py"]
-PROGRAMS = ["tests/test_motion.py", "tests/test_programs.py"]     # the controllers' program readers
-HOSTILE = [*PROGRAMS, "tests/test_hostile_programs.py"]            # what check-program must refuse
-STATS = ["tests/test_diagnose_stats.py", "tests/test_startup.py", "tests/test_shapes.py",
-         "tests/test_diagnose.py"]
+EDITS = ["test_kinematics_edit.py", "test_compose.py", "test_signs.py"]
+PROGRAMS = ["test_motion.py", "test_programs.py"]     # the controllers' program readers
+HOSTILE = [*PROGRAMS, "test_hostile_programs.py"]            # what check-program must refuse
+STATS = ["test_diagnose_stats.py", "test_startup.py", "test_shapes.py",
+         "test_diagnose.py"]
 TESTS = {
-    "compgen/model/lines.py": ["tests/test_lines.py", *EDITS],
-    "compgen/statistics/identify.py": ["tests/test_identify.py", "tests/test_startup.py",
-                                       "tests/test_probe.py"],        # two devices' variance components
-    "compgen/model/kinematics.py": ["tests/test_kinematics.py", "tests/test_effects.py",
-                                    "tests/test_identify.py"],
-    "compgen/model/poses.py": ["tests/test_kinematics.py", "tests/test_noise.py", "tests/test_identify.py"],
+    "compgen/model/lines.py": ["test_lines.py", *EDITS],
+    "compgen/statistics/identify.py": ["test_identify.py", "test_startup.py",
+                                       "test_probe.py"],        # two devices' variance components
+    "compgen/model/kinematics.py": ["test_kinematics.py", "test_effects.py",
+                                    "test_identify.py"],
+    "compgen/model/poses.py": ["test_kinematics.py", "test_noise.py", "test_identify.py"],
     # the reversal sides: the start sides' constants are fitted by identify and diagnose
-    "compgen/model/sides.py": ["tests/test_kinematics.py", "tests/test_identify.py", "tests/test_diagnose.py",
-                               "tests/test_programs.py"],
-    "compgen/units.py": ["tests/test_units.py", "tests/test_edge.py"],
-    "compgen/controllers/correction.py": [*EDITS, "tests/test_edge.py"],
-    "compgen/controllers/heidenhain.py": [*EDITS, "tests/test_tab.py", "tests/test_edge.py", *PROGRAMS,
-                                          "tests/test_probe_programs.py"],
-    "compgen/controllers/tab.py": ["tests/test_tab.py", "tests/test_kinematics_edit.py"],
+    "compgen/model/sides.py": ["test_kinematics.py", "test_identify.py", "test_diagnose.py",
+                               "test_programs.py"],
+    "compgen/units.py": ["test_units.py", "test_edge.py"],
+    "compgen/controllers/correction.py": [*EDITS, "test_edge.py"],
+    "compgen/controllers/heidenhain.py": [*EDITS, "test_tab.py", "test_edge.py", *PROGRAMS,
+                                          "test_probe_programs.py"],
+    "compgen/controllers/tab.py": ["test_tab.py", "test_kinematics_edit.py"],
     # each control's probing programs, second rounds and configuration are its writer's too
-    **{f"compgen/controllers/sinumerik/{m}.py": [*EDITS, "tests/test_edge.py", *PROGRAMS,
-                                                  "tests/test_probe_programs.py",
-                                                  "tests/test_table_rounds.py"]
+    **{f"compgen/controllers/sinumerik/{m}.py": [*EDITS, "test_edge.py", *PROGRAMS,
+                                                  "test_probe_programs.py",
+                                                  "test_table_rounds.py"]
        for m in ("controller", "carr", "cec", "reader")},
     # a head module's senses are seen only by LinuxCNC itself running compgen's program
-    **{f"compgen/controllers/linuxcnc/{m}.py": [*EDITS, "tests/test_edge.py", *PROGRAMS,
-                                                 "tests/test_probe_programs.py", "tests/test_table_rounds.py",
-                                                 "tests/test_linuxcnc_config.py",
-                                                 "tests/test_linuxcnc.py::test_a_head_modules_edit_runs_"
+    **{f"compgen/controllers/linuxcnc/{m}.py": [*EDITS, "test_edge.py", *PROGRAMS,
+                                                 "test_probe_programs.py", "test_table_rounds.py",
+                                                 "test_linuxcnc_config.py",
+                                                 "test_linuxcnc.py::test_a_head_modules_edit_runs_"
                                                  "compgens_program_where_compgen_puts_it"]
        for m in ("controller", "heads", "pins", "reader", "tables")},
     # probes, angle senses
-    "compgen/motion/check.py": [*HOSTILE, "tests/test_probe_programs.py", "tests/test_trt.py"],
-    "compgen/motion/blocks.py": [*HOSTILE, "tests/test_probe_programs.py"],
-    "compgen/controllers/programs.py": [*HOSTILE, "tests/test_trt.py"],        # read back under trt's senses
-    "compgen/model/effects.py": ["tests/test_effects.py", "tests/test_kinematics.py", "tests/test_shapes.py"],
+    "compgen/motion/check.py": [*HOSTILE, "test_probe_programs.py", "test_trt.py"],
+    "compgen/motion/blocks.py": [*HOSTILE, "test_probe_programs.py"],
+    "compgen/controllers/programs.py": [*HOSTILE, "test_trt.py"],        # read back under trt's senses
+    "compgen/model/effects.py": ["test_effects.py", "test_kinematics.py", "test_shapes.py"],
     # diagnose and its statistics: the closed-form tests first (quick to fail), the distributions
     # against scipy (test_startup), the declared shapes and the loop a user follows
-    "compgen/statistics/diagnose.py": [*STATS, "tests/test_edge.py", "tests/test_loop.py"],
-    "compgen/statistics/ranking.py": [*STATS, "tests/test_loop.py"],
-    "compgen/statistics/separation.py": [*STATS, "tests/test_loop.py"],
-    "compgen/statistics/choice.py": ["tests/test_diagnose.py", "tests/test_schemas.py"],
-    "compgen/statistics/budget.py": ["tests/test_budget.py"],
+    "compgen/statistics/diagnose.py": [*STATS, "test_edge.py", "test_loop.py"],
+    "compgen/statistics/ranking.py": [*STATS, "test_loop.py"],
+    "compgen/statistics/separation.py": [*STATS, "test_loop.py"],
+    "compgen/statistics/choice.py": ["test_diagnose.py", "test_schemas.py"],
+    "compgen/statistics/budget.py": ["test_budget.py"],
     # the wings: probe logs, the history and its store, diagnose's spectrum and significance
-    "compgen/data/probe.py": ["tests/test_probe.py", "tests/test_probe_programs.py"],
-    "compgen/controllers/probing.py": ["tests/test_probe_programs.py", "tests/test_probe.py"],
-    "compgen/history/store.py": ["tests/test_history.py"],
-    "compgen/history/ledger.py": ["tests/test_history.py"],
-    "compgen/history/drift.py": ["tests/test_history.py"],
-    "compgen/history/checks.py": ["tests/test_history.py"],
-    "compgen/history/words.py": ["tests/test_history.py"],
-    "compgen/history/exchange.py": ["tests/test_history.py"],
-    "compgen/statistics/spectrum.py": [*STATS, "tests/test_loop.py"],
-    "compgen/statistics/significance.py": [*STATS, "tests/test_loop.py"],
-    "compgen/statistics/device.py": ["tests/test_diagnose.py", "tests/test_probe.py"],
+    "compgen/data/probe.py": ["test_probe.py", "test_probe_programs.py"],
+    "compgen/controllers/probing.py": ["test_probe_programs.py", "test_probe.py"],
+    "compgen/history/store.py": ["test_history.py"],
+    "compgen/history/ledger.py": ["test_history.py"],
+    "compgen/history/drift.py": ["test_history.py"],
+    "compgen/history/checks.py": ["test_history.py"],
+    "compgen/history/words.py": ["test_history.py"],
+    "compgen/history/exchange.py": ["test_history.py"],
+    "compgen/statistics/spectrum.py": [*STATS, "test_loop.py"],
+    "compgen/statistics/significance.py": [*STATS, "test_loop.py"],
+    "compgen/statistics/device.py": ["test_diagnose.py", "test_probe.py"],
     # the rest of the package (2026-12-04: the draws had sampled 31 of 59 modules): readers,
     # the command layer, the controller registry and files, the paths, the text and the gate
-    "compgen/configuration/machine_file.py": ["tests/test_edge.py", "tests/test_hostile_inputs.py",
-                                              "tests/test_cli.py"],
-    "compgen/configuration/session.py": ["tests/test_csv_reader.py", "tests/test_streaming.py",
-                                         "tests/test_edge.py"],
-    "compgen/data/rtest.py": ["tests/test_csv_reader.py", "tests/test_hostile_inputs.py",
-                              "tests/test_edge.py"],
-    "compgen/data/simulate.py": ["tests/test_csv_reader.py", "tests/test_identify.py"],
-    "compgen/model/machine.py": ["tests/test_kinematics.py", "tests/test_heads.py", "tests/test_edge.py",
-                                 "tests/test_motion.py"],        # the set-up's solids and their defaults
-    "compgen/model/frames.py": ["tests/test_motion.py", "tests/test_probe_programs.py"],
-    "compgen/model/paths.py": ["tests/test_kinematics.py", "tests/test_heads.py", "tests/test_motion.py"],
-    "compgen/transforms.py": ["tests/test_kinematics.py", "tests/test_compose.py", "tests/test_motion.py"],
-    "compgen/files.py": ["tests/test_edge.py", "tests/test_hostile_inputs.py", "tests/test_cli.py"],
-    "compgen/errors.py": ["tests/test_edge.py", "tests/test_cli.py"],
-    "compgen/search.py": ["tests/test_controllers.py", "tests/test_edge.py", *PROGRAMS],
-    "compgen/planning/advice.py": ["tests/test_diagnose.py", "tests/test_loop.py",
-                                      "tests/test_probe_programs.py"],
-    "compgen/controllers/base.py": ["tests/test_controllers.py", *EDITS],
-    "compgen/controllers/kinematics.py": ["tests/test_controllers.py", *EDITS, "tests/test_heads.py"],
-    "compgen/controllers/registry.py": ["tests/test_controllers.py", "tests/test_imports.py", *EDITS],
-    "compgen/controllers/linuxcnc/config.py": ["tests/test_linuxcnc_config.py", "tests/test_trt.py",
-                                               "tests/test_table_rounds.py"],
-    "compgen/controllers/linuxcnc/files.py": ["tests/test_linuxcnc_config.py", "tests/test_trt.py",
-                                              "tests/test_table_rounds.py"],
-    "compgen/statistics/diagnose_text.py": ["tests/test_diagnose.py", "tests/test_loop.py"],
-    "compgen/statistics/gate.py": ["tests/test_history.py", "tests/test_diagnose.py", "tests/test_edge.py"],
-    "compgen/statistics/results.py": ["tests/test_schemas.py", "tests/test_identify.py",
-                                      "tests/test_history.py"],
-    "compgen/statistics/signature.py": ["tests/test_diagnose_stats.py", "tests/test_effects.py"],
-    "compgen/commands/cli.py": ["tests/test_cli.py", "tests/test_edge.py", "tests/test_hostile_inputs.py"],
-    "compgen/commands/cli_common.py": ["tests/test_cli.py", "tests/test_edge.py",
-                                       "tests/test_hostile_inputs.py"],     # a closed pipe, a bug's exit
-    "compgen/commands/cli_history.py": ["tests/test_history.py"],
-    "compgen/reports/checklist.py": ["tests/test_cli.py", "tests/test_controllers.py",
-                                      "tests/test_report.py"],
-    "compgen/reports/compare.py": ["tests/test_compare.py"],
-    "compgen/reports/plots.py": ["tests/test_plots.py", "tests/test_report.py",
-                                  "tests/test_streaming.py::test_a_dense_sessions_plots_draw_thinned_series_"
+    "compgen/configuration/machine_file.py": ["test_edge.py", "test_hostile_inputs.py",
+                                              "test_cli.py"],
+    "compgen/configuration/session.py": ["test_csv_reader.py", "test_streaming.py",
+                                         "test_edge.py"],
+    "compgen/data/rtest.py": ["test_csv_reader.py", "test_hostile_inputs.py",
+                              "test_edge.py"],
+    "compgen/data/simulate.py": ["test_csv_reader.py", "test_identify.py"],
+    "compgen/model/machine.py": ["test_kinematics.py", "test_heads.py", "test_edge.py",
+                                 "test_motion.py"],        # the set-up's solids and their defaults
+    "compgen/model/frames.py": ["test_motion.py", "test_probe_programs.py"],
+    "compgen/model/paths.py": ["test_kinematics.py", "test_heads.py", "test_motion.py"],
+    "compgen/transforms.py": ["test_kinematics.py", "test_compose.py", "test_motion.py"],
+    "compgen/files.py": ["test_edge.py", "test_hostile_inputs.py", "test_cli.py"],
+    "compgen/errors.py": ["test_edge.py", "test_cli.py"],
+    "compgen/search.py": ["test_controllers.py", "test_edge.py", *PROGRAMS],
+    "compgen/planning/advice.py": ["test_diagnose.py", "test_loop.py",
+                                      "test_probe_programs.py"],
+    "compgen/controllers/base.py": ["test_controllers.py", *EDITS],
+    "compgen/controllers/kinematics.py": ["test_controllers.py", *EDITS, "test_heads.py"],
+    "compgen/controllers/registry.py": ["test_controllers.py", "test_imports.py", *EDITS],
+    "compgen/controllers/linuxcnc/config.py": ["test_linuxcnc_config.py", "test_trt.py",
+                                               "test_table_rounds.py"],
+    "compgen/controllers/linuxcnc/files.py": ["test_linuxcnc_config.py", "test_trt.py",
+                                              "test_table_rounds.py"],
+    "compgen/statistics/diagnose_text.py": ["test_diagnose.py", "test_loop.py"],
+    "compgen/statistics/gate.py": ["test_history.py", "test_diagnose.py", "test_edge.py"],
+    "compgen/statistics/results.py": ["test_schemas.py", "test_identify.py",
+                                      "test_history.py"],
+    "compgen/statistics/signature.py": ["test_diagnose_stats.py", "test_effects.py"],
+    "compgen/commands/cli.py": ["test_cli.py", "test_edge.py", "test_hostile_inputs.py"],
+    "compgen/commands/cli_common.py": ["test_cli.py", "test_edge.py",
+                                       "test_hostile_inputs.py"],     # a closed pipe, a bug's exit
+    "compgen/commands/cli_history.py": ["test_history.py"],
+    "compgen/reports/checklist.py": ["test_cli.py", "test_controllers.py",
+                                      "test_report.py"],
+    "compgen/reports/compare.py": ["test_compare.py"],
+    "compgen/reports/plots.py": ["test_plots.py", "test_report.py",
+                                  "test_streaming.py::test_a_dense_sessions_plots_draw_thinned_series_"
                                   "and_count_every_reading",
-                                  "tests/test_diagnose.py::test_ambiguous_scale_is_reported_with_the_"
+                                  "test_diagnose.py::test_ambiguous_scale_is_reported_with_the_"
                                   "measurement_that_resolves_it"],
-    "compgen/reports/report.py": ["tests/test_report.py"],
-    "compgen/statistics/noise.py": ["tests/test_noise.py", "tests/test_identify.py",
-                                    "tests/test_diagnose_stats.py",
-                                    *(f"tests/test_diagnose.py::test_{t}" for t in (
+    "compgen/reports/report.py": ["test_report.py"],
+    "compgen/statistics/noise.py": ["test_noise.py", "test_identify.py",
+                                    "test_diagnose_stats.py",
+                                    *(f"test_diagnose.py::test_{t}" for t in (
         "outliers_are_listed_where_the_user_finds_them_and_flag_nothing",
         "correlated_noise_flags_nothing_because_it_is_whitened",
         "under_correlated_noise_a_real_effect_is_still_found"))],
 }
+
+
+def _located(name: str) -> str:
+    """A test file named by its base name (``test_x.py``, ``::node`` allowed) at its place
+    in tests/ (one folder per package folder)."""
+    file, _, node = name.partition("::")
+    path = next(ROOT.glob(f"tests/**/{file}")).relative_to(ROOT).as_posix()
+    return f"{path}::{node}" if node else path
+
+
+TESTS = {module: [_located(t) for t in tests] for module, tests in TESTS.items()}
 # functions to mutate only, by module (none now: diagnose's statistics moved to
 # significance.py and spectrum.py, which are mutated whole)
 ONLY_FUNCTIONS: dict[str, set[str]] = {}
 # LinuxCNC's real runs (2½ minutes a mutant) stay out of the rest of the suite; a selection
 # may name one (the LinuxCNC package's: the head modules' senses)
-SKIP = ["--deselect", "tests/test_linuxcnc.py"]
+SKIP = ["--deselect", _located("test_linuxcnc.py")]
 
 
 class Sites(ast.NodeVisitor):
@@ -238,7 +249,7 @@ def run_mutant(work: Path, module: str, text: str, tests: list[str], whole: bool
         # its own process group: a mutant that loops inside a command the tests start is
         # stopped with the tests, not left spinning after them
         with tempfile.TemporaryFile("w+") as out:
-            skip = [] if any(a.startswith("tests/test_linuxcnc.py::") for a in args) else SKIP
+            skip = [] if any(a.startswith(f"{SKIP[1]}::") for a in args) else SKIP
             proc = subprocess.Popen([sys.executable, "-m", "pytest", "-x", "-q", "-rfE", "-p",
                                      "no:cacheprovider", *skip, *args], cwd=work, env=env, stdout=out,
                                     stderr=subprocess.STDOUT, start_new_session=True)

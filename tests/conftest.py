@@ -1,5 +1,7 @@
 import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 from compgen.__main__ import BLAS_THREADS
@@ -122,6 +124,15 @@ def run(*args):
     """Invoke the CLI in-process: (exit code, stdout, stderr)."""
     result = CliRunner().invoke(main, [str(a) for a in args])
     return result.exit_code, result.stdout, result.stderr
+
+
+def pasted(line: str, cwd, env: dict | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
+    """``line`` pasted into bash in ``cwd``, as a user pastes what compgen printed. By default
+    this venv's bin first on PATH: a user who installed compgen has it there."""
+    if env is None:
+        env = {**os.environ, "PATH": os.path.dirname(sys.executable) + os.pathsep + os.environ["PATH"]}
+    return subprocess.run(["bash", "-c", line], cwd=cwd, env=env, capture_output=True, text=True,
+                          timeout=timeout)
 
 
 def rs274(folder: Path, program: str, tool: str, coordinates: str = "XYZAC", params: dict | None = None):

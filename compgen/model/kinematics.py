@@ -298,7 +298,7 @@ class SlotGains:
     exp(w); at w = 0, ω = e). The ball is the workpiece chain's end (its motion counts
     negatively: nest minus ball), the nest the tool chain's. A squareness turns the line of
     motion, moving P by q·(R_F J e × line). Only the frames are held; a gain is made when
-    asked. (``tests/test_kinematics.py`` checks every slot against central differences, on
+    asked. (``tests/model/test_kinematics.py`` checks every slot against central differences, on
     the nominal machine and on one with large errors.)
     """
 

@@ -517,7 +517,7 @@ def beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
     so the readings are exactly linear in it and one walk of the chains gives the answer
     Gauss–Newton converges to in three (1.65 → 1.07 s at 723 000 readings, most of it now
     the AR(1) ρ̂); the same refusal, the same residual figures and ρ̂
-    (``tests/test_compare.py``)."""
+    (``tests/reports/test_compare.py``)."""
     free = FreeConstants(machine, SETUP, poses)       # each later ball's and nest's offset
     _enough(poses, reading.size, len(SETUP))
     _enough(poses, reading.size, len(SETUP), free)     # as identify refuses

@@ -32,7 +32,7 @@ def trt_module(machine: Machine) -> tuple[str, object, object]:
 class HeadModule:
     """A LinuxCNC kinematics module that turns the tool: its name, what machine it is for,
     and how it turns each rotary axis against the machine file (what it holds was run with
-    the real module: tests/test_linuxcnc.py). Its one geometry pin, pivot-length, holds the
+    the real module: tests/controllers/test_linuxcnc.py). Its one geometry pin, pivot-length, holds the
     pivot to the controlled point: compgen's programs put the nest there (G49)."""
     module: str
     what: str

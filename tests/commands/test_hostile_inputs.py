@@ -9,7 +9,7 @@ import subprocess
 import sys
 
 import pytest
-from conftest import BC_MACHINE, ROOT, SEED_MACHINE, run
+from conftest import BC_MACHINE, ROOT, SEED_MACHINE, pasted, run
 
 SESSION = ROOT / "examples" / "seed-session.csv"
 TAB = ROOT / "examples" / "itnc530-current.TAB"
@@ -127,7 +127,7 @@ def test_a_carr_value_in_another_script_or_with_underscores_is_refused(tmp_path)
 
 
 def _bash(line, cwd):
-    return subprocess.run(["bash", "-c", line], capture_output=True, text=True, cwd=cwd, timeout=60)
+    return pasted(line, cwd, dict(os.environ), timeout=60)
 
 
 def test_a_closed_pipe_is_ordinary_and_a_full_disk_one_line(tmp_path):

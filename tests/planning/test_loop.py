@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, ROOT, TABLE4, UM
+from conftest import ARCSEC, ROOT, TABLE4, UM, pasted
 
 from compgen.configuration.machine_file import load_machine
 from compgen.model.effects import effect_name, effect_of_param
@@ -39,7 +39,7 @@ LOCATION = {"ac-trunnion-itnc530": TABLE4,
 
 def _bash(line: str, cwd) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    return subprocess.run(["bash", "-c", line], cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
+    return pasted(line, cwd, env)
 
 
 def _printed(text: str, command: str) -> list[str]:

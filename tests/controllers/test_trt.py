@@ -3,7 +3,7 @@ against LinuxCNC's current source (no LinuxCNC needed): the forward kinematics b
 transcribed from ``src/emc/kinematics/trtfuncs.c`` (LinuxCNC master, 2.10.0~pre1, commit
 5c41560ebb; the pin came with bfb687eaa6, 2.10.0~pre0), ``con`` = +1 with the pin true, −1
 with it false. Debian's 2.9.0~pre1, which predates the pin, runs compgen's default-direction
-programs in ``tests/test_linuxcnc.py``; here the transcription is first held to those, then
+programs in ``tests/controllers/test_linuxcnc.py``; here the transcription is first held to those, then
 used for the mirrored convention."""
 
 import re

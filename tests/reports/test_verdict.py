@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import ROOT, SEED_MACHINE, run
+from conftest import ROOT, SEED_MACHINE, pasted, run
 
 
 def _command(first_line: str, after: str) -> str:
@@ -39,8 +39,7 @@ def _bash(command: str, folder: Path) -> subprocess.CompletedProcess:
     bin_dir = Path(sys.executable).parent
     cwd = folder / f"run{len(list(folder.glob('run*')))}"
     cwd.mkdir()
-    return subprocess.run(["bash", "-c", command], capture_output=True, text=True, cwd=cwd,
-                          env={"PATH": f"{bin_dir}:/usr/bin:/bin", "HOME": str(cwd)}, timeout=300)
+    return pasted(command, cwd, {"PATH": f"{bin_dir}:/usr/bin:/bin", "HOME": str(cwd)})
 
 
 def test_a_fit_that_should_not_reach_the_control_says_settle_it_first(loop):

@@ -71,8 +71,8 @@ def test_a_dense_sessions_plots_draw_thinned_series_and_count_every_reading(seed
     readings that are not drawn makes the two differ)."""
     import matplotlib.axes
 
-    from compgen.reports import plots
     from compgen.data.simulate import simulate
+    from compgen.reports import plots
     from compgen.statistics.identify import fitted, identify
     poses = generate(seed_machine, ["K2"], rate_hz=100, feed=180)
     data = simulate(seed_machine, {"XOC": 2e-3}, poses, 0.5, np.random.default_rng(3))

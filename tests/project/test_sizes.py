@@ -43,7 +43,7 @@ def test_no_module_or_function_grows_past_its_limit(what):
     grown = {k: (n, over.get(k, limit)) for k, n in sizes.items() if n > over.get(k, limit)}
     assert not grown, f"over the limit (lines, allowed): {grown}"
     within = [k for k, ceiling in over.items() if sizes.get(k, 0) <= limit]
-    assert not within, f"within the limit now: take them off the list in tests/test_sizes.py: {within}"
+    assert not within, f"within the limit now: take them off test_sizes.py's list: {within}"
 
 
 def test_every_public_result_type_says_what_it_is():

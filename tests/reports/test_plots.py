@@ -11,12 +11,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from compgen.reports import plots
 from compgen.controllers import template_dir
 from compgen.data.simulate import simulate
 from compgen.errors import CompgenError, one_line
 from compgen.history.drift import Entry
 from compgen.model.paths import generate
+from compgen.reports import plots
 from compgen.statistics.identify import fitted, identify
 from compgen.statistics.spectrum import MIN_PITCH_MM
 

@@ -7,7 +7,7 @@ from itertools import combinations
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, SEED_MACHINE, TABLE4, UM
+from conftest import ARCSEC, SEED_MACHINE, TABLE4, UM, pasted
 
 from compgen import me
 from compgen.configuration.machine_file import load_machine
@@ -1520,7 +1520,6 @@ def test_two_drifts_at_once_end_unexplained_never_named_wrong(seed_machine, pose
     parentheses after the command was a syntax error, and a second "K2 again" reused
     K2_AGAIN). (It went on advising "K4
     again" four times, then named AOC:e45 and YOC:e45, the location errors 11–20 σ off.)"""
-    import subprocess
     import sys
     from pathlib import Path
 
@@ -1542,8 +1541,7 @@ def test_two_drifts_at_once_end_unexplained_never_named_wrong(seed_machine, pose
             # the advised command, as its line prints it (a remark after it is a bash comment),
             # runs pasted into bash: a repeat's program gets a file name of its own each time
             line = next(ln.strip() for ln in report(found).splitlines() if f" -o {m.name}." in ln)
-            done = subprocess.run(["bash", "-c", line], cwd=tmp_path, capture_output=True, text=True, env=env,
-                                  timeout=120)
+            done = pasted(line, tmp_path, env, timeout=120)
             assert done.returncode == 0, (line, done.stderr)
             rng += 1
             data.append(_session(seed_machine, m.poses, truth, seed=rng))

@@ -17,7 +17,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import ROOT, SEED_MACHINE, UM, run
+from conftest import ROOT, SEED_MACHINE, UM, pasted, run
 
 from compgen import history as H
 from compgen.configuration.machine_file import load_machine
@@ -580,9 +580,7 @@ def test_the_measurement_a_failed_check_advises_runs_as_printed(year, tmp_path):
     command = re.search(r"\((\S+(?: -m compgen)? measure-program [^)]*)\)", advice)[1]
     # the advice names compgen as this process was called (in-process, whatever an earlier
     # test left: compgen-cli by default): a user who typed that has the venv on PATH
-    env = {**os.environ, "PATH": os.path.dirname(sys.executable) + os.pathsep + os.environ["PATH"]}
-    done = subprocess.run(["bash", "-c", command], cwd=tmp_path, capture_output=True, text=True, timeout=120,
-                          env=env)
+    done = pasted(command, tmp_path, timeout=120)
     assert done.returncode == 0 and (tmp_path / "calibration.H").exists(), (command, done.stderr)
     rc, out, err = run("check-program", "--machine", "ac-trunnion-itnc530", tmp_path / "calibration.H")
     assert rc == 0, out + err

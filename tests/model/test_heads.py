@@ -3,10 +3,7 @@ the geometry written out by hand from the machine's description, fits at the Cra
 bound; programs and edits on LinuxCNC's head modules, none on other controls yet."""
 
 import json
-import os
 import re
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -19,6 +16,7 @@ from conftest import (
     UM,
     measured_under,
     on_linuxcnc,
+    pasted,
     run,
 )
 from scipy.spatial.transform import Rotation
@@ -396,9 +394,7 @@ def test_a_user_told_to_measure_with_a_longer_nest_can_and_the_sag_is_found(tmp_
     assert code == 0 and "Not told apart" in out, err
     command = next(ln.strip() for ln in out.splitlines() if "--probe-length 220 " in ln)
     assert "K4 with the nest 100 mm longer" in out and "measure-program" in command, out
-    env = {**os.environ, "PATH": os.path.dirname(sys.executable) + os.pathsep + os.environ["PATH"]}
-    done = subprocess.run(["bash", "-c", command], cwd=tmp_path, capture_output=True, text=True, timeout=120,
-                          env=env)
+    done = pasted(command, tmp_path, timeout=120)
     assert done.returncode == 0, (command, done.stderr)
     program = (tmp_path / "K4_NEST100.ngc").read_text()
     assert "pivot-length]> - 370.0000] GT" in program and "220.0000 mm below the gauge line" in program

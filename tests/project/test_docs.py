@@ -11,12 +11,11 @@ after the catalogue had grown to 193.)"""
 import os
 import re
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 
 import pytest
-from conftest import ROOT
+from conftest import ROOT, pasted
 
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 FENCE = re.compile(r"^```[\w-]*\n(.*?)^```", re.M | re.S)
@@ -84,8 +83,7 @@ def test_a_transcript_runs_as_printed_and_prints_what_it_shows(workdir, name, bl
     starts = [i for i, line in enumerate(lines) if line.startswith("$ ")]
     for i, j in zip(starts, [*starts[1:], len(lines)], strict=True):
         command = lines[i][2:]
-        done = subprocess.run(["bash", "-c", command], capture_output=True, text=True, cwd=cwd, env=env,
-                              timeout=600)
+        done = pasted(command, cwd, env, timeout=600)
         assert done.returncode == 0, (name, command, done.stderr[-800:])
         _in_order(lines[i + 1:j], (done.stdout + done.stderr).splitlines(), f"{name}: {command}")
 
@@ -97,7 +95,7 @@ def test_the_main_job_prints_what_the_readme_shows(workdir):
     job = setup.strip().split(" && ")[-1].replace(".venv/bin/compgen ", "compgen-cli ")
     assert job.startswith("compgen-cli fit --machine "), job
     shown = FENCE.findall(text[text.index("## What the main job prints"):])[0]
-    done = subprocess.run(["bash", "-c", job], capture_output=True, text=True, cwd=cwd, env=env, timeout=300)
+    done = pasted(job, cwd, env)
     assert done.returncode == 0, done.stderr
     _in_order(shown.splitlines(), done.stdout.splitlines(), "README's main job")
 

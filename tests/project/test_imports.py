@@ -152,3 +152,13 @@ def test_the_layer_test_sees_an_arrow_up():
     graph["compgen.statistics.identify"] |= {"compgen.planning.advice"}
     assert _arrows_up(graph) == [
         "compgen.statistics.identify (statistics) -> compgen.planning.advice (planning)"]
+
+
+def test_the_tests_mirror_the_package():
+    """One test folder per layer of compgen (tests/base for the modules at its top) and
+    tests/project for what holds the whole project (its layers, sizes, docs, schemas); the
+    shared helpers in tests/conftest.py."""
+    tests = ROOT / "tests"
+    assert {p.parent.name for p in tests.glob("*/test_*.py")} == {*LAYERS, "project"}
+    assert not list(tests.glob("test_*.py")) and not list(tests.glob("*/*/test_*.py")), \
+        "a test file outside the layers' folders"
