@@ -226,8 +226,7 @@ def in_halves(work: Callable[[range], object], starts: range) -> list:
     the poses alone and their results come back in order: the same numbers on any machine.
     ``starts`` are the blocks' first poses, ``range(0, n, block)``; below ``THREADED`` poses
     the halves run one after the other: there a second thread's walk and heap cost more
-    memory than its time saves (diagnose's peak 1.53× fit's at 72 300 poses in two threads,
-    1.02× in one, in the same 4.3 s)."""
+    memory than its time saves (docs/benchmarks.md has the figures)."""
     from concurrent.futures import ThreadPoolExecutor  # here: every command's start-up would pay it
 
     half = len(starts) // 2

@@ -515,8 +515,7 @@ def beyond_setup(machine: Machine, poses: Poses, reading: np.ndarray) -> dict:
     projected out as ``identify`` does: ``FreeConstants``), in closed form: the ball's
     offset is a translation at the workpiece chain's end, turned by the frames before it,
     so the readings are exactly linear in it and one walk of the chains gives the answer
-    Gauss–Newton converges to in three (1.65 → 1.07 s at 723 000 readings, most of it now
-    the AR(1) ρ̂); the same refusal, the same residual figures and ρ̂
+    Gauss–Newton converges to in three; the same refusal, the same residual figures and ρ̂
     (``tests/reports/test_compare.py``)."""
     free = FreeConstants(machine, SETUP, poses)       # each later ball's and nest's offset
     _enough(poses, reading.size, len(SETUP))

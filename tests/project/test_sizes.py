@@ -5,6 +5,7 @@ now, as a ceiling: none may grow, and one brought within the limit must leave th
 list only shrinks)."""
 
 import ast
+import re
 
 import pytest
 from conftest import ROOT
@@ -56,3 +57,23 @@ def test_every_public_result_type_says_what_it_is():
                     and not ast.get_docstring(node)):
                 bare.append(f"{path.relative_to(ROOT)}: {node.name}")
     assert not bare, "\n".join(bare)
+
+
+HISTORY = re.compile(r"\d[\d.]* ?(?:s|ms|MiB|MB|GB|×)? ?(?:→|->) ?\d[\d.]* ?(?:s|ms|MiB|MB|GB|×)"
+                     r"|\btook \d[\d.]* ?(?:s|ms)\b|\b(?:issue|stop|wave) \d+\b")
+
+
+def test_no_docstring_carries_history():
+    """A docstring says what a thing is and how to read it; what it cost before a change
+    (``1.65 → 1.07 s``, "took 8 s") belongs to git and docs/benchmarks.md."""
+    found = [f"{path.relative_to(ROOT)}:{node.lineno}" for path in sorted((ROOT / "compgen").rglob("*.py"))
+             for node in ast.walk(ast.parse(path.read_text()))
+             if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+             and (doc := ast.get_docstring(node)) and HISTORY.search(doc)]
+    assert not found, found
+
+
+def test_the_history_rule_sees_history():
+    assert HISTORY.search("Gauss–Newton in three (1.65 → 1.07 s at 723 000 readings)")
+    assert HISTORY.search("they took 8 of diagnose's 23 s") is None      # the rule's reach, named
+    assert HISTORY.search("they took 8 s of diagnose") and not HISTORY.search("a pose → its reading")
