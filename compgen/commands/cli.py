@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from datetime import date
 from functools import partial
 from pathlib import Path
@@ -27,7 +28,7 @@ from ..files import STDOUT, read_text, write_all, write_atomically
 from ..model.effects import catalogue, compose, location_model
 from ..model.paths import generate
 from ..model.sides import unknown_sides, unpredicted_sides
-from ..planning.advice import Advisor
+from ..planning.advice import Advisor, Proposal
 from ..reports.checklist import checklist, markdown
 from ..reports.compare import compare
 from ..reports.report import report_html
@@ -36,6 +37,7 @@ from ..statistics.diagnose import diagnose
 from ..statistics.diagnose_text import report as diagnosis_text
 from ..statistics.gate import gate_edit, unit_suspicion
 from ..statistics.identify import identify, mountings_note
+from ..statistics.kept import keep, kept_path, key, read_kept
 from ..statistics.results import load_fit
 from ..units import NOISE_MAX_UM
 from .cli_common import (
@@ -251,6 +253,7 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um):
               f"{sum(len(s) for s in sets)} poses")
     result = diagnose(machine, sets, fit, names, fit_file=base, machine_ref=machine_ref(fit),
                       noise_um=noise_um, advisor=Advisor)
+    click.echo(f"compgen: {keep(base, result, key(fit, machine, noise_um, names, True))}", err=True)
     named = compose(machine, fit.model, [c.effect for c in result.candidates if c.significant])
     _warn_about_data(machine, named, sets)
     if plots_dir:
@@ -455,8 +458,12 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
     for path in emitted:
         read_text(path, "file", ansi_ok=True)   # a missing file fails before anything is drawn
     post = [read_data(p, machine, fit.sign, warn) for p in post_files]
-    progress("1/3 diagnose")
-    found = diagnose(machine, sets, fit, fit_file=base, advisor=Advisor)
+    found = read_kept(base, key(fit, machine, None, None, True), Proposal)
+    progress("1/3 diagnose" + (f": kept beside the fit ({kept_path(base).name})" if found else ""))
+    if found is None:
+        found = diagnose(machine, sets, fit, fit_file=base, advisor=Advisor)
+        click.echo(f"compgen: {keep(base, found, key(fit, machine, None, None, True))}", err=True)
+    found = replace(found, fit_file=base, machine_ref=machine.source)
     progress("2/3 compare")
     comparison = compare(machine, sets, fit, controller_name or machine.controller, post)
     progress("3/3 plots")
