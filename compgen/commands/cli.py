@@ -253,7 +253,6 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um):
               f"{sum(len(s) for s in sets)} poses")
     result = diagnose(machine, sets, fit, names, fit_file=base, machine_ref=machine_ref(fit),
                       noise_um=noise_um, advisor=Advisor)
-    click.echo(f"compgen: {keep(base, result, key(fit, machine, noise_um, names, True))}", err=True)
     named = compose(machine, fit.model, [c.effect for c in result.candidates if c.significant])
     _warn_about_data(machine, named, sets)
     if plots_dir:
@@ -263,6 +262,7 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um):
             click.echo(f"wrote {path}", err=as_json)
     click.echo(json.dumps(result.to_dict(), indent=2, ensure_ascii=False) if as_json
                else diagnosis_text(result, base), nl=as_json)
+    click.echo(f"compgen: {keep(base, result, key(fit, machine, noise_um, names, True))}", err=True)
 
 
 @main.command("predict")
@@ -460,10 +460,9 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
     post = [read_data(p, machine, fit.sign, warn) for p in post_files]
     found = read_kept(base, key(fit, machine, None, None, True), Proposal)
     progress("1/3 diagnose" + (f": kept beside the fit ({kept_path(base).name})" if found else ""))
-    if found is None:
-        found = diagnose(machine, sets, fit, fit_file=base, advisor=Advisor)
-        click.echo(f"compgen: {keep(base, found, key(fit, machine, None, None, True))}", err=True)
-    found = replace(found, fit_file=base, machine_ref=machine.source)
+    made = found is None
+    found = replace(found, fit_file=base, machine_ref=machine.source) if found else \
+        diagnose(machine, sets, fit, fit_file=base, advisor=Advisor)
     progress("2/3 compare")
     comparison = compare(machine, sets, fit, controller_name or machine.controller, post)
     progress("3/3 plots")
@@ -481,6 +480,8 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
                        date.today().isoformat(), past, png, screen)
     write_atomically(output, html, force, inputs=(base, before, *post_files, *emitted))
     said(output, f"wrote {output}")
+    if made:                                # kept once the report is written, never before
+        click.echo(f"compgen: {keep(base, found, key(fit, machine, None, None, True))}", err=True)
 
 
 @main.command("effects")

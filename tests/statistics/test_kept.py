@@ -94,6 +94,8 @@ def test_a_file_that_is_not_a_kept_diagnosis_is_never_replaced(made, tmp_path):
 
 def test_diagnose_keeps_it_and_the_report_reads_it(tmp_path):
     assert run("fit", "--machine", "ac-trunnion-itnc530", SESSION, "-o", tmp_path / "fit.json")[0] == 0
+    code, _, err = run("report", "--from", tmp_path / "fit.json", "-o", tmp_path / "fit.json", "--force")
+    assert code == 2 and not (tmp_path / "fit.diagnosis.json").exists(), err      # refused: nothing kept
     code, _, err = run("report", "--from", tmp_path / "fit.json", "-o", tmp_path / "made.html")
     assert code == 0 and "kept the diagnosis in" in err, err
     path = tmp_path / "fit.diagnosis.json"
