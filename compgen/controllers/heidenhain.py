@@ -46,11 +46,18 @@ DESCRIPTION_ROWS = 50
 
 @dataclass(frozen=True)
 class Row:
-    """One ``Trans`` row: ``doc`` is its ISO name (``Y0A``, ``-Y0A`` after the axis)."""
+    """One ``Trans`` row: the ISO symbol of what it holds (``iso``, ``YOA``), written in the
+    table's DOC column as the KinematicsOpt rows are (``doc``: ``Y0A``, ``-Y0A`` for the
+    inverse after the axis)."""
 
-    doc: str
+    iso: str
     axis: str          # X Y Z (mm) or A B C (deg)
     coord: float
+    inverse: bool = False
+
+    @property
+    def doc(self) -> str:
+        return f"{'-' if self.inverse else ''}{self.iso[0]}0{self.iso[2:]}"
 
 
 def rows_of(machine: Machine, p: Plan) -> dict[str, tuple[list[Row], list[Row]]]:
@@ -58,16 +65,16 @@ def rows_of(machine: Machine, p: Plan) -> dict[str, tuple[list[Row], list[Row]]]
     out = {}
     for name, line in p.lines.items():
         d = line.nominal
-        before = [Row(f"{t.upper()}0{name}", t.upper(), line.offset["xyz".index(t)])
+        before = [Row(f"{t.upper()}O{name}", t.upper(), line.offset["xyz".index(t)])
                   for t in TRANSLATIONS if t != d]
-        before += [Row(f"{r.upper()}0{name}", r.upper(), np.degrees(line.tilt[ROTATIONS.index(r)]))
+        before += [Row(f"{r.upper()}O{name}", r.upper(), np.degrees(line.tilt[ROTATIONS.index(r)]))
                    for r in ROTATIONS if r != ROT_OF[d]]
-        out[name] = (before, [Row(f"-{r.doc}", r.axis, -r.coord) for r in reversed(before)])
+        out[name] = (before, [Row(r.iso, r.axis, -r.coord, inverse=True) for r in reversed(before)])
     for name, value in p.squareness.items():       # e.g. COX: Trans C around MachAxis X
         axis, r = name[2], name[0]
-        before = [Row(f"{r}0{axis}", r, np.degrees(value))]
+        before = [Row(f"{r}O{axis}", r, np.degrees(value))]
         prior = out.get(axis, ([], []))
-        out[axis] = (prior[0] + before, [Row(f"-{r}0{axis}", r, -np.degrees(value))] + prior[1])
+        out[axis] = (prior[0] + before, [Row(f"{r}O{axis}", r, -np.degrees(value), inverse=True)] + prior[1])
     return out
 
 
@@ -89,7 +96,7 @@ def edit_table(table: TabTable, rows: dict[str, tuple[list[Row], list[Row]]], wh
 
     def written(text: str, want: float, row: Row) -> str:
         lost = abs(table.mm(text, row.axis) - want)
-        std = sigma.get(row.doc.lstrip("-").replace("0", "O"), 0.0)
+        std = sigma.get(row.iso, 0.0)
         floor = LOSS_FLOOR_MM if row.axis in "XYZ" else LOSS_FLOOR_DEG
         allowed = max(floor, std if row.axis in "XYZ" else np.degrees(std)) * 1.001
         if lost > allowed:
