@@ -92,6 +92,7 @@ def on_linuxcnc(folder: Path, source: Path = None) -> Path:
     source = source or HEAD_MACHINE
     path = folder / f"linuxcnc-{source.stem}.toml"
     text = re.sub(r"feed_max = [0-9.]+", "feed_max = 60000.0", source.read_text())  # the sim's axes
+    text = re.sub(r"(?ms)^\[program\].*?\n\n", "", text)        # the bundled one: HEIDENHAIN's tool
     path.write_text(text.replace('controller = "tnc640"', 'controller = "linuxcnc"')
                     .replace("[limits]", '[program]\ntool = "7"\nfeed = 8000.0\ndwell = 0.1\n'
                              'clearance = 20.0\n\n[linuxcnc]\nconventional_directions = false\n'

@@ -76,8 +76,8 @@ def main():
 @MACHINE
 @click.option("--truth", type=FILE, required=True,
               help='JSON {"parameters": {NAME: {"value": v, "unit": u}}}, or a fit.json.')
-@click.option("--paths", "path_names", default="K4,K1,K2", show_default=True,
-              help="Comma-separated path names from the machine file.")
+@click.option("--paths", "path_names", default="all", show_default=True,
+              help="Comma-separated path names from the machine file, or 'all': every path it defines.")
 @click.option("--noise-um", type=Finite(min=0, max=NOISE_MAX_UM), default=0.0, show_default=True,
               help="Noise σ per reading, µm (white unless --noise-rho).")
 @click.option("--noise-rho", type=Finite(), default=0.0, show_default=True,

@@ -126,8 +126,11 @@ class Controller:
 
     def programs_for_head(self, machine: Machine) -> bool:
         """Whether compgen writes this control's programs for ``machine``, whose head turns
-        the tool (only where the control's kinematics for it was run: none by default)."""
-        return False
+        the tool: a control that switches TCP in its program holds the nest there through
+        the whole program (``programs._steps``; the control's kinematics places the head's
+        pivot, U22); a control whose TCP is its configuration only where compgen ran the
+        configuration's kinematics for it."""
+        return self.tcp_switchable
 
     def corrects(self, machine: Machine, e) -> bool:
         """Whether an edit of this control corrects the constant effect ``e``

@@ -191,7 +191,8 @@ def checked_program(machine: Machine, poses: Poses, label: str, controller_name:
                   tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}",
                   dwell=f"{setup.dwell:g}" if setup.dwell else "",
                   work_offset=setup.work_offset, max_step=f"{machine.limits.max_step_deg:g}",
-                  steps=steps, rotary=[a.name for a in machine.rotary_axes], **ctl.program_context(machine))
+                  steps=steps, rotary=[a.name for a in machine.rotary_axes], turns_tool=bool(machine.heads),
+                  **ctl.program_context(machine))
     result = ctl.check(machine, ctl.blocks(text, mode))
     if result.findings:     # compgen's own safety net: nothing unsafe leaves this function
         at = ", ".join(f"{v:g}" for v in ball)
@@ -231,6 +232,10 @@ def _program_header(machine: Machine, ctl: Controller, poses: Poses, label: str,
                               f"{np.degrees(poses.q[:, j].max()):.3f}"
                               for a, j in zip(machine.rotary_axes, rotary, strict=True)) + " deg",
         "rotary axes turn only at the safe height; the nest moves onto and off the ball along its axis",
+        *([f"head: {ctl.tcp_words} on from the first turn to the last; the control's kinematics must place "
+           f"{' and '.join(a.name for a in machine.heads)} as the machine file does (this program cannot "
+           "read them), the nest's length in the tool table (U22)"] if machine.heads and ctl.tcp_switchable
+          else []),
         "first run: single block, feed override low, nest and ball clear of clamps",
         *(ascii_text(n) for n in notes),
     ]
@@ -252,23 +257,29 @@ def _steps(machine: Machine, poses: Poses, segments, mode: str, switchable: bool
     mm or deg), TCP on and off, dwells, pose markers.
 
     Rotary axes turn only with the nest at ``safe`` above their intersection; the nest goes
-    onto and off the ball along its own axis. A control that switches TCP in the program
-    does all this with TCP off, in machine axes; one whose TCP is its configuration
-    (LinuxCNC's trt kinematics) gets every point in TCP coordinates, with turns in small
-    steps so that the nest stays where it is.
+    onto and off the ball along its own axis. On a table machine, a control that switches
+    TCP in the program does all this with TCP off, in machine axes, and switches it on for
+    each run's poses; one whose TCP is its configuration (LinuxCNC's kinematics modules)
+    gets every point in TCP coordinates, with turns in small steps so that the nest stays
+    where it is. A head's program runs under TCP throughout on every control (off it, the
+    tool length of a tilted head is not along the axis a move names): the switching control
+    lifts the nest and turns the rotary axes to zero at the safe height with TCP off, then
+    switches it on once, and off at the end.
     """
-    w = _Steps(machine, mode == "tcpm" and not switchable, safe, clearance)
+    w = _Steps(machine, mode == "tcpm" and (not switchable or bool(machine.heads)), safe, clearance,
+               switches=switchable and mode == "tcpm")
     w.start()
     for seg in segments:
-        w.segment(poses, seg, mode, switchable, label, first_segment=seg is segments[0])
+        w.segment(poses, seg, mode, label, first_segment=seg is segments[0])
     return w.finish()
 
 
 class _Steps:
     """The steps being laid out, and where the nest stands after the last (``q``)."""
 
-    def __init__(self, machine: Machine, tcp_always: bool, safe: float, clearance: float):
+    def __init__(self, machine: Machine, tcp_always: bool, safe: float, clearance: float, switches: bool):
         self.machine, self.tcp_always, self.safe = machine, tcp_always, safe
+        self.switches = switches          # the program switches TCP on and off itself
         self.linear = [machine.index(c) for c in "XYZ"]
         self.rotary = [machine.index(a.name) for a in machine.rotary_axes]
         self.names = [a.name for a in machine.rotary_axes]
@@ -312,17 +323,20 @@ class _Steps:
             self.at(step, note="turn at the safe height" if k == n else "")
 
     def start(self) -> None:
-        if self.tcp_always:   # TCP coordinates equal machine ones only with the rotary axes at zero
-            self.steps.append({"kind": "require_zero", "axes": {}})
+        if self.tcp_always and not self.switches:   # TCP coordinates equal machine ones only with
+            self.steps.append({"kind": "require_zero", "axes": {}})     # the rotary axes at zero
         self.steps.append({"kind": "rapid", "axes": {"Z": self.safe},
                            "note": "nest up along its axis to the safe height"})
         self.q = self.origin.copy()
         self.q[self.linear[:2]] = np.nan
+        if self.tcp_always and self.switches:       # a head under a switching control's TCP
+            self.steps.append({"kind": "rapid", "axes": dict.fromkeys(self.names, 0.0),
+                               "note": "rotary axes to zero at the safe height"})
+            self.steps.append({"kind": "tcp_on"})
         if self.tcp_always:
             self.at(self.origin, note="above the rotary axes")
 
-    def segment(self, poses: Poses, seg, mode: str, switchable: bool, label: str,
-                first_segment: bool) -> None:
+    def segment(self, poses: Poses, seg, mode: str, label: str, first_segment: bool) -> None:
         """One run of one path: approached from its declared sides, the nest onto the ball,
         each pose with its dwell, and off it."""
         machine, rotary, linear, steps = self.machine, self.rotary, self.linear, self.steps
@@ -348,13 +362,14 @@ class _Steps:
             steps.append({"kind": "stop", "note": (HEAD_PRESET_CHECK if machine.heads else PRESET_CHECK)
                           .format(clearance=f"{self.approach:g}")})
         self.at(first, rapid=False, note="nest onto the ball, along its axis")
-        if mode == "tcpm" and switchable:
+        each_run = self.switches and not self.tcp_always      # TCP on for the poses alone
+        if each_run:
             steps.append({"kind": "tcp_on"})
         for i in seg:
             self.at(poses.q[i], rapid=False, pose=f"pose {i + 1} {ascii_text(str(poses.path[i]))}",
                     tcp=mode == "tcpm")    # the ball centre in TCP coordinates
             steps.append({"kind": "dwell"})
-        if mode == "tcpm" and switchable:
+        if each_run:
             steps.append({"kind": "tcp_off"})
         self.at(self.off(last), rapid=False, note="nest off the ball, along its axis")
         self.at(self.lifted(self.off(last), self.safe))
@@ -369,6 +384,8 @@ class _Steps:
             zero = self.q.copy()
             zero[self.rotary] = 0.0
             self.turn_to(zero)
+            if self.switches:
+                self.steps.append({"kind": "tcp_off"})
         tcp = [s for s in self.steps if s.get("q") is not None]
         if tcp:
             xyz = world(self.machine, np.array([s["q"] for s in tcp]))

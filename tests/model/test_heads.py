@@ -179,25 +179,43 @@ def test_a_session_is_fitted_at_the_cramer_rao_bound(case):
         assert e.std == pytest.approx(b * sigma_hat, rel=0.02), (n, e.std, b)
 
 
-@pytest.mark.parametrize("command", [
-    ("measure-program", "--machine", "bc-swivel-head-table", "--path", "K2", "-o", "{out}/m.h"),
-    ("probe-program", "--machine", "bc-swivel-head-table", "--path", "K2", "-o", "{out}/p.h"),
-], ids=lambda c: c[0])
-def test_no_controller_file_is_written_for_a_head_yet(command, tmp_path, head_machine):
-    """A table-table control's programs would be wrong for a head: refused in one line,
-    before any file, naming the head (its edits: below, on LinuxCNC)."""
-    poses = generate(head_machine, ["K2"])
-    data = simulate(head_machine, TRUTH, poses, 0.0)
-    fit = tmp_path / "fit.json"
-    csv = tmp_path / "d.csv"
-    csv.write_text(format_rtest(head_machine, data))
-    code, _, _ = run("fit", "--machine", "bc-swivel-head-table", "--model", "XOC,YOC", csv, "-o", fit)
-    assert code == 0
-    (tmp_path / "k.tab").write_text("BEGIN k.tab\n")
-    code, out, err = run(*(a.format(out=tmp_path, fit=fit) for a in command))
-    assert code != 0 and "for a head yet" in err and "Traceback" not in err
-    assert len(err.strip().splitlines()) <= 2, err
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.csv", "fit.json", "k.tab"]
+@pytest.mark.parametrize("source", [HEAD_MACHINE, FORK_MACHINE], ids=["swivel", "fork"])
+def test_a_heads_programs_run_under_tcp_from_the_first_turn_to_the_last(tmp_path, source):
+    """On HEIDENHAIN (iTNC 530, TNC 640) and SINUMERIK a head's program lifts the nest and
+    turns the rotary axes to zero at the safe height with TCP off, switches TCP on once, and
+    off after the last turn (off it, a tilted head's tool length is not along the axis a move
+    names); its header names U22. Every path of the machine file, written in one program,
+    passes check-program with the head's body."""
+    sinumerik = _on_sinumerik(tmp_path, source, "{ B = [0.0, 1.0, 0.0], C = [0.0, 0.0, %s1.0] }"
+                              % ("" if source == FORK_MACHINE else "-")).source
+    for machine, ctl, name, on, off in [(source, "itnc530", "H1.H", "FUNCTION TCPM F", "FUNCTION RESET TCPM"),
+                                        (source, "tnc640", "H2.H", "FUNCTION TCPM F", "FUNCTION RESET TCPM"),
+                                        (sinumerik, "sinumerik840d", "S.MPF", "TRAORI", "TRAFOOF")]:
+        code, out, err = run("measure-program", "--machine", machine, "--path", "all", "--controller", ctl,
+                             "-o", tmp_path / name)
+        assert code == 0 and "tcpm mode" in err, err
+        text = (tmp_path / name).read_text()
+        blocks = [ln.split(" ", 1)[1] if ctl != "sinumerik840d" else ln for ln in text.splitlines()[1:]]
+        ons = [i for i, b in enumerate(blocks) if b.startswith(on)]
+        offs = [i for i, b in enumerate(blocks) if b.startswith(off)]
+        zero = next(i for i, b in enumerate(blocks) if "rotary axes to zero at the safe height" in b)
+        poses = [i for i, b in enumerate(blocks) if " ; pose " in b]
+        assert len(ons) == 1 and zero < ons[0] < poses[0] and poses[-1] < offs[-1] and offs[-2] < zero, \
+            (ctl, ons, offs, zero)
+        assert "UNCONFIRMED U22" in text, ctl
+        code, out, err = run("check-program", "--machine", machine, tmp_path / name)
+        assert code == 0 and "OK" in out, (ctl, err)
+
+
+def test_no_probing_program_is_written_for_a_head(tmp_path):
+    """A probe's touches are planned in the machine's axes, which a head turns: refused in
+    one line, before any file."""
+    path = tmp_path / "m.toml"
+    probe = '[probe]\ntool = "98"\nlength = 120.0\nsphere_diameter = 25.4\nstylus_diameter = 3.0\n\n'
+    path.write_text(HEAD_MACHINE.read_text().replace("[limits]", probe + "[limits]"))
+    code, _, err = run("probe-program", "--machine", path, "--path", "K2", "-o", tmp_path / "p.H")
+    assert code == 2 and "rotary head" in err and len(err.strip().splitlines()) == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.toml"]
 
 
 def test_a_linear_axis_carried_by_a_head_is_refused(tmp_path):
@@ -227,7 +245,10 @@ def test_a_heads_catalogue_names_its_sag(head_machine, seed_machine):
 def test_a_heads_sag_is_not_told_from_its_angle_at_one_nest_length(head_machine):
     """The head's weight bends the tool across its axis (sin 2B across, 1 − cos 2B along it):
     at one nest length exactly what an angular error of B at 1/rev does through the nest's
-    lever. diagnose names neither found, and says which two it cannot tell apart."""
+    lever. diagnose names neither found, says which two it cannot tell apart, and advises
+    what tells them apart on the TNC 640: K4 with a longer nest. Where compgen writes no
+    program (LinuxCNC, the head fitting no module) no measurement is advised, and none is
+    said not to help."""
     poses = generate(head_machine, list(head_machine.paths))
     sag = {**TRUTH, "EXB:h2s": 5 * UM, "EZB:h2c": 5 * UM}
     data = [simulate(head_machine, sag, poses, NOISE_UM, np.random.default_rng(3))]
@@ -235,7 +256,18 @@ def test_a_heads_sag_is_not_told_from_its_angle_at_one_nest_length(head_machine)
     assert found.found is None
     assert {"EBB:h1", "EZB+EXB:h2"} <= {found.significant[0].effect, *(found.rivals or ())}, (
         [c.effect for c in found.significant[:3]], found.rivals)
-    # no program is written for a head: no measurement is advised, and none is said not to help
+    assert found.rivals_separated_by and found.rivals_separated_by[0].nest is not None
+    assert "measure: K4 with the nest 100 mm longer" in report(found).splitlines()[0]
+
+
+def test_no_measurement_is_advised_where_no_program_is_written(head_machine, tmp_path):
+    path = on_linuxcnc(tmp_path)
+    path.write_text(path.read_text().replace("offset = [0.0, 0.0, 150.0]", "offset = [5.0, 0.0, 150.0]"))
+    machine = load_machine(path)
+    poses = generate(machine, list(machine.paths))
+    sag = {**TRUTH, "EXB:h2s": 5 * UM, "EZB:h2c": 5 * UM}
+    data = [simulate(machine, sag, poses, NOISE_UM, np.random.default_rng(3))]
+    found = diagnose(machine, data, identify(machine, data), noise_um=NOISE_UM, advisor=Advisor)
     text = report(found)
     assert "does not write measuring programs for a head yet" in text and "was not searched" in text
     assert "No path or ball position" not in text and not found.rivals_separated_by
@@ -267,13 +299,13 @@ def test_what_an_edit_would_leave_says_no_edit_is_written_for_a_head(head_machin
 
 
 def test_the_checklist_prints_no_command_a_head_would_refuse(head_machine, tmp_path):
-    """On the TNC 640 its program step is by hand, and says why; the edit step names the
-    command as the TNC 640 takes it (no --current: its kinematics are in the configuration
-    editor). On LinuxCNC, where the head fits no module, both steps are by hand."""
+    """On the TNC 640 the program step names measure-program and the edit step the command as
+    the TNC 640 takes it (no --current: its kinematics are in the configuration editor). On
+    LinuxCNC, where the head fits no module, both steps are by hand, and say why."""
     code, out, err = run("checklist", "--machine", "bc-swivel-head-table", "--dir", tmp_path, "--json")
     assert code == 0, err
-    assert "measure-program" not in out and "kinematics --from" in out and "--current" not in out
-    assert out.count("does not write") == 1 and "diagnose --from" in out
+    assert "measure-program" in out and "kinematics --from" in out and "--current" not in out
+    assert out.count("does not write") == 0 and "diagnose --from" in out
     path = on_linuxcnc(tmp_path)
     path.write_text(path.read_text().replace("offset = [0.0, 0.0, 150.0]", "offset = [5.0, 0.0, 150.0]"))
     code, out, err = run("checklist", "--machine", path, "--dir", tmp_path, "--json")
@@ -419,9 +451,10 @@ def test_linuxcnc_head_programs_are_written_and_checked_with_the_heads_body(tmp_
     the ball along its tilted axis, the head's turns keep it where it is, and the program
     stops unless the module's pivot-length pin holds the pivot to the nest. check-program
     passes what was written; it refuses a G43 length (it would act along world Z), a guard
-    for another pin value and a program without the guard. K1 takes the head to 90° with
-    the ball 80 mm above the table: its body would enter the table, and the program is
-    refused, naming it; without the body's size no program is written."""
+    for another pin value and a program without the guard. K1 taken to 90° (the machine
+    file's stops at 75°) with the ball 80 mm above the table: the head's body would enter
+    the table, and the program is refused, naming it; without the body's size no program is
+    written."""
     path = on_linuxcnc(tmp_path, source)
     machine_head = load_machine(path).heads[0].name        # its body is about the first head's pivot
     code, out, err = run("measure-program", "--machine", path, "--path", "K4", "-o", tmp_path / "K4.ngc")
@@ -442,6 +475,9 @@ def test_linuxcnc_head_programs_are_written_and_checked_with_the_heads_body(tmp_
         code, _, err = run("check-program", "--machine", path, "--mode", "tcpm", tmp_path / "bad.ngc")
         assert code == 2 and says in err, err
     code, _, err = run("measure-program", "--machine", path, "--path", "K1", "-o", tmp_path / "K1.ngc")
+    assert code == 0, err
+    path.write_text(path.read_text().replace("from = -75.0, to = 75.0", "from = -90.0, to = 90.0"))
+    code, _, err = run("measure-program", "--machine", path, "--path", "K1", "-o", tmp_path / "K1b.ngc")
     assert code == 2 and f"head {machine_head} enters the table" in err, err
     path.write_text(path.read_text().replace("head_radius = 120.0", ""))
     code, _, err = run("measure-program", "--machine", path, "--path", "K4", "-o", tmp_path / "K4b.ngc")
@@ -496,7 +532,7 @@ def _on_sinumerik(folder, source, vectors: str):
     """A reference head on SINUMERIK with its $TC_CARR record (fine offsets on)."""
     path = folder / f"sinumerik-{source.stem}.toml"
     path.write_text(source.read_text().replace('controller = "tnc640"', 'controller = "sinumerik840d"')
-                    .replace("[limits]", "[sinumerik]\ntcarr = 1\nfine_correction = true\n"
+                    .replace("[limits]", "[sinumerik]\ntcarr = 1\nfine_correction = true\nmodulo = [\"C\"]\n"
                                          f"vectors = {vectors}\n\n[limits]"))
     return load_machine(path)
 
@@ -517,8 +553,7 @@ def test_sinumerik_edits_of_a_head_against_hand_computed_records(tmp_path, case)
     -> pivot 1, l1 = -l2, l3 machine reference point -> pivot 2, l4 = -l3. A location error
     moves its axis's pivot by its offsets and turns its vector by its tilt (the table's C
     vector held reversed). The edit writes exactly those, reads back as the fitted lines,
-    and names its sign check's poses to be measured by hand (no SINUMERIK program is written
-    for a head)."""
+    and writes its sign check as a program under TRAORI, which check-program passes."""
     sec = 1 / 3600
     if case == "fork":
         machine = _on_sinumerik(tmp_path, FORK_MACHINE, "{ C = [0.0, 0.0, 1.0], B = [0.0, 1.0, 0.0] }")
@@ -550,8 +585,10 @@ def test_sinumerik_edits_of_a_head_against_hand_computed_records(tmp_path, case)
     assert set(got) == set(want), sorted(set(got) ^ set(want))
     for n in want:                                     # 5 decimals of a mm, 10 of a vector
         assert got[n] == pytest.approx(want[n], abs=6e-6 if n > 12 else 1e-9), (n, got[n], want[n])
-    assert f"kind {machine.sinumerik['kind']}" in out.files[".MPF"] and "_SIGN.MPF" not in out.files
-    assert "measure these poses with the R-test" in out.files[".MPF"]
+    assert f"kind {machine.sinumerik['kind']}" in out.files[".MPF"] and "TRAORI" in out.files["_SIGN.MPF"]
+    (tmp_path / "KIN_SIGN.MPF").write_text(out.files["_SIGN.MPF"])
+    code, _, err = run("check-program", "--machine", machine.source, tmp_path / "KIN_SIGN.MPF")
+    assert code == 0, err
     held_now = read_edits(machine, {"KIN.MPF": out.files[".MPF"]}, _record(*held))
     fitted = plan(machine, fit).lines
     for a in machine.rotary_axes:
@@ -569,8 +606,8 @@ def test_heidenhain_edits_of_a_head_against_hand_computed_rows(tmp_path, case):
     ISO symbol (U18: the manual's example reads the tool side's Trans rows as the table
     side's). The rows are written out here by hand from the fitted truth: the swivel head's
     description table (iTNC 530) and the fork's change list (TNC 640). A table whose rows put
-    the B head 1 mm from where the machine file does is refused; no HEIDENHAIN program is
-    written for a head: the sign check's poses are named."""
+    the B head 1 mm from where the machine file does is refused. The sign check is a program
+    under FUNCTION TCPM, which check-program passes."""
     sec = 1 / 3600
     if case == "swivel-itnc530":
         machine = load_machine(HEAD_MACHINE)
@@ -585,7 +622,10 @@ def test_heidenhain_edits_of_a_head_against_hand_computed_rows(tmp_path, case):
     data = [simulate(machine, truth, generate(machine, ["K4", "K2"]), 0.0, np.random.default_rng(0))]
     fit = identify(machine, data, location_model(machine))
     out = kinematics_edit(machine, fit, ctl, current, "current.TAB", "KIN", "0", "d")
-    assert not any(k.startswith("_SIGN") for k in out.files) and any("by hand" in n for n in out.notes)
+    assert "FUNCTION TCPM F" in out.files["_SIGN.H"] and not any("by hand" in n for n in out.notes)
+    (tmp_path / "KIN_SIGN.H").write_text(out.files["_SIGN.H"])
+    code, _, err = run("check-program", "--machine", machine.source, tmp_path / "KIN_SIGN.H")
+    assert code == 0, err
     if current is not None:        # the table: each axis's pairs around it, the OEM's rows kept
         want = [("Trans", "Z", 150.0, "tool")]
         for key, axis in [("MachAxis", "B"), ("MachAxis", "Z"), ("MachAxis", "Y"), ("MachAxis", "X"),
