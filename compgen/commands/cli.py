@@ -63,7 +63,7 @@ from .cli_common import (
     warn,
 )
 from .cli_history import check_cmd, history_cmd, history_store, record_fit_file
-from .cli_programs import check_program_cmd, measure_program_cmd, probe_program_cmd
+from .cli_programs import check_program_cmd, measure_program_cmd, plan_cmd, probe_program_cmd
 
 
 @click.group(cls=Group)
@@ -509,3 +509,4 @@ main.add_command(check_cmd)
 main.add_command(measure_program_cmd)
 main.add_command(probe_program_cmd)
 main.add_command(check_program_cmd)
+main.add_command(plan_cmd)

@@ -30,12 +30,14 @@ from ..errors import CompgenError
 from ..files import STDOUT, read_text, write_all
 from ..model.machine import at_nest
 from ..model.paths import generate
+from ..units import NOISE_MAX_UM
 from .cli_common import (
     CONTROLLER_NAMES,
     FILE,
     FORCE,
     MACHINE,
     PROBE_LENGTH,
+    Finite,
     named_paths,
     nest_mm,
     vec3,
@@ -199,3 +201,34 @@ def check_program_cmd(machine_file, program, controller_name, ball, nest, mode, 
     click.echo(f"{program}: OK ({ctl.label(machine)}): {result.blocks} moves, about "
                f"{result.seconds / 60:.1f} min; closest approach {result.closest_mm:.1f} mm "
                f"({result.closest_at}); {where}")
+
+
+@click.command("plan")
+@MACHINE
+@click.option("--minutes", type=Finite(min=0, max=10000, min_open=True), required=True,
+              help="The machine's minutes for the measurement (the programs' time, as check-program "
+                   "counts it, and each mounting of the ball elsewhere).")
+@click.option("--noise-um", "noise_um", type=Finite(min=0, max=NOISE_MAX_UM, min_open=True), default=None,
+              help="The R-test's noise, 1σ per reading, µm (default: the machine file's [rtest] noise_um).")
+@click.option("--rho", type=Finite(min=0, max=0.99), default=0.0, show_default=True,
+              help="AR(1) correlation of the noise from reading to reading within a run.")
+@click.option("-o", "--output", "folder", type=click.Path(file_okay=False), required=True,
+              help="Folder for plan.json and each set-up's program and pose list.")
+@FORCE
+def plan_cmd(machine_file, minutes, noise_um, rho, folder, force):
+    """Design the measurement before the machine moves: the set-ups this machine can run
+    that tell its location errors best within the minutes given, each program checked."""
+    from ..planning.plan import files, plan, text
+    machine = load_machine(machine_file)
+    noise = noise_um if noise_um is not None else machine.noise_um
+    if noise is None:
+        raise CompgenError("the R-test's noise is not known: the plan's σ scale with it",
+                           hint="give --noise-um (the device's calibration), or [rtest] noise_um in the "
+                                "machine file")
+    result = plan(machine, minutes, noise, rho)
+    out = files(machine, result, Path(folder), __version__, date.today().isoformat())
+    Path(folder).mkdir(parents=True, exist_ok=True)
+    write_all(out, force, inputs=(machine_file,))
+    click.echo(text(machine, result), nl=False)
+    click.echo(f"wrote {len(out)} files in {folder}: plan.json and each set-up's program; check them with "
+               f"{me()} check-program --machine {shlex.quote(machine_file)} PROGRAM", err=True)

@@ -101,7 +101,7 @@ class Advisor:
         self.unable = ("" if controller(machine.controller).writes_programs(machine) else
                        "compgen does not write measuring programs for a head yet on this control, so it "
                        "advises no measurement")
-        self.candidates = [] if self.unable else _candidates(machine, measured, device)
+        self.candidates = [] if self.unable else proposals(machine, measured, device)
         self._why: dict[str, str | None] = {}
 
     def why_not(self, m: Proposal) -> str | None:
@@ -132,7 +132,7 @@ def _refusal(machine: Machine, m: Proposal) -> str | None:
     return None
 
 
-def _candidates(machine: Machine, measured: Poses | None, device: str = "rtest") -> list[Proposal]:
+def proposals(machine: Machine, measured: Poses | None, device: str = "rtest") -> list[Proposal]:
     """Every place for every path, less what would leave the travel and what ``measured``
     holds already (same path, same ball; there and back where the axes turned back).
 

@@ -1,0 +1,314 @@
+"""The measurement designed before the machine moves (``compgen plan``).
+
+The set-ups searched are the ones compgen can write and check: each path of the machine file
+with the ball where the advice may put it (as now, higher, lower, nearer the axis or farther
+out), run one way or there and back, and on a head with a longer nest. Each is written as
+``measure-program`` writes it and moved through the motion check, which also times it; what
+fails is not offered.
+
+What a set of set-ups will tell is the covariance the fit will report on its data: the exact
+Jacobian of the location errors at every pose, with each later mounting's ball offset (and
+each later nest's) fitted beside them and projected out as ``identify`` does, under white
+noise of ``noise_um`` per reading, or AR(1) noise of correlation ``rho`` within each run (the
+fit's sandwich covariance, ``noise.ar1_covariance``). The plan is chosen greedily: at each
+step the set-up that lowers the worst σ of the rotary axes' location errors the most per
+minute, each σ scaled by its ``[limits]`` (offset_um for an offset, tilt_arcsec for a tilt),
+until the minutes are spent; each step is a point of the front of worst σ against minutes.
+A ball moved to another place is a new mounting: it costs ``mount_minutes`` more, and its
+offset is fitted anew.
+
+Not built: telling named effects apart while planning (``--effects``: the advice's
+separations), a probe's plan, the ball's positions beyond the advice's places."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..controllers.programs import checked_program, measure_program, program_name
+from ..controllers.registry import controller
+from ..errors import CompgenError
+from ..model.effects import effect_of_param, location_model
+from ..model.kinematics import Model
+from ..model.machine import Machine
+from ..model.poses import Poses, runs
+from ..model.sides import NEST, SETUP, FreeConstants
+from ..statistics.noise import ar1_covariance
+from ..units import DISPLAY
+from .advice import MODE, Proposal, proposals
+
+MOUNT_MINUTES = 5.0      # taking the ball off its place and mounting it at another, checked
+BEAM = 40                # sets kept at each size of the search
+THIN = (2, 4)            # a path also with every 2nd and every 4th of its poses (first and last kept)
+FORMAT = "compgen.plan/1"
+FRONT_STEP = 0.95
+
+
+@dataclass(frozen=True, eq=False)
+class Setup:
+    """One set-up of a plan: the advice's proposal and its minutes (the motion check's time
+    of its program); with the products of its Jacobian, of the rotary axes' location errors
+    (J), the ball's offset (G) and the nest's (N) at its poses, from which any set's
+    information follows without walking the chains again."""
+
+    proposal: Proposal
+    minutes: float
+    products: dict
+
+    @property
+    def ball(self) -> tuple[float, ...]:
+        return self.proposal.ball
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A plan: its set-ups in the order to run them, its minutes (the programs' and each
+    mounting's), each location error's predicted σ (mm or rad, the ball's offset left out:
+    each mounting has its own) and the worst scaled σ; the front of worst scaled σ against
+    minutes among the sets searched; and the same figures for the machine file's own paths
+    (``default``)."""
+
+    setups: tuple[Setup, ...]
+    minutes: float
+    sigma: dict[str, float]
+    worst: float
+    front: tuple[tuple[float, float], ...]
+    default: tuple[float, dict[str, float], float]       # minutes, σ, worst
+    noise_um: float
+    rho: float
+
+
+def judged(machine: Machine) -> list[str]:
+    """The location errors a plan is judged by: the rotary axes' (each mounting of the ball
+    has its own offset)."""
+    return [n for n in location_model(machine) if n not in SETUP]
+
+
+def scales(machine: Machine, names: Sequence[str]) -> np.ndarray:
+    """Each location error's ``[limits]``, mm or rad: the unit of the worst scaled σ."""
+    return np.array([machine.limits.offset_um * 1e-3 if effect_of_param(machine, n).unit == "mm"
+                     else np.radians(machine.limits.tilt_arcsec / 3600) for n in names])
+
+
+def covariance(machine: Machine, poses: Poses, noise_um: float, rho: float = 0.0) -> np.ndarray:
+    """The covariance of the rotary axes' location errors (``judged``) a fit of readings at
+    ``poses`` reports (mm, rad), every mounting's and later nest's offset fitted beside them;
+    infinite where the poses do not identify them. Under AR(1) noise of ``rho`` within each
+    run, the fit's sandwich covariance."""
+    names = [*SETUP, *judged(machine)]
+    p = len(names)
+    J = Model(machine, names).linearise(poses)[1].copy()            # (n, 3, p)
+    proj = FreeConstants(machine, names, poses).projector()
+    if proj is not None:
+        J = proj(J)
+    flat = J.reshape(-1, p)
+    G = flat.T @ flat
+    norm = np.sqrt(np.diag(G))
+    if not (norm > 0).all() or np.linalg.cond(G / np.outer(norm, norm)) > 1e12:
+        return np.full((p - 3, p - 3), np.inf)
+    sigma = noise_um * 1e-3
+    if rho:
+        n = len(poses)
+        cov = ar1_covariance(np.moveaxis(J, 2, 0), np.full((n, 3), sigma), runs(poses), np.full((n, 3), rho),
+                             3 * n)
+    else:
+        cov = sigma**2 * np.linalg.inv(G)
+    return cov[3:, 3:]
+
+
+def _products(machine: Machine, poses: Poses) -> dict:
+    names = judged(machine)
+    J = Model(machine, names).linearise(poses)[1].reshape(-1, len(names))
+    G = Model(machine, list(SETUP)).linearise(poses)[1].reshape(-1, 3)
+    N = Model(machine, list(NEST)).linearise(poses)[1].reshape(-1, 3)
+    return {"JJ": J.T @ J, "JG": J.T @ G, "GG": G.T @ G, "JN": J.T @ N, "GN": G.T @ N, "NN": N.T @ N}
+
+
+def _information(setups: Sequence[Setup], p: int) -> np.ndarray:
+    """The rotary axes' information (per unit noise) of ``setups``: each ball mounting's
+    offset and each nest other than the machine file's fitted beside them (a Schur
+    complement of the small products)."""
+    balls = list(dict.fromkeys(s.ball for s in setups))
+    nests = list(dict.fromkeys(s.proposal.nest for s in setups if s.proposal.nest is not None))
+    k = 3 * (len(balls) + len(nests))
+    A, B, D = np.zeros((p, p)), np.zeros((p, k)), np.zeros((k, k))
+    for s in setups:
+        x, b = s.products, 3 * balls.index(s.ball)
+        A += x["JJ"]
+        B[:, b:b + 3] += x["JG"]
+        D[b:b + 3, b:b + 3] += x["GG"]
+        if s.proposal.nest is not None:
+            m = 3 * (len(balls) + nests.index(s.proposal.nest))
+            B[:, m:m + 3] += x["JN"]
+            D[m:m + 3, m:m + 3] += x["NN"]
+            D[b:b + 3, m:m + 3] += x["GN"]
+            D[m:m + 3, b:b + 3] += x["GN"].T
+    return A - B @ np.linalg.pinv(D, rcond=1e-10) @ B.T
+
+
+def _worst(machine: Machine, info: np.ndarray, noise_um: float, unit: np.ndarray) -> float:
+    norm = np.sqrt(np.clip(np.diag(info), 0.0, None))
+    if not (norm > 0).all() or np.linalg.cond(info / np.outer(norm, norm)) > 1e12:
+        return np.inf
+    sigma = noise_um * 1e-3 * np.sqrt(np.diag(np.linalg.inv(info)))
+    return float((sigma / unit).max())
+
+
+def candidates(machine: Machine) -> list[Setup]:
+    """Every set-up the machine can run, timed by the motion check."""
+    ctl = controller(machine.controller)
+    out = []
+    for m in (v for p in proposals(machine, None) for v in _thinned(p)):
+        try:
+            text, at, _, _ = checked_program(machine, m.poses, m.path, machine.controller, MODE, "PLAN", "",
+                                             "")
+        except CompgenError:
+            continue
+        seconds = ctl.check(at, ctl.blocks(text, MODE)).seconds
+        out.append(Setup(m, seconds / 60.0, _products(machine, m.poses)))
+    return out
+
+
+def _thinned(m: Proposal):
+    """``m``, and ``m`` with every k-th of its poses (``THIN``): the same span in less time."""
+    yield m
+    if m.back:                    # a reversal needs each turn's poses as they come
+        return
+    n = len(m.poses)
+    for k in THIN:
+        idx = np.unique(np.r_[np.arange(0, n, k), n - 1])
+        yield replace(m, label=f"{m.label}, every {k}{'nd' if k == 2 else 'th'} pose", name=f"{m.name}_E{k}",
+                      poses=m.poses.take(idx))
+
+
+def _ordered(setups: Sequence[Setup]) -> list[Setup]:
+    """One mounting after the other: the set-ups at the first ball, then the next ball's."""
+    balls = list(dict.fromkeys(s.ball for s in setups))
+    return [s for b in balls for s in setups if s.ball == b]
+
+
+def _minutes(setups: Sequence[Setup], mount_minutes: float) -> float:
+    return sum(s.minutes for s in setups) + mount_minutes * max(len({s.ball for s in setups}) - 1, 0)
+
+
+def _poses(setups: Sequence[Setup]) -> Poses:
+    return Poses.concat([s.proposal.poses for s in _ordered(setups)])
+
+
+def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
+         mount_minutes: float = MOUNT_MINUTES) -> Plan:
+    """The set-ups with the least worst scaled σ within ``minutes`` (a beam search over sets
+    of the set-ups the machine can run, ``BEAM`` kept at each size)."""
+    if not minutes > 0:
+        raise CompgenError(f"--minutes {minutes:g}: give the minutes the machine is yours for")
+    names = judged(machine)
+    unit = scales(machine, names)
+    offered = candidates(machine)
+    own = [s for s in offered if s.proposal.label in machine.paths]
+    if not own:
+        raise CompgenError(f"no path of {machine.source} can be measured on this machine",
+                           hint=f"check the paths with measure-program --machine {machine.source}")
+    default_cov = covariance(machine, _poses(own), noise_um, rho)
+    default = (_minutes(own, mount_minutes), _sigmas(names, default_cov),
+               float((np.sqrt(np.diag(default_cov)) / unit).max()))
+
+    def worst(sets):
+        return _worst(machine, _information(sets, len(names)), noise_um, unit)
+
+    level = [()]
+    seen: dict[frozenset, tuple[float, float]] = {}
+    while level:
+        grown = {}
+        for base in level:
+            for i, s in enumerate(offered):
+                key = frozenset([*(offered.index(b) for b in base), i])
+                if s in base or key in grown or key in seen:
+                    continue
+                sets = [*base, s]
+                spent = _minutes(sets, mount_minutes)
+                if spent <= minutes + 1e-9:
+                    grown[key] = (worst(sets), spent)
+        seen |= grown
+        level = [tuple(offered[i] for i in sorted(key))
+                 for key in sorted(grown, key=lambda k: grown[k])[:BEAM] if np.isfinite(grown[key][0])
+                 or len(key) < len(names)]
+    finite = {k: v for k, v in seen.items() if np.isfinite(v[0])}
+    if not finite:
+        raise CompgenError(f"no set of set-ups within {minutes:g} minutes identifies the location errors: "
+                           f"the machine file's own paths take {default[0]:.1f}", hint="give more --minutes")
+    best = min(finite, key=lambda k: finite[k])
+    chosen = _ordered([offered[i] for i in sorted(best)])
+    cov = covariance(machine, _poses(chosen), noise_um, rho)
+    front, low = [], np.inf
+    for w, spent in sorted(finite.values(), key=lambda v: (v[1], v[0])):
+        if w < FRONT_STEP * low:         # a point that buys a worst σ 5 % lower or more
+            front.append((spent, w))
+            low = w
+    return Plan(tuple(chosen), _minutes(chosen, mount_minutes), _sigmas(names, cov),
+                float((np.sqrt(np.diag(cov)) / unit).max()), tuple(front), default, noise_um, rho)
+
+
+def _sigmas(names: Sequence[str], cov: np.ndarray) -> dict[str, float]:
+    return {n: float(np.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(names)}
+
+
+def _shown(names: Sequence[str], machine: Machine, sigma: dict[str, float]) -> dict:
+    out = {}
+    for n in names:
+        unit, factor = DISPLAY[effect_of_param(machine, n).unit]
+        out[n] = {"value": round(sigma[n] * factor, 6), "unit": unit}
+    return out
+
+
+def files(machine: Machine, p: Plan, folder: Path, version: str, date: str) -> dict[Path, str]:
+    """The plan's files in ``folder``: each set-up's program and pose list, as
+    ``measure-program`` writes them (each checked), and ``plan.json``."""
+    ctl = controller(machine.controller)
+    out: dict[Path, str] = {}
+    setups = []
+    for i, s in enumerate(p.setups, 1):
+        m = s.proposal
+        name = program_name(f"P{i}_{m.name}", room=4, most=ctl.name_max)
+        emitted = measure_program(machine, m.poses, m.path, ctl.name, MODE, name, version, date)
+        out |= emitted.paths(folder / f"{name}{ctl.program_ext}", name, ctl.program_ext)
+        setups.append({"label": m.label, "path": m.path, "ball": [round(v, 4) for v in m.ball],
+                       "probe_length": m.nest if m.nest is not None else machine.probe_length,
+                       "there_and_back": m.back, "poses": f"{name}.poses.csv",
+                       "program": f"{name}{ctl.program_ext}", "minutes": round(s.minutes, 2)})
+    names = judged(machine)
+    doc = {"format": FORMAT, "machine": machine.name, "controller": ctl.name,
+           "noise": {"noise_um": p.noise_um, "rho": p.rho,
+                     "model": "AR(1) within each run" if p.rho else "white"},
+           "minutes": round(p.minutes, 2), "sigma": _shown(names, machine, p.sigma),
+           "worst_scaled_sigma": p.worst, "scaled_by": {"offset_um": machine.limits.offset_um,
+                                                          "tilt_arcsec": machine.limits.tilt_arcsec},
+           "setups": setups, "mount_minutes": MOUNT_MINUTES,
+           "front": [{"minutes": round(m, 2), "worst_scaled_sigma": w} for m, w in p.front],
+           "default": {"paths": list(machine.paths), "minutes": round(p.default[0], 2),
+                       "sigma": _shown(names, machine, p.default[1]), "worst_scaled_sigma": p.default[2]},
+           "not_built": ["telling named effects apart (--effects: the advice's separations)",
+                         "a probe's plan", "ball positions beyond the advice's places"]}
+    out[folder / "plan.json"] = json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
+    return out
+
+
+def text(machine: Machine, p: Plan) -> str:
+    """What ``compgen plan`` prints: the plan against the machine file's own paths, its set-ups
+    in order, and the front."""
+    unit_of = {n: DISPLAY[effect_of_param(machine, n).unit] for n in p.sigma}
+    worst = max(p.sigma, key=lambda n: p.sigma[n] / scales(machine, [n])[0])
+    lines = [f"compgen plan: {machine.name}; noise {p.noise_um:g} µm per reading"
+             + (f", AR(1) ρ {p.rho:g} within each run" if p.rho else " (white)"),
+             f"  plan    {p.minutes:6.1f} min: worst σ {p.worst:.4f} of its [limits] "
+             f"({worst} ±{p.sigma[worst] * unit_of[worst][1]:.3f} {unit_of[worst][0]})",
+             f"  default {p.default[0]:6.1f} min: worst σ {p.default[2]:.4f} of its [limits] "
+             f"(the machine file's paths {', '.join(machine.paths)})",
+             f"  ratio   {p.worst / p.default[2]:.2f} of the default's worst σ", "", "  set-ups, in order:"]
+    lines += [f"    {i}. {s.proposal.label:<58} {s.minutes:5.1f} min" for i, s in enumerate(p.setups, 1)]
+    lines += ["", "  what more minutes buy (worst σ of its [limits]):"]
+    lines += [f"    {m:6.1f} min  {w:.4f}" for m, w in p.front]
+    return "\n".join(lines) + "\n"

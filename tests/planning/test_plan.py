@@ -1,0 +1,78 @@
+"""compgen plan: the set-ups it chooses fit the minutes, every program passes check-program,
+and the σ it predicts is what the fit of the plan's data reports (same noise): the plan's
+set-ups simulated with the seed's Table 4, each as the file its program would give, fitted
+together (each ball position a mounting of its own)."""
+
+import json
+
+import numpy as np
+import pytest
+from conftest import SEED_MACHINE, TABLE4, run
+
+from compgen.configuration.machine_file import load_machine
+from compgen.data.simulate import simulate
+from compgen.planning import plan as P
+from compgen.statistics.identify import identify
+
+NOISE_UM = 0.5
+
+
+@pytest.fixture(scope="module")
+def seed_plan(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("plan") / "p"
+    code, out, err = run("plan", "--machine", SEED_MACHINE, "--minutes", "10", "--noise-um", NOISE_UM,
+                         "-o", folder)
+    assert code == 0, err
+    return folder, out, json.loads((folder / "plan.json").read_text())
+
+
+def test_the_plan_fits_its_minutes_and_every_program_passes_check_program(seed_plan):
+    folder, out, doc = seed_plan
+    assert doc["format"] == "compgen.plan/1" and doc["minutes"] <= 10.0
+    assert sum(s["minutes"] for s in doc["setups"]) <= doc["minutes"] + 1e-6
+    assert "ratio" in out and "set-ups, in order" in out
+    for s in doc["setups"]:
+        code, said, err = run("check-program", "--machine", SEED_MACHINE, folder / s["program"])
+        assert code == 0 and "OK" in said, err
+        assert (folder / s["poses"]).exists()
+    assert {n: v["unit"] for n, v in doc["sigma"].items()} == {
+        "YOA": "um", "ZOA": "um", "BOA": "arcsec", "COA": "arcsec", "XOC": "um", "YOC": "um",
+        "AOC": "arcsec", "BOC": "arcsec"}
+    fronts = [f["worst_scaled_sigma"] for f in doc["front"]]
+    assert fronts == sorted(fronts, reverse=True) and doc["front"][-1]["minutes"] <= 10.0
+
+
+def test_the_fit_of_the_plans_data_reports_the_sigma_it_predicts(seed_machine):
+    """Each set-up simulated as its own file (0.5 µm white noise), fitted together: each
+    reported σ within 20 % of the plan's (the fit scales its σ by its σ̂, itself within a few
+    % of the noise on these many readings)."""
+    p = P.plan(seed_machine, 10.0, NOISE_UM)
+    rng = np.random.default_rng(5)
+    data = [simulate(seed_machine, TABLE4, s.proposal.poses, NOISE_UM, rng) for s in p.setups]
+    fit = identify(seed_machine, data)
+    for n, predicted in p.sigma.items():
+        assert fit.parameters[n].std == pytest.approx(predicted, rel=0.2), (n, predicted)
+    # the search's figure (a Schur complement of each set-up's products) is the full one's
+    search = P._worst(seed_machine, P._information(p.setups, len(p.sigma)), NOISE_UM,
+                      P.scales(seed_machine, list(p.sigma)))
+    assert search == pytest.approx(p.worst, rel=1e-6)
+
+
+def test_a_plan_that_cannot_be_made_says_what_to_do(tmp_path):
+    code, _, err = run("plan", "--machine", SEED_MACHINE, "--minutes", "0.5", "--noise-um", NOISE_UM,
+                       "-o", tmp_path / "p")
+    assert code == 2 and "--minutes" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "p").exists() or not list((tmp_path / "p").iterdir())
+    assert load_machine(SEED_MACHINE).noise_um is None       # the σ scale with the noise: it must be given
+    code, _, err = run("plan", "--machine", SEED_MACHINE, "--minutes", "10", "-o", tmp_path / "q")
+    assert code == 2 and "--noise-um" in err and not (tmp_path / "q").exists(), err
+
+
+def test_a_plan_never_overwrites_without_force(seed_plan, tmp_path):
+    folder = tmp_path / "p"
+    args = ("plan", "--machine", SEED_MACHINE, "--minutes", "5", "--noise-um", NOISE_UM, "-o", folder)
+    assert run(*args)[0] == 0
+    before = (folder / "plan.json").read_text()
+    code, _, err = run(*args[:4], "6", *args[5:])
+    assert code == 2 and "--force" in err and (folder / "plan.json").read_text() == before, err
+    assert run(*args[:4], "6", *args[5:], "--force")[0] == 0
