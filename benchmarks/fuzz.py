@@ -753,6 +753,33 @@ def wing_inputs(work: Path, compgen: list[str]) -> dict[str, Path]:
             "trt": work / "trt", "head": work / "head.csv", "store": work / "a.sqlite", "k4": work / "k4.csv"}
 
 
+def plan_cases() -> list[Case]:
+    """compgen plan's inputs and the diagnosis kept beside a fit: minutes, noise and ρ at and
+    past their edges, a folder that is a file, a machine without [program]; a kept file of
+    any damage beside the fit the report reads (made again, never a crash)."""
+    seed = SEED.read_text()
+    plan = ["plan", "--machine", str(SEED), "--noise-um", "0.5"]
+    out = [Case("plan", f"plan --minutes {m}", {}, [*plan, "--minutes", m, "-o", "{dir}/p"], expect, ["p"])
+           for m, expect in (("nan", "refuse"), ("-inf", "refuse"), ("0", "refuse"), ("1e-9", "refuse"),
+                             ("1e300", "refuse"), ("1,5", "refuse"), ("0.5", "refuse"), ("3", "accept"))]
+    out += [Case("plan", f"plan {opt} {v}", {}, ["plan", "--machine", str(SEED), "--minutes", "3", opt, v,
+                                                 "-o", "{dir}/p"], "refuse", ["p"])
+            for opt, v in (("--noise-um", "0"), ("--noise-um", "nan"), ("--noise-um", "1e9"), ("--rho", "1"),
+                           ("--rho", "-0.5"), ("--rho", "inf"))]
+    out += [Case("plan", "plan -o a file", {"p": b"mine\n"}, [*plan, "--minutes", "3", "-o", "{dir}/p"],
+                 "refuse", unchanged=["p"]),
+            Case("plan", "plan without [program]", {"m.toml": re.sub(r"(?ms)^\[program\].*?\n\n", "", seed)},
+                 ["plan", "--machine", "{dir}/m.toml", "--noise-um", "0.5", "--minutes", "5",
+                  "-o", "{dir}/p"], "refuse", ["p"])]
+    kept = {"garbage": b"\x00\xff{", "empty": b"", "NaN": b"NaN", "object": b"{}",
+            "wrong key": b'{"format": "compgen.kept-diagnosis/1", "key": {}, "diagnosis": {}}',
+            "deep": b"[" * 100000, "foreign format": b'{"format": "compgen.fit/1"}'}
+    out += [Case("plan", f"report with a kept diagnosis: {what}", {"fit.diagnosis.json": body},
+                 ["report", "--from", "{dir}/fit.json", "-o", "{dir}/r.html"], "accept")
+            for what, body in kept.items()]
+    return out
+
+
 def run_case(case: Case, work: Path, compgen: list[str]) -> tuple[Case, str, str]:
     folder = Path(tempfile.mkdtemp(dir=work))
     (folder / "fit.json").write_text(json.dumps(_absolute(json.loads(FIT.read_text()))))
@@ -837,7 +864,7 @@ def main() -> None:
     rng = random.Random(args.seed)
     cases = [*csv_cases(rng), *machine_cases(), *fit_cases(), *current_cases(), *output_cases(),
              *history_cases(), *nest_cases(wings), *shop_cases(wings), *second_look_cases(),
-             *foreign_row_cases(rng, wings),
+             *foreign_row_cases(rng, wings), *plan_cases(),
              *derived_cases(rng, programs, args.generated, wings)]
     t0 = time.perf_counter()
     with ThreadPoolExecutor(args.jobs) as pool:

@@ -205,6 +205,10 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
     of the set-ups the machine can run, ``BEAM`` kept at each size)."""
     if not minutes > 0:
         raise CompgenError(f"--minutes {minutes:g}: give the minutes the machine is yours for")
+    if machine.program is None:
+        raise CompgenError(f"machine file {machine.source} has no [program] section: a plan's set-ups are "
+                           "its programs", hint="add tool, feed, dwell and clearance (see the bundled "
+                                                "machines)")
     names = judged(machine)
     unit = scales(machine, names)
     offered = candidates(machine)

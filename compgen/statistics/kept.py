@@ -1,8 +1,8 @@
 """A diagnosis kept beside its fit (``fit.json`` → ``fit.diagnosis.json``): ``diagnose``
 makes it once and keeps it; the report reads it while it is the diagnosis of the same fit
 (its record marker: model, values, data), the same machine file, the same options and the
-same compgen. Any other is stale and is made again, never read: a kept diagnosis is a
-shortcut, not a source.
+same compgen, and whose content is as it was kept (the marker of the whole diagnosis). Any
+other is stale and is made again, never read: a kept diagnosis is a shortcut, not a source.
 
 The file holds every field of the ``Diagnosis`` (the JSON of ``diagnose --json`` leaves out
 what only its words need) and each advised measurement with its poses, so what is read back
@@ -10,6 +10,7 @@ is the diagnosis as made, to the last digit."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import types
 import typing
@@ -51,9 +52,14 @@ def key(fit: FitResult, machine: Machine, noise_um: float | None, candidates: Se
 
 
 def dumps(found: Diagnosis, made_of: dict) -> str:
-    """The kept file's text."""
-    return json.dumps({"format": FORMAT, "key": made_of, "diagnosis": _encode(found, Diagnosis)},
-                      default=_plain) + "\n"
+    """The kept file's text: the diagnosis with the marker of its whole content (a file
+    damaged or changed by hand is made again, never read as it stands)."""
+    body = json.loads(json.dumps(_encode(found, Diagnosis), default=_plain))
+    return json.dumps({"format": FORMAT, "key": made_of, "sha256": _marker(body), "diagnosis": body}) + "\n"
+
+
+def _marker(body) -> str:
+    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
 
 
 def loads(text: str, made_of: dict, proposal: Callable[..., Proposal]) -> Diagnosis | None:
@@ -62,10 +68,11 @@ def loads(text: str, made_of: dict, proposal: Callable[..., Proposal]) -> Diagno
     its ``poses`` (the caller's: the statistics name no controller's type)."""
     try:
         doc = json.loads(text)
-        if not (isinstance(doc, dict) and doc.get("format") == FORMAT and doc.get("key") == made_of):
+        if not (isinstance(doc, dict) and doc.get("format") == FORMAT and doc.get("key") == made_of
+                and doc.get("sha256") == _marker(doc.get("diagnosis"))):
             return None
         return _decode(doc["diagnosis"], Diagnosis, proposal)
-    except (ValueError, KeyError, TypeError, _Stale):
+    except (ValueError, KeyError, TypeError, RecursionError, _Stale):
         return None
 
 

@@ -73,7 +73,8 @@ def test_a_diagnosis_made_of_anything_else_is_not_read(made, change):
     assert kept.loads(kept.dumps(found, made_of), {**made_of, **change}, Proposal) is None
 
 
-@pytest.mark.parametrize("text", ["", "{", "[]", '{"format": "compgen.kept-diagnosis/1"}', "NaN"])
+@pytest.mark.parametrize("text", ["", "{", "[]", '{"format": "compgen.kept-diagnosis/1"}', "NaN",
+                                  "[" * 100000], ids=["empty", "open", "list", "format", "nan", "deep"])
 def test_a_damaged_kept_file_is_made_again(made, text):
     assert kept.loads(text, made[4], Proposal) is None
 
@@ -82,6 +83,18 @@ def test_a_field_this_compgen_does_not_know_is_stale(made):
     _, _, _, found, made_of = made
     doc = json.loads(kept.dumps(found, made_of))
     doc["diagnosis"]["candidates"][0]["another"] = 1
+    doc["sha256"] = kept._marker(doc["diagnosis"])
+    assert kept.loads(json.dumps(doc), made_of, Proposal) is None
+
+
+@pytest.mark.parametrize("field, value", [("rms_um", "1.0"), ("per_path", None), ("readings", 1.5),
+                                          ("verdict", "found")])
+def test_a_kept_file_changed_by_hand_is_made_again(made, field, value):
+    """A value of another type (the report would format it), a field gone, one added: the
+    content no longer holds its marker."""
+    _, _, _, found, made_of = made
+    doc = json.loads(kept.dumps(found, made_of))
+    doc["diagnosis"][field] = value
     assert kept.loads(json.dumps(doc), made_of, Proposal) is None
 
 
@@ -105,9 +118,15 @@ def test_diagnose_keeps_it_and_the_report_reads_it(tmp_path):
     code, _, err = run("report", "--from", tmp_path / "fit.json", "-o", tmp_path / "read.html")
     assert code == 0 and "kept the diagnosis" not in err, err
     assert (tmp_path / "read.html").read_text() == (tmp_path / "made.html").read_text()
-    # what is read is what is kept: a number changed in it shows in the report
+    # what is read is what is kept: a word changed in it (its marker made again) shows in the
+    # report; changed without its marker, the file is made again
     doc = json.loads(path.read_text())
     doc["diagnosis"]["candidates"][0]["description"] = "a mark put in the kept file"
+    path.write_text(json.dumps(doc))
+    code, _, err = run("report", "--from", tmp_path / "fit.json", "-o", tmp_path / "damaged.html")
+    assert code == 0 and "kept the diagnosis in" in err, err
+    assert "a mark put in the kept file" not in (tmp_path / "damaged.html").read_text()
+    doc["sha256"] = kept._marker(doc["diagnosis"])
     path.write_text(json.dumps(doc))
     assert run("report", "--from", tmp_path / "fit.json", "-o", tmp_path / "changed.html")[0] == 0
     assert "a mark put in the kept file" in (tmp_path / "changed.html").read_text()
