@@ -49,6 +49,7 @@ from .significance import (
     tall_qr,
 )
 from .spectrum import strongest_lines
+from .timeconstant import refined
 
 # Beyond this many poses the first pass carries the best it expects, found on about this
 # many of them: step 5 then needs no pass of its own (5 of 27 s at 720 000 readings)
@@ -117,7 +118,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     device, device_dof = (said.sigma_um, said.dof) if said is not None else (device, device_dof)
 
     effects, notes = _to_try(machine, fit, candidates, poses)
-    ranked, noise, made, carried = _ranked(machine, fit, effects, res)
+    effects, ranked, noise, made, carried = _ranked(machine, fit, effects, res, alpha)
     rss_w = noise.rss(r)
     # the device beside the machine, in one Bonferroni family with it
     devices, tested = _devices(res, ranked, noise, rss_w, dof, alpha)
@@ -360,14 +361,15 @@ def _to_try(machine: Machine, fit: FitResult, candidates: Sequence[str] | None,
     return effects, notes
 
 
-def _ranked(machine: Machine, fit: FitResult, effects: Sequence[Effect],
-            res: _Residual) -> tuple[dict[str, Row], Whitening, dict[str, np.ndarray], tuple]:
+def _ranked(machine: Machine, fit: FitResult, effects: Sequence[Effect], res: _Residual,
+            alpha: float) -> tuple[list[Effect], dict[str, Row], Whitening, dict[str, np.ndarray], tuple]:
     """Step 3: every candidate's numbers (``ranking.rank``). ρ̂ from the residual once the
     best candidate (least squares) is added: the misfit of a missing effect is not noise;
     then, if the noise is correlated, ranked again whitened. Returns the numbers, the
     whitening, the columns made on the way (the reversals with start sides, the best), and
     (best, products) where the last pass carried the best's columns beside the model's:
-    what step 5 needs of the others, without a pass of its own.
+    what step 5 needs of the others, without a pass of its own. A saturating best has its
+    τ fitted (``timeconstant``): the effects come back with it.
 
     The first pass carries the best it expects: on a dense session (beyond
     ``SCREEN_POSES``), the best on every k-th pose; where that is not the best of all
@@ -403,7 +405,8 @@ def _ranked(machine: Machine, fit: FitResult, effects: Sequence[Effect],
                   for e, Cw in ((e, noise.white(C)) for e, C in started.items())}
         ranked = rank(effects, fit.free, res.R, r, noise, plain, white)
         carried = (best.effect.name, both)
-    return ranked, noise, started | {best.effect.name: c}, carried
+    effects, ranked, more = refined(machine, effects, ranked, res, noise, fit.free, alpha)
+    return effects, ranked, noise, started | {best.effect.name: c} | more, carried
 
 
 def _screened(machine: Machine, fit: FitResult, effects: Sequence[Effect], res: _Residual,
