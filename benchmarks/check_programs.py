@@ -7,6 +7,7 @@ A benchmark, not a test (tests/motion/test_motion.py checks the same programs pa
 
 from __future__ import annotations
 
+import argparse
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -21,6 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     print(f"{'machine':<8}{'controller':<15}{'mode':<6}{'path':<7}{'moves':>6}{'min':>7}"
           f"{'closest mm':>12}  {'between':<28}{'check s':>8}")
     for key, file in (("seed", "ac-trunnion-itnc530.toml"), ("B/C", "bc-table-sinumerik840d.toml")):

@@ -709,7 +709,7 @@ def wing_inputs(work: Path, compgen: list[str]) -> dict[str, Path]:
     """The wings' valid inputs, made as a user makes them: a probe log, a history export and
     another store to import it into, a B/C machine's CEC tables and the fit for a second
     round, and LinuxCNC's own xyzac-trt sample with the seed machine's pins."""
-    sys.path[:0] = [str(ROOT / "tests")]
+    sys.path[:0] = [str(ROOT / "tests"), *(str(t.parent) for t in ROOT.glob("tests/*/test_linuxcnc.py"))]
     from test_linuxcnc import sample_copy  # the tests' copy of Debian's sample
 
     from compgen.configuration.machine_file import load_machine

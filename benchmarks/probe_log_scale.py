@@ -26,7 +26,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--mb", type=float, default=20.0)
     mb = ap.parse_args().mb
-    sys.path[:0] = [str(ROOT / "tests"), str(ROOT)]
+    here = [str(t.parent) for t in ROOT.glob("tests/*/test_probe.py")]
+    sys.path[:0] = [str(ROOT / "tests"), *here, str(ROOT)]
     import test_probe as T  # the tests' log writer: the vectors' poses and touches
 
     rng = np.random.default_rng(0)
