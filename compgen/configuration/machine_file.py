@@ -253,7 +253,7 @@ def _noise(g: _Getter) -> float:
 
 
 def _axis(get: _Getter, side: str) -> Axis:
-    get.only({"axis", "type", "direction", "sense", "offset", "travel", "feed_max"})
+    get.only({"axis", "type", "direction", "sense", "offset", "travel", "feed_max", "hirth_deg"})
     name = identifier("axis", get._get("axis"), get.at("axis"))
     kind = get.str("type")
     if kind not in (LINEAR, ROTARY):
@@ -272,8 +272,16 @@ def _axis(get: _Getter, side: str) -> Axis:
     feed = get.number("feed_max")
     if not feed > 0:
         raise CompgenError("feed_max must be positive", where=get.at("feed_max"))
+    hirth = get.number("hirth_deg") if "hirth_deg" in get.doc else None
+    if hirth is not None:
+        teeth = 360.0 / hirth if hirth > 0 else 0.0
+        if kind != ROTARY or not (hirth > 0 and abs(teeth - round(teeth)) < 1e-9 and teeth >= 2):
+            raise CompgenError(f"hirth_deg = {hirth:g}: a Hirth coupling's grid is a rotary axis's 360° "
+                               "over a whole number of teeth (e.g. 1, 2.5, 3 or 5)",
+                               where=get.at("hirth_deg"))
     return Axis(name=name, kind=kind, direction=direction, side=side, sense=sense,
-                offset=get.vec3("offset", default=(0.0, 0.0, 0.0)), travel=travel, feed_max=feed)
+                offset=get.vec3("offset", default=(0.0, 0.0, 0.0)), travel=travel, feed_max=feed,
+                hirth_deg=hirth)
 
 
 def _path(get: _Getter, name: str, machine: Machine) -> PathDef:

@@ -160,6 +160,7 @@ def checked_program(machine: Machine, poses: Poses, label: str, controller_name:
     # the machine executes the angles as written (0.0001 deg): solve X Y Z at exactly those,
     # or a 300 mm lever would put the nest up to 0.3 µm off the ball
     angles = np.radians(np.round(np.degrees(poses.q[:, rotary]), ANGLE_DECIMALS))
+    _check_hirth(machine, np.degrees(angles), label)
     q = inverse(machine, angles, poses.ball)
     # the program runs the poses in the pose list's order (the R-test's readings come in it),
     # one segment, with its own approach and retract, per run of one path label
@@ -192,6 +193,7 @@ def checked_program(machine: Machine, poses: Poses, label: str, controller_name:
                   dwell=f"{setup.dwell:g}" if setup.dwell else "",
                   work_offset=setup.work_offset, max_step=f"{machine.limits.max_step_deg:g}",
                   steps=steps, rotary=[a.name for a in machine.rotary_axes], turns_tool=bool(machine.heads),
+                  indexes=any(a.hirth_deg is not None for a in machine.rotary_axes),
                   **ctl.program_context(machine))
     result = ctl.check(machine, ctl.blocks(text, mode))
     if result.findings:     # compgen's own safety net: nothing unsafe leaves this function
@@ -200,6 +202,18 @@ def checked_program(machine: Machine, poses: Poses, label: str, controller_name:
                            hint="put the ball higher on its stem or nearer the rotary axes, or choose "
                                 "another path; the set-up's solids are the machine file's [rtest]")
     return text, machine, poses, [s["note"] for s in steps if s["kind"] == "stop"]
+
+
+def _check_hirth(machine: Machine, deg: np.ndarray, label: str) -> None:
+    """Every position of a Hirth-coupled axis on its grid: between its teeth it cannot rest."""
+    for k, a in enumerate(machine.rotary_axes):
+        if a.hirth_deg is not None:
+            off = np.abs(deg[:, k] - a.on_grid(deg[:, k]))
+            if (off > 1e-6).any():
+                i = int(np.argmax(off > 1e-6))
+                raise CompgenError(f"{label}: pose {i + 1} puts {a.name} at {deg[i, k]:.4f} deg, between the "
+                                   f"teeth of its Hirth coupling ({a.hirth_deg:g} deg grid)",
+                                   hint=f"round {a.name} to its grid (compgen's paths are written on it)")
 
 
 def _program_header(machine: Machine, ctl: Controller, poses: Poses, label: str, mode: str, list_name: str,
@@ -236,6 +250,9 @@ def _program_header(machine: Machine, ctl: Controller, poses: Poses, label: str,
            f"{' and '.join(a.name for a in machine.heads)} as the machine file does (this program cannot "
            "read them), the nest's length in the tool table (U22)"] if machine.heads and ctl.tcp_switchable
           else []),
+        *[f"{a.name} is Hirth-coupled ({a.hirth_deg:g} deg grid): every position on it; the nest leaves the "
+          f"ball before {a.name} indexes, the control releases and clamps it (U23)"
+          for a in machine.rotary_axes if a.hirth_deg is not None],
         "first run: single block, feed override low, nest and ball clear of clamps",
         *(ascii_text(n) for n in notes),
     ]
@@ -318,6 +335,8 @@ class _Steps:
         for k in range(1, n + 1):
             step = q.copy()
             step[rotary] = q[rotary] + (target[rotary] - q[rotary]) * k / n
+            step[rotary] = [np.radians(a.on_grid(np.degrees(v)))            # a Hirth axis: its teeth
+                            for a, v in zip(machine.rotary_axes, step[rotary], strict=True)]
             if self.tcp_always:          # the nest stays: a head's turn is taken off its axes
                 step[linear] = nest - head_offset(machine, step[None, rotary])[0]
             self.at(step, note="turn at the safe height" if k == n else "")
@@ -346,7 +365,9 @@ class _Steps:
         # every rotary axis reaches the first pose from the side the pose list declares
         # (sides.program_sides): where each axis's backlash is at every pose is known
         before = first.copy()
-        before[rotary] -= poses.side[seg[0], rotary] * np.radians(APPROACH_DEG)
+        # (a Hirth axis has no backlash to take up: its teeth place it, and it rests only on them)
+        loose = np.array([a.hirth_deg is None for a in machine.rotary_axes])
+        before[rotary] -= poses.side[seg[0], rotary] * np.radians(APPROACH_DEG) * loose
         for target, note in ((before, f"approach from {APPROACH_DEG:g} deg before"), (first, "")):
             if not np.isnan(self.q[linear[:2]]).any():
                 self.turn_to(target)
@@ -365,7 +386,13 @@ class _Steps:
         each_run = self.switches and not self.tcp_always      # TCP on for the poses alone
         if each_run:
             steps.append({"kind": "tcp_on"})
-        for i in seg:
+        hirth = [machine.index(a.name) for a in machine.rotary_axes if a.hirth_deg is not None]
+        for k, i in enumerate(seg):
+            if k and hirth and (poses.q[i, hirth] != poses.q[seg[k - 1], hirth]).any():
+                # a Hirth axis is lifted out of its teeth to index (U23): the nest off the ball first
+                self.at(self.off(poses.q[seg[k - 1]]), rapid=False, tcp=mode == "tcpm",
+                        note="nest off the ball: a Hirth axis indexes")
+                self.at(self.off(poses.q[i]), tcp=mode == "tcpm")
             self.at(poses.q[i], rapid=False, pose=f"pose {i + 1} {ascii_text(str(poses.path[i]))}",
                     tcp=mode == "tcpm")    # the ball centre in TCP coordinates
             steps.append({"kind": "dwell"})

@@ -49,7 +49,9 @@ class Axis:
     frame: a table axis that moves the table in -x for a +X command (ISO 841) has -1.
     ``offset`` (mm) places the axis frame in its parent at zero command: for a rotary axis,
     the reference point of its location errors. ``travel`` and ``feed_max`` are in mm and
-    mm/min (linear) or deg and deg/min (rotary), as on the machine's data plate.
+    mm/min (linear) or deg and deg/min (rotary), as on the machine's data plate. A rotary
+    axis with ``hirth_deg`` is Hirth-coupled: it rests only on that grid (its teeth), and is
+    measured only there.
     """
 
     name: str
@@ -60,6 +62,11 @@ class Axis:
     offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     travel: tuple[float, float] = (-math.inf, math.inf)
     feed_max: float = math.inf
+    hirth_deg: float | None = None    # a Hirth-coupled rotary axis: it rests only on this grid, deg
+
+    def on_grid(self, deg: np.ndarray) -> np.ndarray:
+        """Positions (deg) as the axis can hold them: on its Hirth grid (nearest), or as given."""
+        return deg if self.hirth_deg is None else np.round(np.asarray(deg) / self.hirth_deg) * self.hirth_deg
 
     @property
     def rotary(self) -> bool:

@@ -47,7 +47,7 @@ def rotary_positions(machine: Machine, path: PathDef, n: int | None = None) -> n
             cols.append(a[0] + (a[1] - a[0]) * s)
         else:
             cols.append(a[0] + a[1] * np.sin(2 * np.pi * a[2] * s))
-    return np.column_stack(cols)
+    return np.column_stack([axis.on_grid(c) for axis, c in zip(machine.rotary_axes, cols, strict=True)])
 
 
 def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | None = None,
@@ -78,7 +78,14 @@ def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | Non
         path = path_def(machine, name)
         if rate_hz is None:
             angles, step = rotary_positions(machine, path), path.seconds_per_pose
+            # a Hirth axis rests on its grid: poses the grid makes one are measured once
+            angles = angles[np.r_[True, np.any(np.diff(angles, axis=0) != 0, axis=1)]]
         else:
+            hirth = [a.name for a in machine.rotary_axes if a.hirth_deg is not None and
+                     path.rotary[a.name][0] != "const"]
+            if hirth:
+                raise CompgenError(f"path {path.name} turns {', '.join(hirth)}, Hirth-coupled: it is "
+                                   "measured at rest on its grid, not on the fly", hint="leave --rate-hz out")
             steps = _fine_steps(machine, path)
             seconds = path.n * path.seconds_per_pose if feed is None else 60 * steps.sum(axis=0).max() / feed
             _check_speed(machine, path, steps, seconds)
