@@ -12,23 +12,19 @@ import click
 
 from .. import __version__, me
 from ..configuration.machine_file import load_machine
-from ..controllers.probing import probe_program, with_sphere
+from ..controllers.checking import check_file
+from ..controllers.probing import probe_program
 from ..controllers.programs import (
     MODES,
     NAME_MAX,
-    at_ball,
-    lines_of,
     measure_program,
-    program_ball,
     program_name,
-    program_nest,
 )
 from ..controllers.registry import for_machine, for_program
 from ..data.probe import probe_poses
 from ..data.rtest import read_poses
 from ..errors import CompgenError
 from ..files import STDOUT, read_text, write_all
-from ..model.machine import at_nest
 from ..model.paths import generate
 from ..units import NOISE_MAX_UM
 from .cli_common import (
@@ -164,20 +160,10 @@ def check_program_cmd(machine_file, program, controller_name, ball, nest, mode, 
         raise CompgenError(f"--mode is for controls whose configuration decides TCP; {ctl.words} programs "
                            "switch it themselves", hint="leave --mode out")
     text = read_text(program, "program", ansi_ok=True)[0]
-    with lines_of(program):
-        header = None if ball is not None else program_ball(text)   # --ball overrides the header
-        # the nest the program was written for: a head's programs and motion follow its length
-        nest_given = nest is not None
-        nest = nest_mm(nest) if nest_given else program_nest(text)
-        blocks = ctl.blocks(text, mode)
-    at, source = ((vec3(ball, "--ball"), "--ball") if ball is not None else
-                  (header, "the program's header") if header is not None else
-                  (machine.ball, "the machine file"))
-    machine = at_nest(machine, nest, "--probe-length" if nest is not None else program)
-    probing = any(b.probe for b in blocks)     # a probing program: the probe and its sphere
-    if probing:
-        machine = with_sphere(machine)
-    result = ctl.check(at_ball(machine, at), blocks, probe=machine.probe if probing else None)
+    checked = check_file(machine, ctl, text, program, vec3(ball, "--ball") if ball is not None else None,
+                         nest_mm(nest) if nest is not None else None, mode)
+    result, machine, at, source = checked.result, checked.machine, checked.ball, checked.ball_from
+    nest, nest_given = checked.nest, checked.nest_given
     if as_json:
         click.echo(json.dumps({
             "format": "compgen.check-program/1", "program": program, "controller": ctl.name,
@@ -205,21 +191,39 @@ def check_program_cmd(machine_file, program, controller_name, ball, nest, mode, 
 
 @click.command("plan")
 @MACHINE
-@click.option("--minutes", type=Finite(min=0, max=10000, min_open=True), required=True,
+@click.option("--minutes", type=Finite(min=0, max=10000, min_open=True), default=None,
               help="The machine's minutes for the measurement (the programs' time, as check-program "
                    "counts it, and each mounting of the ball elsewhere).")
 @click.option("--noise-um", "noise_um", type=Finite(min=0, max=NOISE_MAX_UM, min_open=True), default=None,
               help="The R-test's noise, 1σ per reading, µm (default: the machine file's [rtest] noise_um).")
 @click.option("--rho", type=Finite(min=0, max=0.99), default=0.0, show_default=True,
               help="AR(1) correlation of the noise from reading to reading within a run.")
-@click.option("-o", "--output", "folder", type=click.Path(file_okay=False), required=True,
+@click.option("-o", "--output", "folder", type=click.Path(file_okay=False), default=None,
               help="Folder for plan.json and each set-up's program and pose list.")
+@click.option("--check", "check_dir", type=click.Path(file_okay=False), default=None,
+              help="A plan written before: its programs and σ against the machine file as it is now "
+                   "(exit 1 where it no longer holds).")
 @FORCE
-def plan_cmd(machine_file, minutes, noise_um, rho, folder, force):
+def plan_cmd(machine_file, minutes, noise_um, rho, folder, check_dir, force):
     """Design the measurement before the machine moves: the set-ups this machine can run
     that tell its location errors best within the minutes given, each program checked."""
-    from ..planning.plan import files, plan, text
+    from ..planning.plan import checked, files, plan, text
     machine = load_machine(machine_file)
+    if check_dir is not None:
+        if minutes is not None or folder is not None:
+            raise CompgenError("--check takes a plan's folder alone", hint="leave --minutes and -o out")
+        lines, ok, made = checked(machine, Path(check_dir))
+        again = (f"{me()} plan --machine {shlex.quote(machine_file)} --minutes {made['minutes'] or 10:g} "
+                 f"--noise-um {made['noise_um']:g}" + (f" --rho {made['rho']:g}" if made["rho"] else "")
+                 + f" -o {shlex.quote(str(Path(check_dir).with_name(Path(check_dir).name + '-again')))}")
+        click.echo("\n".join([f"compgen plan --check: {check_dir} against {machine_file}", *lines,
+                               "the plan holds" if ok else "the plan does not hold on this machine file: "
+                               f"write it again: {again}"]))
+        if not ok:
+            raise SystemExit(1)
+        return
+    if minutes is None or folder is None:
+        raise CompgenError("give --minutes and -o DIR (or --check DIR for a plan written before)")
     noise = noise_um if noise_um is not None else machine.noise_um
     if noise is None:
         raise CompgenError("the R-test's noise is not known: the plan's σ scale with it",

@@ -29,9 +29,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..controllers.checking import check_file
 from ..controllers.programs import checked_program, measure_program, program_name
 from ..controllers.registry import controller
+from ..data.rtest import read_poses
 from ..errors import CompgenError
+from ..files import read_text
 from ..model.effects import effect_of_param, location_model
 from ..model.kinematics import Model
 from ..model.machine import Machine
@@ -316,3 +319,57 @@ def text(machine: Machine, p: Plan) -> str:
     lines += ["", "  what more minutes buy (worst σ of its [limits]):"]
     lines += [f"    {m:6.1f} min  {w:.4f}" for m, w in p.front]
     return "\n".join(lines) + "\n"
+
+
+def checked(machine: Machine, folder: Path) -> tuple[list[str], bool, dict]:
+    """A plan written before, against ``machine`` as its file is now: each set-up's program
+    through the motion check, and each σ from the pose lists the plan wrote; the lines to
+    print, whether the plan holds (every program passes, every σ within 5 % of the plan's),
+    and what it was made for (minutes, noise_um, rho)."""
+    where = folder / "plan.json"
+    try:
+        doc = json.loads(read_text(where, "plan")[0])
+    except (ValueError, RecursionError) as e:
+        raise CompgenError(f"not a plan: {str(e)[:120]}", where=str(where)) from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT or not isinstance(doc.get("setups"), list):
+        raise CompgenError(f"not a plan compgen wrote ({FORMAT})", where=str(where))
+    noise = doc.get("noise") if isinstance(doc.get("noise"), dict) else {}
+    noise_um, rho = noise.get("noise_um"), noise.get("rho", 0.0)
+    if not (_number(noise_um) and noise_um > 0 and _number(rho) and 0 <= rho < 1):
+        raise CompgenError("the plan names no noise it was made for (noise_um, rho)", where=str(where))
+    made = {"minutes": doc.get("minutes") if _number(doc.get("minutes")) else None, "noise_um": noise_um,
+            "rho": rho}
+    ctl = controller(machine.controller)
+    lines, ok, poses = [], True, []
+    for s in doc["setups"]:
+        if not isinstance(s, dict) or not all(isinstance(s.get(k), str) for k in ("program", "poses")):
+            raise CompgenError("a set-up without its program and pose list", where=str(where))
+        program = folder / Path(s["program"]).name
+        text = read_text(program, "program", ansi_ok=True)[0]
+        result = check_file(machine, ctl, text, str(program)).result
+        ok &= not result.findings
+        lines.append(f"  {program.name}: " + (result.first(program.name) if result.findings else
+                                              f"OK, about {result.seconds / 60:.1f} min"))
+        listed = folder / Path(s["poses"]).name
+        try:
+            poses.append(read_poses(str(listed), machine))
+        except CompgenError as e:          # a pose list this machine file no longer takes
+            ok, poses = False, [*poses, None]
+            lines.append(f"  {listed.name}: {e}")
+    if any(p is None for p in poses):
+        return [*lines, "  σ not evaluated: a pose list is not this machine file's"], False, made
+    cov = covariance(machine, Poses.concat(poses), noise_um, rho)
+    now = _shown(judged(machine), machine, _sigmas(judged(machine), cov))
+    for n, was in (doc.get("sigma") if isinstance(doc.get("sigma"), dict) else {}).items():
+        got = now.get(n)
+        planned = was.get("value") if isinstance(was, dict) else None
+        same = got is not None and _number(planned) and abs(got["value"] - planned) <= 0.05 * abs(planned)
+        ok &= same
+        lines.append(f"  {n:<6} σ {planned if _number(planned) else float('nan'):.4f} → "
+                     + (f"{got['value']:.4f} {got['unit']}" if got else "not a location error now")
+                     + ("" if same else "  (changed)"))
+    return lines, ok, made
+
+
+def _number(v) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v)

@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import SEED_MACHINE, TABLE4, run
+from conftest import SEED_MACHINE, TABLE4, pasted, run
 
 from compgen.configuration.machine_file import load_machine
 from compgen.data.simulate import simulate
@@ -76,3 +76,26 @@ def test_a_plan_never_overwrites_without_force(seed_plan, tmp_path):
     code, _, err = run(*args[:4], "6", *args[5:])
     assert code == 2 and "--force" in err and (folder / "plan.json").read_text() == before, err
     assert run(*args[:4], "6", *args[5:], "--force")[0] == 0
+
+
+def test_a_plan_is_checked_against_the_machine_file_as_it_is_now(seed_plan, tmp_path):
+    """Unchanged: it holds (exit 0). The C table's origin moved 20 mm: its programs and pose
+    lists no longer fit, it does not hold (exit 1), and the command it prints writes it again."""
+    folder = seed_plan[0]
+    code, out, err = run("plan", "--machine", SEED_MACHINE, "--check", folder)
+    assert code == 0 and out.strip().endswith("the plan holds"), out + err
+    moved = tmp_path / "moved.toml"
+    moved.write_text(SEED_MACHINE.read_text().replace("[0.0, 0.0, 29.794]", "[0.0, 0.0, 49.794]"))
+    code, out, err = run("plan", "--machine", moved, "--check", folder)
+    assert code == 1 and "does not hold" in out, out + err
+    command = out.strip().splitlines()[-1].split("write it again: ", 1)[1]
+    done = pasted(command, tmp_path)
+    again = folder.with_name(folder.name + "-again")
+    assert done.returncode == 0 and (again / "plan.json").exists(), done.stderr
+
+
+@pytest.mark.parametrize("text", ["", "{}", '{"format": "compgen.plan/1", "setups": []}', "[" * 100000])
+def test_a_folder_that_holds_no_plan_is_refused_in_one_line(tmp_path, text):
+    (tmp_path / "plan.json").write_text(text)
+    code, _, err = run("plan", "--machine", SEED_MACHINE, "--check", tmp_path)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
