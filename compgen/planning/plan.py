@@ -2,20 +2,21 @@
 
 The set-ups searched are the ones compgen can write and check: each path of the machine file
 with the ball where the advice may put it (as now, higher, lower, nearer the axis or farther
-out), run one way or there and back, and on a head with a longer nest. Each is written as
-``measure-program`` writes it and moved through the motion check, which also times it; what
-fails is not offered.
+out), run one way or there and back, on a head with a longer nest, and each with every 2nd
+or 4th of its poses. Each is written as ``measure-program`` writes it and moved through the
+motion check, which also times it; what fails is not offered.
 
 What a set of set-ups will tell is the covariance the fit will report on its data: the exact
-Jacobian of the location errors at every pose, with each later mounting's ball offset (and
-each later nest's) fitted beside them and projected out as ``identify`` does, under white
-noise of ``noise_um`` per reading, or AR(1) noise of correlation ``rho`` within each run (the
-fit's sandwich covariance, ``noise.ar1_covariance``). The plan is chosen greedily: at each
-step the set-up that lowers the worst σ of the rotary axes' location errors the most per
-minute, each σ scaled by its ``[limits]`` (offset_um for an offset, tilt_arcsec for a tilt),
-until the minutes are spent; each step is a point of the front of worst σ against minutes.
-A ball moved to another place is a new mounting: it costs ``mount_minutes`` more, and its
-offset is fitted anew.
+Jacobian of the rotary axes' location errors at every pose, each mounting's ball offset (and
+each nest's other than the machine file's) fitted beside them as ``identify`` does, under
+white noise of ``noise_um`` per reading, or AR(1) noise of correlation ``rho`` within each
+run for the plan chosen (the fit's sandwich covariance, ``noise.ar1_covariance``). The
+search is a beam over sets of set-ups (``BEAM`` kept at each size), each set's information
+the Schur complement of its set-ups' small products, for the least worst σ, each σ scaled by
+its ``[limits]`` (offset_um for an offset, tilt_arcsec for a tilt), within the minutes; the
+sets it met give the front of worst σ against minutes. A ball moved to another place is a
+new mounting: it costs ``mount_minutes`` more, and its offset is fitted anew. ``checked``
+runs a plan written before against the machine file as it is now.
 
 Not built: telling named effects apart while planning (``--effects``: the advice's
 separations), a probe's plan, the ball's positions beyond the advice's places."""
