@@ -14,6 +14,7 @@ from __future__ import annotations
 import re
 from contextlib import contextmanager
 from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -117,17 +118,28 @@ def measure_program(machine: Machine, poses: Poses, label: str, controller_name:
     Each path label is a segment with its own approach and retract along machine Z, so a
     program may chain paths whose ends are far apart.
     """
-    text, machine, poses, stops = checked_program(machine, poses, label, controller_name, mode, name,
-                                                  version, date, list_name, notes)
+    text, machine, poses, stops, _ = checked_program(machine, poses, label, controller_name, mode, name,
+                                                     version, date, list_name, notes)
     ctl = for_machine(controller_name, machine)
     messages = ctl.message_files(name, stops)
     return Emitted({ctl.program_ext: text, ".poses.csv": pose_list(machine, poses), **messages},
                    named=frozenset(messages))
 
 
+class Checked(NamedTuple):
+    """A program written and checked: its text, the machine at its ball and nest, the poses
+    as solved, the notes of its stops, and its time as the motion check counts it (s)."""
+
+    text: str
+    machine: Machine
+    poses: Poses
+    stops: list[str]
+    seconds: float
+
+
 def checked_program(machine: Machine, poses: Poses, label: str, controller_name: str, mode: str,
                     name: str, version: str, date: str, list_name: str | None = None,
-                    notes: tuple[str, ...] = ()) -> tuple[str, Machine, Poses, list[str]]:
+                    notes: tuple[str, ...] = ()) -> Checked:
     """``measure_program``'s program text, every check made (a refusal raises): with the
     machine at its ball and nest, the poses as solved, and the notes of its stops. The
     advice asks only this of each measurement it offers (the files beside it are not
@@ -201,7 +213,7 @@ def checked_program(machine: Machine, poses: Poses, label: str, controller_name:
         raise CompgenError(f"the machine cannot run {label} with the ball at {at} mm: {result.first(name)}",
                            hint="put the ball higher on its stem or nearer the rotary axes, or choose "
                                 "another path; the set-up's solids are the machine file's [rtest]")
-    return text, machine, poses, [s["note"] for s in steps if s["kind"] == "stop"]
+    return Checked(text, machine, poses, [s["note"] for s in steps if s["kind"] == "stop"], result.seconds)
 
 
 def _check_hirth(machine: Machine, deg: np.ndarray, label: str) -> None:

@@ -78,8 +78,9 @@ def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | Non
         path = path_def(machine, name)
         if rate_hz is None:
             angles, step = rotary_positions(machine, path), path.seconds_per_pose
-            # a Hirth axis rests on its grid: poses the grid makes one are measured once
-            angles = angles[np.r_[True, np.any(np.diff(angles, axis=0) != 0, axis=1)]]
+            if any(a.hirth_deg is not None for a in machine.rotary_axes):
+                # a Hirth axis rests on its grid: poses the grid makes one are measured once
+                angles = angles[np.r_[True, np.any(np.diff(angles, axis=0) != 0, axis=1)]]
         else:
             hirth = [a.name for a in machine.rotary_axes if a.hirth_deg is not None and
                      path.rotary[a.name][0] != "const"]

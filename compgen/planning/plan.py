@@ -111,8 +111,7 @@ def covariance(machine: Machine, poses: Poses, noise_um: float, rho: float = 0.0
         J = proj(J)
     flat = J.reshape(-1, p)
     G = flat.T @ flat
-    norm = np.sqrt(np.diag(G))
-    if not (norm > 0).all() or np.linalg.cond(G / np.outer(norm, norm)) > 1e12:
+    if not _identifies(G):
         return np.full((p - 3, p - 3), np.inf)
     sigma = noise_um * 1e-3
     if rho:
@@ -154,26 +153,34 @@ def _information(setups: Sequence[Setup], p: int) -> np.ndarray:
     return A - B @ np.linalg.pinv(D, rcond=1e-10) @ B.T
 
 
-def _worst(machine: Machine, info: np.ndarray, noise_um: float, unit: np.ndarray) -> float:
-    norm = np.sqrt(np.clip(np.diag(info), 0.0, None))
-    if not (norm > 0).all() or np.linalg.cond(info / np.outer(norm, norm)) > 1e12:
+def _identifies(G: np.ndarray) -> bool:
+    """Whether normal equations ``G`` determine every parameter (columns scaled to unit norm,
+    condition at most 1e12)."""
+    norm = np.sqrt(np.clip(np.diag(G), 0.0, None))
+    return bool((norm > 0).all()) and np.linalg.cond(G / np.outer(norm, norm)) <= 1e12
+
+
+def _scaled(cov: np.ndarray, unit: np.ndarray) -> float:
+    """The worst σ of a covariance over each parameter's ``[limits]``."""
+    return float((np.sqrt(np.diag(cov)) / unit).max())
+
+
+def _worst(info: np.ndarray, noise_um: float, unit: np.ndarray) -> float:
+    """The worst scaled σ of the rotary axes' information ``info`` (per unit noise)."""
+    if not _identifies(info):
         return np.inf
-    sigma = noise_um * 1e-3 * np.sqrt(np.diag(np.linalg.inv(info)))
-    return float((sigma / unit).max())
+    return float((noise_um * 1e-3 * np.sqrt(np.diag(np.linalg.inv(info))) / unit).max())
 
 
 def candidates(machine: Machine) -> list[Setup]:
     """Every set-up the machine can run, timed by the motion check."""
-    ctl = controller(machine.controller)
     out = []
     for m in (v for p in proposals(machine, None) for v in _thinned(p)):
         try:
-            text, at, _, _ = checked_program(machine, m.poses, m.path, machine.controller, MODE, "PLAN", "",
-                                             "")
+            done = checked_program(machine, m.poses, m.path, machine.controller, MODE, "PLAN", "", "")
         except CompgenError:
             continue
-        seconds = ctl.check(at, ctl.blocks(text, MODE)).seconds
-        out.append(Setup(m, seconds / 60.0, _products(machine, m.poses)))
+        out.append(Setup(m, done.seconds / 60.0, _products(machine, m.poses)))
     return out
 
 
@@ -221,29 +228,24 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
         raise CompgenError(f"no path of {machine.source} can be measured on this machine",
                            hint=f"check the paths with measure-program --machine {machine.source}")
     default_cov = covariance(machine, _poses(own), noise_um, rho)
-    default = (_minutes(own, mount_minutes), _sigmas(names, default_cov),
-               float((np.sqrt(np.diag(default_cov)) / unit).max()))
+    default = (_minutes(own, mount_minutes), _sigmas(names, default_cov), _scaled(default_cov, unit))
 
-    def worst(sets):
-        return _worst(machine, _information(sets, len(names)), noise_um, unit)
-
-    level = [()]
+    level: list[frozenset] = [frozenset()]          # sets of set-ups, by their index in ``offered``
     seen: dict[frozenset, tuple[float, float]] = {}
     while level:
         grown = {}
         for base in level:
-            for i, s in enumerate(offered):
-                key = frozenset([*(offered.index(b) for b in base), i])
-                if s in base or key in grown or key in seen:
+            for i in range(len(offered)):
+                key = base | {i}
+                if i in base or key in grown or key in seen:
                     continue
-                sets = [*base, s]
+                sets = [*(offered[j] for j in sorted(base)), offered[i]]
                 spent = _minutes(sets, mount_minutes)
                 if spent <= minutes + 1e-9:
-                    grown[key] = (worst(sets), spent)
+                    grown[key] = (_worst(_information(sets, len(names)), noise_um, unit), spent)
         seen |= grown
-        level = [tuple(offered[i] for i in sorted(key))
-                 for key in sorted(grown, key=lambda k: grown[k])[:BEAM] if np.isfinite(grown[key][0])
-                 or len(key) < len(names)]
+        level = [key for key in sorted(grown, key=lambda k: grown[k])[:BEAM]
+                 if np.isfinite(grown[key][0]) or len(key) < len(names)]
     finite = {k: v for k, v in seen.items() if np.isfinite(v[0])}
     if not finite:
         raise CompgenError(f"no set of set-ups within {minutes:g} minutes identifies the location errors: "
@@ -256,8 +258,8 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
         if w < FRONT_STEP * low:         # a point that buys a worst σ 5 % lower or more
             front.append((spent, w))
             low = w
-    return Plan(tuple(chosen), _minutes(chosen, mount_minutes), _sigmas(names, cov),
-                float((np.sqrt(np.diag(cov)) / unit).max()), tuple(front), default, noise_um, rho)
+    return Plan(tuple(chosen), _minutes(chosen, mount_minutes), _sigmas(names, cov), _scaled(cov, unit),
+                tuple(front), default, noise_um, rho)
 
 
 def _sigmas(names: Sequence[str], cov: np.ndarray) -> dict[str, float]:
@@ -346,8 +348,7 @@ def checked(machine: Machine, folder: Path) -> tuple[list[str], bool, dict]:
         if not isinstance(s, dict) or not all(isinstance(s.get(k), str) for k in ("program", "poses")):
             raise CompgenError("a set-up without its program and pose list", where=str(where))
         program = folder / Path(s["program"]).name
-        text = read_text(program, "program", ansi_ok=True)[0]
-        result = check_file(machine, ctl, text, str(program)).result
+        result = check_file(machine, ctl, read_text(program, "program", ansi_ok=True)[0], str(program)).result
         ok &= not result.findings
         lines.append(f"  {program.name}: " + (result.first(program.name) if result.findings else
                                               f"OK, about {result.seconds / 60:.1f} min"))

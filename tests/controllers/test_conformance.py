@@ -104,7 +104,7 @@ def test_each_controllers_programs_pass_its_own_reader_and_the_motion_check(mach
     machine = machine[0]
     ctl = CONTROLLERS[machine.controller]
     poses = generate(machine, ["K4"])
-    text, _, solved, _ = checked_program(machine, poses, "K4", ctl.name, mode, "CONF", "0", "d")
+    text, _, solved, _, _ = checked_program(machine, poses, "K4", ctl.name, mode, "CONF", "0", "d")
     blocks = ctl.blocks(text, mode)
     assert len(blocks) >= len(solved), (ctl.name, mode)
     probe = probe_program(machine, probe_poses(machine, ["K4"]), "K4", ctl.name, "PROBE", "0", "d")

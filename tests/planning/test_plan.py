@@ -53,8 +53,7 @@ def test_the_fit_of_the_plans_data_reports_the_sigma_it_predicts(seed_machine):
     for n, predicted in p.sigma.items():
         assert fit.parameters[n].std == pytest.approx(predicted, rel=0.2), (n, predicted)
     # the search's figure (a Schur complement of each set-up's products) is the full one's
-    search = P._worst(seed_machine, P._information(p.setups, len(p.sigma)), NOISE_UM,
-                      P.scales(seed_machine, list(p.sigma)))
+    search = P._worst(P._information(p.setups, len(p.sigma)), NOISE_UM, P.scales(seed_machine, list(p.sigma)))
     assert search == pytest.approx(p.worst, rel=1e-6)
 
 
