@@ -458,7 +458,8 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
     for path in emitted:
         read_text(path, "file", ansi_ok=True)   # a missing file fails before anything is drawn
     post = [read_data(p, machine, fit.sign, warn) for p in post_files]
-    found = read_kept(base, key(fit, machine, None, None, True), Proposal)
+    made_of = key(fit, machine, None, None, True)         # what report's own diagnose is made of
+    found = read_kept(base, made_of, Proposal)
     progress("1/3 diagnose" + (f": kept beside the fit ({kept_path(base).name})" if found else ""))
     made = found is None
     found = replace(found, fit_file=base, machine_ref=machine.source) if found else \
@@ -481,7 +482,7 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
     write_atomically(output, html, force, inputs=(base, before, *post_files, *emitted))
     said(output, f"wrote {output}")
     if made:                                # kept once the report is written, never before
-        click.echo(f"compgen: {keep(base, found, key(fit, machine, None, None, True))}", err=True)
+        click.echo(f"compgen: {keep(base, found, made_of)}", err=True)
 
 
 @main.command("effects")

@@ -205,7 +205,7 @@ def checked_program(machine: Machine, poses: Poses, label: str, controller_name:
                   dwell=f"{setup.dwell:g}" if setup.dwell else "",
                   work_offset=setup.work_offset, max_step=f"{machine.limits.max_step_deg:g}",
                   steps=steps, rotary=[a.name for a in machine.rotary_axes], turns_tool=bool(machine.heads),
-                  indexes=any(a.hirth_deg is not None for a in machine.rotary_axes),
+                  indexes=bool(machine.hirth_axes),
                   **ctl.program_context(machine))
     result = ctl.check(machine, ctl.blocks(text, mode))
     if result.findings:     # compgen's own safety net: nothing unsafe leaves this function
@@ -264,7 +264,7 @@ def _program_header(machine: Machine, ctl: Controller, poses: Poses, label: str,
           else []),
         *[f"{a.name} is Hirth-coupled ({a.hirth_deg:g} deg grid): every position on it; the nest leaves the "
           f"ball before {a.name} indexes, the control releases and clamps it (U23)"
-          for a in machine.rotary_axes if a.hirth_deg is not None],
+          for a in machine.hirth_axes],
         "first run: single block, feed override low, nest and ball clear of clamps",
         *(ascii_text(n) for n in notes),
     ]
@@ -398,7 +398,7 @@ class _Steps:
         each_run = self.switches and not self.tcp_always      # TCP on for the poses alone
         if each_run:
             steps.append({"kind": "tcp_on"})
-        hirth = [machine.index(a.name) for a in machine.rotary_axes if a.hirth_deg is not None]
+        hirth = [machine.index(a.name) for a in machine.hirth_axes]
         for k, i in enumerate(seg):
             if k and hirth and (poses.q[i, hirth] != poses.q[seg[k - 1], hirth]).any():
                 # a Hirth axis is lifted out of its teeth to index (U23): the nest off the ball first

@@ -259,6 +259,11 @@ class Machine:
         return tuple(a for a in self.tool if a.rotary)
 
     @cached_property
+    def hirth_axes(self) -> tuple[Axis, ...]:
+        """The rotary axes coupled by a Hirth ring: they rest only on their grid."""
+        return tuple(a for a in self.rotary_axes if a.hirth_deg is not None)
+
+    @cached_property
     def gauge(self) -> np.ndarray:
         """The spindle's gauge line on the tool axis with every axis at zero, mm: where the
         tool chain's frames start (the nest centre is at the origin)."""

@@ -78,12 +78,11 @@ def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | Non
         path = path_def(machine, name)
         if rate_hz is None:
             angles, step = rotary_positions(machine, path), path.seconds_per_pose
-            if any(a.hirth_deg is not None for a in machine.rotary_axes):
+            if machine.hirth_axes:
                 # a Hirth axis rests on its grid: poses the grid makes one are measured once
                 angles = angles[np.r_[True, np.any(np.diff(angles, axis=0) != 0, axis=1)]]
         else:
-            hirth = [a.name for a in machine.rotary_axes if a.hirth_deg is not None and
-                     path.rotary[a.name][0] != "const"]
+            hirth = [a.name for a in machine.hirth_axes if path.rotary[a.name][0] != "const"]
             if hirth:
                 raise CompgenError(f"path {path.name} turns {', '.join(hirth)}, Hirth-coupled: it is "
                                    "measured at rest on its grid, not on the fly", hint="leave --rate-hz out")

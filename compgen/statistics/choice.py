@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ..data.rtest import RTestData
-from ..model.effects import compose, effect_name, location_model
+from ..model.effects import compose, effect_name, location_model, resolve
 from ..model.machine import Machine
 from .diagnose import diagnose
 from .identify import identify
@@ -88,13 +88,13 @@ def _times(machine: Machine, data: Sequence[RTestData], fit: FitResult, rest: li
     place, its residual within the band of the fit's (χ²(k, α)·σ̂²); their values. The τ is
     the data's estimate (``timeconstant``), and a location error that shares the warming's
     direction moves with it (XOC by 3σ a minute on the fork head)."""
-    if ":e" not in effect:
+    e = resolve(machine, effect)
+    if e.basis.kind != "e":
         return {}
-    symbol, tau = effect.split(":e")
     rss = fit.residual["sigma_um"] ** 2 * fit.residual["dof"]
     out = {}
     for k in TAU_STEPS:
-        other = f"{symbol}:e{max(1, min(999, round(float(tau) * k)))}"
+        other = f"{e.symbol}:e{max(1, min(999, round(e.basis.order * k)))}"
         if other == effect or other in out:
             continue
         alt = identify(machine, data, compose(machine, rest, [other]), kept, fit.method, fit.sign)

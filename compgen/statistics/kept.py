@@ -10,6 +10,7 @@ is the diagnosis as made, to the last digit."""
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import types
@@ -84,7 +85,10 @@ def _plain(value):
     raise TypeError(f"{type(value).__name__} is not kept")
 
 
+@functools.cache
 def _hints(cls) -> dict:
+    """A result type's fields' types, read once per type (a diagnosis holds hundreds of
+    candidates of one type)."""
     return typing.get_type_hints(cls)
 
 

@@ -38,8 +38,7 @@ def refined(machine: Machine, effects: Sequence[Effect], ranked: dict[str, Row],
     best = max(ranked.values(), key=lambda row: (row.vis >= VISIBLE, row.share)).effect
     if best.basis.kind != "e" or np.isnan(res.poses.t).any():
         return effects, ranked, {}
-    symbol = best.name.split(":")[0]
-    grid = [e for e in effects if e.name.split(":")[0] == symbol and e.basis.kind == "e"]
+    grid = [e for e in effects if e.symbol == best.symbol and e.basis.kind == "e"]
     t_h = res.poses.t / TIME_SCALE_S
     g = np.repeat(_basis(t_h, best.basis.order), 3)
     c = effect_columns(machine, res.poses, best)
@@ -68,7 +67,7 @@ def refined(machine: Machine, effects: Sequence[Effect], ranked: dict[str, Row],
     grids: dict[str, list[Effect]] = {}
     for e in effects:
         if e.basis.kind == "e":
-            grids.setdefault(e.name.split(":")[0], []).append(e)
+            grids.setdefault(e.symbol, []).append(e)
     fitted = [resolve(machine, f"{sym}:e{tau:g}") for sym in grids]
     made = {e.name: effect_columns(machine, res.poses, e) for e in fitted}
     plain = {n: (C.T @ C, res.Q.T @ C, C.T @ res.r) for n, C in made.items()}
@@ -82,6 +81,6 @@ def refined(machine: Machine, effects: Sequence[Effect], ranked: dict[str, Row],
     for i, e in enumerate(effects):
         if e.basis.kind != "e":
             out.append(e)
-        elif first[e.name.split(":")[0]] == i:
-            out.append(next(f for f in fitted if f.name.split(":")[0] == e.name.split(":")[0]))
+        elif first[e.symbol] == i:
+            out.append(next(f for f in fitted if f.symbol == e.symbol))
     return out, {**ranked, **rows}, made
