@@ -20,7 +20,7 @@ from ..controllers.programs import (
     measure_program,
     program_name,
 )
-from ..controllers.registry import for_machine, for_program
+from ..controllers.registry import controller, for_machine, for_program
 from ..data.probe import probe_poses
 from ..data.rtest import read_poses
 from ..errors import CompgenError
@@ -234,5 +234,9 @@ def plan_cmd(machine_file, minutes, noise_um, rho, folder, check_dir, force):
     Path(folder).mkdir(parents=True, exist_ok=True)
     write_all(out, force, inputs=(machine_file,))
     click.echo(text(machine, result), nl=False)
-    click.echo(f"wrote {len(out)} files in {folder}: plan.json and each set-up's program; check them with "
-               f"{me()} check-program --machine {shlex.quote(machine_file)} PROGRAM", err=True)
+    ext = controller(machine.controller).program_ext
+    click.echo(f"wrote {len(out)} files in {folder}: plan.json and each set-up's program; check them:",
+               err=True)
+    for path in (p for p in out if p.suffix == ext):
+        click.echo(f"  {me()} check-program --machine {shlex.quote(machine_file)} {shlex.quote(str(path))}",
+                   err=True)

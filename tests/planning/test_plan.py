@@ -98,3 +98,15 @@ def test_a_folder_that_holds_no_plan_is_refused_in_one_line(tmp_path, text):
     (tmp_path / "plan.json").write_text(text)
     code, _, err = run("plan", "--machine", SEED_MACHINE, "--check", tmp_path)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+
+
+def test_every_command_plan_prints_runs_as_printed(tmp_path):
+    """The check-program line it prints for each program, pasted into bash, passes."""
+    code, _, err = run("plan", "--machine", SEED_MACHINE, "--minutes", "5", "--noise-um", NOISE_UM,
+                       "-o", tmp_path / "p")
+    assert code == 0, err
+    lines = [ln.strip() for ln in err.splitlines() if " check-program " in ln]
+    assert len(lines) == len(json.loads((tmp_path / "p" / "plan.json").read_text())["setups"]) >= 1
+    for line in lines:
+        done = pasted(line, tmp_path)
+        assert done.returncode == 0 and ": OK (" in done.stdout, (line, done.stderr)
