@@ -23,6 +23,7 @@ SEED_MACHINE = ROOT / "machines" / "ac-trunnion-itnc530.toml"
 BC_MACHINE = ROOT / "machines" / "bc-table-sinumerik840d.toml"
 HEAD_MACHINE = ROOT / "machines" / "bc-swivel-head-table.toml"
 FORK_MACHINE = ROOT / "machines" / "bc-fork-head.toml"
+NUTATING_MACHINE = ROOT / "machines" / "bc-nutating-head-table.toml"
 UM, ARCSEC = 1e-3, np.pi / 648000
 
 # Seed report, Table 4 (the truth in shared/vectors/seed-table4-noiseless.csv), inside units

@@ -10,6 +10,8 @@ import tomllib
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
 from ..controllers.registry import CONTROLLERS
 from ..errors import CompgenError
 from ..files import read_text
@@ -30,6 +32,7 @@ from ..model.machine import (
     check_ball,
     identifier,
 )
+from ..transforms import UNIT
 from ..units import NOISE_MAX_UM
 
 TOP_KEYS = {"name", "serial", "drift", "controller", "workpiece", "tool", "rtest", "paths", "program",
@@ -258,10 +261,7 @@ def _axis(get: _Getter, side: str) -> Axis:
     kind = get.str("type")
     if kind not in (LINEAR, ROTARY):
         raise CompgenError(f"type must be {LINEAR!r} or {ROTARY!r}, not {kind!r}", where=get.at("type"))
-    direction = get.str("direction")
-    if direction not in DIRECTIONS:
-        raise CompgenError(f"direction must be one of x, y, z, not {direction!r}",
-                           where=get.at("direction"))
+    direction, incline = _direction(get, name, kind)
     sense = int(get.number("sense", default=1))
     if sense not in (1, -1):
         raise CompgenError("sense must be +1 or -1", where=get.at("sense"))
@@ -281,7 +281,43 @@ def _axis(get: _Getter, side: str) -> Axis:
                                where=get.at("hirth_deg"))
     return Axis(name=name, kind=kind, direction=direction, side=side, sense=sense,
                 offset=get.vec3("offset", default=(0.0, 0.0, 0.0)), travel=travel, feed_max=feed,
-                hirth_deg=hirth)
+                hirth_deg=hirth, incline=incline)
+
+
+# the letter a rotary axis's name gives it (DIN 66217): an inclined axis is that letter's
+# axis tilted, its own frame the machine's turned by the shortest rotation onto it
+NAME_LETTER = {"A": "x", "B": "y", "C": "z"}
+
+
+def _direction(get: _Getter, name: str, kind: str) -> tuple[str, tuple[float, float, float]]:
+    """``direction``: x, y or z; or, for a rotary axis A, B or C, any vector within 90° of
+    its letter's (an inclined axis): its letter and the incline (rad) turning it there."""
+    raw = get._get("direction")
+    if isinstance(raw, str):
+        if raw not in DIRECTIONS:
+            raise CompgenError(f"direction must be one of x, y, z or a vector [x, y, z], not {raw!r}",
+                               where=get.at("direction"))
+        return raw, (0.0, 0.0, 0.0)
+    v = np.array(get.vec3("direction"))
+    letter = NAME_LETTER.get(name)
+    if kind != ROTARY or letter is None:
+        raise CompgenError(f"direction {v.tolist()}: only a rotary axis A, B or C may be inclined; "
+                           f"{name} moves along x, y or z", where=get.at("direction"),
+                           hint='write direction = "x", "y" or "z"')
+    size = float(np.linalg.norm(v))
+    e = UNIT[letter]
+    if not size > 0 or not v @ e > 1e-9 * size:
+        raise CompgenError(f"direction {v.tolist()} of {name} is not within 90° of its letter's +{letter}",
+                           where=get.at("direction"),
+                           hint=f"give the vector {name} turns about right-handed, on the +{letter} side "
+                                "(a turn the other way is sense = -1)")
+    v = v / size
+    axis = np.cross(e, v)
+    s = float(np.linalg.norm(axis))
+    if s < 1e-12:
+        return letter, (0.0, 0.0, 0.0)
+    w = axis / s * math.atan2(s, float(e @ v))
+    return letter, (float(w[0]), float(w[1]), float(w[2]))
 
 
 def _path(get: _Getter, name: str, machine: Machine) -> PathDef:

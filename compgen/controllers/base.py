@@ -7,12 +7,11 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..errors import CompgenError
-from ..model.lines import AxisLine
 from ..model.machine import Machine, ProbeSetup
 from ..motion.blocks import Block
 from ..motion.check import Check, run
@@ -148,6 +147,8 @@ class Controller:
         """What carries the nest under TCP on ``machine``, as a program's header says it."""
         return self.tcp_words
 
+    holds_inclined = False    # its kinematics holds an inclined axis as compgen writes it (U24)
+
     def edits_head(self, machine: Machine) -> bool:
         """Whether compgen writes this control's kinematics edits for ``machine``, whose head
         turns the tool (only where the control's kinematics for it was run: none by default)."""
@@ -212,7 +213,7 @@ class Controller:
         """What the control holds once compgen's edit of ``p`` is loaded: the one function
         every prediction of every control goes through."""
         lines = p.lines if self.holds_tilts else {
-            n: AxisLine(n, line.nominal, line.pivot, line.offset, np.zeros(3)) for n, line in p.lines.items()}
+            n: replace(line, tilt=np.zeros(3)) for n, line in p.lines.items()}
         return Held(lines, dict(p.squareness) if self.squareness_as == "rows" else {},
                     tuple(self.tables(machine, p)))
 

@@ -15,7 +15,7 @@ control held during the measurement, so corrections add to the values held then.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -207,8 +207,8 @@ def _check_bounds(machine: Machine, p: Plan, force: bool) -> None:
 def rest(machine: Machine, p: Plan, held: Held, force: bool = False) -> Plan:
     """The part of ``p`` still to write when the control already holds ``held`` (relative to
     the state the data were measured in): offsets and tilts add to first order."""
-    lines = {n: AxisLine(n, line.nominal, line.pivot, line.offset - held.lines[n].offset,
-                         line.tilt - held.lines[n].tilt) for n, line in p.lines.items()}
+    lines = {n: replace(line, offset=line.offset - held.lines[n].offset, tilt=line.tilt - held.lines[n].tilt)
+             for n, line in p.lines.items()}
     squareness = {k: p.squareness.get(k, 0.0) - held.squareness.get(k, 0.0)
                   for k in {**p.squareness, **held.squareness}}
     p = Plan(lines, squareness, p.tables, p.not_compensable, p.setup, p.fit_params)
@@ -236,8 +236,7 @@ def pivot_of(machine: Machine, name: str) -> np.ndarray:
 
 
 def nominal_lines(machine: Machine) -> dict[str, AxisLine]:
-    return {a.name: AxisLine(a.name, a.direction, pivot_of(machine, a.name), np.zeros(3), np.zeros(3))
-            for a in machine.rotary_axes}
+    return {a.name: AxisLine.of(a, pivot_of(machine, a.name)) for a in machine.rotary_axes}
 
 
 # ---------------------------------------------------------------------------- compensation tables

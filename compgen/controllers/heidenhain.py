@@ -9,7 +9,7 @@ column names each row by its ISO symbol, so a later edit finds and increases it.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -284,7 +284,7 @@ def read_lines(text: str, machine: Machine, lines: dict[str, AxisLine]) -> dict[
                 offset["XYZ".index(axis)] = v
             else:
                 tilt["ABC".index(axis)] = np.radians(v)
-        out[a.name] = AxisLine(a.name, a.direction, lines[a.name].pivot, offset, tilt)
+        out[a.name] = AxisLine.of(a, lines[a.name].pivot, offset, tilt)
     return out
 
 
@@ -503,8 +503,8 @@ class Heidenhain(Controller):
     def since(self, machine: Machine, measured: str, current: str, where: str) -> Held:
         nominal = nominal_lines(machine)
         now, then = (read_lines(t, machine, nominal) for t in (current, measured))
-        lines = {n: AxisLine(n, line.nominal, line.pivot, line.offset - then[n].offset,
-                             line.tilt - then[n].tilt) for n, line in now.items()}
+        lines = {n: replace(line, offset=line.offset - then[n].offset, tilt=line.tilt - then[n].tilt)
+                 for n, line in now.items()}
         sq_now, sq_then = (read_squareness(t, machine) for t in (current, measured))
         return Held(lines, {k: sq_now.get(k, 0.0) - sq_then.get(k, 0.0) for k in {**sq_now, **sq_then}})
 

@@ -42,6 +42,14 @@ def for_machine(name: str, machine: Machine, edit: bool = False) -> Controller:
                            "the tool", where=machine.source,
                            hint="fit, diagnose and report hold for it; write its "
                                 + ("kinematics" if edit else "programs") + " by hand from the fitted values")
+    inclined = [a for a in machine.rotary_axes if a.inclined]
+    if edit and inclined and not ctl.holds_inclined:
+        a = inclined[0]
+        raise CompgenError(f"compgen does not write {ctl.words} kinematics edits for an inclined axis: "
+                           f"{machine.name}'s {a.name} turns about ({', '.join(f'{x:.6f}' for x in a.unit)}) "
+                           "(UNCONFIRMED U24)", where=machine.source,
+                           hint="fit, diagnose and report hold for it; enter the fitted lines by hand, or "
+                                "write the edit for a SINUMERIK, whose $TC_CARR vectors take any direction")
     return ctl
 
 

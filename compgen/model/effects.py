@@ -203,7 +203,7 @@ def _symbols(machine: Machine) -> dict[str, tuple[str, str, str, tuple[str, ...]
 def _axis_symbols(axis: Axis) -> dict:
     L, d, out = axis.name, axis.direction, {}
     head = axis.rotary and axis.side == "tool"
-    tilting = head and d != "z"       # a head that tilts the tool: its weight bends it across
+    tilting = head and abs(axis.unit[2]) < 1 - 1e-9    # it tilts the tool: its weight bends it across
     kinds = ("h",) if axis.full_turn else ("p", "h") if axis.rotary else ("p",)
     for e in TRANSLATIONS + ROTATIONS:
         E = e.upper()
@@ -212,6 +212,10 @@ def _axis_symbols(axis: Axis) -> dict:
             if not own:
                 about = "tilt about" if e in ROTATIONS else "offset in"
                 ref = TRANSLATIONS[ROTATIONS.index(e)].upper() if e in ROTATIONS else E
+                if axis.inclined:      # in its own frame: say where that points
+                    t = ref.lower()
+                    about = about.replace(" in", " along")
+                    ref = f"{L}'s own {t} {_shown(axis.frame[:, 'xyz'.index(t)])}"
                 out[f"{E}O{L}"] = (L, "loc", e, ("const", "e", "t"), f"{L} axis line {about} {ref}",
                                    "assembly or kinematics table not matching the machine; "
                                    "with a time constant: its thermal growth; in time (t1): a "
@@ -270,6 +274,11 @@ def _axis_symbols(axis: Axis) -> dict:
             out[f"{r.upper()}O{L}"] = (L, "loc", r, ("const",), f"squareness of {L} to {other}",
                                        "assembly or thermal bending of the frame", 0)
     return out
+
+
+def _shown(v) -> str:
+    """A direction as words show it: (0, -0.7071, 0.7071)."""
+    return "(" + ", ".join(f"{x + 0.0:.4g}" for x in np.round(v, 12)) + ")"
 
 
 def _turning_pair(d: str) -> tuple[str, str]:

@@ -38,13 +38,22 @@ def _below_nest(machine: Machine) -> float:
     — housing, spindle, the head's body about its pivot — reaches ``t·cos θ`` below, θ up to
     the tilt the head's travel allows."""
     s = machine.setup
-    tilt = min(np.pi, sum(np.radians(max(map(abs, a.travel))) for a in machine.heads if a.direction != "z"))
+    tilt = min(np.pi, sum(_tilt(a) for a in machine.heads))
     c = np.cos(tilt)
     pivots = np.linalg.norm(head_pivots(machine, np.zeros((1, len(machine.axes))))[0], axis=1)
     parts = [(-s.nest_below, machine.probe_length, s.nest_radius),
              (machine.probe_length, machine.probe_length + s.spindle_length, s.spindle_radius),
              *((d, d, s.head_radius) for d in pivots)]
     return max(r - min(lo, hi, lo * c, hi * c) for lo, hi, r in parts)
+
+
+def _tilt(axis) -> float:
+    """The most a head axis turns the tool away from its own line, rad: a turn by θ about a
+    line at α to the tool leaves it at arccos(cos²α + sin²α cos θ) (θ itself across, 0
+    along, 90° at 180° of a 45° nutating head)."""
+    theta = min(np.pi, np.radians(max(map(abs, axis.travel))))
+    cos_a = abs(axis.unit[2])
+    return float(np.arccos(np.clip(cos_a**2 + (1 - cos_a**2) * np.cos(theta), -1, 1)))
 
 
 def frames(machine: Machine, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

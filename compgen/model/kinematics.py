@@ -71,7 +71,8 @@ class Model:
         return relative(self.machine, poses, self._slots(poses, values), lines)
 
     def frame_before_motion(self, poses: Poses, values: np.ndarray, chain, i: int) -> np.ndarray:
-        """Frame of axis ``chain[i]`` just before its own motion, machine frame, (n, 4, 4)."""
+        """Frame of axis ``chain[i]`` just before its own motion, machine frame, (n, 4, 4):
+        its own frame (turned by its incline, on an inclined axis)."""
         slots = self._slots(poses, np.asarray(values, float))
         zero = np.zeros((len(poses), 6))
         T = chain_transform(self.machine, chain[:i], poses, slots, zero)
@@ -422,7 +423,14 @@ def _factors(axis: Axis, q: np.ndarray, loc: np.ndarray, comp: np.ndarray, motio
         own = SLOT_INDEX[ROT_OF[axis.direction]]
         tilt = comp[:, 3:].copy()
         tilt[:, own - 3] = 0.0
-        out = [(("t", offset + loc[:, :3]), [("t", "loc")]),
+        # an inclined axis: into its own frame at the pivot, its errors and turn there, and
+        # back out, so the frame it carries has its parent's orientation at zero
+        incline = (np.broadcast_to(np.asarray(axis.incline, float), loc[:, 3:].shape)
+                   if axis.inclined else None)
+        if incline is not None and line is not None:     # the line is held in the parent's frame
+            line = tuple(np.asarray(v, float) @ axis.frame for v in line)
+        out = [] if incline is None else [(("t", offset), []), (("w", incline), [])]
+        out += [(("t", loc[:, :3] + (0.0 if incline is not None else offset)), [("t", "loc")]),
                (("w", loc[:, 3:]) if loc[:, 3:].any() else None, [("r", "loc", loc[:, 3:], -1)]),
                (("t", comp[:, :3]) if comp[:, :3].any() else None, [("t", "comp")]),
                (("w", tilt) if tilt.any() else None, [("r", "comp", tilt, own)])]
@@ -441,6 +449,8 @@ def _factors(axis: Axis, q: np.ndarray, loc: np.ndarray, comp: np.ndarray, motio
                 r, t = -loc[:, 3:], -loc[:, :3]
                 out += [(("w", r) if r.any() else None, [("r", "loc", r, -1, -1.0)]),
                         (("t", t) if t.any() else None, [("t", "loc", -1.0)])]
+        if incline is not None and motion:     # before its motion: the axis's own frame
+            out.append((("w", -incline), []))
         return out
     # squareness tilts the line of motion; the carriage itself turns only by its own
     # angular error motions

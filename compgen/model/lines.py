@@ -17,14 +17,14 @@ perpendicular to the nominal direction (``shared/research/controllers.md`` §3.6
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..transforms import UNIT, rot_exact
 from .effects import effect_of_param
 from .kinematics import Model, inverse
-from .machine import Machine
+from .machine import Axis, Machine
 from .poses import Poses
 
 
@@ -32,7 +32,8 @@ from .poses import Poses
 class AxisLine:
     """A rotary axis line at the zero pose, machine coordinates.
 
-    ``nominal`` is the nominal direction ('x', 'y' or 'z'), ``pivot`` the nominal pivot
+    ``nominal`` is the letter of the nominal direction ('x', 'y' or 'z'), turned by
+    ``incline`` (rad) on an inclined axis (``Axis.incline``); ``pivot`` the nominal pivot
     (mm); ``offset`` (mm) and ``tilt`` (rad, a rotation vector turning the nominal direction
     onto the true one) are both perpendicular to the nominal direction.
     """
@@ -42,10 +43,28 @@ class AxisLine:
     pivot: np.ndarray
     offset: np.ndarray
     tilt: np.ndarray
+    incline: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @classmethod
+    def of(cls, axis: Axis, pivot: np.ndarray, offset: np.ndarray | None = None,
+           tilt: np.ndarray | None = None) -> AxisLine:
+        """The line of ``axis`` at ``pivot``, moved by ``offset`` and turned by ``tilt``
+        (none: its nominal line)."""
+        return cls(axis.name, axis.direction, pivot, np.zeros(3) if offset is None else offset,
+                   np.zeros(3) if tilt is None else tilt, np.asarray(axis.incline, float))
+
+    @property
+    def inclined(self) -> bool:
+        return bool(np.any(self.incline))
+
+    @property
+    def unit(self) -> np.ndarray:
+        """The nominal direction, a unit vector in machine coordinates."""
+        return rot_exact(self.incline)[:3, :3] @ UNIT[self.nominal]
 
     @property
     def direction(self) -> np.ndarray:
-        return rot_exact(self.tilt)[:3, :3] @ UNIT[self.nominal]
+        return rot_exact(self.tilt)[:3, :3] @ self.unit
 
 
 def location_params(machine: Machine, params: Mapping[str, float]) -> dict[str, float]:
@@ -72,14 +91,14 @@ def axis_lines(machine: Machine, params: Mapping[str, float]) -> dict[str, AxisL
                 continue
             frame = model.frame_before_motion(zero, values, chain, i)[0]
             nominal = nominal_pivot(chain, i)
-            e = UNIT[axis.direction]
-            point, d = frame[:3, 3], frame[:3, :3] @ e
+            e = axis.unit     # the frame before its motion is its own: inclined, if it is
+            point, d = frame[:3, 3], frame[:3, :3] @ UNIT[axis.direction]
             # where the true line crosses the plane through the nominal pivot ⟂ e
             point = point - ((point - nominal) @ e) / (d @ e) * d
             axis_of_turn = np.cross(e, d)
             s = np.linalg.norm(axis_of_turn)
             tilt = np.zeros(3) if s == 0 else axis_of_turn / s * np.arctan2(s, e @ d)
-            lines[axis.name] = AxisLine(axis.name, axis.direction, nominal, point - nominal, tilt)
+            lines[axis.name] = AxisLine.of(axis, nominal, point - nominal, tilt)
     return lines
 
 

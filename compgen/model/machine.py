@@ -18,6 +18,7 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import CompgenError
+from ..transforms import rodrigues
 
 LINEAR, ROTARY = "linear", "rotary"
 DIRECTIONS = ("x", "y", "z")
@@ -52,6 +53,12 @@ class Axis:
     mm/min (linear) or deg and deg/min (rotary), as on the machine's data plate. A rotary
     axis with ``hirth_deg`` is Hirth-coupled: it rests only on that grid (its teeth), and is
     measured only there.
+
+    An inclined (nutating) rotary axis turns about a unit vector that is none of x, y, z:
+    ``direction`` is then the letter of its name (B: y), ``incline`` the rotation vector
+    (rad) that turns that letter's unit vector onto the true one. Its own frame is the
+    machine's turned by ``incline``: its location and error motions are named and act in
+    it (XOB, ZOB across a B tilted about X), as the seed's are in the machine's.
     """
 
     name: str
@@ -63,6 +70,22 @@ class Axis:
     travel: tuple[float, float] = (-math.inf, math.inf)
     feed_max: float = math.inf
     hirth_deg: float | None = None    # a Hirth-coupled rotary axis: it rests only on this grid, deg
+    incline: tuple[float, float, float] = (0.0, 0.0, 0.0)   # an inclined axis's own frame, rad
+
+    @property
+    def inclined(self) -> bool:
+        return any(self.incline)
+
+    @cached_property
+    def frame(self) -> np.ndarray:
+        """The axis's own frame in its parent's orientation, (3, 3): its columns are its
+        x, y, z (the identity but on an inclined axis)."""
+        return _frozen(rodrigues(np.asarray(self.incline, float)))
+
+    @property
+    def unit(self) -> np.ndarray:
+        """The direction it moves along or turns about, a unit vector in the parent's frame."""
+        return self.frame[:, "xyz".index(self.direction)]
 
     def on_grid(self, deg: np.ndarray) -> np.ndarray:
         """Positions (deg) as the axis can hold them: on its Hirth grid (nearest), or as given."""

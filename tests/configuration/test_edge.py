@@ -41,7 +41,15 @@ BAD_MACHINE_EDITS = {
     "two linear axes along x": ('direction = "y"', 'direction = "x"',
                                 "one linear axis along each of x, y, z"),
     "a direction no axis has": ('direction = "y"', 'direction = "w"',
-                                "direction must be one of x, y, z, not 'w'"),
+                                "direction must be one of x, y, z or a vector [x, y, z], not 'w'"),
+    "an inclined linear axis": ('direction = "y"', "direction = [0.0, 1.0, 1.0]",
+                                "only a rotary axis A, B or C may be inclined"),
+    "an inclined axis across its letter": ('direction = "x"        #', "direction = [0.0, 1.0, 0.0] #",
+                                           "direction [0.0, 1.0, 0.0] of A is not within 90° of its letter's +x"),
+    "an inclined axis of no length": ('direction = "x"        #', "direction = [0.0, 0.0, 0.0] #",
+                                      "is not within 90° of its letter's +x"),
+    "an inclined axis of NaN": ('direction = "x"        #', "direction = [nan, 0.0, 1.0] #",
+                                "finite number"),
     "an axis type misspelt": ('type = "linear"', 'type = "linar"', "type must be 'linear' or 'rotary'"),
     "an empty axis type": ('type = "linear"', 'type = ""', "must be a non-empty string"),
     "sense 2": ("sense = -1 ", "sense = 2 ", "sense must be +1 or -1"),
@@ -466,7 +474,8 @@ def test_a_bundled_machine_is_named_from_anywhere(tmp_path):
                           cwd=tmp_path, capture_output=True, text=True)
     assert done.returncode == 0 and "EXC" in done.stdout, done.stderr
     code, _, err = run("effects", "--machine", "no-such-machine")
-    assert code == 2 and ("ac-trunnion-itnc530, bc-fork-head, bc-swivel-head-table, bc-table-sinumerik840d"
+    assert code == 2 and ("ac-trunnion-itnc530, bc-fork-head, bc-nutating-head-table, bc-swivel-head-table,"
+                          " bc-table-sinumerik840d"
                           in err), err
 
 

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -119,8 +119,7 @@ def head_lines(machine: Machine, along: float) -> dict[str, AxisLine]:
     lines = nominal_lines(machine)
     tilt = next(a for a in machine.heads if a.direction != "z")
     line = lines[tilt.name]
-    return {**lines, tilt.name: AxisLine(tilt.name, line.nominal, line.pivot, np.array([0.0, 0.0, along]),
-                                         np.zeros(3))}
+    return {**lines, tilt.name: replace(line, offset=np.array([0.0, 0.0, along]))}
 
 
 def pin_names(tilt) -> list[str]:

@@ -127,7 +127,7 @@ def read_lines(text: str, machine: Machine, current: str | None,
     r = np.array([now[f"{a}-rot-point"] - before[f"{a}-rot-point"] for a in "xyz"])
     d = np.array([now.get(f"{a}-offset", 0.0) - before.get(f"{a}-offset", 0.0) for a in "xyz"])
     zero = np.zeros(3)
-    return {**lines, c.name: AxisLine(c.name, c.direction, lines[c.name].pivot, r, zero),
-            tilt.name: AxisLine(tilt.name, tilt.direction, lines[tilt.name].pivot, r + d, zero)}
+    return {**lines, c.name: AxisLine.of(c, lines[c.name].pivot, r, zero),
+            tilt.name: AxisLine.of(tilt, lines[tilt.name].pivot, r + d, zero)}
 
 

@@ -204,7 +204,7 @@ def read_lines(text: str, machine: Machine, current: dict[int, float],
     for i, (a, t) in enumerate(zip(carr_axes(machine), (t1, t2), strict=True), start=1):
         dv = np.array([new[n] for n in VECTOR[i]])
         was = np.array([current[n] for n in VECTOR[i]])
-        out[a.name] = AxisLine(a.name, a.direction, lines[a.name].pivot, t, _turn(was, dv))
+        out[a.name] = AxisLine.of(a, lines[a.name].pivot, t, _turn(was, dv))
     return out
 
 

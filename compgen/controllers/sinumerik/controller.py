@@ -108,6 +108,7 @@ class Sinumerik840D(Controller):
     pose_line = re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)")
     tcpm_on = re.compile(r"^TRAORI\b", re.MULTILINE)
     tcp_switchable = True
+    holds_inclined = True         # the generic transformations' axis vectors, $TC_CARR7-12
     squareness_as = "tables"      # CEC tables hold squareness and every single-axis table
     section = "sinumerik"
     state_files = "the record's $TC_CARR lines, and the CEC tables' file"
@@ -131,10 +132,13 @@ class Sinumerik840D(Controller):
         vectors = {}
         for a in machine.rotary_axes:
             v = np.array(get.sub("vectors").vec3(a.name))
-            if abs(np.linalg.norm(v) - 1) > 1e-9 or abs(abs(v["xyz".index(a.direction)]) - 1) > 1e-9:
-                raise CompgenError(f"must be the unit vector ±{a.direction} the control holds for "
+            # an inclined axis's vector is written to the digits a user has (0.707107): a
+            # unit vector to 1e-6, along the axis to 1e-6 rad (0.2″)
+            if abs(np.linalg.norm(v) - 1) > 1e-6 or np.linalg.norm(np.cross(v, a.unit)) > 1e-6:
+                words = f"±{a.direction}" if not a.inclined else f"±({', '.join(f'{x:.6f}' for x in a.unit)})"
+                raise CompgenError(f"must be the unit vector {words} the control holds for "
                                    f"{a.name}, got {v.tolist()}", where=get.sub("vectors").at(a.name))
-            vectors[a.name] = v
+            vectors[a.name] = v / np.linalg.norm(v)
         kind = "".join(sorted(set(kinds.values())))
         names = {}
         if "machine_axes" in get.doc:     # channel axis -> machine axis, for CEC tables (K3 p.248)
