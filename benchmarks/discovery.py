@@ -308,7 +308,8 @@ def heads() -> None:
     location errors against the truth in their σ; a name that is neither the hidden effect
     nor among the equivalents of one added is marked WRONG."""
     print("\nheads (seed 11, 0.5 µm white noise)")
-    for path in (ROOT / "machines" / "bc-swivel-head-table.toml", ROOT / "machines" / "bc-fork-head.toml"):
+    for path in (ROOT / "machines" / "bc-swivel-head-table.toml", ROOT / "machines" / "bc-fork-head.toml",
+                 ROOT / "machines" / "bc-nutating-head-table.toml"):
         machine = load_machine(path)
         for name, (hidden, expect) in HEAD_CASES.items():
             used = replace(machine, gain_u=GAIN_U) if any(p.startswith(GAIN) for p in hidden) else machine

@@ -26,6 +26,7 @@ from ..model.lines import AxisLine, axis_lines, controller_inverse, nominal_pivo
 from ..model.machine import Machine
 from ..model.poses import Poses
 from ..statistics.results import FitResult
+from ..transforms import rot_exact
 
 ARCSEC = np.pi / 648000.0
 TABLE_POINTS = 37        # interpolation points of a generated compensation table
@@ -218,11 +219,16 @@ def rest(machine: Machine, p: Plan, held: Held, force: bool = False) -> Plan:
 
 def lines_text(p: Plan) -> list[str]:
     """The corrections in words, µm and arcsec, for every file's header."""
-    out = [f"{n} line at its pivot: offset " + ", ".join(
-        f"{t.upper()} {line.offset[i] * 1e3:+.2f} um" for i, t in enumerate("xyz") if t != line.nominal)
-        + "; tilt " + ", ".join(f"about {t.upper()} {line.tilt[i] / ARCSEC:+.2f} arcsec"
-                                for i, t in enumerate("xyz") if t != line.nominal)
-        for n, line in p.lines.items()]
+    out = []
+    for n, line in p.lines.items():
+        # an inclined line in its own frame, as the fit names its errors (XOB along B's own x)
+        frame = rot_exact(line.incline)[:3, :3]
+        offset, tilt = line.offset @ frame, line.tilt @ frame
+        own = f"{n}'s own " if line.inclined else ""
+        out.append(f"{n} line at its pivot: offset " + ", ".join(
+            f"{own}{t.upper()} {offset[i] * 1e3:+.2f} um" for i, t in enumerate("xyz") if t != line.nominal)
+            + "; tilt " + ", ".join(f"about {own}{t.upper()} {tilt[i] / ARCSEC:+.2f} arcsec"
+                                    for i, t in enumerate("xyz") if t != line.nominal))
     return out + [f"{n} squareness {v / ARCSEC:+.2f} arcsec" for n, v in p.squareness.items()]
 
 

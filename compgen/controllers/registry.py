@@ -35,13 +35,6 @@ def for_machine(name: str, machine: Machine, edit: bool = False) -> Controller:
     its kinematics edits): refused for a machine whose head turns the tool where compgen
     does not write that control's files for it (a table-table control's would be wrong)."""
     ctl = controller(name)
-    if machine.heads and not (ctl.edits_head(machine) if edit else ctl.writes_programs(machine)):
-        what = "kinematics edits" if edit else f"{ctl.words} programs"
-        heads = ", ".join(a.name for a in machine.heads)
-        raise CompgenError(f"compgen does not write {what} for a head yet: {machine.name}'s {heads} turns "
-                           "the tool", where=machine.source,
-                           hint="fit, diagnose and report hold for it; write its "
-                                + ("kinematics" if edit else "programs") + " by hand from the fitted values")
     inclined = [a for a in machine.rotary_axes if a.inclined]
     if edit and inclined and not ctl.holds_inclined:
         a = inclined[0]
@@ -50,6 +43,13 @@ def for_machine(name: str, machine: Machine, edit: bool = False) -> Controller:
                            "(UNCONFIRMED U24)", where=machine.source,
                            hint="fit, diagnose and report hold for it; enter the fitted lines by hand, or "
                                 "write the edit for a SINUMERIK, whose $TC_CARR vectors take any direction")
+    if machine.heads and not (ctl.edits_head(machine) if edit else ctl.writes_programs(machine)):
+        what = "kinematics edits" if edit else f"{ctl.words} programs"
+        heads = ", ".join(a.name for a in machine.heads)
+        raise CompgenError(f"compgen does not write {what} for a head yet: {machine.name}'s {heads} turns "
+                           "the tool", where=machine.source,
+                           hint="fit, diagnose and report hold for it; write its "
+                                + ("kinematics" if edit else "programs") + " by hand from the fitted values")
     return ctl
 
 

@@ -45,7 +45,7 @@ BAD_MACHINE_EDITS = {
     "an inclined linear axis": ('direction = "y"', "direction = [0.0, 1.0, 1.0]",
                                 "only a rotary axis A, B or C may be inclined"),
     "an inclined axis across its letter": ('direction = "x"        #', "direction = [0.0, 1.0, 0.0] #",
-                                           "direction [0.0, 1.0, 0.0] of A is not within 90° of its letter's +x"),
+                                           "[0.0, 1.0, 0.0] of A is not within 90° of its letter's +x"),
     "an inclined axis of no length": ('direction = "x"        #', "direction = [0.0, 0.0, 0.0] #",
                                       "is not within 90° of its letter's +x"),
     "an inclined axis of NaN": ('direction = "x"        #', "direction = [nan, 0.0, 1.0] #",

@@ -11,7 +11,7 @@ from conftest import ARCSEC, NUTATING_MACHINE, UM, run
 from scipy.spatial.transform import Rotation
 
 from compgen.configuration.machine_file import load_machine
-from compgen.controllers.correction import plan
+from compgen.controllers.correction import lines_text, plan
 from compgen.controllers.kinematics import kinematics_edit
 from compgen.controllers.registry import read_edits
 from compgen.data.rtest import commanded, format_rtest
@@ -211,7 +211,8 @@ def test_a_control_with_no_place_for_an_inclined_axis_refuses_in_one_line(nutati
     and where to go, nothing written. The fit's words name B's own directions."""
     machine, poses = nutating
     data = tmp_path / "s.csv"
-    data.write_text(format_rtest(machine, simulate(machine, TRUTH, poses, NOISE_UM, np.random.default_rng(3))))
+    session = simulate(machine, TRUTH, poses, NOISE_UM, np.random.default_rng(3))
+    data.write_text(format_rtest(machine, session))
     fit = tmp_path / "f.json"
     code, out, err = run("fit", "--machine", NUTATING_MACHINE, data, "-o", fit)
     assert code == 0 and "B axis line offset along B's own z (0, -0.7071, 0.7071)" in out, err
@@ -219,3 +220,35 @@ def test_a_control_with_no_place_for_an_inclined_axis_refuses_in_one_line(nutati
         code, _, err = run("kinematics", "--from", fit, "--controller", ctl, "-o", tmp_path / "KIN")
         assert code == 2 and "inclined axis" in err and "U24" in err and err.count("\n") == 1, err
         assert sorted(p.name for p in tmp_path.iterdir()) == ["f.json", "s.csv"]
+
+
+def test_its_programs_run_on_every_control_that_holds_its_kinematics(tmp_path):
+    """Every path in one program under TCPM on both HEIDENHAIN controls (the SINUMERIK one is
+    the bundled machine's own: test_bundled), passed by check-program with the head's body;
+    LinuxCNC has no module for a nutating head (maxkins turns about +Y): refused in one line."""
+    for ctl in ("tnc640", "itnc530"):
+        out = tmp_path / f"ALL_{ctl}.H"
+        code, _, err = run("measure-program", "--machine", NUTATING_MACHINE, "--path", "all",
+                           "--controller", ctl, "-o", out)
+        assert code == 0, err
+        text = out.read_text()
+        assert "FUNCTION TCPM" in text
+        assert "B is inclined: it turns about (0.000000, 0.707107, 0.707107)" in text
+        code, said, err = run("check-program", "--machine", NUTATING_MACHINE, "--controller", ctl, out)
+        assert code == 0 and "OK" in said, err
+    out = tmp_path / "ALL.ngc"
+    code, _, err = run("measure-program", "--machine", NUTATING_MACHINE, "--path", "K2",
+                       "--controller", "linuxcnc", "-o", out)
+    assert code == 2 and "does not write LinuxCNC" in err and err.count("\n") == 1 and not out.exists(), err
+
+
+def test_the_edit_says_the_inclined_line_in_its_own_frame(nutating):
+    """The header's words name B's offsets and tilts along its own x and z, the fit's
+    parameters to rounding, not machine X and Z (which would drop B's Y part)."""
+    machine, poses = nutating
+    truth = {"XOB": 10 * UM, "ZOB": -7 * UM, "AOB": 4 * ARCSEC, "COB": 8 * ARCSEC}
+    fit = identify(machine, [simulate(machine, truth, poses, 0.0, np.random.default_rng(0))],
+                   location_model(machine))
+    words = next(w for w in lines_text(plan(machine, fit)) if w.startswith("B line"))
+    assert words == ("B line at its pivot: offset B's own X +10.00 um, B's own Z -7.00 um; "
+                     "tilt about B's own X +4.00 arcsec, about B's own Z +8.00 arcsec"), words

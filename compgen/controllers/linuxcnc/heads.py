@@ -22,7 +22,7 @@ def trt_module(machine: Machine) -> tuple[str, object, object]:
     """The trt module for a two-axis table (A or B tilting, C on it), or a clear refusal."""
     axes = machine.rotary_axes
     if (len(axes) != 2 or any(a.side != "workpiece" for a in axes) or axes[1].direction != "z"
-            or axes[0].direction not in "xy"):
+            or axes[0].direction not in "xy" or any(a.inclined for a in axes)):
         raise CompgenError("LinuxCNC's trt kinematics is for a tilting table (A or B) carrying C",
                            hint="this machine's chain is not one xyzac-/xyzbc-trt-kins can drive")
     return f"xyz{axes[0].name.lower()}c-trt-kins", axes[0], axes[1]
@@ -66,12 +66,12 @@ def head_module(machine: Machine) -> tuple[HeadModule, float] | None:
     """LinuxCNC's module for ``machine``'s head and the pivot-length it needs (mm: the pivot
     to the nest centre, the nest's length in it), or None where no module fits: every head
     axis pivoting on the tool axis at one point, a table axis turning about the origin, each
-    turning right-handed in the machine file."""
+    turning right-handed in the machine file about its letter's axis (none inclined)."""
     heads, tables = machine.heads, [a for a in machine.rotary_axes if a.side == "workpiece"]
     for m in HEAD_MODULES:
         if ([(a.name, a.direction) for a in heads] != list(m.head)
                 or [(a.name, a.direction) for a in tables] != list(m.table)
-                or any(a.sense != 1 for a in machine.rotary_axes)
+                or any(a.sense != 1 or a.inclined for a in machine.rotary_axes)
                 or any(any(c.offset) for c in tables) or any(heads[0].offset[:2])
                 or any(any(a.offset) for a in heads[1:])):
             continue
