@@ -32,7 +32,7 @@ from ..units import shown
 from .advising import Advising, Proposal
 from .device import DeviceCandidate, device_candidates, device_columns
 from .diagnosis import REPEATS_TRIED, Candidate, Diagnosis, _outside_line, _unexplained
-from .noise import ar1, outliers, repeats
+from .noise import Lazy, ar1, outliers, repeats
 from .ranking import Row, Whitening, effect_columns, rank, started_reversals
 from .results import FitResult
 from .separation import Measured, separating, telling_apart
@@ -395,7 +395,8 @@ def _ranked(machine: Machine, fit: FitResult, effects: Sequence[Effect], res: _R
     u, sv, _ = np.linalg.svd(c - Q @ (Q.T @ c), full_matrices=False)
     beyond = u[:, sv > 1e-9 * sv.max()] if sv.size and sv.max() > 0 else u[:, :0]   # c's span beyond Q
     rest = r - beyond @ (beyond.T @ r)
-    rho = ar1(rest.reshape(-1, 3), seg, (Q, beyond), RHO_MARGIN_SE)
+    taken = Lazy(Q.shape[1] + beyond.shape[1], lambda: (Q, beyond))
+    rho = ar1(rest.reshape(-1, 3), seg, taken, RHO_MARGIN_SE)
     if rho.any():
         noise = Whitening(seg, rho, Q)
         rw = noise.residual(r)

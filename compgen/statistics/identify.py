@@ -22,7 +22,7 @@ from ..model.machine import Machine
 from ..model.poses import Poses, runs
 from ..model.sides import NEST, SETUP, FreeConstants, both_sides, continues, mountings, nest_mountings
 from ..units import parse_quantity, shown
-from .noise import ar1, ar1_covariance
+from .noise import Lazy, ar1, ar1_covariance
 from .results import DataRef, Estimate, FitResult
 from .significance import COND_LIMIT, condition, tall_qr
 
@@ -148,7 +148,8 @@ def _uncertainty(poses: Poses, data: Sequence[RTestData], project, starts: FreeC
     # the estimates' covariance under that noise; white noise keeps σ²(JᵀJ)⁻¹
     seg = runs(poses, np.concatenate([np.full(len(d), k) for k, d in enumerate(data)]))
     # what the fit took out of r (its start sides, J's span): ρ̂ is matched beyond it
-    basis = (*((project.basis(len(poses)),) if starts.count else ()), normal.basis())
+    basis = Lazy(starts.count + p, lambda: (*((project.basis(len(poses)),) if starts.count else ()),
+                                              normal.basis()))
     rho = ar1(r.reshape(-1, 3), seg, basis)
     if rho.any():
         cov = ar1_covariance(normal.J.T.reshape(p, len(poses), 3), r.reshape(-1, 3), seg, rho, dof)

@@ -15,7 +15,7 @@ side): beyond ``OUTLIER_Z`` robust standard deviations of that difference, and b
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,6 +30,18 @@ OUTLIER_MIN_UM = 1.0    # a step below this is noise on any R-test (0.5–1 µm 
 NEIGHBOURS = 2          # each side
 SAME_RHO_P = 0.05       # segments' ρ̂ differing at this level are not one device's
 REPEATS_MIN = 30        # readings beyond the first of each repeated pose, before they say what the noise is
+
+
+@dataclass(frozen=True)
+class Lazy:
+    """A basis of ``columns`` columns (in total, blocks side by side) made when called: what
+    ``ar1`` need not make where the noise is white beyond any basis of that size."""
+
+    columns: int
+    make: Callable[[], np.ndarray | Sequence[np.ndarray]]
+
+    def __call__(self):
+        return self.make()
 
 
 def _previous(x: np.ndarray, seg: np.ndarray) -> np.ndarray:
@@ -47,7 +59,8 @@ def ar1(r: np.ndarray, seg: np.ndarray, basis: np.ndarray | Sequence[np.ndarray]
 
     ``basis`` (3n, k), orthonormal, or such blocks side by side (never copied whole), spans
     what the fit took out of r (rows reading by reading, X Y Z): r's lag-1 sum and energy
-    are then matched to what they are expected to be beyond that span (``_matched``). The
+    are then matched to what they are expected to be beyond that span (``_matched``). It may
+    be a ``Lazy`` of k columns, made only where some ρ̂ could reach the floor. The
     fit's smooth columns take low frequencies, and so correlation, with them: at ρ 0.9 on
     K4 + K1 + K2 (fit's residual, 200 sessions) Kendall's correction for a segment's mean
     alone leaves ρ̂ 0.894 on average, matched 0.898. Beside diagnose's best candidate,
@@ -73,6 +86,10 @@ def ar1(r: np.ndarray, seg: np.ndarray, basis: np.ndarray | Sequence[np.ndarray]
     lags = np.stack([np.bincount(at_seg, lag[:, d], len(segs)) for d in range(3)], axis=1)
     raw = np.divide(lags, energy, out=np.zeros_like(lags), where=energy > 0)
     est = raw + (1 + 3 * raw) / n[:, None]       # the lag-1 estimate's bias (Kendall, 1954)
+    if callable(basis):
+        if _white_beyond_any(raw, n, basis):     # no ρ̂ the basis could lift to the floor:
+            return np.zeros_like(r)              # not made, not matched (1.7 s at 723 000 readings)
+        basis = basis()
     parts = [] if basis is None else [basis] if isinstance(basis, np.ndarray) else list(basis)
     parts = [b.reshape(len(r), 3, -1) for b in parts if b.shape[1]]
     if parts:
@@ -90,6 +107,19 @@ def ar1(r: np.ndarray, seg: np.ndarray, basis: np.ndarray | Sequence[np.ndarray]
     keep = est > np.maximum(2 / np.sqrt(np.maximum(size, 1)), RHO_FLOOR)
     est = est + margin * np.sqrt(np.clip(1 - est**2, 0.0, 1.0) / np.maximum(size, 1))
     return np.where(keep, np.minimum(est, RHO_MAX), 0.0)[at_seg]
+
+
+def _white_beyond_any(raw: np.ndarray, n: np.ndarray, basis) -> bool:
+    """Whether every segment's ρ̂ stays below ``RHO_FLOOR`` whatever a basis of ``basis.columns``
+    columns does to it: matching moves the raw lag-1 ratio by what the basis takes of the lag
+    sum, at most its columns' energy in the segment over what is left, k/(m − k) (Cauchy–
+    Schwarz, each column of unit norm), and the ratio's own bias 2ρ/m; twice that bounds it.
+    At streaming size (m ~ 10⁵, k ~ 15) white noise is told at once; a run of 121 readings
+    never is (the bound is 0.25)."""
+    k = getattr(basis, "columns", None)
+    if k is None or not len(n) or n.min() <= k:
+        return False
+    return bool((raw + 2 * (k + 3) / (n[:, None] - k) < RHO_FLOOR).all())
 
 
 MATCH_ROUNDS = 2        # the second moves ρ̂ by < 1e-4 on K4 + K1 + K2 at ρ 0.5–0.95

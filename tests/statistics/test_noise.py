@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from compgen.data.simulate import ar1_noise
-from compgen.statistics.noise import OUTLIER_MIN_UM, ar1, outliers, whiten
+from compgen.statistics.noise import OUTLIER_MIN_UM, Lazy, ar1, outliers, whiten
 
 
 def test_segments_break_at_a_new_file_or_path():
@@ -249,3 +249,28 @@ def test_the_estimate_is_matched_beyond_the_span_the_fit_took_out(rho):
         kendall.append(ar1(r, seg).mean())
     assert abs(np.mean(matched) - rho) < 0.005, np.mean(matched)
     assert np.mean(kendall) < rho - 0.015, np.mean(kendall)
+
+
+@pytest.mark.parametrize("n, rho, made", [(150_000, 0.0, False), (150_000, 0.3, True), (240, 0.0, True)])
+def test_a_lazy_basis_is_made_only_where_a_rho_could_reach_the_floor(n, rho, made):
+    """Three runs less their fit of 15 columns: white noise at streaming size is told white
+    without the basis (nothing the basis could do lifts its ρ̂ to the floor); correlated
+    noise, and a short run where the bound says nothing, make it. Either way ρ̂ is the one
+    the basis given at once gives."""
+    rng = np.random.default_rng(3)
+    seg = np.repeat([0, 1, 2], n // 3)
+    t = np.linspace(0, 1, n)
+    cols = []
+    for d in range(3):
+        for shape in [*(seg == s for s in range(3)), np.sin(3 * t), np.cos(5 * t)]:
+            c = np.zeros((n, 3))
+            c[:, d] = shape
+            cols.append(c.ravel())
+    B = np.linalg.qr(np.array(cols).T)[0]
+    e = np.vstack([ar1_noise(n // 3, rho, 1e3, rng) for _ in range(3)]).ravel()
+    r = (e - B @ (B.T @ e)).reshape(n, 3)
+    calls = []
+    got = ar1(r, seg, Lazy(B.shape[1], lambda: calls.append(1) or B))
+    assert bool(calls) is made
+    np.testing.assert_array_equal(got, ar1(r, seg, B))
+    assert bool(got.any()) is (rho > 0)
