@@ -11,6 +11,7 @@ import sys
 import click
 
 from .. import called_as, me
+from ..configuration.machine_file import bundled_machines
 from ..controllers.registry import CONTROLLERS
 from ..errors import CompgenError, one_line
 from ..files import STDOUT, new_command, read_text
@@ -106,8 +107,8 @@ def progress(message: str) -> None:
 FILE = click.Path(dir_okay=False)
 CONTROLLER_NAMES = " | ".join(CONTROLLERS)
 MACHINE = click.option("--machine", "machine_file", type=FILE, required=True,
-                       help="Machine file (TOML), or a bundled machine by name: ac-trunnion-itnc530, "
-                            "bc-table-sinumerik840d, bc-swivel-head-table, bc-fork-head.")
+                       help="Machine file (TOML), or a bundled machine by name: "
+                            + ", ".join(bundled_machines()) + ".")
 OUTPUT = click.option("-o", "--output", type=FILE, required=True, help="File to write.")
 FORCE = click.option("--force", is_flag=True, help="Overwrite an existing output file.")
 
