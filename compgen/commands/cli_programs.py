@@ -198,13 +198,17 @@ def check_program_cmd(machine_file, program, controller_name, ball, nest, mode, 
               help="The R-test's noise, 1σ per reading, µm (default: the machine file's [rtest] noise_um).")
 @click.option("--rho", type=Finite(min=0, max=0.99), default=0.0, show_default=True,
               help="AR(1) correlation of the noise from reading to reading within a run.")
+@click.option("--effects", default=None, metavar="NAMES",
+              help="Effects the plan must tell apart where the machine file's paths do, comma-separated "
+                   "(e.g. ECC:h2,EXC+EYC:h2); default: each rotary axis's angular 1/rev and 2/rev, "
+                   "radial 2/rev, and a tilting axis's sag.")
 @click.option("-o", "--output", "folder", type=click.Path(file_okay=False), default=None,
               help="Folder for plan.json and each set-up's program and pose list.")
 @click.option("--check", "check_dir", type=click.Path(file_okay=False), default=None,
               help="A plan written before: its programs and σ against the machine file as it is now "
                    "(exit 1 where it no longer holds).")
 @FORCE
-def plan_cmd(machine_file, minutes, noise_um, rho, folder, check_dir, force):
+def plan_cmd(machine_file, minutes, noise_um, rho, effects, folder, check_dir, force):
     """Design the measurement before the machine moves: the set-ups this machine can run
     that tell its location errors best within the minutes given, each program checked."""
     from ..planning.plan import checked, files, plan, text
@@ -229,7 +233,12 @@ def plan_cmd(machine_file, minutes, noise_um, rho, folder, check_dir, force):
         raise CompgenError("the R-test's noise is not known: the plan's σ scale with it",
                            hint="give --noise-um (the device's calibration), or [rtest] noise_um in the "
                                 "machine file")
-    result = plan(machine, minutes, noise, rho)
+    named = None if effects is None else [n.strip() for n in effects.split(",") if n.strip()]
+    if named is not None and len(named) < 2:
+        raise CompgenError(f"--effects {effects!r}: name two effects or more, comma-separated, to tell "
+                           "apart", hint=f"list the catalogue with {me()} effects --machine "
+                                         f"{shlex.quote(machine_file)}")
+    result = plan(machine, minutes, noise, rho, effects=named)
     out = files(machine, result, Path(folder), __version__, date.today().isoformat())
     Path(folder).mkdir(parents=True, exist_ok=True)
     write_all(out, force, inputs=(machine_file,))

@@ -255,7 +255,7 @@ def _axis_symbols(axis: Axis) -> dict:
         positioning = e == (ROT_OF[d] if axis.rotary else d)
         out[f"E{E}{L}"] = (L, "comp", e, kinds + ("r",) * positioning, words, cause, 1)
     if axis.rotary:
-        u, w = _turning_pair(d)
+        u, w = turning_pair(d)
         for pair, kind in (((u, w), "radial"), ((ROT_OF[u], ROT_OF[w]), "tilt")):
             out["+".join(f"E{e.upper()}{L}" for e in pair)] = (
                 L, "comp", "".join(pair), ("h",), f"{kind} error motion of {L}, a vector turning",
@@ -281,7 +281,7 @@ def _shown(v) -> str:
     return "(" + ", ".join(f"{x + 0.0:.4g}" for x in np.round(v, 12)) + ")"
 
 
-def _turning_pair(d: str) -> tuple[str, str]:
+def turning_pair(d: str) -> tuple[str, str]:
     """The two directions across axis direction ``d``, in right-handed order about it."""
     i = TRANSLATIONS.index(d)
     return TRANSLATIONS[(i + 1) % 3], TRANSLATIONS[(i + 2) % 3]

@@ -18,8 +18,13 @@ sets it met give the front of worst σ against minutes. A ball moved to another 
 new mounting: it costs ``mount_minutes`` more, and its offset is fitted anew. ``checked``
 runs a plan written before against the machine file as it is now.
 
-Not built: telling named effects apart while planning (``--effects``: the advice's
-separations), a probe's plan, the ball's positions beyond the advice's places."""
+Among the sets met, the plan is the one of least worst σ that tells apart every pair of the
+named effects (``--effects``; default ``apart.common_effects``) the machine file's own paths
+tell apart, by the advice's margin (``apart.py``); plan.json gives each pair's sizes, and the
+condition of the location errors, for the plan and for the default.
+
+Not built: a probe's plan, the ball's positions beyond the advice's places, a reversal
+among the effects told apart."""
 
 from __future__ import annotations
 
@@ -36,14 +41,16 @@ from ..controllers.registry import controller
 from ..data.rtest import read_poses
 from ..errors import CompgenError
 from ..files import read_text
-from ..model.effects import effect_of_param, location_model
+from ..model.effects import Effect, effect_of_param, location_model, resolve
 from ..model.kinematics import Model
 from ..model.machine import Machine
 from ..model.poses import Poses, runs
 from ..model.sides import NEST, SETUP, FreeConstants
 from ..statistics.noise import ar1_covariance
+from ..statistics.separation import TELLS_APART
 from ..units import DISPLAY
 from .advice import MODE, Proposal, proposals
+from .apart import Apart, common_effects, holds, separations
 
 MOUNT_MINUTES = 5.0      # taking the ball off its place and mounting it at another, checked
 BEAM = 40                # sets kept at each size of the search
@@ -84,6 +91,32 @@ class Plan:
     default: tuple[float, dict[str, float], float]       # minutes, σ, worst
     noise_um: float
     rho: float
+    told: Told | None = None            # what the plan tells: its condition and separations
+    default_told: Told | None = None    # the same of the machine file's own paths
+    told_kept: bool = True              # it tells apart every pair the default does, as well
+
+
+@dataclass(frozen=True)
+class Told:
+    """What a set of set-ups tells beyond σ: the condition number of its location errors'
+    Jacobian (columns scaled to unit norm), which named effects it sees beyond them, and
+    each pair's separation (``apart.py``)."""
+
+    condition: float
+    seen: dict[str, bool]
+    apart: tuple[Apart, ...]
+
+
+def _told(info: np.ndarray, p: int, effects: Sequence[Effect], noise_um: float) -> Told:
+    loc = info[:p, :p]
+    d = np.sqrt(np.clip(np.diag(loc), 1e-300, None))
+    condition = float(np.sqrt(np.linalg.cond(loc / np.outer(d, d)))) if _identifies(loc) else np.inf
+    spans, at = {}, p
+    for e in effects:
+        spans[e.name] = slice(at, at + len(e.params))
+        at += len(e.params)
+    seen, apart = separations(info, p, spans, noise_um)
+    return Told(condition, seen, tuple(apart))
 
 
 def judged(machine: Machine) -> list[str]:
@@ -123,8 +156,10 @@ def covariance(machine: Machine, poses: Poses, noise_um: float, rho: float = 0.0
     return cov[3:, 3:]
 
 
-def _products(machine: Machine, poses: Poses) -> dict:
-    names = judged(machine)
+def _products(machine: Machine, poses: Poses, effects: Sequence[Effect] = ()) -> dict:
+    """The small products of one set-up's columns: the location errors (``judged``) and the
+    ``effects``' parameters after them (J), the ball's offset (G) and the nest's (N)."""
+    names = [*judged(machine), *(n for e in effects for n in e.params)]
     J = Model(machine, names).linearise(poses)[1].reshape(-1, len(names))
     G = Model(machine, list(SETUP)).linearise(poses)[1].reshape(-1, 3)
     N = Model(machine, list(NEST)).linearise(poses)[1].reshape(-1, 3)
@@ -132,9 +167,11 @@ def _products(machine: Machine, poses: Poses) -> dict:
 
 
 def _information(setups: Sequence[Setup], p: int) -> np.ndarray:
-    """The rotary axes' information (per unit noise) of ``setups``: each ball mounting's
-    offset and each nest other than the machine file's fitted beside them (a Schur
-    complement of the small products)."""
+    """The information (per unit noise) of ``setups`` over the columns of their products,
+    the rotary axes' location errors first (``p`` of them, and any effects' after): each ball
+    mounting's offset and each nest other than the machine file's fitted beside them (a
+    Schur complement of the small products)."""
+    p = setups[0].products["JJ"].shape[0] if setups else p
     balls = list(dict.fromkeys(s.ball for s in setups))
     nests = list(dict.fromkeys(s.proposal.nest for s in setups if s.proposal.nest is not None))
     k = 3 * (len(balls) + len(nests))
@@ -166,21 +203,24 @@ def _scaled(cov: np.ndarray, unit: np.ndarray) -> float:
 
 
 def _worst(info: np.ndarray, noise_um: float, unit: np.ndarray) -> float:
-    """The worst scaled σ of the rotary axes' information ``info`` (per unit noise)."""
+    """The worst scaled σ of the rotary axes' information (per unit noise; the first
+    ``len(unit)`` columns of ``info``: the effects after them are not fitted)."""
+    info = info[:len(unit), :len(unit)]
     if not _identifies(info):
         return np.inf
     return float((noise_um * 1e-3 * np.sqrt(np.diag(np.linalg.inv(info))) / unit).max())
 
 
-def candidates(machine: Machine) -> list[Setup]:
-    """Every set-up the machine can run, timed by the motion check."""
+def candidates(machine: Machine, effects: Sequence[Effect] = ()) -> list[Setup]:
+    """Every set-up the machine can run, timed by the motion check, its products holding
+    the ``effects``' columns too."""
     out = []
     for m in (v for p in proposals(machine, None) for v in _thinned(p)):
         try:
             done = checked_program(machine, m.poses, m.path, machine.controller, MODE, "PLAN", "", "")
         except CompgenError:
             continue
-        out.append(Setup(m, done.seconds / 60.0, _products(machine, m.poses)))
+        out.append(Setup(m, done.seconds / 60.0, _products(machine, m.poses, effects)))
     return out
 
 
@@ -211,9 +251,12 @@ def _poses(setups: Sequence[Setup]) -> Poses:
 
 
 def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
-         mount_minutes: float = MOUNT_MINUTES) -> Plan:
+         mount_minutes: float = MOUNT_MINUTES, effects: Sequence[str] | None = None) -> Plan:
     """The set-ups with the least worst scaled σ within ``minutes`` (a beam search over sets
-    of the set-ups the machine can run, ``BEAM`` kept at each size)."""
+    of the set-ups the machine can run, ``BEAM`` kept at each size) that tell apart every
+    pair of ``effects`` (default ``common_effects``) the machine file's own paths tell apart
+    (``apart.holds``); where no set within the minutes does, the least worst σ, and
+    ``told_kept`` false."""
     if not minutes > 0:
         raise CompgenError(f"--minutes {minutes:g}: give the minutes the machine is yours for")
     if machine.program is None:
@@ -222,13 +265,20 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
                                                 "machines)")
     names = judged(machine)
     unit = scales(machine, names)
-    offered = candidates(machine)
+    named = common_effects(machine) if effects is None else [resolve(machine, n) for n in effects]
+    reversal = next((e.name for e in named if e.basis.kind == "r"), None)
+    if reversal is not None:
+        raise CompgenError(f"--effects {reversal}: a reversal's start sides are free constants a plan's "
+                           "information does not hold yet", hint="leave it out; diagnose's advice on data "
+                                                                  "tells a reversal apart")
+    offered = candidates(machine, named)
     own = [s for s in offered if s.proposal.label in machine.paths]
     if not own:
         raise CompgenError(f"no path of {machine.source} can be measured on this machine",
                            hint=f"check the paths with measure-program --machine {machine.source}")
     default_cov = covariance(machine, _poses(own), noise_um, rho)
     default = (_minutes(own, mount_minutes), _sigmas(names, default_cov), _scaled(default_cov, unit))
+    default_told = _told(_information(own, len(names)), len(names), named, noise_um)
 
     level: list[frozenset] = [frozenset()]          # sets of set-ups, by their index in ``offered``
     seen: dict[frozenset, tuple[float, float]] = {}
@@ -250,7 +300,15 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
     if not finite:
         raise CompgenError(f"no set of set-ups within {minutes:g} minutes identifies the location errors: "
                            f"the machine file's own paths take {default[0]:.1f}", hint="give more --minutes")
-    best = min(finite, key=lambda k: finite[k])
+    best, told, kept = None, None, False
+    for key in sorted(finite, key=lambda k: finite[k]):       # the least worst σ that tells apart
+        sets = [offered[i] for i in sorted(key)]
+        now = _told(_information(sets, len(names)), len(names), named, noise_um)
+        if best is None:
+            best, told = key, now
+        if holds(now.apart, default_told.apart):
+            best, told, kept = key, now, True
+            break
     chosen = _ordered([offered[i] for i in sorted(best)])
     cov = covariance(machine, _poses(chosen), noise_um, rho)
     front, low = [], np.inf
@@ -259,7 +317,7 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
             front.append((spent, w))
             low = w
     return Plan(tuple(chosen), _minutes(chosen, mount_minutes), _sigmas(names, cov), _scaled(cov, unit),
-                tuple(front), default, noise_um, rho)
+                tuple(front), default, noise_um, rho, told, default_told, kept)
 
 
 def _sigmas(names: Sequence[str], cov: np.ndarray) -> dict[str, float]:
@@ -299,11 +357,33 @@ def files(machine: Machine, p: Plan, folder: Path, version: str, date: str) -> d
            "setups": setups, "mount_minutes": MOUNT_MINUTES,
            "front": [{"minutes": round(m, 2), "worst_scaled_sigma": w} for m, w in p.front],
            "default": {"paths": list(machine.paths), "minutes": round(p.default[0], 2),
-                       "sigma": _shown(names, machine, p.default[1]), "worst_scaled_sigma": p.default[2]},
-           "not_built": ["telling named effects apart (--effects: the advice's separations)",
-                         "a probe's plan", "ball positions beyond the advice's places"]}
+                       "sigma": _shown(names, machine, p.default[1]), "worst_scaled_sigma": p.default[2],
+                       **_told_doc(machine, p.default_told)},
+           **_told_doc(machine, p.told),
+           "separations_as_default": p.told_kept,
+           "not_built": ["a probe's plan", "ball positions beyond the advice's places",
+                         "backlash among the effects told apart (its start sides are free constants)"]}
     out[folder / "plan.json"] = json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
     return out
+
+
+def _told_doc(machine: Machine, told: Told | None) -> dict:
+    """``condition`` and ``separations`` as plan.json holds them: each pair with the size of
+    each effect above which it is told from the other (null: no size is), and the effects
+    the location errors absorb whole."""
+    if told is None:
+        return {}
+
+    def size(name: str, v: float):
+        unit, factor = DISPLAY[resolve(machine, name).unit]
+        return {"value": round(v * factor, 4), "unit": unit} if np.isfinite(v) else None
+
+    return {"condition": round(told.condition, 2) if np.isfinite(told.condition) else None,
+            "separations": {"margin": f"{TELLS_APART:g} sigma^2 of misfit (5 sigma), as diagnose's advice",
+                            "unseen": [n for n, ok in told.seen.items() if not ok],
+                            "pairs": [{"pair": list(x.pair), "told_apart_above": {
+                                n: size(n, v) for n, v in zip(x.pair, x.above, strict=True)}}
+                                for x in told.apart]}}
 
 
 def text(machine: Machine, p: Plan) -> str:
@@ -319,9 +399,31 @@ def text(machine: Machine, p: Plan) -> str:
              f"(the machine file's paths {', '.join(machine.paths)})",
              f"  ratio   {p.worst / p.default[2]:.2f} of the default's worst σ", "", "  set-ups, in order:"]
     lines += [f"    {i}. {s.proposal.label:<58} {s.minutes:5.1f} min" for i, s in enumerate(p.setups, 1)]
+    lines += _told_text(machine, p)
     lines += ["", "  what more minutes buy (worst σ of its [limits]):"]
     lines += [f"    {m:6.1f} min  {w:.4f}" for m, w in p.front]
     return "\n".join(lines) + "\n"
+
+
+def _told_text(machine: Machine, p: Plan) -> list[str]:
+    """The condition and separations in a few lines: how many pairs each tells apart, and
+    the pair the plan tells apart least well against the default's."""
+    if p.told is None or p.default_told is None:
+        return []
+
+    def count(t: Told) -> int:
+        return sum(all(np.isfinite(x.above)) for x in t.apart)
+
+    out = ["", f"  condition {p.told.condition:.1f} (default {p.default_told.condition:.1f}); of "
+           f"{len(p.told.apart)} pairs of {len(p.told.seen)} effects, told apart at some size: "
+           f"{count(p.told)} (default {count(p.default_told)})"]
+    if not p.told_kept:
+        out.append("  no set within these minutes tells apart every pair the default does: this one has the "
+                   "least worst σ (plan.json: separations)")
+    unseen = [n for n, ok in p.told.seen.items() if not ok]
+    if unseen:
+        out.append(f"  absorbed by the location errors whole, on this plan: {', '.join(unseen)}")
+    return out
 
 
 def checked(machine: Machine, folder: Path) -> tuple[list[str], bool, dict]:
