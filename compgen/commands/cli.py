@@ -21,7 +21,7 @@ from ..controllers.programs import (
 )
 from ..controllers.registry import for_machine, read_edits, read_state
 from ..data.probe import format_probe_log, probe_poses, simulate_touches
-from ..data.rtest import SIGNS, format_rtest, read_poses
+from ..data.rtest import SIGNS, Measurements, format_rtest, read_poses
 from ..data.simulate import read_truth, simulate
 from ..errors import CompgenError
 from ..files import STDOUT, read_text, write_all, write_atomically
@@ -187,20 +187,27 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
                    "seed's first-order least squares only.")
 @click.option("--sign", type=click.Choice(SIGNS), default=None,
               help="What the R-test device reports (default nest-minus-ball, or the --from fit's).")
+@click.option("--mounted-again", "again", multiple=True, type=FILE, metavar="CSV",
+              help="A data file measured after the ball and the nest were taken off and mounted again, "
+                   "at the same place too: its readings get offsets of their own. Repeatable.")
+@click.option("--not-touched", "untouched", multiple=True, type=FILE, metavar="CSV",
+              help="A data file measured with the set-up as the file before it left it: no step of the "
+                   "set-up is tried before it. Repeatable.")
 @OUTPUT
 @FORCE
 @RECORD
 @SERIAL
 @DATE
 @DB
-def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, method, sign, output, force,
-            record, serial, taken, db):
+def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, method, sign, again, untouched,
+            output, force, record, serial, taken, db):
     """Identify location errors (and any added effects) from R-test DATA files (CSV v1)."""
     if record:
         from ..history import taken_at
         taken = taken_at(taken)      # a bad --date is refused before fit.json is written
     names = [n.strip() for n in model_names.split(",") if n.strip()] if model_names else None
-    asked = fit_request(machine_file, data, base, more, names, add, remove, fixes, sign, warn)
+    asked = fit_request(machine_file, data, base, more, names, add, remove, fixes, sign, warn,
+                        again=again, untouched=untouched)
     machine, sets = asked.machine, asked.sets
     progress(f"fitting {len(asked.model)} effects to {sum(len(s) for s in sets)} poses")
     result = identify(machine, sets, asked.model, asked.fixed, method, asked.sign, advisor=Advisor)
@@ -224,7 +231,7 @@ def _warn_about_data(machine, names, sets) -> None:
     message = unknown_sides(machine, names, *poses)
     if message:
         warn(message)
-    note = mountings_note(machine, names, *poses)
+    note = mountings_note(machine, names, Measurements.concat(sets).poses)   # as the fit joins them
     if note:
         click.echo(f"compgen: note: {note}", err=True)
 

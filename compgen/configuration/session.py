@@ -4,17 +4,18 @@ checksum), and what a new fit or a refit fits (the refit policy)."""
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from .. import me
 from ..data.probe import MAGIC, PROBE_FAMILY, read_probe_log, sphere_centres
-from ..data.rtest import SIGNS, RTestData, read_rtest
+from ..data.rtest import MOUNTED_AGAIN, SIGNS, UNTOUCHED, RTestData, read_rtest
 from ..errors import CompgenError
 from ..model.effects import compose, effect_of_param, location_model
 from ..model.machine import Machine
+from ..model.sides import continues
 from ..statistics.identify import parse_fixed
 from ..statistics.results import FitResult, load_fit
 from .machine_file import load_machine
@@ -75,8 +76,38 @@ def reload(fit: FitResult, machine_file: str | None = None) -> tuple[Machine, li
         if d.sha256 != ref.sha256:
             raise CompgenError("data file changed since the fit", where=ref.file,
                                hint=f"refit with `{me()} fit`")
-        data.append(d)
+        data.append(replace(d, said=ref.said))
     return machine, data
+
+
+def said_of(machine: Machine, sets: Sequence[RTestData], again: Sequence[str] = (),
+            untouched: Sequence[str] = ()) -> list[RTestData]:
+    """``sets`` with what the user said of the set-up before each: ``again`` the files
+    measured after the ball and the nest were taken off and mounted again (at the same place
+    too), ``untouched`` those after which nothing was touched. Refused: a file not among
+    the sets, the first (nothing comes before it), one said both, and one said untouched
+    whose ball or nest is not the file before it's (a ball moved was mounted again)."""
+    def index(path: str) -> int:
+        at = [k for k, d in enumerate(sets) if d.source and Path(d.source).resolve() == Path(path).resolve()]
+        if not at:
+            raise CompgenError(f"{path} is not among the fit's data files", hint="name one of them")
+        if at[0] == 0:
+            raise CompgenError(f"{path} is the fit's first data file: nothing was measured before it",
+                               hint="say it of a later file")
+        return at[0]
+
+    out = list(sets)
+    for words, paths in ((MOUNTED_AGAIN, again), (UNTOUCHED, untouched)):
+        for path in paths:
+            k = index(path)
+            if out[k].said and out[k].said != words:
+                raise CompgenError(f"{path} is said both {out[k].said} and {words}", hint="say one")
+            if words == UNTOUCHED and not all(continues(machine, sets[k - 1].poses, sets[k].poses)):
+                raise CompgenError(f"{path} is said not touched, but its ball or nest is not where the file "
+                                   "before it left them: a ball moved, or another nest, was mounted again",
+                                   hint="leave --not-touched out for it")
+            out[k] = replace(out[k], said=words)
+    return out
 
 
 @dataclass(frozen=True)
@@ -94,13 +125,15 @@ class FitRequest:
 def fit_request(machine_file: str | None = None, data: Sequence[str] = (), base: str | None = None,
                 more: Sequence[str] = (), model: Sequence[str] | None = None, add: Sequence[str] = (),
                 remove: Sequence[str] = (), fixes: Sequence[str] = (), sign: str | None = None,
-                warn: Callable[[str], None] | None = None) -> FitRequest:
+                warn: Callable[[str], None] | None = None, again: Sequence[str] = (),
+                untouched: Sequence[str] = ()) -> FitRequest:
     """The refit policy. A new fit: ``machine_file`` and ``data``, the seed's location errors,
     the contract's sign. A refit of the fit file ``base``: its machine and data (refused if
     either changed), ``more`` data read with its sign, its model and the values it held
     fixed that stay in the model. Then ``model`` replaces the model, ``add``/``remove``
     compose it, and ``fixes`` ("NAME=VALUE") hold values fixed; ``warn`` receives what a
-    probe log's checks flag."""
+    probe log's checks flag; ``again`` and ``untouched`` say what happened to the set-up
+    before those files (``said_of``)."""
     if more and not base:
         raise CompgenError("--data adds to a fit's data: give --from FIT.json too",
                            hint=f"without a fit: {me()} fit --machine M DATA.csv … -o fit.json")
@@ -122,6 +155,7 @@ def fit_request(machine_file: str | None = None, data: Sequence[str] = (), base:
         sign = sign or SIGNS[0]
         sets = [read_data(p, machine, sign, warn) for p in data]
         names, fixed = location_model(machine), {}
+    sets = said_of(machine, sets, again, untouched)
     names = compose(machine, list(model) if model is not None else names, add, remove)
     fixed = {n: v for n, v in fixed.items() if n in names} | parse_fixed(machine, fixes)
     if warn is not None:

@@ -49,9 +49,15 @@ class RTestData:
     cov: np.ndarray | None = None   # (n, 3, 3) mm², each reading's covariance when it is known
     cov_dof: int | None = None      # the degrees of freedom cov's scale was estimated with (a probe
                                     # log's pooled touches), None where it is known
+    said: str = ""                  # what the user said of the set-up before it: MOUNTED_AGAIN,
+                                    # UNTOUCHED, or nothing
 
     def __len__(self) -> int:
         return len(self.poses)
+
+
+# what a user may say of the set-up before a file (fit --mounted-again, --not-touched)
+MOUNTED_AGAIN, UNTOUCHED = "mounted again", "not touched"
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,7 +77,12 @@ class Measurements:
 
     @cached_property
     def poses(self) -> Poses:
-        return Poses.concat([d.poses for d in self.sets])
+        """The sets' poses in order, each set said mounted again one set-up event after the
+        sets before it (``Poses.setup``)."""
+        count = np.cumsum([d.said == MOUNTED_AGAIN for d in self.sets])
+        if not count[-1:].any():
+            return Poses.concat([d.poses for d in self.sets])
+        return Poses.concat([d.poses.with_setup(int(k)) for d, k in zip(self.sets, count, strict=True)])
 
     @cached_property
     def deviation(self) -> np.ndarray:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-FIELDS = ("q", "ball", "t", "path", "side", "nest")     # Poses' arrays, one row per pose
+FIELDS = ("q", "ball", "t", "path", "side", "nest", "setup")     # Poses' arrays, one row per pose
 
 
 @dataclass(frozen=True, eq=False)
@@ -25,6 +25,9 @@ class Poses:
         session used another nest than the machine file's ``probe_length`` (NaN: that one).
         On a head it is the lever of the head's angles: two lengths tell an angle at the
         pivot from a translation (a head's sag)
+    setup : (n,) int, a count of the set-up events said of the poses' files: where it changes
+        the ball and the nest were taken off and mounted again (at the same place too), as a
+        user says it (``fit --mounted-again``); 0 throughout where nothing was said
     """
 
     q: np.ndarray
@@ -33,12 +36,15 @@ class Poses:
     path: np.ndarray
     side: np.ndarray | None = None
     nest: np.ndarray | None = None
+    setup: np.ndarray | None = None
 
     def __post_init__(self):
         if self.side is None:
             object.__setattr__(self, "side", np.full(np.shape(self.q), np.nan))
         if self.nest is None:
             object.__setattr__(self, "nest", np.full(len(self.q), np.nan))
+        if self.setup is None:
+            object.__setattr__(self, "setup", np.zeros(len(self.q), int))
         for field in FIELDS:
             a = np.array(getattr(self, field))   # a copy: freezing must not touch the caller's
             a.setflags(write=False)
@@ -61,7 +67,7 @@ class Poses:
     def starting_at(self, t0: float) -> Poses:
         """These poses with their clock moved so that the first is read at ``t0`` s: a
         measurement made after others, the R-test's clock running on."""
-        return Poses(self.q, self.ball, self.t - self.t[0] + t0, self.path, self.side, self.nest)
+        return Poses(self.q, self.ball, self.t - self.t[0] + t0, self.path, self.side, self.nest, self.setup)
 
     @staticmethod
     def at(q: np.ndarray, ball, nest: np.ndarray | None = None) -> Poses:
@@ -69,6 +75,10 @@ class Poses:
         n = len(q)
         return Poses(q, np.broadcast_to(np.asarray(ball, float), (n, 3)), np.full(n, np.nan),
                      np.full(n, "", dtype=object), nest=nest)
+
+    def with_setup(self, count: int) -> Poses:
+        """These poses with ``count`` set-up events said before them (``setup``)."""
+        return Poses(self.q, self.ball, self.t, self.path, self.side, self.nest, np.full(len(self), count))
 
     @staticmethod
     def concat(items: Sequence[Poses]) -> Poses:

@@ -20,23 +20,30 @@ SETUP = ("XOW", "YOW", "ZOW")      # the ball's offset: what every mounting of t
 NEST = ("nest_X", "nest_Y", "nest_Z")   # the nest's offset: what every nest put in the spindle has anew
 
 
-def mountings(ball: np.ndarray) -> np.ndarray:
+def mountings(ball: np.ndarray, setup: np.ndarray | None = None) -> np.ndarray:
     """The mounting of the ball each pose was measured in (``ball``: the nominal centre per
     pose, (n, 3) mm, as ``Poses.ball``): 0 for the first, one more wherever the ball's
     position changes in the order taken (a ball moved is a ball mounted again, and one
-    moved back is mounted again too). Poses at one position in a row share it, across
-    files too: the ball was not touched between them."""
-    return np.cumsum(np.r_[False, np.any(ball[1:] != ball[:-1], axis=1)])
+    moved back is mounted again too), and wherever ``setup`` (``Poses.setup``) says it was
+    mounted again. Poses at one position in a row share it, across files too, unless the
+    user says otherwise: the ball was not touched between them."""
+    new = np.any(ball[1:] != ball[:-1], axis=1)
+    if setup is not None:
+        new = new | (setup[1:] != setup[:-1])
+    return np.cumsum(np.r_[False, new])
 
 
-def nest_mountings(machine: Machine, nest: np.ndarray) -> np.ndarray:
+def nest_mountings(machine: Machine, nest: np.ndarray, setup: np.ndarray | None = None) -> np.ndarray:
     """The nest each pose was measured with (``nest``: its length per pose, NaN for the
     machine file's ``probe_length``, as ``Poses.nest``): 0 for the first, one more wherever
-    the length changes in the order taken. A nest of another length is another nest, or
-    the same on another holder: put in the spindle again, off the spindle's axis by what
-    that clamping left."""
+    the length changes in the order taken, or ``setup`` says the set-up was mounted again.
+    A nest of another length is another nest, or the same on another holder: put in the
+    spindle again, off the spindle's axis by what that clamping left."""
     length = np.where(np.isnan(nest), machine.probe_length, nest)
-    return np.cumsum(np.r_[False, length[1:] != length[:-1]])
+    new = length[1:] != length[:-1]
+    if setup is not None:
+        new = new | (setup[1:] != setup[:-1])
+    return np.cumsum(np.r_[False, new])
 
 
 def continues(machine: Machine, before: Poses, after: Poses) -> tuple[bool, bool]:
@@ -86,7 +93,7 @@ class FreeConstants:
         nest = [effect_of_param(machine, n) for n in NEST] if ball else []
         self.mounts = self.nests = 0
         if ball and len(poses):
-            mount, held = mountings(poses.ball), nest_mountings(machine, poses.nest)
+            mount, held = mountings(poses.ball, poses.setup), nest_mountings(machine, poses.nest, poses.setup)
             self.mounts, self.nests = int(mount[-1]), int(held[-1])
             entries += [(e, np.flatnonzero(mount == k)) for k in range(1, self.mounts + 1) for e in ball]
             entries += [(e, np.flatnonzero(held == k)) for k in range(1, self.nests + 1) for e in nest]

@@ -126,7 +126,7 @@ def _fit_result(machine: Machine, data: Sequence[RTestData], m: Model, names: li
     return FitResult(
         machine={"name": machine.name, "file": machine.bundled or _absolute(machine.source),
                  "sha256": machine.sha256, **({"bundled": True} if machine.bundled else {})},
-        data=tuple(DataRef(_absolute(d.source), d.sha256, len(d), _counts(d.poses.path), d.device)
+        data=tuple(DataRef(_absolute(d.source), d.sha256, len(d), _counts(d.poses.path), d.device, d.said)
                    for d in data),
         model=tuple(names), parameters=params, free=tuple(names[i] for i in free),
         correlation=np.clip(corr, -1.0, 1.0), singular_values=sv,
@@ -424,10 +424,11 @@ def _with_extra(machine: Machine, m: Model, free: list[int], J: np.ndarray, meas
         same_ball, same_nest, later = False, True, (0, 0)
     else:
         same_ball, same_nest = continues(machine, measured, poses)
-        later = (int(mountings(measured.ball)[-1]), int(nest_mountings(machine, measured.nest)[-1])) \
+        later = (int(mountings(measured.ball, measured.setup)[-1]),
+                 int(nest_mountings(machine, measured.nest, measured.setup)[-1])) \
             if at else (0, 0)                # no ball offset in the model: no set-up's constants
     if (same_ball and later[0]) or (same_nest and later[1]):
-        both = Poses.concat([measured, poses])
+        both = Poses.concat([measured, poses.with_setup(int(measured.setup[-1]))])   # it continues
         whole = m.jacobian(both)
         project = FreeConstants(machine, m.names, both).projector()
         return (whole if project is None else project(whole))[:, :, free].reshape(-1, len(free))
@@ -492,13 +493,15 @@ def mountings_note(machine: Machine, names: Sequence[str], *poses: Poses) -> str
     ball = np.concatenate([p.ball for p in poses])
     if not held or not len(ball):       # no ball offset in the model: no set-up's constants
         return None
-    mount = mountings(ball)[-1]
-    nests = nest_mountings(machine, np.concatenate([p.nest for p in poses]))[-1]
+    setup = np.concatenate([p.setup for p in poses])
+    mount = mountings(ball, setup)[-1]
+    nests = nest_mountings(machine, np.concatenate([p.nest for p in poses]), setup)[-1]
+    again = " or where it was said mounted again" if setup.any() else ""
     said = []
     if mount:
-        said.append(f"the ball at {mount + 1} mountings (a new one wherever its position changes)")
+        said.append(f"the ball at {mount + 1} mountings (a new one wherever its position changes{again})")
     if nests:
-        said.append(f"{nests + 1} nests (a new one wherever the nest's length changes)")
+        said.append(f"{nests + 1} nests (a new one wherever the nest's length changes{again})")
     if not said:
         return None
     first = ball[0]

@@ -59,6 +59,7 @@ class DataRef:
     rows: int
     paths: dict[str, int] = field(default_factory=dict)
     device: str = "rtest"        # "probe": sphere centres from a touch-probe log
+    said: str = ""               # what the user said of the set-up before it (rtest.MOUNTED_AGAIN, UNTOUCHED)
 
 
 @dataclass(frozen=True, eq=False)   # eq=False: ndarray fields make the default __eq__ raise

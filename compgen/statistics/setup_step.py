@@ -9,7 +9,9 @@ that continues the previous one's mounting (same ball position, same nest length
 tried as a step of the ball's and the nest's offsets on its rows and the rest of that
 mounting. Where the best step explains these data as well as the machine's best candidate
 (``significance.rivals``), the best is not named found: which of the two happened is told
-by measuring again without touching the set-up (a warming goes on, a step does not)."""
+by measuring again without touching the set-up (a warming goes on, a step does not). A file
+the user said was measured after the set-up was mounted again (``fit --mounted-again``) is a
+new mounting already; one said not touched (``--not-touched``) is not tried."""
 
 from __future__ import annotations
 
@@ -57,14 +59,14 @@ def setup_step(machine: Machine, poses: Poses, set_of: np.ndarray, sets, r: np.n
     machine's best candidate as (whitened sum of squares removed, columns). None where no
     file continues a mounting."""
     names = [Path(d.source).name if d.source else f"file {k + 1}" for k, d in enumerate(sets)]
-    mount, held = mountings(poses.ball), nest_mountings(machine, poses.nest)
+    mount, held = mountings(poses.ball, poses.setup), nest_mountings(machine, poses.nest, poses.setup)
     ball = [resolve(machine, n) for n in SETUP]
     nest = [resolve(machine, n) for n in NEST]
     rw = noise.residual(r)
     tried = []
     for j in np.unique(set_of)[1:]:
         i0 = int(np.flatnonzero(set_of == j)[0])
-        if i0 == 0:
+        if i0 == 0 or sets[j].said:      # the user said what happened: mounted again, or nothing
             continue
         parts = []
         for effects, group in ((ball, mount), (nest, held)):

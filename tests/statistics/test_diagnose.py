@@ -7,7 +7,7 @@ from itertools import combinations
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, SEED_MACHINE, TABLE4, UM, pasted
+from conftest import ARCSEC, SEED_MACHINE, TABLE4, UM, pasted, run
 
 from compgen import me
 from compgen.configuration.machine_file import load_machine
@@ -1593,3 +1593,56 @@ def test_a_ball_mounted_again_at_its_place_between_two_files_is_never_read_as_a_
         d = diagnose(seed_machine, data, identify(seed_machine, data, location_model(seed_machine)),
                      noise_um=NOISE_UM)
         assert d.verdict == verdict and (verdict != "found" or d.found == "XOW:e45"), (d.verdict, d.found)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_file_said_mounted_again_has_offsets_of_its_own_and_one_said_untouched_no_step(seed_machine, seed):
+    """The same re-mounting (3, −2, 1.5 µm) said by the user (fit --mounted-again b.csv): b.csv's
+    readings get the ball's and the nest's offsets of their own, the fit reaches the noise
+    with every location error within 3σ of seed Table 4, and diagnose finds nothing to add.
+    A warming said untouched across the files is found, with no step tried before b.csv."""
+    from compgen.configuration.session import said_of
+    moved = {**TABLE4, **{n: TABLE4.get(n, 0.0) + v * UM for n, v in zip(("XOW", "YOW", "ZOW"), (3, -2, 1.5),
+                                                                          strict=True)}}
+    data = said_of(seed_machine, _two_files(seed_machine, TABLE4, moved, seed), again=["b.csv"])
+    fit = identify(seed_machine, data, location_model(seed_machine))
+    assert fit.residual["sigma_um"] == pytest.approx(NOISE_UM, rel=0.05)
+    off = {n: abs(e.value - TABLE4[n]) / e.std for n, e in fit.parameters.items()}
+    assert max(off.values()) < 3, off
+    assert fit.data[1].said == "mounted again"
+    d = diagnose(seed_machine, data, fit, noise_um=NOISE_UM)
+    assert d.verdict == "explained" and d.setup_step is None, (d.verdict, d.found, d.setup_step)
+    warm = {**TABLE4, "XOW:e45": 4 * UM}
+    data = said_of(seed_machine, _two_files(seed_machine, warm, warm, seed), untouched=["b.csv"])
+    fit = identify(seed_machine, data, location_model(seed_machine))
+    d = diagnose(seed_machine, data, fit, noise_um=NOISE_UM)
+    assert d.found == "XOW:e45" and d.setup_step is None, (d.verdict, d.found, d.setup_step)
+
+
+def test_what_a_user_says_of_a_file_is_kept_with_the_fit_and_checked(seed_machine, tmp_path):
+    """fit --mounted-again b.csv: the fit file keeps it and diagnose --from reads the data so;
+    a file said untouched whose ball stands elsewhere, the first file, a file not in the fit,
+    and a file said both are each refused in one line, nothing written."""
+    rng = np.random.default_rng(4)
+    moved = {**TABLE4, "XOW": TABLE4["XOW"] + 3 * UM, "YOW": TABLE4["YOW"] - 2 * UM}
+    for name, truth, ball in (("a.csv", TABLE4, None), ("b.csv", moved, None),
+                              ("c.csv", TABLE4, (100.0, 0, 50))):
+        poses = generate(seed_machine, ["K4", "K2"], ball=ball)
+        session = simulate(seed_machine, truth, poses, NOISE_UM, rng)
+        (tmp_path / name).write_text(format_rtest(seed_machine, session))
+    fit = tmp_path / "f.json"
+    code, out, err = run("fit", "--machine", SEED_MACHINE, tmp_path / "a.csv", tmp_path / "b.csv",
+                         "--mounted-again", tmp_path / "b.csv", "-o", fit)
+    assert code == 0, err
+    assert "or where it was said mounted again" in err, err
+    assert [x.get("said", "") for x in json.loads(fit.read_text())["data"]] == ["", "mounted again"]
+    code, out, err = run("diagnose", "--from", fit, "--noise-um", NOISE_UM)
+    assert code == 0 and out.startswith("VERDICT: explained"), out
+    a, b, c = (tmp_path / n for n in ("a.csv", "b.csv", "c.csv"))
+    for args, said in (((c, "--not-touched", c), "is said not touched, but"),
+                       ((b, "--mounted-again", a), "the fit's first data file"),
+                       ((b, "--mounted-again", c), "is not among the fit's data"),
+                       ((b, "--mounted-again", b, "--not-touched", b), "is said both")):
+        code, _, err = run("fit", "--machine", SEED_MACHINE, a, *args, "-o", tmp_path / "g.json")
+        assert code == 2 and said in err and err.count("\n") == 1, err
+        assert not (tmp_path / "g.json").exists()
