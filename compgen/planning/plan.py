@@ -208,7 +208,10 @@ def _worst(info: np.ndarray, noise_um: float, unit: np.ndarray) -> float:
     info = info[:len(unit), :len(unit)]
     if not _identifies(info):
         return np.inf
-    return float((noise_um * 1e-3 * np.sqrt(np.diag(np.linalg.inv(info))) / unit).max())
+    var = np.diag(np.linalg.inv(info))
+    if not (var > 0).all():          # rounding past what _identifies let through: not identified
+        return np.inf
+    return float((noise_um * 1e-3 * np.sqrt(var) / unit).max())
 
 
 def candidates(machine: Machine, effects: Sequence[Effect] = ()) -> list[Setup]:
