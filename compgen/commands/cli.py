@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 from dataclasses import replace
 from datetime import date
 from functools import partial
@@ -12,7 +13,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from .. import __version__
+from .. import __version__, me
 from ..configuration.machine_file import load_machine
 from ..configuration.session import fit_machine, fit_request, machine_ref, read_data, reload
 from ..controllers.kinematics import corrected_by, kinematics_edit, nothing_to_correct
@@ -251,7 +252,11 @@ def _warn_about_data(machine, names, sets) -> None:
               help="The R-test's own noise, 1σ per reading, µm (default: the machine file's "
                    "[rtest] noise_um). With it, the residual is tested against it per path and "
                    "direction, and what no catalogue effect explains is called unexplained.")
-def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um):
+@click.option("--plan", "plan_dir", type=click.Path(file_okay=False), default=None,
+              help="Write the follow-up it advises as a plan here (plan.json and each program, checked): "
+                   "what it brings beside these data; check it later with plan --check.")
+@FORCE
+def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um, plan_dir, force):
     """Where the model fails, and which effects would explain the misfit."""
     fit = load_fit(base)
     machine, sets = reload(fit)
@@ -270,6 +275,28 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um):
     click.echo(json.dumps(result.to_dict(), indent=2, ensure_ascii=False) if as_json
                else diagnosis_text(result, base), nl=as_json)
     click.echo(f"compgen: {keep(base, result, key(fit, machine, noise_um, names, True))}", err=True)
+    if plan_dir:
+        _follow_up_plan(machine, sets, fit, result, base, noise_um, Path(plan_dir), force)
+
+
+def _follow_up_plan(machine, sets, fit, found, base, noise_um, folder: Path, force: bool) -> None:
+    """The diagnosis's follow-up as a plan in ``folder``, at the device's noise (given, or the
+    machine file's; else the fit's σ̂, said so)."""
+    from ..planning.follow_up import follow_up
+    from ..planning.plan import files, text
+    noise = noise_um if noise_um is not None else machine.noise_um
+    if noise is None:
+        noise = fit.residual["sigma_um"]
+        warn(f"the plan's σ at the fit's σ̂ {noise:.3f} µm: give --noise-um (the device's calibration) for "
+             "the device's own")
+    p = follow_up(machine, sets, found, noise, str(Path(base).resolve()))
+    out = files(machine, p, folder, __version__, date.today().isoformat())
+    folder.mkdir(parents=True, exist_ok=True)
+    write_all(out, force, inputs=(base, machine.source, *(s.source for s in sets)))
+    click.echo(text(machine, p), nl=False, err=True)
+    click.echo(f"wrote {len(out)} files in {folder}: the follow-up as a plan; check it again with\n"
+               f"  {me()} plan --machine {shlex.quote(machine_ref(fit))} --check {shlex.quote(str(folder))}",
+               err=True)
 
 
 @main.command("predict")

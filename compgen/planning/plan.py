@@ -35,10 +35,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..configuration.session import reload
 from ..controllers.checking import check_file
 from ..controllers.programs import checked_program, measure_program, program_name
 from ..controllers.registry import controller
-from ..data.rtest import read_poses
+from ..data.rtest import Measurements, read_poses
 from ..errors import CompgenError
 from ..files import read_text
 from ..model.effects import Effect, effect_of_param, location_model, resolve
@@ -47,6 +48,7 @@ from ..model.machine import Machine
 from ..model.poses import Poses, runs
 from ..model.sides import NEST, SETUP, FreeConstants
 from ..statistics.noise import ar1_covariance
+from ..statistics.results import load_fit
 from ..statistics.separation import TELLS_APART
 from ..units import DISPLAY
 from .advice import MODE, Proposal, proposals
@@ -94,6 +96,8 @@ class Plan:
     told: Told | None = None            # what the plan tells: its condition and separations
     default_told: Told | None = None    # the same of the machine file's own paths
     told_kept: bool = True              # it tells apart every pair the default does, as well
+    after: str = ""                     # a follow-up: the fit whose data it follows (``default``:
+                                        # those data alone)
 
 
 @dataclass(frozen=True)
@@ -107,7 +111,7 @@ class Told:
     apart: tuple[Apart, ...]
 
 
-def _told(info: np.ndarray, p: int, effects: Sequence[Effect], noise_um: float) -> Told:
+def told_by(info: np.ndarray, p: int, effects: Sequence[Effect], noise_um: float) -> Told:
     loc = info[:p, :p]
     d = np.sqrt(np.clip(np.diag(loc), 1e-300, None))
     condition = float(np.sqrt(np.linalg.cond(loc / np.outer(d, d)))) if _identifies(loc) else np.inf
@@ -197,7 +201,7 @@ def _identifies(G: np.ndarray) -> bool:
     return bool((norm > 0).all()) and np.linalg.cond(G / np.outer(norm, norm)) <= 1e12
 
 
-def _scaled(cov: np.ndarray, unit: np.ndarray) -> float:
+def worst_scaled(cov: np.ndarray, unit: np.ndarray) -> float:
     """The worst σ of a covariance over each parameter's ``[limits]``."""
     return float((np.sqrt(np.diag(cov)) / unit).max())
 
@@ -280,8 +284,8 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
         raise CompgenError(f"no path of {machine.source} can be measured on this machine",
                            hint=f"check the paths with measure-program --machine {machine.source}")
     default_cov = covariance(machine, _poses(own), noise_um, rho)
-    default = (_minutes(own, mount_minutes), _sigmas(names, default_cov), _scaled(default_cov, unit))
-    default_told = _told(_information(own, len(names)), len(names), named, noise_um)
+    default = (_minutes(own, mount_minutes), sigmas_of(names, default_cov), worst_scaled(default_cov, unit))
+    default_told = told_by(_information(own, len(names)), len(names), named, noise_um)
 
     level: list[frozenset] = [frozenset()]          # sets of set-ups, by their index in ``offered``
     seen: dict[frozenset, tuple[float, float]] = {}
@@ -306,7 +310,7 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
     best, told, kept = None, None, False
     for key in sorted(finite, key=lambda k: finite[k]):       # the least worst σ that tells apart
         sets = [offered[i] for i in sorted(key)]
-        now = _told(_information(sets, len(names)), len(names), named, noise_um)
+        now = told_by(_information(sets, len(names)), len(names), named, noise_um)
         if best is None:
             best, told = key, now
         if holds(now.apart, default_told.apart):
@@ -319,11 +323,11 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
         if w < FRONT_STEP * low:         # a point that buys a worst σ 5 % lower or more
             front.append((spent, w))
             low = w
-    return Plan(tuple(chosen), _minutes(chosen, mount_minutes), _sigmas(names, cov), _scaled(cov, unit),
-                tuple(front), default, noise_um, rho, told, default_told, kept)
+    return Plan(tuple(chosen), _minutes(chosen, mount_minutes), sigmas_of(names, cov),
+                worst_scaled(cov, unit), tuple(front), default, noise_um, rho, told, default_told, kept)
 
 
-def _sigmas(names: Sequence[str], cov: np.ndarray) -> dict[str, float]:
+def sigmas_of(names: Sequence[str], cov: np.ndarray) -> dict[str, float]:
     return {n: float(np.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(names)}
 
 
@@ -359,11 +363,14 @@ def files(machine: Machine, p: Plan, folder: Path, version: str, date: str) -> d
                                                           "tilt_arcsec": machine.limits.tilt_arcsec},
            "setups": setups, "mount_minutes": MOUNT_MINUTES,
            "front": [{"minutes": round(m, 2), "worst_scaled_sigma": w} for m, w in p.front],
-           "default": {"paths": list(machine.paths), "minutes": round(p.default[0], 2),
-                       "sigma": _shown(names, machine, p.default[1]), "worst_scaled_sigma": p.default[2],
-                       **_told_doc(machine, p.default_told)},
+           # a follow-up is set beside the data it follows; a plan beside the machine file's paths
+           ("measured" if p.after else "default"): {
+               **({"fit": p.after} if p.after else {"paths": list(machine.paths),
+                                                    "minutes": round(p.default[0], 2)}),
+               "sigma": _shown(names, machine, p.default[1]), "worst_scaled_sigma": p.default[2],
+               **_told_doc(machine, p.default_told)},
            **_told_doc(machine, p.told),
-           "separations_as_default": p.told_kept,
+           **({} if p.after else {"separations_as_default": p.told_kept}),
            "not_built": ["a probe's plan", "ball positions beyond the advice's places",
                          "backlash among the effects told apart (its start sides are free constants)"]}
     out[folder / "plan.json"] = json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
@@ -394,17 +401,20 @@ def text(machine: Machine, p: Plan) -> str:
     in order, and the front."""
     unit_of = {n: DISPLAY[effect_of_param(machine, n).unit] for n in p.sigma}
     worst = max(p.sigma, key=lambda n: p.sigma[n] / scales(machine, [n])[0])
+    plan, beside = ("with it ", "the data's") if p.after else ("plan    ", "the default's")
     lines = [f"compgen plan: {machine.name}; noise {p.noise_um:g} µm per reading"
              + (f", AR(1) ρ {p.rho:g} within each run" if p.rho else " (white)"),
-             f"  plan    {p.minutes:6.1f} min: worst σ {p.worst:.4f} of its [limits] "
+             f"  {plan}{p.minutes:6.1f} min: worst σ {p.worst:.4f} of its [limits] "
              f"({worst} ±{p.sigma[worst] * unit_of[worst][1]:.3f} {unit_of[worst][0]})",
-             f"  default {p.default[0]:6.1f} min: worst σ {p.default[2]:.4f} of its [limits] "
-             f"(the machine file's paths {', '.join(machine.paths)})",
-             f"  ratio   {p.worst / p.default[2]:.2f} of the default's worst σ", "", "  set-ups, in order:"]
+             f"  measured        : worst σ {p.default[2]:.4f} of its [limits] (the data of {p.after})"
+             if p.after else f"  default {p.default[0]:6.1f} min: worst σ {p.default[2]:.4f} of its [limits] "
+                             f"(the machine file's paths {', '.join(machine.paths)})",
+             f"  ratio   {p.worst / p.default[2]:.2f} of {beside} worst σ", "", "  set-ups, in order:"]
     lines += [f"    {i}. {s.proposal.label:<58} {s.minutes:5.1f} min" for i, s in enumerate(p.setups, 1)]
     lines += _told_text(machine, p)
-    lines += ["", "  what more minutes buy (worst σ of its [limits]):"]
-    lines += [f"    {m:6.1f} min  {w:.4f}" for m, w in p.front]
+    if p.front:
+        lines += ["", "  what more minutes buy (worst σ of its [limits]):"]
+        lines += [f"    {m:6.1f} min  {w:.4f}" for m, w in p.front]
     return "\n".join(lines) + "\n"
 
 
@@ -417,9 +427,10 @@ def _told_text(machine: Machine, p: Plan) -> list[str]:
     def count(t: Told) -> int:
         return sum(all(np.isfinite(x.above)) for x in t.apart)
 
-    out = ["", f"  condition {p.told.condition:.1f} (default {p.default_told.condition:.1f}); of "
+    was = "the data alone" if p.after else "default"
+    out = ["", f"  condition {p.told.condition:.1f} ({was} {p.default_told.condition:.1f}); of "
            f"{len(p.told.apart)} pairs of {len(p.told.seen)} effects, told apart at some size: "
-           f"{count(p.told)} (default {count(p.default_told)})"]
+           f"{count(p.told)} ({was} {count(p.default_told)})"]
     if not p.told_kept:
         out.append("  no set within these minutes tells apart every pair the default does: this one has the "
                    "least worst σ (plan.json: separations)")
@@ -465,8 +476,16 @@ def checked(machine: Machine, folder: Path) -> tuple[list[str], bool, dict]:
             lines.append(f"  {listed.name}: {e}")
     if any(p is None for p in poses):
         return [*lines, "  σ not evaluated: a pose list is not this machine file's"], False, made
+    follows = doc.get("measured").get("fit") if isinstance(doc.get("measured"), dict) else None
+    if isinstance(follows, str):      # a follow-up: its σ is the fit's data and it together
+        try:
+            data = reload(load_fit(follows), machine.source)[1]
+        except CompgenError as e:
+            return [*lines, f"  σ not evaluated: the data it follows: {e}"], False, made
+        before = Measurements.concat(data).poses
+        poses = [before, *(p.with_setup(int(before.setup[-1])) for p in poses)]
     cov = covariance(machine, Poses.concat(poses), noise_um, rho)
-    now = _shown(judged(machine), machine, _sigmas(judged(machine), cov))
+    now = _shown(judged(machine), machine, sigmas_of(judged(machine), cov))
     for n, was in (doc.get("sigma") if isinstance(doc.get("sigma"), dict) else {}).items():
         got = now.get(n)
         planned = was.get("value") if isinstance(was, dict) else None

@@ -160,3 +160,35 @@ def test_a_reversal_or_an_effect_not_in_the_catalogue_is_refused_in_one_line(tmp
                            "--effects", effects, "-o", tmp_path / "p")
         assert code == 2 and said in err and err.count("\n") == 1, err
         assert not (tmp_path / "p").exists()
+
+
+def test_diagnose_writes_its_follow_up_as_a_plan(tmp_path):
+    """A hidden 2/rev radial error of C and a 1/rev angular one: diagnose ties EAC+EBC:h2,
+    ECC:h1 and EXC+EYC:h2 and advises two K2 set-ups; with --plan it writes them as a plan in
+    its order, each program passing check-program, its σ beside the data's, and every pair of
+    the three told apart with them (none by the data alone); plan --check, pasted as printed,
+    holds it."""
+    truth = tmp_path / "t.json"
+    truth.write_text(json.dumps({"parameters": {"EXC:h2c": {"value": 3, "unit": "um"},
+                                                "ECC:h1c": {"value": 5, "unit": "arcsec"}}}))
+    data, fit = tmp_path / "s.csv", tmp_path / "f.json"
+    assert run("simulate", "--machine", SEED_MACHINE, "--truth", truth, "-o", data, "--noise-um", 0.5)[0] == 0
+    assert run("fit", "--machine", SEED_MACHINE, data, "-o", fit)[0] == 0
+    folder = tmp_path / "follow"
+    code, out, err = run("diagnose", "--from", fit, "--noise-um", NOISE_UM, "--plan", folder)
+    assert code == 0, err
+    verdict = out.splitlines()[0]
+    doc = json.loads((folder / "plan.json").read_text())
+    labels = [s["label"] for s in doc["setups"]]
+    assert verdict.endswith(f"measure: {', '.join(labels)} (below)"), (verdict, labels)
+    assert doc["measured"]["fit"] == str(fit.resolve()) and "default" not in doc
+    assert doc["worst_scaled_sigma"] < doc["measured"]["worst_scaled_sigma"]
+    told = [None not in x["told_apart_above"].values() for x in doc["separations"]["pairs"]]
+    before = [None not in x["told_apart_above"].values() for x in doc["measured"]["separations"]["pairs"]]
+    assert len(told) == 3 and all(told) and not any(before), (told, before)
+    for s in doc["setups"]:
+        code, said, e = run("check-program", "--machine", SEED_MACHINE, folder / s["program"])
+        assert code == 0 and "OK" in said, e
+    line = next(ln.strip() for ln in err.splitlines() if "--check" in ln)
+    done = pasted(line, tmp_path)
+    assert done.returncode == 0 and "the plan holds" in done.stdout, done.stdout + done.stderr
