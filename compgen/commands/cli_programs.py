@@ -240,11 +240,14 @@ def plan_cmd(machine_file, minutes, noise_um, rho, effects, folder, check_dir, f
                                          f"{shlex.quote(machine_file)}")
     result = plan(machine, minutes, noise, rho, effects=named)
     out = files(machine, result, Path(folder), __version__, date.today().isoformat())
+    from ..reports.plots import front_png  # matplotlib only when a plan is written
+    out[Path(folder) / "front.png"] = front_png(machine, result)
     Path(folder).mkdir(parents=True, exist_ok=True)
     write_all(out, force, inputs=(machine_file,))
     click.echo(text(machine, result), nl=False)
     ext = controller(machine.controller).program_ext
-    click.echo(f"wrote {len(out)} files in {folder}: plan.json and each set-up's program; check them:",
+    click.echo(f"wrote {len(out)} files in {folder}: plan.json, front.png (worst σ against minutes) and each "
+               "set-up's program; check them:",
                err=True)
     for path in (p for p in out if p.suffix == ext):
         click.echo(f"  {me()} check-program --machine {shlex.quote(machine_file)} {shlex.quote(str(path))}",

@@ -282,3 +282,27 @@ def trend_figure(t, limits: dict[str, float] | None = None, tolerances: dict[str
                          + ("; a path's range against its [tolerances]" if paths else "") + ")")
     fig.autofmt_xdate()
     return fig
+
+
+def front_png(machine: Machine, p) -> bytes:
+    """A plan's front (``planning.plan.Plan``) as a PNG: the worst σ of the location errors
+    over their ``[limits]`` against minutes, for the sets the search met; the plan chosen and
+    the machine file's own paths marked: what five more minutes buy."""
+    return _png(_front_figure(machine, p))
+
+
+@_styled
+def _front_figure(machine: Machine, p):
+    fig, ax = plt.subplots()
+    if p.front:
+        minutes, worst = zip(*p.front, strict=True)
+        ax.step(minutes, worst, where="post", marker="o", label="the best set within the minutes")
+    ax.plot([p.minutes], [p.worst], "s", ms=9, label=f"the plan ({p.minutes:.1f} min)")
+    ax.plot([p.default[0]], [p.default[2]], "D", ms=9,
+            label=f"the machine file's paths ({', '.join(machine.paths)}, {p.default[0]:.1f} min)")
+    ax.set_xlabel("minutes (programs, and 5 min each mounting of the ball elsewhere)")
+    ax.set_ylabel("worst σ over its [limits]")
+    ax.set_yscale("log")
+    ax.set_title(f"{one_line(machine.name)}: what more minutes buy (noise {p.noise_um:g} µm)")
+    ax.legend()
+    return fig

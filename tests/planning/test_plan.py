@@ -41,6 +41,7 @@ def test_the_plan_fits_its_minutes_and_every_program_passes_check_program(seed_p
         "AOC": "arcsec", "BOC": "arcsec"}
     fronts = [f["worst_scaled_sigma"] for f in doc["front"]]
     assert fronts == sorted(fronts, reverse=True) and doc["front"][-1]["minutes"] <= 10.0
+    assert (folder / "front.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"      # the front, drawn
 
 
 def test_the_fit_of_the_plans_data_reports_the_sigma_it_predicts(seed_machine):
