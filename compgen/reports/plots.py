@@ -293,9 +293,13 @@ def front_png(machine: Machine, p) -> bytes:
 
 @_styled
 def _front_figure(machine: Machine, p):
+    from matplotlib.ticker import FuncFormatter
+
     fig, ax = plt.subplots()
     if p.front:
-        minutes, worst = zip(*p.front, strict=True)
+        # the front's points buy 5 % or more each; it runs on to the plan chosen
+        points = [*p.front, *([(p.minutes, p.worst)] if p.minutes > p.front[-1][0] else [])]
+        minutes, worst = zip(*points, strict=True)
         ax.step(minutes, worst, where="post", marker="o", label="the best set within the minutes")
     ax.plot([p.minutes], [p.worst], "s", ms=9, label=f"the plan ({p.minutes:.1f} min)")
     ax.plot([p.default[0]], [p.default[2]], "D", ms=9,
@@ -303,6 +307,9 @@ def _front_figure(machine: Machine, p):
     ax.set_xlabel("minutes (programs, and 5 min each mounting of the ball elsewhere)")
     ax.set_ylabel("worst σ over its [limits]")
     ax.set_yscale("log")
+    plain = FuncFormatter(lambda v, _: f"{v:g}")     # numbers as numbers (mathtext is off)
+    ax.yaxis.set_major_formatter(plain)
+    ax.yaxis.set_minor_formatter(plain)
     ax.set_title(f"{one_line(machine.name)}: what more minutes buy (noise {p.noise_um:g} µm)")
     ax.legend()
     return fig
