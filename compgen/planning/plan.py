@@ -29,12 +29,14 @@ among the effects told apart."""
 from __future__ import annotations
 
 import json
+import shlex
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from .. import me
 from ..configuration.session import reload
 from ..controllers.checking import check_file
 from ..controllers.programs import checked_program, measure_program, program_name
@@ -272,7 +274,11 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
                                                 "machines)")
     names = judged(machine)
     unit = scales(machine, names)
-    named = common_effects(machine) if effects is None else [resolve(machine, n) for n in effects]
+    named = common_effects(machine) if effects is None else \
+        list({e.name: e for e in (resolve(machine, n) for n in effects)}.values())     # each once
+    if len(named) < 2:
+        raise CompgenError(f"--effects {','.join(effects or ())}: name two different effects or more to tell "
+                           "apart", hint=f"the catalogue: {me()} effects --machine {shlex.quote(machine.source)}")
     reversal = next((e.name for e in named if e.basis.kind == "r"), None)
     if reversal is not None:
         raise CompgenError(f"--effects {reversal}: a reversal's start sides are free constants a plan's "
