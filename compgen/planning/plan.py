@@ -278,7 +278,8 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
         list({e.name: e for e in (resolve(machine, n) for n in effects)}.values())     # each once
     if len(named) < 2:
         raise CompgenError(f"--effects {','.join(effects or ())}: name two different effects or more to tell "
-                           "apart", hint=f"the catalogue: {me()} effects --machine {shlex.quote(machine.source)}")
+                           "apart", hint=f"the catalogue: {me()} effects --machine "
+                                         f"{shlex.quote(machine.source)}")
     reversal = next((e.name for e in named if e.basis.kind == "r"), None)
     if reversal is not None:
         raise CompgenError(f"--effects {reversal}: a reversal's start sides are free constants a plan's "
