@@ -156,7 +156,7 @@ def test_a_pairs_size_is_where_a_fit_of_the_other_leaves_25_sigma_squared(seed_m
 
 def test_a_reversal_or_an_effect_not_in_the_catalogue_is_refused_in_one_line(tmp_path):
     for effects, said in (("ECC:h2,ECC:r1", "a reversal's start sides"), ("ECC:h2,EQQ:h1", "unknown effect"),
-                          ("ECC:h2", "name two effects or more")):
+                          ("ECC:h2", "name two effects or more"), ("ECC:h2,ECC:h2", "two different effects")):
         code, _, err = run("plan", "--machine", SEED_MACHINE, "--minutes", "10", "--noise-um", "0.5",
                            "--effects", effects, "-o", tmp_path / "p")
         assert code == 2 and said in err and err.count("\n") == 1, err
