@@ -207,8 +207,9 @@ def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
             data = [measure(machine, truth, poses, kind, rng, outside)]
             followed.append("calibrated, K4+K1+K2 again")
             model = location_model(machine)
-        elif found.found:
-            named.append(found.found)
+        elif found.found:       # found under every name of its one column
+            also = f" ≡ {{{', '.join(found.equivalents)}}}" if found.equivalents else ""
+            named.append(found.found + also)
             model = compose(machine, model, [found.found])
         elif found.rivals:
             if not found.rivals_separated_by:     # equivalent for every set-up: add the best

@@ -494,7 +494,7 @@ def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dic
     the measured poses for both): a candidate the model absorbs, or a part of it (fit --add
     refuses it), and the best's rivals. Equivalent rivals reordered. Returns the candidates
     and ``rival`` with what tells the rivals apart."""
-    rival_names, separated_by, left_open = rival["rivals"], (), {}
+    rival_names, separated_by, left_open, same = rival["rivals"], (), {}, ()
     best = next((ranked[c.effect] for c in out if c.significant), None)
     group = [best, *(ranked[e] for e in rival_names)] if rival_names else []
     # seen, but not to be added as a whole: a part of it the model absorbs, so the
@@ -505,7 +505,8 @@ def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dic
         seen = separating(measured, unseen, advising) if unseen else {}
         out = [replace(c, separated_by=seen[c.effect]) if c.effect in seen else c for c in out]
         if group:
-            by_rival, separated_by, left_open = telling_apart(measured, group, res.rss / res.dof, advising)
+            by_rival, separated_by, left_open, same = telling_apart(measured, group, res.rss / res.dof,
+                                                                    advising)
             out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
     exhausted = tuple(m.run_label for m in separated_by
                       if m.again and _times_measured(machine, res.poses, m) >= REPEATS_TRIED)
@@ -521,8 +522,10 @@ def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dic
             out.remove(first)
             out.insert(out.index(next(c for c in out if c.effect == best.effect.name)), first)
             rival_names = tuple(c.effect for c in out if c.effect in named and c is not first)
+    one = {best.effect.name, *same} if same else set()      # one column: whichever leads
+    same = tuple(n for n in rival_names if n in one)
     return out, {**rival, "rivals": rival_names, "rivals_separated_by": separated_by,
-                 "rivals_open": left_open, "exhausted": exhausted}
+                 "rivals_open": left_open, "exhausted": exhausted, "equivalents": same}
 
 
 

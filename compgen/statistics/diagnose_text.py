@@ -89,7 +89,9 @@ def _candidates(d: Diagnosis, fit: str, after: str, top: int) -> list[str]:
         lines.append(f"      {_said(d, c.description)} (≈ {amp} {c.unit}); likely cause: {c.cause}")
         if c.confounded_with:
             lines.append(f"      partly absorbed by {', '.join(c.confounded_with)}")
-        if d.rivals and (c.effect in d.rivals or c is d.significant[0]):
+        if c.effect in d.equivalents or (d.equivalents and c is d.significant[0]):
+            lines.append("      one column with the others marked so: the same on every set-up (see below)")
+        elif d.rivals and (c.effect in d.rivals or c is d.significant[0]):
             lines.append("      not told apart from the others marked so: see below")
         elif c.significant and d.unexplained:
             lines.append("      it fits a part of the unexplained misfit (see below): not advised on its own")
@@ -115,7 +117,14 @@ def _candidates(d: Diagnosis, fit: str, after: str, top: int) -> list[str]:
 def _rivals_text(d: Diagnosis, fit: str, after: str) -> list[str]:
     """The best's rivals: what would tell them apart, or why nothing does."""
     lines: list[str] = []
-    if d.rivals:
+    if d.equivalents:
+        best = d.significant[0].effect
+        one = " ≡ ".join((best, *d.equivalents))
+        lines += ["", f"  One column: {one} read the same on every set-up this machine can measure: one "
+                      "candidate under several names. Adding one adds any of them, and the location errors "
+                      "move alike; which physical cause it is (the names' causes above) needs another "
+                      "reference.", *_carries(d)]
+    if set(d.rivals) - set(d.equivalents):
         best = d.significant[0].effect
         verb = "explains" if len(d.rivals) == 1 else "explain"
         lines += ["", f"  Not told apart: {', '.join(d.rivals)} {verb} these data as well as "
@@ -213,6 +222,10 @@ def conclusion(d: Diagnosis, fit: str, after: str) -> str:
         return (f"VERDICT: not told apart: {best} vs {d.setup_step.text()}; measure a path again right "
                 "after these data without touching the ball or the nest: a warming or a drift goes on, a "
                 "step does not")
+    if kind == "found" and d.equivalents:
+        return (f"VERDICT: found {' ≡ '.join((best, *d.equivalents))}, one column on every set-up this "
+                "machine can measure (which is the cause needs another reference; against "
+                f"{_noise_said(d)}); add it: {add}")
     if kind == "found":
         return f"VERDICT: found {best} (against {_noise_said(d)}); add it: {add}"
     if kind == "rivals":

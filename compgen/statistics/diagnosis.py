@@ -91,6 +91,7 @@ class Diagnosis:
     after_best: tuple[str, ...] = ()    # still significant once the best candidate is added
     rivals: tuple[str, ...] = ()        # explain almost as much as the best: not told apart
     rivals_separated_by: tuple[Proposal, ...] = ()
+    equivalents: tuple[str, ...] = ()   # rivals that are one column with the best on every set-up
     alpha: float = ALPHA
     notes: tuple[str, ...] = field(default_factory=tuple)
     outliers: tuple[dict, ...] = ()     # {"file", "line", "path", "size_um"}: left out of the tests
@@ -200,7 +201,8 @@ class Diagnosis:
         data themselves, and an effect outside the catalogue would pass for the best
         candidate (an A encoder's 4/rev was named EZA:h2)."""
         best = self.significant[0] if self.significant else None
-        named = (best is not None and not self.rivals and best.separable and not self.unexplained
+        apart = set(self.rivals) - set(self.equivalents)     # an exact equivalent is the best, renamed
+        named = (best is not None and not apart and best.separable and not self.unexplained
                  and self.device_noise_um is not None and self.device_blamed is None and not self.step_rivals)
         return best.effect if named else None
 
@@ -227,6 +229,7 @@ class Diagnosis:
                              "shift_by_choice": self.carries},
             "still_significant_after_best": list(self.after_best),
             "rivals_of_best": list(self.rivals),
+            "equivalents_of_best": list(self.equivalents),
             "found": self.found,
             "device_blamed": self.device_blamed,
             "device_effects": [d.to_dict() for d in self.devices],

@@ -21,6 +21,7 @@ from .significance import COND_LIMIT, condition
 
 SEPARATES = 0.05      # visibility an extra measurement must give to count as separating
 TELLS_APART = 25.0    # σ̂² of misfit a measurement must add between two rivals (5 σ)
+EXACT = 1e-8          # what two effects leave of each other, of what each shows: one column
 ADVISED = 3           # measurements named per effect, shortest first (each written and motion-checked)
 
 
@@ -143,17 +144,20 @@ def separating(measured: Measured, effects: Sequence[Effect],
 
 
 def telling_apart(measured: Measured, group: Sequence[Row], sigma2: float, advisor: Advising
-                  ) -> tuple[dict[str, tuple[Proposal, ...]], tuple[Proposal, ...], dict]:
+                  ) -> tuple[dict[str, tuple[Proposal, ...]], tuple[Proposal, ...], dict, tuple[str, ...]]:
     """Which measurements, not made yet and that the machine can make, tell the best
     (``group[0]``) and its rivals apart: a pair is told apart when, at their fitted sizes,
     they would differ by ``TELLS_APART`` σ̂² more than now (each hypothesis, were it true,
     would leave that much misfit in a fit of the other; first order).
 
     Returns, per rival, what tells it from the best (shortest first); the measurements that
-    tell any pair apart, those telling every pair apart first; and per measurement the
-    pairs it leaves open. The measurements come as a plan: each tells apart the most pairs
-    the ones before it leave open, until every pair is told apart or none is left that
-    would."""
+    tell any pair apart, those telling every pair apart first; per measurement the pairs it
+    leaves open; and the rivals that are the best's exact equivalents: one column with it,
+    on these data and with every measurement the machine can make (what either leaves of
+    the other below ``EXACT`` of what it shows beyond the model), one candidate under two
+    names (``drift_Z:e15`` and ``ZOW:e15`` on a head over a C table). The measurements come
+    as a plan: each tells apart the most pairs the ones before it leave open, until every
+    pair is told apart or none is left that would."""
     effects = [row.effect for row in group]
     amps = {row.effect.name: row.amp for row in group}
     p, cols = measured.p, measured.cols
@@ -166,11 +170,21 @@ def telling_apart(measured: Measured, group: Sequence[Row], sigma2: float, advis
     def apart(R, a, b):
         return min(misfit(R, a, b), misfit(R, b, a))
 
+    def shown(R, a):            # what a shows beyond the model alone
+        Rs = np.linalg.qr(R[:, [*range(p), *cols[a]]], mode="r")
+        return float(np.sum((Rs[p:, p:] @ amps[a]) ** 2))
+
+    def one(R, a, b):
+        return apart(R, a, b) <= EXACT * min(shown(R, a), shown(R, b))
+
+    best = effects[0].name
     pairs = list(combinations([e.name for e in effects], 2))
     now = {pq: apart(measured.R, *pq) for pq in pairs}
+    same = {e.name for e in effects[1:] if one(measured.R, best, e.name)}
     split = {}
     for extra in advisor.candidates:
         R = measured.with_extra(extra)
+        same = {b for b in same if one(R, best, b)}
         gains = {pq: apart(R, *pq) - now[pq] for pq in pairs}
         told = {pq for pq, g in gains.items() if g >= TELLS_APART * sigma2}
         if told:
@@ -189,10 +203,10 @@ def telling_apart(measured: Measured, group: Sequence[Row], sigma2: float, advis
         remaining -= split[step[0].label][1]
     open_ = {m.label: tuple(pq for pq in pairs if pq not in split[m.label][1]) for m in plan}
     ordered = tuple(plan)
-    best = effects[0].name
     by_rival = {}
     for e in effects[1:]:
         pair = (best, e.name)
         tells = sorted((s for s in split.values() if pair in s[1]), key=lambda s: (len(s[0].poses), -s[2]))
         by_rival[e.name] = advisor.runnable([s[0] for s in tells], most=ADVISED)
-    return by_rival, ordered, {k: v for k, v in open_.items() if v}
+    equivalents = tuple(e.name for e in effects if e.name in same)
+    return by_rival, ordered, {k: v for k, v in open_.items() if v}, equivalents
