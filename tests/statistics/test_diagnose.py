@@ -1646,3 +1646,24 @@ def test_what_a_user_says_of_a_file_is_kept_with_the_fit_and_checked(seed_machin
         code, _, err = run("fit", "--machine", SEED_MACHINE, a, *args, "-o", tmp_path / "g.json")
         assert code == 2 and said in err and err.count("\n") == 1, err
         assert not (tmp_path / "g.json").exists()
+
+
+def test_exact_equivalents_are_one_candidate_found_under_every_name(head_machine):
+    """On a head over a C table the nest growing along the tool's Z (drift_Z) and the ball's
+    stem warming (ZOW) are one column at every set-up the machine can measure: found under
+    both names, not "not told apart"; the rivals of a hidden 2/rev of C, which a measurement
+    tells apart, are no equivalents."""
+    truth = {"XOC": 6 * UM, "YOC": -8 * UM, "XOB": 10 * UM, "ZOB": -7 * UM, "drift_Z:e15": 6 * UM}
+    poses = generate(head_machine, ["K4", "K1", "K2"])
+    data = [simulate(head_machine, truth, poses, NOISE_UM, np.random.default_rng(11))]
+    found = diagnose(head_machine, data, identify(head_machine, data), noise_um=NOISE_UM, advisor=Advisor)
+    assert found.verdict == "found" and {found.found, *found.equivalents} == {"drift_Z:e15", "ZOW:e15"}, \
+        (found.verdict, found.found, found.rivals, found.equivalents)
+    first = report(found).splitlines()[0]
+    assert first.startswith(f"VERDICT: found {found.found} ≡ {found.equivalents[0]}, one column"), first
+    assert found.to_dict()["equivalents_of_best"] == list(found.equivalents)
+    data = [simulate(head_machine, {**truth, "drift_Z:e15": 0.0, "EXC:h2c": 3 * UM}, poses, NOISE_UM,
+                     np.random.default_rng(11))]
+    found = diagnose(head_machine, data, identify(head_machine, data), noise_um=NOISE_UM, advisor=Advisor)
+    assert found.rivals and found.rivals_separated_by and not found.equivalents, \
+        (found.verdict, found.rivals, found.equivalents)
