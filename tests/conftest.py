@@ -236,3 +236,80 @@ def pg_db(postgres, request):
         db.execute(f"DROP DATABASE IF EXISTS {name}")
         db.execute(f"CREATE DATABASE {name}")
     return f"{postgres}/{name}"
+
+
+def hidden_2_per_rev_is_found(machine, truth: dict, poses, noise_um: float) -> None:
+    """C's radial motion at 2/rev hidden beside ``truth`` (3 and −2 µm): diagnose names it
+    found; added, the fit reaches the noise with every location error within 4 σ of the truth."""
+    from compgen.data.simulate import simulate
+    from compgen.model.effects import compose, location_model
+    from compgen.planning.advice import Advisor
+    from compgen.statistics.diagnose import diagnose
+    from compgen.statistics.identify import identify
+
+    hidden = {**truth, "EXC:h2c": 3 * UM, "EXC:h2s": -2 * UM}
+    data = [simulate(machine, hidden, poses, noise_um, np.random.default_rng(2))]
+    found = diagnose(machine, data, identify(machine, data), noise_um=noise_um, advisor=Advisor)
+    assert found.found == "EXC:h2", ([c.effect for c in found.significant[:3]], found.rivals)
+    fit = identify(machine, data, compose(machine, location_model(machine), ["EXC:h2"]))
+    assert abs(fit.residual["sigma_um"] / noise_um - 1) < 0.1, fit.residual["sigma_um"]
+    off = {n: abs(fit.parameters[n].value - v) / fit.parameters[n].std for n, v in truth.items()}
+    assert max(off.values()) < 4, off
+
+
+def carr_record(v1, v2) -> str:
+    """A $TC_CARR record 1 as the control holds it: fine offsets 0, the axis vectors v1, v2."""
+    fine = [41, 42, 43, 44, 45, 46, 55, 56, 57, 58, 59, 60]
+    return "\n".join([*(f"$TC_CARR{n}[1]={x}" for n, x in zip(range(7, 13), [*v1, *v2], strict=True)),
+                      *(f"$TC_CARR{n}[1]=0" for n in fine)]) + "\n"
+
+
+def carr_edit_is(machine, fit, held, fine: dict, v1, v2, folder: Path) -> str:
+    """The SINUMERIK edit of ``fit`` from the record ``held`` (v1, v2 as the control holds
+    them) writes exactly the fine offsets ``fine`` (vector name → mm) and the vectors v1, v2
+    (5 decimals of a mm, 10 of a vector), reads back as the fitted lines, and its sign check
+    passes check-program. Returns the edit's main file."""
+    import re
+
+    from compgen.controllers.correction import plan
+    from compgen.controllers.kinematics import kinematics_edit
+    from compgen.controllers.registry import read_edits
+
+    out = kinematics_edit(machine, fit, "sinumerik840d", carr_record(*held), "current", "KIN", "0", "d")
+    got = {int(m[1]): float(m[2]) for m in re.finditer(r"(?m)^\$TC_CARR(\d+)\[1\]=(\S+)$", out.files[".MPF"])}
+    index = {"l1": (41, 42, 43), "l2": (44, 45, 46), "l3": (55, 56, 57), "l4": (58, 59, 60)}
+    want = {n: float(v[k]) for vec, v in fine.items() for k, n in enumerate(index[vec])}
+    want |= {n: x for n, x in zip(range(7, 13), [*v1, *v2], strict=True)}
+    assert set(got) == set(want), sorted(set(got) ^ set(want))
+    for n in want:
+        assert abs(got[n] - want[n]) <= (6e-6 if n > 12 else 1e-9), (n, got[n], want[n])
+    (folder / "KIN_SIGN.MPF").write_text(out.files["_SIGN.MPF"])
+    code, _, err = run("check-program", "--machine", machine.source, folder / "KIN_SIGN.MPF")
+    assert code == 0, err
+    now = read_edits(machine, {"KIN.MPF": out.files[".MPF"]}, carr_record(*held))
+    fitted = plan(machine, fit).lines
+    for a in machine.rotary_axes:
+        np.testing.assert_allclose(now.lines[a.name].offset, fitted[a.name].offset, atol=6e-6)
+        np.testing.assert_allclose(now.lines[a.name].tilt, fitted[a.name].tilt, atol=1e-9)
+    return out.files[".MPF"], out.files["_SIGN.MPF"]
+
+
+def fitted_at_the_bound(machine, truth: dict, poses, deviation, noise_um: float, seed: int) -> None:
+    """Location errors only, white noise: each estimate within 5 σ of the truth, σ the bound
+    that ``deviation`` (poses, values → (n, 3) mm, the geometry written out by hand) gives
+    by central differences, and the fit's own σ that bound to 2 % (its σ̂ for the noise)."""
+    from compgen.data.simulate import simulate
+    from compgen.model.effects import location_model
+    from compgen.statistics.identify import identify
+
+    names = list(location_model(machine))
+    fit = identify(machine, [simulate(machine, truth, poses, noise_um, np.random.default_rng(seed))], names)
+    h = 1e-6
+    J = np.column_stack([(deviation(poses, {**truth, n: truth[n] + h})
+                          - deviation(poses, {**truth, n: truth[n] - h})).ravel() / (2 * h) for n in names])
+    bound = noise_um * UM * np.sqrt(np.diag(np.linalg.inv(J.T @ J)))
+    sigma_hat = fit.residual["sigma_um"] / noise_um
+    for n, b in zip(names, bound, strict=True):
+        e = fit.parameters[n]
+        assert abs(e.value - truth[n]) < 5 * b, (n, e.value, truth[n], b)
+        assert abs(e.std / (b * sigma_hat) - 1) < 0.02, (n, e.std, b)

@@ -14,6 +14,10 @@ from conftest import (
     ROOT,
     SEED_MACHINE,
     UM,
+    carr_edit_is,
+    carr_record,
+    fitted_at_the_bound,
+    hidden_2_per_rev_is_found,
     measured_under,
     on_linuxcnc,
     pasted,
@@ -164,19 +168,7 @@ def test_a_session_is_fitted_at_the_cramer_rao_bound(case):
     where σ is the bound the hand-written geometry gives (its Jacobian by central
     differences), and the fit's own σ that bound to 2 % (its σ̂ for the noise)."""
     machine, hand, poses = case
-    names = list(location_model(machine))
-    data = simulate(machine, TRUTH, poses, NOISE_UM, np.random.default_rng(40))
-    fit = identify(machine, [data], names)
-    h = 1e-6
-    J = np.column_stack([(_deviation(hand, poses, {**TRUTH, n: TRUTH[n] + h})
-                          - _deviation(hand, poses, {**TRUTH, n: TRUTH[n] - h})).ravel() / (2 * h)
-                         for n in names])
-    bound = NOISE_UM * UM * np.sqrt(np.diag(np.linalg.inv(J.T @ J)))
-    sigma_hat = fit.residual["sigma_um"] / NOISE_UM
-    for n, b in zip(names, bound, strict=True):
-        e = fit.parameters[n]
-        assert abs(e.value - TRUTH[n]) < 5 * b, (n, e.value, TRUTH[n], b)
-        assert e.std == pytest.approx(b * sigma_hat, rel=0.02), (n, e.std, b)
+    fitted_at_the_bound(machine, TRUTH, poses, lambda p, v: _deviation(hand, p, v), NOISE_UM, 40)
 
 
 @pytest.mark.parametrize("source", [HEAD_MACHINE, FORK_MACHINE], ids=["swivel", "fork"])
@@ -318,15 +310,7 @@ def test_a_hidden_2_per_rev_of_c_is_named_found_on_both_heads(case):
     """C's radial motion at 2/rev, hidden (3 and −2 µm): diagnose names it found; added, the
     fit reaches the noise with every location error within 4 σ of the truth."""
     machine, _, _ = case
-    poses = generate(machine, list(machine.paths))
-    hidden = {**TRUTH, "EXC:h2c": 3 * UM, "EXC:h2s": -2 * UM}
-    data = [simulate(machine, hidden, poses, NOISE_UM, np.random.default_rng(2))]
-    found = diagnose(machine, data, identify(machine, data), noise_um=NOISE_UM, advisor=Advisor)
-    assert found.found == "EXC:h2", ([c.effect for c in found.significant[:3]], found.rivals)
-    fit = identify(machine, data, compose(machine, location_model(machine), ["EXC:h2"]))
-    assert fit.residual["sigma_um"] == pytest.approx(NOISE_UM, rel=0.1)
-    off = {n: abs(fit.parameters[n].value - v) / fit.parameters[n].std for n, v in TRUTH.items()}
-    assert max(off.values()) < 4, off
+    hidden_2_per_rev_is_found(machine, TRUTH, generate(machine, list(machine.paths)), NOISE_UM)
 
 
 LONGER = GAUGE + 100.0       # the second nest's distance below the gauge line, mm
@@ -537,13 +521,6 @@ def _on_sinumerik(folder, source, vectors: str):
     return load_machine(path)
 
 
-def _record(v1, v2) -> str:
-    """A $TC_CARR record as the control holds it: fine offsets 0, the axis vectors."""
-    fine = [41, 42, 43, 44, 45, 46, 55, 56, 57, 58, 59, 60]
-    return "\n".join([*(f"$TC_CARR{n}[1]={x}" for n, x in zip(range(7, 13), [*v1, *v2], strict=True)),
-                      *(f"$TC_CARR{n}[1]=0" for n in fine)]) + "\n"
-
-
 @pytest.mark.parametrize("case", ["fork", "swivel"])
 def test_sinumerik_edits_of_a_head_against_hand_computed_records(tmp_path, case):
     """The fork is a kind T record (rotary axis 1 = C, carrying axis 2 = B), the swivel head
@@ -577,23 +554,8 @@ def test_sinumerik_edits_of_a_head_against_hand_computed_records(tmp_path, case)
     assert machine.sinumerik["kind"] == ("T" if case == "fork" else "M")
     data = [simulate(machine, truth, generate(machine, ["K4", "K2"]), 0.0, np.random.default_rng(0))]
     fit = identify(machine, data, location_model(machine))
-    out = kinematics_edit(machine, fit, "sinumerik840d", _record(*held), "current", "KIN", "0", "d")
-    got = {int(m[1]): float(m[2]) for m in re.finditer(r"(?m)^\$TC_CARR(\d+)\[1\]=(\S+)$", out.files[".MPF"])}
-    index = {"l1": (41, 42, 43), "l2": (44, 45, 46), "l3": (55, 56, 57), "l4": (58, 59, 60)}
-    want = {n: float(v[k]) for vec, v in fine.items() for k, n in enumerate(index[vec])}
-    want |= {n: x for n, x in zip(range(7, 13), [*v1, *v2], strict=True)}
-    assert set(got) == set(want), sorted(set(got) ^ set(want))
-    for n in want:                                     # 5 decimals of a mm, 10 of a vector
-        assert got[n] == pytest.approx(want[n], abs=6e-6 if n > 12 else 1e-9), (n, got[n], want[n])
-    assert f"kind {machine.sinumerik['kind']}" in out.files[".MPF"] and "TRAORI" in out.files["_SIGN.MPF"]
-    (tmp_path / "KIN_SIGN.MPF").write_text(out.files["_SIGN.MPF"])
-    code, _, err = run("check-program", "--machine", machine.source, tmp_path / "KIN_SIGN.MPF")
-    assert code == 0, err
-    held_now = read_edits(machine, {"KIN.MPF": out.files[".MPF"]}, _record(*held))
-    fitted = plan(machine, fit).lines
-    for a in machine.rotary_axes:
-        np.testing.assert_allclose(held_now.lines[a.name].offset, fitted[a.name].offset, atol=6e-6)
-        np.testing.assert_allclose(held_now.lines[a.name].tilt, fitted[a.name].tilt, atol=1e-9)
+    edit, sign = carr_edit_is(machine, fit, held, fine, v1, v2, tmp_path)
+    assert f"kind {machine.sinumerik['kind']}" in edit and "TRAORI" in sign
 
 
 SWIVEL_TAB = (ROOT / "examples" / "swivel-head-itnc530.TAB").read_text()   # the OEM's rows
@@ -695,7 +657,7 @@ def test_two_rounds_on_a_head_from_a_non_zero_state_reach_the_noise(tmp_path, ca
         machine = _on_sinumerik(tmp_path, source, "{ C = [0.0, 0.0, 1.0], B = [0.0, 1.0, 0.0] }"
                                 if case.endswith("T") else "{ B = [0.0, 1.0, 0.0], C = [0.0, 0.0, -1.0] }")
         held0 = ([0, 0, 1], [0, 1, 0]) if case.endswith("T") else ([0, 1, 0], [0, 0, -1])
-        nominal = _record(*held0)
+        nominal = carr_record(*held0)
         # an earlier round's 4.7 µm on pivot 2 (the fork's B, the table's C), its chain closed
         closing = "$TC_CARR44[1]=-0.0047" if case.endswith("T") else "$TC_CARR58[1]=-0.0047"
         state = nominal.replace("$TC_CARR55[1]=0", "$TC_CARR55[1]=0.0047").replace(

@@ -3,25 +3,28 @@ about (0, 1, 1)/√2 through its pivot over a C table. compgen's chain against t
 written out by hand from that description, fits at the Cramér-Rao bound, a ball never
 measured predicted, a hidden 2/rev of C found, and what each control can hold of it."""
 
-import re
 
 import numpy as np
 import pytest
-from conftest import ARCSEC, NUTATING_MACHINE, UM, run
+from conftest import (
+    ARCSEC,
+    NUTATING_MACHINE,
+    UM,
+    carr_edit_is,
+    fitted_at_the_bound,
+    hidden_2_per_rev_is_found,
+    run,
+)
 from scipy.spatial.transform import Rotation
 
 from compgen.configuration.machine_file import load_machine
 from compgen.controllers.correction import lines_text, plan
-from compgen.controllers.kinematics import kinematics_edit
-from compgen.controllers.registry import read_edits
 from compgen.data.rtest import commanded, format_rtest
 from compgen.data.simulate import simulate
-from compgen.model.effects import compose, effect_of_param, location_model
+from compgen.model.effects import effect_of_param, location_model
 from compgen.model.kinematics import Model, SlotGains
 from compgen.model.lines import axis_lines
 from compgen.model.paths import generate
-from compgen.planning.advice import Advisor
-from compgen.statistics.diagnose import diagnose
 from compgen.statistics.identify import identify
 
 GAUGE, PIVOT = 120.0, 150.0         # the file's probe_length and the head's pivot length, mm
@@ -119,18 +122,7 @@ def test_a_session_is_fitted_at_the_cramer_rao_bound(nutating):
     """Location errors only, white noise of 0.5 µm: each estimate within 5 σ of the truth,
     σ the bound the hand-written geometry gives, and the fit's own σ that bound to 2 %."""
     machine, poses = nutating
-    names = list(location_model(machine))
-    data = simulate(machine, TRUTH, poses, NOISE_UM, np.random.default_rng(69))
-    fit = identify(machine, [data], names)
-    h = 1e-6
-    J = np.column_stack([(_deviation(poses, {**TRUTH, n: TRUTH[n] + h})
-                          - _deviation(poses, {**TRUTH, n: TRUTH[n] - h})).ravel() / (2 * h) for n in names])
-    bound = NOISE_UM * UM * np.sqrt(np.diag(np.linalg.inv(J.T @ J)))
-    sigma_hat = fit.residual["sigma_um"] / NOISE_UM
-    for n, b in zip(names, bound, strict=True):
-        e = fit.parameters[n]
-        assert abs(e.value - TRUTH[n]) < 5 * b, (n, e.value, TRUTH[n], b)
-        assert e.std == pytest.approx(b * sigma_hat, rel=0.02), (n, e.std, b)
+    fitted_at_the_bound(machine, TRUTH, poses, _deviation, NOISE_UM, 69)
 
 
 def test_a_ball_never_measured_is_predicted_to_the_noise(nutating):
@@ -153,20 +145,7 @@ def test_a_hidden_2_per_rev_of_c_is_named_found(nutating):
     """C's radial motion at 2/rev hidden (3 and −2 µm): diagnose names it found; added, the fit
     reaches the noise with every location error within 4 σ of the truth."""
     machine, poses = nutating
-    hidden = {**TRUTH, "EXC:h2c": 3 * UM, "EXC:h2s": -2 * UM}
-    data = [simulate(machine, hidden, poses, NOISE_UM, np.random.default_rng(2))]
-    found = diagnose(machine, data, identify(machine, data), noise_um=NOISE_UM, advisor=Advisor)
-    assert found.found == "EXC:h2", ([c.effect for c in found.significant[:3]], found.rivals)
-    fit = identify(machine, data, compose(machine, location_model(machine), ["EXC:h2"]))
-    assert fit.residual["sigma_um"] == pytest.approx(NOISE_UM, rel=0.1)
-    off = {n: abs(fit.parameters[n].value - v) / fit.parameters[n].std for n, v in TRUTH.items()}
-    assert max(off.values()) < 4, off
-
-
-def _record(v1, v2) -> str:
-    fine = [41, 42, 43, 44, 45, 46, 55, 56, 57, 58, 59, 60]
-    return "\n".join([*(f"$TC_CARR{n}[1]={x}" for n, x in zip(range(7, 13), [*v1, *v2], strict=True)),
-                      *(f"$TC_CARR{n}[1]=0" for n in fine)]) + "\n"
+    hidden_2_per_rev_is_found(machine, TRUTH, poses, NOISE_UM)
 
 
 def test_sinumerik_holds_the_inclined_line_against_a_hand_computed_record(nutating, tmp_path):
@@ -185,22 +164,7 @@ def test_sinumerik_holds_the_inclined_line_against_a_hand_computed_record(nutati
     v2 = _rot([0, 7 * ARCSEC, 0]) @ [0, 0, -1]
     fit = identify(machine, [simulate(machine, truth, poses, 0.0, np.random.default_rng(0))],
                    location_model(machine))
-    out = kinematics_edit(machine, fit, "sinumerik840d", _record(*held), "current", "KIN", "0", "d")
-    got = {int(m[1]): float(m[2]) for m in re.finditer(r"(?m)^\$TC_CARR(\d+)\[1\]=(\S+)$", out.files[".MPF"])}
-    index = {"l1": (41, 42, 43), "l2": (44, 45, 46), "l3": (55, 56, 57), "l4": (58, 59, 60)}
-    want = {n: float(v[k]) for vec, v in fine.items() for k, n in enumerate(index[vec])}
-    want |= {n: x for n, x in zip(range(7, 13), [*v1, *v2], strict=True)}
-    assert set(got) == set(want)
-    for n in want:
-        assert got[n] == pytest.approx(want[n], abs=6e-6 if n > 12 else 1e-9), (n, got[n], want[n])
-    (tmp_path / "KIN_SIGN.MPF").write_text(out.files["_SIGN.MPF"])
-    code, _, err = run("check-program", "--machine", machine.source, tmp_path / "KIN_SIGN.MPF")
-    assert code == 0, err
-    now = read_edits(machine, {"KIN.MPF": out.files[".MPF"]}, _record(*held))
-    fitted = plan(machine, fit).lines
-    for a in machine.rotary_axes:
-        np.testing.assert_allclose(now.lines[a.name].offset, fitted[a.name].offset, atol=6e-6)
-        np.testing.assert_allclose(now.lines[a.name].tilt, fitted[a.name].tilt, atol=1e-9)
+    carr_edit_is(machine, fit, held, fine, v1, v2, tmp_path)
     line = axis_lines(machine, truth)["B"]
     np.testing.assert_allclose(line.direction, v1, atol=1e-12)
 

@@ -223,6 +223,20 @@ def test_poses_repeat_only_with_the_same_ball_and_axes_to_the_csvs_resolution(se
         assert (same[1:].all() and not same[0]) if repeated else not same.any(), same.sum()
 
 
+def _three_runs_and_their_fit(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Three runs of n/3 readings and the orthonormal basis of a fit of 15 columns to them:
+    each run's constant and two smooth shapes, per direction."""
+    seg = np.repeat([0, 1, 2], n // 3)
+    t = np.linspace(0, 1, n)
+    cols = []
+    for d in range(3):
+        for shape in [*(seg == s for s in range(3)), np.sin(3 * t), np.cos(5 * t)]:
+            c = np.zeros((n, 3))
+            c[:, d] = shape
+            cols.append(c.ravel())
+    return seg, np.linalg.qr(np.array(cols).T)[0]
+
+
 @pytest.mark.parametrize("rho", [0.5, 0.9])
 def test_the_estimate_is_matched_beyond_the_span_the_fit_took_out(rho):
     """400 sessions of three runs of 80 readings, AR(1) noise, less their least-squares fit
@@ -232,15 +246,7 @@ def test_the_estimate_is_matched_beyond_the_span_the_fit_took_out(rho):
     run's mean alone leaves it 0.02 (at 0.5) to 0.04 (at 0.9) low."""
     rng = np.random.default_rng(7)
     n, sessions = 240, 400
-    seg = np.repeat([0, 1, 2], n // 3)
-    t = np.linspace(0, 1, n)
-    cols = []
-    for d in range(3):
-        for shape in [*(seg == s for s in range(3)), np.sin(3 * t), np.cos(5 * t)]:
-            c = np.zeros((n, 3))
-            c[:, d] = shape
-            cols.append(c.ravel())
-    B = np.linalg.qr(np.array(cols).T)[0]
+    seg, B = _three_runs_and_their_fit(n)
     matched, kendall = [], []
     for _ in range(sessions):
         e = np.vstack([ar1_noise(n // 3, rho, 1e3, rng) for _ in range(3)]).ravel()
@@ -258,15 +264,7 @@ def test_a_lazy_basis_is_made_only_where_a_rho_could_reach_the_floor(n, rho, mad
     noise, and a short run where the bound says nothing, make it. Either way ρ̂ is the one
     the basis given at once gives."""
     rng = np.random.default_rng(3)
-    seg = np.repeat([0, 1, 2], n // 3)
-    t = np.linspace(0, 1, n)
-    cols = []
-    for d in range(3):
-        for shape in [*(seg == s for s in range(3)), np.sin(3 * t), np.cos(5 * t)]:
-            c = np.zeros((n, 3))
-            c[:, d] = shape
-            cols.append(c.ravel())
-    B = np.linalg.qr(np.array(cols).T)[0]
+    seg, B = _three_runs_and_their_fit(n)
     e = np.vstack([ar1_noise(n // 3, rho, 1e3, rng) for _ in range(3)]).ravel()
     r = (e - B @ (B.T @ e)).reshape(n, 3)
     calls = []
