@@ -1,4 +1,4 @@
-"""An inclined (nutating) axis: the reference machine of issue 69, a B head turning the tool
+"""An inclined (nutating) axis: the nutating reference machine, a B head turning the tool
 about (0, 1, 1)/√2 through its pivot over a C table. compgen's chain against the geometry
 written out by hand from that description, fits at the Cramér-Rao bound, a ball never
 measured predicted, a hidden 2/rev of C found, and what each control can hold of it."""
