@@ -536,6 +536,17 @@ def second_look_cases() -> list[Case]:
             Case("second-look", "history import --same-machine of no export", {"x.json": "{}"},
                  ["history", "import", "{dir}/x.json", "--same-machine", "A", "--db", "{dir}/h.sqlite"],
                  "refuse", ["h.sqlite"])]
+    # what a user says of a file's set-up: of a file not in the fit, of the first, both at
+    # once, and as meant (a moved ball said untouched: tests/statistics/test_diagnose.py)
+    session = SESSION.read_text()
+    two = {"a.csv": session, "b.csv": session.replace("K4,", "K4b,")}
+    fit = ["fit", "--machine", str(SEED), "{dir}/a.csv", "{dir}/b.csv", "-o", "{dir}/f.json"]
+    again, untouched = "--mounted-again", "--not-touched"
+    out += [Case("second-look", f"fit {' '.join(said)}", two, [*fit, *said], expect, ["f.json"])
+            for said, expect in (([again, "{dir}/zz.csv"], "refuse"), ([again, "{dir}/a.csv"], "refuse"),
+                                 ([untouched, "{dir}/a.csv"], "refuse"),
+                                 ([again, "{dir}/b.csv", untouched, "{dir}/b.csv"], "refuse"),
+                                 ([again, "{dir}/b.csv"], "accept"), ([untouched, "{dir}/b.csv"], "accept"))]
     return out
 
 
@@ -771,6 +782,14 @@ def plan_cases() -> list[Case]:
             Case("plan", "plan without [program]", {"m.toml": re.sub(r"(?ms)^\[program\].*?\n\n", "", seed)},
                  ["plan", "--machine", "{dir}/m.toml", "--noise-um", "0.5", "--minutes", "5",
                   "-o", "{dir}/p"], "refuse", ["p"])]
+    out += [Case("plan", f"plan --effects {e[:40]!r}", {},
+                 [*plan, "--minutes", "5", "--effects", e, "-o", "{dir}/p"], expect, ["p"])
+            for e, expect in (("", "refuse"), (",", "refuse"), ("ECC:h2", "refuse"),
+                              ("ECC:h2,ECC:h2", "refuse"), ("ECC:h2,ECC:r1", "refuse"),
+                              ("ECC:h2,EQQ:h9", "refuse"), ("ECC:h2,\n", "refuse"),
+                              ("ECC:h2," + "E" * 5000, "refuse"), ("ECC:h2,EXC+EYC:h2", "accept"))]
+    out += [Case("plan", "diagnose --plan into a file", {"p": b"mine\n"},
+                 ["diagnose", "--from", "{dir}/fit.json", "--plan", "{dir}/p"], "refuse", unchanged=["p"])]
     kept = {"garbage": b"\x00\xff{", "empty": b"", "NaN": b"NaN", "object": b"{}",
             "wrong key": b'{"format": "compgen.kept-diagnosis/1", "key": {}, "diagnosis": {}}',
             "deep": b"[" * 100000, "foreign format": b'{"format": "compgen.fit/1"}'}
