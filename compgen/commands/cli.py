@@ -263,7 +263,7 @@ def diagnose_cmd(base, as_json, candidates, plots_dir, before, noise_um, plan_di
     names = [c.strip() for c in candidates.split(",") if c.strip()] if candidates else None
     progress(f"trying {'the catalogue' if names is None else len(names)} effects against "
               f"{sum(len(s) for s in sets)} poses")
-    result = diagnose(machine, sets, fit, names, fit_file=base, machine_ref=machine_ref(fit),
+    result = diagnose(machine, sets, fit, names, fit_file=base,
                       noise_um=noise_um, advisor=Advisor)
     named = compose(machine, fit.model, [c.effect for c in result.candidates if c.significant])
     _warn_about_data(machine, named, sets)
@@ -496,7 +496,7 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
     found = read_kept(base, made_of, Proposal)
     progress("1/3 diagnose" + (f": kept beside the fit ({kept_path(base).name})" if found else ""))
     made = found is None
-    found = replace(found, fit_file=base, machine_ref=machine.source) if found else \
+    found = replace(found, fit_file=base) if found else \
         diagnose(machine, sets, fit, fit_file=base, advisor=Advisor)
     progress("2/3 compare")
     comparison = compare(machine, sets, fit, controller_name or machine.controller, post)

@@ -65,6 +65,8 @@ class Proposal:
     device: str = "rtest"        # "probe": made with a touch probe (probe-program)
     again: bool = False          # a repeat of what was measured, right after it: for time
     nest: float | None = None    # mm below the gauge line, where not the machine file's
+    machine_ref: str = ""        # how its command names the machine file: a bundled machine by name
+    program_ext: str = ""        # the suffix of its program: the machine's control's
 
     @property
     def run_label(self) -> str:
@@ -82,12 +84,12 @@ class Proposal:
         return (f"--path {self.path} --ball {ball}" + " --there-and-back" * self.back
                 + (f" --probe-length {self.nest:g}" if self.nest is not None else ""))
 
-    def command(self, me: str, machine_ref: str, program_ext: str) -> str:
+    def command(self, me: str) -> str:
         """The whole ``measure-program`` (or ``probe-program``) command, as it runs pasted
         into bash."""
         verb = "probe-program" if self.device == "probe" else "measure-program"
-        return (f"{me} {verb} --machine {shlex.quote(machine_ref)} {self.options()} "
-                f"-o {self.name}{program_ext}")
+        return (f"{me} {verb} --machine {shlex.quote(self.machine_ref)} {self.options()} "
+                f"-o {self.name}{self.program_ext}")
 
 
 class Advisor:
@@ -96,7 +98,6 @@ class Advisor:
 
     def __init__(self, machine: Machine, measured: Poses | None = None, device: str = "rtest"):
         self.machine = machine
-        self.program_ext = controller(machine.controller).program_ext    # of the commands advised
         # why nothing can be advised on this machine (its programs are not written), if so
         self.unable = ("" if controller(machine.controller).writes_programs(machine) else
                        "compgen does not write measuring programs for a head yet on this control, so it "
@@ -183,5 +184,6 @@ def proposals(machine: Machine, measured: Poses | None, device: str = "rtest") -
                 n = runs_of[key]
                 label, stem = f"{label}{AGAIN}", f"{stem}_AGAIN" + (f"_{n}" if n > 1 else "")
             out.append(Proposal(label, name, tuple(float(v) for v in at), poses, back, stem, device,
-                                   again, nest))
+                                   again, nest, machine.bundled or machine.source,
+                                   controller(machine.controller).program_ext))
     return out

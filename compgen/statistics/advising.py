@@ -26,15 +26,13 @@ class Proposal(Protocol):
 
     def to_dict(self) -> dict: ...
 
-    def command(self, me: str, machine_ref: str, program_ext: str) -> str: ...
+    def command(self, me: str) -> str: ...
 
 
 class Advising(Protocol):
-    """The measurements one machine can make (``candidates``), and which of a list it can
-    (``runnable``); ``unable`` says why it advises none, ``program_ext`` is the suffix of
-    the programs its commands write."""
+    """The measurements one machine can make (``candidates``), each naming its own command,
+    and which of a list it can (``runnable``); ``unable`` says why it advises none."""
 
-    program_ext: str
     unable: str
     candidates: Sequence[Proposal]
 

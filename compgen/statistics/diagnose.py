@@ -95,7 +95,7 @@ class _Residual:
 
 def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
              candidates: Sequence[str] | None = None, alpha: float = ALPHA,
-             fit_file: str = "", advisor: Callable[..., Advising] | None = None, machine_ref: str = "",
+             fit_file: str = "", advisor: Callable[..., Advising] | None = None,
              noise_um: float | None = None) -> Diagnosis:
     """Rank the effects not in ``fit``'s model by how much of its residual they explain.
 
@@ -104,8 +104,8 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     best candidate is added (the misfit of a missing effect is not noise). With an
     ``advisor`` (``advisor(machine, poses, device)``: ``advice.Advisor``), the measurements
     that would separate what these data cannot are searched for among those the machine can
-    make; ``machine_ref`` is how the commands printed name the machine file. ``noise_um``
-    is the R-test's own noise (default: the machine file's ``[rtest] noise_um``): with it,
+    make (each names the machine file as its command prints it). ``noise_um`` is the R-test's
+    own noise (default: the machine file's ``[rtest] noise_um``): with it,
     the residual is tested against it per path and direction, and what no catalogue effect
     accounts for is called unexplained."""
     joined = Measurements.concat(data)
@@ -164,8 +164,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         tested=tested, alpha=alpha, **rival,
         carries=_carries(fit, out, ranked, rival["rivals"]),
         outliers=_outlier_rows(data, res.bad, res.size), noise=_noise_summary(res.seg, noise.rho, poses.path),
-        machine_ref=machine_ref or machine.source,
-        program_ext=advising.program_ext if advising is not None else "", device_noise_um=device,
+        searched=advising is not None, device_noise_um=device,
         repeats=said, misfit=misfit,
         lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, notes=notes,
         data_device=kind, devices=tuple(devices), device_blamed=blamed, setup_step=step)

@@ -143,7 +143,7 @@ def _rivals_text(d: Diagnosis, fit: str, after: str) -> list[str]:
                              + ", ".join(" / ".join(p) for p in sorted(_told(d, m))) + ")")
                 lines.append(f"      {_measure(d, m)}")
             lines += _then(plan, fit, after)
-        elif not d.program_ext:          # no measurement was searched for (see the notes)
+        elif not d.searched:             # no measurement was searched for (see the notes)
             lines += ["  Which measurement would tell them apart was not searched. Any one of them models "
                       f"the misfit: {me()} fit --from {fit} --add {best} -o {after}; the location errors "
                       "written to a control depend on the choice:", *_carries(d)]
@@ -332,7 +332,7 @@ def next_name(path: str) -> str:
 
 
 def _measure(d: Diagnosis, m: Proposal) -> str:
-    command = m.command(me(), d.machine_ref, d.program_ext)
+    command = m.command(me())
     # a remark after the command is a bash comment: the line pastes and runs as printed
     return command + ("  # then run it at once, the R-test's clock running on: its t column continues "
                       "these data's" if m.again else "")

@@ -97,8 +97,7 @@ class Diagnosis:
     outliers: tuple[dict, ...] = ()     # {"file", "line", "path", "size_um"}: left out of the tests
     noise: dict = field(default_factory=dict)   # path → AR(1) ρ̂ per direction used by the tests
     rivals_open: dict = field(default_factory=dict)   # label → pairs of rivals it leaves apart
-    machine_ref: str = ""   # how a command names the machine file (--machine)
-    program_ext: str = ""   # the suffix of the machine's control's programs
+    searched: bool = False  # which measurements would tell more was searched (an advisor was given)
     device_noise_um: float | None = None   # the R-test's own noise, when given; a probe's, from its touches
     repeats: Repeats | None = None         # device_noise_um estimated from readings that repeat a pose
     data_device: str = "rtest"             # "probe": the data are sphere centres from probe logs

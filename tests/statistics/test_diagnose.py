@@ -1313,7 +1313,7 @@ def test_the_json_s_ball_is_the_one_the_printed_command_measures_at(seed_machine
     command measure-program is given, so a script reading either measures at one place."""
     machine = _to_a_tenth_um(seed_machine)
     for m in Advisor(machine).candidates:
-        given = re.search(r"--ball (\S+)", m.command("compgen", "m.toml", ".H"))[1]
+        given = re.search(r"--ball (\S+)", m.command("compgen"))[1]
         assert m.to_dict()["ball"] == [float(v) for v in given.split(",")], m.label
 
 
@@ -1529,8 +1529,7 @@ def test_two_drifts_at_once_end_unexplained_never_named_wrong(seed_machine, pose
     names, env = [], {"PATH": f"{Path(sys.executable).parent}:/usr/bin:/bin"}
     for _ in range(8):
         fit = identify(seed_machine, data, model)
-        found = diagnose(seed_machine, data, fit, noise_um=NOISE_UM, advisor=Advisor,
-                         machine_ref=str(SEED_MACHINE))
+        found = diagnose(seed_machine, data, fit, noise_um=NOISE_UM, advisor=Advisor)
         verdicts.append(found.verdict)
         if found.found:
             assert found.found in truth, (found.found, verdicts)
