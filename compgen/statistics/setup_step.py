@@ -1,9 +1,10 @@
 """A set-up event between two files, as a rival of what the machine's candidates name.
 
 compgen takes a ball at a new position as mounted again (``sides.mountings``): its offset
-is fitted anew there. A ball taken off and put back at the same place between two files,
-or a nest taken out and put back at the same length, is not seen so: the fit gives both
-files one offset, and the step between them is left in the residual, where a warming of
+is fitted anew there. A ball taken off and put back at the same place between two files (or
+in a pause within one), or a nest taken out and put back at the same length, is not seen
+so: the fit gives both files one offset, and the step between them is left in the residual,
+where a warming of
 the ball (``XOW:e45``) or a drift fits most of it and would be named found. So each file
 that continues the previous one's mounting (same ball position, same nest length) is
 tried as a step of the ball's and the nest's offsets on its rows and the rest of that
@@ -64,10 +65,7 @@ def setup_step(machine: Machine, poses: Poses, set_of: np.ndarray, sets, r: np.n
     nest = [resolve(machine, n) for n in NEST]
     rw = noise.residual(r)
     tried = []
-    for j in np.unique(set_of)[1:]:
-        i0 = int(np.flatnonzero(set_of == j)[0])
-        if i0 == 0 or sets[j].said:      # the user said what happened: mounted again, or nothing
-            continue
+    for i0, where in _breaks(poses, set_of, sets, names):
         parts = []
         for effects, group in ((ball, mount), (nest, held)):
             if group[i0] != group[i0 - 1]:       # mounted anew already: fitted so
@@ -87,7 +85,7 @@ def setup_step(machine: Machine, poses: Poses, set_of: np.ndarray, sets, r: np.n
         drop = float(np.sum((basis.T @ rw) ** 2))
         coef = np.linalg.lstsq(Cw, rw, rcond=None)[0] * 1e3
         split = [p.shape[1] if p is not None else 0 for p in parts]
-        tried.append((drop, basis.shape[1], names[j], tuple(coef[:split[0]]),
+        tried.append((drop, basis.shape[1], where, tuple(coef[:split[0]]),
                       tuple(coef[split[0]:split[0] + split[1]])))
     if not tried:
         return None
@@ -97,3 +95,23 @@ def setup_step(machine: Machine, poses: Poses, set_of: np.ndarray, sets, r: np.n
     rival = bool(significant and best is not None and (
         drop >= best[0] or rivals(best, {"step": (drop, k)}, rss_w / dof, alpha, False)))
     return SetupStep(before, tuple(map(float, ball_um)), tuple(map(float, nest_um)), p, significant, rival)
+
+
+PAUSE_S = 120.0      # a break in time within a file this long: time enough to take the ball off
+
+
+def _breaks(poses: Poses, set_of: np.ndarray, sets, names: list[str]) -> list[tuple[int, str]]:
+    """Where a set-up event may have happened, as (first pose after it, how the text names
+    it): each file after the first, unless the user said what happened before it; and each
+    pause of ``PAUSE_S`` or more within a file (the clock running on)."""
+    out = []
+    for j in np.unique(set_of)[1:]:
+        i0 = int(np.flatnonzero(set_of == j)[0])
+        if i0 and not sets[j].said:        # the user said what happened: mounted again, or nothing
+            out.append((i0, names[j]))
+    gap = np.diff(poses.t)                 # NaN without a time column: no pause is seen
+    within = set_of[1:] == set_of[:-1]
+    for i in np.flatnonzero(within & (gap >= PAUSE_S)) + 1:
+        out.append((int(i), f"{names[set_of[i]]} at t = {poses.t[i]:.0f} s (after a {gap[i - 1]:.0f} s "
+                            "pause)"))
+    return out

@@ -1666,3 +1666,32 @@ def test_exact_equivalents_are_one_candidate_found_under_every_name(head_machine
     found = diagnose(head_machine, data, identify(head_machine, data), noise_um=NOISE_UM, advisor=Advisor)
     assert found.rivals and found.rivals_separated_by and not found.equivalents, \
         (found.verdict, found.rivals, found.equivalents)
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_a_ball_mounted_again_in_a_pause_within_one_file_is_a_step_not_a_warming(seed_machine, seed):
+    """The re-mounting of the two-file case (3, −2, 1.5 µm), made in a 5-minute pause within
+    one file: the step at the pause is the best's rival, named by the time it came; a warming
+    across the pause is still found, and clean data with the pause stay explained."""
+    from dataclasses import replace
+
+    from compgen.model.poses import Poses
+    moved = {**TABLE4, **{n: TABLE4.get(n, 0.0) + v * UM for n, v in zip(("XOW", "YOW", "ZOW"), (3, -2, 1.5),
+                                                                          strict=True)}}
+
+    def one_file(first_truth, second_truth):
+        a, b = _two_files(seed_machine, first_truth, second_truth, seed)
+        late = b.poses.starting_at(float(np.nanmax(a.poses.t)) + 300.0)
+        return [replace(a, poses=Poses.concat([a.poses, late]), lines=(),
+                        deviation=np.vstack([a.deviation, b.deviation]))]
+
+    warm = {**TABLE4, "XOW:e45": 4 * UM}
+    for first, second, verdict in ((TABLE4, moved, "set-up step"), (warm, warm, "found"),
+                                   (TABLE4, TABLE4, "explained")):
+        data = one_file(first, second)
+        d = diagnose(seed_machine, data, identify(seed_machine, data, location_model(seed_machine)),
+                     noise_um=NOISE_UM)
+        assert d.verdict == verdict, (verdict, d.verdict, d.found, d.setup_step)
+        if verdict == "set-up step":
+            assert "a.csv at t = " in d.setup_step.before and "s pause)" in d.setup_step.before, d.setup_step
+            assert np.allclose(d.setup_step.ball_um, (3, -2, 1.5), atol=0.4), d.setup_step
