@@ -1,7 +1,8 @@
-"""An inclined (nutating) axis: the nutating reference machine, a B head turning the tool
+"""Inclined axes: the nutating reference machine, a B head turning the tool
 about (0, 1, 1)/√2 through its pivot over a C table. compgen's chain against the geometry
 written out by hand from that description, fits at the Cramér-Rao bound, a ball never
-measured predicted, a hidden 2/rev of C found, and what each control can hold of it."""
+measured predicted, a hidden 2/rev of C found, and what each control can hold of it; and an
+inclined table (a B/C table with B at 45°), its chain, fit and SINUMERIK record likewise."""
 
 
 import numpy as np
@@ -9,6 +10,7 @@ import pytest
 from conftest import (
     ARCSEC,
     NUTATING_MACHINE,
+    ROOT,
     UM,
     carr_edit_is,
     fitted_at_the_bound,
@@ -216,3 +218,73 @@ def test_the_edit_says_the_inclined_line_in_its_own_frame(nutating):
     words = next(w for w in lines_text(plan(machine, fit)) if w.startswith("B line"))
     assert words == ("B line at its pivot: offset B's own X +10.00 um, B's own Z -7.00 um; "
                      "tilt about B's own X +4.00 arcsec, about B's own Z +8.00 arcsec"), words
+
+
+TABLE_TRUTH = {"XOW": 3 * UM, "YOW": -5 * UM, "ZOW": 4 * UM, "XOB": 10 * UM, "ZOB": -5 * UM,
+               "AOB": 4 * ARCSEC, "COB": 6 * ARCSEC, "XOC": -6 * UM, "YOC": 7 * UM, "AOC": -5 * ARCSEC,
+               "BOC": 3 * ARCSEC}
+
+
+@pytest.fixture(scope="module")
+def inclined_table(tmp_path_factory):
+    """The B/C table machine with its B inclined 45° (as on a DMG eVo's table): B turns the
+    table about N through the origin, C (45 mm above) about the B-carried +Z; the record
+    holds B's vector reversed, as the control holds a table's."""
+    path = tmp_path_factory.mktemp("evo") / "evo.toml"
+    path.write_text((ROOT / "machines" / "bc-table-sinumerik840d.toml").read_text()
+                    .replace('direction = "y"        # right-handed about +Y', "direction = [0.0, 1.0, 1.0]")
+                    .replace("B = [0.0, -1.0, 0.0]", f"B = [0.0, {-S:.16f}, {-S:.16f}]"))
+    machine = load_machine(path)
+    assert machine.axis("B").inclined
+    return machine, generate(machine, list(machine.paths))
+
+
+def _table_deviation(poses, v):
+    """Nest minus ball on the inclined table written from its description, less its nominal:
+    the ball in C's frame carried by C (its line moved and turned by its errors) 45 mm above
+    B's pivot, B's line moved along its own x and z and turned about them, the nest where
+    the linear axes put it (table errors move the ball only)."""
+    def ball(values):
+        B, C = poses.q[:, 3], poses.q[:, 4]
+        w = poses.ball + [values["XOW"], values["YOW"], values["ZOW"]]
+        c_line = _rot([values["AOC"], values["BOC"], 0])
+        in_c = np.einsum("ij,njk,nk->ni", c_line, _rot(np.outer(C, [0, 0, 1])), w)
+        in_b = np.array([0, 0, 45.0]) + [values["XOC"], values["YOC"], 0] + in_c
+        b_line = _rot(values["AOB"] * EX + values["COB"] * EZ)
+        turned = np.einsum("ij,njk,nk->ni", b_line, _rot(np.outer(B, N)), in_b)
+        return values["XOB"] * EX + values["ZOB"] * EZ + turned
+    return -(ball(v) - ball(dict.fromkeys(v, 0.0)))
+
+
+def test_an_inclined_table_is_the_table_as_described_and_fitted_at_the_bound(inclined_table):
+    """The inclined table's chain against the hand-written one (every error alone and all at
+    once, 1e-9 mm), and its fit at the Cramér–Rao bound of that geometry."""
+    machine, poses = inclined_table
+    assert machine.axis_names[3:] == ("B", "C")
+    names = list(location_model(machine))
+    assert sorted(names) == sorted(TABLE_TRUTH)
+    model = Model(machine, names)
+    for trial in [*np.eye(len(names)) * 1e-3, np.linspace(-3e-3, 3e-3, len(names))]:
+        want = _table_deviation(poses, dict(zip(names, trial, strict=True)))
+        np.testing.assert_allclose(model.deviation(poses, trial), want, rtol=0, atol=1e-9)
+    fitted_at_the_bound(machine, TABLE_TRUTH, poses, _table_deviation, NOISE_UM, 5)
+
+
+def test_sinumerik_holds_an_inclined_table_against_a_hand_computed_record(inclined_table, tmp_path):
+    """A kind P record (axis 1 B carrying axis 2 C): l2 = t1 (B's pivot moved along its own x
+    and z), l3 = t2 − t1, l4 = −t2 (C's pivot, B's move included: C is carried); B's vector,
+    held reversed, turned by COB about B's own z, and C's with it (B's tilt turns what it
+    carries: v2 is C's direction with B at zero)."""
+    machine, poses = inclined_table
+    truth = {"XOB": 10 * UM, "ZOB": -5 * UM, "COB": 6 * ARCSEC}
+    fit = identify(machine, [simulate(machine, truth, poses, 0.0, np.random.default_rng(0))],
+                   location_model(machine))
+    t1 = 10 * UM * EX - 5 * UM * EZ
+    # C's line at B = 0: its pivot 45 mm up, moved and turned with B's line; where it crosses
+    # the plane through the nominal pivot square to +Z
+    turn, pivot = _rot(6 * ARCSEC * EZ), np.array([0, 0, 45.0])
+    point, d = t1 + turn @ pivot, turn @ [0, 0, 1]
+    t2 = point - (point - pivot)[2] / d[2] * d - pivot
+    v1, v2 = -(_rot(6 * ARCSEC * EZ) @ N), -(_rot(6 * ARCSEC * EZ) @ [0, 0, 1])
+    fine = {"l2": t1, "l3": t2 - t1, "l4": -t2}
+    carr_edit_is(machine, fit, ([0, -S, -S], [0, 0, -1]), fine, v1, v2, tmp_path)
