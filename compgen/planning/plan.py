@@ -61,6 +61,7 @@ BEAM = 40                # sets kept at each size of the search
 THIN = (2, 4)            # a path also with every 2nd and every 4th of its poses (first and last kept)
 FORMAT = "compgen.plan/1"
 FRONT_STEP = 0.95
+FRONT_MINUTES = 0.1      # points of the front closer in time than this are one: the better
 
 
 @dataclass(frozen=True, eq=False)
@@ -328,6 +329,8 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
     front, low = [], np.inf
     for w, spent in sorted(finite.values(), key=lambda v: (v[1], v[0])):
         if w < FRONT_STEP * low:         # a point that buys a worst σ 5 % lower or more
+            if front and spent - front[-1][0] < FRONT_MINUTES:
+                front.pop()              # within a few seconds of the last: the better of the two
             front.append((spent, w))
             low = w
     return Plan(tuple(chosen), _minutes(chosen, mount_minutes), sigmas_of(names, cov),

@@ -41,6 +41,8 @@ def test_the_plan_fits_its_minutes_and_every_program_passes_check_program(seed_p
         "AOC": "arcsec", "BOC": "arcsec"}
     fronts = [f["worst_scaled_sigma"] for f in doc["front"]]
     assert fronts == sorted(fronts, reverse=True) and doc["front"][-1]["minutes"] <= 10.0
+    steps = zip(doc["front"], doc["front"][1:], strict=False)
+    assert all(b["minutes"] - a["minutes"] >= 0.1 for a, b in steps)
     assert (folder / "front.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"      # the front, drawn
 
 
