@@ -52,12 +52,6 @@ class Apart:
     above: tuple[float, float]
 
 
-def _least(S: np.ndarray) -> float:
-    """S's least eigenvalue over its scale (0 where S is)."""
-    scale = float(np.abs(np.diag(S)).max()) if S.size else 0.0
-    return float(np.linalg.eigvalsh(S).min()) / scale if scale > 0 else 0.0
-
-
 def _left(info: np.ndarray, a: list[int], beside: list[int]) -> np.ndarray:
     """S = I_aa − I_aM I_MM⁺ I_Ma: what of a's columns the columns ``beside`` leave."""
     Iaa = info[np.ix_(a, a)]
@@ -77,13 +71,19 @@ def separations(info: np.ndarray, p: int, spans: Mapping[str, slice], noise_um: 
     margin = np.sqrt(TELLS_APART) * noise_um * 1e-3
     loc = list(range(p))
     cols = {n: list(range(s.start, s.stop)) for n, s in spans.items()}
-    seen = {n: _least(_left(info, c, loc)) > SEEN for n, c in cols.items()}
+
+    def least(a: str, beside: list[int]) -> float:
+        """The least of what ``beside`` leaves of a's columns, 0 where that is below ``SEEN``
+        of a's own information (the advice's visibility, squared)."""
+        lam = float(np.linalg.eigvalsh(_left(info, cols[a], beside)).min())
+        scale = float(np.abs(np.diag(info[np.ix_(cols[a], cols[a])])).max())
+        return lam if scale > 0 and lam > SEEN * scale else 0.0
 
     def above(a: str, b: str) -> float:
-        S = _left(info, cols[a], loc + cols[b])
-        lam = float(np.linalg.eigvalsh(S).min())
-        scale = float(np.abs(np.diag(info[np.ix_(cols[a], cols[a])])).max())
-        return margin / np.sqrt(lam) if scale > 0 and lam > SEEN * scale else np.inf
+        lam = least(a, loc + cols[b])
+        return margin / np.sqrt(lam) if lam else np.inf
+
+    seen = {n: least(n, loc) > 0 for n in cols}
 
     out = [Apart((a, b), (above(a, b), above(b, a))) for a, b in combinations(cols, 2)]
     return seen, out

@@ -195,3 +195,12 @@ def test_diagnose_writes_its_follow_up_as_a_plan(tmp_path):
     line = next(ln.strip() for ln in err.splitlines() if "--check" in ln)
     done = pasted(line, tmp_path)
     assert done.returncode == 0 and "the plan holds" in done.stdout, done.stdout + done.stderr
+
+
+def test_an_effect_the_location_errors_absorb_is_said_unseen(seed_machine):
+    """The nest's X offset is absorbed by XOC and XOW on every set-up (diagnose says so): the
+    plan lists it unseen and tells no pair with it apart, one parameter or two."""
+    for absorbed in ("nest_X", "EXC+EYC:h1"):
+        p = P.plan(seed_machine, 10.0, NOISE_UM, effects=["ECC:h2", absorbed])
+        assert p.told.seen == {"ECC:h2": True, absorbed: False}, p.told.seen
+        assert p.told.apart[0].above[1] == np.inf
