@@ -14,13 +14,23 @@ from ..controllers.programs import checked_program
 from ..data.rtest import Measurements, RTestData
 from ..errors import CompgenError
 from ..model.effects import Effect, resolve
-from ..model.kinematics import Model
 from ..model.machine import Machine
 from ..model.poses import Poses
-from ..model.sides import SETUP, FreeConstants
+from ..model.sides import SETUP
 from ..statistics.diagnosis import Diagnosis
 from .advice import MODE
-from .plan import MOUNT_MINUTES, Plan, Setup, covariance, judged, scales, sigmas_of, told_by, worst_scaled
+from .plan import (
+    MOUNT_MINUTES,
+    Plan,
+    Setup,
+    covariance,
+    fitted_columns,
+    judged,
+    scales,
+    sigmas_of,
+    told_by,
+    worst_scaled,
+)
 
 
 def advised(found: Diagnosis) -> tuple[Sequence, list[str]]:
@@ -42,11 +52,7 @@ def information(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np
     every mounting's ball offset and each later nest's taken out (their columns projected out,
     the first mounting's by a Schur complement), as a fit of these poses would have them."""
     names = [*SETUP, *judged(machine), *(n for e in effects for n in e.params)]
-    J = Model(machine, names).linearise(poses)[1].copy()
-    project = FreeConstants(machine, names, poses).projector()
-    if project is not None:
-        J = project(J)
-    flat = J.reshape(-1, len(names))
+    flat = fitted_columns(machine, poses, names).reshape(-1, len(names))
     G = flat.T @ flat
     k = len(SETUP)
     return G[k:, k:] - G[k:, :k] @ np.linalg.pinv(G[:k, :k], rcond=1e-12) @ G[:k, k:]

@@ -145,10 +145,7 @@ def covariance(machine: Machine, poses: Poses, noise_um: float, rho: float = 0.0
     run, the fit's sandwich covariance."""
     names = [*SETUP, *judged(machine)]
     p = len(names)
-    J = Model(machine, names).linearise(poses)[1].copy()            # (n, 3, p)
-    proj = FreeConstants(machine, names, poses).projector()
-    if proj is not None:
-        J = proj(J)
+    J = fitted_columns(machine, poses, names)
     flat = J.reshape(-1, p)
     G = flat.T @ flat
     if not _identifies(G):
@@ -161,6 +158,14 @@ def covariance(machine: Machine, poses: Poses, noise_um: float, rho: float = 0.0
     else:
         cov = sigma**2 * np.linalg.inv(G)
     return cov[3:, 3:]
+
+
+def fitted_columns(machine: Machine, poses: Poses, names: Sequence[str]) -> np.ndarray:
+    """The Jacobian (n, 3, p) of ``names`` at ``poses`` as a fit of them has it: each later
+    mounting's and nest's offset projected out (``FreeConstants``), as ``identify`` does."""
+    J = Model(machine, names).linearise(poses)[1].copy()
+    project = FreeConstants(machine, names, poses).projector()
+    return J if project is None else project(J)
 
 
 def _products(machine: Machine, poses: Poses, effects: Sequence[Effect] = ()) -> dict:
