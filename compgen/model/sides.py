@@ -46,6 +46,12 @@ def nest_mountings(machine: Machine, nest: np.ndarray, setup: np.ndarray | None 
     return np.cumsum(np.r_[False, new])
 
 
+def set_ups(machine: Machine, poses: Poses) -> tuple[np.ndarray, np.ndarray]:
+    """The ball's mounting and the nest each pose was measured in (``mountings``,
+    ``nest_mountings``), with the set-up events said of its files (``Poses.setup``)."""
+    return mountings(poses.ball, poses.setup), nest_mountings(machine, poses.nest, poses.setup)
+
+
 def continues(machine: Machine, before: Poses, after: Poses) -> tuple[bool, bool]:
     """Whether a measurement at ``after`` continues the last mounting of the ball and the
     last nest of ``before``, as ``mountings`` and ``nest_mountings`` number them: the ball
@@ -93,7 +99,7 @@ class FreeConstants:
         nest = [effect_of_param(machine, n) for n in NEST] if ball else []
         self.mounts = self.nests = 0
         if ball and len(poses):
-            mount, held = mountings(poses.ball, poses.setup), nest_mountings(machine, poses.nest, poses.setup)
+            mount, held = set_ups(machine, poses)
             self.mounts, self.nests = int(mount[-1]), int(held[-1])
             entries += [(e, np.flatnonzero(mount == k)) for k in range(1, self.mounts + 1) for e in ball]
             entries += [(e, np.flatnonzero(held == k)) for k in range(1, self.nests + 1) for e in nest]

@@ -20,7 +20,7 @@ from ..model.effects import canonical, effect_of_param, location_model
 from ..model.kinematics import Model
 from ..model.machine import Machine
 from ..model.poses import Poses, runs
-from ..model.sides import NEST, SETUP, FreeConstants, both_sides, continues, mountings, nest_mountings
+from ..model.sides import NEST, SETUP, FreeConstants, both_sides, continues, set_ups
 from ..units import parse_quantity, shown
 from .noise import Lazy, ar1, ar1_covariance
 from .results import DataRef, Estimate, FitResult
@@ -424,8 +424,7 @@ def _with_extra(machine: Machine, m: Model, free: list[int], J: np.ndarray, meas
         same_ball, same_nest, later = False, True, (0, 0)
     else:
         same_ball, same_nest = continues(machine, measured, poses)
-        later = (int(mountings(measured.ball, measured.setup)[-1]),
-                 int(nest_mountings(machine, measured.nest, measured.setup)[-1])) \
+        later = tuple(int(k[-1]) for k in set_ups(machine, measured)) \
             if at else (0, 0)                # no ball offset in the model: no set-up's constants
     if (same_ball and later[0]) or (same_nest and later[1]):
         both = Poses.concat([measured, poses.with_setup(int(measured.setup[-1]))])   # it continues
@@ -493,10 +492,9 @@ def mountings_note(machine: Machine, names: Sequence[str], *poses: Poses) -> str
     ball = np.concatenate([p.ball for p in poses])
     if not held or not len(ball):       # no ball offset in the model: no set-up's constants
         return None
-    setup = np.concatenate([p.setup for p in poses])
-    mount = mountings(ball, setup)[-1]
-    nests = nest_mountings(machine, np.concatenate([p.nest for p in poses]), setup)[-1]
-    again = " or where it was said mounted again" if setup.any() else ""
+    joined = Poses.concat(poses)
+    mount, nests = (int(k[-1]) for k in set_ups(machine, joined))
+    again = " or where it was said mounted again" if joined.setup.any() else ""
     said = []
     if mount:
         said.append(f"the ball at {mount + 1} mountings (a new one wherever its position changes{again})")

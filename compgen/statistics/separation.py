@@ -13,7 +13,7 @@ import numpy as np
 from ..model.effects import Effect, effect_of_param
 from ..model.machine import Machine
 from ..model.poses import Poses
-from ..model.sides import NEST, SETUP, both_sides, continues, mountings, nest_mountings, span
+from ..model.sides import NEST, SETUP, both_sides, continues, set_ups, span
 from .advising import Advising, Proposal
 from .ranking import Row
 from .signature import r_factor
@@ -56,8 +56,7 @@ class Measured:
         self.ball = [e for e in model_effects if e.name in SETUP and e.basis.kind == "const"]
         self.nest = [effect_of_param(machine, n) for n in NEST] if self.ball else []
         none = np.zeros(len(poses), int)           # no ball offset in the model: no set-up's constants
-        mount = mountings(poses.ball, poses.setup) if self.ball else none
-        held = nest_mountings(machine, poses.nest, poses.setup) if self.ball else none
+        mount, held = set_ups(machine, poses) if self.ball else (none, none)
         self.last = (int(mount[-1]), int(held[-1]))         # the mounting and nest an extra may continue
         self.layout, self.width = self._laid_out([*(("ball", k) for k in range(1, self.last[0] + 1)),
                                                   *(("nest", k) for k in range(1, self.last[1] + 1))])

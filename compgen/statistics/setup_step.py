@@ -24,7 +24,7 @@ import numpy as np
 from ..model.effects import resolve
 from ..model.machine import Machine
 from ..model.poses import Poses
-from ..model.sides import NEST, SETUP, mountings, nest_mountings, span
+from ..model.sides import NEST, SETUP, set_ups, span
 from .ranking import Whitening, effect_columns
 from .significance import p_value, rivals
 
@@ -60,7 +60,7 @@ def setup_step(machine: Machine, poses: Poses, set_of: np.ndarray, sets, r: np.n
     machine's best candidate as (whitened sum of squares removed, columns). None where no
     file continues a mounting."""
     names = [Path(d.source).name if d.source else f"file {k + 1}" for k, d in enumerate(sets)]
-    mount, held = mountings(poses.ball, poses.setup), nest_mountings(machine, poses.nest, poses.setup)
+    mount, held = set_ups(machine, poses)
     ball = [resolve(machine, n) for n in SETUP]
     nest = [resolve(machine, n) for n in NEST]
     rw = noise.residual(r)
