@@ -262,7 +262,7 @@ def _program_header(machine: Machine, ctl: Controller, poses: Poses, label: str,
            f"{' and '.join(a.name for a in machine.heads)} as the machine file does (this program cannot "
            "read them), the nest's length in the tool table (U22)"] if machine.heads and ctl.tcp_switchable
           else []),
-        *[f"{a.name} is inclined: it turns about ({', '.join(f'{x:.6f}' for x in a.unit)}), as the control's "
+        *[f"{a.name} is inclined: it turns about {a.unit_text}, as the control's "
           "kinematics must hold it" for a in machine.rotary_axes if a.inclined],
         *[f"{a.name} is Hirth-coupled ({a.hirth_deg:g} deg grid): every position on it; the nest leaves the "
           f"ball before {a.name} indexes, the control releases and clamps it (U23)"

@@ -39,7 +39,7 @@ def for_machine(name: str, machine: Machine, edit: bool = False) -> Controller:
     if edit and inclined and not ctl.holds_inclined:
         a = inclined[0]
         raise CompgenError(f"compgen does not write {ctl.words} kinematics edits for an inclined axis: "
-                           f"{machine.name}'s {a.name} turns about ({', '.join(f'{x:.6f}' for x in a.unit)}) "
+                           f"{machine.name}'s {a.name} turns about {a.unit_text} "
                            "(UNCONFIRMED U24)", where=machine.source,
                            hint="fit, diagnose and report hold for it; enter the fitted lines by hand, or "
                                 "write the edit for a SINUMERIK, whose $TC_CARR vectors take any direction")

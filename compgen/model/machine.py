@@ -87,6 +87,11 @@ class Axis:
         """The direction it moves along or turns about, a unit vector in the parent's frame."""
         return self.frame[:, "xyz".index(self.direction)]
 
+    @property
+    def unit_text(self) -> str:
+        """``unit`` as programs and messages write it: (0.000000, 0.707107, 0.707107)."""
+        return "(" + ", ".join(f"{x:.6f}" for x in self.unit) + ")"
+
     def on_grid(self, deg: np.ndarray) -> np.ndarray:
         """Positions (deg) as the axis can hold them: on its Hirth grid (nearest), or as given."""
         return deg if self.hirth_deg is None else np.round(np.asarray(deg) / self.hirth_deg) * self.hirth_deg

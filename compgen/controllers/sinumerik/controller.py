@@ -135,7 +135,7 @@ class Sinumerik840D(Controller):
             # an inclined axis's vector is written to the digits a user has (0.707107): a
             # unit vector to 1e-6, along the axis to 1e-6 rad (0.2″)
             if abs(np.linalg.norm(v) - 1) > 1e-6 or np.linalg.norm(np.cross(v, a.unit)) > 1e-6:
-                words = f"±{a.direction}" if not a.inclined else f"±({', '.join(f'{x:.6f}' for x in a.unit)})"
+                words = f"±{a.direction}" if not a.inclined else f"±{a.unit_text}"
                 raise CompgenError(f"must be the unit vector {words} the control holds for "
                                    f"{a.name}, got {v.tolist()}", where=get.sub("vectors").at(a.name))
             vectors[a.name] = v / np.linalg.norm(v)
