@@ -45,12 +45,9 @@ def _regular(path: Path, what: str, limit: int = MAX_BYTES) -> None:
         raise CompgenError(f"{st.st_size / 2**20:.0f} MB is too large for a {what}", where=str(path))
 
 
-def read_text(path: str | Path, what: str, ansi_ok: bool = False,
-              limit: int = MAX_BYTES) -> tuple[str, bytes]:
-    """A user's text file: its text and raw bytes (for checksums), or one clear line.
-
-    ``ansi_ok`` accepts Latin-1 where UTF-8 fails: controller exports are often ANSI.
-    """
+def read_bytes(path: str | Path, what: str, limit: int = MAX_BYTES) -> bytes:
+    """A user's text file's bytes, not yet decoded (a large data file is parsed from them),
+    or one clear line."""
     path = Path(path)
     _regular(path, what, limit)
     reading(path)
@@ -60,12 +57,28 @@ def read_text(path: str | Path, what: str, ansi_ok: bool = False,
         raise CompgenError(f"cannot read {what}: {exc.strerror}", where=str(path)) from None
     if b"\x00" in raw:
         raise CompgenError(f"binary file, not a text {what}", where=str(path))
+    return raw
+
+
+def decoded(raw: bytes, what: str, path: str | Path, ansi_ok: bool = False) -> str:
+    """A text file's bytes as text, or one clear line. ``ansi_ok`` accepts Latin-1 where
+    UTF-8 fails: controller exports are often ANSI."""
     try:
-        text = raw.decode("utf-8-sig")
+        return raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         if not ansi_ok:
             raise CompgenError(f"{what} is not UTF-8 text (byte {exc.start})", where=str(path)) from None
-        text = raw.decode("latin-1")
+        return raw.decode("latin-1")
+
+
+def read_text(path: str | Path, what: str, ansi_ok: bool = False,
+              limit: int = MAX_BYTES) -> tuple[str, bytes]:
+    """A user's text file: its text and raw bytes (for checksums), or one clear line.
+
+    ``ansi_ok`` accepts Latin-1 where UTF-8 fails: controller exports are often ANSI.
+    """
+    raw = read_bytes(path, what, limit)
+    text = decoded(raw, what, path, ansi_ok)
     if ansi_ok:
         _no_odd_characters(text, what, path)
     return text, raw

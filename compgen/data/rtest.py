@@ -6,6 +6,7 @@ problem names file, line and column. Writing keeps enough digits to round-trip t
 
 from __future__ import annotations
 
+import codecs
 import csv
 import hashlib
 import io
@@ -17,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CompgenError, one_line
-from ..files import MAX_DATA_BYTES, read_text
+from ..files import MAX_DATA_BYTES, decoded, read_bytes
 from ..model.kinematics import head_offset, inverse, nominal, solved
 from ..model.machine import IDENTIFIERS, NEST_RANGE_MM, Machine, check_ball, check_travel, identifier
 from ..model.poses import Poses
@@ -261,10 +262,11 @@ def _cells(line: str, where: str) -> list[str]:
 
 
 def read_table(path: str | Path, machine: Machine, required: list[str]) -> Table:
-    """A CSV v1 table with every cell checked: numbers finite, rows whole, columns present."""
+    """A CSV v1 table with every cell checked: numbers finite, rows whole, columns present.
+    An ASCII file, as every R-test writes, is parsed from its bytes, not decoded whole."""
     where = str(path)
-    text, raw = read_text(path, "data file", limit=MAX_DATA_BYTES)
-    header_line, header_text, body = _header(text, where)
+    raw = read_bytes(path, "data file", limit=MAX_DATA_BYTES)
+    header_line, header_text, at = _header(raw, where)
     header = [h.strip() for h in _cells(header_text, f"{where}:{header_line}")]
     dup = sorted({h for h in header if header.count(h) > 1})
     if dup:
@@ -282,12 +284,17 @@ def read_table(path: str | Path, machine: Machine, required: list[str]) -> Table
                           if c in header and c not in required]
     col = {c: header.index(c) for c in header}
     digest = hashlib.sha256(raw).hexdigest()
-    fast = _fast_table(body, header, numeric, col)
+    fast = _fast_table(raw, at, header, numeric, col)
     if fast is not None:
         values, labels = fast
         return _checked(Table(where, digest, {name: values[:, j] for j, name in enumerate(numeric)},
                               labels, range(header_line + 1, header_line + 1 + len(labels))))
 
+    try:
+        body = raw[at:].decode("utf-8")
+    except UnicodeDecodeError:
+        decoded(raw, "data file", path)                  # the refusal, naming the file's byte
+        raise
     lines = [(i, line) for i, line in enumerate(body.splitlines(), start=header_line + 1)
              if line.strip() and not line.lstrip().startswith("#")]
     if not lines:
@@ -318,68 +325,115 @@ def read_table(path: str | Path, machine: Machine, required: list[str]) -> Table
     return _checked(Table(where, digest, columns, np.array(labels, dtype=object), line_no))
 
 
-def _header(text: str, where: str) -> tuple[int, str, str]:
+def _header(raw: bytes, where: str) -> tuple[int, str, int]:
     """The first line that is neither blank nor a comment (its number and text) and the
-    text after it; a large file's rest is not split into lines here (line ends as
-    ``str.splitlines`` takes them). A file without one is refused."""
-    for limit in (1 << 16, len(text)):
-        lines = text[:limit].splitlines(keepends=True)
-        if limit < len(text):
+    byte the text after it starts at; only the file's head is decoded (line ends as
+    ``str.splitlines`` takes them). A file without one, or not UTF-8 there, is refused."""
+    bom = len(codecs.BOM_UTF8) if raw.startswith(codecs.BOM_UTF8) else 0
+    for limit in (1 << 16, len(raw)):
+        try:   # a character cut at the limit waits for the next try
+            text = codecs.getincrementaldecoder("utf-8")().decode(raw[bom:limit], final=limit >= len(raw))
+        except UnicodeDecodeError:
+            decoded(raw, "data file", where)          # the refusal, naming the file's byte
+            raise
+        lines = text.splitlines(keepends=True)
+        if limit < len(raw):
             lines = lines[:-1]                 # the last may be cut short
         offset = 0
         for number, line in enumerate(lines, start=1):
             offset += len(line)
             content = (line.splitlines() or [""])[0]
             if content.strip() and not content.lstrip().startswith("#"):
-                return number, content, text[offset:]
+                return number, content, bom + len(text[:offset].encode("utf-8"))
     raise CompgenError("empty file: no header and no data", where=where)
 
 
-def _fast_table(body: str, header: list[str], numeric: list[str],
+ROWS_A_STEP = 1 << 16      # rows whose commas are found at once (a few MB of positions)
+BYTES_A_STEP = 1 << 22     # bytes whose line ends are found at once: a mask of the whole file is 70 MB
+LABEL_MAX = 64             # bytes of a path label's cell: 16 characters (``IDENTIFIERS``) and its spaces
+
+
+def _fast_table(buf: bytes, at: int, header: list[str], numeric: list[str],
                 col: dict[str, int]) -> tuple[np.ndarray, np.ndarray] | None:
-    """The careful reader's result for a well-formed table, at numpy's speed: plain ASCII, no
-    quotes, no comment or blank line, every row as many fields as the header, every numeric
-    cell what ``NUMBER`` takes (numpy's parser refuses "1_0", "0x10", "--1" and empty cells;
-    nan, inf and 1e999 fail the size check) and of a sensible size. Anything else returns
-    None: the careful reader then finds and names the first fault."""
-    if "\r" in body:
-        body = body.replace("\r\n", "\n")
-    body = body.rstrip("\n")      # the one copy of a large file's text here (strip makes another)
-    if (not body or body.isspace() or not body.isascii() or any(c in body for c in '"#\r')
-            or "\n\n" in body or body.startswith("\n")):
+    """The careful reader's result for a well-formed table, at numpy's speed, from ``buf``'s
+    bytes from ``at`` (the rows after the header): plain ASCII, no quotes, no comment or
+    blank line, every row as many fields as the header, every numeric cell what ``NUMBER``
+    takes (numpy's parser refuses "1_0", "0x10", "--1" and empty cells; nan, inf and 1e999
+    fail the size check) and of a sensible size. Anything else returns None: the careful
+    reader then finds and names the first fault. No copy of the file's text is made where
+    its lines end in LF (at 723 000 rows each copy is 70 MB, and a process's new memory
+    costs ~2 ms a MB on a virtual machine)."""
+    if buf.find(b"\r", at) >= 0:
+        buf, at = buf[at:].replace(b"\r\n", b"\n"), 0
+    elif buf.find(b"\r", 0, at) >= 0:                 # loadtxt would end a line there
+        buf, at = buf[at:], 0
+    end = len(buf)
+    while end > at and buf[end - 1] == 10:           # the last row's line end(s), 4 kB at a time
+        tail = buf[max(at, end - 4096):end]
+        end -= len(tail) - len(tail.rstrip(b"\n"))
+    if end == at or any(buf.find(c, at, end) >= 0 for c in (b'"', b"#", b"\r", b"\n\n")) or buf[at] == 10:
         return None
-    text = body.encode("ascii")
-    raw = np.frombuffer(text, np.uint8)
-    starts = np.r_[0, np.flatnonzero(raw == 10) + 1]
-    ends = np.r_[starts[1:] - 1, len(raw)]
-    # every row as many fields as the header: the commas of each line, counted by numpy;
-    # then comma j of row i is commas[i·(fields − 1) + j]
-    commas, per_row = np.flatnonzero(raw == 44), len(header) - 1
-    if not (np.diff(np.searchsorted(commas, np.r_[starts, len(raw)])) == per_row).all():
+    raw = np.frombuffer(buf, np.uint8, count=end - at, offset=at)
+    if raw.max() >= 128:
+        return None
+    cells = _fields(raw, len(header) - 1, col.get("path"))
+    if cells is None:
         return None
     try:
-        # from bytes: numpy's reader then need not decode a str (0.48 → 0.37 s at 723 000 rows)
-        values = np.loadtxt(io.BytesIO(text), delimiter=",", usecols=[col[c] for c in numeric], ndmin=2,
-                            comments=None, dtype=float)
+        # from the bytes where they lie (a BytesIO of bytes shares them), past the header
+        values = np.loadtxt(io.BytesIO(buf), delimiter=",", usecols=[col[c] for c in numeric], ndmin=2,
+                            comments=None, dtype=float, skiprows=buf.count(b"\n", 0, at),
+                            max_rows=len(cells[0]))
     except ValueError:
         return None
-    if values.shape[0] != len(starts) or not (np.abs(values) < CELL_MAX).all():
-        return None
+    if values.shape[0] != len(cells[0]) or not -CELL_MAX < values.min() <= values.max() < CELL_MAX:
+        return None                                    # (NaN fails both)
     if "path" not in col:
-        return values, np.full(len(starts), "", dtype=object)
-    # the label cells, as fixed-width byte strings, decoded once per distinct label
-    k, row = col["path"], np.arange(len(starts)) * per_row
-    first = starts if k == 0 else commas[row + k - 1] + 1
-    last = ends if k == per_row else commas[row + k]
-    width = int((last - first).max()) if len(first) else 0
-    at = first[:, None] + np.arange(max(width, 1))
-    cells = np.where(at < last[:, None], raw[np.minimum(at, len(raw) - 1)], 0).astype(np.uint8)
-    distinct, which = np.unique(cells.view(f"S{max(width, 1)}").ravel(), return_inverse=True)
-    names = [b.decode("ascii").strip() for b in distinct.tolist()]
+        return values, np.full(len(values), "", dtype=object)
+    names, which = _labels(raw, *cells)
     pattern = IDENTIFIERS["path"][0]              # a label is written into programs' comments
-    if any(name and not re.fullmatch(pattern, name) for name in names):
+    if which is None or any(name and not re.fullmatch(pattern, name) for name in names):
         return None
-    return values, np.array(names, dtype=object)[which.ravel()]
+    return values, np.array(names, dtype=object)[which]
+
+
+def _fields(raw: np.ndarray, per_row: int, k: int | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """Where field k of each row starts and ends (every row's starts where there is no k),
+    found with the check that every row holds ``per_row`` commas; None where one does not.
+    Line ends and commas are found a step at a time: a mask of the whole file, or the
+    positions of all its commas (8 bytes each), would be new memory of the file's size
+    and more."""
+    starts = np.concatenate([[0], *(np.flatnonzero(raw[lo:lo + BYTES_A_STEP] == 10) + lo + 1
+                                    for lo in range(0, len(raw), BYTES_A_STEP))])
+    bounds = np.r_[starts, len(raw) + 1]                 # a row ends one before the next starts
+    first, last = starts.copy(), bounds[1:] - 1
+    for lo in range(0, len(starts), ROWS_A_STEP):
+        part = bounds[lo:lo + ROWS_A_STEP + 1]
+        commas = np.flatnonzero(raw[part[0]:part[-1] - 1] == 44) + part[0]
+        if not (np.diff(np.searchsorted(commas, part)) == per_row).all():
+            return None
+        if k is not None and per_row:
+            row = commas.reshape(-1, per_row)
+            if k:
+                first[lo:lo + ROWS_A_STEP] = row[:, k - 1] + 1
+            if k < per_row:
+                last[lo:lo + ROWS_A_STEP] = row[:, k]
+    return first, last
+
+
+def _labels(raw: np.ndarray, first: np.ndarray, last: np.ndarray) -> tuple[list[str], np.ndarray | None]:
+    """The cells from ``first`` to ``last`` of every row as their distinct texts and each
+    row's index into them; None where one is wider than ``LABEL_MAX``."""
+    width = int((last - first).max()) if len(first) else 0
+    if width > LABEL_MAX:
+        return [], None
+    width = max(width, 1)
+    cells = np.zeros((len(first), width), np.uint8)
+    for k in range(width):                               # a column of the cells at a time
+        live = first + k < last
+        cells[live, k] = raw[first[live] + k]
+    distinct, which = np.unique(cells.view(f"S{width}").ravel(), return_inverse=True)
+    return [b.decode("ascii").strip() for b in distinct.tolist()], which.ravel()
 
 
 def commanded(machine: Machine, q: np.ndarray, nest: np.ndarray | None = None) -> np.ndarray:

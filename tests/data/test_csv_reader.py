@@ -50,7 +50,8 @@ def _move_column(text: str, name: str, to: int) -> str:
 @pytest.mark.parametrize("variant", ["as written", "path in the middle", "path last", "CRLF",
                                      "labels of several widths", "no trailing newline",
                                      "path last, the widest label first, no trailing newline",
-                                     "every label empty"])
+                                     "every label empty", "a µ in a comment", "a UTF-8 BOM",
+                                     "many newlines at the end", "CRLF in the comments only"])
 def test_the_fast_reader_gives_the_careful_readers_table(tmp_path, monkeypatch, variant):
     text = _session()
     if variant == "path in the middle":
@@ -63,6 +64,14 @@ def test_the_fast_reader_gives_the_careful_readers_table(tmp_path, monkeypatch, 
         text = text.replace("\nK1,", "\nK1long,").replace("\nK2,", "\n  K,")
     elif variant == "no trailing newline":
         text = text.rstrip("\n")
+    elif variant == "a µ in a comment":      # as compgen simulate writes: the rows are still ASCII
+        text = "# dX dY dZ in µm, 20 °C\n" + text
+    elif variant == "a UTF-8 BOM":
+        text = "\ufeff" + text
+    elif variant == "many newlines at the end":
+        text = text + "\n" * 10_000
+    elif variant == "CRLF in the comments only":
+        text = "# one\r\n# two\r\n" + text
     elif variant == "every label empty":     # a path column written but never filled in
         text = "\n".join(line if line.startswith(("#", "path")) else line[line.index(","):]
                          for line in text.splitlines()) + "\n"
@@ -83,6 +92,7 @@ def test_the_fast_reader_gives_the_careful_readers_table(tmp_path, monkeypatch, 
     ("a quoted cell", 3),
     ("a blank line inside", 5),
     ("a comment inside", 5),
+    ("a µ in a row", 3),
 ])
 def test_the_fast_reader_steps_aside_and_the_careful_one_names_the_line(tmp_path, monkeypatch, fault, line):
     lines = _session().splitlines()
@@ -95,6 +105,8 @@ def test_the_fast_reader_steps_aside_and_the_careful_one_names_the_line(tmp_path
         lines[first] = '"' + lines[first].replace(",", '",', 1)
     elif fault == "a blank line inside":
         lines.insert(first + 2, "")
+    elif fault == "a µ in a row":
+        lines[first + 1] = lines[first + 1].replace(",", ",µ", 1)
     else:
         lines.insert(first + 2, "# a note")
     f = tmp_path / "s.csv"
@@ -102,10 +114,11 @@ def test_the_fast_reader_steps_aside_and_the_careful_one_names_the_line(tmp_path
     used = []
     original = rtest._fast_table
     monkeypatch.setattr(rtest, "_fast_table", lambda *a: used.append(original(*a)) or used[-1])
-    if fault.startswith("two rows"):
+    if fault.startswith("two rows") or "µ" in fault:
         with pytest.raises(CompgenError) as exc:
             read_rtest(f, MACHINE)
-        assert f"s.csv:{line}" in str(exc.value) and "fields" in str(exc.value), exc.value
+        assert f"s.csv:{line + 1 if 'µ' in fault else line}" in str(exc.value), exc.value
+        assert ("fields" if "µ" not in fault else "not a number") in str(exc.value), exc.value
     else:
         data = read_rtest(f, MACHINE)
         assert len(data) == len(generate(MACHINE, ["K4", "K1", "K2"]))
@@ -208,4 +221,18 @@ def test_a_file_with_no_header_is_refused_as_empty(tmp_path, text):
     f = tmp_path / "s.csv"
     f.write_text(text)
     with pytest.raises(CompgenError, match=r"s\.csv: empty file: no header and no data"):
+        read_rtest(f, MACHINE)
+
+
+@pytest.mark.parametrize("where", ["in a comment", "in a row", "past the first 64 kB"])
+def test_a_file_not_utf8_is_refused_naming_its_byte_wherever_it_lies(tmp_path, where):
+    """The reader decodes only a file's head where its rows are ASCII: a byte that is no
+    UTF-8 is still refused, at its place in the file, in the head or in the rows."""
+    raw = _session().encode()
+    at = {"in a comment": 2, "in a row": raw.index(b"\nK1,") + 3,
+          "past the first 64 kB": raw.index(b"\n", 70_000) + 3}[where]
+    assert where != "past the first 64 kB" or len(raw) > 70_000
+    f = tmp_path / "s.csv"
+    f.write_bytes(raw[:at] + b"\xff" + raw[at + 1:])
+    with pytest.raises(CompgenError, match=rf"s\.csv: data file is not UTF-8 text \(byte {at}\)"):
         read_rtest(f, MACHINE)
