@@ -276,9 +276,10 @@ def _told_beside(devices: list[DeviceCandidate], beside: np.ndarray, res: _Resid
     # ``span`` of what was), and their products with each other and the residual,
     # once: each joint fit below is then a few columns' normal equations
     names = list(cols)
-    C = np.column_stack([*(noise.off(cols[e]) for e in names), machine])
-    CC, Cr, rr = C.T @ C, C.T @ rw, float(rw @ rw)
-    beside_m = list(range(len(names), C.shape[1]))
+    C = [*(noise.off(cols[e]) for e in names), machine]       # side by side, never copied so
+    CC, Cr = np.block([[a.T @ b for b in C] for a in C]), np.concatenate([a.T @ rw for a in C])
+    rr = float(rw @ rw)
+    beside_m = list(range(len(names), len(CC)))
 
     def together(chosen):
         """Values and σ, %, of these gains fitted at once with the model and the machine's

@@ -22,7 +22,7 @@ from ..model.machine import Machine
 from ..model.poses import Poses, runs
 from ..model.sides import NEST, SETUP, FreeConstants, both_sides, continues, set_ups
 from ..units import parse_quantity, shown
-from .noise import Lazy, ar1, ar1_covariance
+from .noise import Lazy, Span, ar1, ar1_covariance
 from .results import DataRef, Estimate, FitResult
 from .significance import COND_LIMIT, condition, tall_qr
 
@@ -273,15 +273,17 @@ class Normal:
         """(JᵀJ)⁻¹."""
         return np.linalg.inv(self.G) / np.outer(self.scale, self.scale)
 
-    def basis(self) -> np.ndarray:
+    def basis(self) -> Span:
         """Orthonormal columns spanning J's: J's unit-norm columns times L⁻ᵀ, L the Cholesky
-        factor of their Gram matrix (one product of J, where a QR of J makes three of its
-        size: 440 MB more of fit's peak at 723 000 readings); a QR where G is singular."""
+        factor of their Gram matrix, held as J and that factor (``noise.Span``: never
+        multiplied out, where a QR of J makes three matrices of its size: 630 MB more of
+        fit's peak at 723 000 readings); a QR where G is singular."""
         try:
             L = np.linalg.cholesky(self.G)
         except np.linalg.LinAlgError:
-            return tall_qr(self.J)[0]
-        return self.J @ (np.linalg.inv(L).T / self.scale[:, None])
+            Q = tall_qr(self.J)[0]
+            return Span(Q, np.eye(Q.shape[1]))
+        return Span(self.J, np.linalg.inv(L).T / self.scale[:, None])
 
     def singular_values(self) -> np.ndarray:
         """Singular values of J with unit-norm columns, largest first, from JᵀJ: exact to

@@ -38,10 +38,21 @@ class Lazy:
     ``ar1`` need not make where the noise is white beyond any basis of that size."""
 
     columns: int
-    make: Callable[[], np.ndarray | Sequence[np.ndarray]]
+    make: Callable[[], np.ndarray | Span | Sequence[np.ndarray | Span]]
 
     def __call__(self):
         return self.make()
+
+
+@dataclass(frozen=True)
+class Span:
+    """Orthonormal columns held as ``X @ T`` (X (3n, k) as it is, T (k, k)): a fit's Jacobian
+    and the factor that makes its columns orthonormal. ``ar1`` needs only k × k products of
+    them, so the product, a second matrix of J's size (190 MB at 723 000 readings), is never
+    made."""
+
+    X: np.ndarray
+    T: np.ndarray
 
 
 def _previous(x: np.ndarray, seg: np.ndarray) -> np.ndarray:
@@ -53,14 +64,15 @@ def _previous(x: np.ndarray, seg: np.ndarray) -> np.ndarray:
     return prev
 
 
-def ar1(r: np.ndarray, seg: np.ndarray, basis: np.ndarray | Sequence[np.ndarray] | None = None,
+def ar1(r: np.ndarray, seg: np.ndarray,
+        basis: np.ndarray | Span | Sequence[np.ndarray | Span] | Lazy | None = None,
         margin: float = 0.0) -> np.ndarray:
     """ρ̂ of each reading's segment and direction, (n, 3), from residuals r (n, 3).
 
-    ``basis`` (3n, k), orthonormal, or such blocks side by side (never copied whole), spans
-    what the fit took out of r (rows reading by reading, X Y Z): r's lag-1 sum and energy
-    are then matched to what they are expected to be beyond that span (``_matched``). It may
-    be a ``Lazy`` of k columns, made only where some ρ̂ could reach the floor. The
+    ``basis`` (3n, k), orthonormal (an array or a ``Span``), or such blocks side by side
+    (never copied whole), spans what the fit took out of r (rows reading by reading, X Y Z):
+    r's lag-1 sum and energy are then matched to what they are expected to be beyond that
+    span (``_matched``). It may be a ``Lazy`` of k columns, made only where some ρ̂ could reach the floor. The
     fit's smooth columns take low frequencies, and so correlation, with them: at ρ 0.9 on
     K4 + K1 + K2 (fit's residual, 200 sessions) Kendall's correction for a segment's mean
     alone leaves ρ̂ 0.894 on average, matched 0.898. Beside diagnose's best candidate,
@@ -90,8 +102,9 @@ def ar1(r: np.ndarray, seg: np.ndarray, basis: np.ndarray | Sequence[np.ndarray]
         if _white_beyond_any(raw, n, basis):     # no ρ̂ the basis could lift to the floor:
             return np.zeros_like(r)              # not made, not matched (1.7 s at 723 000 readings)
         basis = basis()
-    parts = [] if basis is None else [basis] if isinstance(basis, np.ndarray) else list(basis)
-    parts = [b.reshape(len(r), 3, -1) for b in parts if b.shape[1]]
+    parts = [] if basis is None else [basis] if isinstance(basis, np.ndarray | Span) else list(basis)
+    parts = [b if isinstance(b, Span) else Span(b, np.eye(b.shape[1])) for b in parts]
+    parts = [Span(b.X.reshape(len(r), 3, -1), b.T) for b in parts if b.X.shape[1]]
     if parts:
         est = _matched(raw, est, energy, parts, at_seg, n)
     size = np.repeat(n[:, None], 3, axis=1)
@@ -123,37 +136,46 @@ def _white_beyond_any(raw: np.ndarray, n: np.ndarray, basis) -> bool:
 
 
 MATCH_ROUNDS = 2        # the second moves ρ̂ by < 1e-4 on K4 + K1 + K2 at ρ 0.5–0.95
+DIRECT_RHO = 1e-3       # below this ``_filtered`` makes Pc whole: its division by ρ would cost 1e-13·(1e-3/ρ)
 
 
-def _matched(raw: np.ndarray, est: np.ndarray, energy: np.ndarray, B: list[np.ndarray], at_seg: np.ndarray,
+def _matched(raw: np.ndarray, est: np.ndarray, energy: np.ndarray, B: list[Span], at_seg: np.ndarray,
              n: np.ndarray) -> np.ndarray:
     """ρ per segment and direction whose expected lag-1 ratio beyond the basis B ((n, 3, k)
     blocks side by side) is the one observed (``raw``): with M = I − BBᵀ and the noise's
     covariance Σ(ρ) (AR(1) in each segment and direction, each its own variance),
     E[rᵀLr] = tr(L M Σ M) for the lag-1 sum L of a block and E[rᵀr] = tr(D M Σ M) for its
     energy, each a trace of k × k products (B's columns filtered by the AR(1) correlation,
-    ``_correlate``); 2ρ/n more for the ratio's own bias (its numerator and denominator
+    ``_filtered``); 2ρ/n more for the ratio's own bias (its numerator and denominator
     correlate). Blocks the basis leaves (almost) nothing of keep ``est``; it starts the
     rounds. Unbiased within 0.002 at ρ 0–0.95 on simulated segments of 80 readings, 15
-    columns (Kendall: −0.01 to −0.05)."""
+    columns (Kendall: −0.01 to −0.05). Every product is of the blocks' X, turned by T at
+    k × k: a block of X is a view, copied only while it is worked on."""
+    T = np.zeros(np.sum([b.T.shape for b in B], axis=0))      # the parts' T, block-diagonal
+    i = j = 0
+    for b in B:
+        T[i:i + b.T.shape[0], j:j + b.T.shape[1]] = b.T
+        i, j = i + b.T.shape[0], j + b.T.shape[1]
     blocks = []
-    for s in range(len(n)):
-        at = np.flatnonzero(at_seg == s)
+    for s, at in enumerate(_segments(at_seg, len(n))):
         for d in range(3):
             if energy[s, d] > 0:
-                c = np.concatenate([b[at, d] for b in B], axis=1)
-                lag_cc = c[1:].T @ c[:-1]                   # cᵀLc, L's symmetric part
-                blocks.append((s, d, c, energy[s, d] / len(at), c.T @ c, (lag_cc + lag_cc.T) / 2))
+                x = B[0].X[at, d] if len(B) == 1 else np.concatenate([b.X[at, d] for b in B], axis=1)
+                whole = np.ascontiguousarray(x)              # for BLAS; dropped after
+                xx, lag = whole.T @ whole, whole[1:].T @ whole[:-1]
+                lag = (lag + lag.T) / 2                      # xᵀLx, L's symmetric part
+                blocks.append((s, d, x, energy[s, d] / len(x), xx, lag, T.T @ xx @ T, T.T @ lag @ T))
     out = est.copy()
     for _ in range(MATCH_ROUNDS):
         q = np.clip(out, 0.0, RHO_MAX)
-        G, traces = 0.0, []              # BᵀΣB; each block's tr(cᵀPc), tr(cᵀ(L + Lᵀ)Pc)
-        for s, d, c, v, *_ in blocks:    # (Pc is a block's size: one at a time)
-            pc = _correlate(c, float(q[s, d]))
-            G = G + v * (c.T @ pc)
-            traces.append((np.vdot(c, pc), np.vdot(c[:-1], pc[1:]) + np.vdot(c[1:], pc[:-1])))
-        for (s, d, c, v, cc, lag_cc), (own, lag_pc) in zip(blocks, traces, strict=True):
-            m, qs = len(c), float(q[s, d])
+        G, traces = 0.0, []              # BᵀΣB; each block's tr(cᵀPc), tr(cᵀ(L + Lᵀ)Pc), c = xT
+        for s, d, x, v, xx, lag, *_ in blocks:
+            xpx, lag_px = _filtered(x, float(q[s, d]), xx, lag)
+            cpc = T.T @ xpx @ T
+            G = G + v * cpc
+            traces.append((np.trace(cpc), np.trace(T.T @ lag_px @ T)))
+        for (s, d, x, v, *_, cc, lag_cc), (own, lag_pc) in zip(blocks, traces, strict=True):
+            m, qs = len(x), float(q[s, d])
             lag = v * (qs * (m - 1) - lag_pc) + np.vdot(lag_cc, G)
             size = v * (m - 2 * own) + np.vdot(cc, G)
             if size > 1e-3 * v * m:
@@ -161,12 +183,36 @@ def _matched(raw: np.ndarray, est: np.ndarray, energy: np.ndarray, B: list[np.nd
     return out
 
 
-def _correlate(x: np.ndarray, rho: float) -> np.ndarray:
-    """P x along axis 0, P the AR(1) correlation ρ^|i−j| of one run: the sums of ρ^(k−i) x_k
-    over k ≥ i and over k ≤ i, less x counted twice."""
+def _segments(at_seg: np.ndarray, count: int) -> list[slice | np.ndarray]:
+    """Each segment's readings: a slice where they are consecutive (as a run's are: a view,
+    where an index array gathers a copy of every column, 0.5 s at 723 000 readings), else
+    their indices."""
+    out: list[slice | np.ndarray] = []
+    for s in range(count):
+        at = np.flatnonzero(at_seg == s)
+        whole = len(at) and at[-1] - at[0] + 1 == len(at)
+        out.append(slice(int(at[0]), int(at[-1]) + 1) if whole else at)
+    return out
+
+
+def _filtered(c: np.ndarray, rho: float, cc: np.ndarray, lag_cc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cᵀPc and cᵀ(L + Lᵀ)Pc for P the AR(1) correlation ρ^|i−j| of one run, L its lag,
+    given cᵀc and cᵀ(L + Lᵀ)c / 2: one pass of ``_suffix`` where Pc itself takes two.
+    P = (1 − ρ²)·W⁻¹W⁻ᵀ (W the Prais–Winsten transform) gives cᵀPc = (1 − ρ²)·zᵀz, z = W⁻ᵀc;
+    P⁻¹'s three diagonals give (L + Lᵀ)Pc = ((1 + ρ²)Pc − (1 − ρ²)c)/ρ less ρ at the two
+    ends, where (Pc)₀ = Σ ρʲcⱼ and (Pc)ₘ₋₁ = Σ ρ^(m−1−j)cⱼ. Below ``DIRECT_RHO`` the division
+    by ρ would cost digits: Pc is made whole."""
     if rho == 0:
-        return x
-    return _suffix(x, rho) + _suffix(x[::-1], rho)[::-1] - x
+        return cc, 2 * lag_cc
+    if rho < DIRECT_RHO:
+        c = np.ascontiguousarray(c)
+        pc = _suffix(c, rho) + _suffix(c[::-1], rho)[::-1] - c
+        return c.T @ pc, c[:-1].T @ pc[1:] + c[1:].T @ pc[:-1]
+    z = _inverse_transpose(c, rho)
+    cpc = (1 - rho * rho) * (z.T @ z)
+    powers = rho ** np.arange(min(len(c), int(np.log(1e-17) / np.log(rho)) + 1))   # beyond: below a double
+    ends = np.outer(c[0], powers @ c[:len(powers)]) + np.outer(c[-1], powers @ c[::-1][:len(powers)])
+    return cpc, ((1 + rho * rho) * cpc - (1 - rho * rho) * cc) / rho - rho * ends
 
 
 def whiten(x: np.ndarray, seg: np.ndarray, rho: np.ndarray, before: tuple | None = None) -> np.ndarray:
@@ -196,15 +242,17 @@ def ar1_covariance(J: np.ndarray, r: np.ndarray, seg: np.ndarray, rho: np.ndarra
     A = np.einsum("pnd,qnd->pq", J, J)
     B = np.zeros((p, p))
     scale = n * 3 / dof
-    for s in np.unique(seg):
-        at = np.flatnonzero(seg == s)
+    segs, at_seg = np.unique(seg, return_inverse=True)
+    for at in _segments(at_seg, len(segs)):
         for d in range(3):
             X = J[:, at, d].T
-            sigma2 = float(r[at, d] @ r[at, d]) / len(at) * scale
-            q = float(rho[at[0], d])
+            sigma2 = float(r[at, d] @ r[at, d]) / len(X) * scale
+            q = float(rho[at][0, d])
             if q:
                 X = _inverse_transpose(X, q)
                 sigma2 *= 1 - q * q
+            else:
+                X = np.ascontiguousarray(X)            # for BLAS
             B += sigma2 * (X.T @ X)
     Ainv = np.linalg.inv(A)
     return Ainv @ B @ Ainv
@@ -231,7 +279,29 @@ def _suffix(x: np.ndarray, rho: float) -> np.ndarray:
 
 
 def outliers(r_um: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Readings that stand apart from their neighbours: their indices and how far, µm."""
+    """Readings that stand apart from their neighbours: their indices and how far, µm.
+    Their steps from their neighbours are found a step of ``ROWS_A_STEP`` readings at a time,
+    each with its neighbours either side: whole, the neighbours of every reading were
+    200 MB of new memory at 723 000 readings."""
+    n = len(r_um)
+    step, alone = np.zeros_like(r_um), np.zeros(n, bool)
+    for lo in range(0, n, ROWS_A_STEP):
+        a, hi = max(lo - NEIGHBOURS, 0), min(lo + ROWS_A_STEP, n)
+        part, lone = _steps(r_um[a:hi + NEIGHBOURS], seg[a:hi + NEIGHBOURS])
+        step[lo:hi], alone[lo:hi] = part[lo - a:hi - a], lone[lo - a:hi - a]
+    scale = 1.4826 * np.median(np.abs(step[~alone]), axis=0) if (~alone).any() else np.zeros(3)
+    z = np.abs(step) / np.maximum(scale, 1e-9)
+    size = np.linalg.norm(step, axis=1)
+    bad = np.flatnonzero((z > OUTLIER_Z).any(axis=1) & (size > OUTLIER_MIN_UM))
+    return bad, size[bad]
+
+
+ROWS_A_STEP = 1 << 16       # readings whose steps ``outliers`` finds at once
+
+
+def _steps(r_um: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each reading's step from the median of its neighbours in its segment, and whether it
+    has none."""
     n = len(r_um)
     near = np.full((n, 2 * NEIGHBOURS, 3), np.nan)
     for k, shift in enumerate((*range(-NEIGHBOURS, 0), *range(1, NEIGHBOURS + 1))):
@@ -246,11 +316,7 @@ def outliers(r_um: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     middle = np.sort(near[whole], axis=1)[:, NEIGHBOURS - 1:NEIGHBOURS + 1]
     step[whole] = r_um[whole] - (middle[:, 0] + middle[:, 1]) / 2
     step[edge] = r_um[edge] - np.nanmedian(near[edge], axis=1)
-    scale = 1.4826 * np.median(np.abs(step[~alone]), axis=0) if (~alone).any() else np.zeros(3)
-    z = np.abs(step) / np.maximum(scale, 1e-9)
-    size = np.linalg.norm(step, axis=1)
-    bad = np.flatnonzero((z > OUTLIER_Z).any(axis=1) & (size > OUTLIER_MIN_UM))
-    return bad, size[bad]
+    return step, alone
 
 
 @dataclass(frozen=True)

@@ -465,11 +465,14 @@ def test_the_normal_equations_basis_is_orthonormal_and_spans_j():
     from compgen.statistics.identify import Normal
     rng = np.random.default_rng(3)
     J = rng.normal(size=(3000, 5)) * np.array([1e-3, 1.0, 1e3, 5.0, 0.2])
-    B = Normal(J).basis()
+    span = Normal(J).basis()
+    B = span.X @ span.T
     np.testing.assert_allclose(B.T @ B, np.eye(5), atol=1e-10)
     np.testing.assert_allclose(B @ (B.T @ J), J, rtol=1e-9, atol=1e-9 * np.abs(J).max())
     J[:, 2] = 0.0
-    B = Normal(J).basis()
+    span = Normal(J).basis()
+    B = span.X @ span.T
+    np.testing.assert_allclose(B.T @ B, np.eye(B.shape[1]), atol=1e-10)
     np.testing.assert_allclose(B @ (B.T @ J), J, atol=1e-9 * np.abs(J).max())
 
 
