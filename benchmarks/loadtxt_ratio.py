@@ -43,7 +43,6 @@ np.loadtxt(path, delimiter=",", skiprows=skip, usecols=range(1, columns))
 print(time.perf_counter() - t)
 """
 AIMS = {"fit": 10.0, "diagnose --json": 40.0, "report": 40.0}      # × loadtxt
-MEMORY_AIM = 1.5        # diagnose's peak over fit's
 
 
 def timed(argv: list[str], cwd: Path) -> tuple[float, float, float]:
@@ -103,9 +102,8 @@ def main() -> None:
             met = "met" if wall / read <= AIMS.get(name, 0) else "NOT met"
             aim = f"   (aim ≤ {AIMS[name]:g}×: {met})" if name in AIMS else ""
             print(f"  {name:<18}{wall:8.1f}{cpu:8.1f}{rss:10.0f}{wall / read:10.1f}×{aim}")
-        ratio = peaks["diagnose --json"] / peaks["fit"]
-        print(f"diagnose's peak memory / fit's: {ratio:.2f} (aim ≤ {MEMORY_AIM:g}: "
-              f"{'met' if ratio <= MEMORY_AIM else 'NOT met'})")
+        print(f"diagnose's peak memory / fit's at this size: {peaks['diagnose --json'] / peaks['fit']:.2f} "
+              "(the aim of ≤ 1.5 is at 21 690 poses: benchmarks/startup.py)")
 
 
 if __name__ == "__main__":
