@@ -16,8 +16,8 @@ M_ARENA_MAX = -8         # glibc's mallopt parameter (malloc.h)
 
 def _one_malloc_arena() -> None:
     """glibc gives each thread a heap ("arena") of its own and keeps resident what a thread
-    frees there: the model's two workers (``kinematics.in_halves``) left ~100 MiB of freed
-    memory in diagnose's peak at 723 000 readings (1074 → 966 MiB with one arena, no slower).
+    frees there: the memory the model's two workers (``kinematics.in_halves``) free would stay
+    in a process's peak (about 100 MiB of diagnose's at 723 000 readings; docs/benchmarks.md).
     MALLOC_ARENA_MAX=1 would do it but is read when the process starts; a C library without
     mallopt (not glibc) is left as it is."""
     import ctypes  # numpy loads it anyway

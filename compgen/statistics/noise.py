@@ -281,7 +281,7 @@ def _suffix(x: np.ndarray, rho: float) -> np.ndarray:
 def outliers(r_um: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Readings that stand apart from their neighbours: their indices and how far, µm.
     Their steps from their neighbours are found a step of ``ROWS_A_STEP`` readings at a time,
-    each with its neighbours either side: whole, the neighbours of every reading were
+    each with its neighbours either side: the neighbours of every reading at once would be
     200 MB of new memory at 723 000 readings."""
     n = len(r_um)
     step, alone = np.zeros_like(r_um), np.zeros(n, bool)

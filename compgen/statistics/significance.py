@@ -49,9 +49,9 @@ def tall_qr(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     passes of matrix products where Householder QR walks J column by column (2.2 s of
     diagnose at 720 000 readings, 0.3 s this way). The scaling and the first factor are
     applied to J as one p × p matrix and the second factor to Q's rows a step at a time, so
-    Q is the one matrix of J's size made (three were, 570 MB of diagnose's peak at 723 000
-    readings). R's diagonal is positive; J rank deficient or worse conditioned than that:
-    Householder (``numpy.linalg.qr``)."""
+    Q is the one matrix of J's size made (each is 190 MB at 723 000 readings). R's diagonal
+    is positive; J rank deficient or worse conditioned than that: Householder
+    (``numpy.linalg.qr``)."""
     norms = np.linalg.norm(J, axis=0)
     if J.shape[0] > 4 * J.shape[1] and (norms > 0).all():
         try:
