@@ -305,6 +305,8 @@ HEAD_CASES = {
     "C radial 2/rev, 3 µm": ({"EXC:h2c": 3 * UM}, "EXC:h2"),
     "the head's sag, 5 µm": ({"EXB:h2s": 5 * UM, "EZB:h2c": 5 * UM}, "EZB+EXB:h2"),
     "the nest growing along Z, 6 µm, τ = 15 min": ({"drift_Z:e15": 6 * UM}, "drift_Z:e15"),
+    # the spindle warming: the nest grows along the tool axis, which the head turns
+    "the nest growing along the tool axis, 8 µm, τ = 20 min": ({"nest_Z:e20": 8 * UM}, OFF_GRID),
     "XOC warming 6 µm, τ = 8 min (off the grid)": ({"XOC:e8": 6 * UM}, OFF_GRID),
     "the nest's X sensor gain 2 % (calibration 1 %)": ({"gain_X": 0.02}, "device"),
 }

@@ -191,8 +191,13 @@ def _symbols(machine: Machine) -> dict[str, tuple[str, str, str, tuple[str, ...]
         out[f"{D}OW"] = ("ball", "loc", d, ("const", "e"), f"ball centre offset in {D} (table frame)",
                          "ball not where the machine file says: set-up, not a machine error; "
                          "growing with time: the ball's stem or clamp warming after mounting", 0)
-        out[f"nest_{D}"] = ("nest", "loc", d, ("const",), f"R-test nest offset in {D}",
-                            "nest centre off the spindle axis or wrong probe length", 0)
+        # with a time constant, along the tool axis: the spindle, or the nest's holder, warming
+        # grows along it, and a head turns it, where drift_Z stays along the machine's Z
+        out[f"nest_{D}"] = ("nest", "loc", d, ("const", "e") if D == "Z" else ("const",),
+                            f"R-test nest offset in {D} (tool frame)",
+                            "nest centre off the spindle axis or wrong probe length" + (
+                                "; growing with time: the spindle or the nest's holder warming along the "
+                                "tool axis" if D == "Z" else ""), 0)
         out[f"drift_{D}"] = ("time", "loc", d, ("t", "e"), f"thermal drift of tool to table in {D}",
                              "warm-up of spindle, column or table during the test", 1)
     for axis in machine.axes:

@@ -1695,3 +1695,30 @@ def test_a_ball_mounted_again_in_a_pause_within_one_file_is_a_step_not_a_warming
         if verdict == "set-up step":
             assert "a.csv at t = " in d.setup_step.before and "s pause)" in d.setup_step.before, d.setup_step
             assert np.allclose(d.setup_step.ball_um, (3, -2, 1.5), atol=0.4), d.setup_step
+
+
+def test_the_nest_growing_along_a_heads_tool_axis_is_named_as_the_nest(head_machine, seed_machine):
+    """The spindle warming: the nest grows along the tool axis (nest_Z in the tool's frame,
+    saturating), which a head turns, where a drift of tool to table stays along the
+    machine's Z. Its readings are the tool's z times 1 − exp(−t/τ); on a head it is found
+    under its own name, not as a drift, and with it added the location errors hold the
+    truth; where the tool never turns (the seed's trunnion) it is the drift's column."""
+    from compgen.model.frames import sensor_axes
+    from compgen.model.kinematics import Model
+    poses = generate(head_machine, ["K4", "K1", "K2"])
+    grown = Model(head_machine, ["nest_Z:e15"]).deviation(poses, np.array([1.0]))
+    rise = 1 - np.exp(-poses.t / (15 * 60.0))
+    np.testing.assert_allclose(grown, sensor_axes(head_machine, poses.q)[:, :, 2] * rise[:, None], atol=1e-12)
+    assert np.ptp(sensor_axes(head_machine, poses.q)[:, 2, 2]) > 0.1        # the head turns the tool
+    truth = {"XOC": 6 * UM, "YOC": -8 * UM, "XOB": 10 * UM, "ZOB": -7 * UM, "nest_Z:e15": 8 * UM}
+    data = [simulate(head_machine, truth, poses, NOISE_UM, np.random.default_rng(11))]
+    found = diagnose(head_machine, data, identify(head_machine, data), noise_um=NOISE_UM, advisor=Advisor)
+    names = {found.found, *found.equivalents}
+    assert found.verdict == "found" and "nest_Z:e15" in names and "drift_Z:e15" not in names, \
+        (found.verdict, found.found, found.rivals, found.equivalents)
+    fit = identify(head_machine, data, compose(head_machine, location_model(head_machine), ["nest_Z:e15"]))
+    off = {n: abs(fit.parameters[n].value - v) / fit.parameters[n].std for n, v in truth.items()}
+    assert max(off.values()) < 3, off
+    seed, one = generate(seed_machine, ["K4", "K1", "K2"]), np.array([1.0])
+    np.testing.assert_allclose(Model(seed_machine, ["nest_Z:e15"]).deviation(seed, one),
+                               Model(seed_machine, ["drift_Z:e15"]).deviation(seed, one), atol=1e-12)
