@@ -120,6 +120,17 @@ def csv_cases(rng: random.Random) -> list[Case]:
         Case("csv", "a FIFO", {}, fit, "refuse", ["new.json"], special="fifo"),
         Case("csv", "BOM and CRLF (good)", {"data.csv": ("\ufeff" + whole).replace("\n", "\r\n")}, fit,
              "accept"),
+        # the reader decodes a file's head and parses its rows from the bytes: each way round it
+        Case("csv", "a µ in a comment (good)", {"data.csv": "# dX in µm\n" + whole}, fit, "accept"),
+        Case("csv", "a µ in a row", {"data.csv": whole.replace("\nK4,", "\nK4µ,", 1)}, fit, "refuse",
+             ["new.json"]),
+        Case("csv", "a byte not UTF-8 past 64 kB", {"data.csv": whole.encode()[:70_000] + b"\xff"
+                                                    + whole.encode()[70_001:]}, fit, "refuse", ["new.json"]),
+        Case("csv", "lines ending in CR alone (good)", {"data.csv": whole.replace("\n", "\r")}, fit,
+             "accept"),
+        Case("csv", "a label of 70 letters", {"data.csv": whole.replace("\nK4,", "\n" + "K" * 70 + ",", 1)},
+             fit, "refuse", ["new.json"]),
+        Case("csv", "10 000 newlines at the end (good)", {"data.csv": whole + "\n" * 10_000}, fit, "accept"),
     ]
     for _ in range(6):     # a file cut short: a row cut inside its last number cannot be told
         cut = rng.randrange(len(whole) // 3, len(whole))
