@@ -27,10 +27,10 @@ from ..model.frames import sensor_axes
 from ..model.kinematics import Model
 from ..model.machine import Machine
 from ..model.poses import Poses, runs
-from ..model.sides import FreeConstants, same_pose, span
+from ..model.sides import FreeConstants, same_pose
 from ..units import shown
 from .advising import Advising, Proposal
-from .device import DeviceCandidate, device_candidates, device_columns
+from .device import blamed_device, tested_devices, told_beside
 from .diagnosis import REPEATS_TRIED, Candidate, Diagnosis, _outside_line, _unexplained
 from .noise import Lazy, ar1, outliers, repeats
 from .ranking import Row, Whitening, effect_columns, rank, started_reversals
@@ -41,8 +41,8 @@ from .signature import products
 from .significance import (
     ALPHA,
     VISIBLE,
+    beside,
     lack_of_fit,
-    p_beside,
     p_value,
     rivals,
     still_significant,
@@ -121,7 +121,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     effects, ranked, noise, made, carried = _ranked(machine, fit, effects, res, alpha)
     rss_w = noise.rss(r)
     # the device beside the machine, in one Bonferroni family with it
-    devices, tested = _devices(res, ranked, noise, rss_w, dof, alpha)
+    devices, tested = tested_devices(res, ranked, noise, rss_w, dof, alpha)
     out = _candidates(effects, ranked, rss, r.size, rss_w, dof, tested, alpha)
     model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
     advising = advisor(machine, poses, kind) if advisor is not None else None
@@ -136,9 +136,10 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     # the best machine effect's whitened columns: its rivals and second effects are tested
     # beside it, and so are the gains with them
     first = noise.white(_columns(machine, res, made, significant[0].effect)) if significant else None
-    blamed = _blamed(devices, ranked[significant[0].effect] if significant else None, rss_w / dof, alpha)
+    best_row = ranked[significant[0].effect] if significant else None
+    blamed = blamed_device(devices, best_row, rss_w / dof, alpha)
     if blamed is not None:
-        devices = _told_beside(devices, np.empty((r.size, 0)), res, noise, alpha, blamed)
+        devices = told_beside(devices, np.empty((r.size, 0)), res, noise, alpha, blamed)
     seen = [d for d in devices if d.significant]
     best_sum_sq = max([ranked[c.effect].drop for c in significant[:1]] + [d.drop for d in seen], default=0.0)
     misfit, share = _misfit(res, noise, device, best_sum_sq, alpha, device_dof)
@@ -153,7 +154,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     if blamed is None and first is not None:     # beside the machine's best and its second effects
         told = max(1, SECOND_WALKS // len(poses))
         seconds = [noise.white(_columns(machine, res, made, e)) for e in rival["after_best"][:told]]
-        devices = _told_beside(devices, np.column_stack([first, *seconds]), res, noise,
+        devices = told_beside(devices, np.column_stack([first, *seconds]), res, noise,
                                alpha if len(rival["after_best"]) <= told else 0.0)
     return Diagnosis(
         machine=machine.name, fit_file=fit_file, model=fit.model,
@@ -168,17 +169,6 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         repeats=said, misfit=misfit,
         lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, notes=notes,
         data_device=kind, devices=tuple(devices), device_blamed=blamed, setup_step=step)
-
-
-def _devices(res: _Residual, ranked: dict[str, Row], noise: Whitening, rss_w: float, dof: int,
-             alpha: float) -> tuple[list[DeviceCandidate], int]:
-    """The device beside the machine, in one Bonferroni family with it: its candidates, and
-    how many the family holds."""
-    devices = device_candidates(res.pred, res.rtest, res.Q, res.r, noise, rss_w / dof, res.axes)
-    tested = (sum(1 for row in ranked.values() if row.k_eff)
-              + sum(1 for d in devices if d.visibility >= VISIBLE))
-    return [replace(d, p_value=p, significant=bool(d.visibility >= VISIBLE and p < alpha))
-            for d in devices for p in [p_value(d.drop_w, 1, rss_w, dof, tested)]], tested
 
 
 def _candidates(effects: Sequence[Effect], ranked: dict[str, Row], rss: float, readings: int, rss_w: float,
@@ -227,87 +217,9 @@ def _misfit(res: _Residual, noise: Whitening, device: float | None, best_sum_sq:
     return misfit, share
 
 
-def _blamed(devices: Sequence[DeviceCandidate], best: Row | None, sigma2_w: float,
-            alpha: float) -> str | None:
-    """The device parameter that explains the misfit as well as the best of the machine's
-    candidates (its rival by ``significance.rivals``, misfit taken as left), or better, or
-    alone: then no machine effect is named found."""
-    seen = [d for d in devices if d.significant]
-    if not seen:
-        return None
-    top = max(seen, key=lambda d: d.drop_w)
-    if best is None or top.drop_w >= best.drop_w or rivals((best.drop_w, best.k_eff), {
-            top.effect: (top.drop_w, 1)}, sigma2_w, alpha, True):
-        return top.effect
-    return None
-
-
-def _told_beside(devices: list[DeviceCandidate], beside: np.ndarray, res: _Residual, noise: Whitening,
-                 alpha: float, lead: str | None = None) -> list[DeviceCandidate]:
-    """The device parameters told beside what explains the misfit first: the blamed gain
-    (``lead``), or, where none is, the machine's best candidate and the second effects that
-    stay significant beside it (whitened columns ``beside``), and then the gain that stays
-    most significant beside those. Significant only where they stay so, one after the other,
-    and each told as estimated with them (and with the gains that stay). Alone, a gain takes
-    a share of a misfit it does not cause: an X gain of 1.5 % made Z's read −0.6 ± 0.15 %
-    (p 0.006), and beside a Z gain of −1.5 % read 2.5 % itself; a calibrated R-test beside an
-    unmodelled 15″ 2/rev angle of C read X −56 ± 1.7 % (p < 1e-300), and beside the best of
-    three machine effects X was significant, where the other two took it back."""
-    cols = {e: noise.white(c)[:, None] for e, c in device_columns(res.pred, res.rtest, res.axes).items()}
-    rw = noise.residual(res.r)
-    machine = span(noise.off(beside))     # rivals among second effects are one column
-
-    def tested(names, added):
-        """These gains' p-values beside the model and ``added``, Bonferroni over them."""
-        basis = span(noise.off(added))
-        prods = {e: _beside(cols[e], noise, basis, rw) for e in names}
-        return p_beside(noise.Q, basis, rw, prods) if prods else {}
-
-    # beside the machine's effects every gain the model leaves visible is tested again: alone,
-    # a gain is tested against a residual the misfit it does not cause inflates
-    seen = [d.effect for d in devices if (d.significant if lead else d.visibility >= VISIBLE)]
-    p = {} if lead else tested(seen, machine)
-    lead = lead or min((e for e in seen if p[e] < alpha), key=p.get, default=None)
-    if lead:
-        p |= tested([e for e in seen if e != lead], np.column_stack([machine, cols[lead]]))
-    joint = [lead, *(e for e in seen if e != lead and p[e] < alpha)] if lead else []
-
-    # every gain's column off the model beside the machine's effects (off it already:
-    # ``span`` of what was), and their products with each other and the residual,
-    # once: each joint fit below is then a few columns' normal equations
-    names = list(cols)
-    C = [*(noise.off(cols[e]) for e in names), machine]       # side by side, never copied so
-    CC, Cr = np.block([[a.T @ b for b in C] for a in C]), np.concatenate([a.T @ rw for a in C])
-    rr = float(rw @ rw)
-    beside_m = list(range(len(names), len(CC)))
-
-    def together(chosen):
-        """Values and σ, %, of these gains fitted at once with the model and the machine's
-        effects, σ from the residual all of them leave: the misfit they explain is not noise."""
-        at = [names.index(e) for e in chosen] + beside_m
-        inv = np.linalg.inv(CC[np.ix_(at, at)])
-        amp = inv @ Cr[at]
-        left = max(rr - float(Cr[at] @ amp), 0.0)
-        std = np.sqrt(np.diag(inv) * left / (res.dof - len(at)))
-        return {e: (float(a) * 100.0, float(s) * 100.0) for e, a, s in zip(chosen, amp, std, strict=False)}
-
-    told = together(joint)
-    for d in devices:
-        if d.effect not in told:
-            told[d.effect] = together([*joint, d.effect])[d.effect]
-    return [replace(d, value=told[d.effect][0], std=told[d.effect][1], p_value=p.get(d.effect, d.p_value),
-                    significant=d.effect in joint) for d in devices]
-
-
 def _columns(machine: Machine, res: _Residual, made: dict[str, np.ndarray], name: str) -> np.ndarray:
     """A candidate's columns: those step 3 made (a reversal's carry its start sides), or a walk."""
     return made[name] if name in made else effect_columns(machine, res.poses, resolve(machine, name))
-
-
-def _beside(C: np.ndarray, noise: Whitening, added: np.ndarray, rw: np.ndarray) -> tuple:
-    """Whitened columns ``C`` as ``still_significant`` takes them beside the model and the
-    columns ``added``: (CᵀC, [Q | added]ᵀC, Cᵀrw)."""
-    return C.T @ C, np.vstack([noise.Q.T @ C, added.T @ C]), C.T @ rw
 
 
 def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residual:
@@ -474,7 +386,7 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], firs
         prods = ({e.name: carried[1][e.name] for e in walked} if carried and carried[0] == best else
                  products(machine, poses, walked, (noise.Q, first), rw,
                           (res.seg, noise.rho) if noise.rho.any() else None))
-        prods |= {e.name: _beside(noise.white(made[e.name]), noise, first, rw)
+        prods |= {e.name: beside(noise.white(made[e.name]), noise, first, rw)
                   for e in others if e.name in made}
         kept = still_significant(noise.Q, first, rw, prods, alpha)
         after_best = tuple(e.name for e in others if e.name in kept)

@@ -186,6 +186,12 @@ def still_significant(Q: np.ndarray, added: np.ndarray, r: np.ndarray, prods: di
     return {name for name, p in p_beside(Q, added, r, prods).items() if p < alpha}
 
 
+def beside(C: np.ndarray, noise, added: np.ndarray, rw: np.ndarray) -> tuple:
+    """Whitened columns ``C`` as ``still_significant`` takes them beside the model and the
+    columns ``added``: (CᵀC, [Q | added]ᵀC, Cᵀrw)."""
+    return C.T @ C, np.vstack([noise.Q.T @ C, added.T @ C]), C.T @ rw
+
+
 def p_beside(Q: np.ndarray, added: np.ndarray, r: np.ndarray, prods: dict) -> dict[str, float]:
     """Each effect's p-value once the model (orthonormal columns ``Q``) is joined by the
     columns ``added``, first order; Bonferroni over all of them. Each effect is given by
