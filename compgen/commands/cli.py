@@ -15,7 +15,7 @@ import numpy as np
 
 from .. import __version__, me
 from ..configuration.machine_file import load_machine
-from ..configuration.session import fit_machine, fit_request, machine_ref, read_data, reload
+from ..configuration.session import fit_machine, fit_request, machine_ref, read_data, reload, turned_of
 from ..controllers.kinematics import corrected_by, kinematics_edit, nothing_to_correct
 from ..controllers.programs import (
     program_name,
@@ -194,6 +194,9 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
 @click.option("--not-touched", "untouched", multiple=True, type=FILE, metavar="CSV",
               help="A data file measured with the set-up as the file before it left it: no step of the "
                    "set-up is tried before it. Repeatable.")
+@click.option("--ball-turned", "turned", multiple=True, metavar="CSV=DEG",
+              help="A data file measured after the ball was turned DEG degrees on its stem (at the same "
+                   "place): its form turns with it, the machine does not. Repeatable.")
 @OUTPUT
 @FORCE
 @RECORD
@@ -201,14 +204,14 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
 @DATE
 @DB
 def fit_cmd(machine_file, data, base, more, model_names, add, remove, fixes, method, sign, again, untouched,
-            output, force, record, serial, taken, db):
+            turned, output, force, record, serial, taken, db):
     """Identify location errors (and any added effects) from R-test DATA files (CSV v1)."""
     if record:
         from ..history import taken_at
         taken = taken_at(taken)      # a bad --date is refused before fit.json is written
     names = [n.strip() for n in model_names.split(",") if n.strip()] if model_names else None
     asked = fit_request(machine_file, data, base, more, names, add, remove, fixes, sign, warn,
-                        again=again, untouched=untouched)
+                        again=again, untouched=untouched, turned=[turned_of(t) for t in turned])
     machine, sets = asked.machine, asked.sets
     progress(f"fitting {len(asked.model)} effects to {sum(len(s) for s in sets)} poses")
     result = identify(machine, sets, asked.model, asked.fixed, method, asked.sign, advisor=Advisor)

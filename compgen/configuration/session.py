@@ -76,15 +76,26 @@ def reload(fit: FitResult, machine_file: str | None = None) -> tuple[Machine, li
         if d.sha256 != ref.sha256:
             raise CompgenError("data file changed since the fit", where=ref.file,
                                hint=f"refit with `{me()} fit`")
-        data.append(replace(d, said=ref.said))
+        data.append(replace(d, said=ref.said, turned=ref.turned))
     return machine, data
 
 
+def turned_of(text: str) -> tuple[str, float]:
+    """``FILE=DEG`` of ``fit --ball-turned`` as (file, degrees), or one clear refusal."""
+    path, _, deg = text.rpartition("=")
+    try:
+        return path, float(deg) if path else float("x")
+    except ValueError:
+        raise CompgenError(f"--ball-turned {text}: give the file and the degrees the ball was turned on "
+                           "its stem", hint="e.g. --ball-turned K4_TURNED.csv=60") from None
+
+
 def said_of(machine: Machine, sets: Sequence[RTestData], again: Sequence[str] = (),
-            untouched: Sequence[str] = ()) -> list[RTestData]:
+            untouched: Sequence[str] = (), turned: Sequence[tuple[str, float]] = ()) -> list[RTestData]:
     """``sets`` with what the user said of the set-up before each: ``again`` the files
     measured after the ball and the nest were taken off and mounted again (at the same place
-    too), ``untouched`` those after which nothing was touched. Refused: a file not among
+    too), ``untouched`` those after which nothing was touched, ``turned`` (file, deg) those
+    measured after the ball was turned on its stem (and so mounted again). Refused: a file not among
     the sets, the first (nothing comes before it), one said both, and one said untouched
     whose ball or nest is not the file before it's (a ball moved was mounted again)."""
     def index(path: str) -> int:
@@ -107,6 +118,14 @@ def said_of(machine: Machine, sets: Sequence[RTestData], again: Sequence[str] = 
                                    "before it left them: a ball moved, or another nest, was mounted again",
                                    hint="leave --not-touched out for it")
             out[k] = replace(out[k], said=words)
+    for path, deg in turned:
+        k = index(path)
+        if out[k].said == UNTOUCHED:
+            raise CompgenError(f"{path} is said both {UNTOUCHED} and turned on its stem", hint="say one")
+        if not (np.isfinite(deg) and 0 < abs(deg) < 360):
+            raise CompgenError(f"--ball-turned {path}={deg:g}: the turn is between −360 and 360° and not 0",
+                               hint="the degrees the ball was turned on its stem since the file before")
+        out[k] = replace(out[k], said=MOUNTED_AGAIN, turned=float(deg))
     return out
 
 
@@ -126,7 +145,7 @@ def fit_request(machine_file: str | None = None, data: Sequence[str] = (), base:
                 more: Sequence[str] = (), model: Sequence[str] | None = None, add: Sequence[str] = (),
                 remove: Sequence[str] = (), fixes: Sequence[str] = (), sign: str | None = None,
                 warn: Callable[[str], None] | None = None, again: Sequence[str] = (),
-                untouched: Sequence[str] = ()) -> FitRequest:
+                untouched: Sequence[str] = (), turned: Sequence[tuple[str, float]] = ()) -> FitRequest:
     """The refit policy. A new fit: ``machine_file`` and ``data``, the seed's location errors,
     the contract's sign. A refit of the fit file ``base``: its machine and data (refused if
     either changed), ``more`` data read with its sign, its model and the values it held
@@ -155,7 +174,7 @@ def fit_request(machine_file: str | None = None, data: Sequence[str] = (), base:
         sign = sign or SIGNS[0]
         sets = [read_data(p, machine, sign, warn) for p in data]
         names, fixed = location_model(machine), {}
-    sets = said_of(machine, sets, again, untouched)
+    sets = said_of(machine, sets, again, untouched, turned)
     names = compose(machine, list(model) if model is not None else names, add, remove)
     fixed = {n: v for n, v in fixed.items() if n in names} | parse_fixed(machine, fixes)
     if warn is not None:

@@ -52,6 +52,8 @@ class RTestData:
                                     # log's pooled touches), None where it is known
     said: str = ""                  # what the user said of the set-up before it: MOUNTED_AGAIN,
                                     # UNTOUCHED, or nothing
+    turned: float = 0.0             # deg the ball was turned on its stem before it (then said
+                                    # MOUNTED_AGAIN too: its clamp was loosened)
 
     def __len__(self) -> int:
         return len(self.poses)
@@ -81,9 +83,11 @@ class Measurements:
         """The sets' poses in order, each set said mounted again one set-up event after the
         sets before it (``Poses.setup``)."""
         count = np.cumsum([d.said == MOUNTED_AGAIN for d in self.sets])
+        turn = np.radians(np.cumsum([d.turned for d in self.sets]))
         if not count[-1:].any():
             return Poses.concat([d.poses for d in self.sets])
-        return Poses.concat([d.poses.with_setup(int(k)) for d, k in zip(self.sets, count, strict=True)])
+        return Poses.concat([d.poses.with_setup(int(k), float(a))
+                             for d, k, a in zip(self.sets, count, turn, strict=True)])
 
     @cached_property
     def deviation(self) -> np.ndarray:

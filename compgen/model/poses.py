@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-FIELDS = ("q", "ball", "t", "path", "side", "nest", "setup")     # Poses' arrays, one row per pose
+FIELDS = ("q", "ball", "t", "path", "side", "nest", "setup", "turn")     # Poses' arrays, one row per pose
 
 
 def _frozen(a) -> bool:
@@ -39,6 +39,9 @@ class Poses:
     setup : (n,) int, a count of the set-up events said of the poses' files: where it changes
         the ball and the nest were taken off and mounted again (at the same place too), as a
         user says it (``fit --mounted-again``); 0 throughout where nothing was said
+    turn : (n,) rad, how far the ball was turned on its stem since the first of the poses'
+        files, as a user says it (``fit --ball-turned``): its form turns with it, the machine
+        does not
     """
 
     q: np.ndarray
@@ -48,6 +51,7 @@ class Poses:
     side: np.ndarray | None = None
     nest: np.ndarray | None = None
     setup: np.ndarray | None = None
+    turn: np.ndarray | None = None
 
     def __post_init__(self):
         if self.side is None:
@@ -56,6 +60,8 @@ class Poses:
             object.__setattr__(self, "nest", np.full(len(self.q), np.nan))
         if self.setup is None:
             object.__setattr__(self, "setup", np.zeros(len(self.q), int))
+        if self.turn is None:
+            object.__setattr__(self, "turn", np.zeros(len(self.q)))
         for field in FIELDS:
             a = getattr(self, field)
             if not _frozen(a):
@@ -80,7 +86,8 @@ class Poses:
     def starting_at(self, t0: float) -> Poses:
         """These poses with their clock moved so that the first is read at ``t0`` s: a
         measurement made after others, the R-test's clock running on."""
-        return Poses(self.q, self.ball, self.t - self.t[0] + t0, self.path, self.side, self.nest, self.setup)
+        return Poses(self.q, self.ball, self.t - self.t[0] + t0, self.path, self.side, self.nest, self.setup,
+                     self.turn)
 
     @staticmethod
     def at(q: np.ndarray, ball, nest: np.ndarray | None = None) -> Poses:
@@ -89,9 +96,11 @@ class Poses:
         return Poses(q, np.broadcast_to(np.asarray(ball, float), (n, 3)), np.full(n, np.nan),
                      np.full(n, "", dtype=object), nest=nest)
 
-    def with_setup(self, count: int) -> Poses:
-        """These poses with ``count`` set-up events said before them (``setup``)."""
-        return Poses(self.q, self.ball, self.t, self.path, self.side, self.nest, np.full(len(self), count))
+    def with_setup(self, count: int, turn: float = 0.0) -> Poses:
+        """These poses with ``count`` set-up events said before them (``setup``), the ball
+        turned ``turn`` rad on its stem since the first file (``turn``)."""
+        return Poses(self.q, self.ball, self.t, self.path, self.side, self.nest, np.full(len(self), count),
+                     np.full(len(self), turn))
 
     @staticmethod
     def concat(items: Sequence[Poses]) -> Poses:

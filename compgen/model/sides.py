@@ -201,7 +201,8 @@ def same_pose(machine: Machine, poses: Poses, run: np.ndarray) -> np.ndarray:
     (to 1e-6 mm and 1e-6 deg, the CSV's resolution) and ball, every axis reached from the same
     side, so that no backlash counts as a repeat's scatter: the recorded side, else the move
     of its run (``run``, as ``runs`` numbers them) that reached it; a pose that no move of its
-    run has reached yet repeats only poses of its own run."""
+    run has reached yet repeats only poses of its own run. A pose measured after the set-up was
+    said mounted again, or the ball turned on its stem, repeats only poses of that mounting."""
     scale = np.array([180.0 / np.pi if a.rotary else 1.0 for a in machine.axes])
     side = poses.side.copy()
     starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
@@ -214,7 +215,8 @@ def same_pose(machine: Machine, poses: Poses, run: np.ndarray) -> np.ndarray:
             reached[a:b] = last_moves(np.sign(np.diff(poses.q[a:b, j])), np.nan)
         side[:, j] = np.where(unknown, np.where(np.isnan(reached), 2.0 + run, reached), side[:, j])
     return _groups([*np.round(poses.q * scale * 1e6).T, *np.round(poses.ball * 1e6).T,
-                    np.round(np.nan_to_num(poses.nest, nan=-1e-6) * 1e6), *side.T])
+                    np.round(np.nan_to_num(poses.nest, nan=-1e-6) * 1e6), *side.T, poses.setup,
+                    np.round(poses.turn * 1e6)])
 
 
 def _groups(columns) -> np.ndarray:

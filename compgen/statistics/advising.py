@@ -19,6 +19,7 @@ class Proposal(Protocol):
 
     label: str
     path: str
+    name: str
     ball: tuple[float, float, float]
     poses: Poses
     again: bool
@@ -37,3 +38,7 @@ class Advising(Protocol):
     candidates: Sequence[Proposal]
 
     def runnable(self, ms: Sequence[Proposal], most: int | None = None) -> tuple[Proposal, ...]: ...
+
+    def turned(self, path: str, ball: tuple[float, float, float], before: int) -> Proposal | None:
+        """``path`` again with the ball where it is, turned on its stem (the ``before``-th time
+        it is turned), if the machine can run it."""

@@ -30,7 +30,7 @@ from ..model.poses import Poses, runs
 from ..model.sides import FreeConstants, same_pose
 from ..units import shown
 from .advising import Advising, Proposal
-from .device import blamed_device, tested_devices, told_beside
+from .device import blamed_device, device_columns, form_columns, tested_devices, told_beside
 from .diagnosis import REPEATS_TRIED, Candidate, Diagnosis, _outside_line, _unexplained
 from .noise import Lazy, ar1, outliers, repeats
 from .ranking import Row, Whitening, effect_columns, rank, started_reversals
@@ -120,8 +120,10 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     effects, notes = _to_try(machine, fit, candidates, poses)
     effects, ranked, noise, made, carried = _ranked(machine, fit, effects, res, alpha)
     rss_w = noise.rss(r)
-    # the device beside the machine, in one Bonferroni family with it
-    devices, tested = tested_devices(res, ranked, noise, rss_w, dof, alpha)
+    # the device (the R-test's sensors, the ball's form) beside the machine, in one Bonferroni family
+    columns = device_columns(res.pred, res.rtest, res.axes) | form_columns(machine, poses, res.rtest,
+                                                                           res.axes)
+    devices, tested = tested_devices(res, columns, ranked, noise, rss_w, dof, alpha)
     out = _candidates(effects, ranked, rss, r.size, rss_w, dof, tested, alpha)
     model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
     advising = advisor(machine, poses, kind) if advisor is not None else None
@@ -136,10 +138,11 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     # the best machine effect's whitened columns: its rivals and second effects are tested
     # beside it, and so are the gains with them
     first = noise.white(_columns(machine, res, made, significant[0].effect)) if significant else None
-    best_row = ranked[significant[0].effect] if significant else None
-    blamed = blamed_device(devices, best_row, rss_w / dof, alpha)
+    blamed, form_rival = blamed_device(devices, best, rss_w / dof, alpha)
+    turned = None if form_rival is None or advising is None else advising.turned(   # where the ball is
+        str(poses.path[-1]), tuple(poses.ball[-1]), sum(1 for d in joined.sets if d.turned))
     if blamed is not None:
-        devices = told_beside(devices, np.empty((r.size, 0)), res, noise, alpha, blamed)
+        devices = told_beside(devices, columns, np.empty((r.size, 0)), res, noise, alpha, blamed)
     seen = [d for d in devices if d.significant]
     best_sum_sq = max([ranked[c.effect].drop for c in significant[:1]] + [d.drop for d in seen], default=0.0)
     misfit, share = _misfit(res, noise, device, best_sum_sq, alpha, device_dof)
@@ -154,7 +157,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     if blamed is None and first is not None:     # beside the machine's best and its second effects
         told = max(1, SECOND_WALKS // len(poses))
         seconds = [noise.white(_columns(machine, res, made, e)) for e in rival["after_best"][:told]]
-        devices = told_beside(devices, np.column_stack([first, *seconds]), res, noise,
+        devices = told_beside(devices, columns, np.column_stack([first, *seconds]), res, noise,
                                alpha if len(rival["after_best"]) <= told else 0.0)
     return Diagnosis(
         machine=machine.name, fit_file=fit_file, model=fit.model,
@@ -168,7 +171,8 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         searched=advising is not None, device_noise_um=device,
         repeats=said, misfit=misfit,
         lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, notes=notes,
-        data_device=kind, devices=tuple(devices), device_blamed=blamed, setup_step=step)
+        data_device=kind, devices=tuple(devices), device_blamed=blamed, form_rival=form_rival,
+        form_turned=turned, setup_step=step)
 
 
 def _candidates(effects: Sequence[Effect], ranked: dict[str, Row], rss: float, readings: int, rss_w: float,

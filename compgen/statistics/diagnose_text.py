@@ -24,6 +24,7 @@ def report(d: Diagnosis, fit_path: str = "fit.json", top: int = 8) -> str:
     lines += _residuals(d)
     lines += _candidates(d, fit, after, top)
     lines += _devices(d)
+    lines += _form(d, fit, after)
     lines += _rivals_text(d, fit, after)
     if d.significant and not d.rivals and not d.unexplained and d.device_noise_um is None:
         lines += ["", f"  Not named as found: the R-test's noise is not given, so whether "
@@ -97,6 +98,8 @@ def _candidates(d: Diagnosis, fit: str, after: str, top: int) -> list[str]:
             lines.append("      it fits a part of the unexplained misfit (see below): not advised on its own")
         elif c.significant and d.device_blamed:
             lines.append(f"      the device explains these data as well ({d.device_blamed}): see below")
+        elif d.form_rival and c is d.significant[0]:
+            lines.append(f"      the ball's form explains these data as well ({d.form_rival}): see below")
         elif d.step_rivals and c is d.significant[0]:
             lines.append(f"      {d.setup_step.text()} explains these data as well: not named found "
                          "(see the first line)")
@@ -215,9 +218,17 @@ def conclusion(d: Diagnosis, fit: str, after: str) -> str:
     best = d.significant[0].effect if d.significant else None
     add = f"{me()} fit --from {fit} --add {best} -o {after}"
     kind = d.verdict
+    if kind == "device" and d.blamed.form:
+        return (f"VERDICT: the ball's form explains the misfit ({d.blamed.description}, {d.blamed.text()}), "
+                "not the machine: measure again on a round ball, or one whose form is known")
     if kind == "device":
         return (f"VERDICT: the device explains the misfit ({d.blamed.description}, {d.device_blamed}): "
                 "calibrate that sensor and measure again")
+    if kind == "rivals" and d.form_rival:
+        m = d.form_turned
+        return (f"VERDICT: not told apart: {best} vs the ball's form ({d.form_rival}); "
+                + (f"turn the ball {d.turn_degrees:g}° on its stem and measure {m.path} again (below)"
+                   if m else "no program of this machine measures the ball turned on its stem (below)"))
     if kind == "set-up step":
         return (f"VERDICT: not told apart: {best} vs {d.setup_step.text()}; measure a path again right "
                 "after these data without touching the ball or the nest: a warming or a drift goes on, a "
@@ -345,28 +356,59 @@ def _told(d: Diagnosis, m: Proposal) -> set[tuple[str, str]]:
 
 
 def _devices(d: Diagnosis) -> list[str]:
-    """The R-test's own gains, where one is significant: blamed, or beside the machine's best."""
+    """The R-test's own gains and the ball's form, where one is significant: blamed, or
+    beside the machine's best."""
     seen = d.significant_devices
     if not seen:
         return []
     c = d.blamed
     if c is None:
         said = "; ".join(f"{o.text()} ({said_p(o.p_value)})" for o in seen)
-        sensors = " and ".join(o.effect[-1] for o in seen)
         verb = "stays" if len(seen) == 1 else "stay"
         return ["", f"  The device: {said} {verb} significant beside the machine's effects (the best and "
                     "those significant beside it), which explain more: no device parameter is blamed for "
-                    "the misfit, but "
-                    f"calibrate the R-test's {sensors} sensor{'s' if len(seen) > 1 else ''} against its "
-                    "reference (its calibration: [rtest] gain_u in the machine file) before these data "
-                    "correct a control, then measure again."]
+                    f"the misfit, but {_remedy(seen)} before these data correct a control, then measure "
+                    "again."]
     than = f"as well as {d.significant[0].effect}" if d.significant else "where no machine effect does"
-    return ["", f"  The device: {c.description}, {c.value:+.2f} ± {c.std:.2f} % ({c.effect}), explains these "
-                f"data {than}: no machine effect is named found, and nothing here corrects a control for it.",
-            f"  Calibrate the R-test's {c.effect[-1]} sensor against its reference (its calibration: "
-            "[rtest] gain_u in the machine file), then measure again and fit the new data alone."
-            + "".join(f" {o.text()} stays significant beside it "
-                      f"({said_p(o.p_value)}): calibrate that sensor too." for o in seen if o is not c)]
+    size = f"{c.value:.2f} ± {c.std:.2f} µm" if c.form else f"{c.value:+.2f} ± {c.std:.2f} %"
+    return ["", f"  The device: {c.description}, {size} ({c.effect}), explains these data {than}: no machine "
+                "effect is named found, and nothing here corrects a control for it.",
+            f"  {_remedy([c])[0].upper()}{_remedy([c])[1:]}, then measure again and fit the new data alone."
+            + "".join(f" {o.text()} stays significant beside it ({said_p(o.p_value)}): "
+                      + ("have the ball's form measured too." if o.form else "calibrate that sensor too.")
+                      for o in seen if o is not c)]
+
+
+def _remedy(devices) -> str:
+    """What a user does about these device parameters: calibrate the sensors, replace the ball."""
+    sensors = " and ".join(o.effect[-1] for o in devices if not o.form)
+    out = ([f"calibrate the R-test's {sensors} sensor{'s' if ' and ' in sensors else ''} against its "
+            "reference (its calibration: [rtest] gain_u in the machine file)"] if sensors else [])
+    if any(o.form for o in devices):
+        out.append("measure on a round ball, or one whose form is known (its calibration certificate)")
+    return " and ".join(out)
+
+
+def _form(d: Diagnosis, fit: str, after: str) -> list[str]:
+    """The ball's form tied with the machine's best, and the measurement that tells them apart."""
+    if d.form_rival is None:
+        return []
+    form = next(o for o in d.devices if o.effect == d.form_rival)
+    turn = f"{d.turn_degrees:g}"
+    lines = ["", f"  The ball's form: {form.description} ({form.effect}, about {form.value:.2f} µm alone), "
+                 f"reads on these paths as {d.significant[0].effect} does: these data cannot tell a ball "
+                 "out of round from the machine, and neither is named. Turned on its stem, the ball's form "
+                 f"turns with it and the machine does not ({turn}° reads the form the other way round)."]
+    m = d.form_turned
+    if m is None:
+        return [*lines, "  No program of this machine measures the ball where it stands: have the ball's "
+                        "form measured (its calibration certificate) before these data correct a control."]
+    return [*lines, f"  Loosen the ball's clamp, turn the ball {turn}° on its stem without moving it, "
+                    "tighten it, and run:",
+            f"    {m.command(me())}",
+            f"  save the R-test's readings as {m.name}.csv (the pose list beside the program, with dX dY "
+            "dZ), then fit them with these data, saying the turn, and diagnose again:",
+            f"    {me()} fit --from {fit} --data {m.name}.csv --ball-turned {m.name}.csv={turn} -o {after}"]
 
 
 def _device(d: Diagnosis) -> str:

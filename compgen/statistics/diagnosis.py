@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .advising import Proposal
-from .device import DeviceCandidate
+from .device import FORM, DeviceCandidate
 from .noise import Repeats
 from .setup_step import SetupStep
 from .significance import ALPHA, COND_LIMIT, VISIBLE
@@ -107,6 +107,8 @@ class Diagnosis:
     best_sum_sq: float = 0.0        # the residual sum of squares the best significant candidate removes, mm²
     devices: tuple[DeviceCandidate, ...] = ()   # the R-test's own parameters, tested beside the machine's
     device_blamed: str | None = None    # the one that explains the misfit as well as the machine's best
+    form_rival: str | None = None       # the ball's form, explaining it as the machine's best does
+    form_turned: Proposal | None = None  # the measurement that tells them apart: a path, the ball turned
     setup_step: SetupStep | None = None   # a set-up event between two files, against the best
     # for rivals: what adding each puts into the fitted parameters, first order, shown units
     carries: dict[str, dict[str, float]] = field(default_factory=dict)
@@ -141,6 +143,12 @@ class Diagnosis:
     @property
     def significant(self) -> tuple[Candidate, ...]:
         return tuple(c for c in self.candidates if c.significant)
+
+    @property
+    def turn_degrees(self) -> float | None:
+        """How far to turn the ball on its stem to tell its form from the machine: 180°/k,
+        where its k lobes read the other way round."""
+        return None if self.form_rival is None else 180.0 / int(self.form_rival.removeprefix(FORM))
 
     @property
     def significant_devices(self) -> tuple[DeviceCandidate, ...]:
@@ -178,6 +186,8 @@ class Diagnosis:
         best = self.significant[0] if self.significant else None
         if self.device_blamed is not None:
             return "device"
+        if self.form_rival is not None:
+            return "rivals"
         if self.step_rivals:
             return "set-up step"
         if self.found is not None:
@@ -202,7 +212,8 @@ class Diagnosis:
         best = self.significant[0] if self.significant else None
         apart = set(self.rivals) - set(self.equivalents)     # an exact equivalent is the best, renamed
         named = (best is not None and not apart and best.separable and not self.unexplained
-                 and self.device_noise_um is not None and self.device_blamed is None and not self.step_rivals)
+                 and self.device_noise_um is not None and self.device_blamed is None and not self.step_rivals
+                 and self.form_rival is None)
         return best.effect if named else None
 
     @property
@@ -231,6 +242,9 @@ class Diagnosis:
             "equivalents_of_best": list(self.equivalents),
             "found": self.found,
             "device_blamed": self.device_blamed,
+            "form_rival": self.form_rival,
+            "form_turned_by": None if self.form_turned is None else {
+                **self.form_turned.to_dict(), "degrees": self.turn_degrees},
             "device_effects": [d.to_dict() for d in self.devices],
             "setup_step": self.setup_step.to_dict() if self.setup_step is not None else None,
             "rivals_equivalent": bool(self.rivals and not self.rivals_separated_by),

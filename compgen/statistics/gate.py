@@ -55,9 +55,16 @@ def gate_reasons(data: Sequence[RTestData], fit: FitResult, found: Diagnosis) ->
                  f"the residual holds a periodic line no catalogue effect has ({found.outside_line.text()})")
         reasons.append(f"{where} and no catalogue effect explains it (run diagnose: it shows where and its "
                        "shape, and how to declare it)")
+    elif (c := found.blamed) and c.form:
+        reasons.append(f"the ball's form explains the misfit as well as any machine effect ({c.text()}): "
+                       "measure again on a round ball, or one whose form is known")
     elif c := found.blamed:
         reasons.append(f"{device} itself explains the misfit as well as any machine effect ({c.text()}): "
                        "calibrate the device and measure again")
+    elif found.form_rival:
+        reasons.append(f"the ball's form ({found.form_rival}) explains the misfit as well as "
+                       f"{found.significant[0].effect}: turn the ball on its stem and measure again (run "
+                       "diagnose: it prints how)")
     elif found.step_rivals:
         reasons.append(f"{found.setup_step.text()} explains the misfit as well as "
                        f"{found.significant[0].effect}: measure again without touching the set-up, and fit "

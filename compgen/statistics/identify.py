@@ -126,7 +126,8 @@ def _fit_result(machine: Machine, data: Sequence[RTestData], m: Model, names: li
     return FitResult(
         machine={"name": machine.name, "file": machine.bundled or _absolute(machine.source),
                  "sha256": machine.sha256, **({"bundled": True} if machine.bundled else {})},
-        data=tuple(DataRef(_absolute(d.source), d.sha256, len(d), _counts(d.poses.path), d.device, d.said)
+        data=tuple(DataRef(_absolute(d.source), d.sha256, len(d), _counts(d.poses.path), d.device, d.said,
+                     d.turned)
                    for d in data),
         model=tuple(names), parameters=params, free=tuple(names[i] for i in free),
         correlation=np.clip(corr, -1.0, 1.0), singular_values=sv,

@@ -60,6 +60,7 @@ class DataRef:
     paths: dict[str, int] = field(default_factory=dict)
     device: str = "rtest"        # "probe": sphere centres from a touch-probe log
     said: str = ""               # what the user said of the set-up before it (rtest.MOUNTED_AGAIN, UNTOUCHED)
+    turned: float = 0.0          # deg the ball was turned on its stem before it (fit --ball-turned)
 
 
 @dataclass(frozen=True, eq=False)   # eq=False: ndarray fields make the default __eq__ raise
