@@ -50,10 +50,10 @@ from compgen.data.probe import (  # noqa: E402
     simulate_touches,
     sphere_centres,
 )
-from compgen.data.rtest import RTestData  # noqa: E402
+from compgen.data.rtest import MOUNTED_AGAIN, RTestData  # noqa: E402
 from compgen.data.simulate import ar1_noise, simulate  # noqa: E402
 from compgen.model.effects import compose, effect_name, location_model  # noqa: E402
-from compgen.model.frames import sensor_axes  # noqa: E402
+from compgen.model.frames import frames, sensor_axes  # noqa: E402
 from compgen.model.kinematics import Model  # noqa: E402
 from compgen.model.paths import generate  # noqa: E402
 from compgen.model.poses import Poses  # noqa: E402
@@ -68,6 +68,7 @@ UNMEASURED_BALLS = ([-150.0, 120.0, 180.0], [120.0, -100.0, 260.0])   # mm, tabl
 MAX_ROUNDS = 8          # diagnoses: each names, adds or measures one thing
 MAX_LOOKS = 2           # measurements made only to look where the data are blind
 OFF_GRID = "off the grid"   # a hidden time constant the catalogue does not hold
+FORM = "form"           # a hidden ball form: (size µm, lobes k, their phase rad), outside the model
 MOUNT_UM = 20.0         # σ of the ball's offset a mounting leaves, per axis
 
 CASES = {
@@ -112,6 +113,9 @@ CASES = {
     # an A encoder's 4/rev: on a tilting axis too, every order of the catalogue is tried
     "A encoder 4/rev, 4″": ({"EAA:h4c": 4 * ARCSEC}, "EAA:h4"),
     # three at once: a candidate still significant once the best is added is a second effect
+    # the ball itself: three lobes about its stem, read as C's radial motion against it at
+    # 3/rev to 0.04 µm; a ball turned on its stem tells them apart
+    "a ball with three lobes, 0.8 µm (the device)": ({FORM: (0.8, 3, 0.4)}, "device"),
     "three at once: C 2/rev radial 2 µm, C 1/rev angular 8″, A sag 3 µm":
         ({"EXC:h2c": 2 * UM, "ECC:h1c": 8 * ARCSEC, "EZA:h1c": -3 * UM},
          frozenset({"EXC:h2", "ECC:h1", "EZA:h1"})),
@@ -141,7 +145,8 @@ def true_deviation(machine, truth, poses, outside=None) -> np.ndarray:
     """The hidden machine's readings: catalogue effects through the model, and ``outside``
     (axis, pitch mm) as that axis moved off by a sine of its position on the nominal machine."""
     gain = {k: truth[k] for k in truth if k.startswith(GAIN)}      # the device, not the machine
-    truth = {k: v for k, v in truth.items() if k not in gain}
+    form = truth.get(FORM)
+    truth = {k: v for k, v in truth.items() if k not in gain and k != FORM}
     dev = Model(machine, list(truth)).deviation(poses, np.array(list(truth.values())))
     # each sensor reads along its own axis: the machine's X, Y, Z under a fixed spindle, the
     # tool's turned axes on a head (the nest turns with it)
@@ -150,6 +155,8 @@ def true_deviation(machine, truth, poses, outside=None) -> np.ndarray:
     for k, g in gain.items():
         along[:, "XYZ".index(k[-1])] *= 1 + g
     dev = along if axes is None else np.einsum("nij,nj->ni", axes, along)
+    if form is not None:
+        dev = dev + form_reading(machine, poses, *form)
     if outside is not None:
         axis, pitch = outside[:2]
         q = poses.q.copy()
@@ -158,6 +165,22 @@ def true_deviation(machine, truth, poses, outside=None) -> np.ndarray:
         nominal = Model(machine, ())
         dev = dev + nominal.relative(Poses(q, poses.ball, poses.t, poses.path)) - nominal.relative(poses)
     return dev
+
+
+def form_reading(machine, poses, size_um: float, k: int, phase: float) -> np.ndarray:
+    """What a ball's form adds to the readings (n, 3) mm: its radius R + size·sinᵏθ·cos k(φ − phase)
+    (θ from its stem, φ about it from the table's x, the ball turned ``poses.turn`` on it) read
+    by each sensor on its side, along it: the ball nearer that sensor by the radius there."""
+    table = frames(machine, poses.q)[0][:, :3, :3]
+    axes = sensor_axes(machine, poses.q)
+    axes = np.broadcast_to(np.eye(3), (len(poses), 3, 3)) if axes is None else axes
+    out = np.zeros((len(poses), 3))
+    for s in range(3):
+        e = axes[:, :, s]
+        u = np.einsum("nji,nj->ni", table, e)
+        theta, phi = np.arccos(np.clip(u[:, 2], -1, 1)), np.arctan2(u[:, 1], u[:, 0]) - poses.turn
+        out -= e * (size_um * 1e-3 * np.sin(theta) ** k * np.cos(k * (phi - phase)))[:, None]
+    return out
 
 
 def session(machine, truth, poses, kind, rng, outside=None, blind=False) -> RTestData:
@@ -198,19 +221,30 @@ def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
             named.append("unexplained")
             break
         elif found.significant_devices:    # blamed, or significant beside the machine's best:
-            # the user calibrates the R-test and measures everything again
+            # the user calibrates the R-test (or takes a round ball) and measures everything again
             named.append(f"device {found.device_blamed or found.significant_devices[0].effect}")
-            truth = {k: v for k, v in truth.items() if not k.startswith(GAIN)}
+            how = "a round ball" if FORM in truth else "calibrated"
+            truth = {k: v for k, v in truth.items() if not k.startswith(GAIN) and k != FORM}
             poses = generate(machine, ["K4", "K1", "K2"])
             truth = remounted(truth, poses, data, rng)
             first = {n: truth[n] for n in SETUP}
             data = [measure(machine, truth, poses, kind, rng, outside)]
-            followed.append("calibrated, K4+K1+K2 again")
+            followed.append(f"{how}, K4+K1+K2 again")
             model = location_model(machine)
         elif found.found:       # found under every name of its one column
             also = f" ≡ {{{', '.join(found.equivalents)}}}" if found.equivalents else ""
             named.append(found.found + also)
             model = compose(machine, model, [found.found])
+        elif found.form_rival:      # the ball turned on its stem, where it stands, as printed
+            m = found.form_turned
+            if m is None:
+                break
+            followed.append(f"{m.path}, the ball turned {found.turn_degrees:g}°")
+            turned = sum(d.turned for d in data) + found.turn_degrees
+            truth = {**truth, **dict(zip(SETUP, rng.normal(0, MOUNT_UM * 1e-3, 3), strict=True))}
+            read = measure(machine, truth, replace_turn(m.poses, np.radians(turned)), kind, rng, outside)
+            data.append(RTestData(m.poses, read.deviation, read.source, "", read.lines, said=MOUNTED_AGAIN,
+                                  turned=found.turn_degrees))
         elif found.rivals:
             if not found.rivals_separated_by:     # equivalent for every set-up: add the best
                 best = found.significant[0].effect
@@ -250,6 +284,12 @@ def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
     return {"named": named, "followed": followed, "sigma_um": fit.residual["sigma_um"],
             "predict_um": worst, "rivals_left": list(found.rivals), "location_sigma": off,
             "invisible": [c.effect for c in found.candidates if not c.visible and not c.silent]}
+
+
+def replace_turn(poses: Poses, turn: float) -> Poses:
+    """``poses`` with the ball turned ``turn`` rad on its stem (what the hidden ball's form reads)."""
+    return Poses(poses.q, poses.ball, poses.t, poses.path, poses.side, poses.nest, poses.setup,
+                 np.full(len(poses), turn))
 
 
 def probe_session(machine, seed: int, path: Path) -> RTestData:
@@ -309,6 +349,7 @@ HEAD_CASES = {
     "the nest growing along the tool axis, 8 µm, τ = 20 min": ({"nest_Z:e20": 8 * UM}, OFF_GRID),
     "XOC warming 6 µm, τ = 8 min (off the grid)": ({"XOC:e8": 6 * UM}, OFF_GRID),
     "the nest's X sensor gain 2 % (calibration 1 %)": ({"gain_X": 0.02}, "device"),
+    "a ball with three lobes, 0.8 µm (the device)": ({FORM: (0.8, 3, 0.4)}, "device"),
 }
 
 
@@ -341,7 +382,7 @@ def heads() -> None:
         for name, (hidden, expect) in HEAD_CASES.items():
             used = replace(machine, gain_u=GAIN_U) if any(p.startswith(GAIN) for p in hidden) else machine
             out = discover(used, {**HEAD_TRUTH, **hidden}, "white", np.random.default_rng(11))
-            truth = {effect_name(p) for p in hidden if not p.startswith(GAIN)} | {expect}
+            truth = {effect_name(p) for p in hidden if not p.startswith(GAIN) and p != FORM} | {expect}
             warm = {p.split(":")[0] for p in hidden if ":e" in p}      # the same warming at a fitted τ
             wrong = [n for n in wrong_names(out["named"], truth, warm) if not n.startswith("device")]
             mark = ("WRONG: " + ", ".join(wrong) if wrong else
@@ -375,8 +416,9 @@ def main() -> None:
             expect = outside[2]
         # a name found that is no hidden effect is a wrong finding (a declaration of what
         # diagnose called unexplained, or the best of equivalents, is not one)
-        truths = ({effect_name(p) for p in hidden if not p.startswith(GAIN)}
-                  | {f"device {p}" for p in hidden if p.startswith(GAIN)})
+        truths = ({effect_name(p) for p in hidden if not p.startswith(GAIN) and p != FORM}
+                  | {f"device {p}" for p in hidden if p.startswith(GAIN)}
+                  | ({f"device ball_lobes{hidden[FORM][1]}"} if FORM in hidden else set()))
         warm = {p.split(":")[0] for p in hidden if ":e" in p}      # the same warming at a fitted τ
         wrong = [] if outside is not None else wrong_names(out["named"], truths, warm)
         if expect == "device":       # the device blamed, and no machine effect named found
