@@ -558,6 +558,14 @@ def second_look_cases() -> list[Case]:
                                  ([untouched, "{dir}/a.csv"], "refuse"),
                                  ([again, "{dir}/b.csv", untouched, "{dir}/b.csv"], "refuse"),
                                  ([again, "{dir}/b.csv"], "accept"), ([untouched, "{dir}/b.csv"], "accept"))]
+    turned = "--ball-turned"    # FILE=DEG: its syntax, its range, its file, beside another saying
+    said_turned = [([f"{{dir}}/{f}"], "refuse") for f in ("b.csv", "b.csv=0", "b.csv=360", "b.csv=inf",
+                                                          "b.csv=6O", "a.csv=60", "zz.csv=60")]
+    said_turned += [(["=60"], "refuse"), (["{dir}/b.csv=-60"], "accept"), (["{dir}/b.csv=60"], "accept")]
+    out += [Case("second-look", f"fit {turned} {said[0]}", two, [*fit, turned, *said], expect, ["f.json"])
+            for said, expect in said_turned]
+    out.append(Case("second-look", f"fit {untouched} and {turned} b.csv", two,
+                    [*fit, untouched, "{dir}/b.csv", turned, "{dir}/b.csv=60"], "refuse", ["f.json"]))
     return out
 
 
