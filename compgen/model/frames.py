@@ -67,6 +67,23 @@ def frames(machine: Machine, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
             np.einsum("nji,nj->ni", R, tool[:, :3, 2]))
 
 
+def table_turn(machine: Machine, q: np.ndarray) -> np.ndarray:
+    """(n, 3, 3): the nominal table frame's orientation in the machine frame at poses ``q``
+    (its columns the table's x, y, z): the turns of the table's rotary axes about their own
+    lines, in the chain's order (a linear axis turns nothing), where the whole chain's 4 × 4
+    walk costs a second at 723 000 poses."""
+    R = None
+    for axis in machine.workpiece:
+        if axis.rotary:            # Rodrigues about the axis's fixed line: c·I + s·[k]× + (1 − c)·kkᵀ
+            k = np.asarray(axis.unit, float)
+            cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+            angle = axis.sense * q[:, machine.index(axis.name)]
+            c, s = np.cos(angle)[:, None, None], np.sin(angle)[:, None, None]
+            turn = c * np.eye(3) + s * cross + (1 - c) * np.outer(k, k)
+            R = turn if R is None else R @ turn
+    return np.broadcast_to(np.eye(3), (len(q), 3, 3)) if R is None else R
+
+
 def sensor_axes(machine: Machine, q: np.ndarray) -> np.ndarray | None:
     """The R-test nest's sensor directions at poses ``q`` (n, 3, 3: column s is sensor s, in
     the machine frame): they turn with the tool, so on a head they are the tool's turned

@@ -36,7 +36,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..model.frames import frames
+from ..model.frames import table_turn
 from ..model.sides import span
 from .significance import VISIBLE, beside, explained, p_beside, p_value, rivals
 
@@ -107,17 +107,24 @@ def form_columns(machine, poses, rtest: np.ndarray, axes: np.ndarray | None = No
     n = len(poses)
     if not rtest.any():
         return {}
-    table = frames(machine, poses.q)[0][:, :3, :3]
-    sensors = axes if axes is not None else np.broadcast_to(np.eye(3), (n, 3, 3))
-    along = [sensors[:, :, s] for s in range(3)]
-    flat = [(u[:, 0] + 1j * u[:, 1]) * np.exp(-1j * poses.turn)          # sinθ·e^{iφ}, ball frame
-            for u in (np.einsum("nji,nj->ni", table, e) for e in along)]
-    out = {}
-    for k in LOBES:
+    table = table_turn(machine, poses.q)
+    turn = np.exp(-1j * poses.turn)
+    # sinθ·e^{iφ} of each sensor's direction in the ball's frame: row s of the table's turn
+    # where the sensors are the machine's X, Y, Z
+    flat = [(table[:, s, 0] + 1j * table[:, s, 1]) * turn if axes is None else
+            (np.einsum("nj,nj->n", table[:, :, 0], axes[:, :, s])
+             + 1j * np.einsum("nj,nj->n", table[:, :, 1], axes[:, :, s])) * turn for s in range(3)]
+    power, out = [np.ones(n, complex) for _ in range(3)], {}
+    for k in range(1, max(LOBES) + 1):
+        power = [p * w for p, w in zip(power, flat, strict=True)]
+        if k not in LOBES:
+            continue
         c = np.zeros((n, 3, 2))
-        for e, w in zip(along, flat, strict=True):
-            wk = w**k
-            c -= e[:, :, None] * np.stack([wk.real, wk.imag], axis=-1)[:, None, :]
+        for s, wk in enumerate(power):
+            if axes is None:          # sensor s reads along the machine's axis s alone
+                c[:, s, 0], c[:, s, 1] = -wk.real, -wk.imag
+            else:
+                c -= axes[:, :, s, None] * np.stack([wk.real, wk.imag], axis=-1)[:, None, :]
         c[~rtest] = 0.0
         out[f"{FORM}{k}"] = c.reshape(-1, 2)
     return out
@@ -143,10 +150,12 @@ def device_candidates(columns: dict[str, np.ndarray], Q: np.ndarray, r: np.ndarr
     rw = noise.residual(r) if columns else None
     out = []
     for name, c in columns.items():
-        vis, drop, amp = explained(c.T @ c, Q.T @ c, c.T @ r)
+        qc = Q.T @ c
+        vis, drop, amp = explained(c.T @ c, qc, c.T @ r)
         cw = noise.white(c)
-        perp = noise.off(cw)
-        drop_w = explained(cw.T @ cw, noise.Q.T @ cw, cw.T @ rw)[1] if noise.rho.any() else drop
+        qw = noise.Q.T @ cw if noise.rho.any() else qc          # white noise: the same products
+        perp = cw - noise.Q @ qw
+        drop_w = explained(cw.T @ cw, qw, cw.T @ rw)[1] if noise.rho.any() else drop
         value, std = _shown(name, amp, sigma2_w * np.linalg.pinv(perp.T @ perp))
         k = name[len(FORM):] if name.startswith(FORM) else ""
         out.append(DeviceCandidate(
@@ -205,13 +214,14 @@ def told_beside(devices: list[DeviceCandidate], columns: dict[str, np.ndarray], 
     unmodelled 15″ 2/rev angle of C read X −56 ± 1.7 % (p < 1e-300), and beside the best of
     three machine effects X was significant, where the other two took it back."""
     cols = {e: noise.white(c) for e, c in columns.items()}
+    qc = {e: noise.Q.T @ c for e, c in cols.items()}          # one pass over Q for each
     rw = noise.residual(res.r)
     machine = span(noise.off(beside_these))     # rivals among second effects are one column
 
     def tested(names, added):
         """These parameters' p-values beside the model and ``added``, Bonferroni over them."""
         basis = span(noise.off(added))
-        prods = {e: beside(cols[e], noise, basis, rw) for e in names}
+        prods = {e: beside(cols[e], noise, basis, rw, qc[e]) for e in names}
         return p_beside(noise.Q, basis, rw, prods) if prods else {}
 
     # beside the machine's effects every parameter the model leaves visible is tested again:
@@ -227,7 +237,7 @@ def told_beside(devices: list[DeviceCandidate], columns: dict[str, np.ndarray], 
     # ``span`` of what was), and their products with each other and the residual,
     # once: each joint fit below is then a few columns' normal equations
     names = list(cols)
-    C = [*(noise.off(cols[e]) for e in names), machine]       # side by side, never copied so
+    C = [*(cols[e] - noise.Q @ qc[e] for e in names), machine]       # side by side, never copied so
     CC, Cr = np.block([[a.T @ b for b in C] for a in C]), np.concatenate([a.T @ rw for a in C])
     rr = float(rw @ rw)
     first = np.cumsum([0, *(c.shape[1] for c in C)])

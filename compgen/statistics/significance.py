@@ -186,10 +186,11 @@ def still_significant(Q: np.ndarray, added: np.ndarray, r: np.ndarray, prods: di
     return {name for name, p in p_beside(Q, added, r, prods).items() if p < alpha}
 
 
-def beside(C: np.ndarray, noise, added: np.ndarray, rw: np.ndarray) -> tuple:
+def beside(C: np.ndarray, noise, added: np.ndarray, rw: np.ndarray, qc: np.ndarray | None = None) -> tuple:
     """Whitened columns ``C`` as ``still_significant`` takes them beside the model and the
-    columns ``added``: (CᵀC, [Q | added]ᵀC, Cᵀrw)."""
-    return C.T @ C, np.vstack([noise.Q.T @ C, added.T @ C]), C.T @ rw
+    columns ``added``: (CᵀC, [Q | added]ᵀC, Cᵀrw); ``qc``, QᵀC where it is known already (a
+    pass over Q less)."""
+    return C.T @ C, np.vstack([noise.Q.T @ C if qc is None else qc, added.T @ C]), C.T @ rw
 
 
 def p_beside(Q: np.ndarray, added: np.ndarray, r: np.ndarray, prods: dict) -> dict[str, float]:

@@ -288,3 +288,20 @@ def test_sinumerik_holds_an_inclined_table_against_a_hand_computed_record(inclin
     v1, v2 = -(_rot(6 * ARCSEC * EZ) @ N), -(_rot(6 * ARCSEC * EZ) @ [0, 0, 1])
     fine = {"l2": t1, "l3": t2 - t1, "l4": -t2}
     carr_edit_is(machine, fit, ([0, -S, -S], [0, 0, -1]), fine, v1, v2, tmp_path)
+
+
+def test_the_tables_turn_is_its_chains_on_every_bundled_machine(inclined_table):
+    """``table_turn`` (the table's rotary axes' turns alone) against the whole chain's walk,
+    on every bundled machine and on the B/C table with B inclined at 45°."""
+    from pathlib import Path
+
+    from compgen.configuration.machine_file import load_machine
+    from compgen.model.frames import table_turn
+    from compgen.model.kinematics import chain_transform
+    from compgen.model.poses import Poses
+    machines = [load_machine(f) for f in sorted(Path(__file__).parents[2].glob("machines/*.toml"))]
+    for machine in [*machines, inclined_table[0]]:
+        q = np.random.default_rng(0).uniform(-3, 3, (50, len(machine.axes)))
+        walked = chain_transform(machine, machine.workpiece, Poses.at(q, np.zeros(3)), {}, np.zeros((50, 6)))
+        np.testing.assert_allclose(table_turn(machine, q), walked[:, :3, :3], atol=1e-12,
+                                   err_msg=machine.name)

@@ -170,3 +170,4 @@ def test_a_turn_said_wrong_is_refused_in_one_line(seed_machine, tmp_path, said, 
                        "--ball-turned", said, "-o", tmp_path / "f.json")
     assert code == 2 and refusal in err and err.count("\n") == 1, err
     assert not (tmp_path / "f.json").exists()
+
