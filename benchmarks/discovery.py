@@ -53,7 +53,7 @@ from compgen.data.probe import (  # noqa: E402
 from compgen.data.rtest import MOUNTED_AGAIN, RTestData  # noqa: E402
 from compgen.data.simulate import ar1_noise, simulate  # noqa: E402
 from compgen.model.effects import compose, effect_name, location_model  # noqa: E402
-from compgen.model.frames import frames, sensor_axes  # noqa: E402
+from compgen.model.frames import sensor_axes, sensors_on_ball  # noqa: E402
 from compgen.model.kinematics import Model  # noqa: E402
 from compgen.model.paths import generate  # noqa: E402
 from compgen.model.poses import Poses  # noqa: E402
@@ -171,13 +171,10 @@ def form_reading(machine, poses, size_um: float, k: int, phase: float) -> np.nda
     """What a ball's form adds to the readings (n, 3) mm: its radius R + size·sinᵏθ·cos k(φ − phase)
     (θ from its stem, φ about it from the table's x, the ball turned ``poses.turn`` on it) read
     by each sensor on its side, along it: the ball nearer that sensor by the radius there."""
-    table = frames(machine, poses.q)[0][:, :3, :3]
-    axes = sensor_axes(machine, poses.q)
-    axes = np.broadcast_to(np.eye(3), (len(poses), 3, 3)) if axes is None else axes
+    axes, on_table = sensors_on_ball(machine, poses.q)
     out = np.zeros((len(poses), 3))
     for s in range(3):
-        e = axes[:, :, s]
-        u = np.einsum("nji,nj->ni", table, e)
+        e, u = axes[:, :, s], on_table[:, :, s]
         theta, phi = np.arccos(np.clip(u[:, 2], -1, 1)), np.arctan2(u[:, 1], u[:, 0]) - poses.turn
         out -= e * (size_um * 1e-3 * np.sin(theta) ** k * np.cos(k * (phi - phase)))[:, None]
     return out

@@ -36,7 +36,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..model.frames import table_turn
+from ..model.frames import sensors_on_ball
 from ..model.sides import span
 from .significance import VISIBLE, beside, explained, p_beside, p_value, rivals
 
@@ -98,22 +98,18 @@ def device_columns(pred: np.ndarray, rtest: np.ndarray,
     return out
 
 
-def form_columns(machine, poses, rtest: np.ndarray, axes: np.ndarray | None = None) -> dict[str, np.ndarray]:
+def form_columns(machine, poses, rtest: np.ndarray) -> dict[str, np.ndarray]:
     """Each lobe order's two columns (3n, 2), mm per mm of the form's cos and sin amplitude:
-    sensor s (column s of ``axes``, else the machine's X, Y, Z) touches the ball on its side
+    sensor s (``frames.sensors_on_ball``) touches the ball on its side
     along s, so a radius larger there by δ reads the ball nearer that sensor, nest minus ball
     −δ along s; δ in the ball's own frame, the table's turned by ``poses.turn`` about the
     stem (its z)."""
     n = len(poses)
     if not rtest.any():
         return {}
-    table = table_turn(machine, poses.q)
+    axes, on_table = sensors_on_ball(machine, poses.q)
     turn = np.exp(-1j * poses.turn)
-    # sinθ·e^{iφ} of each sensor's direction in the ball's frame: row s of the table's turn
-    # where the sensors are the machine's X, Y, Z
-    flat = [(table[:, s, 0] + 1j * table[:, s, 1]) * turn if axes is None else
-            (np.einsum("nj,nj->n", table[:, :, 0], axes[:, :, s])
-             + 1j * np.einsum("nj,nj->n", table[:, :, 1], axes[:, :, s])) * turn for s in range(3)]
+    flat = [(on_table[:, 0, s] + 1j * on_table[:, 1, s]) * turn for s in range(3)]   # sinθ·e^{iφ}, ball frame
     power, out = [np.ones(n, complex) for _ in range(3)], {}
     for k in range(1, max(LOBES) + 1):
         power = [p * w for p, w in zip(power, flat, strict=True)]
@@ -121,10 +117,7 @@ def form_columns(machine, poses, rtest: np.ndarray, axes: np.ndarray | None = No
             continue
         c = np.zeros((n, 3, 2))
         for s, wk in enumerate(power):
-            if axes is None:          # sensor s reads along the machine's axis s alone
-                c[:, s, 0], c[:, s, 1] = -wk.real, -wk.imag
-            else:
-                c -= axes[:, :, s, None] * np.stack([wk.real, wk.imag], axis=-1)[:, None, :]
+            c -= axes[:, :, s, None] * np.stack([wk.real, wk.imag], axis=-1)[:, None, :]
         c[~rtest] = 0.0
         out[f"{FORM}{k}"] = c.reshape(-1, 2)
     return out

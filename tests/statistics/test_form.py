@@ -8,7 +8,7 @@ from conftest import TABLE4, UM
 
 from compgen.data.rtest import MOUNTED_AGAIN, RTestData
 from compgen.data.simulate import simulate
-from compgen.model.frames import frames, sensor_axes
+from compgen.model.frames import sensors_on_ball
 from compgen.model.paths import generate
 from compgen.planning.advice import Advisor
 from compgen.statistics.device import form_columns
@@ -38,13 +38,10 @@ def _support(u: np.ndarray, size_mm: float, k: int, phase: float) -> np.ndarray:
 def _form_readings(machine, poses, size_um: float, k: int, phase: float, turn: float) -> np.ndarray:
     """Nest minus ball (n, 3) mm that the form alone makes: sensor s touches the ball on its
     side along s, the ball turned ``turn`` rad on its stem."""
-    table = frames(machine, poses.q)[0][:, :3, :3]
-    sensors = sensor_axes(machine, poses.q)
-    sensors = np.broadcast_to(np.eye(3), (len(poses), 3, 3)) if sensors is None else sensors
+    sensors, on_table = sensors_on_ball(machine, poses.q)
     out = np.zeros((len(poses), 3))
     for s in range(3):
-        e = sensors[:, :, s]
-        u = np.einsum("nji,nj->ni", table, e)                              # in the table frame
+        e, u = sensors[:, :, s], on_table[:, :, s]
         c, w = np.cos(-turn), np.sin(-turn)
         u = np.stack([c * u[:, 0] - w * u[:, 1], w * u[:, 0] + c * u[:, 1], u[:, 2]], axis=1)   # the ball's
         out -= e * (_support(u, size_um * 1e-3, k, phase) - RADIUS_MM)[:, None]
@@ -72,7 +69,7 @@ def test_the_forms_columns_are_what_the_ball_itself_reads(seed_machine, head_mac
                                                                                                 np.radians(40))})
         rtest = np.ones(len(poses), bool)
         for k in (2, 3, 4):
-            cols = form_columns(machine, turned, rtest, sensor_axes(machine, turned.q))[f"ball_lobes{k}"]
+            cols = form_columns(machine, turned, rtest)[f"ball_lobes{k}"]
             for phase in (0.0, 0.7):
                 want = _form_readings(machine, poses, 1.0, k, phase, np.radians(40))
                 got = (cols @ (1e-3 * np.array([np.cos(k * phase), np.sin(k * phase)]))).reshape(-1, 3)
