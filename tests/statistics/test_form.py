@@ -13,6 +13,7 @@ from compgen.model.paths import generate
 from compgen.planning.advice import Advisor
 from compgen.statistics.device import form_columns
 from compgen.statistics.diagnose import diagnose
+from compgen.statistics.gate import gate_reasons
 from compgen.statistics.identify import identify
 
 NOISE_UM = 0.5
@@ -89,12 +90,17 @@ def test_a_ball_with_three_lobes_is_not_named_a_machine_effect_until_the_ball_is
     d = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM, advisor=Advisor)
     assert d.verdict == "rivals" and d.form_rival == "ball_lobes3" and d.found is None, \
         (d.verdict, d.form_rival, d.found, [c.effect for c in d.significant[:3]])
+    fit = identify(seed_machine, data)
+    assert any("the ball's form (ball_lobes3)" in r and "turn the ball" in r
+               for r in gate_reasons(data, fit, d)), gate_reasons(data, fit, d)
     k4 = generate(seed_machine, ["K4"]).starting_at(float(poses.t[-1]) + 60.0)
     moved = {**TABLE4, "XOW": 4 * UM, "YOW": -3 * UM, "ZOW": 2 * UM}
     data.append(_session(seed_machine, k4, moved, form, np.radians(60.0), seed + 10, "b.csv", MOUNTED_AGAIN))
     d = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM, advisor=Advisor)
     assert d.verdict == "device" and d.device_blamed == "ball_lobes3" and d.found is None, \
         (d.verdict, d.device_blamed, d.form_rival, d.found)
+    fit = identify(seed_machine, data)
+    assert any(r.startswith("the ball's form explains the misfit") for r in gate_reasons(data, fit, d))
     assert abs(d.blamed.value - 0.8) < 3 * d.blamed.std < 0.3, d.blamed
 
 
