@@ -515,7 +515,7 @@ def report_cmd(base, controller_name, post_files, before, emitted, folder, with_
         past = trend(history_store(db, create=False), machine)
         png = trend_png(past, drift_limits(machine, past), machine.tolerances)
     html = report_html(machine, fit, found, images, comparison, emitted, steps, __version__,
-                       date.today().isoformat(), past, png, screen)
+                       date.today().isoformat(), past, png, screen, base)
     write_atomically(output, html, force, inputs=(base, before, *post_files, *emitted))
     said(output, f"wrote {output}")
     if made:                                # kept once the report is written, never before

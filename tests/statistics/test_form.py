@@ -2,6 +2,8 @@
 R-test's sensors where they touch it, simulated here from the ball's surface itself (its
 support function found by search, not compgen's first-order columns)."""
 
+import html
+
 import numpy as np
 import pytest
 from conftest import TABLE4, UM
@@ -138,6 +140,11 @@ def test_the_printed_turn_pastes_and_ends_with_the_ball_blamed(seed_machine, tmp
     first = next(line for line in done.stdout.splitlines() if line.startswith("VERDICT"))
     said = "vs the ball's form (ball_lobes3); turn the ball 60° on its stem and measure K2 again"
     assert said in first, first
+    report = pasted("compgen-cli report --from fit.json -o r.html", tmp_path)
+    assert report.returncode == 0, report.stderr
+    page = html.unescape((tmp_path / "r.html").read_text())
+    assert "the ball's form (ball_lobes3); turn the ball 60° on its stem" in page
+    assert "they predict the same readings everywhere" not in page
     printed = [line.strip() for line in done.stdout.splitlines() if line.strip().startswith("compgen-cli ")]
     program = next(line for line in printed if " measure-program " in line and "_TURNED" in line)
     refit = next(line for line in printed if "--ball-turned" in line)
