@@ -94,11 +94,13 @@ def sensor_axes(machine: Machine, q: np.ndarray) -> np.ndarray | None:
     return chain_transform(machine, machine.tool, Poses.at(q, np.zeros(3)), {}, zero)[:, :3, :3]
 
 
-def sensors_on_ball(machine: Machine, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def sensors_on_ball(machine: Machine, q: np.ndarray,
+                    axes: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Each R-test sensor's direction at poses ``q`` (n, 3, 3: column s sensor s) in the
     machine frame (``sensor_axes``, the machine's X, Y, Z under a fixed spindle) and in the
-    nominal table frame, where the ball and its stem stand."""
-    axes = sensor_axes(machine, q)
+    nominal table frame, where the ball and its stem stand. ``axes``: ``sensor_axes`` where
+    the caller has them already (on a head, a walk of the tool's chain)."""
+    axes = sensor_axes(machine, q) if axes is None else axes
     axes = np.broadcast_to(np.eye(3), (len(q), 3, 3)) if axes is None else axes
     return axes, np.einsum("nji,njs->nis", table_turn(machine, q), axes)
 

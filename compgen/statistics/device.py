@@ -82,7 +82,7 @@ def device_columns(pred: np.ndarray, rtest: np.ndarray,
     """Each gain's column (3n, 1), mm per 1 of gain, from the fit's prediction ``pred`` (n, 3)
     on the readings an R-test made (``rtest``, (n,)). A sensor reads along its own axis:
     ``axes`` (n, 3, 3, column s sensor s in the machine frame) where the nest turns with a
-    head, else the machine's X, Y, Z. None where the fit predicts no displacement to scale."""
+    head, else the machine's X, Y, Z. Empty where the fit predicts no displacement to scale."""
     y = np.where(rtest[:, None], pred, 0.0)
     out = {}
     if not rtest.any() or not np.any(y):
@@ -98,16 +98,16 @@ def device_columns(pred: np.ndarray, rtest: np.ndarray,
     return out
 
 
-def form_columns(machine, poses, rtest: np.ndarray) -> dict[str, np.ndarray]:
+def form_columns(machine, poses, rtest: np.ndarray, axes: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Each lobe order's two columns (3n, 2), mm per mm of the form's cos and sin amplitude:
     sensor s (``frames.sensors_on_ball``) touches the ball on its side
     along s, so a radius larger there by δ reads the ball nearer that sensor, nest minus ball
     −δ along s; δ in the ball's own frame, the table's turned by ``poses.turn`` about the
-    stem (its z)."""
+    stem (its z). ``axes``: the sensors' ``sensor_axes``, where known already."""
     n = len(poses)
     if not rtest.any():
         return {}
-    axes, on_table = sensors_on_ball(machine, poses.q)
+    axes, on_table = sensors_on_ball(machine, poses.q, axes)
     turn = np.exp(-1j * poses.turn)
     flat = [(on_table[:, 0, s] + 1j * on_table[:, 1, s]) * turn for s in range(3)]   # sinθ·e^{iφ}, ball frame
     power, out = [np.ones(n, complex) for _ in range(3)], {}

@@ -121,7 +121,8 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     effects, ranked, noise, made, carried = _ranked(machine, fit, effects, res, alpha)
     rss_w = noise.rss(r)
     # the device (the R-test's sensors, the ball's form) beside the machine, in one Bonferroni family
-    columns = device_columns(res.pred, res.rtest, res.axes) | form_columns(machine, poses, res.rtest)
+    columns = (device_columns(res.pred, res.rtest, res.axes)
+               | form_columns(machine, poses, res.rtest, res.axes))      # the sensors' axes walked once
     devices, tested = tested_devices(res, columns, ranked, noise, rss_w, dof, alpha)
     out = _candidates(effects, ranked, rss, r.size, rss_w, dof, tested, alpha)
     model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
