@@ -78,8 +78,10 @@ def table_turn(machine: Machine, q: np.ndarray) -> np.ndarray:
             k = np.asarray(axis.unit, float)
             cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
             angle = axis.sense * q[:, machine.index(axis.name)]
-            c, s = np.cos(angle)[:, None, None], np.sin(angle)[:, None, None]
-            turn = c * np.eye(3) + s * cross + (1 - c) * np.outer(k, k)
+            c, s, kk = np.cos(angle), np.sin(angle), np.outer(k, k)
+            turn = np.empty((len(q), 3, 3))
+            for i, j in np.ndindex(3, 3):      # entry by entry: no (n, 3, 3) temporaries
+                turn[:, i, j] = kk[i, j] + (float(i == j) - kk[i, j]) * c + cross[i, j] * s
             R = turn if R is None else R @ turn
     return np.broadcast_to(np.eye(3), (len(q), 3, 3)) if R is None else R
 
@@ -101,7 +103,8 @@ def sensors_on_ball(machine: Machine, q: np.ndarray,
     nominal table frame, where the ball and its stem stand. ``axes``: ``sensor_axes`` where
     the caller has them already (on a head, a walk of the tool's chain)."""
     axes = sensor_axes(machine, q) if axes is None else axes
-    axes = np.broadcast_to(np.eye(3), (len(q), 3, 3)) if axes is None else axes
+    if axes is None:           # the machine's X, Y, Z: in the table frame, the table's turn's rows
+        return np.broadcast_to(np.eye(3), (len(q), 3, 3)), table_turn(machine, q).transpose(0, 2, 1)
     return axes, np.einsum("nji,njs->nis", table_turn(machine, q), axes)
 
 

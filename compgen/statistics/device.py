@@ -115,9 +115,8 @@ def form_columns(machine, poses, rtest: np.ndarray, axes: np.ndarray | None = No
         power = [p * w for p, w in zip(power, flat, strict=True)]
         if k not in LOBES:
             continue
-        c = np.zeros((n, 3, 2))
-        for s, wk in enumerate(power):
-            c -= axes[:, :, s, None] * np.stack([wk.real, wk.imag], axis=-1)[:, None, :]
+        lobe = np.stack([np.stack([wk.real, wk.imag], axis=-1) for wk in power], axis=1)    # (n, s, 2)
+        c = np.einsum("nds,nsk->ndk", axes, -lobe) if machine.heads else -lobe    # else the axes are X, Y, Z
         c[~rtest] = 0.0
         out[f"{FORM}{k}"] = c.reshape(-1, 2)
     return out

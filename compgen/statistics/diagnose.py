@@ -250,7 +250,8 @@ def _residual(machine: Machine, joined: Measurements, fit: FitResult) -> _Residu
         starts = FreeConstants(machine, fit.model, poses).projector()
         J = J[keep]
     r = r3.ravel()
-    J = J[:, :, free]                               # indexed by a list: a copy, projected in place
+    if free != list(range(J.shape[2])):             # indexed by a list: a copy, projected in place
+        J = J[:, :, free]                           # (else linearise's own, (p, n, 3) underneath)
     Q, R = tall_qr((J if starts is None else starts(J)).reshape(r.size, -1))
     if starts is not None:
         Q = np.hstack([starts.basis(len(poses)), Q])

@@ -13,8 +13,8 @@ from ..model.kinematics import SlotGains, coordinate, effect_gains, in_halves
 from ..model.machine import Machine
 from ..model.poses import Poses
 
-CHUNK_BYTES = 8 << 20  # the basis values of every candidate held at once: ~2 500 poses of ~400 columns
-BLOCK = 4096           # poses a walk of the chain serves: its slots' gains held
+CHUNK_BYTES = 24 << 20  # the basis values of every candidate held at once: a BLOCK of ~300 columns at once
+BLOCK = 8192           # poses a walk of the chain serves: its slots' gains held
 SMALLEST = 1024        # poses a walk serves at least (a walk has its cost in Python as well)
 
 
