@@ -96,13 +96,14 @@ class Advisor:
     """The measurements of one machine not yet made in ``measured``, each checked at most
     once (a check writes the whole program in memory and moves the machine through it)."""
 
-    def __init__(self, machine: Machine, measured: Poses | None = None, device: str = "rtest"):
+    def __init__(self, machine: Machine, measured: Poses | None = None, device: str = "rtest",
+                 run: np.ndarray | None = None):
         self.machine = machine
         # why nothing can be advised on this machine (its programs are not written), if so
         self.unable = ("" if controller(machine.controller).writes_programs(machine) else
                        "compgen does not write measuring programs for a head yet on this control, so it "
                        "advises no measurement")
-        self.candidates = [] if self.unable else proposals(machine, measured, device)
+        self.candidates = [] if self.unable else proposals(machine, measured, device, run)
         self._why: dict[str, str | None] = {}
 
     def why_not(self, m: Proposal) -> str | None:
@@ -146,9 +147,12 @@ def _refusal(machine: Machine, m: Proposal) -> str | None:
     return None
 
 
-def proposals(machine: Machine, measured: Poses | None, device: str = "rtest") -> list[Proposal]:
+def proposals(machine: Machine, measured: Poses | None, device: str = "rtest",
+              run: np.ndarray | None = None) -> list[Proposal]:
     """Every place for every path, less what would leave the travel and what ``measured``
     holds already (same path, same ball; there and back where the axes turned back).
+    ``run``: the runs of ``measured`` as ``poses.runs`` numbers them with each pose's file,
+    where known (a repeat in a file of its own continues the last one's path and clock).
 
     Where ``measured`` gives the time of its readings, each measurement is made after them
     (its clock running on, as the R-test's does when the next program follows), and what
@@ -161,7 +165,7 @@ def proposals(machine: Machine, measured: Poses | None, device: str = "rtest") -
     start = float(measured.t.max()) + GAP_S if timed else 0.0
     if measured is not None:
         # path and ball hold within a run: one look per run, not per pose
-        run = runs(measured)
+        run = runs(measured) if run is None else run
         first = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
         nest = np.where(np.isnan(measured.nest), machine.probe_length, measured.nest)
         where_ = [(str(measured.path[i]), tuple(np.round(measured.ball[i], 3)), round(float(nest[i]), 3))

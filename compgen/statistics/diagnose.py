@@ -44,6 +44,8 @@ from .significance import (
     beside,
     lack_of_fit,
     p_value,
+    paired,
+    rival_margin,
     rivals,
     still_significant,
     tall_qr,
@@ -64,6 +66,7 @@ RHO_MARGIN_SE = 1.0
 # of 723 poses, 2766). Where more stay significant, no gain is judged in that round: it is
 # told, never called significant
 SECOND_WALKS = 2_000_000
+PAIRED = 8               # second effects a misfit-left rival is paired with
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,7 +105,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     Outlying readings are listed and left out; the tests are made on the readings made white
     by their segments' AR(1) correlation (``noise.py``), estimated from the residual once the
     best candidate is added (the misfit of a missing effect is not noise). With an
-    ``advisor`` (``advisor(machine, poses, device)``: ``advice.Advisor``), the measurements
+    ``advisor`` (``advisor(machine, poses, device, runs)``: ``advice.Advisor``), the measurements
     that would separate what these data cannot are searched for among those the machine can
     make (each names the machine file as its command prints it). ``noise_um`` is the R-test's
     own noise (default: the machine file's ``[rtest] noise_um``): with it,
@@ -126,7 +129,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     devices, tested = tested_devices(res, columns, ranked, noise, rss_w, dof, alpha)
     out = _candidates(effects, ranked, rss, r.size, rss_w, dof, tested, alpha)
     model_effects = list(dict.fromkeys(effect_of_param(machine, n) for n in fit.free))
-    advising = advisor(machine, poses, kind) if advisor is not None else None
+    advising = advisor(machine, poses, kind, res.seg) if advisor is not None else None
     if advising is not None and advising.unable:      # said, never taken for "none would tell"
         notes, advising = (*notes, f"  {advising.unable}."), None
     bias, units, signature_um = _bias(fit, res, effects, ranked)
@@ -402,6 +405,20 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], firs
             for c in out if c.visible and c.effect != best.effect.name},
             noise.rss(r) / res.dof, alpha, bool(after_best))
         rival_names = tuple(n for n in rival_names if n not in after_best)
+        sigma2 = noise.rss(r) / res.dof
+        alike = rivals((best.drop_w, best.k_eff),
+                       {n: (ranked[n].drop_w, ranked[n].k_eff) for n in rival_names}, sigma2, alpha, False)
+        pending = {n: noise.white(_columns(machine, res, made, n)) for n in rival_names if n not in alike}
+        if pending:       # rivals by the misfit the best leaves: judged beside what explains it
+            # those significant beside the best, then the others by rank: a rival's own second
+            # may be absorbed by the best (the second drift beside the wrong curve)
+            # (the rivals too: two effects at once may each be the other's rival)
+            seconds = list(dict.fromkeys([*after_best, *(c.effect for c in significant[1:])])
+                           )[:min(PAIRED, max(1, SECOND_WALKS // len(poses)))]
+            seconds = [noise.white(_columns(machine, res, made, e)) for e in seconds]
+            kept = paired(first, pending, seconds, noise.residual(r), noise.off,
+                          rival_margin(best.k_eff, sigma2, alpha))
+            rival_names = tuple(n for n in rival_names if n in alike or n in kept)
     return {"after_best": after_best, "rivals": rival_names}
 
 
@@ -426,7 +443,7 @@ def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dic
                                                                     advising)
             out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
     exhausted = tuple(m.run_label for m in separated_by
-                      if m.again and _times_measured(machine, res.poses, m) >= REPEATS_TRIED)
+                      if m.again and _times_measured(machine, res.poses, res.seg, m) >= REPEATS_TRIED)
     if rival_names and not separated_by:
         # equivalent everywhere: put first the one the location errors absorb least, so
         # that adding it leaves them where an effect without that absorbed part has them.
@@ -447,9 +464,10 @@ def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dic
 
 
 
-def _times_measured(machine: Machine, poses: Poses, m: Proposal) -> int:
-    """How many runs of ``poses`` are ``m``'s: its path, its ball, its nest."""
-    run = runs(poses)
+def _times_measured(machine: Machine, poses: Poses, run: np.ndarray, m: Proposal) -> int:
+    """How many runs of ``poses`` (``run``: numbered with each pose's file, as a repeat in a
+    file of its own continues the last one's path and clock) are ``m``'s: its path, its
+    ball, its nest."""
     first = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
     nest = np.where(np.isnan(poses.nest), machine.probe_length, poses.nest)
     want = machine.probe_length if m.nest is None else m.nest

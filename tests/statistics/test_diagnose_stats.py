@@ -303,6 +303,29 @@ def test_a_rival_removes_within_the_noise_of_the_best_or_while_misfit_is_left_ni
     assert rivals(best, others, sigma2, alpha, misfit_left=True) == ("close", "far", "nine_tenths")
 
 
+def test_a_rival_by_the_misfit_left_is_judged_beside_the_second_effects():
+    """The residual is a line in t plus a second effect s. Alone, a saturating curve e removes
+    most of what t removes; beside s, whichever candidate's best pair removes more by the
+    noise margin keeps the other only if that other's pair comes within it: t drops e, e
+    (had it been ranked first) keeps t, and a rival that is the best's own column stays."""
+    from compgen.statistics.significance import paired, rival_margin
+    rng = np.random.default_rng(5)
+    x = np.linspace(0, 1, 600)
+    t, e = x - x.mean(), 1 - np.exp(-x / 3)
+    e -= e.mean()
+    s = np.sin(9 * x)
+    sigma = 0.01
+    rw = t + 0.5 * s + rng.normal(0, sigma, x.size)
+    within = rival_margin(1, sigma**2, 0.01)
+    seconds = [s[:, None], np.cos(5 * x)[:, None]]
+    alone = {n: float((c @ rw) ** 2 / (c @ c)) for n, c in (("t", t), ("e", e))}
+    assert alone["e"] > 0.9 * alone["t"]            # a rival by the misfit left
+    cols = {"t": t[:, None], "e": e[:, None], "same": 2 * t[:, None]}
+    assert paired(cols["t"], {"e": cols["e"], "same": cols["same"]}, seconds, rw, lambda v: v, within) \
+        == ("same",)
+    assert paired(cols["e"], {"t": cols["t"]}, seconds, rw, lambda v: v, within) == ("t",)
+
+
 def test_lack_of_fit_is_the_chi2_test_of_each_path_and_direction_against_the_noise():
     """Two paths, dY of one at 1.3× the noise and dZ of the other at 1.6×: only they fail,
     the worst first; their RMS and p-values (χ² with n·dof_share degrees of freedom,
