@@ -112,14 +112,16 @@ class Advisor:
             self._why[m.label] = _refusal(self.machine, m)
         return self._why[m.label]
 
-    def turned(self, path: str, ball: tuple[float, float, float], before: int) -> Proposal | None:
-        """``path`` again with the ball at ``ball`` (it stays there), turned on its stem: its own
-        file, K4_TURNED, then K4_TURNED_2 (the data holding one turned already)."""
+    def turned(self, path: str, ball: tuple[float, float, float], before: int, degrees: float
+               ) -> Proposal | None:
+        """``path`` again with the ball at ``ball`` (it stays there), turned ``degrees`` on its
+        stem: its own file, K4_TURNED, then K4_TURNED_2 (the data holding one turned already)."""
         try:
             poses = generate(self.machine, [path], ball=np.asarray(ball, float))
         except CompgenError:
             return None
-        m = Proposal(f"{path} with the ball turned on its stem", path, tuple(float(v) for v in ball), poses,
+        m = Proposal(f"{path} with the ball turned {degrees:g}° on its stem", path,
+                     tuple(float(v) for v in ball), poses,
                      name=f"{path}_TURNED" + (f"_{before + 1}" if before else ""),
                      machine_ref=self.machine.bundled or self.machine.source,
                      program_ext=controller(self.machine.controller).program_ext)

@@ -7,6 +7,7 @@ the follow-ups and without them. ``plan --check DIR`` reads the fit's data again
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -17,6 +18,7 @@ from ..model.effects import Effect, resolve
 from ..model.machine import Machine
 from ..model.poses import Poses
 from ..model.sides import SETUP
+from ..statistics.device import form_columns
 from ..statistics.diagnosis import Diagnosis
 from .advice import MODE
 from .plan import (
@@ -35,8 +37,12 @@ from .plan import (
 
 def advised(found: Diagnosis) -> tuple[Sequence, list[str]]:
     """The measurements the diagnosis advises, in order, and the effects they are to tell
-    apart: the plan telling the best and its rivals apart; else the one measurement that
-    shows most of what the data cannot see, and those effects."""
+    apart: the path with the ball turned on its stem where the ball's form ties with the
+    best (told beside it as the form's own columns, ``information``); the plan telling the
+    best and its rivals apart; else the one measurement that shows most of what the data
+    cannot see, and those effects."""
+    if found.form_rival is not None and found.form_turned is not None:
+        return (found.form_turned,), [found.significant[0].effect]
     if found.rivals_separated_by:
         return found.rivals_separated_by, [found.significant[0].effect, *found.rivals]
     m, shows = found.next_measurement
@@ -47,12 +53,24 @@ def advised(found: Diagnosis) -> tuple[Sequence, list[str]]:
     return (m,), list(shows)
 
 
-def information(machine: Machine, poses: Poses, effects: Sequence[Effect]) -> np.ndarray:
+class Form(NamedTuple):
+    """The ball's form of ``k`` lobes as a plan tells it beside the machine's effects: its
+    name and its two columns' (cos, sin of the lobes in the ball's frame)."""
+
+    name: str
+    params: tuple[str, str] = ("cos", "sin")
+
+
+def information(machine: Machine, poses: Poses, effects: Sequence[Effect | Form]) -> np.ndarray:
     """Per unit noise, over the location errors (``judged``) and the effects' parameters:
     every mounting's ball offset and each later nest's taken out (their columns projected out,
-    the first mounting's by a Schur complement), as a fit of these poses would have them."""
-    names = [*SETUP, *judged(machine), *(n for e in effects for n in e.params)]
+    the first mounting's by a Schur complement), as a fit of these poses would have them. A
+    ``Form``'s columns turn with the ball on its stem (``poses.turn``)."""
+    effects_ = [e for e in effects if not isinstance(e, Form)]
+    names = [*SETUP, *judged(machine), *(n for e in effects_ for n in e.params)]
     flat = fitted_columns(machine, poses, names).reshape(-1, len(names))
+    forms = form_columns(machine, poses, np.ones(len(poses), bool))
+    flat = np.hstack([flat, *(forms[e.name] for e in effects if isinstance(e, Form))])
     G = flat.T @ flat
     k = len(SETUP)
     return G[k:, k:] - G[k:, :k] @ np.linalg.pinv(G[:k, :k], rcond=1e-12) @ G[:k, k:]
@@ -65,18 +83,22 @@ def follow_up(machine: Machine, data: Sequence[RTestData], found: Diagnosis, noi
     mounting; σ and separations with the follow-ups beside the data, and the data's alone
     as its ``default``."""
     measurements, named = advised(found)
-    effects = [resolve(machine, n) for n in named]
     measured = Measurements.concat(data).poses
+    # the ball turned on its stem: mounted again where it stands, its form read turned
+    turned = found.form_rival is not None and measurements == (found.form_turned,)
+    effects = [*(resolve(machine, n) for n in named), *((Form(found.form_rival),) if turned else ())]
+    turn = float(measured.turn[-1]) + (np.radians(found.turn_degrees) if turned else 0.0)
     setups = []
     for m in measurements:
         done = checked_program(machine, m.poses, m.path, machine.controller, MODE, "PLAN", "", "")
         setups.append(Setup(m, done.seconds / 60.0, {}))
-    after = Poses.concat([measured, *(s.proposal.poses.with_setup(int(measured.setup[-1])) for s in setups)])
+    after = Poses.concat([measured, *(s.proposal.poses.with_setup(int(measured.setup[-1]), turn)
+                                      for s in setups)])
     names = judged(machine)
     unit = scales(machine, names)
     now_cov = covariance(machine, measured, noise_um, rho)
     then_cov = covariance(machine, after, noise_um, rho)
-    moves = len({s.ball for s in setups} - {tuple(measured.ball[-1])})
+    moves = len({s.ball for s in setups} - {tuple(measured.ball[-1])}) + turned
     minutes = sum(s.minutes for s in setups) + MOUNT_MINUTES * moves
     told = told_by(information(machine, after, effects), len(names), effects, noise_um)
     was = told_by(information(machine, measured, effects), len(names), effects, noise_um)

@@ -49,6 +49,7 @@ from ..model.kinematics import Model
 from ..model.machine import Machine
 from ..model.poses import Poses, runs
 from ..model.sides import NEST, SETUP, FreeConstants
+from ..statistics.device import FORM
 from ..statistics.noise import ar1_covariance
 from ..statistics.results import load_fit
 from ..statistics.separation import TELLS_APART
@@ -400,7 +401,7 @@ def _told_doc(machine: Machine, told: Told | None) -> dict:
         return {}
 
     def size(name: str, v: float):
-        unit, factor = DISPLAY[resolve(machine, name).unit]
+        unit, factor = DISPLAY["mm" if name.startswith(FORM) else resolve(machine, name).unit]   # form: mm
         return {"value": round(v * factor, 4), "unit": unit} if np.isfinite(v) else None
 
     return {"condition": round(told.condition, 2) if np.isfinite(told.condition) else None,

@@ -39,6 +39,7 @@ class Advising(Protocol):
 
     def runnable(self, ms: Sequence[Proposal], most: int | None = None) -> tuple[Proposal, ...]: ...
 
-    def turned(self, path: str, ball: tuple[float, float, float], before: int) -> Proposal | None:
-        """``path`` again with the ball where it is, turned on its stem (the ``before``-th time
-        it is turned), if the machine can run it."""
+    def turned(self, path: str, ball: tuple[float, float, float], before: int, degrees: float
+               ) -> Proposal | None:
+        """``path`` again with the ball where it is, turned ``degrees`` on its stem (after
+        ``before`` turns), if the machine can run it."""

@@ -31,7 +31,7 @@ from ..model.sides import FreeConstants, same_pose
 from ..units import shown
 from .advising import Advising, Proposal
 from .device import blamed_device, device_columns, form_columns, tested_devices, told_beside
-from .diagnosis import REPEATS_TRIED, Candidate, Diagnosis, _outside_line, _unexplained
+from .diagnosis import REPEATS_TRIED, Candidate, Diagnosis, _outside_line, _unexplained, turn_for
 from .noise import Lazy, ar1, outliers, repeats
 from .ranking import Row, Whitening, effect_columns, rank, started_reversals
 from .results import FitResult
@@ -142,8 +142,8 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     # beside it, and so are the gains with them
     first = noise.white(_columns(machine, res, made, significant[0].effect)) if significant else None
     blamed, form_rival = blamed_device(devices, best, rss_w / dof, alpha)
-    turned = None if form_rival is None or advising is None else advising.turned(   # where the ball is
-        str(poses.path[-1]), tuple(poses.ball[-1]), sum(1 for d in joined.sets if d.turned))
+    turned = None if form_rival is None or advising is None else advising.turned(str(poses.path[-1]),
+        tuple(poses.ball[-1]), sum(1 for d in joined.sets if d.turned), turn_for(form_rival))   # ball stays
     if blamed is not None:
         devices = told_beside(devices, columns, np.empty((r.size, 0)), res, noise, alpha, blamed)
     seen = [d for d in devices if d.significant]

@@ -35,6 +35,12 @@ RESOLVES_UM = 0.1     # an R-test's sensors resolve about this: a smaller line i
 REPEATS_TRIED = 3
 
 
+def turn_for(form: str) -> float:
+    """Degrees to turn a ball of ``form`` (``ball_lobes{k}``) on its stem to tell its form
+    from the machine: 180°/k, where its k lobes read the other way round."""
+    return 180.0 / int(form.removeprefix(FORM))
+
+
 @dataclass(frozen=True)
 class Candidate:
     """An effect not in the fit's model, tried against its residual: how visible it is on these
@@ -148,7 +154,7 @@ class Diagnosis:
     def turn_degrees(self) -> float | None:
         """How far to turn the ball on its stem to tell its form from the machine: 180°/k,
         where its k lobes read the other way round."""
-        return None if self.form_rival is None else 180.0 / int(self.form_rival.removeprefix(FORM))
+        return None if self.form_rival is None else turn_for(self.form_rival)
 
     @property
     def significant_devices(self) -> tuple[DeviceCandidate, ...]:

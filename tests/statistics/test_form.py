@@ -160,6 +160,26 @@ def test_the_printed_turn_pastes_and_ends_with_the_ball_blamed(seed_machine, tmp
     assert done.stdout.startswith("VERDICT: the ball's form explains the misfit"), done.stdout[:300]
 
 
+def test_the_follow_up_plan_of_a_form_tie_turns_the_ball(seed_machine):
+    """``diagnose --plan`` of the tie: the path again with the ball turned 60° on its stem (a
+    mounting's minutes besides the program's), and the pair it is to tell apart, the machine
+    effect against the ball's form (their columns turned with the ball), told apart above
+    0.13 µm with it, above 0.78 µm by the data alone (where the 0.8 µm form tied)."""
+    from compgen.planning.follow_up import follow_up
+    from compgen.planning.plan import MOUNT_MINUTES
+    poses = generate(seed_machine, ["K4", "K1", "K2"])
+    data = [_session(seed_machine, poses, TABLE4, (0.8, 3, 0.4), 0.0, 3, "a.csv")]
+    found = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM, advisor=Advisor)
+    assert found.form_rival == "ball_lobes3", found.verdict
+    plan = follow_up(seed_machine, data, found, NOISE_UM, "fit.json")
+    (setup,) = plan.setups
+    assert setup.proposal.label == "K2 with the ball turned 60° on its stem" and setup.proposal.name == "K2_TURNED"
+    assert plan.minutes == pytest.approx(setup.minutes + MOUNT_MINUTES)
+    (then,), (now,) = plan.told.apart, plan.default_told.apart
+    assert then.pair == now.pair == (found.significant[0].effect, "ball_lobes3")
+    assert max(then.above) * 1e3 < 0.2 and min(now.above) * 1e3 > 0.6, (then.above, now.above)
+
+
 @pytest.mark.parametrize("said, refusal", [
     ("b.csv", "give the file and the degrees"),
     ("b.csv=0", "the turn is between −360 and 360° and not 0"),
