@@ -99,6 +99,10 @@ CASES = {
     "Z periodic, pitch 4.2 mm, 2 µm (outside the catalogue)": ({}, ("Z", 4.2, "EZZ:w")),
     # the set-up in time: the ball rising along its stem as it warms after mounting (table frame)
     "stem warming: the ball rises 3 µm, τ = 15 min": ({"ZOW:e15": 3 * UM}, "ZOW:e15"),
+    # a scale warming as its axis works: a positioning error linear in position, growing
+    "A's scale warming: 3″ per rad of A, τ = 15 min": ({"EAA:g15": 3 * ARCSEC}, "EAA:g15"),
+    "X's scale warming: 10 µm per m, τ = 5 min": ({"EXX:g5": 10 * UM}, "EXX:g5"),
+    "A's scale warming: 3″ per rad of A, τ = 25 min (off the grid)": ({"EAA:g25": 3 * ARCSEC}, OFF_GRID),
     # the device: the nest's X sensor reads 1.5 % high; its calibration says ±1 %
     "the R-test's X sensor gain 1.5 % (calibration 1 %)": ({"gain_X": 0.015}, "device"),
     # two drifts at once: YOC and AOC growing through the session
@@ -354,9 +358,10 @@ def wrong_names(named: list[str], truths: set[str], warm: set[str] = frozenset()
     """What the loop named that is no hidden effect: a name found, or a tie whose members
     hold none (the loop added the best of equivalents that all stand for something not
     there). A declaration of what diagnose called unexplained, or "unexplained", is none;
-    a warming of a symbol hidden warming, at a fitted τ, is the truth."""
+    a warming of a symbol hidden warming, at a fitted τ, is the truth, and so is a scale in
+    time of a symbol hidden so at the grid's τ (the catalogue fits no τ of a scale)."""
     def true(name: str) -> bool:
-        return name in truths or (":e" in name and name.split(":")[0] in warm)
+        return name in truths or ((":e" in name or ":g" in name) and name.split(":")[0] in warm)
 
     out = []
     for n in named:
@@ -380,7 +385,7 @@ def heads() -> None:
             used = replace(machine, gain_u=GAIN_U) if any(p.startswith(GAIN) for p in hidden) else machine
             out = discover(used, {**HEAD_TRUTH, **hidden}, "white", np.random.default_rng(11))
             truth = {effect_name(p) for p in hidden if not p.startswith(GAIN) and p != FORM} | {expect}
-            warm = {p.split(":")[0] for p in hidden if ":e" in p}      # the same warming at a fitted τ
+            warm = {p.split(":")[0] for p in hidden if ":e" in p or ":g" in p}  # a fitted τ, a grid τ
             wrong = [n for n in wrong_names(out["named"], truth, warm) if not n.startswith("device")]
             mark = ("WRONG: " + ", ".join(wrong) if wrong else
                     "NOT within 3σ" if out["location_sigma"] > 3 else
@@ -416,7 +421,7 @@ def main() -> None:
         truths = ({effect_name(p) for p in hidden if not p.startswith(GAIN) and p != FORM}
                   | {f"device {p}" for p in hidden if p.startswith(GAIN)}
                   | ({f"device ball_lobes{hidden[FORM][1]}"} if FORM in hidden else set()))
-        warm = {p.split(":")[0] for p in hidden if ":e" in p}      # the same warming at a fitted τ
+        warm = {p.split(":")[0] for p in hidden if ":e" in p or ":g" in p}  # a fitted τ, a grid τ
         wrong = [] if outside is not None else wrong_names(out["named"], truths, warm)
         if expect == "device":       # the device blamed, and no machine effect named found
             hit = not wrong and any(n.startswith("device") for n in out["named"])

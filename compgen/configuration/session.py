@@ -13,7 +13,7 @@ from .. import me
 from ..data.probe import MAGIC, PROBE_FAMILY, read_probe_log, sphere_centres
 from ..data.rtest import MOUNTED_AGAIN, SIGNS, UNTOUCHED, RTestData, read_rtest
 from ..errors import CompgenError
-from ..model.effects import compose, effect_of_param, location_model
+from ..model.effects import IN_TIME, compose, effect_of_param, location_model
 from ..model.machine import Machine
 from ..model.sides import continues
 from ..statistics.identify import parse_fixed
@@ -189,7 +189,7 @@ def one_clock(machine: Machine, names: Sequence[str], sets: Sequence[RTestData])
     is a function of one session's clock, and a file whose t starts again at 0 (a device
     that restarts its clock) would be taken as read at the session's start."""
     timed = sorted({e.name for e in (effect_of_param(machine, n) for n in names)
-                    if e.carrier == "time" or e.basis.kind == "e"})
+                    if e.carrier == "time" or e.basis.kind in IN_TIME})
     spans = [(float(np.nanmin(s.poses.t)), float(np.nanmax(s.poses.t)), s.source) for s in sets
              if len(s.poses) and not np.isnan(s.poses.t).all()]
     late = [(b, a) for a, b in zip(spans, spans[1:], strict=False) if b[0] <= a[1]]

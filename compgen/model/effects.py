@@ -73,18 +73,20 @@ TIME_SCALE_S = 3600.0        # drift polynomials run in t / 1 h
 # short to see an order, visibility says so and it is never named)
 MAX_ORDER = {"h": 4, "p": 3, "t": 2}
 TAUS_MIN = (5, 15, 45)       # saturating thermal growth offered: time constants, min
+IN_TIME = ("e", "t", "g")    # the bases that run in the readings' time: each needs t
 SHAPE_NAME = r"[a-z][a-z0-9_]{0,31}"   # a declared shape's name ([effects.shapes.NAME])
 
 
 @dataclass(frozen=True)
 class Basis:
     """Shape of an effect in its coordinate: constant, harmonic k, polynomial k, time
-    polynomial k, saturating in time with τ = ``order`` minutes, periodic along a linear
+    polynomial k, saturating in time with τ = ``order`` minutes, a scale (linear in the
+    axis's position) saturating in time with τ = ``order`` minutes, periodic along a linear
     axis with a pitch of ``pitch`` mm, or a shape the machine file declares (``label``):
     a spline through ``at`` (a value per knot) or a lookup table (``table`` at ``at``,
     scaled to a largest |value| of 1: the parameter is its size)."""
 
-    kind: str            # "const", "h", "p", "t", "e", "r", "w", "s" or "l"
+    kind: str            # "const", "h", "p", "t", "e", "g", "r", "w", "s" or "l"
     order: int = 0       # a compound's harmonic is signed: − turns against the axis
     origin: bool = False  # harmonics of a tilting axis: taken from angle 0 (cos kθ − 1)
     pitch: float = 0.0   # "w": the period along the axis, mm
@@ -120,8 +122,8 @@ class Basis:
             return np.stack([np.cos(turn), np.sin(turn)], axis=-1)
         if self.kind == "e":
             return (1 - np.exp(-x * (60.0 / self.order)))[..., None]
-        if self.kind == "r":              # x is the direction of motion, ±1 (0: never moved)
-            return x[..., None]
+        if self.kind in ("r", "g"):       # ±1 by the direction of motion (0: never moved); a
+            return x[..., None]           # scale in time: position × growth (``coordinate``)
         if self.kind == "s":              # a hat per knot, linear between, held beyond; none
             # at the first knot: a constant error motion is a location error (order 0 above)
             return np.stack([np.interp(x, self.at, row) for row in np.eye(len(self.at))[1:]], axis=-1)
@@ -258,7 +260,10 @@ def _axis_symbols(axis: Axis) -> dict:
                         {"a": "pitch", "b": "yaw", "c": "roll"}
                 words, cause = f"{names[e]} of {L}", "guideway twist or bending"
         positioning = e == (ROT_OF[d] if axis.rotary else d)
-        out[f"E{E}{L}"] = (L, "comp", e, kinds + ("r",) * positioning, words, cause, 1)
+        # a positioning error linear in position (a scale) may grow in time: the scale or the
+        # screw warming (gN); a full turn's angle has no scale
+        timed = ("g",) * (positioning and "p" in kinds)
+        out[f"E{E}{L}"] = (L, "comp", e, kinds + ("r",) * positioning + timed, words, cause, 1)
     if axis.rotary:
         u, w = turning_pair(d)
         for pair, kind in (((u, w), "radial"), ((ROT_OF[u], ROT_OF[w]), "tilt")):
@@ -305,7 +310,7 @@ def canonical(name: str) -> str:
 
 
 def _order_ok(kind: str, order: int, first: int, compound: bool) -> bool:
-    if kind == "e":
+    if kind in ("e", "g"):
         return order >= 1                 # τ, minutes (three digits at most: the name's pattern)
     if kind == "r":
         return order == 1
@@ -340,13 +345,14 @@ def resolve(machine: Machine, name: str, table: dict | None = None) -> Effect:
                       f"{words}, periodic with a pitch of {pitch:g} mm",
                       "a periodic error along the axis: ball-screw pitch or scale interpolation")
     else:
-        m = re.fullmatch(r"([hpter])(-?)(\d{1,3})", order_txt)
+        m = re.fullmatch(r"([hpterg])(-?)(\d{1,3})", order_txt)
         compound = len(direction) == 2
         if not m or m[1] not in kinds or not _order_ok(m[1], int(m[2] + m[3]), first, compound):
             turns = " (N < 0 turns against the axis)" if compound else ""
             raise CompgenError(f"{symbol} takes {' or '.join(k + 'N' for k in kinds)} with N ≥ {first}"
-                               f"{turns}, not {order_txt!r}" + (" (eN: τ = N min, 1…999)" if "e" in kinds
-                                                                 else ""), where=name,
+                               f"{turns}, not {order_txt!r}"
+                               + (" (eN, gN: τ = N min, 1…999)" if {"e", "g"} & set(kinds) else ""),
+                               where=name,
                                hint="an order-1 straightness is a squareness: use COX, AOZ or BOZ"
                                if first == 2 else None)
         kind, order = m[1], int(m[2] + m[3])
@@ -360,6 +366,9 @@ def resolve(machine: Machine, name: str, table: dict | None = None) -> Effect:
                                              f"at {abs(order)}/rev")
         if kind == "e":
             words += f", growing as 1 − exp(−t/{order} min)"
+        if kind == "g":
+            words += f", a scale (linear in position) growing as 1 − exp(−t/{order} min)"
+            cause = "the scale or the screw warming as the axis works"
         if kind == "r":
             words = words.replace("positioning error", "reversal (backlash)") + \
                 ": ± half the reversal value by the direction of motion"
@@ -422,7 +431,7 @@ def catalogue(machine: Machine) -> tuple[Effect, ...]:
         for kind in kinds:
             if kind == "const":
                 orders: list = [None]
-            elif kind == "e":
+            elif kind in ("e", "g"):
                 orders = list(TAUS_MIN)
             elif kind == "r":
                 orders = [1]

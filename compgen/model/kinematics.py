@@ -20,6 +20,7 @@ import numpy as np
 from ..errors import CompgenError
 from ..transforms import UNIT, apply, rodrigues, rot_axis, rot_exact, trans
 from .effects import (
+    IN_TIME,
     POLY_SCALE_MM,
     ROT_OF,
     ROTATIONS,
@@ -198,11 +199,17 @@ def nominal(machine: Machine, poses: Poses) -> np.ndarray:
 
 def coordinate(machine: Machine, effect: Effect, poses: Poses) -> np.ndarray:
     """The coordinate an effect's basis runs in: rad, position per 1000 mm, or hours (a
-    drift, and any effect in time: ``e`` and ``t``)."""
-    if effect.carrier == "time" or effect.basis.kind in ("e", "t"):
+    drift, and any effect in time: ``e`` and ``t``); a scale in time (``g``), the axis's
+    position (rad, per 1000 mm) times its growth 1 − exp(−t/τ)."""
+    if effect.carrier == "time" or effect.basis.kind in IN_TIME:
         if np.isnan(poses.t).any():
             raise CompgenError(f"{effect.name} needs the time column t in every data row")
-        return poses.t / TIME_SCALE_S
+        if effect.basis.kind != "g":
+            return poses.t / TIME_SCALE_S
+        grown = -np.expm1(-poses.t / (60.0 * effect.basis.order))
+        axis = machine.axis(effect.carrier)
+        q = poses.q[:, machine.index(axis.name)]
+        return grown * (q if axis.rotary else q / POLY_SCALE_MM)
     if effect.basis.kind == "const":
         return np.zeros(len(poses))
     axis = machine.axis(effect.carrier)

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..data.rtest import Measurements, RTestData
 from ..errors import CompgenError
-from ..model.effects import Effect, catalogue, effect_of_param, resolve
+from ..model.effects import IN_TIME, Effect, catalogue, effect_of_param, resolve
 from ..model.frames import sensor_axes
 from ..model.kinematics import Model
 from ..model.machine import Machine
@@ -271,7 +271,7 @@ def _to_try(machine: Machine, fit: FitResult, candidates: Sequence[str] | None,
                            else [resolve(machine, c) for c in candidates]) if e.name not in in_model]
     notes = ()
     if candidates is None and np.isnan(poses.t).any():   # a drift needs the time of every reading
-        timed = [e.name for e in effects if e.carrier == "time" or e.basis.kind in ("e", "t")]
+        timed = [e.name for e in effects if e.carrier == "time" or e.basis.kind in IN_TIME]
         effects = [e for e in effects if e.name not in timed]
         if timed:
             notes = (f"  not tried: {', '.join(timed)} (they need the time t of every reading; "

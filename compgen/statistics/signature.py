@@ -70,6 +70,15 @@ def _columns_at(machine: Machine, poses: Poses, effects: Sequence[Effect], x: Se
                             for e, c in zip(effects, x, strict=True)])
 
 
+def _where(e: Effect) -> tuple:
+    """What an effect's coordinate depends on: its axis and basis kind; the time alone for a
+    warming; a scale in time's τ too."""
+    kind = e.basis.kind
+    if kind == "e":
+        return ("time", "e")
+    return (e.carrier, kind, e.basis.order) if kind == "g" else (e.carrier, kind)
+
+
 def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.ndarray | Sequence[np.ndarray],
              r: np.ndarray,
              noise: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, tuple]:
@@ -85,15 +94,12 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
     from each slot's own, made once per pose for every effect on it: Qᵀc = vᵀ(g·WᵀQ),
     cᵀr = vᵀ(g·Wᵀr) and cᵀc = Σ vᵢvⱼ gᵢ·(WᵀW)gⱼ, WᵀW tridiagonal within a segment (a pose
     and the next): no K × 3n matrix of columns is made."""
-    def where(e):            # what an effect's coordinate depends on
-        return (e.carrier, e.basis.kind) if e.basis.kind != "e" else ("time", "e")
-
     if not effects:          # every one's columns made before (diagnose's step 3): none to walk
         return {}
     coords: dict = {}
     for e in effects:        # on the whole session: a reversal's side depends on its run
-        if where(e) not in coords:
-            coords[where(e)] = coordinate(machine, e, poses)
+        if _where(e) not in coords:
+            coords[_where(e)] = coordinate(machine, e, poses)
     n = len(poses)
     Qs = [Q] if isinstance(Q, np.ndarray) else list(Q)     # [Q | more] without copying Q
     edges = np.cumsum([0, *(q.shape[1] for q in Qs)])
@@ -112,14 +118,14 @@ def products(machine: Machine, poses: Poses, effects: Sequence[Effect], Q: np.nd
     # the basis values each group's columns are, per slot of the group: where in the
     # distinct bases' values side by side, and a compound's sign (``Effect.split`` of the
     # identity: a signed selection of its terms, (cos, −sin) and (sin, cos) turned by sense)
-    bases = list(dict.fromkeys((where(e), e.basis) for e in effects))
+    bases = list(dict.fromkeys((_where(e), e.basis) for e in effects))
     first_col = np.cumsum([0, *(len(basis.terms) for _, basis in bases)])
     taken: dict = {}
     for g, members in groups.items():
         picks: list[list] = [[] for _ in g]
         for i in members:
             e = effects[i]
-            j = bases.index((where(e), e.basis))
+            j = bases.index((_where(e), e.basis))
             own = np.arange(first_col[j], first_col[j + 1])
             for t, (_, M) in enumerate(e.split(np.eye(len(own)))):
                 if not ((M != 0).sum(axis=0) == 1).all():

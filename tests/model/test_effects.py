@@ -238,14 +238,16 @@ def test_the_catalogue_offers_the_orders_it_says():
     turning C and of the tilting A (an encoder's 4/rev shows over A's tilt), compounds both
     ways, polynomials 1-3 (a straightness from 2: its order 1 is a squareness), drift in
     hours 1-2 and τ 5, 15, 45 min; a location error in time, linear (t1) or saturating; the
-    ball's stem saturating only."""
+    ball's stem saturating only; a scale (a positioning error linear in position) growing
+    with τ 5, 15, 45 min, on the linear axes and the tilting A, never on C's full turn."""
     names = {e.name for e in catalogue(SEED)}
     have = lambda prefix: sorted(n[len(prefix):] for n in names if n.startswith(prefix))  # noqa: E731
     assert have("ECC:") == ["h1", "h2", "h3", "h4", "r1"]
     assert have("ECA:") == ["h1", "h2", "h3", "h4", "p1", "p2", "p3"]
     assert have("EXC+EYC:") == ["h-1", "h-2", "h-3", "h-4", "h1", "h2", "h3", "h4"]
     assert have("EYA+EZA:") == ["h-1", "h-2", "h-3", "h-4", "h1", "h2", "h3", "h4"]
-    assert have("EXX:") == ["p1", "p2", "p3", "r1"] and have("EYX:") == ["p2", "p3"]
+    assert have("EXX:") == ["g15", "g45", "g5", "p1", "p2", "p3", "r1"] and have("EYX:") == ["p2", "p3"]
+    assert have("EAA:") == ["g15", "g45", "g5", "h1", "h2", "h3", "h4", "p1", "p2", "p3", "r1"]
     assert have("drift_X:") == ["e15", "e45", "e5", "t1", "t2"]
     assert have("XOC:") == ["e15", "e45", "e5", "t1"] and "XOC" in names
     assert have("ZOW:") == ["e15", "e45", "e5"] and "ZOW" in names      # the ball's stem warming
@@ -265,3 +267,22 @@ def test_orders_and_pitches_are_taken_within_their_ranges(name, ok):
 def test_a_linear_axis_positioning_error_linear_in_position_is_its_scale():
     assert resolve(SEED, "EXX:p1").words.endswith("(scale: linear in position)")
     assert "scale" not in resolve(SEED, "EXX:p2").words and "scale" not in resolve(SEED, "EYX:p2").words
+
+
+@pytest.mark.parametrize("name, scale, size", [("EAA:g15", "EAA:p1", np.radians(20 / 3600)),
+                                               ("EXX:g5", "EXX:p1", 0.01)])
+def test_a_scale_in_time_reads_as_the_scale_grown_to_each_readings_time(name, scale, size):
+    """A scale growing in time (EAA:g15: A's angular positioning error linear in A, its slope
+    growing as 1 − exp(−t/15 min)) reads at each pose as the plain scale (EAA:p1) of the
+    size it has grown to at that pose's time, the chain evaluated pose by pose; and it needs
+    every reading's time."""
+    poses = generate(SEED, ["K4", "K1"])
+    grown = size * -np.expm1(-poses.t / (60.0 * resolve(SEED, name).basis.order))
+    got = Model(SEED, [name]).deviation(poses, np.array([size]))
+    for i in range(0, len(poses), 17):
+        want = Model(SEED, [scale]).deviation(poses.take(np.array([i])), np.array([grown[i]]))[0]
+        assert np.abs(got[i] - want).max() < 1e-12, (i, got[i], want)
+    assert np.abs(got).max() > 1e-3          # a few µm: seen
+    timeless = Poses(poses.q, poses.ball, np.full(len(poses), np.nan), poses.path)
+    with pytest.raises(CompgenError, match="needs the time column"):
+        Model(SEED, [name]).deviation(timeless, np.array([size]))

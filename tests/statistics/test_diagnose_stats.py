@@ -109,17 +109,19 @@ def test_a_column_that_moves_nothing_is_invisible():
 def test_products_a_block_at_a_time_equal_those_of_the_whole_columns(seed_machine, monkeypatch):
     """``signature.products`` (blocks of poses, whitening carried across them) against cᵀc,
     Qᵀc and cᵀr of each effect's whole columns, plain and made white with AR(1) ρ."""
-    from compgen.model.effects import Basis, Effect, catalogue
+    from compgen.model.effects import IN_TIME, Basis, Effect, catalogue, resolve
     from compgen.model.kinematics import Model, SlotGains, coordinate, effect_gains
     from compgen.model.paths import generate
     from compgen.model.poses import runs
     from compgen.statistics import signature
     from compgen.statistics.noise import whiten
     poses = generate(seed_machine, ["K4", "K1", "K2"])
-    every = [e for e in catalogue(seed_machine) if e.carrier != "time" and e.basis.kind not in ("e", "t")]
+    every = [e for e in catalogue(seed_machine) if e.carrier != "time" and e.basis.kind not in IN_TIME]
     # a spline of five knots (four parameters) on a slot other effects share
     shape = Effect("EXC", "C", "comp", "x", Basis("s", label="bow", at=(-3.0, -1.0, 0.0, 1.0, 3.0)), "test")
-    effects = [*every[::7], *(e for e in every if len(e.direction) == 2)][:40] + [shape]
+    # and three scales in time, on A and on X: position times growth, a coordinate of each τ
+    scales = [resolve(seed_machine, n) for n in ("EAA:g15", "EXX:g5", "EXX:g45")]
+    effects = [*every[::7], *(e for e in every if len(e.direction) == 2)][:40] + scales + [shape]
     on = [(e.carrier, e.slot, e.direction) for e in effects]
     assert on.count(on[-1]) > 1 and len(set(on)) < len(on) and any(len(e.direction) == 2 for e in effects)
     J = Model(seed_machine, ["XOC", "YOC", "BOA"]).jacobian(poses).reshape(-1, 3)

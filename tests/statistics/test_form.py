@@ -173,7 +173,8 @@ def test_the_follow_up_plan_of_a_form_tie_turns_the_ball(seed_machine):
     assert found.form_rival == "ball_lobes3", found.verdict
     plan = follow_up(seed_machine, data, found, NOISE_UM, "fit.json")
     (setup,) = plan.setups
-    assert setup.proposal.label == "K2 with the ball turned 60° on its stem" and setup.proposal.name == "K2_TURNED"
+    m = setup.proposal
+    assert (m.label, m.name) == ("K2 with the ball turned 60° on its stem", "K2_TURNED")
     assert plan.minutes == pytest.approx(setup.minutes + MOUNT_MINUTES)
     (then,), (now,) = plan.told.apart, plan.default_told.apart
     assert then.pair == now.pair == (found.significant[0].effect, "ball_lobes3")

@@ -93,3 +93,16 @@ def test_two_drifts_in_time_are_told_apart_beside_each_other(seed_machine):
         found = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM)
         assert found.significant[0].effect == "AOC:t1" and found.found == named, (files, found.rivals)
         assert named or "AOC:e45" in found.rivals
+
+
+def test_a_scale_warming_as_its_axis_works_is_named_and_added_within_3_sigma(seed_machine):
+    """A's scale growing in time (3″ per radian of A, τ = 15 min): named found at its τ, not
+    as a warming of A's location or a plain scale; added, the fit at the noise and the
+    location errors within 3σ."""
+    from conftest import ARCSEC
+    poses = generate(seed_machine, ["K4", "K1", "K2"])
+    truth = {**TABLE4, "EAA:g15": 3 * ARCSEC}
+    data = [simulate(seed_machine, truth, poses, NOISE_UM, np.random.default_rng(3))]
+    found = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM)
+    assert found.found == "EAA:g15", (found.verdict, [c.effect for c in found.significant[:3]], found.rivals)
+    _within_3_sigma(seed_machine, data, found.found)
