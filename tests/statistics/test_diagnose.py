@@ -962,6 +962,11 @@ def test_a_drift_fitted_across_files_whose_clocks_overlap_is_said(seed_machine, 
     assert overlapping.poses.t.max() > first.poses.t.max()
     said = one_clock(seed_machine, model, [first, overlapping])
     assert said and f"starts at t = {start:g} s, before" in said, said
+    # every effect in time: a location error linear in it, a scale growing (it said nothing of them)
+    for timed in ("YOC:t1", "EAA:g15"):
+        said = one_clock(seed_machine, compose(seed_machine, location_model(seed_machine), [timed]),
+                         [first, restarted])
+        assert said and timed in said, (timed, said)
 
 
 def _gained(machine, poses, gains, seed, hidden=None, rho=0.0):
