@@ -69,6 +69,8 @@ MAX_ROUNDS = 8          # diagnoses: each names, adds or measures one thing
 MAX_LOOKS = 2           # measurements made only to look where the data are blind
 OFF_GRID = "off the grid"   # a hidden time constant the catalogue does not hold
 FORM = "form"           # a hidden ball form: (size µm, lobes k, their phase rad), outside the model
+TRIGGER = "trigger"     # a hidden probe trigger's lobes about the stylus: (size µm, phase rad)
+TOUCH_UM = 0.5          # a probe's trigger noise per touch (its repeatability, 1σ)
 MOUNT_UM = 20.0         # σ of the ball's offset a mounting leaves, per axis
 
 CASES = {
@@ -120,6 +122,10 @@ CASES = {
     # the ball itself: three lobes about its stem, read as C's radial motion against it at
     # 3/rev to 0.04 µm; a ball turned on its stem tells them apart
     "a ball with three lobes, 0.8 µm (the device)": ({FORM: (0.8, 3, 0.4)}, "device"),
+    # a touch probe's trigger radius by direction: three lobes about the stylus (a kinematic
+    # probe's contacts), probed on a sphere; and a machine effect probed, that it is not blamed for
+    "probed: the probe's trigger, three lobes of 1.5 µm (the device)": ({TRIGGER: (1.5, 0.3)}, "device"),
+    "probed: C radial 2/rev turning with C, 3 µm": ({"EXC+EYC:h2c": 3 * UM}, "EXC+EYC:h2"),
     "three at once: C 2/rev radial 2 µm, C 1/rev angular 8″, A sag 3 µm":
         ({"EXC:h2c": 2 * UM, "ECC:h1c": 8 * ARCSEC, "EZA:h1c": -3 * UM},
          frozenset({"EXC:h2", "ECC:h1", "EZA:h1"})),
@@ -148,9 +154,9 @@ def noise(kind: str, n: int, rng) -> np.ndarray:
 def true_deviation(machine, truth, poses, outside=None) -> np.ndarray:
     """The hidden machine's readings: catalogue effects through the model, and ``outside``
     (axis, pitch mm) as that axis moved off by a sine of its position on the nominal machine."""
-    gain = {k: truth[k] for k in truth if k.startswith(GAIN)}      # the device, not the machine
+    gain = {k: truth[k] for k in truth if k.startswith(GAIN)}  # the device (a trigger: probed)
     form = truth.get(FORM)
-    truth = {k: v for k, v in truth.items() if k not in gain and k != FORM}
+    truth = {k: v for k, v in truth.items() if k not in gain and k not in (FORM, TRIGGER)}
     dev = Model(machine, list(truth)).deviation(poses, np.array(list(truth.values())))
     # each sensor reads along its own axis: the machine's X, Y, Z under a fixed spindle, the
     # tool's turned axes on a head (the nest turns with it)
@@ -202,14 +208,34 @@ def remounted(truth, poses, data, rng) -> dict:
     return {**truth, **dict(zip(SETUP, rng.normal(0, MOUNT_UM * 1e-3, 3), strict=True))}
 
 
-def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
-    measure = partial(session, blind=blind)      # every measurement of the case alike
-    data = [measure(machine, truth, generate(machine, ["K4", "K1", "K2"]), kind, rng, outside)]
+def probed(machine, truth, poses, kind, rng, outside=None, folder: Path | None = None) -> RTestData:
+    """A probe log of the hidden machine at ``poses`` (``TOUCH_UM`` per touch, a trigger's
+    lobes where the truth hides them: each touch triggers that much farther out along its
+    normal, by the direction it moves), read back as compgen reads one."""
+    dev = true_deviation(machine, truth, poses, outside)
+    tips, directions = simulate_touches(machine, poses, dev, TOUCH_UM, rng)
+    if TRIGGER in truth:
+        size, phase = truth[TRIGGER]
+        d = directions
+        phi = np.arctan2(d[..., 1], d[..., 0])
+        lobe = size * 1e-3 * np.hypot(d[..., 0], d[..., 1]) ** 3 * np.cos(3 * (phi - phase))
+        tips = tips - lobe[..., None] * d          # farther out: against the motion, along the normal
+    path = (folder or Path(tempfile.mkdtemp(prefix="compgen-probe-"))) / f"p{rng.integers(1 << 30)}.log"
+    path.write_text(format_probe_log(machine, machine.probe, poses, tips, directions, ("discovery",)))
+    return sphere_centres(read_probe_log(path, machine), machine).data
+
+
+def discover(machine, truth, kind, rng, outside=None, blind=False, probe=False) -> dict:
+    # every measurement of the case alike: the R-test's, or a probe's on its thinned poses
+    measure = probed if probe else partial(session, blind=blind)
+    planned = probe_poses if probe else generate
+    noise_um = None if probe else SIGMA_UM          # a probe's: from its touches
+    data = [measure(machine, truth, planned(machine, ["K4", "K1", "K2"]), kind, rng, outside)]
     first = {n: truth[n] for n in SETUP}        # the ball's offset the fit reports: its first mounting's
     model, named, followed, last, looks = location_model(machine), [], [], None, 0
     for _ in range(MAX_ROUNDS):
         fit = identify(machine, data, model)
-        found = diagnose(machine, data, fit, noise_um=SIGMA_UM, advisor=Advisor)
+        found = diagnose(machine, data, fit, noise_um=noise_um, advisor=Advisor)
         last = (fit, found)
         line = found.outside_line or (found.lines[0] if found.lines else None)
         if found.unexplained and line is not None and line.unit == "mm":
@@ -225,8 +251,8 @@ def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
             # the user calibrates the R-test (or takes a round ball) and measures everything again
             named.append(f"device {found.device_blamed or found.significant_devices[0].effect}")
             how = "a round ball" if FORM in truth else "calibrated"
-            truth = {k: v for k, v in truth.items() if not k.startswith(GAIN) and k != FORM}
-            poses = generate(machine, ["K4", "K1", "K2"])
+            truth = {k: v for k, v in truth.items() if not k.startswith(GAIN) and k not in (FORM, TRIGGER)}
+            poses = planned(machine, ["K4", "K1", "K2"])
             truth = remounted(truth, poses, data, rng)
             first = {n: truth[n] for n in SETUP}
             data = [measure(machine, truth, poses, kind, rng, outside)]
@@ -269,7 +295,7 @@ def discover(machine, truth, kind, rng, outside=None, blind=False) -> dict:
     fit, found = last
     if tuple(model) != fit.model:      # named or added in the last round: the user refits
         fit = identify(machine, data, model)
-    fit = with_budget(machine, data, fit, noise_um=SIGMA_UM)     # σ holding its whole budget
+    fit = with_budget(machine, data, fit, noise_um=noise_um)     # σ holding its whole budget
     model_now = Model(machine, fit.model)
     x = np.array([fit.parameters[n].value for n in fit.model])
     truth = {**truth, **first}          # the ball as the fit reports it: at its first mounting
@@ -413,14 +439,15 @@ def main() -> None:
         outside = expect if isinstance(expect, tuple) else None
         used = replace(machine, gain_u=GAIN_U) if any(p.startswith(GAIN) for p in hidden) else machine
         out = discover(used, {**TABLE4, **hidden}, kind, np.random.default_rng(11), outside,
-                       blind="without the sides" in name)
+                       blind="without the sides" in name, probe=name.startswith("probed"))
         if outside is not None:
             expect = outside[2]
         # a name found that is no hidden effect is a wrong finding (a declaration of what
         # diagnose called unexplained, or the best of equivalents, is not one)
-        truths = ({effect_name(p) for p in hidden if not p.startswith(GAIN) and p != FORM}
+        truths = ({effect_name(p) for p in hidden if not p.startswith(GAIN) and p not in (FORM, TRIGGER)}
                   | {f"device {p}" for p in hidden if p.startswith(GAIN)}
-                  | ({f"device ball_lobes{hidden[FORM][1]}"} if FORM in hidden else set()))
+                  | ({f"device ball_lobes{hidden[FORM][1]}"} if FORM in hidden else set())
+                  | ({"device probe_lobes3"} if TRIGGER in hidden else set()))
         warm = {p.split(":")[0] for p in hidden if ":e" in p or ":g" in p}  # a fitted τ, a grid τ
         wrong = [] if outside is not None else wrong_names(out["named"], truths, warm)
         if expect == "device":       # the device blamed, and no machine effect named found

@@ -37,6 +37,11 @@ RADIUS_K, RADIUS_UM = 4.0, 2.0       # the touches' sphere this many σ and µm 
 ITERATIONS = 8
 NOISELESS_MM = 5e-5           # triggers scattering less (0.05 µm): a simulation; exact repeats are real
 TOUCH_S = 3.0                # s from one touch to the next, as a simulated log times them
+# A kinematic probe triggers on its three contacts: its pre-travel, and so the radius at which
+# it triggers, varies in three lobes about the stylus (the spindle's axis, the spindle held at
+# one orientation): R + a·sin³θ·cos 3(φ − φ₀), θ from the spindle axis, φ about it, of the
+# direction the stylus moves. A fixed spindle keeps that frame the machine's.
+TRIGGER_LOBES = 3
 
 
 @dataclass(frozen=True, eq=False)
@@ -208,9 +213,23 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
     t = np.array([np.nanmin(log.t[g]) if not np.isnan(log.t[g]).all() else np.nan for g in groups])
     poses = Poses(q, ball, t, log.path[first])
     data = RTestData(poses, reading, log.source, log.sha256, tuple(int(log.lines[i]) for i in first),
-                     device="probe", cov=cov, cov_dof=dof)
+                     device="probe", cov=cov, cov_dof=dof, lobes=trigger_lobes(log, groups, normals))
     return Centres(data, centre, math.sqrt(s2) * 1e3, dof, radius_offset * 1e3, radius_sigma * 1e3,
                    tuple(warnings))
+
+
+def trigger_lobes(log: ProbeLog, groups: list[np.ndarray], normals: list[np.ndarray]) -> np.ndarray:
+    """(n, 3, 2): each pose's reading per mm of the trigger's lobes' cos and sin amplitude
+    (``TRIGGER_LOBES``): a touch triggering δ farther out along its normal moves the centre
+    on the known radius by N⁺δ (N the touches' outward normals, first order), and the reading,
+    nominal minus probed, by −N⁺δ; δ by the direction each touch moved (``log.direction``)."""
+    out = np.zeros((len(groups), 3, 2))
+    for k, (g, u) in enumerate(zip(groups, normals, strict=True)):
+        d = log.direction[g]
+        lobe = (np.hypot(d[:, 0], d[:, 1]) ** TRIGGER_LOBES
+                * np.exp(1j * TRIGGER_LOBES * np.arctan2(d[:, 1], d[:, 0])))       # sin³θ·e^{3iφ}
+        out[k] = -np.linalg.pinv(-u) @ np.stack([lobe.real, lobe.imag], axis=1)
+    return out
 
 
 def _check_pose(log: ProbeLog, g: np.ndarray, u: np.ndarray, weakest: float, usual: int,

@@ -54,6 +54,8 @@ class RTestData:
                                     # UNTOUCHED, or nothing
     turned: float = 0.0             # deg the ball was turned on its stem before it (then said
                                     # MOUNTED_AGAIN too: its clamp was loosened)
+    lobes: np.ndarray | None = None  # (n, 3, 2): a probe log's readings per mm of its trigger's
+                                    # lobes (``probe.trigger_lobes``), None for an R-test's
 
     def __len__(self) -> int:
         return len(self.poses)
@@ -112,6 +114,14 @@ class Measurements:
     def rtest(self) -> np.ndarray:
         """(n,) whether each reading is an R-test's (a probe's sphere centres carry no sensor gain)."""
         return np.array([d.device == "rtest" for d in self.sets], bool)[self.set_of]
+
+    @cached_property
+    def lobes(self) -> np.ndarray | None:
+        """(n, 3, 2) each reading per mm of the probe trigger's lobes (0 for an R-test's), or
+        None where no set is a probe log's."""
+        if all(d.lobes is None for d in self.sets):
+            return None
+        return np.concatenate([np.zeros((len(d), 3, 2)) if d.lobes is None else d.lobes for d in self.sets])
 
     def covariance(self, prior: np.ndarray) -> np.ndarray:
         """(n, 3, 3) mm²: each reading's own covariance where its set gives it, else ``prior``."""

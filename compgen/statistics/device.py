@@ -27,7 +27,13 @@ lobes against a radial 3/rev of C differ by 0.04 µm on the seed's K4, K1, K2). 
 stem by β (``fit --ball-turned``) the ball's form turns by β and the machine's does not:
 180°/k makes the form read the other way round. Where the form and the machine's best
 explain the data alike, neither is named: the ball turned tells them apart
-(``blamed_device``)."""
+(``blamed_device``).
+
+A touch probe's centres carry its trigger instead: the radius at which it triggers, varying in
+lobes about the stylus by the direction it moves (``probe.trigger_lobes``), moves each
+centre by what the pose's touches make of it. It is a device parameter as a gain is: blamed
+where it explains the misfit as well as the machine's best, never added to a model; its
+remedy is the probe's calibration (or the probe turned in the spindle), then probing again."""
 
 from __future__ import annotations
 
@@ -36,6 +42,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..data.probe import TRIGGER_LOBES
 from ..model.frames import sensors_on_ball
 from ..model.sides import span
 from .significance import VISIBLE, beside, explained, p_beside, p_value, rivals
@@ -43,7 +50,8 @@ from .significance import VISIBLE, beside, explained, p_beside, p_value, rivals
 SENSORS = "XYZ"
 LOBES = (2, 3, 4)          # a ball's form about its stem: an oval, three lobes, four
 FORM = "ball_lobes"        # its candidates' names: ball_lobes2, ball_lobes3, ball_lobes4
-SHOWN = {"gain": ("%", 100.0), "ball": ("µm", 1e3)}     # a parameter's unit, per 1 (a gain) or per mm
+TRIGGER = "probe_lobes"    # a probe's trigger lobes: probe_lobes3 (``probe.TRIGGER_LOBES``)
+SHOWN = {"gain": ("%", 100.0), "ball": ("µm", 1e3), "probe": ("µm", 1e3)}   # unit, per 1 (a gain) or per mm
 
 
 @dataclass(frozen=True)
@@ -70,6 +78,11 @@ class DeviceCandidate:
     def form(self) -> bool:
         """The ball's form, not the R-test's sensors."""
         return self.effect.startswith(FORM)
+
+    @property
+    def trigger(self) -> bool:
+        """The probe's trigger lobes."""
+        return self.effect.startswith(TRIGGER)
 
     def to_dict(self) -> dict:
         return {"effect": self.effect, "description": self.description, "value": self.value,
@@ -122,6 +135,15 @@ def form_columns(machine, poses, rtest: np.ndarray, axes: np.ndarray | None = No
     return out
 
 
+def trigger_columns(lobes: np.ndarray | None, bad: np.ndarray) -> dict[str, np.ndarray]:
+    """The probe trigger's lobes as a candidate's two columns (3n, 2), mm per mm, from the
+    readings' ``Measurements.lobes``, the outlying readings ``bad`` left out as the
+    diagnosis leaves them; none where no reading is a probe's."""
+    if lobes is None:
+        return {}
+    return {f"{TRIGGER}{TRIGGER_LOBES}": np.delete(lobes, bad, axis=0).reshape(-1, 2)}
+
+
 def _shown(name: str, amp: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
     """A parameter's value and σ in its shown unit from its columns' amplitudes and their
     covariance: a gain's one; a form's size, √(c² + s²), and its σ along that direction."""
@@ -154,6 +176,8 @@ def device_candidates(columns: dict[str, np.ndarray], Q: np.ndarray, r: np.ndarr
             effect=name, unit=SHOWN[name.split("_")[0]][0], value=value, std=std,
             visibility=float(vis.min()), drop=float(drop), drop_w=float(drop_w), columns=c.shape[1],
             description=f"the ball's form, {k} lobes about its stem (its radius off round)" if k else
+                        f"the probe's trigger, {name[len(TRIGGER):]} lobes about the stylus (its radius by "
+                        "the direction it moves)" if name.startswith(TRIGGER) else
                         f"the R-test's {name[-1]} sensor reads its displacement scaled (a gain error)"))
     return out
 
@@ -172,8 +196,9 @@ def tested_devices(res, columns: dict[str, np.ndarray], ranked: dict, noise, rss
 def blamed_device(devices: Sequence[DeviceCandidate], best, sigma2_w: float,
                   alpha: float) -> tuple[str | None, str | None]:
     """The device parameter blamed for the misfit, and the ball's form tied with the
-    machine's best (``significance.rivals``, misfit taken as left). A sensor's gain is blamed
-    where it explains as well as the best of the machine's candidates, or better, or alone:
+    machine's best (``significance.rivals``, misfit taken as left). A sensor's gain, or a
+    probe's trigger, is blamed where it explains as well as the best of the machine's
+    candidates, or better, or alone:
     then no machine effect is named found. The ball's form is blamed only where the best is
     no rival of it; where each is the other's rival, neither is named: a ball turned on its
     stem tells them apart."""

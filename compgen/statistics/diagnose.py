@@ -30,7 +30,7 @@ from ..model.poses import Poses, runs
 from ..model.sides import FreeConstants, same_pose
 from ..units import shown
 from .advising import Advising, Proposal
-from .device import blamed_device, device_columns, form_columns, tested_devices, told_beside
+from .device import blamed_device, device_columns, form_columns, tested_devices, told_beside, trigger_columns
 from .diagnosis import REPEATS_TRIED, Candidate, Diagnosis, _outside_line, _unexplained, turn_for
 from .noise import Lazy, ar1, outliers, repeats
 from .ranking import Row, Whitening, effect_columns, rank, started_reversals
@@ -124,7 +124,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     effects, ranked, noise, made, carried = _ranked(machine, fit, effects, res, alpha)
     rss_w = noise.rss(r)
     # the device (the R-test's sensors, the ball's form) beside the machine, in one Bonferroni family
-    columns = (device_columns(res.pred, res.rtest, res.axes)
+    columns = (device_columns(res.pred, res.rtest, res.axes) | trigger_columns(joined.lobes, res.bad)
                | form_columns(machine, poses, res.rtest, res.axes))      # the sensors' axes walked once
     devices, tested = tested_devices(res, columns, ranked, noise, rss_w, dof, alpha)
     out = _candidates(effects, ranked, rss, r.size, rss_w, dof, tested, alpha)

@@ -223,7 +223,8 @@ def conclusion(d: Diagnosis, fit: str, after: str) -> str:
                 "not the machine: measure again on a round ball, or one whose form is known")
     if kind == "device":
         return (f"VERDICT: the device explains the misfit ({d.blamed.description}, {d.device_blamed}): "
-                "calibrate that sensor and measure again")
+                + ("calibrate the probe and probe again" if d.blamed.trigger else
+                   "calibrate that sensor and measure again"))
     if kind == "rivals" and d.form_rival:
         m = d.form_turned
         return (f"VERDICT: not told apart: {best} vs the ball's form ({d.form_rival}); "
@@ -370,20 +371,24 @@ def _devices(d: Diagnosis) -> list[str]:
                     f"the misfit, but {_remedy(seen)} before these data correct a control, then measure "
                     "again."]
     than = f"as well as {d.significant[0].effect}" if d.significant else "where no machine effect does"
-    size = f"{c.value:.2f} ± {c.std:.2f} µm" if c.form else f"{c.value:+.2f} ± {c.std:.2f} %"
+    size = f"{c.value:.2f} ± {c.std:.2f} µm" if c.unit == "µm" else f"{c.value:+.2f} ± {c.std:.2f} %"
     return ["", f"  The device: {c.description}, {size} ({c.effect}), explains these data {than}: no machine "
                 "effect is named found, and nothing here corrects a control for it.",
             f"  {_remedy([c])[0].upper()}{_remedy([c])[1:]}, then measure again and fit the new data alone."
             + "".join(f" {o.text()} stays significant beside it ({said_p(o.p_value)}): "
-                      + ("have the ball's form measured too." if o.form else "calibrate that sensor too.")
+                      + ("have the ball's form measured too." if o.form else "calibrate the probe too."
+                         if o.trigger else "calibrate that sensor too.")
                       for o in seen if o is not c)]
 
 
 def _remedy(devices) -> str:
     """What a user does about these device parameters: calibrate the sensors, replace the ball."""
-    sensors = " and ".join(o.effect[-1] for o in devices if not o.form)
+    sensors = " and ".join(o.effect[-1] for o in devices if not o.form and not o.trigger)
     out = ([f"calibrate the R-test's {sensors} sensor{'s' if ' and ' in sensors else ''} against its "
             "reference (its calibration: [rtest] gain_u in the machine file)"] if sensors else [])
+    if any(o.trigger for o in devices):       # the control's own cycle: its radius by direction
+        out.append("calibrate the probe's trigger radius by direction on a reference sphere (the control's "
+                   "3-D probe calibration), or probe again with the spindle oriented otherwise")
     if any(o.form for o in devices):
         out.append("measure on a round ball, or one whose form is known (its calibration certificate)")
     return " and ".join(out)

@@ -47,16 +47,19 @@ def _rows(every=5, hidden_ecc_arcsec=0.0):
 
 
 def write_log(path, noise_um=1.0, seed=0, stylus=3.0, true_stylus=None, every=5, hidden_ecc_arcsec=0.0,
-              damage=None, dirs=DIRS, ball=False):
+              damage=None, dirs=DIRS, ball=False, lobes=None):
     """A probe log v1 of the seed machine with the Table 4 errors; ``damage`` edits the
     touch rows (a list of [path, pose, A, C, x, y, z, nx, ny, nz] cells, then bx, by, bz with
-    ``ball``) before writing."""
+    ``ball``) before writing; ``lobes`` = (a µm, φ₀): each touch triggers a·sin³θ·cos 3(φ − φ₀)
+    farther out, θ and φ of the direction it moves (a kinematic probe's three contacts)."""
     rng = np.random.default_rng(seed)
     rho = (25.4 + (true_stylus or stylus)) / 2
     touches = []
     for k, (label, a, c, centre) in enumerate(_rows(every, hidden_ecc_arcsec), 1):
         for u in dirs:
-            tip = centre + (rho + rng.normal(0, noise_um * 1e-3)) * u
+            lobe = 0.0 if lobes is None else lobes[0] * 1e-3 * np.hypot(u[0], u[1]) ** 3 * np.cos(
+                3 * (np.arctan2(-u[1], -u[0]) - lobes[1]))
+            tip = centre + (rho + lobe + rng.normal(0, noise_um * 1e-3)) * u
             touches.append([label, str(k), a, c, *(f"{v:.5f}" for v in tip), *(f"{-v:.6f}" for v in u),
                             *((f"{v:.3f}" for v in SEED_BALL) if ball else ())])
     if damage:
@@ -121,7 +124,10 @@ def test_a_hidden_c_positioning_error_is_named(tmp_path):
     best = d["candidates"][0]
     assert best["effect"] == "ECC:h2" and best["significant"], best
     assert d["found"] == "ECC:h2" or d["found"] is None, d["found"]
-    assert d["device_effects"] == [] and not d["device_blamed"]    # a probe's centres carry no gain
+    # a probe's centres carry no gain; its trigger's lobes are told, invisible here (these touches
+    # keep their directions in the machine frame: the lobes are one offset, the ball's)
+    assert [(e["effect"], e["significant"]) for e in d["device_effects"]] == [("probe_lobes3", False)]
+    assert d["device_effects"][0]["visibility"] < 0.01 and not d["device_blamed"]
     code, out, _ = run("fit", "--from", tmp_path / "fit.json", "--add", "ECC:h2", "-o",
                        tmp_path / "fit2.json")
     assert code == 0
@@ -194,6 +200,47 @@ def test_in_a_mixed_session_a_gain_is_the_r_tests_alone(tmp_path):
     assert gain["gain_X"].significant, gain["gain_X"]
     assert abs(gain["gain_X"].value - 1.5) < 3 * gain["gain_X"].std, gain["gain_X"]
     assert d.device_blamed == "gain_X" and d.found is None
+
+
+def test_a_trigger_lobed_about_the_stylus_moves_each_centre_as_its_columns_say(tmp_path):
+    """Touches triggering 1.5 µm·sin³θ·cos 3(φ − 0.3) farther out (θ, φ of the direction each
+    moves), no noise: each centre's reading moves from the round trigger's by what
+    ``trigger_lobes`` says per mm of the lobes' cos and sin, to 1 % of the largest move."""
+    machine = load_machine(SEED_MACHINE)
+    round_, lobed = (sphere_centres(read_probe_log(write_log(tmp_path / f"{n}.log", noise_um=0.0, lobes=lob),
+                                                   machine), machine).data
+                     for n, lob in (("r", None), ("l", (1.5, 0.3))))
+    moved = lobed.deviation - round_.deviation
+    said = lobed.lobes @ (1.5e-3 * np.array([np.cos(0.9), np.sin(0.9)]))
+    assert np.abs(moved).max() > 0.5e-3                      # the lobes move the centres
+    assert np.abs(moved - said).max() < 0.01 * np.abs(moved).max(), np.abs(moved - said).max()
+
+
+@pytest.mark.parametrize("lobes", [None, (1.5, 0.3)])
+def test_a_lobed_trigger_is_blamed_as_the_device_a_round_one_never(tmp_path, lobes):
+    """0.5 µm a touch, K4 + K1 + K2 probed as compgen's programs touch (turned with the
+    sphere's stem: the lobes read differently at each pose; touches fixed in the machine
+    frame would make them one offset, the ball's): a trigger with three lobes of 1.5 µm
+    about the stylus is the device blamed (within 3σ of 1.5 µm), no machine effect named
+    found; a round trigger is never significant."""
+    from compgen.data.probe import format_probe_log, probe_poses, simulate_touches
+    from compgen.data.simulate import simulate
+    machine = load_machine(SEED_MACHINE)
+    rng = np.random.default_rng(4)
+    poses = probe_poses(machine, ["K4", "K1", "K2"])
+    tips, d = simulate_touches(machine, poses, simulate(machine, TABLE4, poses).deviation, 0.5, rng)
+    if lobes is not None:           # farther out along the normal, −d, by the direction d it moves
+        tips = tips - (lobes[0] * 1e-3 * np.hypot(d[..., 0], d[..., 1]) ** 3
+                       * np.cos(3 * (np.arctan2(d[..., 1], d[..., 0]) - lobes[1])))[..., None] * d
+    (tmp_path / "k.log").write_text(format_probe_log(machine, machine.probe, poses, tips, d))
+    data = [sphere_centres(read_probe_log(tmp_path / "k.log", machine), machine).data]
+    d = diagnose(machine, data, identify(machine, data))
+    trigger = next(c for c in d.devices if c.effect == "probe_lobes3")
+    if lobes is None:
+        assert not trigger.significant and d.device_blamed is None, trigger
+        return
+    assert d.device_blamed == "probe_lobes3" and d.found is None, (d.verdict, trigger)
+    assert abs(trigger.value - 1.5) < 3 * trigger.std, trigger
 
 
 def _refused(tmp_path, log, *words):
