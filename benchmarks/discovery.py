@@ -52,6 +52,7 @@ from compgen.data.probe import (  # noqa: E402
 )
 from compgen.data.rtest import MOUNTED_AGAIN, RTestData  # noqa: E402
 from compgen.data.simulate import ar1_noise, simulate  # noqa: E402
+from compgen.errors import CompgenError  # noqa: E402
 from compgen.model.effects import compose, effect_name, location_model  # noqa: E402
 from compgen.model.frames import sensor_axes, sensors_on_ball  # noqa: E402
 from compgen.model.kinematics import Model  # noqa: E402
@@ -497,6 +498,19 @@ def main() -> None:
         found = diagnose(machine, data, identify(machine, data))
         flagged += bool(found.significant) or any(g.significant for g in found.devices) or found.unexplained
         unexplained += found.unexplained
+    refused = 0                              # clean logs the reader refuses (a touch taken for a chip)
+    for seed in range(15 * args.draws):
+        rng = np.random.default_rng(5000 + seed)
+        poses = probe_poses(machine, ["K1"])
+        clean = simulate(machine, {}, poses).deviation
+        tips, directions = simulate_touches(machine, poses, clean, TOUCH_UM, rng)
+        (work / "c.log").write_text(format_probe_log(machine, machine.probe, poses, tips, directions))
+        try:
+            sphere_centres(read_probe_log(work / "c.log", machine), machine)
+        except CompgenError:
+            refused += 1
+    print(f"  {'probe log':<10} refused {refused}/{15 * args.draws}: clean one-path logs (K1, 60 touches, "
+          f"{TOUCH_UM:g} µm a touch), a touch taken for a chip")
     print(f"  {'probe':<10} flagged {flagged}/{args.draws} (unexplained {unexplained}): K4 + K1 + K2 probed, "
           "1 µm per touch, the noise from the touches")
     set_up_events(machine, args.draws)

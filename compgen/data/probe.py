@@ -33,6 +33,7 @@ MIN_TOUCHES = 4              # a centre on a known radius needs three; one more 
 FLAT = 0.1                   # touch directions spreading less than this (rms) out of a plane: no centre
 RADIAL_COS = 0.5             # a touch moving more than 60° off the centre did not come radially
 OUTLIER_K, OUTLIER_UM = 5.0, 2.0     # a touch this many σ and µm off its pose's sphere: a bad trigger
+OUTLIER_ALPHA = 1e-3         # and beyond Student's t of the log's touches at this rate for a clean log
 RADIUS_K, RADIUS_UM = 4.0, 2.0       # the touches' sphere this many σ and µm off ρ: a wrong stylus
 ITERATIONS = 8
 NOISELESS_MM = 5e-5           # triggers scattering less (0.05 µm): a simulation; exact repeats are real
@@ -164,11 +165,8 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
     dof = int(counts.sum() - 3 * len(groups))      # ≥ 1 a pose: each has MIN_TOUCHES ≥ 4
     r_all = np.concatenate(residuals)
     s2 = float(r_all @ r_all) / dof
-    # a bad trigger would inflate the pooled σ it is judged by: judge by a robust scale
-    robust = 1.4826 * float(np.median(np.abs(r_all))) * math.sqrt(counts.sum() / dof)
-    scale = max(robust, 1e-7)
     inverse_info = [np.linalg.inv(u.T @ u) for u in normals]     # (JᵀJ)⁻¹ of each pose
-    _check_outliers(log, groups, normals, residuals, inverse_info, scale)
+    _check_outliers(log, groups, normals, residuals, inverse_info, float(r_all @ r_all), dof)
     # one stylus for the whole log: its radius error is common to every pose
     num = den = 0.0
     for u, r, G in zip(normals, residuals, inverse_info, strict=True):
@@ -272,21 +270,30 @@ def _check_pose(log: ProbeLog, g: np.ndarray, u: np.ndarray, weakest: float, usu
                         f"{usual}: a touch is missing (its centre is fitted from the rest)")
 
 
-def _check_outliers(log: ProbeLog, groups, normals, residuals, inverse_info, scale: float) -> None:
+def _check_outliers(log: ProbeLog, groups, normals, residuals, inverse_info, rss: float, dof: int) -> None:
     """No touch off the sphere its pose's other touches fit by more than OUTLIER_K of the
-    log's robust trigger scatter and OUTLIER_UM (a chip, a bad trigger)."""
+    trigger scatter the log's other touches show and OUTLIER_UM (a chip, a bad trigger): each
+    touch's residual studentized by the pooled scatter without it (a bad trigger does not
+    inflate the σ it is judged by). A median's scale of one path's 60 touches, as it was,
+    read 0.25 µm for a 0.5 µm trigger one log in a hundred and refused a clean touch. The
+    bound is OUTLIER_K or, where more, Student's t at OUTLIER_ALPHA over the log's touches
+    (each studentized residual is t with dof − 1): 5.4 for one path's 60 touches."""
+    from scipy.special import stdtrit  # here: only a probe log's reading pays its import
+
     where = log.source
+    bound = max(OUTLIER_K, float(stdtrit(max(dof - 1, 1), 1 - OUTLIER_ALPHA / (2 * sum(map(len, groups))))))
     for g, u, r, G in zip(groups, normals, residuals, inverse_info, strict=True):
         h = np.einsum("ij,jk,ik->i", u, G, u)
-        room = 1 - h
-        deleted = np.where(room > 1e-6, r / np.maximum(room, 1e-6), 0.0)
-        z = np.where(room > 1e-6, np.abs(r) / (scale * np.sqrt(np.maximum(room, 1e-6))), 0.0)
+        room = np.maximum(1 - h, 1e-6)
+        deleted = np.where(1 - h > 1e-6, r / room, 0.0)
+        others = np.sqrt(np.maximum(rss - r * deleted, 1e-14) / max(dof - 1, 1))    # σ without the touch
+        z = np.where(1 - h > 1e-6, np.abs(r) / (others * np.sqrt(room)), 0.0)
         k = int(np.argmax(z))
-        if z[k] > OUTLIER_K and abs(deleted[k]) * 1e3 > OUTLIER_UM:
+        if z[k] > bound and abs(deleted[k]) * 1e3 > OUTLIER_UM:
             raise CompgenError(f"a touch of {_at(log, g)} lies {deleted[k] * 1e3:+.1f} µm off the sphere its "
-                               f"other touches fit ({z[k]:.0f}σ of the log's {scale * 1e3:.2f} µm trigger "
-                               "noise): a "
-                               "chip on the sphere or a bad trigger", where=f"{where}:{log.lines[g[k]]}",
+                               f"other touches fit ({z[k]:.0f}σ of the {others[k] * 1e3:.2f} µm trigger "
+                               "noise the log's other touches show): a chip on the sphere or a bad trigger",
+                               where=f"{where}:{log.lines[g[k]]}",
                                hint="clean the sphere and re-probe the pose, or delete the line")
 
 
