@@ -195,7 +195,10 @@ def check_program_cmd(machine_file, program, controller_name, ball, nest, mode, 
               help="The machine's minutes for the measurement (the programs' time, as check-program "
                    "counts it, and each mounting of the ball elsewhere).")
 @click.option("--noise-um", "noise_um", type=Finite(min=0, max=NOISE_MAX_UM, min_open=True), default=None,
-              help="The R-test's noise, 1σ per reading, µm (default: the machine file's [rtest] noise_um).")
+              help="The R-test's noise, 1σ per reading, µm (default: the machine file's [rtest] noise_um); "
+                   "with --device probe, the probe's trigger noise, 1σ per touch (its repeatability).")
+@click.option("--device", type=click.Choice(["rtest", "probe"]), default="rtest", show_default=True,
+              help="What measures: the R-test, or a touch probe on the sphere ([probe] in the machine file).")
 @click.option("--rho", type=Finite(min=0, max=0.99), default=0.0, show_default=True,
               help="AR(1) correlation of the noise from reading to reading within a run.")
 @click.option("--effects", default=None, metavar="NAMES",
@@ -208,7 +211,7 @@ def check_program_cmd(machine_file, program, controller_name, ball, nest, mode, 
               help="A plan written before: its programs and σ against the machine file as it is now "
                    "(exit 1 where it no longer holds).")
 @FORCE
-def plan_cmd(machine_file, minutes, noise_um, rho, effects, folder, check_dir, force):
+def plan_cmd(machine_file, minutes, noise_um, device, rho, effects, folder, check_dir, force):
     """Design the measurement before the machine moves: the set-ups this machine can run
     that tell its location errors best within the minutes given, each program checked."""
     from ..planning.plan import checked, files, plan, text
@@ -219,6 +222,7 @@ def plan_cmd(machine_file, minutes, noise_um, rho, effects, folder, check_dir, f
         lines, ok, made = checked(machine, Path(check_dir))
         again = (f"{me()} plan --machine {shlex.quote(machine_file)} --minutes {made['minutes'] or 10:g} "
                  f"--noise-um {made['noise_um']:g}" + (f" --rho {made['rho']:g}" if made["rho"] else "")
+                 + (" --device probe" if made["device"] == "probe" else "")
                  + f" -o {shlex.quote(str(Path(check_dir).with_name(Path(check_dir).name + '-again')))}")
         click.echo("\n".join([f"compgen plan --check: {check_dir} against {machine_file}", *lines,
                                "the plan holds" if ok else "the plan does not hold on this machine file: "
@@ -228,17 +232,18 @@ def plan_cmd(machine_file, minutes, noise_um, rho, effects, folder, check_dir, f
         return
     if minutes is None or folder is None:
         raise CompgenError("give --minutes and -o DIR (or --check DIR for a plan written before)")
-    noise = noise_um if noise_um is not None else machine.noise_um
+    noise = noise_um if noise_um is not None or device == "probe" else machine.noise_um
     if noise is None:
-        raise CompgenError("the R-test's noise is not known: the plan's σ scale with it",
-                           hint="give --noise-um (the device's calibration), or [rtest] noise_um in the "
-                                "machine file")
+        what = "probe" if device == "probe" else "R-test"
+        more = ", 1σ per touch)" if device == "probe" else "), or [rtest] noise_um in the machine file"
+        raise CompgenError(f"the {what}'s noise is not known: the plan's σ scale with it",
+                           hint=f"give --noise-um (the device's calibration{more}")
     named = None if effects is None else [n.strip() for n in effects.split(",") if n.strip()]
     if named is not None and len(named) < 2:
         raise CompgenError(f"--effects {effects!r}: name two effects or more, comma-separated, to tell "
                            "apart", hint=f"list the catalogue with {me()} effects --machine "
                                          f"{shlex.quote(machine_file)}")
-    result = plan(machine, minutes, noise, rho, effects=named)
+    result = plan(machine, minutes, noise, rho, effects=named, device=device)
     out = files(machine, result, Path(folder), __version__, date.today().isoformat())
     from ..reports.plots import front_png  # matplotlib only when a plan is written
     out[Path(folder) / "front.png"] = front_png(machine, result)

@@ -23,8 +23,13 @@ named effects (``--effects``; default ``apart.common_effects``) the machine file
 tell apart, by the advice's margin (``apart.py``); plan.json gives each pair's sizes, and the
 condition of the location errors, for the plan and for the default.
 
-Not built: a probe's plan, the ball's positions beyond the advice's places, a reversal
-among the effects told apart."""
+A probe's plan (``device="probe"``) searches the probing programs instead (each path's poses
+thinned to ``[probe] poses``, timed by the motion check as ``check-program`` times them);
+``noise_um`` is then the trigger's noise per touch, and each pose's centre weighs as its
+touches make it: information NᵀN per unit noise, N the touches' directions (``weights``).
+
+Not built: the ball's positions beyond the advice's places, a reversal among the effects
+told apart."""
 
 from __future__ import annotations
 
@@ -39,8 +44,10 @@ import numpy as np
 from .. import me
 from ..configuration.session import reload
 from ..controllers.checking import check_file
+from ..controllers.probing import probe_program
 from ..controllers.programs import checked_program, measure_program, program_name
 from ..controllers.registry import controller
+from ..data.probe import need_probe, touch_directions
 from ..data.rtest import Measurements, read_poses
 from ..errors import CompgenError
 from ..files import read_text
@@ -102,6 +109,7 @@ class Plan:
     told_kept: bool = True              # it tells apart every pair the default does, as well
     after: str = ""                     # a follow-up: the fit whose data it follows (``default``:
                                         # those data alone)
+    device: str = "rtest"               # "probe": a touch probe's plan, noise_um per touch
 
 
 @dataclass(frozen=True)
@@ -139,14 +147,29 @@ def scales(machine: Machine, names: Sequence[str]) -> np.ndarray:
                      else np.radians(machine.limits.tilt_arcsec / 3600) for n in names])
 
 
-def covariance(machine: Machine, poses: Poses, noise_um: float, rho: float = 0.0) -> np.ndarray:
+def weights(machine: Machine, poses: Poses, device: str) -> np.ndarray | None:
+    """Per pose of a probe's plan, U (3 × 3) with UᵀU = NᵀN, N the directions of its touches
+    (``probe.touch_directions``): its centre's information per unit touch noise, as the
+    log's reader weighs it (covariance σ²(NᵀN)⁻¹); None for an R-test (σ per reading)."""
+    if device != "probe":
+        return None
+    n = touch_directions(machine, poses, need_probe(machine))
+    return np.linalg.cholesky(np.einsum("nmi,nmj->nij", n, n)).transpose(0, 2, 1)
+
+
+def _weighed(weight: np.ndarray | None, J: np.ndarray) -> np.ndarray:
+    return J if weight is None else np.einsum("nij,nj...->ni...", weight, J)
+
+
+def covariance(machine: Machine, poses: Poses, noise_um: float, rho: float = 0.0,
+               device: str = "rtest") -> np.ndarray:
     """The covariance of the rotary axes' location errors (``judged``) a fit of readings at
     ``poses`` reports (mm, rad), every mounting's and later nest's offset fitted beside them;
     infinite where the poses do not identify them. Under AR(1) noise of ``rho`` within each
-    run, the fit's sandwich covariance."""
+    run, the fit's sandwich covariance; a probe's centres each weighed by its touches."""
     names = [*SETUP, *judged(machine)]
     p = len(names)
-    J = fitted_columns(machine, poses, names)
+    J = fitted_columns(machine, poses, names, weights(machine, poses, device))
     flat = J.reshape(-1, p)
     G = flat.T @ flat
     if not _identifies(G):
@@ -161,21 +184,25 @@ def covariance(machine: Machine, poses: Poses, noise_um: float, rho: float = 0.0
     return cov[3:, 3:]
 
 
-def fitted_columns(machine: Machine, poses: Poses, names: Sequence[str]) -> np.ndarray:
+def fitted_columns(machine: Machine, poses: Poses, names: Sequence[str],
+                   weight: np.ndarray | None = None) -> np.ndarray:
     """The Jacobian (n, 3, p) of ``names`` at ``poses`` as a fit of them has it: each later
-    mounting's and nest's offset projected out (``FreeConstants``), as ``identify`` does."""
-    J = Model(machine, names).linearise(poses)[1].copy()
-    project = FreeConstants(machine, names, poses).projector()
+    mounting's and nest's offset projected out (``FreeConstants``), as ``identify`` does;
+    each pose weighed by ``weight`` (``weights``) where given."""
+    J = _weighed(weight, Model(machine, names).linearise(poses)[1].copy())
+    project = FreeConstants(machine, names, poses).projector(
+        None if weight is None else lambda idx, a: _weighed(weight[idx], a))
     return J if project is None else project(J)
 
 
-def _products(machine: Machine, poses: Poses, effects: Sequence[Effect] = ()) -> dict:
+def _products(machine: Machine, poses: Poses, effects: Sequence[Effect] = (), device: str = "rtest") -> dict:
     """The small products of one set-up's columns: the location errors (``judged``) and the
     ``effects``' parameters after them (J), the ball's offset (G) and the nest's (N)."""
     names = [*judged(machine), *(n for e in effects for n in e.params)]
-    J = Model(machine, names).linearise(poses)[1].reshape(-1, len(names))
-    G = Model(machine, list(SETUP)).linearise(poses)[1].reshape(-1, 3)
-    N = Model(machine, list(NEST)).linearise(poses)[1].reshape(-1, 3)
+    w = weights(machine, poses, device)
+    J = _weighed(w, Model(machine, names).linearise(poses)[1]).reshape(-1, len(names))
+    G = _weighed(w, Model(machine, list(SETUP)).linearise(poses)[1]).reshape(-1, 3)
+    N = _weighed(w, Model(machine, list(NEST)).linearise(poses)[1]).reshape(-1, 3)
     return {"JJ": J.T @ J, "JG": J.T @ G, "GG": G.T @ G, "JN": J.T @ N, "GN": G.T @ N, "NN": N.T @ N}
 
 
@@ -227,17 +254,28 @@ def _worst(info: np.ndarray, noise_um: float, unit: np.ndarray) -> float:
     return float((noise_um * 1e-3 * np.sqrt(var) / unit).max())
 
 
-def candidates(machine: Machine, effects: Sequence[Effect] = ()) -> list[Setup]:
+def candidates(machine: Machine, effects: Sequence[Effect] = (), device: str = "rtest") -> list[Setup]:
     """Every set-up the machine can run, timed by the motion check, its products holding
-    the ``effects``' columns too."""
+    the ``effects``' columns too: an R-test's programs, or a probe's (its poses thinned by
+    ``[probe] poses`` already: each is offered whole)."""
     out = []
-    for m in (v for p in proposals(machine, None) for v in _thinned(p)):
+    offered = proposals(machine, None, device)
+    for m in (v for p in offered for v in (_thinned(p) if device == "rtest" else [p])):
         try:
-            done = checked_program(machine, m.poses, m.path, machine.controller, MODE, "PLAN", "", "")
+            seconds = _seconds(machine, m, device)
         except CompgenError:
             continue
-        out.append(Setup(m, done.seconds / 60.0, _products(machine, m.poses, effects)))
+        out.append(Setup(m, seconds / 60.0, _products(machine, m.poses, effects, device)))
     return out
+
+
+def _seconds(machine: Machine, m: Proposal, device: str) -> float:
+    """The program's time as the motion check counts it (a refusal raises)."""
+    if device == "rtest":
+        return checked_program(machine, m.poses, m.path, machine.controller, MODE, "PLAN", "", "").seconds
+    ctl = controller(machine.controller)
+    text = probe_program(machine, m.poses, m.path, ctl.name, "PLAN", "", "").files[ctl.program_ext]
+    return check_file(machine, ctl, text, "PLAN").result.seconds
 
 
 def _thinned(m: Proposal):
@@ -267,7 +305,8 @@ def _poses(setups: Sequence[Setup]) -> Poses:
 
 
 def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
-         mount_minutes: float = MOUNT_MINUTES, effects: Sequence[str] | None = None) -> Plan:
+         mount_minutes: float = MOUNT_MINUTES, effects: Sequence[str] | None = None,
+         device: str = "rtest") -> Plan:
     """The set-ups with the least worst scaled σ within ``minutes`` (a beam search over sets
     of the set-ups the machine can run, ``BEAM`` kept at each size) that tell apart every
     pair of ``effects`` (default ``common_effects``) the machine file's own paths tell apart
@@ -292,12 +331,15 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
         raise CompgenError(f"--effects {reversal}: a reversal's start sides are free constants a plan's "
                            "information does not hold yet", hint="leave it out; diagnose's advice on data "
                                                                   "tells a reversal apart")
-    offered = candidates(machine, named)
+    if device == "probe" and rho:
+        raise CompgenError(f"--rho {rho:g}: a probe's touches are each their own trigger, not a series",
+                           hint="leave --rho out for a probe's plan")
+    offered = candidates(machine, named, device)
     own = [s for s in offered if s.proposal.label in machine.paths]
     if not own:
         raise CompgenError(f"no path of {machine.source} can be measured on this machine",
                            hint=f"check the paths with measure-program --machine {machine.source}")
-    default_cov = covariance(machine, _poses(own), noise_um, rho)
+    default_cov = covariance(machine, _poses(own), noise_um, rho, device)
     default = (_minutes(own, mount_minutes), sigmas_of(names, default_cov), worst_scaled(default_cov, unit))
     default_told = told_by(_information(own, len(names)), len(names), named, noise_um)
 
@@ -331,7 +373,7 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
             best, told, kept = key, now, True
             break
     chosen = _ordered([offered[i] for i in sorted(best)])
-    cov = covariance(machine, _poses(chosen), noise_um, rho)
+    cov = covariance(machine, _poses(chosen), noise_um, rho, device)
     front, low = [], np.inf
     for w, spent in sorted(finite.values(), key=lambda v: (v[1], v[0])):
         if w < FRONT_STEP * low:         # a point that buys a worst σ 5 % lower or more
@@ -340,7 +382,8 @@ def plan(machine: Machine, minutes: float, noise_um: float, rho: float = 0.0,
             front.append((spent, w))
             low = w
     return Plan(tuple(chosen), _minutes(chosen, mount_minutes), sigmas_of(names, cov),
-                worst_scaled(cov, unit), tuple(front), default, noise_um, rho, told, default_told, kept)
+                worst_scaled(cov, unit), tuple(front), default, noise_um, rho, told, default_told, kept,
+                device=device)
 
 
 def sigmas_of(names: Sequence[str], cov: np.ndarray) -> dict[str, float]:
@@ -364,15 +407,17 @@ def files(machine: Machine, p: Plan, folder: Path, version: str, date: str) -> d
     for i, s in enumerate(p.setups, 1):
         m = s.proposal
         name = program_name(f"P{i}_{m.name}", room=4, most=ctl.name_max)
-        emitted = measure_program(machine, m.poses, m.path, ctl.name, MODE, name, version, date)
+        probe = p.device == "probe"
+        emitted = (probe_program(machine, m.poses, m.path, ctl.name, name, version, date) if probe
+                   else measure_program(machine, m.poses, m.path, ctl.name, MODE, name, version, date))
         out |= emitted.paths(folder / f"{name}{ctl.program_ext}", name, ctl.program_ext)
         setups.append({"label": m.label, "path": m.path, "ball": [round(v, 4) for v in m.ball],
                        "probe_length": m.nest if m.nest is not None else machine.probe_length,
                        "there_and_back": m.back, "poses": f"{name}.poses.csv",
                        "program": f"{name}{ctl.program_ext}", "minutes": round(s.minutes, 2)})
     names = judged(machine)
-    doc = {"format": FORMAT, "machine": machine.name, "controller": ctl.name,
-           "noise": {"noise_um": p.noise_um, "rho": p.rho,
+    doc = {"format": FORMAT, "machine": machine.name, "controller": ctl.name, "device": p.device,
+           "noise": {"noise_um": p.noise_um, "rho": p.rho, "per": {"probe": "touch"}.get(p.device, "reading"),
                      "model": "AR(1) within each run" if p.rho else "white"},
            "minutes": round(p.minutes, 2), "sigma": _shown(names, machine, p.sigma),
            "worst_scaled_sigma": p.worst, "scaled_by": {"offset_um": machine.limits.offset_um,
@@ -387,7 +432,7 @@ def files(machine: Machine, p: Plan, folder: Path, version: str, date: str) -> d
                **_told_doc(machine, p.default_told)},
            **_told_doc(machine, p.told),
            **({} if p.after else {"separations_as_default": p.told_kept}),
-           "not_built": ["a probe's plan", "ball positions beyond the advice's places",
+           "not_built": ["ball positions beyond the advice's places",
                          "backlash among the effects told apart (its start sides are free constants)"]}
     out[folder / "plan.json"] = json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
     return out
@@ -418,7 +463,8 @@ def text(machine: Machine, p: Plan) -> str:
     unit_of = {n: DISPLAY[effect_of_param(machine, n).unit] for n in p.sigma}
     worst = max(p.sigma, key=lambda n: p.sigma[n] / scales(machine, [n])[0])
     plan, beside = ("with it ", "the data's") if p.after else ("plan    ", "the default's")
-    lines = [f"compgen plan: {machine.name}; noise {p.noise_um:g} µm per reading"
+    lines = [f"compgen plan: {machine.name}; noise {p.noise_um:g} µm per "
+             f"{'touch (a probe)' if p.device == 'probe' else 'reading'}"
              + (f", AR(1) ρ {p.rho:g} within each run" if p.rho else " (white)"),
              f"  {plan}{p.minutes:6.1f} min: worst σ {p.worst:.4f} of its [limits] "
              f"({worst} ±{p.sigma[worst] * unit_of[worst][1]:.3f} {unit_of[worst][0]})",
@@ -472,8 +518,11 @@ def checked(machine: Machine, folder: Path) -> tuple[list[str], bool, dict]:
     noise_um, rho = noise.get("noise_um"), noise.get("rho", 0.0)
     if not (_number(noise_um) and noise_um > 0 and _number(rho) and 0 <= rho < 1):
         raise CompgenError("the plan names no noise it was made for (noise_um, rho)", where=str(where))
+    device = doc.get("device", "rtest")
+    if device not in ("rtest", "probe"):
+        raise CompgenError(f"a plan for the device {str(device)[:40]!r}: rtest or probe", where=str(where))
     made = {"minutes": doc.get("minutes") if _number(doc.get("minutes")) else None, "noise_um": noise_um,
-            "rho": rho}
+            "rho": rho, "device": device}
     ctl = controller(machine.controller)
     lines, ok, poses = [], True, []
     for s in doc["setups"]:
@@ -500,7 +549,7 @@ def checked(machine: Machine, folder: Path) -> tuple[list[str], bool, dict]:
             return [*lines, f"  σ not evaluated: the data it follows: {e}"], False, made
         before = Measurements.concat(data).poses
         poses = [before, *(p.with_setup(int(before.setup[-1])) for p in poses)]
-    cov = covariance(machine, Poses.concat(poses), noise_um, rho)
+    cov = covariance(machine, Poses.concat(poses), noise_um, rho, device)
     now = _shown(judged(machine), machine, sigmas_of(judged(machine), cov))
     for n, was in (doc.get("sigma") if isinstance(doc.get("sigma"), dict) else {}).items():
         got = now.get(n)

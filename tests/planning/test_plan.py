@@ -204,3 +204,42 @@ def test_an_effect_the_location_errors_absorb_is_said_unseen(seed_machine):
         p = P.plan(seed_machine, 10.0, NOISE_UM, effects=["ECC:h2", absorbed])
         assert p.told.seen == {"ECC:h2": True, absorbed: False}, p.told.seen
         assert p.told.apart[0].above[1] == np.inf
+
+
+def test_a_probes_plan_writes_probing_programs_and_predicts_the_fits_sigma(tmp_path):
+    """``--device probe``: the set-ups are probing programs (each passes check-program, the
+    plan --check holds), the noise is the trigger's per touch, and a fit of the plan's
+    probe logs (touches 0.5 µm off the sphere, read back as compgen reads a log: each centre
+    with its covariance) reports σ within 20 % of the plan's."""
+    from compgen.data.probe import format_probe_log, read_probe_log, simulate_touches, sphere_centres
+    code, out, err = run("plan", "--machine", SEED_MACHINE, "--minutes", "20", "--noise-um", NOISE_UM,
+                         "--device", "probe", "-o", tmp_path / "p")
+    assert code == 0, err
+    doc = json.loads((tmp_path / "p" / "plan.json").read_text())
+    assert doc["device"] == "probe" and doc["noise"]["per"] == "touch" and "per touch" in out
+    for s in doc["setups"]:
+        code, said, err = run("check-program", "--machine", SEED_MACHINE, tmp_path / "p" / s["program"])
+        assert code == 0 and "OK" in said and "stylus" in said, err
+    code, said, err = run("plan", "--machine", SEED_MACHINE, "--check", tmp_path / "p")
+    assert code == 0 and said.rstrip().endswith("the plan holds"), said + err
+    machine = load_machine(SEED_MACHINE)
+    p = P.plan(machine, 20.0, NOISE_UM, device="probe")
+    rng = np.random.default_rng(6)
+    data = []
+    for k, s in enumerate(p.setups):
+        poses = s.proposal.poses
+        tips, d = simulate_touches(machine, poses, simulate(machine, TABLE4, poses).deviation, NOISE_UM, rng)
+        (tmp_path / f"{k}.log").write_text(format_probe_log(machine, machine.probe, poses, tips, d))
+        data.append(sphere_centres(read_probe_log(tmp_path / f"{k}.log", machine), machine).data)
+    fit = identify(machine, data)
+    for n, predicted in p.sigma.items():
+        assert fit.parameters[n].std == pytest.approx(predicted, rel=0.2), (n, predicted)
+
+
+@pytest.mark.parametrize("args, words", [(["--device", "probe"], "the probe's noise is not known"),
+                                         (["--device", "probe", "--noise-um", "0.5", "--rho", "0.5"],
+                                          "a probe's touches are each their own trigger")])
+def test_a_probes_plan_without_its_noise_or_with_a_rho_is_refused_in_one_line(tmp_path, args, words):
+    code, _, err = run("plan", "--machine", SEED_MACHINE, "--minutes", "20", *args, "-o", tmp_path / "p")
+    assert code == 2 and words in err and err.count("\n") == 1, err
+    assert not (tmp_path / "p").exists()
