@@ -6,7 +6,7 @@ import shlex
 from itertools import combinations
 
 from .. import me
-from ..model.effects import effect_name
+from ..model.effects import IN_TIME, effect_name
 from ..units import three, three_header
 from .advising import Proposal
 from .diagnosis import REPEATS_TRIED, Diagnosis
@@ -157,10 +157,22 @@ def _rivals_text(d: Diagnosis, fit: str, after: str) -> list[str]:
                       + ", they predict readings closer than the noise tells apart (or the same: they "
                       "differ by what the location errors absorb). Any one of them models the misfit: "
                       f"{me()} fit --from {fit} --add {best} -o {after};",
-                      "  which of them is the physical cause stays open (it needs another "
-                      "reference), and the location errors written to a control depend on the "
-                      "choice:", *_carries(d)]
+                      "  which of them is the physical cause stays open ("
+                      + ("they differ only in time: the same paths measured again later, the "
+                         "R-test's clock running on, part them as they grow apart; fit everything "
+                         "together then" if _in_time(d) else "it needs another reference")
+                      + "), and the location errors written to a control depend on the choice:",
+                      *_carries(d)]
     return lines
+
+
+def _in_time(d: Diagnosis) -> bool:
+    """Whether the best and its rivals are one error growing in time by different shapes
+    (``AOC:t1`` against ``AOC:e45``): what no set-up of these minutes tells apart, more
+    minutes do, as the shapes grow apart."""
+    names = [d.significant[0].effect, *d.rivals] if d.significant else []
+    return (len({n.partition(":")[0] for n in names}) == 1
+            and all(n.partition(":")[2][:1] in IN_TIME for n in names))
 
 
 def _unseen(d: Diagnosis, fit: str, after: str) -> list[str]:
@@ -244,6 +256,7 @@ def conclusion(d: Diagnosis, fit: str, after: str) -> str:
         plan = d.rivals_separated_by
         return (f"VERDICT: not told apart: {' vs '.join((best, *d.rivals))}; "
                 + (f"measure: {', '.join(m.label for m in plan)} (below)" if plan else
+                   "they differ only in time: measure again later (below)" if _in_time(d) else
                    "no set-up of this machine tells them apart (below)"))
     if kind == "unexplained" and d.exhausted:
         return (f"VERDICT: unexplained: {' vs '.join((best, *d.rivals))} stay tied with "

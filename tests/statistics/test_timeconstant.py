@@ -106,3 +106,29 @@ def test_a_scale_warming_as_its_axis_works_is_named_and_added_within_3_sigma(see
     found = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM)
     assert found.found == "EAA:g15", (found.verdict, [c.effect for c in found.significant[:3]], found.rivals)
     _within_3_sigma(seed_machine, data, found.found)
+
+
+def test_one_error_growing_by_shapes_no_set_up_parts_says_more_minutes_do(seed_machine):
+    """AOC growing as t² (no candidate's shape): over one K4 + K1 + K2, AOC:t1 and AOC:e45 tie
+    and no single set-up of the machine parts them at their sizes. They are one error's two
+    shapes in time: the text says measuring again later parts them (not that it needs another
+    reference), and a second session back to back does."""
+    from conftest import ARCSEC
+
+    from compgen.model.poses import Poses
+    from compgen.planning.advice import Advisor
+    from compgen.statistics.diagnose_text import report
+    poses = generate(seed_machine, ["K4", "K1", "K2"])
+    truth = {**TABLE4, "AOC:t2": 4 * ARCSEC}
+    data = [simulate(seed_machine, truth, poses, NOISE_UM, np.random.default_rng(7))]
+    found = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM, advisor=Advisor)
+    text = report(found)
+    assert found.verdict == "rivals" and not found.rivals_separated_by, found.verdict
+    assert text.startswith("VERDICT: not told apart: AOC:t1 vs AOC:e45; they differ only in time: measure "
+                           "again later"), text.splitlines()[0]
+    assert "they differ only in time: the same paths measured again later" in text
+    assert "it needs another reference" not in text
+    later = Poses(poses.q, poses.ball, poses.t + poses.t.max() + 20, poses.path)
+    data.append(simulate(seed_machine, truth, later, NOISE_UM, np.random.default_rng(8)))
+    found = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM, advisor=Advisor)
+    assert found.verdict != "rivals" or found.rivals_separated_by, found.rivals
