@@ -501,10 +501,10 @@ def main() -> None:
     refused = 0                              # clean logs the reader refuses (a touch taken for a chip)
     for seed in range(15 * args.draws):
         rng = np.random.default_rng(5000 + seed)
-        poses = probe_poses(machine, ["K1"])
-        clean = simulate(machine, {}, poses).deviation
-        tips, directions = simulate_touches(machine, poses, clean, TOUCH_UM, rng)
-        (work / "c.log").write_text(format_probe_log(machine, machine.probe, poses, tips, directions))
+        k1 = probe_poses(machine, ["K1"])           # (``poses`` are the power test's, below)
+        clean = simulate(machine, {}, k1).deviation
+        tips, directions = simulate_touches(machine, k1, clean, TOUCH_UM, rng)
+        (work / "c.log").write_text(format_probe_log(machine, machine.probe, k1, tips, directions))
         try:
             sphere_centres(read_probe_log(work / "c.log", machine), machine)
         except CompgenError:
