@@ -448,6 +448,13 @@ def catalogue(machine: Machine) -> tuple[Effect, ...]:
                               if e.name not in known)
 
 
+def one_error_in_time(names: Sequence[str]) -> bool:
+    """Whether effects are one error growing in time by different shapes (``AOC:t1``,
+    ``AOC:e45``): what no set-up of some minutes tells apart, more minutes do."""
+    return (len(names) > 1 and len({n.partition(":")[0] for n in names}) == 1
+            and all(n.partition(":")[2][:1] in IN_TIME for n in names))
+
+
 def location_model(machine: Machine) -> tuple[str, ...]:
     """The seed's model generalised: ball offset plus the four location errors of each
     rotary axis (for the seed machine exactly XOW YOW ZOW, YOA ZOA BOA COA, XOC YOC AOC BOC).

@@ -17,12 +17,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from itertools import combinations
 
 import numpy as np
 
 from ..data.rtest import Measurements, RTestData
 from ..errors import CompgenError
-from ..model.effects import IN_TIME, Effect, catalogue, effect_of_param, resolve
+from ..model.effects import IN_TIME, Effect, catalogue, effect_of_param, one_error_in_time, resolve
 from ..model.frames import sensor_axes
 from ..model.kinematics import Model
 from ..model.machine import Machine
@@ -442,6 +443,10 @@ def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dic
             by_rival, separated_by, left_open, same = telling_apart(measured, group, res.rss / res.dof,
                                                                     advising)
             out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
+            names = [row.effect.name for row in group]
+            if not separated_by and one_error_in_time(names):     # more minutes part its shapes
+                separated_by = advising.runnable([m for m in advising.candidates if m.again], 1)
+                left_open = {m.label: list(combinations(names, 2)) for m in separated_by}
     exhausted = tuple(m.run_label for m in separated_by
                       if m.again and _times_measured(machine, res.poses, res.seg, m) >= REPEATS_TRIED)
     if rival_names and not separated_by:

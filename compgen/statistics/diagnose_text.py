@@ -6,7 +6,7 @@ import shlex
 from itertools import combinations
 
 from .. import me
-from ..model.effects import IN_TIME, effect_name
+from ..model.effects import effect_name, one_error_in_time
 from ..units import three, three_header
 from .advising import Proposal
 from .diagnosis import REPEATS_TRIED, Diagnosis
@@ -142,8 +142,10 @@ def _rivals_text(d: Diagnosis, fit: str, after: str) -> list[str]:
                          + ("together they tell every pair apart" if not left else
                             "together they leave " + ", ".join(" / ".join(p) for p in left) + " open"))
             for i, m in enumerate(plan, 1):
-                lines.append(f"   {i}. {m.label} (tells apart "
-                             + ", ".join(" / ".join(p) for p in sorted(_told(d, m))) + ")")
+                told = sorted(_told(d, m))
+                lines.append(f"   {i}. {m.label} (" + (f"tells apart {', '.join(' / '.join(p) for p in told)}"
+                             if told else "parts none at their sizes here: their shapes grow apart in time; "
+                             "measure it, fit, diagnose, and again while they stay tied") + ")")
                 lines.append(f"      {_measure(d, m)}")
             lines += _then(plan, fit, after)
         elif not d.searched:             # no measurement was searched for (see the notes)
@@ -167,12 +169,8 @@ def _rivals_text(d: Diagnosis, fit: str, after: str) -> list[str]:
 
 
 def _in_time(d: Diagnosis) -> bool:
-    """Whether the best and its rivals are one error growing in time by different shapes
-    (``AOC:t1`` against ``AOC:e45``): what no set-up of these minutes tells apart, more
-    minutes do, as the shapes grow apart."""
-    names = [d.significant[0].effect, *d.rivals] if d.significant else []
-    return (len({n.partition(":")[0] for n in names}) == 1
-            and all(n.partition(":")[2][:1] in IN_TIME for n in names))
+    """Whether the best and its rivals are one error growing in time by different shapes."""
+    return bool(d.significant) and one_error_in_time([d.significant[0].effect, *d.rivals])
 
 
 def _unseen(d: Diagnosis, fit: str, after: str) -> list[str]:

@@ -108,14 +108,16 @@ def test_a_scale_warming_as_its_axis_works_is_named_and_added_within_3_sigma(see
     _within_3_sigma(seed_machine, data, found.found)
 
 
-def test_one_error_growing_by_shapes_no_set_up_parts_says_more_minutes_do(seed_machine):
+def test_one_error_growing_by_shapes_no_set_up_parts_is_measured_again_later(seed_machine):
     """AOC growing as t² (no candidate's shape): over one K4 + K1 + K2, AOC:t1 and AOC:e45 tie
     and no single set-up of the machine parts them at their sizes. They are one error's two
-    shapes in time: the text says measuring again later parts them (not that it needs another
-    reference), and a second session back to back does."""
+    shapes in time: the advice is the repeat right after these data, said to part none at
+    their sizes alone (it said no set-up tells them apart and that the cause needs another
+    reference). Followed as printed, each repeat in a file of its own, the loop ends naming
+    AOC in time or unexplained once the repeat is in the data three times, never another
+    error."""
     from conftest import ARCSEC
 
-    from compgen.model.poses import Poses
     from compgen.planning.advice import Advisor
     from compgen.statistics.diagnose_text import report
     poses = generate(seed_machine, ["K4", "K1", "K2"])
@@ -123,12 +125,16 @@ def test_one_error_growing_by_shapes_no_set_up_parts_says_more_minutes_do(seed_m
     data = [simulate(seed_machine, truth, poses, NOISE_UM, np.random.default_rng(7))]
     found = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM, advisor=Advisor)
     text = report(found)
-    assert found.verdict == "rivals" and not found.rivals_separated_by, found.verdict
-    assert text.startswith("VERDICT: not told apart: AOC:t1 vs AOC:e45; they differ only in time: measure "
-                           "again later"), text.splitlines()[0]
-    assert "they differ only in time: the same paths measured again later" in text
+    assert text.startswith("VERDICT: not told apart: AOC:t1 vs AOC:e45; measure: K4 again, right after these "
+                           "data"), text.splitlines()[0]
+    assert "(parts none at their sizes here: their shapes grow apart in time" in text
     assert "it needs another reference" not in text
-    later = Poses(poses.q, poses.ball, poses.t + poses.t.max() + 20, poses.path)
-    data.append(simulate(seed_machine, truth, later, NOISE_UM, np.random.default_rng(8)))
-    found = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM, advisor=Advisor)
-    assert found.verdict != "rivals" or found.rivals_separated_by, found.rivals
+    for seed in range(8, 14):
+        m = found.rivals_separated_by[0]
+        assert m.again and m.path == "K4", m.label
+        data.append(simulate(seed_machine, truth, m.poses, NOISE_UM, np.random.default_rng(seed)))
+        found = diagnose(seed_machine, data, identify(seed_machine, data), noise_um=NOISE_UM, advisor=Advisor)
+        if found.verdict != "rivals":
+            break
+    assert (found.found or "").startswith("AOC:") or (found.unexplained and found.exhausted), \
+        (found.verdict, found.found, found.rivals)
