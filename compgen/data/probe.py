@@ -211,22 +211,26 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
     t = np.array([np.nanmin(log.t[g]) if not np.isnan(log.t[g]).all() else np.nan for g in groups])
     poses = Poses(q, ball, t, log.path[first])
     data = RTestData(poses, reading, log.source, log.sha256, tuple(int(log.lines[i]) for i in first),
-                     device="probe", cov=cov, cov_dof=dof, lobes=trigger_lobes(log, groups, normals))
+                     device="probe", cov=cov, cov_dof=dof,
+                     lobes=trigger_lobes(log, groups, normals, inverse_info))
     return Centres(data, centre, math.sqrt(s2) * 1e3, dof, radius_offset * 1e3, radius_sigma * 1e3,
                    tuple(warnings))
 
 
-def trigger_lobes(log: ProbeLog, groups: list[np.ndarray], normals: list[np.ndarray]) -> np.ndarray:
+def trigger_lobes(log: ProbeLog, groups: list[np.ndarray], normals: list[np.ndarray],
+                  inverse_info: list[np.ndarray]) -> np.ndarray:
     """(n, 3, 2): each pose's reading per mm of the trigger's lobes' cos and sin amplitude
     (``TRIGGER_LOBES``): a touch triggering δ farther out along its normal moves the centre
-    on the known radius by N⁺δ (N the touches' outward normals, first order), and the reading,
-    nominal minus probed, by −N⁺δ; δ by the direction each touch moved (``log.direction``)."""
+    on the known radius by N⁺δ (N = −u the touches' outward normals, u their unit vectors to
+    the centre, first order), and the reading, nominal minus probed, by −N⁺δ = (uᵀu)⁻¹uᵀδ
+    (``inverse_info``: each pose's (uᵀu)⁻¹); δ by the direction each touch moved
+    (``log.direction``)."""
     out = np.zeros((len(groups), 3, 2))
-    for k, (g, u) in enumerate(zip(groups, normals, strict=True)):
+    for k, (g, u, G) in enumerate(zip(groups, normals, inverse_info, strict=True)):
         d = log.direction[g]
         lobe = (np.hypot(d[:, 0], d[:, 1]) ** TRIGGER_LOBES
                 * np.exp(1j * TRIGGER_LOBES * np.arctan2(d[:, 1], d[:, 0])))       # sin³θ·e^{3iφ}
-        out[k] = -np.linalg.pinv(-u) @ np.stack([lobe.real, lobe.imag], axis=1)
+        out[k] = G @ (u.T @ np.stack([lobe.real, lobe.imag], axis=1))
     return out
 
 

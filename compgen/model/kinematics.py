@@ -201,26 +201,24 @@ def coordinate(machine: Machine, effect: Effect, poses: Poses) -> np.ndarray:
     """The coordinate an effect's basis runs in: rad, position per 1000 mm, or hours (a
     drift, and any effect in time: ``e`` and ``t``); a scale in time (``g``), the axis's
     position (rad, per 1000 mm) times its growth 1 − exp(−t/τ)."""
-    if effect.carrier == "time" or effect.basis.kind in IN_TIME:
-        if np.isnan(poses.t).any():
-            raise CompgenError(f"{effect.name} needs the time column t in every data row")
-        if effect.basis.kind != "g":
-            return poses.t / TIME_SCALE_S
-        grown = -np.expm1(-poses.t / (60.0 * effect.basis.order))
-        axis = machine.axis(effect.carrier)
-        q = poses.q[:, machine.index(axis.name)]
-        return grown * (q if axis.rotary else q / POLY_SCALE_MM)
-    if effect.basis.kind == "const":
+    kind = effect.basis.kind
+    timed = effect.carrier == "time" or kind in IN_TIME
+    if timed and np.isnan(poses.t).any():
+        raise CompgenError(f"{effect.name} needs the time column t in every data row")
+    if timed and kind != "g":
+        return poses.t / TIME_SCALE_S
+    if kind == "const":
         return np.zeros(len(poses))
     axis = machine.axis(effect.carrier)
     q = poses.q[:, machine.index(axis.name)]
-    if effect.basis.kind == "r":
+    if kind == "r":
         side = poses.side[:, machine.index(axis.name)]
         known = ~np.isnan(side)
         if known.all():
             return side.copy()
         return np.where(known, side, motion_direction(q, runs(poses)))
-    return q if axis.rotary else q / POLY_SCALE_MM
+    position = q if axis.rotary else q / POLY_SCALE_MM
+    return position * -np.expm1(-poses.t / (60.0 * effect.basis.order)) if kind == "g" else position
 
 
 BLOCK = 16384            # poses per evaluation of the chain

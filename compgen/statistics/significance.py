@@ -247,8 +247,11 @@ def paired(best: np.ndarray, rivals: dict[str, np.ndarray], seconds: list[np.nda
     candidate is judged on a residual a second effect still moves: two drifts in time made
     the best's curve and its rivals remove 0.9 of one another's share over 80 minutes of
     data, where beside the second drift they differed by tens of σ̂²."""
+    seconds = [off(s) for s in seconds]      # off the model once each: ``off`` is linear
+
     def pair(c: np.ndarray) -> float:
-        return max(float(np.sum((span(off(np.column_stack([c, s]))).T @ rw) ** 2)) for s in seconds)
+        c = off(c)
+        return max(float(np.sum((span(np.column_stack([c, s])).T @ rw) ** 2)) for s in seconds)
 
     top = pair(best)
     return tuple(name for name, c in rivals.items() if top - pair(c) < within)
