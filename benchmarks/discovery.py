@@ -217,7 +217,8 @@ def probed(machine, truth, poses, kind, rng, outside=None, folder: Path | None =
     tips, directions = simulate_touches(machine, poses, dev, TOUCH_UM, rng)
     if TRIGGER in truth:
         size, phase = truth[TRIGGER]
-        d = directions
+        axes = sensor_axes(machine, poses.q)           # on a head the stylus turns with the tool
+        d = directions if axes is None else np.einsum("nji,nmj->nmi", axes, directions)
         phi = np.arctan2(d[..., 1], d[..., 0])
         lobe = size * 1e-3 * np.hypot(d[..., 0], d[..., 1]) ** 3 * np.cos(3 * (phi - phase))
         tips = tips - lobe[..., None] * d          # farther out: against the motion, along the normal
@@ -378,6 +379,9 @@ HEAD_CASES = {
     "XOC warming 6 µm, τ = 8 min (off the grid)": ({"XOC:e8": 6 * UM}, OFF_GRID),
     "the nest's X sensor gain 2 % (calibration 1 %)": ({"gain_X": 0.02}, "device"),
     "a ball with three lobes, 0.8 µm (the device)": ({FORM: (0.8, 3, 0.4)}, "device"),
+    # a head probed under TCP, its touches turning with the stylus
+    "probed: C radial 2/rev, 3 µm": ({"EXC:h2c": 3 * UM}, "EXC:h2"),
+    "probed: the trigger, three lobes of 1.5 µm (the device)": ({TRIGGER: (1.5, 0.3)}, "device"),
 }
 
 
@@ -400,7 +404,7 @@ def wrong_names(named: list[str], truths: set[str], warm: set[str] = frozenset()
     return out
 
 
-def heads() -> None:
+def heads(only: str | None = None) -> None:
     """Each head case on both reference heads: what the loop named, what it measured, and the
     location errors against the truth in their σ; a name that is neither the hidden effect
     nor among the equivalents of one added is marked WRONG (``wrong_names``)."""
@@ -409,9 +413,13 @@ def heads() -> None:
                  ROOT / "machines" / "bc-nutating-head-table.toml"):
         machine = load_machine(path)
         for name, (hidden, expect) in HEAD_CASES.items():
+            if only and only not in name:
+                continue
             used = replace(machine, gain_u=GAIN_U) if any(p.startswith(GAIN) for p in hidden) else machine
-            out = discover(used, {**HEAD_TRUTH, **hidden}, "white", np.random.default_rng(11))
-            truth = {effect_name(p) for p in hidden if not p.startswith(GAIN) and p != FORM} | {expect}
+            out = discover(used, {**HEAD_TRUTH, **hidden}, "white", np.random.default_rng(11),
+                           probe=name.startswith("probed"))
+            truth = {effect_name(p) for p in hidden
+                     if not p.startswith(GAIN) and p not in (FORM, TRIGGER)} | {expect}
             warm = {p.split(":")[0] for p in hidden if ":e" in p or ":g" in p}  # a fitted τ, a grid τ
             wrong = [n for n in wrong_names(out["named"], truth, warm) if not n.startswith("device")]
             mark = ("WRONG: " + ", ".join(wrong) if wrong else
@@ -474,6 +482,7 @@ def main() -> None:
         print(f"{name:<66} {' → '.join(out['named']) or '–':<34} {'; '.join(out['followed']) or '–':<28} "
               f"{out['sigma_um']:6.3f} {out['predict_um']:8.3f} {out['location_sigma']:6.1f}  {mark}{extra}")
     if args.only:
+        heads(args.only)
         return
     print(f"\nfalse alarms on clean data ({args.draws} data sets each, the R-test's noise given; flagged = "
           "any significant effect or sensor gain, or unexplained)")

@@ -135,6 +135,12 @@ def simulate_cmd(machine_file, truth, path_names, noise_um, noise_rho, seed, bal
         poses = generate(machine, names, ball=at, start_s=start_s, back=back, rate_hz=rate_hz, feed=feed,
                          nest=nest_mm(nest))
     drive = None
+    if edits and device == "probe" and machine.heads:
+        raise CompgenError("--edit with --device probe on a head is not simulated: its probing program runs "
+                           "under the control's TCP, which the edit moves, and the log's turn into the "
+                           "machine frame is the machine file's",
+                           hint="simulate the edited machine with an R-test session "
+                                "(leave out --device probe)")
     if edits and device == "probe":
         # the probing program moves the axes by compgen's inverse of the machine file, without
         # TCP: no kinematics edit moves it, and the probe reads the machine against that file

@@ -179,7 +179,8 @@ def check_program_cmd(machine_file, program, controller_name, ball, nest, mode, 
     for finding in result.findings:
         click.echo(finding.text(program))
     where = f"ball at {', '.join(f'{v:g}' for v in at)} mm (from {source})" + (
-        "" if nest is None else f"; nest {nest:g} mm below the gauge line (from "
+        "" if nest is None else f"; {'stylus tip' if checked.probing else 'nest'} {nest:g} mm below the "
+        "gauge line (from "
         f"{'--probe-length' if nest_given else 'the program' + chr(39) + 's header'})")
     if result.findings:
         click.echo(f"{program}: checked with the {where}", err=True)

@@ -159,6 +159,11 @@ class Controller:
         machine; a head only where ``programs_for_head`` says so."""
         return not machine.heads or self.programs_for_head(machine)
 
+    def writes_probing(self, machine: Machine) -> bool:
+        """Whether compgen writes this control's probing programs for ``machine``: every
+        table-table machine; a head is probed under TCP, switched on in the program."""
+        return not machine.heads or self.tcp_switchable
+
     def check_setup(self, machine: Machine) -> None:
         """Refuse a [program] set-up this control cannot run (e.g. a tool it cannot call)."""
 

@@ -17,7 +17,8 @@ from .programs import at_ball, lines_of, program_ball, program_nest
 class FileCheck:
     """The motion check of one program (``result``), the machine as checked (its nest, the
     probe where it probes), the ball it was checked with and where that came from, and the
-    nest's length (None: the machine file's) and whether it was given."""
+    nest's length (None: the machine file's) and whether it was given; ``probing``: a probing
+    program (its tool point the stylus tip)."""
 
     result: Check
     machine: Machine
@@ -25,6 +26,7 @@ class FileCheck:
     ball_from: str
     nest: float | None
     nest_given: bool
+    probing: bool = False
 
 
 def check_file(machine: Machine, ctl: Controller, text: str, source: str, ball=None,
@@ -42,6 +44,6 @@ def check_file(machine: Machine, ctl: Controller, text: str, source: str, ball=N
     machine = at_nest(machine, nest, "--probe-length" if nest is not None else source)
     probing = any(b.probe for b in blocks)     # a probing program: the probe and its sphere
     if probing:
-        machine = with_sphere(machine)
+        machine = with_sphere(machine, nest)
     result = ctl.check(at_ball(machine, at), blocks, probe=machine.probe if probing else None)
-    return FileCheck(result, machine, tuple(at), whence, nest, nest_given)
+    return FileCheck(result, machine, tuple(at), whence, nest, nest_given, probing)

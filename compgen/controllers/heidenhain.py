@@ -331,6 +331,11 @@ PROBE_RUN = re.compile(r"TCH PROBE 4\.3 ABST\+?(\d{1,4}(?:\.\d{1,6})?) F(\d{1,6}
                        r"MB\+?(\d{1,4}(?:\.\d{1,6})?) REFERENCE SYSTEM:0")
 # a tool by number, or by name in double quotes (TOOL CALL "NAME" Z): the control rejects a bare name
 TOOL_CALL = re.compile(r'TOOL CALL (?:\d{1,9}|"[^"]+") Z( S\S*)?')
+# a head's logged tip turned from TCP coordinates into the machine frame (U25): scratch Q20-Q26,
+# the result back into Q1-Q3 that the log's format file prints; no motion
+_NUM = r"[+-]\d{1,6}(?:\.\d{1,9})?"
+LOG_ARITHMETIC = re.compile(rf"FN 3: Q2[01] = \+Q[1-3] \* {_NUM}|FN 1: Q2[0-6] = \+Q20 \+ (?:\+Q21|{_NUM})"
+                            r"|FN 0: Q[1-3] = \+Q2[4-6]")
 MESSAGE = re.compile(r"FN 16: F-PRINT TNC:\\[\w.]+_MSG\.A / SCREEN:")
 
 
@@ -435,7 +440,7 @@ def _plain_block(k: int, raw: str, b: str) -> list[Block] | None:
     if (d := re.fullmatch(r"CYCL DEF 9\.1 DWELL (\S+)", b)) is not None:
         return [dwell(d[1], k, raw)]
     if re.fullmatch(r"FN 0: Q1[0-5] = [+-]\d{1,6}(?:\.\d{1,9})?", b) or re.fullmatch(
-            r"FN 16: F-PRINT TNC:\\[\w.]+ / TNC:\\[\w.]+", b):
+            r"FN 16: F-PRINT TNC:\\[\w.]+ / TNC:\\[\w.]+", b) or LOG_ARITHMETIC.fullmatch(b):
         return [Block(k, raw, "log")]
     return None
 

@@ -123,18 +123,21 @@ def kinematics_edit(machine: Machine, fit: FitResult, controller_name: str, curr
     ``folder``: the folder they are written to; ``despite``: the fit gate's reasons, where the
     edit is written although the fit does not explain its data (its header says so).
 
-    Probe data are measured without the control's kinematics acting (a probing program moves
-    the axes by compgen's inverse of the machine file), so they hold the machine against the
-    machine file: their edit sets the control to the machine file's geometry plus the fit,
-    taking off what ``current`` holds beyond that geometry, where R-test data, measured under
-    TCP, add to what the control held while measuring.
+    Probe data of a table-table machine are measured without the control's kinematics acting
+    (a probing program moves the axes by compgen's inverse of the machine file), so they hold
+    the machine against the machine file: their edit sets the control to the machine file's
+    geometry plus the fit, taking off what ``current`` holds beyond that geometry, where R-test
+    data, measured under TCP, add to what the control held while measuring; so do a head's
+    probe data, probed under TCP.
     """
     devices = {d.device for d in fit.data}
-    if len(devices) > 1:     # a probe measures against the machine file, an R-test against the table
+    # a head is probed under TCP (probing.py), as an R-test measures: against the control's kinematics
+    without_tcp = devices == {"probe"} and not machine.heads
+    if len(devices) > 1 and not machine.heads:   # a probe measures against the machine file, an R-test
+        # against the control's kinematics
         raise CompgenError("the fit joins data measured under TCP (R-test) and without (probe log): they "
                            "measured against different geometries, so no edit holds both",
                            hint="fit each device's data alone, and write the edit from one of them")
-    without_tcp = devices == {"probe"}
     ctl = for_machine(controller_name, machine, edit=True)
     for text in (current, measured):
         if text is not None and re.search(rf"\b{fit.marker}\b", text):
@@ -210,7 +213,9 @@ def _header(machine: Machine, ctl: Controller, fit: FitResult, sign_name: str, s
               *(f"WRITTEN DESPITE THE FIT GATE: {ascii_text(r)}" for r in despite),
               ("measured without TCP (a probing program): the machine against the machine file's geometry; "
                "the edit sets the control to that geometry plus the fit" if without_tcp else
-               "corrections add to the kinematics active while the R-test ran under TCPM/TRAORI"),
+               "corrections add to the kinematics active while the "
+               + ("probe" if {d.device for d in fit.data} == {"probe"} else "R-test")
+               + " ran under TCPM/TRAORI"),
               "BACKUP FIRST: " + ctl.backup,
               f"then run the sign check {sign_name}: see its expected changes" if signcheck else
               "then make the sign check by hand at the poses named: see their expected changes",

@@ -5,10 +5,14 @@ Every pose: the rotary axes turn at the safe height; the stylus comes down above
 sphere; each touch starts ``approach`` from the surface on the line from the sphere's
 centre, probes radially inwards to ``overtravel`` beyond it, logs the tip centre the
 control latched, and goes back the way it came; between touches the stylus rises to the
-height of the first (from above), so it never crosses the sphere. Positions are machine
-axes from compgen's inverse kinematics (no TCP): the log's X, Y, Z are then the frame the
-log's contract names. The program is run through the motion check (``Controller.check``)
-with the probe in the set-up before it is returned.
+start of the touch along the stylus, so it never crosses the sphere. Where the tool does not
+tilt, positions are machine axes from compgen's inverse kinematics (no TCP): the log's X, Y,
+Z are then the frame the log's contract names. A head is probed under TCP, as its measuring
+programs run (off it, a tilted head's tool length is not along the axis a move names): the
+touches turn with the stylus, and each latched tip is turned from TCP coordinates into the
+machine frame by the pose's nominal kinematics before it is logged (U25). The program is run
+through the motion check (``Controller.check``) with the probe in the set-up before it is
+returned.
 
 Per control, what writes the log: LinuxCNC ``G38.2`` with ``(LOGOPEN,…)``/``(LOG,…)`` and
 the probe result parameters #5061–#5063 (LinuxCNC's ``interp_parameter_def.hh``: "5061-5069
@@ -24,22 +28,35 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..data.probe import DIRECTION, MAGIC, need_probe, touch_directions
+from ..data.probe import DIRECTION, MAGIC, need_probe, stylus_up, tip_centres, touch_directions
 from ..data.rtest import BALL
 from ..errors import CompgenError
-from ..model.frames import safe_height
+from ..model.frames import from_world, safe_height, world
 from ..model.kinematics import inverse
-from ..model.machine import Machine, ProbeSetup, check_travel
+from ..model.machine import Machine, ProbeSetup, at_nest, check_travel
 from ..model.poses import Poses
 from . import Emitted, ascii_text, render
 from .base import Controller
-from .programs import ANGLE_DECIMALS, BALL_HEADER, LINEAR_DECIMALS, at_ball, pose_list
+from .programs import (
+    ANGLE_DECIMALS,
+    BALL_HEADER,
+    LINEAR_DECIMALS,
+    NEST_HEADER,
+    TURN_STEP_DEG,
+    at_ball,
+    pose_list,
+)
 from .registry import for_machine
 
 
-def with_sphere(machine: Machine) -> Machine:
-    """The machine with its set-up's ball the probe's calibration sphere."""
+def with_sphere(machine: Machine, length: float | None = None) -> Machine:
+    """The machine with its set-up's ball the probe's calibration sphere; on a head, the
+    stylus tip its tool point, ``length`` below the gauge line (a program's header or
+    --probe-length; default ``[probe] length``): the lever the head turns it by."""
     setup = need_probe(machine)
+    if machine.heads:
+        machine = at_nest(machine, setup.length if length is None else length,
+                          f"{machine.source}: [probe] length")
     return replace(machine, setup=replace(machine.setup, ball_diameter=setup.sphere_diameter))
 
 
@@ -53,22 +70,25 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
     if len(balls) > 1:
         raise CompgenError(f"a program probes one sphere position; these poses hold {len(balls)}",
                            hint="write one program per sphere position")
+    if not ctl.writes_probing(machine):
+        raise CompgenError(f"compgen writes {ctl.words} probing programs for machines whose tool does not "
+                           f"tilt: a head is probed under TCP, which {ctl.words} switches in its "
+                           "configuration, not in the program",
+                           hint="measure this head with an R-test (measure-program), or probe it on a "
+                                "HEIDENHAIN or SINUMERIK control (--controller)")
     ctl.check_tool(setup.tool, "[probe] tool", machine.source)
     if machine.program is None:
         raise CompgenError(f"machine file {machine.source} has no [program] section",
                            hint="it gives the work offset the program's positions are in")
     machine = with_sphere(at_ball(machine, balls[0]))
     rotary = [machine.index(a.name) for a in machine.rotary_axes]
-    linear = [machine.index(c) for c in "XYZ"]
     angles = np.radians(np.round(np.degrees(poses.q[:, rotary]), ANGLE_DECIMALS))
     poses = Poses(inverse(machine, angles, poses.ball), poses.ball, poses.t, poses.path)
     check_travel(machine, poses.q, label)
     safe = safe_height(machine)
     names = [a.name for a in machine.rotary_axes]
-    steps, count, reach = _touch_steps(machine, poses, setup, rotary, linear, names, safe)
-    q = np.repeat(poses.q, setup.touches * 3, axis=0)
-    q[:, linear] = np.array(reach)
-    check_travel(machine, q, f"{label} (the touches' start and end points)")
+    steps, count, reach = _touch_steps(machine, poses, setup, names, safe)
+    check_travel(machine, np.array(reach), f"{label} (the touches' start and end points)")
     before: dict[str, float] = {}
     for s in steps:
         if "axes" in s:
@@ -89,6 +109,7 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
                   tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}", probe_feed=f"{setup.probe_feed:g}",
                   work_offset=machine.program.work_offset, log_name=log_name, log_head=log_head,
                   rotary=names, number=ctl.number, retract=ctl.number(setup.approach, 4), ball=ball,
+                  head_tcp=bool(machine.heads),
                   **ctl.program_context(machine))
     named = {**ctl.message_files(name, [s["note"] for s in steps if s["kind"] == "stop"]),
              **ctl.log_files(log_head, list(count), names, ball)}
@@ -102,49 +123,170 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
     return Emitted(files, named=frozenset(named))
 
 
-def _touch_steps(machine: Machine, poses: Poses, setup: ProbeSetup, rotary: list[int], linear: list[int],
-                 names: list[str], safe: float) -> tuple[list[dict], dict[str, int], list]:
+def _touch_steps(machine: Machine, poses: Poses, setup: ProbeSetup, names: list[str],
+                 safe: float) -> tuple[list[dict], dict[str, int], list]:
     """Each pose's steps: the turn at the safe height, then each touch from its start out on
     the line from the centre, probing inwards, logged, and back the way it came; the poses
-    counted per path, and every point the stylus goes to (for the travel check)."""
+    counted per path, and every point the axes go to (for the travel check). Between
+    touches the stylus rises along itself to where the touch along it started, so it never
+    crosses the sphere. On a head every move runs under TCP (``_Touches``)."""
+    w = _Touches(machine, safe)
     rho = (setup.sphere_diameter + setup.stylus_diameter) / 2
-    hub = rho + setup.approach                # above the centre: the start of the touch from above
+    hub = rho + setup.approach                # along the stylus from the centre: the first touch's start
     u = touch_directions(machine, poses, setup)
-    steps: list[dict] = [{"kind": "rapid", "axes": {"Z": safe}, "note": "up to the safe height"}]
+    up = stylus_up(machine, poses.q)
+    tips = tip_centres(machine, poses.q, None)
     count: dict[str, int] = {}
-    reach = []                                 # every point the stylus goes to, for the travel check
     for i in range(len(poses)):
         path = ascii_text(str(poses.path[i]))
         if not LOG_WORD.fullmatch(path):
             raise CompgenError(f"path label {path!r} cannot stand in the control's log lines",
                                hint="name paths with letters, digits, _ and - (e.g. K4)")
         count[path] = count.get(path, 0) + 1
-        c = poses.q[i, linear]
-        turn = {n: float(np.degrees(poses.q[i, j])) for n, j in zip(names, rotary, strict=True)}
-        steps.append({"kind": "comment", "note": f"---- {path} pose {count[path]}: "
-                      + " ".join(f"{n}{v:.4f}" for n, v in turn.items())})
-        steps.append({"kind": "rapid", "axes": turn, "note": "turn at the safe height"})
-        steps.append({"kind": "rapid", "axes": {"X": c[0], "Y": c[1]}, "note": "above the sphere"})
+        c, q = tips[i], poses.q[i]
+        turn = {n: float(np.degrees(q[j])) for n, j in zip(names, w.rotary, strict=True)}
+        w.steps.append({"kind": "comment", "note": f"---- {path} pose {count[path]}: "
+                        + " ".join(f"{n}{v:.4f}" for n, v in turn.items())})
+        w.turn(q)
+        w.above(q, c + hub * up[i], "above the sphere")
+        log_map = w.log_map(q)
         for j, direction in enumerate(u[i]):
             start = c + (rho + setup.approach) * direction
-            over = start if j == 0 else np.array([start[0], start[1], c[2] + hub])
-            target = c + (rho - setup.overtravel) * direction
+            over = start + (hub - (start - c) @ up[i]) * up[i]     # across the stylus from the first start
             if j:
-                steps.append({"kind": "feed", "axes": dict(zip("XYZ", over, strict=True))})
-            steps.append({"kind": "feed", "axes": dict(zip("XYZ", start, strict=True))})
+                w.to(q, over)
+            w.to(q, start)
             if i == j == 0:       # the preset and the sphere, seen before the first touch
-                steps.append({"kind": "stop",
-                              "note": PROBE_PRESET_CHECK.format(approach=f"{setup.approach:g}")})
-            steps.append({"kind": "probe", "axes": dict(zip("XYZ", target, strict=True)),
-                          "direction": -direction, "distance": setup.approach + setup.overtravel})
-            steps.append({"kind": "log", "path": path, "pose": count[path], "turn": turn,
-                          "n": [f"{v:.6f}" for v in -direction]})
-            steps.append({"kind": "feed", "axes": dict(zip("XYZ", start, strict=True)), "note": "back off"})
+                w.steps.append({"kind": "stop",
+                                "note": PROBE_PRESET_CHECK.format(approach=f"{setup.approach:g}")})
+            w.probe(q, c + (rho - setup.overtravel) * direction, -direction,
+                    setup.approach + setup.overtravel)
+            w.steps.append({"kind": "log", "path": path, "pose": count[path], "turn": turn,
+                            "n": [f"{v:.6f}" for v in -direction], "map": log_map})
+            w.to(q, start, note="back off")
             if j:
-                steps.append({"kind": "feed", "axes": dict(zip("XYZ", over, strict=True))})
-            reach += [start, over, target]
-        steps.append({"kind": "rapid", "axes": {"Z": safe}, "note": "up to the safe height"})
-    return steps, count, reach
+                w.to(q, over)
+        w.up(q)
+    return w.finish(), count, w.reach
+
+
+class _Touches:
+    """A probing program's moves as the axes make them (``reach``), each a step the
+    templates write: machine axes where the tool does not tilt (the tip is the linear
+    axes'); on a head, TCP coordinates under the control's TCP, switched on once at the
+    safe height with the rotary axes at zero (as a head's measuring program does), the
+    turns in small steps that keep the tip where it is, and each log line's tip turned
+    from TCP coordinates into the machine frame (``log_map``)."""
+
+    def __init__(self, machine: Machine, safe: float):
+        self.machine, self.safe, self.tcp = machine, safe, bool(machine.heads)
+        self.linear = [machine.index(c) for c in "XYZ"]
+        self.rotary = [machine.index(a.name) for a in machine.rotary_axes]
+        self.names = [a.name for a in machine.rotary_axes]
+        self.steps: list[dict] = [{"kind": "rapid", "axes": {"Z": safe}, "note": "up to the safe height"}]
+        self.reach: list[np.ndarray] = []
+        self.q = None          # the machine pose after the last step, where known
+        self.tip = None
+        if self.tcp:
+            self.steps += [{"kind": "rapid", "axes": dict.fromkeys(self.names, 0.0),
+                            "note": "rotary axes to zero at the safe height"}, {"kind": "tcp_on"}]
+            self.q = np.zeros(len(machine.axes))
+            self.q[self.linear[2]] = safe
+            self.tip = self.q[self.linear].copy()
+            self._step("rapid", self.q, "above the rotary axes")
+
+    def axes(self, q: np.ndarray, tip: np.ndarray) -> np.ndarray:
+        """The pose at ``q``'s rotary axes that puts the stylus tip at ``tip``: at fixed
+        rotary axes the tip moves as the linear axes do."""
+        out = np.array(q, float)
+        out[self.linear] = q[self.linear] + tip - tip_centres(self.machine, q[None], None)[0]
+        return out
+
+    def _step(self, kind: str, q: np.ndarray, note: str = "", **more) -> dict:
+        step = {"kind": kind, "axes": dict(zip("XYZ", q[self.linear], strict=True)), "note": note,
+                "q": q if self.tcp else None, **more}
+        self.steps.append(step)
+        return step
+
+    def turn(self, q: np.ndarray) -> None:
+        """The rotary axes to ``q``'s at the safe height: in one move where the tool does not
+        tilt; on a head in steps of TURN_STEP_DEG, the tip kept in place."""
+        if not self.tcp:
+            self.steps.append({"kind": "rapid", "note": "turn at the safe height",
+                               "axes": {n: float(np.degrees(q[j])) for n, j in zip(self.names, self.rotary,
+                                                                                  strict=True)}})
+            return
+        before = self.q
+        largest = np.degrees(np.abs(q[self.rotary] - before[self.rotary])).max()
+        n = max(1, int(np.ceil(largest / TURN_STEP_DEG)))
+        for k in range(1, n + 1):
+            step = before.copy()
+            step[self.rotary] = before[self.rotary] + (q[self.rotary] - before[self.rotary]) * k / n
+            self.q = self.axes(step, self.tip)
+            s = self._step("rapid", self.q, "turn at the safe height" if k == n else "")
+            s["axes"].update({a: np.degrees(self.q[j]) for a, j in zip(self.names, self.rotary, strict=True)})
+
+    def above(self, q: np.ndarray, tip: np.ndarray, note: str) -> None:
+        """The stylus tip straight above ``tip`` (machine frame) at the safe height."""
+        self.tip = np.array([tip[0], tip[1], self.safe])
+        self.q = self.axes(q, self.tip)
+        if self.tcp:
+            self._step("rapid", self.q, note)
+        else:           # the axes are at the safe height and turned already: X and Y alone
+            self.steps.append({"kind": "rapid", "axes": {"X": tip[0], "Y": tip[1]}, "note": note})
+
+    def up(self, q: np.ndarray) -> None:
+        """The stylus tip up to the safe height (machine Z), the rest held."""
+        if self.tcp:
+            self.above(q, self.tip, "up to the safe height")
+        else:
+            self.steps.append({"kind": "rapid", "axes": {"Z": self.safe}, "note": "up to the safe height"})
+
+    def to(self, q: np.ndarray, tip: np.ndarray, note: str = "") -> None:
+        """The stylus tip to ``tip`` (machine frame) at ``q``'s rotary axes, at the feed."""
+        self.q, self.tip = self.axes(q, tip), tip
+        self.reach.append(self.q)
+        self._step("feed", self.q, note)
+
+    def probe(self, q: np.ndarray, target: np.ndarray, inwards: np.ndarray, distance: float) -> None:
+        """A probing move towards ``target`` (the tip's, machine frame) along ``inwards``."""
+        end = self.axes(q, target)
+        self.reach.append(end)
+        self._step("probe", end, direction=inwards, distance=distance, start=self.q)
+
+    def log_map(self, q: np.ndarray) -> list[list[str]] | None:
+        """Each row of the affine map (3 × 4) from the tip's TCP coordinates the control
+        latches to the machine frame the log's contract names, at ``q``'s rotary axes, as the
+        control's numbers; None where they are one (axes mode, or a head whose TCP
+        coordinates are the machine's)."""
+        if not self.tcp:
+            return None
+        corners = np.vstack([np.zeros(3), np.eye(3)])
+        tips = tip_centres(self.machine, from_world(self.machine, corners,
+                                                    np.repeat(q[None, self.rotary], 4, axis=0)), None)
+        A, b = (tips[1:] - tips[0]).T, tips[0]
+        if np.abs(A - np.eye(3)).max() < 1e-12 and np.abs(b).max() < 1e-9:
+            return None
+        return [[f"{round(v, 9) + 0.0:.9f}" for v in row] + [f"{round(o, 6) + 0.0:.6f}"]     # no "-0"
+                for row, o in zip(A, b, strict=True)]
+
+    def finish(self) -> list[dict]:
+        """On a head: the rotary axes back to zero at the safe height, TCP off, and every
+        point in TCP coordinates (each probing direction with it)."""
+        if not self.tcp:
+            return self.steps
+        zero = self.q.copy()
+        zero[self.rotary] = 0.0
+        self.turn(zero)
+        self.steps.append({"kind": "tcp_off"})
+        held = [s for s in self.steps if s.get("q") is not None]
+        xyz = world(self.machine, np.array([s["q"] for s in held]))
+        for s, p in zip(held, xyz, strict=True):
+            s["axes"].update(zip("XYZ", p, strict=True))
+            if s["kind"] == "probe":
+                d = p - world(self.machine, s["start"][None])[0]
+                s["direction"] = d / np.linalg.norm(d)
+        return self.steps
 
 
 def _probe_header(machine: Machine, ctl: Controller, setup: ProbeSetup, poses: Poses, label: str,
@@ -153,10 +295,15 @@ def _probe_header(machine: Machine, ctl: Controller, setup: ProbeSetup, poses: P
     return [
         f"compgen {version} probing program, {date}",
         f"machine: {ascii_text(machine.name)}; controller: {ctl.label(machine)}",
-        "mode AXES: X Y Z from compgen's inverse kinematics; no TCP",
+        (f"mode TCPM: {ctl.tcp_label(machine)} from the first turn to the last, the control's kinematics "
+         "moves X Y Z; each logged tip is turned from TCP coordinates into the machine frame (U25)"
+         if machine.heads else "mode AXES: X Y Z from compgen's inverse kinematics; no TCP"),
         f"path {ascii_text(label)}: {len(poses)} poses, {setup.touches} touches each; the log: {log_name}",
         f"{BALL_HEADER} " + " ".join(f"{c}{ctl.number(v, LINEAR_DECIMALS)}"
                                      for c, v in zip("XYZ", poses.ball[0], strict=True)) + " mm",
+        *([f"stylus tip on tool {setup.tool}, {ctl.number(setup.length, LINEAR_DECIMALS)} {NEST_HEADER}: "
+           "the lever the head turns it by, as the control's tool table must hold it (U22)"]
+          if machine.heads else []),
         f"probe: tool {setup.tool}, length {setup.length:g} mm to the stylus tip centre; sphere "
         f"{setup.sphere_diameter:g} mm, stylus tip {setup.stylus_diameter:g} mm (as calibrated)",
         "active preset: the machine file's origin (nominal intersection of the rotary axes)",

@@ -43,7 +43,7 @@ _BALL_LINE = re.compile(re.escape(BALL_HEADER) + r" X([-+]?\d+(?:\.\d+)?) Y([-+]
                         r"Z([-+]?\d+(?:\.\d+)?) mm")
 NEST_HEADER = "mm below the gauge line"     # the nest's length, where not the machine file's
 # the length as the control's numbers write it (HEIDENHAIN signs it: +150.0000)
-_NEST_LINE = re.compile(r"nest on tool \S+, ([-+]?\d+(?:\.\d+)?) " + re.escape(NEST_HEADER))
+_NEST_LINE = re.compile(r"(?:nest|stylus tip) on tool \S+, ([-+]?\d+(?:\.\d+)?) " + re.escape(NEST_HEADER))
 
 
 def program_nest(text: str) -> float | None:

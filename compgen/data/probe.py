@@ -19,8 +19,8 @@ import numpy as np
 
 from ..errors import CompgenError, one_line
 from ..files import read_text
-from ..model.frames import table_axis_down
-from ..model.kinematics import inverse
+from ..model.frames import sensor_axes, table_axis_down
+from ..model.kinematics import head_offset, inverse
 from ..model.machine import Machine, ProbeSetup
 from ..model.poses import Poses
 from ..units import number
@@ -197,9 +197,9 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
     first = np.array([g[0] for g in groups])
     rotary = log.rotary[first]
     ball = log.ball[first]
-    q = inverse(machine, rotary, ball)
-    linear = [machine.index(c) for c in "XYZ"]
-    reading = q[:, linear] - centre
+    nest = stylus_nest(machine, len(groups))
+    q = inverse(machine, rotary, ball, nest=nest)
+    reading = tip_centres(machine, q, nest) - centre
     far = np.flatnonzero(np.abs(reading).max(axis=1) > READING_MAX_MM)
     if far.size:
         k = far[0]
@@ -209,25 +209,26 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
                            hint="the machine file's ball position does not match the sphere: give its "
                                 "place in [rtest] ball, or per row in bx, by, bz")
     t = np.array([np.nanmin(log.t[g]) if not np.isnan(log.t[g]).all() else np.nan for g in groups])
-    poses = Poses(q, ball, t, log.path[first])
+    poses = Poses(q, ball, t, log.path[first], nest=nest)
     data = RTestData(poses, reading, log.source, log.sha256, tuple(int(log.lines[i]) for i in first),
                      device="probe", cov=cov, cov_dof=dof,
-                     lobes=trigger_lobes(log, groups, normals, inverse_info))
+                     lobes=trigger_lobes(log, groups, normals, inverse_info, sensor_axes(machine, q)))
     return Centres(data, centre, math.sqrt(s2) * 1e3, dof, radius_offset * 1e3, radius_sigma * 1e3,
                    tuple(warnings))
 
 
 def trigger_lobes(log: ProbeLog, groups: list[np.ndarray], normals: list[np.ndarray],
-                  inverse_info: list[np.ndarray]) -> np.ndarray:
+                  inverse_info: list[np.ndarray], stylus: np.ndarray | None = None) -> np.ndarray:
     """(n, 3, 2): each pose's reading per mm of the trigger's lobes' cos and sin amplitude
     (``TRIGGER_LOBES``): a touch triggering δ farther out along its normal moves the centre
     on the known radius by N⁺δ (N = −u the touches' outward normals, u their unit vectors to
     the centre, first order), and the reading, nominal minus probed, by −N⁺δ = (uᵀu)⁻¹uᵀδ
     (``inverse_info``: each pose's (uᵀu)⁻¹); δ by the direction each touch moved
-    (``log.direction``)."""
+    (``log.direction``) in the probe's own frame: ``stylus`` (n, 3, 3), the tool's axes
+    where a head turns the probe (``frames.sensor_axes``), None where they are the machine's."""
     out = np.zeros((len(groups), 3, 2))
     for k, (g, u, G) in enumerate(zip(groups, normals, inverse_info, strict=True)):
-        d = log.direction[g]
+        d = log.direction[g] if stylus is None else log.direction[g] @ stylus[k]
         lobe = (np.hypot(d[:, 0], d[:, 1]) ** TRIGGER_LOBES
                 * np.exp(1j * TRIGGER_LOBES * np.arctan2(d[:, 1], d[:, 0])))       # sin³θ·e^{3iφ}
         out[k] = G @ (u.T @ np.stack([lobe.real, lobe.imag], axis=1))
@@ -396,7 +397,7 @@ def probe_poses(machine: Machine, names, ball=None) -> Poses:
                                                      "(comma-separated), or all")
     out = []
     for name in names:
-        p = generate(machine, [name], ball=ball)
+        p = generate(machine, [name], ball=ball, nest=setup.length if machine.heads else None)
         keep = np.unique(np.round(np.linspace(0, len(p) - 1, min(setup.poses, len(p)))).astype(int))
         out.append(p.take(keep))
     return Poses.concat(out)
@@ -407,10 +408,22 @@ def need_probe(machine: Machine) -> ProbeSetup:
         raise CompgenError(f"machine file {machine.source} has no [probe] section",
                            hint="add the probe's tool, length, sphere_diameter and stylus_diameter "
                                 "(see the bundled machines)")
-    if machine.heads:
-        raise CompgenError("probing with a rotary head is not supported: the probe's touches are planned "
-                           "for a spindle that does not tilt", hint="measure this machine with an R-test")
     return machine.probe
+
+
+def stylus_nest(machine: Machine, n: int) -> np.ndarray | None:
+    """Each of ``n`` probed poses' tool point below the gauge line (``Poses.nest``), mm: on
+    a head the stylus tip, ``[probe] length`` down the tool, is what the head's angles turn
+    (their lever); None where no head tilts the tool (the linear axes carry the tip)."""
+    return np.full(n, need_probe(machine).length) if machine.heads else None
+
+
+def tip_centres(machine: Machine, q: np.ndarray, nest: np.ndarray | None) -> np.ndarray:
+    """The stylus tip's centre (n, 3) on the nominal machine at poses ``q``, machine frame,
+    mm: the linear axes' position, and on a head where its turn puts the tip from there
+    (``nest``: ``stylus_nest``'s lengths)."""
+    rotary = [machine.index(a.name) for a in machine.rotary_axes]
+    return q[:, [machine.index(c) for c in "XYZ"]] + head_offset(machine, q[:, rotary], nest)
 
 
 def simulate_touches(machine: Machine, poses: Poses, reading: np.ndarray, noise_um: float = 0.0,
@@ -421,8 +434,7 @@ def simulate_touches(machine: Machine, poses: Poses, reading: np.ndarray, noise_
     diameter ``stylus_error_um`` larger than calibrated."""
     setup = need_probe(machine)
     rng = rng or np.random.default_rng()
-    linear = [machine.index(c) for c in "XYZ"]
-    centre = poses.q[:, linear] - reading
+    centre = tip_centres(machine, poses.q, stylus_nest(machine, len(poses))) - reading
     u = touch_directions(machine, poses, setup)
     rho = (setup.sphere_diameter + setup.stylus_diameter + stylus_error_um * 1e-3) / 2
     radius = rho + rng.normal(0.0, noise_um * 1e-3, u.shape[:2])
@@ -430,21 +442,36 @@ def simulate_touches(machine: Machine, poses: Poses, reading: np.ndarray, noise_
 
 def touch_directions(machine: Machine, poses: Poses, setup: ProbeSetup) -> np.ndarray:
     """(n, m, 3): for each pose, the unit vectors from the sphere's centre to where the
-    probe touches it (machine frame). One touch from above, the rest around at
-    ``elevation`` above the horizontal, turned so that the stem, wherever the rotary axes
-    point it, lies midway between two of them."""
+    probe touches it (machine frame). One touch along the stylus (from above where the tool
+    does not tilt), the rest around it at ``elevation`` above the plane across it, turned so
+    that the stem, wherever the rotary axes point it, lies midway between two of them. On a
+    head the stylus turns with the tool: the touches turn with it."""
+    up = stylus_up(machine, poses.q)
+    across = np.where(np.abs(up[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    e1 = across - np.einsum("ni,ni->n", across, up)[:, None] * up
+    e1 /= np.linalg.norm(e1, axis=1)[:, None]
+    e2 = np.cross(up, e1)                     # (x, y) where the stylus points down Z
     stem = table_axis_down(machine, poses.q)
+    s1, s2 = np.einsum("ni,ni->n", stem, e1), np.einsum("ni,ni->n", stem, e2)
     around = setup.touches - 1
     el = math.radians(setup.elevation)
-    azimuth0 = np.arctan2(stem[:, 1], stem[:, 0]) + math.pi / around
-    flat = np.hypot(stem[:, 0], stem[:, 1]) < 1e-9            # stem straight down: any turn will do
+    azimuth0 = np.arctan2(s2, s1) + math.pi / around
+    flat = np.hypot(s1, s2) < 1e-9            # stem straight down the stylus: any turn will do
     azimuth0 = np.where(flat, 0.0, azimuth0)
     k = np.arange(around)
     az = azimuth0[:, None] + 2 * math.pi * k[None, :] / around
-    side = np.stack([math.cos(el) * np.cos(az), math.cos(el) * np.sin(az), np.full(az.shape, math.sin(el))],
-                    axis=-1)
-    top = np.broadcast_to([0.0, 0.0, 1.0], (len(poses), 1, 3))
-    return np.concatenate([top, side], axis=1)
+    side = (math.cos(el) * (np.cos(az)[..., None] * e1[:, None, :] + np.sin(az)[..., None] * e2[:, None, :])
+            + math.sin(el) * up[:, None, :])
+    return np.concatenate([up[:, None, :], side], axis=1)
+
+
+def stylus_up(machine: Machine, q: np.ndarray) -> np.ndarray:
+    """(n, 3): the unit vector up the stylus, from its tip to the spindle, machine frame:
+    +Z where no head tilts the tool, the tool's turned axis on a head."""
+    axes = sensor_axes(machine, q)
+    if axes is None:
+        return np.broadcast_to([0.0, 0.0, 1.0], (len(q), 3))
+    return np.ascontiguousarray(axes[:, :, 2])
 
 
 def format_probe_log(machine: Machine, setup: ProbeSetup, poses: Poses, tips: np.ndarray,

@@ -273,10 +273,8 @@ class _Walk:
         return True
 
     def tcp_move(self, b: Block) -> bool:
-        """A move in TCP coordinates (its ends in TCP xyz and the rotary axes)."""
-        if b.probe:
-            raise CompgenError(f"line {b.line}: a probing move under TCP is not checked",
-                               hint="probing programs run in machine axes (compgen probe-program)")
+        """A move in TCP coordinates (its ends in TCP xyz and the rotary axes); a probing move
+        (a head's, under TCP) stops where the stylus tip meets the sphere."""
         if self.w is None:
             if np.isnan(self.q).any():
                 self.findings.append(Finding(b.line, "TCP before positioning", "TCP is on before every axis "
@@ -292,7 +290,15 @@ class _Walk:
                 now = w[3 + self.rotary.index(i)]
                 v = _turned(self.modulo, b, letter, self.sensed(letter, v), np.degrees(now))
                 end[3 + self.rotary.index(i)] = np.radians(v)
-        self.segments.append(_Segment(b, True, w, end, False))
+        if b.probe:       # where it stops: found on the machine poses, given back in TCP coordinates
+            m = self.machine
+            ends = from_world(m, np.array([w[:3], end[:3]]), np.array([w[3:], end[3:]]))
+            stop = _touch(m, self.probe, b, ends[0], ends[1], self.findings)
+            if stop is None:
+                return False
+            end = np.concatenate([world(m, stop[None])[0], stop[self.rotary]])
+        after_touch = bool(self.segments) and self.segments[-1].block.probe
+        self.segments.append(_Segment(b, True, w, end, False, probing=b.probe or after_touch))
         self.w = end
         return True
 

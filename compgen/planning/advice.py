@@ -21,7 +21,7 @@ import numpy as np
 from ..controllers.probing import probe_program
 from ..controllers.programs import checked_program
 from ..controllers.registry import controller
-from ..data.probe import probe_poses
+from ..data.probe import need_probe, probe_poses
 from ..errors import CompgenError
 from ..model.machine import Machine
 from ..model.paths import GAP_S, generate
@@ -177,6 +177,8 @@ def proposals(machine: Machine, measured: Poses | None, device: str = "rtest",
             d = motion_direction(measured.q[:, machine.index(a.name)], run)
             back = np.add.reduceat(d > 0, first) & np.add.reduceat(d < 0, first)     # both ways in a run
             turned |= {w for w, both in zip(where_, back, strict=True) if both}
+    # the tool point a look is made with: a probe's stylus tip on a head (its lever), else the nest
+    point = need_probe(machine).length if device == "probe" and machine.heads else machine.probe_length
     places = [(where, tag, scale, dz, back, None) for where, tag, scale, dz, back in PLACES]
     if machine.heads and device == "rtest":
         places += [(where, tag, 1.0, 0.0, False, machine.probe_length + more) for where, tag, more in NESTS]
@@ -186,7 +188,7 @@ def proposals(machine: Machine, measured: Poses | None, device: str = "rtest",
             continue
         at = ball * [scale, scale, 1.0] + [0.0, 0.0, dz]
         for name in machine.paths:
-            key = (name, tuple(np.round(at, 3)), round(nest or machine.probe_length, 3))
+            key = (name, tuple(np.round(at, 3)), round(nest or point, 3))
             again = key in (turned if back else done)
             if again and (back or not timed):     # a repeat: the path as it ran, in time
                 continue

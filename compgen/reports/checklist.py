@@ -40,6 +40,8 @@ class Step:
 # a head's steps that compgen does not write for yet: no command is printed that would refuse
 HEAD_PROGRAMS = ("compgen does not write programs for a head yet: write one for the machine file's "
                  "paths (under TCPM, the nest on the ball)")
+HEAD_PROBING = ("compgen probes a head under TCP switched on in the program (HEIDENHAIN, SINUMERIK), not on "
+                "this control: measure it with an R-test, or write the probing program by hand")
 HEAD_EDIT = ("compgen does not write edits for a head yet: enter the fitted location errors in the "
              "control's kinematics by hand, and keep its backup")
 
@@ -193,7 +195,7 @@ def _probe_steps(machine: Machine, folder: Path, f: _Found, fit: tuple[Path, dic
 
     def out(name: str) -> str:
         return quote(str(folder / name))
-    writes = ctl.writes_programs(machine)
+    writes = ctl.writes_probing(machine)
     return [
         Step("Warm-up: spindle and axes at working temperature", BY_HAND,
              note="thermal drift over a probing run can reach several µm"),
@@ -202,7 +204,7 @@ def _probe_steps(machine: Machine, folder: Path, f: _Found, fit: tuple[Path, dic
                            "holds the sphere's and the stylus's diameters"),
         Step("Probing programs written", DONE if f.probe_programs else OPEN, _names(f.probe_programs),
              f"{me()} probe-program --machine {m} --path all -o {out('PROBE' + _ext(machine))}")
-        if writes else Step("Probing programs written", BY_HAND, note=HEAD_PROGRAMS),
+        if writes else Step("Probing programs written", BY_HAND, note=HEAD_PROBING),
         Step("Preset checked at the program's stop: the stylus above the sphere's centre", BY_HAND,
              note="every probing program stops once before its first touch"),
         Step("Probed: the program's probe log saved (probe log v1)", DONE if f.probe_logs else OPEN,

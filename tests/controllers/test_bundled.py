@@ -1,7 +1,7 @@
 """Every bundled machine runs as shipped: it carries [program], every path it defines is
 written in one program for its own control and passes check-program, and so does its probing
-program where it carries [probe]. A control it has a section for besides its own runs the
-same, or refuses in one line what the [program] cannot be on it (LinuxCNC calls tools by
+program (a head's under the control's TCP). A control it has a section for besides its own runs
+the same, or refuses in one line what the [program] cannot be on it (LinuxCNC calls tools by
 number; the B/C table's SINUMERIK tool is a name). simulate's default paths are the machine
 file's own."""
 
@@ -27,6 +27,7 @@ def _controls(path: Path) -> list[str]:
 def test_a_bundled_machine_runs_every_path_it_defines(path, tmp_path):
     machine = load_machine(path)
     assert machine.program is not None, f"{path.name} has no [program]"
+    assert machine.probe is not None, f"{path.name} has no [probe]"
     for ctl in _controls(path):
         out = tmp_path / f"ALL{CONTROLLERS[ctl].program_ext}"
         code, _, err = run("measure-program", "--machine", path, "--path", "all", "--controller", ctl,
@@ -37,13 +38,12 @@ def test_a_bundled_machine_runs_every_path_it_defines(path, tmp_path):
         assert code == 0, (ctl, err)
         code, said, err = run("check-program", "--machine", path, "--controller", ctl, out)
         assert code == 0 and "OK" in said, (ctl, err)
-        if machine.probe is not None:
-            probe = tmp_path / f"P{CONTROLLERS[ctl].program_ext}"
-            code, _, err = run("probe-program", "--machine", path, "--path", "K4", "--controller", ctl,
-                               "-o", probe, "--force")
-            assert code == 0, (ctl, err)
-            code, said, err = run("check-program", "--machine", path, "--controller", ctl, probe)
-            assert code == 0 and "OK" in said, (ctl, err)
+        probe = tmp_path / f"P{CONTROLLERS[ctl].program_ext}"
+        code, _, err = run("probe-program", "--machine", path, "--path", "all", "--controller", ctl,
+                           "-o", probe, "--force")
+        assert code == 0, (ctl, err)
+        code, said, err = run("check-program", "--machine", path, "--controller", ctl, probe)
+        assert code == 0 and "OK" in said, (ctl, err)
 
 
 @pytest.mark.parametrize("path", BUNDLED, ids=[p.stem for p in BUNDLED])

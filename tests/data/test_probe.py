@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, SEED_MACHINE, TABLE4, run, vector
+from conftest import HEAD_MACHINE, ROOT, SEED_MACHINE, TABLE4, run, vector
 
 from compgen.configuration.machine_file import load_machine
 from compgen.data.probe import read_probe_log, sphere_centres
@@ -632,3 +632,35 @@ def test_diagnose_on_probe_data_names_the_probes_stylus_not_an_r_test_nest(tmp_p
     assert run("fit", "--machine", SEED_MACHINE, log, "-o", fit)[0] == 0
     code, out, err = run("diagnose", "--from", fit)
     assert code == 0 and "R-test nest" not in out and "probe's stylus tip offset in X" in out, out
+
+
+def test_a_heads_trigger_lobes_turn_with_the_stylus(tmp_path):
+    """On a head the probe turns with the tool: its trigger's lobes are about the stylus in
+    the tool's frame. Touches simulated with lobes in that frame (each direction turned into
+    the tool's axes, ``frames.sensor_axes``), no noise, move each centre as the columns say,
+    to 1 % of the largest move; lobes taken about machine Z would not (the columns of a fixed
+    spindle miss them by far more)."""
+    from compgen.data.probe import format_probe_log, probe_poses, simulate_touches
+    from compgen.model.frames import sensor_axes
+    machine = load_machine(HEAD_MACHINE)
+    poses = probe_poses(machine, ["K4", "K1", "K2"])
+    poses = poses.take(np.sort(np.unique(np.round(poses.q, 9), axis=0, return_index=True)[1]))   # each once
+    tips, d = simulate_touches(machine, poses, np.zeros((len(poses), 3)), 0.0)
+    local = np.einsum("nji,nmj->nmi", sensor_axes(machine, poses.q), d)       # the tool's frame
+    lobe = 1.5e-3 * np.hypot(local[..., 0], local[..., 1]) ** 3 * np.cos(
+        3 * (np.arctan2(local[..., 1], local[..., 0]) - 0.3))
+    for name, t in (("r", tips), ("l", tips - lobe[..., None] * d)):
+        (tmp_path / f"{name}.log").write_text(format_probe_log(machine, machine.probe, poses, t, d))
+    round_, lobed = (sphere_centres(read_probe_log(tmp_path / f"{n}.log", machine), machine).data
+                     for n in "rl")
+    moved = lobed.deviation - round_.deviation
+    said = lobed.lobes @ (1.5e-3 * np.array([np.cos(0.9), np.sin(0.9)]))
+    assert np.abs(moved).max() > 0.5e-3
+    assert np.abs(moved - said).max() < 0.01 * np.abs(moved).max(), np.abs(moved - said).max()
+    # the same lobes about machine Z, as a fixed spindle holds them: not what a head's columns say
+    about_z = 1.5e-3 * np.hypot(d[..., 0], d[..., 1]) ** 3 * np.cos(
+        3 * (np.arctan2(d[..., 1], d[..., 0]) - 0.3))
+    (tmp_path / "z.log").write_text(format_probe_log(machine, machine.probe, poses,
+                                                     tips - about_z[..., None] * d, d))
+    z = sphere_centres(read_probe_log(tmp_path / "z.log", machine), machine).data.deviation - round_.deviation
+    assert np.abs(z - said).max() > 0.3 * np.abs(z).max()

@@ -199,15 +199,14 @@ def test_a_heads_programs_run_under_tcp_from_the_first_turn_to_the_last(tmp_path
         assert code == 0 and "OK" in out, (ctl, err)
 
 
-def test_no_probing_program_is_written_for_a_head(tmp_path):
-    """A probe's touches are planned in the machine's axes, which a head turns: refused in
-    one line, before any file."""
-    path = tmp_path / "m.toml"
-    probe = '[probe]\ntool = "98"\nlength = 120.0\nsphere_diameter = 25.4\nstylus_diameter = 3.0\n\n'
-    path.write_text(HEAD_MACHINE.read_text().replace("[limits]", probe + "[limits]"))
-    code, _, err = run("probe-program", "--machine", path, "--path", "K2", "-o", tmp_path / "p.H")
-    assert code == 2 and "rotary head" in err and len(err.strip().splitlines()) == 1, err
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.toml"]
+def test_a_head_is_probed_only_where_the_program_switches_tcp(tmp_path):
+    """A head is probed under TCP (tests/controllers/test_head_probing.py): a control whose TCP
+    is its configuration (LinuxCNC) gets no probing program for it, refused in one line before
+    any file."""
+    code, _, err = run("probe-program", "--machine", HEAD_MACHINE, "--path", "K2", "--controller", "linuxcnc",
+                       "-o", tmp_path / "p.ngc")
+    assert code == 2 and "a head is probed under TCP" in err and len(err.strip().splitlines()) == 1, err
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_linear_axis_carried_by_a_head_is_refused(tmp_path):
@@ -217,7 +216,7 @@ def test_a_linear_axis_carried_by_a_head_is_refused(tmp_path):
     text = FORK.read_text()
     assert z in text
     path = tmp_path / "m.toml"
-    path.write_text(text.replace(z, "").replace("[rtest]", z + "[rtest]"))
+    path.write_text(text.replace(z, "").replace("\n[rtest]", "\n" + z + "[rtest]", 1))   # the section
     with pytest.raises(CompgenError, match="a linear axis follows the head C"):
         load_machine(path)
 

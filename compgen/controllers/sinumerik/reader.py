@@ -34,6 +34,11 @@ def _guard_body(lines: list[str], k: int, b: str) -> int:
     return len(GUARD_BODY)
 
 
+_FACTOR = r"\([+-]?\d{1,6}(?:\.\d{1,9})?\)"
+TIP = re.compile(rf"TIP_[XYZ]=\$AA_MW\[X\]\*{_FACTOR}\+\$AA_MW\[Y\]\*{_FACTOR}\+\$AA_MW\[Z\]\*{_FACTOR}"
+                 rf"\+{_FACTOR}")
+
+
 def program_blocks(text: str) -> list[Block]:
     """A SINUMERIK part program as the control executes it (the blocks compgen writes). In a
     probing program every MEAS block is followed by STOPRE and the switch's guard, every
@@ -46,7 +51,7 @@ def program_blocks(text: str) -> list[Block]:
         if skip:
             skip -= 1
             continue
-        if not b or b in ("ORIWKS", "ORIAXES", "M6", "DEF INT ERR"):
+        if not b or b in ("ORIWKS", "ORIAXES", "M6", "DEF INT ERR", "DEF REAL TIP_X,TIP_Y,TIP_Z"):
             continue
         if expect:
             if b != expect[0]:
@@ -61,7 +66,10 @@ def program_blocks(text: str) -> list[Block]:
             continue
         if b == "STOPRE":
             continue
-        if re.fullmatch(r'WRITE\(ERR,"\w+","[^"]*"(?:<<\$AA_MW\[[XYZ]\]<<"[^"]*")*\)', b):
+        if TIP.fullmatch(b):             # a head's latched tip into the machine frame (U25): no motion
+            out.append(Block(k, raw, "log"))
+            continue
+        if re.fullmatch(r'WRITE\(ERR,"\w+","[^"]*"(?:<<(?:\$AA_MW\[[XYZ]\]|TIP_[XYZ])<<"[^"]*")*\)', b):
             out.append(Block(k, raw, "log"))        # a line of the probe log (U15)
             expect = ["IF ERR<>0"]
             continue
