@@ -41,6 +41,7 @@ from .setup_step import setup_step
 from .signature import products
 from .significance import (
     ALPHA,
+    MARGINAL,
     VISIBLE,
     beside,
     lack_of_fit,
@@ -157,7 +158,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     # rivals of a curve that fits a little of an unexplained misfit by chance: not pursued
     rival = _rivals(machine, res, [] if unexplained else significant, first, out, ranked, noise, made,
                     carried, alpha)
-    out, rival = _advised(machine, res, out, ranked, rival, model_effects, advising)
+    out, rival = _advised(machine, res, out, ranked, rival, model_effects, advising, alpha)
     if blamed is None and first is not None:     # beside the machine's best and its second effects
         told = max(1, SECOND_WALKS // len(poses))
         seconds = [noise.white(_columns(machine, res, made, e)) for e in rival["after_best"][:told]]
@@ -424,11 +425,16 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], firs
 
 
 def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dict[str, Row], rival: dict,
-             model_effects: Sequence[Effect], advising: Advising | None) -> tuple[list[Candidate], dict]:
+             model_effects: Sequence[Effect], advising: Advising | None,
+             alpha: float) -> tuple[list[Candidate], dict]:
     """Step 6: what would separate what these data cannot (``separation.py``, one R factor of
     the measured poses for both): a candidate the model absorbs, or a part of it (fit --add
-    refuses it), and the best's rivals. Equivalent rivals reordered. Returns the candidates
-    and ``rival`` with what tells the rivals apart."""
+    refuses it), and the best's rivals. Equivalent rivals reordered. Rivals no set-up parts
+    at their sizes get the repeat right after the data: one error's shapes in time grow apart
+    with more minutes, and a tie that is marginal (its best passes the family's ``alpha`` but
+    not ``MARGINAL`` of it) is asked again before any is named: a chance misfit fades when
+    measured again, a real one grows. Returns the candidates and ``rival`` with what tells
+    the rivals apart."""
     rival_names, separated_by, left_open, same = rival["rivals"], (), {}, ()
     best = next((ranked[c.effect] for c in out if c.significant), None)
     group = [best, *(ranked[e] for e in rival_names)] if rival_names else []
@@ -444,7 +450,8 @@ def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dic
                                                                     advising)
             out = [replace(c, separated_by=by_rival[c.effect]) if c.effect in by_rival else c for c in out]
             names = [row.effect.name for row in group]
-            if not separated_by and one_error_in_time(names):     # more minutes part its shapes
+            lead = next(c for c in out if c.significant)
+            if not separated_by and (one_error_in_time(names) or lead.p_value > MARGINAL * alpha):
                 separated_by = advising.runnable([m for m in advising.candidates if m.again], 1)
                 left_open = {m.label: list(combinations(names, 2)) for m in separated_by}
     exhausted = tuple(m.run_label for m in separated_by

@@ -145,7 +145,11 @@ def _rivals_text(d: Diagnosis, fit: str, after: str) -> list[str]:
                 told = sorted(_told(d, m))
                 lines.append(f"   {i}. {m.label} (" + (f"tells apart {', '.join(' / '.join(p) for p in told)}"
                              if told else "parts none at their sizes here: their shapes grow apart in time; "
-                             "measure it, fit, diagnose, and again while they stay tied") + ")")
+                             "measure it, fit, diagnose, and again while they stay tied" if _in_time(d) else
+                             f"parts none at their sizes here: the misfit is near the noise (p "
+                             f"{d.significant[0].p_value:.2g} against the family's {d.alpha:g}); measured "
+                             "again, a chance misfit fades and a real one grows; fit everything together "
+                             "then") + ")")
                 lines.append(f"      {_measure(d, m)}")
             lines += _then(plan, fit, after)
         elif not d.searched:             # no measurement was searched for (see the notes)

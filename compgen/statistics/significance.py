@@ -16,6 +16,10 @@ from ..model.sides import span
 ALPHA = 0.01          # family-wise false-alarm rate over all effects tried
 VISIBLE = 0.01        # ‖c⊥‖/‖c‖ below this: the model absorbs the effect entirely
 RIVAL = 0.9           # removing this share of what the best removes makes a rival (misfit left)
+# a tie no set-up parts whose best passes the family's α but not this share of it is marginal:
+# it is measured again before any is named (1 in 100 clean diagnoses passes α by chance; over a
+# loop of five diagnoses that is 1 in 20, where 1 in 1000 passes α/10)
+MARGINAL = 0.1
 
 
 def explained(cc: np.ndarray, qc: np.ndarray, cr: np.ndarray, keep: np.ndarray | None = None
