@@ -256,7 +256,8 @@ def _noise(g: _Getter) -> float:
 
 
 def _axis(get: _Getter, side: str) -> Axis:
-    get.only({"axis", "type", "direction", "sense", "offset", "travel", "feed_max", "hirth_deg"})
+    get.only({"axis", "type", "direction", "sense", "offset", "travel", "feed_max", "hirth_deg",
+              "positioning", "m_function"})
     name = identifier("axis", get._get("axis"), get.at("axis"))
     kind = get.str("type")
     if kind not in (LINEAR, ROTARY):
@@ -281,7 +282,34 @@ def _axis(get: _Getter, side: str) -> Axis:
                                where=get.at("hirth_deg"))
     return Axis(name=name, kind=kind, direction=direction, side=side, sense=sense,
                 offset=get.vec3("offset", default=(0.0, 0.0, 0.0)), travel=travel, feed_max=feed,
-                hirth_deg=hirth, incline=incline)
+                hirth_deg=hirth, incline=incline, m_function=_m_function(get, kind))
+
+
+def _m_function(get: _Getter, kind: str) -> int | None:
+    """``positioning = "m-function"`` with ``m_function = N``: a rotary axis the NC does not
+    interpolate, positioned by the OEM's M-function N (the PLC); "nc" (default): the NC's."""
+    how = get.str("positioning") if "positioning" in get.doc else "nc"
+    if how not in ("nc", "m-function"):
+        raise CompgenError(f'positioning must be "nc" or "m-function", not {how!r}',
+                           where=get.at("positioning"))
+    if how == "nc":
+        if "m_function" in get.doc:
+            raise CompgenError('m_function is the number of the OEM\'s M-function of an axis with '
+                               'positioning = "m-function"', where=get.at("m_function"),
+                               hint='add positioning = "m-function", or leave m_function out')
+        return None
+    if kind != ROTARY:
+        raise CompgenError("only a rotary axis is positioned by an M-function here",
+                           where=get.at("positioning"))
+    if "m_function" not in get.doc:
+        raise CompgenError('positioning = "m-function" needs the M-function\'s number: m_function = N',
+                           where=get.at("positioning"), hint="the OEM's M number that positions the axis "
+                                                             "(iTNC 530 MP6602, TNC 640 mStrobeRotAxPos)")
+    n = get.number("m_function")
+    if not (n == int(n) and 0 <= n <= 9999):
+        raise CompgenError(f"m_function = {n:g}: an M-function's number is a whole number 0 to 9999",
+                           where=get.at("m_function"))
+    return int(n)
 
 
 # the letter a rotary axis's name gives it (DIN 66217): an inclined axis is that letter's

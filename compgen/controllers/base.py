@@ -159,6 +159,17 @@ class Controller:
         machine; a head only where ``programs_for_head`` says so."""
         return not machine.heads or self.programs_for_head(machine)
 
+    # how its programs have the PLC turn an axis (the OEM's M-function, U26): "m-function" (the
+    # target handed over, the call in the program), "stop" (the operator calls it at a stop and
+    # the program stops unless the axis stands there), "" (not written: its kinematics move every
+    # axis themselves)
+    plc_index = ""
+
+    def plc_words(self, axis) -> str:
+        """How this control's programs hand the PLC an axis's target (the header's words)."""
+        return ("at a stop the operator calls it, and the program stops unless the axis stands there "
+                "(no source says how this control passes the target)")
+
     def writes_probing(self, machine: Machine) -> bool:
         """Whether compgen writes this control's probing programs for ``machine``: every
         table-table machine; a head is probed under TCP, switched on in the program."""

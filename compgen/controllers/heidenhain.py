@@ -24,6 +24,7 @@ from ..units import number
 from . import fmt_signed, render
 from .base import Controller, EditContext, EditFiles
 from .correction import Held, Plan, nominal_lines, pivot_of
+from .plc import PLC_TARGET
 from .state_guards import heidenhain_guard, heidenhain_state, require_guard
 from .tab import MM_PER, TabTable
 
@@ -331,6 +332,8 @@ PROBE_RUN = re.compile(r"TCH PROBE 4\.3 ABST\+?(\d{1,4}(?:\.\d{1,6})?) F(\d{1,6}
                        r"MB\+?(\d{1,4}(?:\.\d{1,6})?) REFERENCE SYSTEM:0")
 # a tool by number, or by name in double quotes (TOOL CALL "NAME" Z): the control rejects a bare name
 TOOL_CALL = re.compile(r'TOOL CALL (?:\d{1,9}|"[^"]+") Z( S\S*)?')
+# an axis's target for the OEM's M-function: Q120-Q122 for A, B, C (U26)
+PLC_TARGET_LINE = re.compile(r"FN 0: Q(12[0-2]) = ([+-]\d{1,4}(?:\.\d{1,9})?)")
 # a head's logged tip turned from TCP coordinates into the machine frame (U25): scratch Q20-Q26,
 # the result back into Q1-Q3 that the log's format file prints; no motion
 _NUM = r"[+-]\d{1,6}(?:\.\d{1,9})?"
@@ -346,6 +349,7 @@ def program_blocks(text: str) -> list[Block]:
     out, name = [], None
     at: dict[str, float] = {}          # the linear axes' last written values
     direction = None
+    plc: dict[str, float] = {}        # the targets handed to the OEM's M-function (U26)
     raws = text.splitlines()
     bodies = [raw.split(";", 1)[0].strip() for raw in raws]
     numbered = [re.fullmatch(r"\d+\s*(.*)", body) for body in bodies]
@@ -391,6 +395,12 @@ def program_blocks(text: str) -> list[Block]:
             direction = np.array([float(v) for v in d.groups()])
             if not 0.999 < np.linalg.norm(direction) < 1.001:
                 raise CompgenError(f"line {k}: the probing direction is not a unit vector")
+        elif (d := PLC_TARGET_LINE.fullmatch(b)) is not None:
+            plc["ABC"[int(d[1]) - 120]] = float(d[2])
+            out.append(Block(k, raw, "log"))
+        elif plc and (d := re.fullmatch(r"M(\d{1,4})", b)) is not None:    # the PLC turns them (U26)
+            out.append(Block(k, raw, "move", target=plc, rapid=True, plc=True, name=f"M{d[1]}"))
+            plc = {}
         elif (d := PROBE_RUN.fullmatch(b)) is not None:
             if float(d[3]) == 0:
                 raise CompgenError(f"line {k}: MB0: cycle 4 leaves the stylus deflected at the touch",
@@ -452,6 +462,7 @@ class Heidenhain(Controller):
 
     family = "heidenhain"
     tcp_switchable = True
+    plc_index = "m-function"
     program_ext = ".H"
     comment = ";"
     tcp_words = "FUNCTION TCPM"
@@ -516,6 +527,9 @@ class Heidenhain(Controller):
     def beyond_nominal(self, machine: Machine, current: str, where: str) -> Held:
         # the ISO-named rows hold the deviations from the machine's geometry: none is nominal
         return Held(read_lines(current, machine, nominal_lines(machine)), read_squareness(current, machine))
+
+    def plc_words(self, axis) -> str:
+        return f"in Q{PLC_TARGET[axis.name]} (iTNC 530 MP6602, TNC 640 mStrobeRotAxPos)"
 
     def tool_word(self, tool: str) -> str:
         return tool if tool.isdigit() else f'"{tool}"'

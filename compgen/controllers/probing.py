@@ -37,6 +37,7 @@ from ..model.machine import Machine, ProbeSetup, at_nest, check_travel
 from ..model.poses import Poses
 from . import Emitted, ascii_text, render
 from .base import Controller
+from .plc import check_plc, index_steps, plc_lines
 from .programs import (
     ANGLE_DECIMALS,
     BALL_HEADER,
@@ -45,6 +46,7 @@ from .programs import (
     TURN_STEP_DEG,
     at_ball,
     pose_list,
+    write_words,
 )
 from .registry import for_machine
 
@@ -70,6 +72,7 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
     if len(balls) > 1:
         raise CompgenError(f"a program probes one sphere position; these poses hold {len(balls)}",
                            hint="write one program per sphere position")
+    check_plc(machine, ctl)
     if not ctl.writes_probing(machine):
         raise CompgenError(f"compgen writes {ctl.words} probing programs for machines whose tool does not "
                            f"tilt: a head is probed under TCP, which {ctl.words} switches in its "
@@ -89,13 +92,7 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
     names = [a.name for a in machine.rotary_axes]
     steps, count, reach = _touch_steps(machine, poses, setup, names, safe)
     check_travel(machine, np.array(reach), f"{label} (the touches' start and end points)")
-    before: dict[str, float] = {}
-    for s in steps:
-        if "axes" in s:
-            s["words"] = " ".join(ctl.axis_word(n, v, before.get(n), s["kind"] != "rapid",
-                                                ANGLE_DECIMALS if n in names else LINEAR_DECIMALS, machine)
-                                  for n, v in s["axes"].items())
-            before.update(s["axes"])
+    write_words(ctl, machine, steps)
     log_name = name[:ctl.name_max - 4] + "_LOG"     # a name the control keeps, one per program
     header = _probe_header(machine, ctl, setup, poses, label, log_name, safe, version, date)
     log_head = [MAGIC, f"# sphere_diameter = {setup.sphere_diameter:.4f}",
@@ -109,7 +106,7 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
                   tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}", probe_feed=f"{setup.probe_feed:g}",
                   work_offset=machine.program.work_offset, log_name=log_name, log_head=log_head,
                   rotary=names, number=ctl.number, retract=ctl.number(setup.approach, 4), ball=ball,
-                  head_tcp=bool(machine.heads),
+                  head_tcp=bool(machine.heads), plc=bool(machine.plc_axes),
                   **ctl.program_context(machine))
     named = {**ctl.message_files(name, [s["note"] for s in steps if s["kind"] == "stop"]),
              **ctl.log_files(log_head, list(count), names, ball)}
@@ -212,9 +209,12 @@ class _Touches:
         """The rotary axes to ``q``'s at the safe height: in one move where the tool does not
         tilt; on a head in steps of TURN_STEP_DEG, the tip kept in place."""
         if not self.tcp:
-            self.steps.append({"kind": "rapid", "note": "turn at the safe height",
-                               "axes": {n: float(np.degrees(q[j])) for n, j in zip(self.names, self.rotary,
-                                                                                  strict=True)}})
+            turn = {n: float(np.degrees(q[j])) for n, j in zip(self.names, self.rotary, strict=True)}
+            for a in index_steps(self.machine, self.steps, self.q, turn):      # the PLC's (U26)
+                del turn[a]
+            if turn:
+                self.steps.append({"kind": "rapid", "note": "turn at the safe height", "axes": turn})
+            self.q = q
             return
         before = self.q
         largest = np.degrees(np.abs(q[self.rotary] - before[self.rotary])).max()
@@ -307,6 +307,7 @@ def _probe_header(machine: Machine, ctl: Controller, setup: ProbeSetup, poses: P
         f"probe: tool {setup.tool}, length {setup.length:g} mm to the stylus tip centre; sphere "
         f"{setup.sphere_diameter:g} mm, stylus tip {setup.stylus_diameter:g} mm (as calibrated)",
         "active preset: the machine file's origin (nominal intersection of the rotary axes)",
+        *plc_lines(machine, ctl, "stylus"),
         f"each touch: {setup.approach:g} mm out, probing {setup.probe_feed:g} mm/min up to "
         f"{setup.overtravel:g} mm in; positioning {setup.feed:g} mm/min; safe height Z {safe:g} mm",
         "first run: single block, feed override low, the probe's stylus clear of the sphere",

@@ -29,6 +29,7 @@ from ..motion import check as motion
 from ..units import number
 from . import Emitted, ascii_text, render
 from .base import Controller
+from .plc import check_plc, index_steps, plc_lines, plc_runs
 from .registry import for_machine
 
 MODES = ("tcpm", "axes")
@@ -175,8 +176,10 @@ def checked_program(machine: Machine, poses: Poses, label: str, controller_name:
     _check_hirth(machine, np.degrees(angles), label)
     q = inverse(machine, angles, poses.ball)
     # the program runs the poses in the pose list's order (the R-test's readings come in it),
-    # one segment, with its own approach and retract, per run of one path label
-    segments = np.split(np.arange(len(poses)), np.flatnonzero(poses.path[1:] != poses.path[:-1]) + 1)
+    # one segment, with its own approach and retract, per run of one path label (and of one
+    # position of each axis the PLC turns)
+    check_plc(machine, ctl)
+    segments = plc_runs(machine, poses.path, angles)
     run = np.repeat(np.arange(len(segments)), list(map(len, segments)))
     poses = Poses(q, poses.ball, poses.t, poses.path, program_sides(machine, q, run), poses.nest)
     check_travel(machine, poses.q, label)
@@ -191,12 +194,7 @@ def checked_program(machine: Machine, poses: Poses, label: str, controller_name:
     up[linear[2]] = safe
     check_travel(machine, up[None], f"the safe height Z {safe:g} above the rotary axes")
     steps = _steps(machine, poses, segments, mode, ctl.tcp_switchable, safe, setup.clearance, label)
-    before: dict[str, float] = {}
-    for step in steps:
-        step["words"] = " ".join(ctl.axis_word(n, v, before.get(n), step["kind"] == "feed",
-                                               ANGLE_DECIMALS if n in ROT else LINEAR_DECIMALS, machine)
-                                 for n, v in step.get("axes", {}).items())
-        before.update(step.get("axes", {}))
+    write_words(ctl, machine, steps)
     ball = poses.ball[0]
     header = _program_header(machine, ctl, poses, label, mode, list_name or name, nest, file_nest, safe,
                              version, date, notes)
@@ -205,7 +203,7 @@ def checked_program(machine: Machine, poses: Poses, label: str, controller_name:
                   dwell=f"{setup.dwell:g}" if setup.dwell else "",
                   work_offset=setup.work_offset, max_step=f"{machine.limits.max_step_deg:g}",
                   steps=steps, rotary=[a.name for a in machine.rotary_axes], turns_tool=bool(machine.heads),
-                  indexes=bool(machine.hirth_axes),
+                  indexes=bool(machine.hirth_axes), plc=bool(machine.plc_axes),
                   **ctl.program_context(machine))
     result = ctl.check(machine, ctl.blocks(text, mode))
     if result.findings:     # compgen's own safety net: nothing unsafe leaves this function
@@ -214,6 +212,21 @@ def checked_program(machine: Machine, poses: Poses, label: str, controller_name:
                            hint="put the ball higher on its stem or nearer the rotary axes, or choose "
                                 "another path; the set-up's solids are the machine file's [rtest]")
     return Checked(text, machine, poses, [s["note"] for s in steps if s["kind"] == "stop"], result.seconds)
+
+
+def write_words(ctl: Controller, machine: Machine, steps: list[dict]) -> None:
+    """Each step's axis words as ``ctl`` writes them (``Controller.axis_word``: a move's
+    feed, the block before's value), and a PLC turn's target in the sense those words have."""
+    before: dict[str, float] = {}
+    for step in steps:
+        if step["kind"] == "index":
+            step["value"] *= ctl.angle_sense(machine).get(step["axis"], 1)
+            step["word"] = ctl.number(step["value"], ANGLE_DECIMALS)
+        if "axes" in step:
+            step["words"] = " ".join(ctl.axis_word(n, v, before.get(n), step["kind"] != "rapid",
+                                                   ANGLE_DECIMALS if n in ROT else LINEAR_DECIMALS, machine)
+                                     for n, v in step["axes"].items())
+            before.update(step["axes"])
 
 
 def _check_hirth(machine: Machine, deg: np.ndarray, label: str) -> None:
@@ -267,6 +280,7 @@ def _program_header(machine: Machine, ctl: Controller, poses: Poses, label: str,
         *[f"{a.name} is Hirth-coupled ({a.hirth_deg:g} deg grid): every position on it; the nest leaves the "
           f"ball before {a.name} indexes, the control releases and clamps it (U23)"
           for a in machine.hirth_axes],
+        *plc_lines(machine, ctl, "nest"),
         "first run: single block, feed override low, nest and ball clear of clamps",
         *(ascii_text(n) for n in notes),
     ]
@@ -330,6 +344,8 @@ class _Steps:
         tcp = self.tcp_always if tcp is None else tcp
         axes = {**dict(zip("XYZ", q[self.linear], strict=True)),
                 **{n: np.degrees(q[i]) for n, i in zip(self.names, self.rotary, strict=True)}}
+        for a in index_steps(self.machine, self.steps, self.q, axes):
+            del axes[a]
         self.steps.append({"kind": "rapid" if rapid else "feed", "axes": axes, "note": note, "pose": pose,
                            "q": q if tcp else None})
         self.q = q
@@ -362,6 +378,7 @@ class _Steps:
                            "note": "nest up along its axis to the safe height"})
         self.q = self.origin.copy()
         self.q[self.linear[:2]] = np.nan
+        self.q[[self.machine.index(a.name) for a in self.machine.plc_axes]] = np.nan   # not known: indexed
         if self.tcp_always and self.switches:       # a head under a switching control's TCP
             self.steps.append({"kind": "rapid", "axes": dict.fromkeys(self.names, 0.0),
                                "note": "rotary axes to zero at the safe height"})
@@ -380,15 +397,18 @@ class _Steps:
         # (sides.program_sides): where each axis's backlash is at every pose is known
         before = first.copy()
         # (a Hirth axis has no backlash to take up: its teeth place it, and it rests only on them)
-        loose = np.array([a.hirth_deg is None for a in machine.rotary_axes])
+        # (nor one the PLC positions: the NC does not choose the side it comes from)
+        loose = np.array([a not in machine.at_rest_axes for a in machine.rotary_axes])
         before[rotary] -= poses.side[seg[0], rotary] * np.radians(APPROACH_DEG) * loose
         for target, note in ((before, f"approach from {APPROACH_DEG:g} deg before"), (first, "")):
             if not np.isnan(self.q[linear[:2]]).any():
                 self.turn_to(target)
             else:                        # XY not yet known: turn in place at the safe height
-                steps.append({"kind": "rapid", "axes": {n: np.degrees(target[i]) for n, i in
-                                                        zip(self.names, rotary, strict=True)},
-                              "note": note or "turn at the safe height"})
+                turn = {n: np.degrees(target[i]) for n, i in zip(self.names, rotary, strict=True)}
+                for a in index_steps(machine, steps, self.q, turn):
+                    del turn[a]
+                if turn:
+                    steps.append({"kind": "rapid", "axes": turn, "note": note or "turn at the safe height"})
                 self.q = self.q.copy()
                 self.q[rotary] = target[rotary]
         self.at(self.lifted(self.off(first), self.safe), note="above the first pose")

@@ -52,7 +52,9 @@ class Axis:
     the reference point of its location errors. ``travel`` and ``feed_max`` are in mm and
     mm/min (linear) or deg and deg/min (rotary), as on the machine's data plate. A rotary
     axis with ``hirth_deg`` is Hirth-coupled: it rests only on that grid (its teeth), and is
-    measured only there.
+    measured only there. One with ``m_function`` is positioned by the PLC when a program
+    calls that M-function (the OEM's), never interpolated by the NC: it turns only between
+    poses, at rest while measured.
 
     An inclined (nutating) rotary axis turns about a unit vector that is none of x, y, z:
     ``direction`` is then the letter of its name (B: y), ``incline`` the rotation vector
@@ -70,6 +72,7 @@ class Axis:
     travel: tuple[float, float] = (-math.inf, math.inf)
     feed_max: float = math.inf
     hirth_deg: float | None = None    # a Hirth-coupled rotary axis: it rests only on this grid, deg
+    m_function: int | None = None     # positioned by the OEM's M-function of this number (the PLC)
     incline: tuple[float, float, float] = (0.0, 0.0, 0.0)   # an inclined axis's own frame, rad
 
     @property
@@ -290,6 +293,17 @@ class Machine:
     def hirth_axes(self) -> tuple[Axis, ...]:
         """The rotary axes coupled by a Hirth ring: they rest only on their grid."""
         return tuple(a for a in self.rotary_axes if a.hirth_deg is not None)
+
+    @cached_property
+    def plc_axes(self) -> tuple[Axis, ...]:
+        """The rotary axes the PLC positions by the OEM's M-function: at rest while measured."""
+        return tuple(a for a in self.rotary_axes if a.m_function is not None)
+
+    @cached_property
+    def at_rest_axes(self) -> tuple[Axis, ...]:
+        """The rotary axes measured only at rest (Hirth-coupled or PLC-positioned): a path
+        turning one is measured pose by pose, never on the fly, and takes no backlash side."""
+        return tuple(a for a in self.rotary_axes if a.hirth_deg is not None or a.m_function is not None)
 
     @cached_property
     def gauge(self) -> np.ndarray:

@@ -82,10 +82,11 @@ def generate(machine: Machine, names: Sequence[str], ball: Sequence[float] | Non
                 # a Hirth axis rests on its grid: poses the grid makes one are measured once
                 angles = angles[np.r_[True, np.any(np.diff(angles, axis=0) != 0, axis=1)]]
         else:
-            hirth = [a.name for a in machine.hirth_axes if path.rotary[a.name][0] != "const"]
-            if hirth:
-                raise CompgenError(f"path {path.name} turns {', '.join(hirth)}, Hirth-coupled: it is "
-                                   "measured at rest on its grid, not on the fly", hint="leave --rate-hz out")
+            rest = [a.name for a in machine.at_rest_axes if path.rotary[a.name][0] != "const"]
+            if rest:
+                raise CompgenError(f"path {path.name} turns {', '.join(rest)}, Hirth-coupled or positioned "
+                                   "by the PLC: it is measured at rest, not on the fly",
+                                   hint="leave --rate-hz out")
             steps = _fine_steps(machine, path)
             seconds = path.n * path.seconds_per_pose if feed is None else 60 * steps.sum(axis=0).max() / feed
             _check_speed(machine, path, steps, seconds)

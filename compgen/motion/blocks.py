@@ -28,6 +28,8 @@ class Block:
     turn: dict = field(default_factory=dict)   # modulo axis letter → "+", "-" or "short"
     name: str = ""               # offset: the work offset the block selects (G54, ...)
     probe: bool = False          # a probing move: it stops where the stylus touches the sphere
+    plc: bool = False            # a turn the PLC makes (the OEM's M-function ``name``, "" where the
+                                 # operator calls it), not the NC: never under TCP (U26)
 
 
 

@@ -237,6 +237,8 @@ class _Walk:
 
     def move(self, b: Block) -> bool:
         """One move's segment; False where the walk cannot go on from it."""
+        if not self.plc_holds(b):
+            return False
         q, linear, rotary = self.q, self.linear, self.rotary
         if b.machine_coords:
             self.findings.append(Finding(b.line, "machine coordinates", "the machine file does not say where "
@@ -270,6 +272,29 @@ class _Walk:
         self.segments.append(_Segment(b, False, q, end, bool((np.isnan(q) & ~np.isnan(end)).any()),
                                       probing=b.probe or after_touch))
         self.q = end
+        return True
+
+    def plc_holds(self, b: Block) -> bool:
+        """An axis the PLC positions turns only by its M-function (never an NC word), with TCP
+        off (the control does not hold the nest while the PLC turns it) (U26)."""
+        axes = {a.name: a for a in self.machine.rotary_axes}
+        for letter in b.target:
+            a = axes.get(letter)
+            if b.plc and (a is None or a.m_function is None or b.name not in ("", f"M{a.m_function}")):
+                self.findings.append(Finding(b.line, "not the axis's M-function",
+                                             f"{b.name or 'the stop'} turns {letter}, which the machine file "
+                                             f"does not position by {b.name or 'an M-function'}",
+                                             b.text.strip()))
+                return False
+            if not b.plc and a is not None and a.m_function is not None:
+                self.findings.append(Finding(b.line, "an NC move of an axis the PLC positions",
+                                             f"{letter} is turned by the OEM's M-function M{a.m_function}, "
+                                             "not by the NC", b.text.strip()))
+                return False
+        if b.plc and self.tcp:
+            self.findings.append(Finding(b.line, "the PLC turns an axis under TCP", "the control does not "
+                                         "hold the nest while the PLC turns the axis", b.text.strip()))
+            return False
         return True
 
     def tcp_move(self, b: Block) -> bool:

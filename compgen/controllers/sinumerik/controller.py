@@ -104,6 +104,7 @@ class Sinumerik840D(Controller):
     program_ext = ".MPF"
     comment = ";"
     tcp_words = "TRAORI"
+    plc_index = "stop"
     backup = "a commissioning archive, and keep the _RESTORE program"
     pose_line = re.compile(r"^G1 X(\S+) Y(\S+) Z(\S+) ((?:[A-C]\S+ )+)F\S+ ; pose (\d+)")
     tcpm_on = re.compile(r"^TRAORI\b", re.MULTILINE)

@@ -34,6 +34,8 @@ def _guard_body(lines: list[str], k: int, b: str) -> int:
     return len(GUARD_BODY)
 
 
+# stop unless an axis the PLC positions stands at its target, after the stop that asked for it
+INDEX_IF = re.compile(r"IF ABS\(\$AA_IM\[([A-C])\]-\(([+-]?\d{1,4}(?:\.\d{1,9})?)\)\)>0\.001")
 _FACTOR = r"\([+-]?\d{1,6}(?:\.\d{1,9})?\)"
 TIP = re.compile(rf"TIP_[XYZ]=\$AA_MW\[X\]\*{_FACTOR}\+\$AA_MW\[Y\]\*{_FACTOR}\+\$AA_MW\[Z\]\*{_FACTOR}"
                  rf"\+{_FACTOR}")
@@ -77,6 +79,10 @@ def program_blocks(text: str) -> list[Block]:
             move, _, feed = gcode_move(raw, k, b.split()[1:], None, feed, "SUPA")
             out.append(replace(move, probe=True))
             expect = ["STOPRE", "IF $AC_MEA[1]==0"]
+            continue
+        if (d := INDEX_IF.fullmatch(b)) is not None:      # the operator had the PLC turn it (U26)
+            skip = _guard_body(lines, k, b)
+            out.append(Block(k, raw, "move", target={d[1]: float(d[2])}, rapid=True, plc=True))
             continue
         if (d := FRAME_IF.fullmatch(b)) is not None:         # compgen's frame guard: no motion
             skip = _guard_body(lines, k, b)
