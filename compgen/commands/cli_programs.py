@@ -113,11 +113,15 @@ def measure_program_cmd(machine_file, path_names, poses_file, ball, back, nest, 
                                             "the machine file's [rtest] ball).")
 @click.option("--controller", "controller_name", default=None, metavar="NAME",
               help=f"{CONTROLLER_NAMES}. Default: the machine file's.")
+@click.option("--spindle-deg", "spindle_deg", type=Finite(), default=None, metavar="DEG",
+              help="Orient the spindle to DEG (0 to 360) before the first touch, said in the log: the probe "
+                   "and its trigger's lobes turn with it, the machine does not (what diagnose advises where "
+                   "the trigger explains the misfit).")
 @click.option("-o", "--output", type=FILE, required=True,
               help="Program file; its pose list goes beside it as <stem>.poses.csv (HEIDENHAIN: and the "
                    "F-PRINT format files <stem>_<path>.A).")
 @FORCE
-def probe_program_cmd(machine_file, path_names, ball, controller_name, output, force):
+def probe_program_cmd(machine_file, path_names, ball, controller_name, spindle_deg, output, force):
     """Write a probing program: a touch probe on the calibration sphere at each pose, every
     touch logged on the control as a probe log v1; checked with the probe in the set-up."""
     machine = load_machine(machine_file)
@@ -128,7 +132,7 @@ def probe_program_cmd(machine_file, path_names, ball, controller_name, output, f
     out = Path(output)
     name = program_name(out.stem, room=4, most=ctl.name_max)
     emitted = probe_program(machine, poses, "+".join(names), ctl.name, name, __version__,
-                            date.today().isoformat())
+                            date.today().isoformat(), spindle_deg)
     files = emitted.paths(out, name, ctl.program_ext)
     write_all(files, force, inputs=(machine_file,))
     click.echo(f"wrote {', '.join(str(p) for p in files)}: {len(poses)} poses, "

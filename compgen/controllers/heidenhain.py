@@ -420,7 +420,8 @@ def _plain_block(k: int, raw: str, b: str) -> list[Block] | None:
     """A block whose meaning holds alone (no axis position or probing direction carried from
     the blocks before): what it is ([] for a block that does nothing checked), or None."""
     if not b or b in ("M30", "M126", "PLANE RESET STAY", "CYCL DEF 7.0 DATUM SHIFT",
-                      "CYCL DEF 9.0 DWELL TIME", "TCH PROBE 4.0 MEASURING IN 3-D", "TCH PROBE 4.1 Q1"):
+                      "CYCL DEF 9.0 DWELL TIME", "TCH PROBE 4.0 MEASURING IN 3-D", "TCH PROBE 4.1 Q1",
+                      "CYCL DEF 13.0 ORIENTATION"):
         return []
     if b == "STOP":                    # the preset check: the operator continues (U11)
         return [Block(k, raw, "stop")]
@@ -447,6 +448,8 @@ def _plain_block(k: int, raw: str, b: str) -> list[Block] | None:
                            hint="write the program with compgen")
     if MESSAGE.fullmatch(b):              # the preset check's message, shown in a window (U16)
         return [Block(k, raw, "log")]
+    if re.fullmatch(r"CYCL DEF 13\.1 ANGLE \d{1,3}(?:\.\d{1,4})?", b):    # the spindle oriented (U27)
+        return []
     if (d := re.fullmatch(r"CYCL DEF 9\.1 DWELL (\S+)", b)) is not None:
         return [dwell(d[1], k, raw)]
     if re.fullmatch(r"FN 0: Q1[0-5] = [+-]\d{1,6}(?:\.\d{1,9})?", b) or re.fullmatch(

@@ -23,6 +23,7 @@ F-PRINT``. What no source read so far confirms is marked in ``templates/unconfir
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import replace
 
@@ -63,9 +64,12 @@ def with_sphere(machine: Machine, length: float | None = None) -> Machine:
 
 
 def probe_program(machine: Machine, poses: Poses, label: str, controller_name: str, name: str,
-                  version: str, date: str) -> Emitted:
+                  version: str, date: str, spindle_deg: float | None = None) -> Emitted:
     """The probing program (and, for HEIDENHAIN, its F-PRINT format files), checked with the
-    probe in the set-up. ``poses``: one ball position, the rotary axes of each pose."""
+    probe in the set-up. ``poses``: one ball position, the rotary axes of each pose;
+    ``spindle_deg``: the spindle oriented there before the first touch (the probe and its
+    trigger's lobes turn with it: a second log at another orientation tells them from the
+    machine), said in the log's ``spindle_deg``."""
     ctl = for_machine(controller_name, machine)
     setup = need_probe(machine)
     balls = np.unique(np.round(np.asarray(poses.ball, float), 6), axis=0)
@@ -91,13 +95,22 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
     safe = safe_height(machine)
     names = [a.name for a in machine.rotary_axes]
     steps, count, reach = _touch_steps(machine, poses, setup, names, safe)
+    if spindle_deg is not None:
+        if not (math.isfinite(spindle_deg) and 0.0 <= spindle_deg < 360.0):
+            raise CompgenError(f"--spindle-deg {spindle_deg:g}: the spindle's orientation is 0 to 360 "
+                               "degrees")
+        steps.insert(0, {"kind": "orient", "deg": f"{spindle_deg:.4f}", "note": "the probe turned with it"})
     check_travel(machine, np.array(reach), f"{label} (the touches' start and end points)")
     write_words(ctl, machine, steps)
     log_name = name[:ctl.name_max - 4] + "_LOG"     # a name the control keeps, one per program
     header = _probe_header(machine, ctl, setup, poses, label, log_name, safe, version, date)
+    if spindle_deg is not None:
+        header.append(f"the spindle oriented to {spindle_deg:g} deg before the first touch: the probe and "
+                      "its trigger turn with it" + ("" if ctl.family == "linuxcnc" else " (U27)"))
     log_head = [MAGIC, f"# sphere_diameter = {setup.sphere_diameter:.4f}",
                 f"# stylus_diameter = {setup.stylus_diameter:.4f}",
                 *([f"# machine = {machine.name}"] if _loggable(machine.name) else []),
+                *([f"# spindle_deg = {spindle_deg:.4f}"] if spindle_deg is not None else []),
                 ",".join(["path", "pose", *names, "X", "Y", "Z", *DIRECTION, *BALL])]
     # where the sphere stood, on every touch's line (the contract's bx, by, bz): a log of the
     # sphere moved as a diagnosis advised is fitted where it was, not where the machine file has it
@@ -106,7 +119,7 @@ def probe_program(machine: Machine, poses: Poses, label: str, controller_name: s
                   tool=ctl.tool_word(setup.tool), feed=f"{setup.feed:g}", probe_feed=f"{setup.probe_feed:g}",
                   work_offset=machine.program.work_offset, log_name=log_name, log_head=log_head,
                   rotary=names, number=ctl.number, retract=ctl.number(setup.approach, 4), ball=ball,
-                  head_tcp=bool(machine.heads), plc=bool(machine.plc_axes),
+                  head_tcp=bool(machine.heads), plc=bool(machine.plc_axes), orient=spindle_deg is not None,
                   **ctl.program_context(machine))
     named = {**ctl.message_files(name, [s["note"] for s in steps if s["kind"] == "stop"]),
              **ctl.log_files(log_head, list(count), names, ball)}

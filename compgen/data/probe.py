@@ -63,6 +63,19 @@ class ProbeLog:
     lines: np.ndarray         # (m,) CSV line of each touch
 
     @property
+    def spindle(self) -> float:
+        """The spindle's orientation while probing, rad (the log's ``spindle_deg``, 0 where it
+        does not say): the probe's trigger lobes turn with it."""
+        if "spindle_deg" not in self.keys:
+            return 0.0
+        where = f"{self.source}:{self.key_lines['spindle_deg']}"
+        v = number(self.keys["spindle_deg"], "spindle_deg", where)
+        if not (math.isfinite(v) and -360.0 <= v <= 360.0):
+            raise CompgenError(f"spindle_deg {self.keys['spindle_deg']!r} is no spindle orientation in "
+                               "degrees", where=where)
+        return math.radians(v)
+
+    @property
     def radius(self) -> float:
         """ρ, mm: the tip centre's distance from the sphere's centre at a touch."""
         return (number(self.keys["sphere_diameter"], "sphere_diameter", self.source)
@@ -212,7 +225,8 @@ def sphere_centres(log: ProbeLog, machine: Machine) -> Centres:
     poses = Poses(q, ball, t, log.path[first], nest=nest)
     data = RTestData(poses, reading, log.source, log.sha256, tuple(int(log.lines[i]) for i in first),
                      device="probe", cov=cov, cov_dof=dof,
-                     lobes=trigger_lobes(log, groups, normals, inverse_info, sensor_axes(machine, q)))
+                     lobes=trigger_lobes(log, groups, normals, inverse_info, sensor_axes(machine, q)),
+                     spindle=math.degrees(log.spindle))
     return Centres(data, centre, math.sqrt(s2) * 1e3, dof, radius_offset * 1e3, radius_sigma * 1e3,
                    tuple(warnings))
 
@@ -225,12 +239,14 @@ def trigger_lobes(log: ProbeLog, groups: list[np.ndarray], normals: list[np.ndar
     the centre, first order), and the reading, nominal minus probed, by −N⁺δ = (uᵀu)⁻¹uᵀδ
     (``inverse_info``: each pose's (uᵀu)⁻¹); δ by the direction each touch moved
     (``log.direction``) in the probe's own frame: ``stylus`` (n, 3, 3), the tool's axes
-    where a head turns the probe (``frames.sensor_axes``), None where they are the machine's."""
+    where a head turns the probe (``frames.sensor_axes``), None where they are the machine's,
+    turned by the spindle's orientation (``log.spindle``: the probe turns with the spindle)."""
     out = np.zeros((len(groups), 3, 2))
+    turn = log.spindle
     for k, (g, u, G) in enumerate(zip(groups, normals, inverse_info, strict=True)):
         d = log.direction[g] if stylus is None else log.direction[g] @ stylus[k]
         lobe = (np.hypot(d[:, 0], d[:, 1]) ** TRIGGER_LOBES
-                * np.exp(1j * TRIGGER_LOBES * np.arctan2(d[:, 1], d[:, 0])))       # sin³θ·e^{3iφ}
+                * np.exp(1j * TRIGGER_LOBES * (np.arctan2(d[:, 1], d[:, 0]) - turn)))   # sin³θ·e^{3i(φ−s)}
         out[k] = G @ (u.T @ np.stack([lobe.real, lobe.imag], axis=1))
     return out
 

@@ -56,6 +56,7 @@ class RTestData:
                                     # MOUNTED_AGAIN too: its clamp was loosened)
     lobes: np.ndarray | None = None  # (n, 3, 2): a probe log's readings per mm of its trigger's
                                     # lobes (``probe.trigger_lobes``), None for an R-test's
+    spindle: float = 0.0            # deg the spindle was oriented to while a probe log was made
 
     def __len__(self) -> int:
         return len(self.poses)

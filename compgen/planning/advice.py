@@ -67,6 +67,7 @@ class Proposal:
     nest: float | None = None    # mm below the gauge line, where not the machine file's
     machine_ref: str = ""        # how its command names the machine file: a bundled machine by name
     program_ext: str = ""        # the suffix of its program: the machine's control's
+    spindle: float | None = None  # deg the probe is turned to in the spindle (probe-program --spindle-deg)
 
     @property
     def run_label(self) -> str:
@@ -76,13 +77,15 @@ class Proposal:
     def to_dict(self) -> dict:
         return {"label": self.label, "path": self.path, "ball": [round(v, 4) for v in self.ball],
                 "there_and_back": self.back, "name": self.name, "right_after": self.again,
-                **({"probe_length_mm": self.nest} if self.nest is not None else {})}
+                **({"probe_length_mm": self.nest} if self.nest is not None else {}),
+                **({"spindle_deg": self.spindle} if self.spindle is not None else {})}
 
     def options(self) -> str:
         """The options of ``measure-program`` that write it."""
         ball = ",".join(f"{v:.4f}".rstrip("0").rstrip(".") for v in self.ball)   # as to_dict's
         return (f"--path {self.path} --ball {ball}" + " --there-and-back" * self.back
-                + (f" --probe-length {self.nest:g}" if self.nest is not None else ""))
+                + (f" --probe-length {self.nest:g}" if self.nest is not None else "")
+                + (f" --spindle-deg {self.spindle:g}" if self.spindle is not None else ""))
 
     def command(self, me: str) -> str:
         """The whole ``measure-program`` (or ``probe-program``) command, as it runs pasted
@@ -127,6 +130,21 @@ class Advisor:
                      program_ext=controller(self.machine.controller).program_ext)
         return m if self.why_not(m) is None else None
 
+    def spindle_turned(self, path: str, ball: tuple[float, float, float], before: int, degrees: float
+                       ) -> Proposal | None:
+        """``path`` probed again with the sphere at ``ball`` and the probe turned ``degrees`` in the
+        spindle: its own file, K4_SPINDLE, then K4_SPINDLE_2."""
+        try:
+            poses = probe_poses(self.machine, [path], np.asarray(ball, float))
+        except CompgenError:
+            return None
+        m = Proposal(f"{path} with the probe turned {degrees:g}° in the spindle", path,
+                     tuple(float(v) for v in ball), poses, device="probe", spindle=degrees,
+                     name=f"{path}_SPINDLE" + (f"_{before + 1}" if before else ""),
+                     machine_ref=self.machine.bundled or self.machine.source,
+                     program_ext=controller(self.machine.controller).program_ext)
+        return m if self.why_not(m) is None else None
+
     def runnable(self, ms, most: int | None = None) -> tuple[Proposal, ...]:
         """Those of ``ms`` the machine can make, in their order; at most ``most``."""
         out = []
@@ -141,7 +159,7 @@ class Advisor:
 def _refusal(machine: Machine, m: Proposal) -> str | None:
     try:
         if m.device == "probe":
-            probe_program(machine, m.poses, m.path, machine.controller, "ADVICE", "", "")
+            probe_program(machine, m.poses, m.path, machine.controller, "ADVICE", "", "", m.spindle)
         else:
             checked_program(machine, m.poses, m.path, machine.controller, MODE, "ADVICE", "", "")
     except CompgenError as exc:

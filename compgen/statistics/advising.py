@@ -43,3 +43,8 @@ class Advising(Protocol):
                ) -> Proposal | None:
         """``path`` again with the ball where it is, turned ``degrees`` on its stem (after
         ``before`` turns), if the machine can run it."""
+
+    def spindle_turned(self, path: str, ball: tuple[float, float, float], before: int, degrees: float
+                       ) -> Proposal | None:
+        """``path`` probed again with the ball where it is and the spindle, and the probe with it,
+        turned ``degrees`` (after ``before`` such logs), if the machine can probe it."""

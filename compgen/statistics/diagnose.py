@@ -31,7 +31,15 @@ from ..model.poses import Poses, runs
 from ..model.sides import FreeConstants, same_pose
 from ..units import shown
 from .advising import Advising, Proposal
-from .device import blamed_device, device_columns, form_columns, tested_devices, told_beside, trigger_columns
+from .device import (
+    TRIGGER,
+    blamed_device,
+    device_columns,
+    form_columns,
+    tested_devices,
+    told_beside,
+    trigger_columns,
+)
 from .diagnosis import REPEATS_TRIED, Candidate, Diagnosis, _outside_line, _unexplained, turn_for
 from .noise import Lazy, ar1, outliers, repeats
 from .ranking import Row, Whitening, effect_columns, rank, started_reversals
@@ -144,8 +152,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
     # beside it, and so are the gains with them
     first = noise.white(_columns(machine, res, made, significant[0].effect)) if significant else None
     blamed, form_rival = blamed_device(devices, best, rss_w / dof, alpha)
-    turned = None if form_rival is None or advising is None else advising.turned(str(poses.path[-1]),
-        tuple(poses.ball[-1]), sum(1 for d in joined.sets if d.turned), turn_for(form_rival))   # ball stays
+    turned, spun = _turns(advising, poses, joined, form_rival, blamed)
     if blamed is not None:
         devices = told_beside(devices, columns, np.empty((r.size, 0)), res, noise, alpha, blamed)
     seen = [d for d in devices if d.significant]
@@ -177,7 +184,7 @@ def diagnose(machine: Machine, data: Sequence[RTestData], fit: FitResult,
         repeats=said, misfit=misfit,
         lines=lines, best_share_of_excess=share, best_sum_sq=best_sum_sq, notes=notes,
         data_device=kind, devices=tuple(devices), device_blamed=blamed, form_rival=form_rival,
-        form_turned=turned, setup_step=step)
+        form_turned=turned, probe_turned=spun, setup_step=step)
 
 
 def _candidates(effects: Sequence[Effect], ranked: dict[str, Row], rss: float, readings: int, rss_w: float,
@@ -422,6 +429,21 @@ def _rivals(machine: Machine, res: _Residual, significant: list[Candidate], firs
                           rival_margin(best.k_eff, sigma2, alpha))
             rival_names = tuple(n for n in rival_names if n in alike or n in kept)
     return {"after_best": after_best, "rivals": rival_names}
+
+
+def _turns(advising: Advising | None, poses: Poses, joined: Measurements, form_rival: str | None,
+           blamed: str | None) -> tuple[Proposal | None, Proposal | None]:
+    """What tells the device from the machine, as a measurement: the last path with the ball
+    turned on its stem where its form ties with the machine's best, with the probe turned in
+    the spindle where the probe's trigger is blamed (the ball stays where it is)."""
+    if advising is None:
+        return None, None
+    at = (str(poses.path[-1]), tuple(poses.ball[-1]))
+    ball = None if form_rival is None else advising.turned(*at, sum(1 for d in joined.sets if d.turned),
+                                                          turn_for(form_rival))
+    spun = None if blamed is None or not blamed.startswith(TRIGGER) else advising.spindle_turned(
+        *at, sum(1 for d in joined.sets if d.spindle), turn_for(blamed))
+    return ball, spun
 
 
 def _advised(machine: Machine, res: _Residual, out: list[Candidate], ranked: dict[str, Row], rival: dict,

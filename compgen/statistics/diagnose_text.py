@@ -238,7 +238,9 @@ def conclusion(d: Diagnosis, fit: str, after: str) -> str:
     if kind == "device":
         return (f"VERDICT: the device explains the misfit ({d.blamed.description}, {d.device_blamed}): "
                 + ("calibrate the probe and probe again" if d.blamed.trigger else
-                   "calibrate that sensor and measure again"))
+                   "calibrate that sensor and measure again")
+                + (f", or probe {d.probe_turned.path} with the probe turned {d.probe_turned.spindle:g}° in "
+                   "the spindle (below)" if d.probe_turned else ""))
     if kind == "rivals" and d.form_rival:
         m = d.form_turned
         return (f"VERDICT: not told apart: {best} vs the ball's form ({d.form_rival}); "
@@ -387,13 +389,17 @@ def _devices(d: Diagnosis) -> list[str]:
                     "again."]
     than = f"as well as {d.significant[0].effect}" if d.significant else "where no machine effect does"
     size = f"{c.value:.2f} ± {c.std:.2f} µm" if c.unit == "µm" else f"{c.value:+.2f} ± {c.std:.2f} %"
+    turned = d.probe_turned
     return ["", f"  The device: {c.description}, {size} ({c.effect}), explains these data {than}: no machine "
                 "effect is named found, and nothing here corrects a control for it.",
             f"  {_remedy([c])[0].upper()}{_remedy([c])[1:]}, then measure again and fit the new data alone."
             + "".join(f" {o.text()} stays significant beside it ({said_p(o.p_value)}): "
                       + ("have the ball's form measured too." if o.form else "calibrate the probe too."
                          if o.trigger else "calibrate that sensor too.")
-                      for o in seen if o is not c)]
+                      for o in seen if o is not c),
+            *([f"  Or tell it from the machine: {turned.label} (the trigger turns with the probe, the "
+               "machine does not), then fit both logs together:", f"      {_measure(d, turned)}"]
+              if turned else [])]
 
 
 def _remedy(devices) -> str:

@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .advising import Proposal
-from .device import FORM, DeviceCandidate
+from .device import FORM, TRIGGER, DeviceCandidate
 from .noise import Repeats
 from .setup_step import SetupStep
 from .significance import ALPHA, COND_LIMIT, VISIBLE
@@ -36,9 +36,10 @@ REPEATS_TRIED = 3
 
 
 def turn_for(form: str) -> float:
-    """Degrees to turn a ball of ``form`` (``ball_lobes{k}``) on its stem to tell its form
-    from the machine: 180°/k, where its k lobes read the other way round."""
-    return 180.0 / int(form.removeprefix(FORM))
+    """Degrees to turn a ball of ``form`` (``ball_lobes{k}``) on its stem, or a probe whose
+    trigger has k lobes (``probe_lobes{k}``) in the spindle, to tell them from the machine:
+    180°/k, where the k lobes read the other way round."""
+    return 180.0 / int(form.removeprefix(FORM).removeprefix(TRIGGER))
 
 
 @dataclass(frozen=True)
@@ -115,6 +116,7 @@ class Diagnosis:
     device_blamed: str | None = None    # the one that explains the misfit as well as the machine's best
     form_rival: str | None = None       # the ball's form, explaining it as the machine's best does
     form_turned: Proposal | None = None  # the measurement that tells them apart: a path, the ball turned
+    probe_turned: Proposal | None = None  # where the probe's trigger is blamed: a path, the probe turned
     setup_step: SetupStep | None = None   # a set-up event between two files, against the best
     # for rivals: what adding each puts into the fitted parameters, first order, shown units
     carries: dict[str, dict[str, float]] = field(default_factory=dict)
@@ -251,6 +253,7 @@ class Diagnosis:
             "form_rival": self.form_rival,
             "form_turned_by": None if self.form_turned is None else {
                 **self.form_turned.to_dict(), "degrees": self.turn_degrees},
+            "probe_turned_by": None if self.probe_turned is None else self.probe_turned.to_dict(),
             "device_effects": [d.to_dict() for d in self.devices],
             "setup_step": self.setup_step.to_dict() if self.setup_step is not None else None,
             "rivals_equivalent": bool(self.rivals and not self.rivals_separated_by),

@@ -202,14 +202,24 @@ def test_in_a_mixed_session_a_gain_is_the_r_tests_alone(tmp_path):
     assert d.device_blamed == "gain_X" and d.found is None
 
 
-def test_a_trigger_lobed_about_the_stylus_moves_each_centre_as_its_columns_say(tmp_path):
+@pytest.mark.parametrize("spindle", [None, 60.0, 25.0])
+def test_a_trigger_lobed_about_the_stylus_moves_each_centre_as_its_columns_say(tmp_path, spindle):
     """Touches triggering 1.5 µm·sin³θ·cos 3(φ − 0.3) farther out (θ, φ of the direction each
     moves), no noise: each centre's reading moves from the round trigger's by what
-    ``trigger_lobes`` says per mm of the lobes' cos and sin, to 1 % of the largest move."""
+    ``trigger_lobes`` says per mm of the lobes' cos and sin, to 1 % of the largest move; with
+    the spindle oriented (the log's ``spindle_deg``) the lobes turn with the probe: at 60° they
+    read the other way round."""
     machine = load_machine(SEED_MACHINE)
-    round_, lobed = (sphere_centres(read_probe_log(write_log(tmp_path / f"{n}.log", noise_um=0.0, lobes=lob),
-                                                   machine), machine).data
-                     for n, lob in (("r", None), ("l", (1.5, 0.3))))
+    turn = np.radians(spindle or 0.0)        # the probe's lobes turned with the spindle
+    logs = []
+    for n, lob in (("r", None), ("l", (1.5, 0.3 + turn))):
+        path = write_log(tmp_path / f"{n}.log", noise_um=0.0, lobes=lob)
+        if spindle is not None:
+            text = path.read_text().replace("# machine = ", f"# spindle_deg = {spindle:g}\n# machine = ", 1)
+            path.write_text(text)
+        logs.append(path)
+    round_, lobed = (sphere_centres(read_probe_log(p, machine), machine).data for p in logs)
+    assert lobed.spindle == pytest.approx(spindle or 0.0)
     moved = lobed.deviation - round_.deviation
     said = lobed.lobes @ (1.5e-3 * np.array([np.cos(0.9), np.sin(0.9)]))
     assert np.abs(moved).max() > 0.5e-3                      # the lobes move the centres
@@ -240,6 +250,51 @@ def test_a_lobed_trigger_is_blamed_as_the_device_a_round_one_never(tmp_path, lob
         assert not trigger.significant and d.device_blamed is None, trigger
         return
     assert d.device_blamed == "probe_lobes3" and d.found is None, (d.verdict, trigger)
+    assert abs(trigger.value - 1.5) < 3 * trigger.std, trigger
+
+
+def test_a_blamed_trigger_is_told_from_the_machine_with_the_probe_turned_in_the_spindle(tmp_path):
+    """The trigger blamed (three lobes of 1.5 µm, 0.5 µm a touch): diagnose prints the path
+    probed again with the probe turned 60° in the spindle as a command that pastes into bash
+    and writes the program; that log (its lobes turned with the probe, said in spindle_deg)
+    fitted with the first, the trigger is blamed again, its size within 3σ of 1.5 µm, and no
+    machine effect is named."""
+    import sys
+
+    from conftest import pasted
+
+    from compgen.data.probe import format_probe_log, probe_poses, simulate_touches
+    from compgen.data.simulate import simulate
+    from compgen.planning.advice import Advisor
+    from compgen.statistics.diagnose_text import report
+    machine = load_machine(SEED_MACHINE)
+    rng = np.random.default_rng(4)
+
+    def probed(poses, name, turn_deg=None):
+        tips, d = simulate_touches(machine, poses, simulate(machine, TABLE4, poses).deviation, 0.5, rng)
+        phase = 0.3 + np.radians(turn_deg or 0.0)                 # the lobes turn with the probe
+        tips = tips - (1.5e-3 * np.hypot(d[..., 0], d[..., 1]) ** 3
+                       * np.cos(3 * (np.arctan2(d[..., 1], d[..., 0]) - phase)))[..., None] * d
+        said = () if turn_deg is None else (f"spindle_deg = {turn_deg:g}",)
+        (tmp_path / name).write_text(format_probe_log(machine, machine.probe, poses, tips, d, said))
+        return sphere_centres(read_probe_log(tmp_path / name, machine), machine).data
+
+    data = [probed(probe_poses(machine, ["K4", "K1", "K2"]), "k.log")]
+    d = diagnose(machine, data, identify(machine, data), advisor=Advisor)
+    assert d.device_blamed == "probe_lobes3" and d.probe_turned is not None, d.verdict
+    m = d.probe_turned
+    assert m.spindle == 60 and m.device == "probe" and d.to_dict()["probe_turned_by"]["spindle_deg"] == 60
+    text = report(d)
+    assert "or probe K2 with the probe turned 60° in the spindle (below)" in text.splitlines()[0], text
+    line = next(ln.strip() for ln in text.splitlines() if "--spindle-deg 60" in ln)
+    env = {"PATH": f"{Path(sys.executable).parent}:/usr/bin:/bin"}
+    done = pasted(line, tmp_path, env, timeout=120)
+    assert done.returncode == 0 and (tmp_path / f"{m.name}.H").exists(), (line, done.stderr)
+    assert "CYCL DEF 13.1 ANGLE 60.0000" in (tmp_path / f"{m.name}.H").read_text()
+    data.append(probed(m.poses, "turned.log", 60.0))
+    again = diagnose(machine, data, identify(machine, data), advisor=Advisor)
+    trigger = next(c for c in again.devices if c.effect == "probe_lobes3")
+    assert again.device_blamed == "probe_lobes3" and again.found is None, (again.verdict, trigger)
     assert abs(trigger.value - 1.5) < 3 * trigger.std, trigger
 
 

@@ -143,6 +143,8 @@ def program_blocks(text: str, tcp: bool, head: str | None = None) -> list[Block]
                                    hint="give the program compgen wrote")
             guard_at = k
             out.append(Block(k, raw, "pin", target={f"{d[1]}.pivot-length": (float(d[2]), float(d[3]))}))
+        elif re.fullmatch(r"M19 R\d{1,3}(?:\.\d{1,4})?", b):     # the spindle oriented: no axis moves
+            continue
         elif b == "M66 E0 L0":               # waits for motion: the guard reads the pin as it is
             out.append(Block(k, raw, "sync"))
         elif re.fullmatch(r"T\d+ M6", b):

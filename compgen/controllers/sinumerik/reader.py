@@ -66,7 +66,7 @@ def program_blocks(text: str) -> list[Block]:
                 skip = _guard_body(lines, k, b)
                 out.append(Block(k, raw, "log"))
             continue
-        if b == "STOPRE":
+        if b == "STOPRE" or re.fullmatch(r"SPOS=\d{1,3}(?:\.\d{1,4})?", b):    # the spindle oriented (U27)
             continue
         if TIP.fullmatch(b):             # a head's latched tip into the machine frame (U25): no motion
             out.append(Block(k, raw, "log"))
