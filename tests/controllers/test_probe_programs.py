@@ -96,26 +96,30 @@ def test_a_damaged_probing_program_is_refused_at_its_line(tmp_path, ctl, find, r
     assert re.search(rf"BAD{re.escape(EXT[ctl])}:({at}|{at + 1}|{at + 2}|{at + 3}): ", stdout), stdout
 
 
-@pytest.mark.parametrize("ball", [None, "-217.504,-0.279,111.537"])
-def test_linuxcnc_runs_the_probing_program_and_its_log_is_a_probe_log(tmp_path, ball):
+@pytest.mark.parametrize("ball, spindle", [(None, None), ("-217.504,-0.279,111.537", None), (None, "60")])
+def test_linuxcnc_runs_the_probing_program_and_its_log_is_a_probe_log(tmp_path, ball, spindle):
     """rs274 (LinuxCNC's interpreter) reads the program to the simulator's probing moves;
     the LOG lines it writes, each probe result set where the stylus meets the sphere, are a
     probe log v1 that compgen fits back to the nominal machine: with the sphere where the
     machine file has it, and 100 mm lower (as diagnose advises a probe user): the log says
-    where it stood (bx, by, bz)."""
+    where it stood (bx, by, bz); with the probe turned in the spindle (M19 R60 before the
+    first touch), the log says that too."""
     out = tmp_path / "PROBE.ngc"
     code, _, err = run("probe-program", "--machine", SEED_MACHINE, "--path", "all", "--controller",
-                       "linuxcnc", "-o", out, *([f"--ball={ball}"] if ball else []))
+                       "linuxcnc", "-o", out, *([f"--ball={ball}"] if ball else []),
+                       *(["--spindle-deg", spindle] if spindle else []))
     assert code == 0, err
     canon, done = rs274(out.parent, out.name, "T98 P1 Z120 ;probe")
+    if spindle:
+        assert 0 <= canon.find("ORIENT_SPINDLE(0, 60.0000, 0)") < canon.find("STRAIGHT_PROBE"), canon[:2000]
     probes = np.array([[float(v) for v in m[1].split(",")][:3]
                        for m in re.finditer(r"STRAIGHT_PROBE\(([^)]*)\)", canon)])
     assert len(probes) == 36 * 5, done.stdout + done.stderr
     logged = re.findall(r'LOG\("([^"]*)"\)', canon)
-    assert logged[:4] == ["# compgen probe log v1", "# sphere_diameter = 25.4000",
-                          "# stylus_diameter = 3.0000",
-                          "path,pose,A,C,X,Y,Z,nx,ny,nz,bx,by,bz"]
-    rows = [r.split(",") for r in logged[4:]]
+    head = ["# compgen probe log v1", "# sphere_diameter = 25.4000", "# stylus_diameter = 3.0000",
+            *(["# spindle_deg = 60.0000"] if spindle else []), "path,pose,A,C,X,Y,Z,nx,ny,nz,bx,by,bz"]
+    assert logged[:len(head)] == head
+    rows = [r.split(",") for r in logged[len(head):]]
     assert len(rows) == len(probes)
     machine = load_machine(SEED_MACHINE)
     stood = [float(v) for v in ball.split(",")] if ball else list(machine.ball)
@@ -128,7 +132,7 @@ def test_linuxcnc_runs_the_probing_program_and_its_log_is_a_probe_log(tmp_path, 
         np.testing.assert_allclose([float(v) for v in r[10:13]], stood, atol=1e-4)
         r[4:7] = [f"{v:.6f}" for v in target - 2.0 * n]
     log = tmp_path / "PROBE_LOG.log"
-    log.write_text("\n".join(logged[:4] + [",".join(r) for r in rows]) + "\n")
+    log.write_text("\n".join(logged[:len(head)] + [",".join(r) for r in rows]) + "\n")
     fit = identify(machine, [sphere_centres(read_probe_log(log, machine), machine).data])
     # nominal, to the 0.1 µm the program writes its positions in: below 0.1 µm and 0.2″
     assert all(abs(e.value) < (1e-4 if e.unit == "mm" else 1e-6)
