@@ -136,7 +136,8 @@ def csv_cases(rng: random.Random) -> list[Case]:
         cut = rng.randrange(len(whole) // 3, len(whole))
         text = whole[:cut]
         last = text.rstrip("\n").splitlines()[-1].split(",")
-        ok = len(last) == len(cols) and not text.endswith((",", "-", "."))
+        # a cell cut to its sign alone ("+" of a side's +1, "-") or to "1." is no number: refused
+        ok = len(last) == len(cols) and not text.endswith((",", "-", ".", "+"))
         out.append(Case("csv", f"cut at byte {cut}", {"data.csv": text}, fit, "accept" if ok else "refuse",
                         ["new.json"]))
     # readings in mm: fit warns, the edit is refused
