@@ -20,10 +20,13 @@ A_LINE = 'direction = "x"        # right-handed about +X (contract §2)\noffset 
 
 
 def _plc(tmp_path, more='positioning = "m-function"\nm_function = 130\n', source=SEED_MACHINE):
+    """The seed machine with A positioned by the PLC, K4 and K1 at 25 poses (every pose that
+    turns A is a run of its own: the shipped 241 and 361 are seconds of checking each)."""
     text = source.read_text()
-    assert A_LINE in text
+    assert A_LINE in text and "n = 241\n" in text and "n = 361\n" in text
     path = tmp_path / "m.toml"
-    path.write_text(text.replace(A_LINE, A_LINE + more))
+    path.write_text(text.replace(A_LINE, A_LINE + more).replace("n = 241\n", "n = 25\n")
+                    .replace("n = 361\n", "n = 25\n"))
     return path
 
 
