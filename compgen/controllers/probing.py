@@ -44,8 +44,8 @@ from .programs import (
     BALL_HEADER,
     LINEAR_DECIMALS,
     NEST_HEADER,
-    TURN_STEP_DEG,
     at_ball,
+    held_turn,
     pose_list,
     write_words,
 )
@@ -220,7 +220,7 @@ class _Touches:
 
     def turn(self, q: np.ndarray) -> None:
         """The rotary axes to ``q``'s at the safe height: in one move where the tool does not
-        tilt; on a head in steps of TURN_STEP_DEG, the tip kept in place."""
+        tilt; on a head in steps, the tip kept in place (``programs.held_turn``)."""
         if not self.tcp:
             turn = {n: float(np.degrees(q[j])) for n, j in zip(self.names, self.rotary, strict=True)}
             for a in index_steps(self.machine, self.steps, self.q, turn):      # the PLC's (U26)
@@ -229,14 +229,9 @@ class _Touches:
                 self.steps.append({"kind": "rapid", "note": "turn at the safe height", "axes": turn})
             self.q = q
             return
-        before = self.q
-        largest = np.degrees(np.abs(q[self.rotary] - before[self.rotary])).max()
-        n = max(1, int(np.ceil(largest / TURN_STEP_DEG)))
-        for k in range(1, n + 1):
-            step = before.copy()
-            step[self.rotary] = before[self.rotary] + (q[self.rotary] - before[self.rotary]) * k / n
-            self.q = self.axes(step, self.tip)
-            s = self._step("rapid", self.q, "turn at the safe height" if k == n else "")
+        turn = held_turn(self.machine, self.q, q, True)      # the tip held where it is
+        for k, self.q in enumerate(turn, 1):
+            s = self._step("rapid", self.q, "turn at the safe height" if k == len(turn) else "")
             s["axes"].update({a: np.degrees(self.q[j]) for a, j in zip(self.names, self.rotary, strict=True)})
 
     def above(self, q: np.ndarray, tip: np.ndarray, note: str) -> None:

@@ -214,6 +214,28 @@ def checked_program(machine: Machine, poses: Poses, label: str, controller_name:
     return Checked(text, machine, poses, [s["note"] for s in steps if s["kind"] == "stop"], result.seconds)
 
 
+def held_turn(machine: Machine, q: np.ndarray, target: np.ndarray, tcp: bool) -> list[np.ndarray]:
+    """The poses of a turn of the rotary axes from ``q`` to ``target``'s at the safe height:
+    one move, or under TCP steps of TURN_STEP_DEG (none where they are there already) with
+    the tool point kept where it is (``machine.probe_length`` down the tool: a head's turn is
+    taken off its linear axes); a Hirth axis's steps on its teeth."""
+    rotary = [machine.index(a.name) for a in machine.rotary_axes]
+    linear = [machine.index(c) for c in "XYZ"]
+    delta = np.degrees(np.abs(target[rotary] - q[rotary])).max()
+    n = int(np.ceil(delta / TURN_STEP_DEG)) if tcp else 1
+    point = q[linear] + head_offset(machine, q[None, rotary])[0] if tcp else None
+    out = []
+    for k in range(1, n + 1):
+        step = q.copy()
+        step[rotary] = q[rotary] + (target[rotary] - q[rotary]) * k / n
+        step[rotary] = [np.radians(a.on_grid(np.degrees(v)))            # a Hirth axis: its teeth
+                        for a, v in zip(machine.rotary_axes, step[rotary], strict=True)]
+        if tcp:
+            step[linear] = point - head_offset(machine, step[None, rotary])[0]
+        out.append(step)
+    return out
+
+
 def write_words(ctl: Controller, machine: Machine, steps: list[dict]) -> None:
     """Each step's axis words as ``ctl`` writes them (``Controller.axis_word``: a move's
     feed, the block before's value), and a PLC turn's target in the sense those words have."""
@@ -358,18 +380,9 @@ class _Steps:
 
     def turn_to(self, target):
         """At the safe height: turn the rotary axes to ``target``'s, the nest kept in place."""
-        q, rotary, linear, machine = self.q, self.rotary, self.linear, self.machine
-        delta = np.degrees(np.abs(target[rotary] - q[rotary])).max()
-        n = int(np.ceil(delta / TURN_STEP_DEG)) if self.tcp_always else 1     # 0: already there
-        nest = q[linear] + head_offset(machine, q[None, rotary])[0] if self.tcp_always else None
-        for k in range(1, n + 1):
-            step = q.copy()
-            step[rotary] = q[rotary] + (target[rotary] - q[rotary]) * k / n
-            step[rotary] = [np.radians(a.on_grid(np.degrees(v)))            # a Hirth axis: its teeth
-                            for a, v in zip(machine.rotary_axes, step[rotary], strict=True)]
-            if self.tcp_always:          # the nest stays: a head's turn is taken off its axes
-                step[linear] = nest - head_offset(machine, step[None, rotary])[0]
-            self.at(step, note="turn at the safe height" if k == n else "")
+        turn = held_turn(self.machine, self.q, target, self.tcp_always)
+        for k, step in enumerate(turn, 1):
+            self.at(step, note="turn at the safe height" if k == len(turn) else "")
 
     def start(self) -> None:
         if self.tcp_always and not self.switches:   # TCP coordinates equal machine ones only with

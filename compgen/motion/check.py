@@ -277,6 +277,8 @@ class _Walk:
     def plc_holds(self, b: Block) -> bool:
         """An axis the PLC positions turns only by its M-function (never an NC word), with TCP
         off (the control does not hold the nest while the PLC turns it) (U26)."""
+        if not (b.plc or self.machine.plc_axes):        # every move of every program: nothing to hold
+            return True
         axes = {a.name: a for a in self.machine.rotary_axes}
         for letter in b.target:
             a = axes.get(letter)

@@ -119,30 +119,28 @@ class Advisor:
                ) -> Proposal | None:
         """``path`` again with the ball at ``ball`` (it stays there), turned ``degrees`` on its
         stem: its own file, K4_TURNED, then K4_TURNED_2 (the data holding one turned already)."""
-        try:
-            poses = generate(self.machine, [path], ball=np.asarray(ball, float))
-        except CompgenError:
-            return None
-        m = Proposal(f"{path} with the ball turned {degrees:g}° on its stem", path,
-                     tuple(float(v) for v in ball), poses,
-                     name=f"{path}_TURNED" + (f"_{before + 1}" if before else ""),
-                     machine_ref=self.machine.bundled or self.machine.source,
-                     program_ext=controller(self.machine.controller).program_ext)
-        return m if self.why_not(m) is None else None
+        return self._again(f"{path} with the ball turned {degrees:g}° on its stem", path, ball,
+                           f"{path}_TURNED", before, generate)
 
     def spindle_turned(self, path: str, ball: tuple[float, float, float], before: int, degrees: float
                        ) -> Proposal | None:
         """``path`` probed again with the sphere at ``ball`` and the probe turned ``degrees`` in the
         spindle: its own file, K4_SPINDLE, then K4_SPINDLE_2."""
+        return self._again(f"{path} with the probe turned {degrees:g}° in the spindle", path, ball,
+                           f"{path}_SPINDLE", before, probe_poses, device="probe", spindle=degrees)
+
+    def _again(self, label: str, path: str, ball, stem: str, before: int, planned, **more) -> Proposal | None:
+        """``path`` measured again with the ball at ``ball`` (``planned``: how its poses are
+        made, ``generate`` or ``probe_poses``), under ``stem`` and, after ``before`` such
+        runs, ``stem_2``…; None where the machine cannot run it."""
         try:
-            poses = probe_poses(self.machine, [path], np.asarray(ball, float))
+            poses = planned(self.machine, [path], ball=np.asarray(ball, float))
         except CompgenError:
             return None
-        m = Proposal(f"{path} with the probe turned {degrees:g}° in the spindle", path,
-                     tuple(float(v) for v in ball), poses, device="probe", spindle=degrees,
-                     name=f"{path}_SPINDLE" + (f"_{before + 1}" if before else ""),
+        m = Proposal(label, path, tuple(float(v) for v in ball), poses,
+                     name=stem + (f"_{before + 1}" if before else ""),
                      machine_ref=self.machine.bundled or self.machine.source,
-                     program_ext=controller(self.machine.controller).program_ext)
+                     program_ext=controller(self.machine.controller).program_ext, **more)
         return m if self.why_not(m) is None else None
 
     def runnable(self, ms, most: int | None = None) -> tuple[Proposal, ...]:
